@@ -1,0 +1,18 @@
+"""casship: ship manoeuvring models, state estimation and system identification on CasADi.
+
+One symbolic model, written once, gives simulators, exact Jacobians, Kalman filters, smoothers,
+moving-horizon estimation, maximum-likelihood identification and the linearisations that
+python-control turns into autopilots.
+"""
+from .angles import wrap, unwrap
+from .data import Dataset, Gaussian, Trajectory
+from .discretize import DiscreteModel, discretize, van_loan
+from .model import Model, ModelBuilder
+from .simulate import measure, simulate
+from .estimators import EKF, KF, FilterResult, persistence_model
+from . import frames, models
+
+__version__ = "0.1.0"
+
+__all__ = ["ModelBuilder", "Model", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
+           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "simulate", "measure", "wrap", "unwrap", "frames", "models", "__version__"]

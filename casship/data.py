@@ -1,0 +1,288 @@
+"""Value objects: :class:`Gaussian`, :class:`Dataset` (time + named columns) and :class:`Trajectory`.
+
+A :class:`Dataset` is the one container for records: measured data (inputs and measurements, NaN =
+"not measured") and simulated trajectories alike. Columns are looked up by name; estimators and
+fits pick the columns named like the model's inputs and outputs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["Gaussian", "Dataset", "Trajectory", "check_time", "as_cov"]
+
+
+def check_time(t, name: str = "time") -> np.ndarray:
+    """Validate a time vector: 1-D, finite, strictly increasing. Returns it as float array."""
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1:
+        raise ValueError(f"{name}: expected a 1-D array of time stamps, got shape {t.shape}")
+    if t.size == 0:
+        raise ValueError(f"{name}: no time stamps")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if bad.size:
+        raise ValueError(f"{name}: non-finite time stamp at row {bad[0]} ({t[bad[0]]})")
+    step = np.diff(t)
+    bad = np.flatnonzero(step <= 0)
+    if bad.size:
+        k = bad[0]
+        raise ValueError(f"{name}: time stamps must increase strictly; row {k + 1} ({t[k + 1]}) "
+                         f"is not after row {k} ({t[k]})")
+    return t
+
+
+def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_zero: bool = True) -> np.ndarray:
+    """Turn a covariance given as scalar, vector (diagonal), matrix or name->variance mapping into
+    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``."""
+    if isinstance(value, Mapping):
+        if names is None:
+            raise TypeError(f"{name}: a mapping needs channel names")
+        unknown = set(value) - set(names)
+        if unknown:
+            raise ValueError(f"{name}: unknown channel name(s) {sorted(unknown)}; known: {list(names)}")
+        missing = [c for c in names if c not in value]
+        if missing:
+            raise ValueError(f"{name}: no variance given for channel(s) {missing}")
+        value = [value[c] for c in names]
+    m = np.asarray(value, dtype=float)
+    if m.ndim == 0:
+        m = np.eye(n) * float(m)
+    elif m.ndim == 1:
+        if m.size != n:
+            raise ValueError(f"{name}: expected {n} variances, got {m.size}")
+        m = np.diag(m)
+    if m.shape != (n, n):
+        raise ValueError(f"{name}: expected shape ({n}, {n}), got {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"{name}: contains non-finite entries")
+    if not np.allclose(m, m.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(m).max(initial=0.0))):
+        raise ValueError(f"{name}: matrix is not symmetric")
+    m = 0.5 * (m + m.T)
+    if n:
+        eig = np.linalg.eigvalsh(m)
+        tol = 1e-12 * max(1.0, abs(eig).max())
+        if eig.min() < -tol:
+            raise ValueError(f"{name}: not positive semi-definite (smallest eigenvalue {eig.min():.3g}); "
+                             "variances must be non-negative")
+        if not allow_zero and eig.min() <= tol:
+            raise ValueError(f"{name}: must be positive definite (smallest eigenvalue {eig.min():.3g})")
+    return m
+
+
+@dataclass(frozen=True)
+class Gaussian:
+    """A Gaussian belief ``N(mean, cov)``.
+
+    Parameters
+    ----------
+    mean : array_like, shape (n,)
+    cov : array_like, shape (n, n), or (n,) variances, or scalar
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+    def __post_init__(self):
+        mean = np.asarray(self.mean, dtype=float).reshape(-1)
+        if not np.all(np.isfinite(mean)):
+            raise ValueError("Gaussian: mean contains non-finite entries")
+        object.__setattr__(self, "mean", mean)
+        object.__setattr__(self, "cov", as_cov(self.cov, mean.size, "Gaussian covariance"))
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov))
+
+    def sample(self, n: int, seed=None) -> np.ndarray:
+        """``n`` samples as rows, from a seed or ``numpy.random.Generator``."""
+        rng = np.random.default_rng(seed)
+        return rng.multivariate_normal(self.mean, self.cov, size=n, method="eigh")
+
+
+class Dataset:
+    """A record: strictly increasing time stamps and named, equally long columns.
+
+    NaN in a measurement column means "not measured at this sample". Inputs must be finite
+    wherever they are used (checked by the consumers, which name the offending column and row).
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        Time stamps [s].
+    columns : mapping str -> array_like, shape (N,)
+    units : mapping str -> str, optional
+    meta : mapping, optional
+        Free-form description (source, vessel, ...).
+    """
+
+    def __init__(self, t, columns: Mapping[str, Iterable[float]], units: Mapping[str, str] | None = None,
+                 meta: Mapping | None = None):
+        self.t = check_time(t)
+        self.t.setflags(write=False)
+        cols = {}
+        for name, values in columns.items():
+            if not isinstance(name, str) or not name:
+                raise ValueError(f"column name {name!r} must be a non-empty string")
+            if name == "t" or name == "time":
+                raise ValueError(f"column name {name!r} is reserved for the time stamps")
+            arr = np.asarray(values, dtype=float).reshape(-1)
+            if arr.size != self.t.size:
+                raise ValueError(f"column {name!r} has {arr.size} rows, time has {self.t.size}")
+            arr.setflags(write=False)
+            cols[name] = arr
+        self._columns = cols
+        self.units = dict(units or {})
+        self.meta = dict(meta or {})
+
+    # -- access -----------------------------------------------------------------------------------
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self._columns)
+
+    def __len__(self) -> int:
+        return self.t.size
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._columns
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name in ("t", "time"):
+            return self.t
+        try:
+            return self._columns[name]
+        except KeyError:
+            raise ValueError(f"unknown column {name!r}; columns: {list(self._columns)}") from None
+
+    def matrix(self, names: Sequence[str], *, finite: bool = False, what: str = "column") -> np.ndarray:
+        """Stack named columns into an (N, len(names)) array; ``finite=True`` rejects NaN/inf."""
+        if not names:
+            return np.zeros((len(self), 0))
+        out = np.column_stack([self[n] for n in names])
+        if finite:
+            bad = ~np.isfinite(out)
+            if bad.any():
+                row, col = np.argwhere(bad)[0]
+                raise ValueError(f"{what} {names[col]!r} is not finite at row {row} (t = {self.t[row]:g} s); "
+                                 "NaN is only allowed in measurements")
+        return out
+
+    @property
+    def dt(self) -> np.ndarray:
+        return np.diff(self.t)
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(N={len(self)}, t=[{self.t[0]:g}, {self.t[-1]:g}] s, "
+                f"columns={list(self._columns)})")
+
+    # -- derived datasets -------------------------------------------------------------------------
+    def with_columns(self, **columns) -> "Dataset":
+        """A new dataset with columns added or replaced."""
+        merged = dict(self._columns)
+        merged.update(columns)
+        return Dataset(self.t, merged, self.units, self.meta)
+
+    def select(self, names: Sequence[str]) -> "Dataset":
+        return Dataset(self.t, {n: self[n] for n in names}, {n: self.units.get(n, "") for n in names}, self.meta)
+
+    def slice(self, start: int | None = None, stop: int | None = None) -> "Dataset":
+        sl = slice(start, stop)
+        return Dataset(self.t[sl], {n: v[sl] for n, v in self._columns.items()}, self.units, self.meta)
+
+    def between(self, t0: float, t1: float) -> "Dataset":
+        """Rows with ``t0 <= t <= t1``."""
+        idx = np.flatnonzero((self.t >= t0) & (self.t <= t1))
+        if idx.size == 0:
+            raise ValueError(f"no samples between t = {t0} and {t1} s")
+        return self.slice(idx[0], idx[-1] + 1)
+
+    # -- I/O -----------------------------------------------------------------------------------------
+    def to_pandas(self):
+        import pandas as pd
+
+        frame = pd.DataFrame({"t": self.t, **self._columns})
+        frame.attrs["units"] = dict(self.units)
+        return frame
+
+    @classmethod
+    def from_pandas(cls, frame, time: str = "t", units: Mapping[str, str] | None = None) -> "Dataset":
+        if time not in frame.columns:
+            raise ValueError(f"no time column {time!r}; columns: {list(frame.columns)}")
+        cols = {str(c): frame[c].to_numpy(dtype=float) for c in frame.columns if c != time}
+        return cls(frame[time].to_numpy(dtype=float), cols, units or frame.attrs.get("units"))
+
+    def to_csv(self, path) -> Path:
+        """Write ``t`` and all columns as CSV with a header row."""
+        path = Path(path)
+        header = ",".join(["t", *self._columns])
+        data = np.column_stack([self.t, *self._columns.values()])
+        np.savetxt(path, data, delimiter=",", header=header, comments="", fmt="%.17g")
+        return path
+
+    @classmethod
+    def from_csv(cls, path, time: str | None = None, rename: Mapping[str, str] | None = None,
+                 scale: Mapping[str, float] | None = None) -> "Dataset":
+        """Read a CSV with a header row of column names.
+
+        Parameters
+        ----------
+        time : str, optional
+            Name of the time column; ``t`` or ``time`` by default.
+        rename : mapping, optional
+            Old name -> new name (e.g. ``{"heading": "psi"}``).
+        scale : mapping, optional
+            New name -> factor applied after renaming (e.g. ``{"psi": np.pi / 180}``).
+        """
+        import pandas as pd
+
+        frame = pd.read_csv(path)
+        if time is None:
+            time = next((c for c in ("t", "time") if c in frame.columns), None)
+            if time is None:
+                raise ValueError(f"{path}: no 't' or 'time' column; columns: {list(frame.columns)}")
+        if rename:
+            unknown = set(rename) - set(frame.columns)
+            if unknown:
+                raise ValueError(f"{path}: cannot rename unknown column(s) {sorted(unknown)}")
+            frame = frame.rename(columns=dict(rename))
+        non_numeric = [c for c in frame.columns if not np.issubdtype(frame[c].dtype, np.number)]
+        if non_numeric:
+            raise ValueError(f"{path}: non-numeric column(s) {non_numeric}")
+        data = cls.from_pandas(frame, time=time)
+        for name, factor in (scale or {}).items():
+            data = data.with_columns(**{name: data[name] * factor})
+        data.meta["source"] = str(path)
+        return data
+
+
+class Trajectory(Dataset):
+    """A simulated record: a :class:`Dataset` whose columns include a model's states, inputs, outputs.
+
+    Attributes
+    ----------
+    model_name : str
+    state_names, input_names, output_names : tuple of str
+    """
+
+    def __init__(self, t, columns, *, model_name: str, state_names, input_names, output_names,
+                 units=None, meta=None):
+        super().__init__(t, columns, units, meta)
+        self.model_name = model_name
+        self.state_names = tuple(state_names)
+        self.input_names = tuple(input_names)
+        self.output_names = tuple(output_names)
+
+    @property
+    def x(self) -> np.ndarray:
+        """States as an (N, nx) array."""
+        return self.matrix(self.state_names)
+
+    @property
+    def u(self) -> np.ndarray:
+        return self.matrix(self.input_names)
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.matrix(self.output_names)

@@ -1,0 +1,364 @@
+"""Shared machinery of the recursive estimators: data preparation, the compiled fold over a record,
+the online stepper and the :class:`FilterResult` value.
+
+Every recursive estimator is one CasADi step Function with the signature
+
+``step(carry, u_prev, u, y, mask, dt, p, Q, R, gate, *extra) ->
+(carry_next, x, P, x_pred, P_pred, C, e, S, nis, ll, accepted)``
+
+where ``carry`` is the estimator's memory (mean and vectorised covariance, or an ensemble), ``y``
+holds the measured outputs with NaN replaced by 0 and ``mask`` flags which ones were measured,
+``dt`` is the time since the previous sample (0 on the first row: update only), ``C`` is the
+cross-covariance of the previous filtered state and the predicted state (what a Rauch-Tung-Striebel
+smoother needs) and ``gate`` the chi-square threshold of the innovation test. Batch filtering runs
+the same Function through ``mapaccum`` over the whole record; online use calls it through
+preallocated buffers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+from scipy import stats
+
+from .._fast import BufferedCall
+from ..angles import wrap, wrap_sym
+from ..data import Dataset, Gaussian, as_cov
+from ..discretize import DiscreteModel
+
+__all__ = ["Estimator", "FilterResult", "Health", "STEP_OUTPUTS"]
+
+STEP_INPUTS = ["carry", "u_prev", "u", "y", "mask", "dt", "p", "Q", "R", "gate"]
+STEP_OUTPUTS = ["carry_next", "x", "P", "x_pred", "P_pred", "C", "e", "S", "nis", "ll", "accepted"]
+
+
+@dataclass(frozen=True)
+class Health:
+    """NIS-based divergence monitor of a filter run.
+
+    A window of ``window`` samples is flagged when its summed NIS lies outside the two-sided
+    ``1 - alpha`` chi-square interval for the number of scalar measurements in it.
+    """
+
+    window: int
+    alpha: float
+    flagged: np.ndarray          # (n_windows,) bool
+    window_start: np.ndarray     # first row of each window
+    nis_sum: np.ndarray
+    dof: np.ndarray
+
+    @property
+    def ok(self) -> bool:
+        """True if fewer windows are flagged than expected by chance plus a margin."""
+        n = self.flagged.size
+        return bool(n == 0 or self.flagged.sum() <= max(1, int(np.ceil(2 * self.alpha * n + 2 * np.sqrt(self.alpha * n)))))
+
+    def raise_if_diverged(self) -> None:
+        if not self.ok:
+            first = int(self.window_start[np.argmax(self.flagged)])
+            raise RuntimeError(f"filter health check failed: {int(self.flagged.sum())} of {self.flagged.size} "
+                               f"NIS windows outside the {100 * (1 - self.alpha):.0f}% chi-square interval "
+                               f"(first at row {first})")
+
+
+@dataclass(frozen=True)
+class FilterResult:
+    """Result of running an estimator over a record (all arrays indexed by sample).
+
+    Attributes
+    ----------
+    t : (N,) time stamps
+    x, P : filtered means (N, nx) and covariances (N, nx, nx)
+    x_pred, P_pred : predicted means and covariances before each update
+    C : cross-covariances of the previous filtered and the current predicted state (for smoothing)
+    innovations : (N, ny) residuals, NaN where the channel was not measured (angles wrapped)
+    S : (N, ny, ny) innovation covariances (identity rows/columns for unmeasured channels)
+    nis : (N,) normalised innovation squared
+    n_measured : (N,) number of scalar measurements used per sample
+    loglik_terms : (N,) log-likelihood of each sample's measurements given the past
+    rejected : (N,) True where the innovation gate rejected the update
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    x_pred: np.ndarray
+    P_pred: np.ndarray
+    C: np.ndarray
+    innovations: np.ndarray
+    S: np.ndarray
+    nis: np.ndarray
+    n_measured: np.ndarray
+    loglik_terms: np.ndarray
+    rejected: np.ndarray
+    state_names: tuple
+    output_names: tuple
+    estimator: str
+    angle_states: np.ndarray = field(repr=False, default=None)
+
+    @property
+    def loglik(self) -> float:
+        """Total log-likelihood of the record (prediction-error decomposition)."""
+        return float(np.sum(self.loglik_terms))
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviations (N, nx) of the filtered states."""
+        return np.sqrt(np.maximum(np.einsum("kii->ki", self.P), 0.0))
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """Estimate of a named state over the record."""
+        try:
+            return self.x[:, self.state_names.index(name)]
+        except ValueError:
+            raise ValueError(f"unknown state {name!r}; states: {list(self.state_names)}") from None
+
+    def nees(self, x_true: np.ndarray) -> np.ndarray:
+        """Normalised estimation error squared against true states (angles wrapped)."""
+        err = np.asarray(x_true, dtype=float) - self.x
+        if self.angle_states is not None and self.angle_states.any():
+            err[:, self.angle_states] = wrap(err[:, self.angle_states])
+        return np.einsum("ki,ki->k", err, np.linalg.solve(self.P, err[..., None])[..., 0])
+
+    def health(self, window: int = 50, alpha: float = 0.01) -> Health:
+        """Windowed NIS test (see :class:`Health`)."""
+        n = self.nis.size // window
+        if n == 0:
+            empty = np.zeros(0)
+            return Health(window, alpha, empty.astype(bool), empty.astype(int), empty, empty)
+        used = ~self.rejected
+        nis = np.where(used, self.nis, 0.0)[: n * window].reshape(n, window).sum(axis=1)
+        dof = np.where(used, self.n_measured, 0)[: n * window].reshape(n, window).sum(axis=1)
+        lo = stats.chi2.ppf(alpha / 2, np.maximum(dof, 1))
+        hi = stats.chi2.ppf(1 - alpha / 2, np.maximum(dof, 1))
+        flagged = (dof > 0) & ((nis < lo) | (nis > hi))
+        return Health(window, alpha, flagged, np.arange(n) * window, nis, dof)
+
+    def to_dataset(self) -> Dataset:
+        """Estimates and their standard deviations (``<state>_std``) as a :class:`Dataset`."""
+        cols = {n: self.x[:, i] for i, n in enumerate(self.state_names)}
+        std = self.std
+        cols.update({f"{n}_std": std[:, i] for i, n in enumerate(self.state_names)})
+        return Dataset(self.t, cols, meta={"estimator": self.estimator})
+
+
+class Estimator:
+    """Base class of the recursive estimators (not used directly).
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    Q : covariance of the process noise ``w`` (nw x nw; scalar, variances, matrix or name mapping)
+    R : covariance of the measured outputs (scalar, variances, matrix or name mapping)
+    measured : sequence of str, optional
+        Output names that are measured (default: all outputs of the model).
+    options : mapping, optional
+        ``gate`` (probability of the chi-square innovation gate, e.g. 0.999; off by default) and
+        estimator-specific options.
+    """
+
+    name = "estimator"
+    _common_options = {"gate": None}
+    _options: dict = {}
+
+    def __init__(self, dmodel: DiscreteModel, Q, R, *, measured: Sequence[str] | None = None,
+                 options: Mapping | None = None):
+        if not isinstance(dmodel, DiscreteModel):
+            raise TypeError(f"{type(self).__name__} needs a DiscreteModel (use casship.discretize), "
+                            f"got {type(dmodel).__name__}")
+        model = dmodel.model
+        self.dmodel, self.model = dmodel, model
+        measured = tuple(model.output_names if measured is None else measured)
+        unknown = [n for n in measured if n not in model.output_names]
+        if unknown:
+            raise ValueError(f"unknown measured output(s) {unknown}; outputs: {list(model.output_names)}")
+        if not measured:
+            raise ValueError("at least one output must be measured")
+        self.measured = measured
+        self.meas_index = [model.index(n, "output") for n in measured]
+        self.ny = len(measured)
+        self.angle_meas = model.angle_outputs[self.meas_index]
+        self.Q = as_cov(Q, model.nw, "Q", model.noise_names)
+        self.R = as_cov(R, self.ny, "R", measured, allow_zero=False)
+        allowed = {**self._common_options, **self._options}
+        options = dict(options or {})
+        unknown = set(options) - set(allowed)
+        if unknown:
+            raise ValueError(f"unknown option(s) {sorted(unknown)} for {type(self).__name__}; "
+                             f"known: {sorted(allowed)}")
+        self.options = {**allowed, **options}
+        gate = self.options["gate"]
+        if gate is not None and not 0 < gate < 1:
+            raise ValueError(f"option 'gate' is a probability in (0, 1), got {gate}")
+        self.sym = dmodel.symbolic
+        self._step = self._build_step()
+        self._folds: dict[int, ca.Function] = {}
+        self._online = None
+
+    # -- symbolic helpers shared by the estimators ----------------------------------------------
+    def _symbols(self):
+        m, S = self.model, self.sym
+        return dict(u_prev=S.sym("u_prev", m.nu), u=S.sym("u", m.nu), y=S.sym("y", self.ny),
+                    mask=S.sym("mask", self.ny), dt=S.sym("dt"), p=S.sym("p", m.np),
+                    Q=S.sym("Q", m.nw, m.nw), R=S.sym("R", self.ny, self.ny), gate=S.sym("gate"))
+
+    def h_meas(self, x, u, p):
+        """Symbolic measured outputs."""
+        return self.model.h(x, u, p)[self.meas_index]
+
+    def residual(self, y, yhat, mask):
+        """Masked measurement residual with angle channels wrapped on the circle."""
+        e = y - yhat
+        if self.angle_meas.any():
+            e = self.sym(ca.vertcat(*[wrap_sym(e[i]) if a else e[i] for i, a in enumerate(self.angle_meas)]))
+        return mask * e
+
+    def masked_innovation_cov(self, HPH, R, mask):
+        """``S`` with unmeasured channels replaced by unit diagonal entries (they then carry no gain)."""
+        Dm = ca.diag(mask)
+        return Dm @ (HPH + R) @ Dm + ca.diag(1 - mask)
+
+    @staticmethod
+    def gaussian_terms(e, S, mask):
+        """NIS and log-likelihood of a masked innovation."""
+        L = ca.chol(S)          # upper triangular, S = L' L
+        z = ca.solve(L.T, e)
+        nis = ca.dot(z, z)
+        logdet = 2 * ca.sum1(ca.log(ca.diag(L)))
+        ll = -0.5 * (nis + logdet + ca.sum1(mask) * np.log(2 * np.pi))
+        return nis, ll
+
+    def _build_step(self) -> ca.Function:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # -- public -------------------------------------------------------------------------------
+    @property
+    def step_function(self) -> ca.Function:
+        """The compiled step Function (also the one exported to C)."""
+        return self._step
+
+    def carry_from(self, prior: Gaussian, seed=None) -> np.ndarray:
+        """The estimator memory for a Gaussian prior (mean and vectorised covariance)."""
+        return np.concatenate([prior.mean, prior.cov.reshape(-1, order="F")])
+
+    def extra_inputs(self, n: int, seed) -> list[np.ndarray]:
+        """Per-step inputs beyond the common ones (random draws of ensemble filters)."""
+        return []
+
+    def prepare(self, data: Dataset, p=None) -> dict:
+        """Check a record and turn it into the fold's input arrays (columns = samples)."""
+        m = self.model
+        missing = [n for n in (*m.input_names, *self.measured) if n not in data]
+        if missing:
+            raise ValueError(f"data has no column(s) {missing} needed by {self.name} on {m.name!r}; "
+                             f"columns: {list(data.names)}")
+        U = data.matrix(m.input_names, finite=True, what="input")
+        Y = data.matrix(self.measured)
+        if np.isinf(Y).any():
+            row, col = np.argwhere(np.isinf(Y))[0]
+            raise ValueError(f"measurement {self.measured[col]!r} is infinite at row {row}")
+        for j in np.flatnonzero(self.angle_meas):
+            col = Y[:, j]
+            big = np.abs(col[np.isfinite(col)])
+            if big.size and big.max() > 2 * np.pi + 1e-9:
+                raise ValueError(f"angle measurement {self.measured[j]!r} reaches {big.max():.4g}: "
+                                 "angles are in radians (degrees given?)")
+        mask = np.isfinite(Y).astype(float)
+        dt = np.concatenate([[0.0], np.diff(data.t)])
+        U_prev = np.vstack([U[:1], U[:-1]])
+        gate = np.full(len(data), np.inf)
+        if self.options["gate"] is not None:
+            counts = mask.sum(axis=1)
+            ok = counts > 0
+            gate[ok] = stats.chi2.ppf(self.options["gate"], counts[ok])
+        p = m.params() if p is None else m.params(p)
+        return dict(u_prev=U_prev.T, u=U.T, y=np.nan_to_num(Y, nan=0.0).T, mask=mask.T, dt=dt[None, :],
+                    p=p, Q=self.Q, R=self.R, gate=gate[None, :])
+
+    def fold(self, n: int) -> ca.Function:
+        """The step Function folded over ``n`` samples (``mapaccum``), cached per length."""
+        if n not in self._folds:
+            self._folds[n] = self._step.mapaccum(n)
+        return self._folds[n]
+
+    def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
+        """Run the estimator over a whole record in one compiled fold.
+
+        Parameters
+        ----------
+        data : Dataset
+            Columns named like the model inputs (finite) and measured outputs (NaN = missing).
+        prior : Gaussian
+            Belief about the state at the first time stamp, before its measurement.
+        p : array or mapping, optional
+            Model parameters (nominal by default).
+        seed : int or Generator, optional
+            For stochastic estimators (EnKF).
+        """
+        self._check_prior(prior)
+        arrays = self.prepare(data, p)
+        n = len(data)
+        rng = np.random.default_rng(seed)
+        args = [self.carry_from(prior, rng)] + [arrays[k] for k in STEP_INPUTS[1:]] + self.extra_inputs(n, rng)
+        out = self.fold(n)(*args)
+        return self._result(data.t, arrays["mask"].T, [np.asarray(o) for o in out])
+
+    def _check_prior(self, prior: Gaussian) -> None:
+        if not isinstance(prior, Gaussian):
+            raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
+        if prior.mean.size != self.model.nx:
+            raise ValueError(f"prior has {prior.mean.size} entries, model {self.model.name!r} has "
+                             f"{self.model.nx} states {list(self.model.state_names)}")
+
+    def _result(self, t, mask, out) -> FilterResult:
+        nx, ny, n = self.model.nx, self.ny, t.size
+        _, x, P, xp, Pp, C, e, S, nis, ll, acc = out
+        cube = lambda a, k: a.T.reshape(n, k, k).transpose(0, 2, 1)  # noqa: E731 (column-major blocks)
+        e = e.T.copy()
+        e[mask == 0] = np.nan
+        return FilterResult(
+            t=t, x=x.T, P=cube(P, nx), x_pred=xp.T, P_pred=cube(Pp, nx), C=cube(C, nx), innovations=e,
+            S=cube(S, ny), nis=nis.ravel(), n_measured=mask.sum(axis=1).astype(int), loglik_terms=ll.ravel(),
+            rejected=acc.ravel() < 0.5, state_names=self.model.state_names, output_names=self.measured,
+            estimator=self.name, angle_states=self.model.angle_states)
+
+    # -- online -----------------------------------------------------------------------------------
+    def step(self, x, P, u_prev, y, dt, *, u=None, p=None):
+        """One online step (predict over ``dt`` with ``u_prev``, then update with ``y``).
+
+        Arguments are numpy arrays; ``y`` may hold NaN for channels not measured now. Evaluation
+        goes through preallocated buffers (no CasADi ``DM`` conversion per call). Returns
+        ``(x, P, info)`` with ``info = {"e", "nis", "ll", "rejected", "x_pred", "P_pred"}``.
+        """
+        m = self.model
+        if self._online is None:
+            self._online = BufferedCall(self._step)
+            a = self._online.args
+            a[6][:] = m.params()
+            a[7][:] = self.Q.reshape(-1, order="F")
+            a[8][:] = self.R.reshape(-1, order="F")
+        call = self._online
+        a = call.args
+        a[0][: m.nx] = x
+        a[0][m.nx:] = np.asarray(P).reshape(-1, order="F")
+        a[1][:] = u_prev
+        a[2][:] = u_prev if u is None else u
+        y = np.asarray(y, dtype=float)
+        ok = np.isfinite(y)
+        a[3][:] = np.where(ok, y, 0.0)
+        a[4][:] = ok
+        a[5][0] = dt
+        if p is not None:
+            a[6][:] = m.params(p)
+        gate = self.options["gate"]
+        a[9][0] = stats.chi2.ppf(gate, ok.sum()) if gate is not None and ok.any() else np.inf
+        r = call()
+        info = {"e": np.where(ok, r[6], np.nan), "nis": float(r[8][0]), "ll": float(r[9][0]),
+                "rejected": bool(r[10][0] < 0.5), "x_pred": r[3].copy(),
+                "P_pred": r[4].reshape(m.nx, m.nx, order="F").copy()}
+        return r[1].copy(), r[2].reshape(m.nx, m.nx, order="F").copy(), info
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.model.name!r}, measured={list(self.measured)})"

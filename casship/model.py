@@ -1,0 +1,394 @@
+"""Symbolic model core: declare named states, inputs, parameters, noise and outputs once.
+
+A :class:`ModelBuilder` collects CasADi ``SX`` symbols and expressions; :meth:`ModelBuilder.build`
+freezes them into an immutable :class:`Model` holding named CasADi Functions
+
+* ``f(x, u, p, w) -> xdot``     continuous-time dynamics,
+* ``h(x, u, p) -> y``            outputs (measurement model),
+* ``f_jac(x, u, p, w) -> (A, B, Fp, G)`` and ``h_jac(x, u, p) -> (C, D, Hp)`` exact Jacobians.
+
+Models compose through *ports*: named additive placeholders (for example a generalised force
+``tau`` of a 3-DOF ship) that a later term can feed without rewriting the model, see
+:meth:`Model.extend`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Callable, Iterable, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+__all__ = ["ModelBuilder", "Model", "Variable", "Parameter"]
+
+
+@dataclass(frozen=True)
+class Variable:
+    """A named scalar of a model (state, input, noise channel or output)."""
+
+    name: str
+    unit: str = ""
+    angle: bool = False
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Parameter(Variable):
+    """A named model parameter with its nominal value and optional bounds."""
+
+    value: float = 0.0
+    lower: float = -np.inf
+    upper: float = np.inf
+    source: str = ""
+
+
+def _check_name(name: str, taken: Mapping[str, str]) -> None:
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ValueError(f"name {name!r} is not a valid identifier")
+    if name in taken:
+        raise ValueError(f"name {name!r} is already declared as a {taken[name]}")
+
+
+def _as_sx(expr, what: str) -> ca.SX:
+    try:
+        value = ca.SX(expr)
+    except Exception as exc:  # pragma: no cover - message path
+        raise TypeError(f"{what}: cannot convert {type(expr).__name__} to a CasADi expression") from exc
+    if value.shape != (1, 1):
+        raise ValueError(f"{what}: expected a scalar expression, got shape {value.shape}")
+    return value
+
+
+class ModelBuilder:
+    """Collect the symbols and equations of a model, then :meth:`build` it.
+
+    Parameters
+    ----------
+    name : str
+        Name of the model (used for Function names and reports).
+    doc : str, optional
+        One-line description with the source of the model.
+
+    Examples
+    --------
+    >>> import casship as cs
+    >>> b = cs.ModelBuilder("nomoto1")
+    >>> psi, r = b.state("psi", angle=True), b.state("r")
+    >>> delta = b.input("delta")
+    >>> K, T = b.param("K", 0.08), b.param("T", 25.0)
+    >>> b.ode(psi=r, r=(K * delta - r) / T + b.noise("w_r"))
+    >>> b.output("psi_m", psi)
+    >>> model = b.build()
+    >>> model.state_names
+    ('psi', 'r')
+    """
+
+    def __init__(self, name: str, doc: str = ""):
+        self.name = name
+        self.doc = doc
+        self._kinds: dict[str, str] = {}
+        self._symbols: dict[str, ca.SX] = {}
+        self._states: list[Variable] = []
+        self._inputs: list[Variable] = []
+        self._params: list[Parameter] = []
+        self._noises: list[Variable] = []
+        self._outputs: list[Variable] = []
+        self._ode: dict[str, ca.SX] = {}
+        self._output_expr: dict[str, ca.SX] = {}
+        self._ports: dict[str, ca.SX] = {}
+        self._port_terms: dict[str, list[ca.SX]] = {}
+        self.meta: dict = {}
+
+    # -- declarations -------------------------------------------------------------------------
+    def _declare(self, kind: str, var: Variable, store: list) -> ca.SX:
+        _check_name(var.name, self._kinds)
+        sym = ca.SX.sym(var.name)
+        self._kinds[var.name] = kind
+        self._symbols[var.name] = sym
+        store.append(var)
+        return sym
+
+    def state(self, name: str, *, unit: str = "", angle: bool = False, doc: str = "") -> ca.SX:
+        """Declare a state; ``angle=True`` marks it as an angle (wrapped residuals)."""
+        return self._declare("state", Variable(name, unit, angle, doc), self._states)
+
+    def input(self, name: str, *, unit: str = "", angle: bool = False, doc: str = "") -> ca.SX:
+        """Declare a (known) input such as a rudder angle or propeller rate."""
+        return self._declare("input", Variable(name, unit, angle, doc), self._inputs)
+
+    def param(self, name: str, value: float, *, bounds: tuple[float, float] | None = None,
+              unit: str = "", doc: str = "", source: str = "") -> ca.SX:
+        """Declare a parameter with nominal ``value`` and optional ``bounds=(lower, upper)``."""
+        value = float(value)
+        if not np.isfinite(value):
+            raise ValueError(f"parameter {name!r}: nominal value must be finite, got {value}")
+        lower, upper = (-np.inf, np.inf) if bounds is None else (float(bounds[0]), float(bounds[1]))
+        if not lower <= value <= upper:
+            raise ValueError(f"parameter {name!r}: nominal value {value} outside bounds {(lower, upper)}")
+        par = Parameter(name, unit, False, doc, value, lower, upper, source)
+        return self._declare("param", par, self._params)
+
+    def noise(self, name: str, *, unit: str = "", doc: str = "") -> ca.SX:
+        """Declare a process-noise channel ``w`` (zero mean; covariance given to estimators)."""
+        return self._declare("noise", Variable(name, unit, False, doc), self._noises)
+
+    def port(self, name: str, size: int = 1) -> ca.SX:
+        """Declare an additive port: a placeholder that later terms may feed (sum), zero if unfed."""
+        _check_name(name, self._kinds)
+        sym = ca.SX.sym(name, size)
+        self._kinds[name] = "port"
+        self._ports[name] = sym
+        self._port_terms[name] = []
+        return sym
+
+    def feed(self, port: str, expr) -> None:
+        """Add ``expr`` to the port ``port`` (e.g. a wind force ``vertcat(X, Y, N)`` to ``tau``)."""
+        if port not in self._ports:
+            raise ValueError(f"unknown port {port!r}; ports: {sorted(self._ports)}")
+        expr = ca.SX(expr)
+        if expr.shape != self._ports[port].shape:
+            raise ValueError(f"port {port!r} has shape {self._ports[port].shape}, got {expr.shape}")
+        self._port_terms[port].append(expr)
+
+    # -- equations ----------------------------------------------------------------------------
+    def ode(self, **rhs) -> None:
+        """Set the time derivative of states by name, e.g. ``b.ode(psi=r, r=...)``."""
+        for name, expr in rhs.items():
+            if self._kinds.get(name) != "state":
+                raise ValueError(f"ode: {name!r} is not a declared state")
+            self._ode[name] = _as_sx(expr, f"ode for {name!r}")
+
+    def add_to_ode(self, **rhs) -> None:
+        """Add terms to existing state derivatives (for composing models)."""
+        for name, expr in rhs.items():
+            if name not in self._ode:
+                raise ValueError(f"add_to_ode: state {name!r} has no equation yet")
+            self._ode[name] = self._ode[name] + _as_sx(expr, f"add_to_ode for {name!r}")
+
+    def output(self, name: str, expr, *, unit: str = "", angle: bool | None = None,
+               doc: str = "") -> None:
+        """Declare an output ``y``; an output that is an angle state is an angle by default."""
+        expr = _as_sx(expr, f"output {name!r}")
+        if angle is None:
+            angle = any(v.angle and ca.is_equal(expr, self._symbols[v.name]) for v in self._states)
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ValueError(f"output name {name!r} is not a valid identifier")
+        if name in self._output_expr:
+            raise ValueError(f"output {name!r} is already declared")
+        if name in self._kinds and not (self._kinds[name] == "state" and ca.is_equal(expr, self._symbols[name])):
+            raise ValueError(f"output {name!r} clashes with the {self._kinds[name]} of that name; an output may "
+                             "share a name only with the state it measures")
+        self._outputs.append(Variable(name, unit, bool(angle), doc))
+        self._output_expr[name] = expr
+
+    # -- lookup -------------------------------------------------------------------------------
+    def sym(self, name: str) -> ca.SX:
+        """The symbol of a declared state, input, parameter, noise channel or port."""
+        if name in self._symbols:
+            return self._symbols[name]
+        if name in self._ports:
+            return self._ports[name]
+        raise ValueError(f"unknown name {name!r} in model {self.name!r}")
+
+    def has(self, name: str) -> bool:
+        return name in self._kinds
+
+    # -- build --------------------------------------------------------------------------------
+    def build(self) -> "Model":
+        """Freeze into an immutable :class:`Model` (checks that every state has an equation)."""
+        missing = [v.name for v in self._states if v.name not in self._ode]
+        if missing:
+            raise ValueError(f"model {self.name!r}: states without an equation: {missing}")
+        if not self._states:
+            raise ValueError(f"model {self.name!r} has no states")
+        return Model(self)
+
+    def copy(self, name: str | None = None) -> "ModelBuilder":
+        new = ModelBuilder(name or self.name, self.doc)
+        new._kinds = dict(self._kinds)
+        new._symbols = dict(self._symbols)
+        new._states, new._inputs = list(self._states), list(self._inputs)
+        new._params, new._noises = list(self._params), list(self._noises)
+        new._outputs = list(self._outputs)
+        new._ode, new._output_expr = dict(self._ode), dict(self._output_expr)
+        new._ports = dict(self._ports)
+        new._port_terms = {k: list(v) for k, v in self._port_terms.items()}
+        new.meta = dict(self.meta)
+        return new
+
+
+def _vec(symbols: Iterable[ca.SX]) -> ca.SX:
+    symbols = list(symbols)
+    return ca.vertcat(*symbols) if symbols else ca.SX(0, 1)
+
+
+class Model:
+    """An immutable continuous-time model built by :class:`ModelBuilder`.
+
+    Attributes
+    ----------
+    f, h : casadi.Function
+        ``f(x,u,p,w)->xdot`` and ``h(x,u,p)->y`` with named inputs and outputs.
+    f_jac, h_jac : casadi.Function
+        Exact Jacobians ``(A, B, Fp, G)`` of ``f`` and ``(C, D, Hp)`` of ``h``.
+    state_names, input_names, param_names, noise_names, output_names : tuple of str
+    """
+
+    def __init__(self, builder: ModelBuilder):
+        self._builder = builder.copy()
+        b = self._builder
+        self.name = b.name
+        self.doc = b.doc
+        self.meta = MappingProxyType(dict(b.meta))
+        self.state_vars = tuple(b._states)
+        self.input_vars = tuple(b._inputs)
+        self.param_vars = tuple(b._params)
+        self.noise_vars = tuple(b._noises)
+        self.output_vars = tuple(b._outputs)
+        self.state_names = tuple(v.name for v in b._states)
+        self.input_names = tuple(v.name for v in b._inputs)
+        self.param_names = tuple(v.name for v in b._params)
+        self.noise_names = tuple(v.name for v in b._noises)
+        self.output_names = tuple(v.name for v in b._outputs)
+        self.nx, self.nu, self.np = len(self.state_names), len(self.input_names), len(self.param_names)
+        self.nw, self.ny = len(self.noise_names), len(self.output_names)
+        self.angle_states = np.array([v.angle for v in b._states], dtype=bool)
+        self.angle_outputs = np.array([v.angle for v in b._outputs], dtype=bool)
+
+        x = _vec(b._symbols[n] for n in self.state_names)
+        u = _vec(b._symbols[n] for n in self.input_names)
+        p = _vec(b._symbols[n] for n in self.param_names)
+        w = _vec(b._symbols[n] for n in self.noise_names)
+        port_syms = [b._ports[k] for k in b._ports]
+        port_vals = [sum(b._port_terms[k], ca.SX.zeros(b._ports[k].shape)) for k in b._ports]
+        xdot = _vec(b._ode[n] for n in self.state_names)
+        y = _vec(b._output_expr[n] for n in self.output_names)
+        if port_syms:
+            # Terms may themselves refer to ports of their own kind only through states, so one
+            # substitution pass resolves them.
+            xdot, y = ca.substitute([xdot, y], port_syms, port_vals)
+        free = set(ca.symvar(ca.vertcat(xdot, y))) - set(ca.symvar(ca.vertcat(x, u, p, w)))
+        if free:
+            raise ValueError(f"model {self.name!r}: expressions use undeclared symbols "
+                             f"{sorted(str(s) for s in free)}")
+        if ca.depends_on(y, w):
+            raise ValueError(f"model {self.name!r}: outputs must not depend on process noise")
+        self.x, self.u, self.p, self.w = x, u, p, w
+        self.xdot, self.y = xdot, y
+        self.f = ca.Function("f", [x, u, p, w], [xdot], ["x", "u", "p", "w"], ["xdot"])
+        self.h = ca.Function("h", [x, u, p], [y], ["x", "u", "p"], ["y"])
+        self.f_jac = ca.Function(
+            "f_jac", [x, u, p, w],
+            [ca.jacobian(xdot, x), ca.jacobian(xdot, u), ca.jacobian(xdot, p), ca.jacobian(xdot, w)],
+            ["x", "u", "p", "w"], ["A", "B", "Fp", "G"])
+        self.h_jac = ca.Function(
+            "h_jac", [x, u, p], [ca.jacobian(y, x), ca.jacobian(y, u), ca.jacobian(y, p)],
+            ["x", "u", "p"], ["C", "D", "Hp"])
+        self._nominal = np.array([v.value for v in self.param_vars], dtype=float)
+        self.param_lower = np.array([v.lower for v in self.param_vars], dtype=float)
+        self.param_upper = np.array([v.upper for v in self.param_vars], dtype=float)
+        self._freeze()
+
+    # -- immutability ---------------------------------------------------------------------------
+    def __setattr__(self, key, value):
+        if getattr(self, "_frozen", False):
+            raise AttributeError(f"Model {self.name!r} is immutable; build a new one instead")
+        super().__setattr__(key, value)
+
+    def _freeze(self):
+        object.__setattr__(self, "_frozen", True)
+
+    def __repr__(self) -> str:
+        return (f"Model({self.name!r}, x={list(self.state_names)}, u={list(self.input_names)}, "
+                f"p[{self.np}], w={list(self.noise_names)}, y={list(self.output_names)})")
+
+    # -- named vectors --------------------------------------------------------------------------
+    @staticmethod
+    def _named(names: Sequence[str], values: Mapping[str, float], kind: str, base) -> np.ndarray:
+        out = np.array(base, dtype=float).copy()
+        index = {n: i for i, n in enumerate(names)}
+        for key, val in values.items():
+            if key not in index:
+                raise ValueError(f"unknown {kind} name {key!r}; known: {list(names)}")
+            out[index[key]] = float(val)
+        return out
+
+    def states(self, **values: float) -> np.ndarray:
+        """State vector with the given named entries, zeros elsewhere."""
+        return self._named(self.state_names, values, "state", np.zeros(self.nx))
+
+    def inputs(self, **values: float) -> np.ndarray:
+        """Input vector with the given named entries, zeros elsewhere."""
+        return self._named(self.input_names, values, "input", np.zeros(self.nu))
+
+    def params(self, base: np.ndarray | Mapping[str, float] | None = None, **overrides: float) -> np.ndarray:
+        """Nominal parameter vector, or ``base``, with named ``overrides``.
+
+        ``base`` may be a full vector or a mapping name -> value (e.g. a fit's estimates).
+        """
+        if base is None:
+            vec = self._nominal
+        elif isinstance(base, Mapping):
+            vec = self._named(self.param_names, base, "parameter", self._nominal)
+        else:
+            vec = np.asarray(base, dtype=float)
+            if vec.shape != (self.np,):
+                raise ValueError(f"params: expected a vector of {self.np} parameters, got shape {vec.shape}")
+        return self._named(self.param_names, overrides, "parameter", vec)
+
+    def param_dict(self, p: np.ndarray | None = None) -> dict[str, float]:
+        """Mapping name -> value of a parameter vector (nominal by default)."""
+        vec = self._nominal if p is None else np.asarray(p, dtype=float)
+        return {n: float(v) for n, v in zip(self.param_names, vec)}
+
+    def index(self, name: str, kind: str = "state") -> int:
+        """Position of a named state, input, param, noise or output in its vector."""
+        table = {"state": self.state_names, "input": self.input_names, "param": self.param_names,
+                 "noise": self.noise_names, "output": self.output_names}
+        if kind not in table:
+            raise ValueError(f"unknown kind {kind!r}; use one of {list(table)}")
+        try:
+            return table[kind].index(name)
+        except ValueError:
+            raise ValueError(f"unknown {kind} name {name!r} in model {self.name!r}; "
+                             f"known: {list(table[kind])}") from None
+
+    def indices(self, names: Iterable[str], kind: str = "state") -> list[int]:
+        return [self.index(n, kind) for n in names]
+
+    # -- composition ------------------------------------------------------------------------------
+    def builder(self, name: str | None = None) -> ModelBuilder:
+        """A builder pre-loaded with this model's declarations and equations, to extend it."""
+        return self._builder.copy(name)
+
+    def extend(self, term: Callable[[ModelBuilder], None], name: str | None = None) -> "Model":
+        """A new model with ``term(builder)`` applied (the term declares inputs/params and feeds ports).
+
+        Examples
+        --------
+        >>> def push(b):
+        ...     b.feed("tau", ca.vertcat(b.param("X_ext", 1.0), 0, 0))   # doctest: +SKIP
+        >>> windy = ship.extend(push, name="ship+push")                     # doctest: +SKIP
+        """
+        b = self.builder(name or self.name)
+        term(b)
+        return b.build()
+
+    def with_outputs(self, outputs: Mapping[str, object] | Sequence[str], name: str | None = None) -> "Model":
+        """A copy whose outputs are replaced.
+
+        ``outputs`` is a list of state names (each measured directly, output named like the state)
+        or a mapping output name -> state name or callable ``builder -> expression``.
+        """
+        b = self.builder(name or self.name)
+        b._outputs, b._output_expr = [], {}
+        items = outputs.items() if isinstance(outputs, Mapping) else ((n, n) for n in outputs)
+        for out_name, spec in items:
+            if isinstance(spec, str):
+                if spec not in self.state_names:
+                    raise ValueError(f"with_outputs: {spec!r} is not a state of {self.name!r}")
+                b.output(out_name, b.sym(spec))
+            else:
+                b.output(out_name, spec(b))
+        return b.build()

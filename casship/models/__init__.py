@@ -1,0 +1,16 @@
+"""Model library: factories returning :class:`casship.Model` objects, each citing its source."""
+from .kinematic import constant_acceleration, double_integrator, sog_cog, sog_cog_latlon, tomera_kinematic
+from .nomoto import nomoto_first_order, nomoto_second_order
+from .registry import get_model, model_names, register
+from .taylor import SHI_DEFAULTS, SHI_PARAM_NAMES, shi_taylor
+
+register("nomoto1", nomoto_first_order, "first-order Nomoto model (Mariner K, T)")
+register("nomoto2", nomoto_second_order, "second-order Nomoto model (Mariner K, T1, T2, T3)")
+register("shi-taylor", shi_taylor, "Shi et al. (2009) 16-parameter Taylor response model with kinematics")
+register("sog-cog", sog_cog, "five-state SOG/COG/course-rate model, North-East (Fossen & Fossen 2021)")
+register("sog-cog-latlon", sog_cog_latlon, "five-state SOG/COG/course-rate model, lat/lon (Fossen & Fossen 2021)")
+register("tomera-kinematic", tomera_kinematic, "x, y, psi double integrators (Tomera 2011)")
+
+__all__ = ["constant_acceleration", "double_integrator", "sog_cog", "sog_cog_latlon", "tomera_kinematic",
+           "nomoto_first_order", "nomoto_second_order", "shi_taylor", "SHI_DEFAULTS", "SHI_PARAM_NAMES",
+           "get_model", "model_names", "register"]

@@ -1,0 +1,102 @@
+"""Kinematic models: double integrator (seed 001), constant acceleration (seed 000) and the
+five-state SOG/COG/course-rate model of Fossen & Fossen (2021) in North-East and lat/lon form."""
+from __future__ import annotations
+
+import casadi as ca
+
+from ..frames import wgs84_radii
+from ..model import Model, ModelBuilder
+
+__all__ = ["double_integrator", "tomera_kinematic", "constant_acceleration", "sog_cog", "sog_cog_latlon"]
+
+
+def _add_double_integrator(b: ModelBuilder, pos: str, vel: str, g: tuple[float, float], angle: bool) -> None:
+    p = b.state(pos, unit="rad" if angle else "m", angle=angle)
+    v = b.state(vel, unit="rad/s" if angle else "m/s")
+    g1 = b.param(f"g1_{pos}", g[0], doc="process-noise gain on the position equation")
+    g2 = b.param(f"g2_{pos}", g[1], doc="process-noise gain on the velocity equation")
+    w1, w2 = b.noise(f"w1_{pos}"), b.noise(f"w2_{pos}")
+    b.ode(**{pos: v + g1 * w1, vel: g2 * w2})
+    b.output(pos, p)
+
+
+def double_integrator(pos: str = "x", vel: str = "vx", g: tuple[float, float] = (1.0, 0.01),
+                      angle: bool = False) -> Model:
+    """One degree of freedom as a double integrator, ``x' = A x + G w``, ``y = C x``.
+
+    Tomera (2011), Eq. 56-58: ``A = [[0, 1], [0, 0]]``, ``C = [1, 0]``, ``G = diag(g)``, with the
+    position measured. The gains ``g1_<pos>``, ``g2_<pos>`` are parameters (the paper's G matrix is
+    read as ``diag(1, 0.01)`` for x and y and ``diag(0.2, 0.01)`` for psi; see the Tomera study).
+    """
+    b = ModelBuilder(f"double_integrator_{pos}", "per-axis double integrator (Tomera 2011, Eq. 56-58)")
+    _add_double_integrator(b, pos, vel, g, angle)
+    return b.build()
+
+
+def tomera_kinematic(g_xy: tuple[float, float] = (1.0, 0.01), g_psi: tuple[float, float] = (0.2, 0.01)) -> Model:
+    """The three decoupled double integrators (x, y, psi) of Tomera (2011), earth-fixed velocities.
+
+    States ``x, vx, y, vy, psi, r``; outputs ``x, y`` (DGPS) and ``psi`` (gyro-compass).
+    """
+    b = ModelBuilder("tomera_kinematic", "x, y, psi double integrators (Tomera 2011, Eq. 56-62)")
+    _add_double_integrator(b, "x", "vx", g_xy, False)
+    _add_double_integrator(b, "y", "vy", g_xy, False)
+    _add_double_integrator(b, "psi", "r", g_psi, True)
+    return b.build()
+
+
+def constant_acceleration(name: str = "s") -> Model:
+    """Constant-acceleration model of one coordinate (Shi et al. 2009, Eq. 6).
+
+    States ``<name>`` (position), ``<name>_v`` (velocity), ``<name>_a`` (acceleration); white
+    noise ``w_<name>`` drives the acceleration (jerk noise); output the position.
+    """
+    b = ModelBuilder(f"constant_acceleration_{name}", "constant-acceleration kinematics (Shi et al. 2009, Eq. 6)")
+    s = b.state(name, unit="m")
+    v = b.state(f"{name}_v", unit="m/s")
+    a = b.state(f"{name}_a", unit="m/s^2")
+    b.ode(**{name: v, f"{name}_v": a, f"{name}_a": b.noise(f"w_{name}")})
+    b.output(name, s)
+    return b.build()
+
+
+def sog_cog(alpha1: float = 0.01, alpha2: float = 0.1) -> Model:
+    """Five-state SOG/COG/course-rate model in North-East coordinates (Fossen & Fossen 2021).
+
+    ``x_n' = U cos chi``, ``y_n' = U sin chi``, ``U' = -alpha1 U + w_U``, ``chi' = omega_chi``,
+    ``omega_chi' = -alpha2 omega_chi + w_chi``; outputs the GNSS position ``x_n, y_n``.
+    """
+    b = ModelBuilder("sog_cog", "5-state SOG/COG EKF model, North-East (Fossen & Fossen 2021)")
+    xn, yn = b.state("x_n", unit="m"), b.state("y_n", unit="m")
+    _add_speed_course(b, alpha1, alpha2)
+    U, chi = b.sym("U"), b.sym("chi")
+    b.ode(x_n=U * ca.cos(chi), y_n=U * ca.sin(chi))
+    b.output("x_n", xn)
+    b.output("y_n", yn)
+    return b.build()
+
+
+def sog_cog_latlon(alpha1: float = 0.01, alpha2: float = 0.1) -> Model:
+    """Five-state SOG/COG/course-rate model in latitude/longitude (rad) with WGS-84 radii.
+
+    ``lat' = U cos chi / R_M``, ``lon' = U sin chi / (R_N cos lat)``; outputs ``lat, lon`` (rad).
+    """
+    b = ModelBuilder("sog_cog_latlon", "5-state SOG/COG EKF model, latitude/longitude (Fossen & Fossen 2021)")
+    lat = b.state("lat", unit="rad", angle=True)
+    lon = b.state("lon", unit="rad", angle=True)
+    _add_speed_course(b, alpha1, alpha2)
+    U, chi = b.sym("U"), b.sym("chi")
+    r_n, r_m = wgs84_radii(lat)
+    b.ode(lat=U * ca.cos(chi) / r_m, lon=U * ca.sin(chi) / (r_n * ca.cos(lat)))
+    b.output("lat", lat)
+    b.output("lon", lon)
+    return b.build()
+
+
+def _add_speed_course(b: ModelBuilder, alpha1: float, alpha2: float) -> None:
+    U = b.state("U", unit="m/s", doc="speed over ground")
+    b.state("chi", unit="rad", angle=True, doc="course over ground")
+    om = b.state("omega_chi", unit="rad/s", doc="course rate")
+    a1 = b.param("alpha1", alpha1, bounds=(0.0, 10.0), unit="1/s", doc="speed Singer constant")
+    a2 = b.param("alpha2", alpha2, bounds=(0.0, 10.0), unit="1/s", doc="course-rate Singer constant")
+    b.ode(U=-a1 * U + b.noise("w_U"), chi=om, omega_chi=-a2 * om + b.noise("w_chi"))

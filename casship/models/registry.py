@@ -1,0 +1,31 @@
+"""Named model factories, so that the command line and studies can ask for a model by name."""
+from __future__ import annotations
+
+from typing import Callable
+
+from ..model import Model
+
+__all__ = ["register", "get_model", "model_names"]
+
+_FACTORIES: dict[str, tuple[Callable[..., Model], str]] = {}
+
+
+def register(name: str, factory: Callable[..., Model], doc: str) -> None:
+    """Register ``factory`` (called without arguments gives the preset) under ``name``."""
+    if name in _FACTORIES:
+        raise ValueError(f"model name {name!r} is already registered")
+    _FACTORIES[name] = (factory, doc)
+
+
+def get_model(name: str, **options) -> Model:
+    """Build the registered model ``name`` (keyword options go to its factory)."""
+    try:
+        factory = _FACTORIES[name][0]
+    except KeyError:
+        raise ValueError(f"unknown model {name!r}; known models: {sorted(_FACTORIES)}") from None
+    return factory(**options)
+
+
+def model_names() -> dict[str, str]:
+    """Mapping name -> one-line description of every registered model."""
+    return {k: v[1] for k, v in sorted(_FACTORIES.items())}

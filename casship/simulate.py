@@ -1,0 +1,217 @@
+"""Simulation of models and generation of noisy measurements."""
+from __future__ import annotations
+
+from typing import Callable, Mapping
+
+import numpy as np
+
+from ._fast import BufferedCall
+from .angles import wrap
+from .data import Dataset, Trajectory, check_time
+from .discretize import DiscreteModel, discretize
+from .model import Model
+
+__all__ = ["simulate", "measure", "input_matrix", "fold_steps"]
+
+
+def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | None:
+    """Inputs as an (N, nu) array from an array, a mapping name -> array/constant or a Dataset.
+
+    Returns ``None`` for a callable (evaluated during the simulation).
+    """
+    n = t.size
+    if callable(inputs) and not isinstance(inputs, Dataset):
+        return None
+    if inputs is None:
+        if model.nu:
+            raise ValueError(f"model {model.name!r} needs inputs {list(model.input_names)}")
+        return np.zeros((n, 0))
+    if isinstance(inputs, Dataset):
+        missing = [k for k in model.input_names if k not in inputs]
+        if missing:
+            raise ValueError(f"data has no column for input(s) {missing} of model {model.name!r}")
+        if len(inputs) != n:
+            raise ValueError(f"input data has {len(inputs)} rows, time grid has {n}")
+        return inputs.matrix(model.input_names, finite=True, what="input")
+    if isinstance(inputs, Mapping):
+        unknown = set(inputs) - set(model.input_names)
+        if unknown:
+            raise ValueError(f"unknown input name(s) {sorted(unknown)}; model inputs: {list(model.input_names)}")
+        missing = [k for k in model.input_names if k not in inputs]
+        if missing:
+            raise ValueError(f"no value given for input(s) {missing}")
+        cols = []
+        for name in model.input_names:
+            v = np.broadcast_to(np.asarray(inputs[name], dtype=float), (n,)) if np.ndim(inputs[name]) == 0 \
+                else np.asarray(inputs[name], dtype=float)
+            if v.shape != (n,):
+                raise ValueError(f"input {name!r} has shape {v.shape}, expected ({n},)")
+            cols.append(v)
+        U = np.column_stack(cols) if cols else np.zeros((n, 0))
+    else:
+        U = np.asarray(inputs, dtype=float)
+        if U.ndim == 1 and model.nu == 1:
+            U = U[:, None]
+        if U.shape != (n, model.nu):
+            raise ValueError(f"inputs have shape {U.shape}, expected ({n}, {model.nu}) for {list(model.input_names)}")
+    bad = np.argwhere(~np.isfinite(U))
+    if bad.size:
+        row, col = bad[0]
+        raise ValueError(f"input {model.input_names[col]!r} is not finite at row {row} (t = {t[row]:g} s)")
+    return U
+
+
+def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
+    """Run ``x[k+1] = F(x[k], U[k], p, W[k], dt[k])`` over all steps in one compiled fold.
+
+    Returns the (len(dt) + 1, nx) array of states, the first row being ``x0``.
+    """
+    steps = dt.size
+    if steps == 0:
+        return np.asarray(x0, dtype=float)[None, :]
+    fold = dmodel.F.mapaccum(steps)
+    X = fold(x0, U[:steps].T, p, W[:steps].T, dt[None, :])
+    return np.vstack([np.asarray(x0, dtype=float)[None, :], np.asarray(X).T])
+
+
+def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", max_step: float | None = None,
+             w=None) -> Trajectory:
+    """Simulate ``model`` from ``x0`` on the time grid ``t``.
+
+    Parameters
+    ----------
+    model : Model
+    x0 : array_like (nx,) or mapping state name -> value
+    t : array_like (N,)
+        Strictly increasing time grid [s]; the result is sampled on it.
+    inputs : array (N, nu), mapping name -> array or constant, Dataset, or callable
+        Inputs held constant over each interval (zero-order hold). A callable
+        ``inputs(t, x) -> u`` is evaluated at every grid point (closed loop).
+    p : array_like or mapping, optional
+        Parameters (nominal by default).
+    method : {"rk4", "euler", "cvodes"}
+        Integration method per interval (see :func:`casship.discretize`).
+    max_step : float, optional
+        Largest explicit sub-step [s]; by default one sub-step per interval.
+    w : array (N, nw), optional
+        Process-noise realisation held over each interval (zero by default).
+
+    Returns
+    -------
+    Trajectory
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from casship.models import nomoto_first_order
+    >>> m = nomoto_first_order()
+    >>> tr = simulate(m, m.states(), np.arange(0, 10, 0.1), {"delta": 0.1})
+    >>> round(float(tr["r"][-1]), 4) > 0
+    True
+    """
+    t = check_time(t, "t")
+    x0 = model.states(**x0) if isinstance(x0, Mapping) else np.asarray(x0, dtype=float).reshape(-1)
+    if x0.shape != (model.nx,):
+        raise ValueError(f"x0 has {x0.size} entries, model {model.name!r} has {model.nx} states")
+    if not np.all(np.isfinite(x0)):
+        raise ValueError("x0 contains non-finite entries")
+    p = model.params(p) if p is not None else model.params()
+    dt = np.diff(t)
+    substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
+    dmodel = discretize(model, float(dt[0]) if dt.size else 1.0, method=method, substeps=substeps)
+    W = np.zeros((t.size, model.nw)) if w is None else np.asarray(w, dtype=float).reshape(t.size, model.nw)
+    U = input_matrix(model, t, inputs)
+    if U is not None:
+        X = fold_steps(dmodel, x0, U, p, W, dt)
+    else:
+        X, U = _closed_loop(model, dmodel, x0, t, inputs, p, W, dt)
+    if not np.all(np.isfinite(X)):
+        row = int(np.argwhere(~np.isfinite(X))[0, 0])
+        raise FloatingPointError(f"simulation of {model.name!r} diverged at t = {t[row]:g} s")
+    Y = np.asarray(model.h.map(t.size)(X.T, U.T, p)).T.reshape(t.size, model.ny)
+    cols = {n: X[:, i] for i, n in enumerate(model.state_names)}
+    cols.update({n: U[:, i] for i, n in enumerate(model.input_names)})
+    cols.update({n: Y[:, i] for i, n in enumerate(model.output_names) if n not in cols})
+    units = {v.name: v.unit for v in (*model.state_vars, *model.input_vars, *model.output_vars)}
+    return Trajectory(t, cols, model_name=model.name, state_names=model.state_names,
+                      input_names=model.input_names, output_names=model.output_names, units=units,
+                      meta={"model": model.name, "method": method, "params": model.param_dict(p)})
+
+
+def _closed_loop(model, dmodel, x0, t, controller: Callable, p, W, dt):
+    step = BufferedCall(dmodel.F)
+    x_arg, u_arg, p_arg, w_arg, dt_arg = step.args
+    p_arg[:] = p
+    X = np.empty((t.size, model.nx))
+    U = np.empty((t.size, model.nu))
+    X[0] = x0
+    for k in range(t.size):
+        u = np.asarray(controller(t[k], X[k]), dtype=float).reshape(-1)
+        if u.shape != (model.nu,) or not np.all(np.isfinite(u)):
+            raise ValueError(f"input function returned {u!r} at t = {t[k]:g} s; expected {model.nu} finite values "
+                             f"for {list(model.input_names)}")
+        U[k] = u
+        if k + 1 < t.size:
+            x_arg[:], u_arg[:], w_arg[:], dt_arg[0] = X[k], u, W[k], dt[k]
+            X[k + 1] = step()[0]
+    return X, U
+
+
+def measure(traj: Dataset, model: Model, std: Mapping[str, float], *, rates: Mapping[str, float] | None = None,
+            seed=None, keep: tuple[str, ...] = ()) -> Dataset:
+    """Noisy measurements of a simulated trajectory.
+
+    Parameters
+    ----------
+    traj : Trajectory
+        Simulated record holding the model's outputs and inputs.
+    model : Model
+        Its output names select the columns; angle outputs are wrapped to (-pi, pi].
+    std : mapping output name -> standard deviation
+        Outputs not named here are not measured.
+    rates : mapping output name -> rate [Hz], optional
+        Channels sampled slower than the record; other rows are NaN (not measured).
+    seed : int or numpy.random.Generator
+    keep : tuple of str
+        Extra columns of ``traj`` to copy (e.g. true states for later comparison, prefixed ``true_``).
+
+    Returns
+    -------
+    Dataset
+        Inputs of the model, the measured outputs (NaN where not sampled) and ``true_*`` columns.
+    """
+    rng = np.random.default_rng(seed)
+    unknown = set(std) - set(model.output_names)
+    if unknown:
+        raise ValueError(f"unknown output name(s) {sorted(unknown)}; outputs: {list(model.output_names)}")
+    rates = dict(rates or {})
+    unknown = set(rates) - set(std)
+    if unknown:
+        raise ValueError(f"rates given for unmeasured output(s) {sorted(unknown)}")
+    t = traj.t
+    cols = {n: traj[n] for n in model.input_names}
+    for name in model.output_names:
+        if name not in std:
+            continue
+        sigma = float(std[name])
+        if not np.isfinite(sigma) or sigma < 0:
+            raise ValueError(f"standard deviation of {name!r} must be finite and >= 0, got {sigma}")
+        y = traj[name] + sigma * rng.standard_normal(t.size)
+        if model.angle_outputs[model.index(name, "output")]:
+            y = wrap(y)
+        if name in rates:
+            y = np.where(sample_mask(t, rates[name]), y, np.nan)
+        cols[name] = y
+    for name in keep:
+        cols[f"true_{name}"] = traj[name]
+    return Dataset(t, cols, traj.units, {"measured_from": traj.meta.get("model", ""), "std": dict(std)})
+
+
+def sample_mask(t: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Rows of the grid ``t`` at which a sensor of ``rate_hz`` delivers (first row always)."""
+    rate_hz = float(rate_hz)
+    if not np.isfinite(rate_hz) or rate_hz <= 0:
+        raise ValueError(f"sample rate must be positive, got {rate_hz}")
+    period = 1.0 / rate_hz
+    phase = (t - t[0]) / period
+    return np.abs(phase - np.round(phase)) < 1e-6
