@@ -1,0 +1,66 @@
+"""Side-by-side speed comparisons of casship with peer libraries.
+
+Each module ``benchmarks/bench_<topic>.py`` defines ``main(quick: bool = False) -> list[dict]``
+returning one row per comparison::
+
+    {"benchmark": str, "casship_s": float, "peer": str, "peer_s": float | None,
+     "ratio": float | None,            # peer_s / casship_s (> 1: casship is faster)
+     "accuracy_check": str}            # how the two results were checked to agree
+
+Times are medians of repeated runs (:func:`median_time`). A peer that is not installed gives a row
+with ``peer_s = None`` and ``skipped`` naming the reason (:func:`skipped_row`), never an error.
+``python -m benchmarks`` (or ``casship bench``) runs every module and prints one table.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+__all__ = ["median_time", "row", "skipped_row", "format_table"]
+
+
+def median_time(func: Callable[[], object], repeat: int = 5, warmup: int = 1) -> float:
+    """Median wall-clock time [s] of ``func()`` over ``repeat`` runs after ``warmup`` untimed runs."""
+    if repeat < 1:
+        raise ValueError(f"repeat must be >= 1, got {repeat}")
+    for _ in range(warmup):
+        func()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        func()
+        times.append(time.perf_counter() - t0)
+    times.sort()
+    mid = len(times) // 2
+    return times[mid] if len(times) % 2 else 0.5 * (times[mid - 1] + times[mid])
+
+
+def row(benchmark: str, casship_s: float, peer: str, peer_s: float | None, accuracy_check: str,
+        **extra) -> dict:
+    """A result row; ``ratio = peer_s / casship_s`` (how many times faster casship is)."""
+    ratio = None if peer_s is None or casship_s <= 0 else peer_s / casship_s
+    return {"benchmark": benchmark, "casship_s": casship_s, "peer": peer, "peer_s": peer_s,
+            "ratio": ratio, "accuracy_check": accuracy_check, **extra}
+
+
+def skipped_row(benchmark: str, peer: str, reason: str, casship_s: float | None = None) -> dict:
+    """A row for a comparison whose peer is unavailable (e.g. the ``bench`` extra not installed)."""
+    return {"benchmark": benchmark, "casship_s": casship_s, "peer": peer, "peer_s": None, "ratio": None,
+            "accuracy_check": "", "skipped": reason}
+
+
+def _fmt(value, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def format_table(rows: list[dict]) -> str:
+    """Markdown table of result rows (medians in seconds, ratio = peer / casship)."""
+    lines = ["| benchmark | casship [s] | peer | peer [s] | ratio | accuracy check |",
+             "|---|---:|---|---:|---:|---|"]
+    for r in rows:
+        note = r.get("skipped") or r.get("error")
+        check = f"skipped: {note}" if r.get("skipped") else (f"error: {note}" if r.get("error")
+                                                               else r.get("accuracy_check", ""))
+        lines.append(f"| {r.get('benchmark', '?')} | {_fmt(r.get('casship_s'), '.4g')} | {r.get('peer', '')} | "
+                     f"{_fmt(r.get('peer_s'), '.4g')} | {_fmt(r.get('ratio'), '.3g')} | {check} |")
+    return "\n".join(lines)
