@@ -10,9 +10,10 @@ from .discretize import DiscreteModel, discretize, van_loan
 from .model import Model, ModelBuilder
 from .simulate import measure, simulate
 from .estimators import EKF, KF, FilterResult, persistence_model
+from .linear import linearize, to_iosys, trim
 from . import frames, models
 
 __version__ = "0.1.0"
 
 __all__ = ["ModelBuilder", "Model", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
-           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "simulate", "measure", "wrap", "unwrap", "frames", "models", "__version__"]
+           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__"]
