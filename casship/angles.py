@@ -17,6 +17,8 @@ def wrap(angle):
     """
     a = np.asarray(angle, dtype=float)
     out = np.pi - np.mod(np.pi - a, 2.0 * np.pi)
+    # np.mod may round up to exactly 2 pi for arguments just above pi; keep the interval half-open.
+    out = np.where(out <= -np.pi, out + 2.0 * np.pi, out)
     return out if out.ndim else float(out)
 
 

@@ -67,6 +67,7 @@ class DiscreteModel:
             [ca.jacobian(xf, x), ca.jacobian(xf, u), ca.jacobian(xf, p), ca.jacobian(xf, w)],
             names, ["A", "B", "Fp", "G"])
         self.F_nominal = ca.Function("F_nominal", args[:4], [self.F(x, u, p, w, dt)], names[:4], ["xf"])
+        self._folds: dict[int, ca.Function] = {}
 
     def _explicit_step(self, x, u, p, w, h):
         f = self.model.f
@@ -98,6 +99,19 @@ class DiscreteModel:
 
     def __repr__(self) -> str:
         return f"DiscreteModel({self.model.name!r}, dt={self.dt:g}, method={self.method!r}, substeps={self.substeps})"
+
+    def fold(self, n: int) -> ca.Function:
+        """``F`` folded over ``n`` steps (``mapaccum``), cached per length.
+
+        ``fold(x0, U, p, W, dt) -> X`` with ``U`` (nu, n), ``W`` (nw, n), ``dt`` (1, n) and ``X`` the
+        (nx, n) states after each step; see :func:`casship.simulate.fold_steps` for records of any length.
+        """
+        n = int(n)
+        if n < 1:
+            raise ValueError(f"fold length must be >= 1, got {n}")
+        if n not in self._folds:
+            self._folds[n] = self.F.mapaccum(n)
+        return self._folds[n]
 
     def step(self, x, u, p=None, w=None, dt=None) -> np.ndarray:
         """One step numerically (convenience; batch work should use :func:`casship.simulate`)."""

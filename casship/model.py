@@ -288,6 +288,9 @@ class Model:
         self._nominal = np.array([v.value for v in self.param_vars], dtype=float)
         self.param_lower = np.array([v.lower for v in self.param_vars], dtype=float)
         self.param_upper = np.array([v.upper for v in self.param_vars], dtype=float)
+        for arr in (self.angle_states, self.angle_outputs, self._nominal, self.param_lower, self.param_upper):
+            arr.setflags(write=False)
+        self._cache: dict = {}   # derived numeric Functions (folds, maps); never the model's meaning
         self._freeze()
 
     # -- immutability ---------------------------------------------------------------------------
@@ -298,6 +301,12 @@ class Model:
 
     def _freeze(self):
         object.__setattr__(self, "_frozen", True)
+
+    def _cached(self, key, make: Callable[[], object]):
+        """A derived object (e.g. a discretisation or a mapped Function) built once per key."""
+        if key not in self._cache:
+            self._cache[key] = make()
+        return self._cache[key]
 
     def __repr__(self) -> str:
         return (f"Model({self.name!r}, x={list(self.state_names)}, u={list(self.input_names)}, "

@@ -32,6 +32,8 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
             raise ValueError(f"data has no column for input(s) {missing} of model {model.name!r}")
         if len(inputs) != n:
             raise ValueError(f"input data has {len(inputs)} rows, time grid has {n}")
+        if not np.allclose(inputs.t, t, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(t).max()))):
+            raise ValueError("input data time stamps differ from the simulation time grid t")
         return inputs.matrix(model.input_names, finite=True, what="input")
     if isinstance(inputs, Mapping):
         unknown = set(inputs) - set(model.input_names)
@@ -61,17 +63,62 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
     return U
 
 
-def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
-    """Run ``x[k+1] = F(x[k], U[k], p, W[k], dt[k])`` over all steps in one compiled fold.
+FOLD_CHUNK = 1024
 
-    Returns the (len(dt) + 1, nx) array of states, the first row being ``x0``.
+
+def _chunk(steps: int) -> int:
+    """Fold length for ``steps`` steps: a power of two up to :data:`FOLD_CHUNK` (few cached sizes)."""
+    return min(FOLD_CHUNK, 1 << max(0, int(steps - 1).bit_length()))
+
+
+def _padded(a: np.ndarray, total: int) -> np.ndarray:
+    """Columns of ``a`` (k, n) repeated from the last one up to ``total`` columns."""
+    extra = total - a.shape[1]
+    if extra <= 0:
+        return a
+    last = a[:, -1:] if a.shape[1] else np.zeros((a.shape[0], 1))
+    return np.hstack([a, np.repeat(last, extra, axis=1)])
+
+
+def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
+    """Run ``x[k+1] = F(x[k], U[k], p, W[k], dt[k])`` over all steps through a compiled fold.
+
+    The record is processed in blocks by one cached ``mapaccum`` of the step Function (building a
+    fold of the full length would cost more than evaluating it); the state is carried from block
+    to block, so the result is identical to a single fold. Returns the (len(dt) + 1, nx) array of
+    states, the first row being ``x0``.
     """
+    x0 = np.asarray(x0, dtype=float).reshape(-1)
+    dt = np.asarray(dt, dtype=float).reshape(-1)
     steps = dt.size
     if steps == 0:
-        return np.asarray(x0, dtype=float)[None, :]
-    fold = dmodel.F.mapaccum(steps)
-    X = fold(x0, U[:steps].T, p, W[:steps].T, dt[None, :])
-    return np.vstack([np.asarray(x0, dtype=float)[None, :], np.asarray(X).T])
+        return x0[None, :]
+    size = _chunk(steps)
+    fold = dmodel.fold(size)
+    total = -(-steps // size) * size
+    Uc = _padded(np.asarray(U, dtype=float)[:steps].T, total)
+    Wc = _padded(np.asarray(W, dtype=float)[:steps].T, total)
+    dtc = _padded(dt[None, :], total)
+    blocks, x = [], x0
+    for start in range(0, total, size):
+        cols = slice(start, start + size)
+        X = np.asarray(fold(x, Uc[:, cols], p, Wc[:, cols], dtc[:, cols]))
+        blocks.append(X)
+        x = X[:, -1]
+    return np.vstack([x0[None, :], np.hstack(blocks)[:, :steps].T])
+
+
+def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
+    """Outputs ``h(x, u, p)`` of every row of ``X`` (N, nx) and ``U`` (N, nu) as an (N, ny) array."""
+    n = X.shape[0]
+    if model.ny == 0:
+        return np.zeros((n, 0))
+    size = _chunk(n)
+    hmap = model._cached(("h_map", size), lambda: model.h.map(size))
+    total = -(-n // size) * size
+    Xc, Uc = _padded(X.T, total), _padded(U.T, total)
+    Y = np.hstack([np.asarray(hmap(Xc[:, k:k + size], Uc[:, k:k + size], p)) for k in range(0, total, size)])
+    return Y[:, :n].T.reshape(n, model.ny)
 
 
 def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", max_step: float | None = None,
@@ -117,9 +164,13 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
         raise ValueError("x0 contains non-finite entries")
     p = model.params(p) if p is not None else model.params()
     dt = np.diff(t)
+    if max_step is not None and not (np.isfinite(max_step) and max_step > 0):
+        raise ValueError(f"max_step must be a positive finite number, got {max_step}")
     substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
-    dmodel = discretize(model, float(dt[0]) if dt.size else 1.0, method=method, substeps=substeps)
-    W = np.zeros((t.size, model.nw)) if w is None else np.asarray(w, dtype=float).reshape(t.size, model.nw)
+    dmodel = model._cached(("discretize", method, substeps),
+                           lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
+                                              substeps=substeps))
+    W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
     if U is not None:
         X = fold_steps(dmodel, x0, U, p, W, dt)
@@ -128,7 +179,7 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     if not np.all(np.isfinite(X)):
         row = int(np.argwhere(~np.isfinite(X))[0, 0])
         raise FloatingPointError(f"simulation of {model.name!r} diverged at t = {t[row]:g} s")
-    Y = np.asarray(model.h.map(t.size)(X.T, U.T, p)).T.reshape(t.size, model.ny)
+    Y = eval_outputs(model, X, U, p)
     cols = {n: X[:, i] for i, n in enumerate(model.state_names)}
     cols.update({n: U[:, i] for i, n in enumerate(model.input_names)})
     cols.update({n: Y[:, i] for i, n in enumerate(model.output_names) if n not in cols})
@@ -136,6 +187,21 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     return Trajectory(t, cols, model_name=model.name, state_names=model.state_names,
                       input_names=model.input_names, output_names=model.output_names, units=units,
                       meta={"model": model.name, "method": method, "params": model.param_dict(p)})
+
+
+def _noise_matrix(model: Model, t: np.ndarray, w) -> np.ndarray:
+    if w is None:
+        return np.zeros((t.size, model.nw))
+    W = np.asarray(w, dtype=float)
+    if W.ndim == 1 and model.nw == 1:
+        W = W[:, None]
+    if W.shape != (t.size, model.nw):
+        raise ValueError(f"w has shape {W.shape}, expected ({t.size}, {model.nw}) for noise channels "
+                         f"{list(model.noise_names)}")
+    if not np.all(np.isfinite(W)):
+        row, col = np.argwhere(~np.isfinite(W))[0]
+        raise ValueError(f"process noise {model.noise_names[col]!r} is not finite at row {row}")
+    return W
 
 
 def _closed_loop(model, dmodel, x0, t, controller: Callable, p, W, dt):
@@ -200,7 +266,10 @@ def measure(traj: Dataset, model: Model, std: Mapping[str, float], *, rates: Map
         if model.angle_outputs[model.index(name, "output")]:
             y = wrap(y)
         if name in rates:
-            y = np.where(sample_mask(t, rates[name]), y, np.nan)
+            try:
+                y = np.where(sample_mask(t, rates[name]), y, np.nan)
+            except ValueError as exc:
+                raise ValueError(f"rate of {name!r}: {exc}") from None
         cols[name] = y
     for name in keep:
         cols[f"true_{name}"] = traj[name]
@@ -208,10 +277,15 @@ def measure(traj: Dataset, model: Model, std: Mapping[str, float], *, rates: Map
 
 
 def sample_mask(t: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Rows of the grid ``t`` at which a sensor of ``rate_hz`` delivers (first row always)."""
+    """Rows of the grid ``t`` at which a sensor of ``rate_hz`` delivers.
+
+    The sensor samples at ``t[0] + k / rate_hz``; each sample lands on the first grid row at or after
+    its time (rows coincide when the rate divides the grid rate, e.g. 5 Hz in 50 Hz: every 10th
+    row). A rate at or above the grid rate samples every row. The first row is always sampled.
+    """
     rate_hz = float(rate_hz)
     if not np.isfinite(rate_hz) or rate_hz <= 0:
-        raise ValueError(f"sample rate must be positive, got {rate_hz}")
-    period = 1.0 / rate_hz
-    phase = (t - t[0]) / period
-    return np.abs(phase - np.round(phase)) < 1e-6
+        raise ValueError(f"sample rate must be a positive finite number [Hz], got {rate_hz}")
+    t = np.asarray(t, dtype=float)
+    tick = np.floor((t - t[0]) * rate_hz + 1e-6)
+    return np.concatenate([[True], np.diff(tick) > 0])

@@ -1,0 +1,116 @@
+"""Run every ``benchmarks/bench_*.py`` comparison: ``python -m benchmarks [--quick] [--json out.json]``.
+
+Prints one table of median times and ratios (peer / casship) and writes the rows as JSON together
+with a description of the machine. A module that cannot be imported because a peer library is
+missing gives a ``skipped`` row; any other failure gives an ``error`` row (exit status 1), and the
+remaining benchmarks still run.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import pkgutil
+import platform
+import sys
+import time
+import traceback
+from pathlib import Path
+
+from . import format_table, skipped_row
+
+__all__ = ["discover", "run_all", "machine_info", "main"]
+
+
+def discover(only: list[str] | None = None) -> list[str]:
+    """Names of the benchmark modules (``bench_<topic>``), sorted; ``only`` filters by topic."""
+    here = Path(__file__).resolve().parent
+    names = sorted(i.name for i in pkgutil.iter_modules([str(here)]) if i.name.startswith("bench_"))
+    if only:
+        wanted = {o if o.startswith("bench_") else f"bench_{o}" for o in only}
+        unknown = wanted - set(names)
+        if unknown:
+            raise ValueError(f"unknown benchmark(s) {sorted(unknown)}; known: {names}")
+        names = [n for n in names if n in wanted]
+    return names
+
+
+def run_all(quick: bool = False, only: list[str] | None = None, verbose: bool = True) -> list[dict]:
+    """Import and run every benchmark module; returns all rows (with a ``module`` key each)."""
+    rows: list[dict] = []
+    for name in discover(only):
+        if verbose:
+            print(f"[bench] {name} ...", file=sys.stderr, flush=True)
+        t0 = time.perf_counter()
+        try:
+            module = importlib.import_module(f"{__package__}.{name}")
+        except ImportError as exc:
+            missing = getattr(exc, "name", None) or str(exc)
+            rows.append({**skipped_row(name, str(missing), f"cannot import {missing}: install the 'bench' extra"),
+                         "module": name})
+            continue
+        try:
+            result = module.main(quick=quick)
+        except ImportError as exc:
+            missing = getattr(exc, "name", None) or str(exc)
+            rows.append({**skipped_row(name, str(missing), f"cannot import {missing}: install the 'bench' extra"),
+                         "module": name})
+            continue
+        except Exception as exc:  # one broken benchmark must not hide the others
+            rows.append({"benchmark": name, "casship_s": None, "peer": "", "peer_s": None, "ratio": None,
+                         "accuracy_check": "", "error": f"{type(exc).__name__}: {exc}", "module": name,
+                         "traceback": traceback.format_exc()})
+            continue
+        for r in result or []:
+            rows.append({**r, "module": name})
+        if verbose:
+            print(f"[bench] {name} done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+    return rows
+
+
+def machine_info() -> dict:
+    """Python, CasADi, NumPy, SciPy versions, CPU model and count of the running machine."""
+    import casadi
+    import numpy
+    import scipy
+
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"python": platform.python_version(), "casadi": casadi.__version__, "numpy": numpy.__version__,
+            "scipy": scipy.__version__, "platform": platform.platform(), "cpu": cpu,
+            "cpu_count": os.cpu_count(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
+    parser.add_argument("--json", default=None, help="write rows and machine description to this file")
+    parser.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")
+    args = parser.parse_args(argv)
+    try:
+        names = discover(args.only)
+    except ValueError as exc:
+        parser.error(str(exc))
+    rows = run_all(quick=args.quick, only=[n for n in names] if args.only else None)
+    info = machine_info()
+    print(format_table(rows))
+    print(f"\nmedians in seconds; ratio = peer / casship (> 1: casship faster). "
+          f"{info['cpu']} ({info['cpu_count']} CPUs), Python {info['python']}, CasADi {info['casadi']}"
+          + (" [quick]" if args.quick else ""))
+    if args.json:
+        out = Path(args.json)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"machine": info, "quick": args.quick, "rows": rows}, indent=2, default=str))
+        print(f"rows written to {out}")
+    return 1 if any(r.get("error") for r in rows) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

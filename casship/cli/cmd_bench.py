@@ -1,0 +1,35 @@
+"""``casship bench``: run every comparison in ``benchmarks/`` (same runner as ``python -m benchmarks``)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("bench", help="run the speed comparisons in benchmarks/ and print a table of ratios")
+    p.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
+    p.add_argument("--json", default=None, help="write rows and machine description to this JSON file")
+    p.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")
+    p.set_defaults(func=run)
+
+
+def _import_runner():
+    try:
+        from benchmarks import __main__ as runner
+    except ImportError:
+        # benchmarks/ sits next to the casship package in a source checkout; it is not installed.
+        root = Path(__file__).resolve().parents[2]
+        if not (root / "benchmarks" / "__main__.py").is_file():
+            raise RuntimeError("the benchmarks/ folder of the casship source checkout was not found; "
+                               "run 'casship bench' from a clone of the repository") from None
+        sys.path.insert(0, str(root))
+        from benchmarks import __main__ as runner
+    return runner
+
+
+def run(args) -> int:
+    runner = _import_runner()
+    argv = (["--quick"] if args.quick else []) + (["--json", args.json] if args.json else [])
+    if args.only:
+        argv += ["--only", *args.only]
+    return runner.main(argv)
