@@ -1,0 +1,153 @@
+"""Unscented Kalman filter with angle-aware sigma-point statistics.
+
+The sigma points follow the scaled unscented transform (Julier 2002; Wan & van der Merwe 2000):
+``lambda = alpha^2 (n + kappa) - n``, points ``x`` and ``x +- sqrt(n + lambda) * S[:, i]`` with
+``S S' = P``, mean weights ``W0 = lambda / (n + lambda)``, ``Wi = 1 / (2 (n + lambda))`` and the
+covariance weight ``W0c = W0 + 1 - alpha^2 + beta``. With ``alpha = 1, beta = 0`` this is the
+original form of Julier & Uhlmann that seed 002 uses (``W0 = kappa / (n + kappa)``, ``kappa = 3``),
+the default here.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..angles import wrap_sym
+from .base import STEP_INPUTS, STEP_OUTPUTS, Estimator
+
+__all__ = ["UKF", "psd_sqrt", "sigma_weights"]
+
+
+def psd_sqrt(P, tol: float = 0.0):
+    """Symbolic lower Cholesky factor ``L`` (``L L' = P``) that tolerates positive *semi*-definite ``P``.
+
+    A pivot that is not larger than ``tol`` gives a zero column instead of a division by zero, so
+    states with zero variance (fixed parameters, noise-free channels) yield no NaN.
+    """
+    n = P.shape[0]
+    sym = type(P) if isinstance(P, (ca.SX, ca.MX)) else ca.SX
+    L = [[sym(0) for _ in range(n)] for _ in range(n)]
+    for j in range(n):
+        d = P[j, j] - sum((L[j][k] * L[j][k] for k in range(j)), sym(0))
+        ok = d > tol
+        ljj = ca.if_else(ok, ca.sqrt(ca.if_else(ok, d, 1)), 0)
+        L[j][j] = ljj
+        inv = ca.if_else(ok, 1 / ca.if_else(ok, ljj, 1), 0)
+        for i in range(j + 1, n):
+            L[i][j] = (P[i, j] - sum((L[i][k] * L[j][k] for k in range(j)), sym(0))) * inv
+    return ca.vertcat(*[ca.horzcat(*row) for row in L])
+
+
+def sigma_weights(n: int, alpha: float, beta: float, kappa: float):
+    """Scale ``c = n + lambda`` and the mean and covariance weights of the ``2n+1`` sigma points."""
+    lam = alpha**2 * (n + kappa) - n
+    c = n + lam
+    if c <= 0:
+        raise ValueError(f"UKF: n + lambda = {c:g} must be positive (n = {n}, alpha = {alpha}, kappa = {kappa})")
+    wm = np.full(2 * n + 1, 1.0 / (2 * c))
+    wm[0] = lam / c
+    wc = wm.copy()
+    wc[0] += 1 - alpha**2 + beta
+    return c, wm, wc
+
+
+def circular_mean(points, wm, angles):
+    """Weighted mean of sigma points (columns); angle rows averaged on the circle.
+
+    For an angle row the mean is the central point plus the weighted mean of the wrapped deviations
+    from it, which equals the arithmetic mean when no point crosses +-pi and never jumps by 2 pi.
+    """
+    ref = points[:, 0]
+    rows = []
+    for i in range(points.shape[0]):
+        if angles[i]:
+            dev = ca.horzcat(*[wrap_sym(points[i, j] - ref[i]) for j in range(points.shape[1])])
+            rows.append(ref[i] + ca.mtimes(dev, ca.DM(wm)))
+        else:
+            rows.append(ca.mtimes(points[i, :], ca.DM(wm)))
+    return ca.vertcat(*rows)
+
+
+def deviations(points, mean, angles):
+    """Columns ``points[:, j] - mean`` with angle rows wrapped to (-pi, pi]."""
+    d = points - ca.repmat(mean, 1, points.shape[1])
+    if not np.any(angles):
+        return d
+    return ca.vertcat(*[ca.horzcat(*[wrap_sym(d[i, j]) for j in range(d.shape[1])]) if angles[i] else d[i, :]
+                        for i in range(d.shape[0])])
+
+
+class UKF(Estimator):
+    """Unscented Kalman filter with ``2n+1`` sigma points, angle-aware means and residuals.
+
+    The process noise enters additively through the exact noise Jacobian of the discretised step at
+    the mean, ``P- = sum Wc (X_i - x-)(X_i - x-)' + G Q G'`` (exact for models linear in ``w``).
+    Sigma points are redrawn from the predicted belief before the update (as in seed 002).
+
+    Options
+    -------
+    gate : float or None
+        Chi-square innovation gate probability; rejected updates are reported.
+    alpha, beta, kappa : float
+        Scaled unscented transform parameters. The default ``alpha = 1, beta = 0, kappa = 3`` is
+        the unscaled form of seed 002; ``alpha = 1e-3, beta = 2, kappa = 0`` is the common scaled form.
+
+    Examples
+    --------
+    >>> import casship as cs
+    >>> m = cs.models.nomoto_first_order()
+    >>> ukf = cs.UKF(cs.discretize(m, 0.1), Q=1e-8, R=1e-4, options={"kappa": 3})
+    """
+
+    name = "UKF"
+    _options = {"alpha": 1.0, "beta": 0.0, "kappa": 3.0}
+
+    def _build_step(self) -> ca.Function:
+        m, S, dm = self.model, self.sym, self.dmodel
+        n = m.nx
+        opt = self.options
+        c, wm, wc = sigma_weights(n, float(opt["alpha"]), float(opt["beta"]), float(opt["kappa"]))
+        self.sigma_scale, self.wm, self.wc = c, wm, wc
+        ang_x = m.angle_states
+        s = self._symbols()
+        carry = S.sym("carry", n + n * n)
+        x, P = carry[:n], ca.reshape(carry[n:], n, n)
+        Wc = ca.DM(np.diag(wc))
+
+        def points(mean, cov):
+            L = np.sqrt(c) * psd_sqrt(0.5 * (cov + cov.T))
+            return ca.horzcat(mean, ca.repmat(mean, 1, n) + L, ca.repmat(mean, 1, n) - L)
+
+        # predict
+        w0 = S.zeros(m.nw)
+        X = points(x, P)
+        Xf = ca.horzcat(*[dm.F(X[:, j], s["u_prev"], s["p"], w0, s["dt"]) for j in range(2 * n + 1)])
+        xp = circular_mean(Xf, wm, ang_x)
+        dX0 = deviations(X, x, ang_x)
+        dXf = deviations(Xf, xp, ang_x)
+        G = dm.F_jac(x, s["u_prev"], s["p"], w0, s["dt"])[3]
+        Pp = dXf @ Wc @ dXf.T + G @ s["Q"] @ G.T
+        Pp = 0.5 * (Pp + Pp.T)
+        C = dX0 @ Wc @ dXf.T
+        # update with redrawn points
+        mask = s["mask"]
+        Xp = points(xp, Pp)
+        Y = ca.horzcat(*[self.h_meas(Xp[:, j], s["u"], s["p"]) for j in range(2 * n + 1)])
+        yhat = circular_mean(Y, wm, self.angle_meas)
+        dY = ca.diag(mask) @ deviations(Y, yhat, self.angle_meas)
+        dXp = deviations(Xp, xp, ang_x)
+        Pyy = dY @ Wc @ dY.T
+        Pxy = dXp @ Wc @ dY.T
+        e = self.residual(s["y"], yhat, mask)
+        Sm = self.masked_innovation_cov(Pyy, s["R"], mask)
+        Sm = 0.5 * (Sm + Sm.T)
+        K = ca.solve(Sm, Pxy.T).T
+        nis, ll = self.gaussian_terms(e, Sm, mask)
+        acc = nis <= s["gate"]
+        xu = xp + acc * K @ e
+        Pu = Pp - acc * K @ Sm @ K.T
+        Pu = 0.5 * (Pu + Pu.T)
+        vec = lambda a: ca.reshape(a, -1, 1)  # noqa: E731
+        outs = [ca.vertcat(xu, vec(Pu)), xu, vec(Pu), xp, vec(Pp), vec(C), e, vec(Sm), nis, ll, acc]
+        ins = [carry] + [s[k] for k in STEP_INPUTS[1:]]
+        return ca.Function("ukf_step", ins, outs, STEP_INPUTS, STEP_OUTPUTS)
