@@ -1,0 +1,159 @@
+"""KVLCC2 tanker presets for the MMG standard method (Yasukawa & Yoshimura 2015).
+
+Every constant carries its source (short names as in the project's reference table):
+
+* YY2015 — Yasukawa & Yoshimura (2015), J Mar Sci Technol 20:37-52, doi:10.1007/s00773-014-0293-y,
+  as typed identically in ShipMMG/shipmmg ``tests/test_mmg_3dof.py`` (SM-py), ShipMMG.jl (SM-jl),
+  Mesratya/BE_MAN ``ship_params.py`` (BEMAN), wjchoi91/BalancedPathFollowing ``ZigzagTest.m`` (WJC),
+  nikpau/mmgdynamics ``calibrated_vessels.py`` (MMGD).
+* S2020 — SIMMAN 2020 KVLCC2 case 1.2 test conditions (Fn 0.142, rudder rate 2.32 deg/s full scale).
+* MLA — martinlarsalbert/System-identification-of-Vessel-Manoeuvring-Models ``ship_data.yml``.
+
+Choices where the sources disagree (each is a parameter, so it can be changed or identified):
+
+* ``x_G`` full scale: 11.2 m (WJC, MMGD) rather than 11.1 m (BEMAN, XDYN).
+* ``w_P0``: 0.40 at model scale (SM-py, SM-jl, MLA, MMGD-L7); 0.35 at full scale (BEMAN, WJC, MMGD).
+* ``x_P_dash``: -0.48 (BEMAN, WJC, MLA -3.386/7) rather than -0.690 (SM-py, SM-jl).
+* ``k_2``: -0.1385 (SM-py, SM-jl; BEMAN/WJC -0.139 rounded) rather than -0.1359 (MMGD).
+* ``k_zz``: 0.25 L (all implementations) rather than 0.24 L in air (S2020).
+* ``rho``: 1025 kg/m^3 at both scales (implementations), although model basins use fresh water.
+* Rudder rate: 2.32 deg/s full scale (S2020), Froude-scaled 2.32 * sqrt(45.7) = 15.68 deg/s model.
+* Model-scale propeller rate: not agreed (17.95 rps SM-py, 13.4 rps MMGD); the presets store no
+  fixed ``n0`` at model scale — solve it for the wanted speed with
+  :func:`casship.maneuvers.propeller_rate_for_speed`.
+
+The non-dimensional hull coefficients are model-scale values; using them at full scale (as all the
+implementations above do) ignores scale effects on resistance and wake.
+"""
+from __future__ import annotations
+
+import math
+from typing import Mapping
+
+import numpy as np
+
+from ..model import Model
+from .mmg import MMG_PARAMS, mmg_standard
+
+__all__ = ["kvlcc2", "kvlcc2_l7", "KVLCC2_COMMON", "KVLCC2_FULL", "KVLCC2_L7", "KVLCC2_SOURCES"]
+
+_ALL = "YY2015 (SM-py, SM-jl, BEMAN, WJC, MMGD identical)"
+
+#: Non-dimensional coefficients shared by both scales, with their sources.
+KVLCC2_COMMON: dict[str, float] = {
+    "k_zz": 0.25,
+    "m_x_dash": 0.022, "m_y_dash": 0.223, "J_z_dash": 0.011,
+    "R_0_dash": 0.022, "X_vv_dash": -0.040, "X_vr_dash": 0.002, "X_rr_dash": 0.011, "X_vvvv_dash": 0.771,
+    "Y_v_dash": -0.315, "Y_r_dash": 0.083, "Y_vvv_dash": -1.607, "Y_vvr_dash": 0.379,
+    "Y_vrr_dash": -0.391, "Y_rrr_dash": 0.008,
+    "N_v_dash": -0.137, "N_r_dash": -0.049, "N_vvv_dash": -0.030, "N_vvr_dash": -0.294,
+    "N_vrr_dash": 0.055, "N_rrr_dash": -0.013,
+    "t_P": 0.220, "x_P_dash": -0.48, "k_0": 0.2931, "k_1": -0.2753, "k_2": -0.1385,
+    "C_1": 2.0, "C_2_plus": 1.6, "C_2_minus": 1.1,
+    "t_R": 0.387, "a_H": 0.312, "x_H_dash": -0.464, "x_R_dash": -0.5,
+    "gamma_R_minus": 0.395, "gamma_R_plus": 0.640, "l_R_dash": -0.710,
+    "epsilon": 1.09, "kappa": 0.50, "f_alpha": 2.747,
+    "rho": 1025.0,
+}
+
+#: Full-scale (L_pp = 320 m) particulars.
+KVLCC2_FULL: dict[str, float] = {
+    "L_pp": 320.0, "B": 58.0, "d": 20.8, "nabla": 312600.0, "x_G": 11.2,
+    "D_p": 9.86, "H_R": 15.80, "A_R": 112.5, "w_P0": 0.35,
+}
+
+#: Model-scale (L7, 1/45.7) particulars.
+KVLCC2_L7: dict[str, float] = {
+    "L_pp": 7.00, "B": 1.27, "d": 0.46, "nabla": 3.27, "x_G": 0.25,
+    "D_p": 0.216, "H_R": 0.345, "A_R": 0.0539, "w_P0": 0.40,
+}
+
+#: Source of every constant (parameter name -> source).
+KVLCC2_SOURCES: dict[str, str] = {name: _ALL for name in KVLCC2_COMMON}
+KVLCC2_SOURCES.update({
+    "k_zz": "0.25 L used by SM-py, WJC, TUDRL (S2020: 0.24 L in air)",
+    "x_P_dash": "BEMAN, WJC, MLA (-3.386 m / 7 m); SM-py/SM-jl use -0.690",
+    "k_0": "SM-py, SM-jl (BEMAN/WJC 0.293)", "k_1": "SM-py, SM-jl (BEMAN/WJC -0.275)",
+    "k_2": "SM-py, SM-jl (BEMAN/WJC -0.139); MMGD -0.1359",
+    "C_1": "WJC, MMGD, MLA", "C_2_plus": "WJC, MMGD, MLA", "C_2_minus": "WJC, MMGD, MLA",
+    "x_R_dash": "SM-py, BEMAN, MLA (x_r = -3.5 m of 7 m)",
+    "rho": "implementations (SM-py, BEMAN); S2020/MLA model basin 1000",
+    "L_pp": "all sources", "B": "all sources", "d": "all sources",
+    "nabla": "WJC, MMGD, TUDRL (full 312600); SM-py (L7 3.27)",
+    "x_G": "full: WJC, MMGD 11.2 (BEMAN/XDYN 11.1); L7: SM-py 0.25 (MLA 0.2436)",
+    "D_p": "WJC, MMGD, BEMAN (full); SM-py (L7; MLA 0.204 for the MARIN propeller)",
+    "H_R": "BEMAN, WJC; SM-py, MLA", "A_R": "BEMAN, WJC, MMGD; SM-py, MLA",
+    "w_P0": "full 0.35: BEMAN, WJC, MMGD; L7 0.40: SM-py, SM-jl, MLA",
+})
+
+#: Approach speeds and propeller rates.
+U0_FULL = 15.5 * 1852.0 / 3600.0        # 15.5 kn = 7.974 m/s (S2020, WJC 7.9732)
+N0_FULL = 1.53                           # rps (BEMAN, WJC; MARIN runs 91.5-91.8 rpm)
+U0_L7 = 1.18                             # m/s, Fn 0.142 (S2020)
+SCALE_L7 = 45.7                          # MLA scale_factor; S2020 45.714
+RUDDER_RATE_FULL = math.radians(2.32)    # rad/s (S2020)
+
+
+def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | None, name: str, doc: str,
+           meta: dict, **options) -> Model:
+    values = dict(KVLCC2_COMMON)
+    values.update(particulars)
+    for key, val in (overrides or {}).items():
+        if key not in MMG_PARAMS:
+            raise ValueError(f"unknown KVLCC2 parameter {key!r}; known: {list(MMG_PARAMS)}")
+        values[key] = float(val)
+    return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, meta=meta, **options)
+
+
+def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
+           rudder_time_constant: float = 1.0, rudder_rate_max: float = RUDDER_RATE_FULL,
+           rudder_max: float | None = None) -> Model:
+    """KVLCC2 at full scale (L_pp = 320 m), MMG standard method.
+
+    Parameters
+    ----------
+    params : mapping, optional
+        Overrides of the nominal parameter values (names as in :data:`casship.models.mmg.MMG_PARAMS`).
+    rudder_actuator : bool
+        Add the rudder angle as a state driven by ``delta_cmd`` (first order with a smooth rate
+        limit, 2.32 deg/s by default).
+    rudder_time_constant, rudder_rate_max, rudder_max
+        Actuator settings [s, rad/s, rad].
+
+    Returns
+    -------
+    Model
+        States ``u, v, r, x, y, psi`` (+ ``delta``), inputs ``delta`` (or ``delta_cmd``) and ``n``;
+        ``meta`` holds ``L_pp``, ``B``, ``d``, ``U0`` (15.5 kn), ``n0`` (1.53 rps), ``rudder_rate``.
+
+    Examples
+    --------
+    >>> from casship.models import kvlcc2
+    >>> ship = kvlcc2()
+    >>> ship.meta["L_pp"]
+    320.0
+    """
+    meta = {"L_pp": 320.0, "B": 58.0, "d": 20.8, "U0": U0_FULL, "n0": N0_FULL, "rudder_rate": RUDDER_RATE_FULL,
+            "rudder_max": math.radians(35.0), "scale": 1.0, "vessel": "KVLCC2 full scale",
+            "wind": {"A_F": 1200.0, "A_L": 3600.0, "L_OA": 325.5, "B": 58.0, "A_OD": 750.0, "H_BR": 30.0,
+                     "H_C": 12.0, "C": -120.0,
+                     "source": "A_F, A_L assumed by MMGD/TUDRL; A_OD from BEMAN A_SS; H_BR, H_C, C estimated"}}
+    return _build(KVLCC2_FULL, params, "kvlcc2", "KVLCC2 full scale, MMG standard method (Yasukawa & "
+                  "Yoshimura 2015)", meta, rudder_actuator=rudder_actuator,
+                  rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max)
+
+
+def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
+              rudder_time_constant: float = 0.1, rudder_rate_max: float = RUDDER_RATE_FULL * np.sqrt(SCALE_L7),
+              rudder_max: float | None = None) -> Model:
+    """KVLCC2 model L7 (L_pp = 7 m, scale 1/45.7), MMG standard method.
+
+    Same options as :func:`kvlcc2`; the default rudder rate is the Froude-scaled 15.68 deg/s.
+    ``meta["U0"]`` is 1.18 m/s (Fn 0.142, S2020); ``meta["n0"]`` is not given (sources disagree).
+    """
+    meta = {"L_pp": 7.0, "B": 1.27, "d": 0.46, "U0": U0_L7, "n0": None,
+            "rudder_rate": RUDDER_RATE_FULL * np.sqrt(SCALE_L7), "rudder_max": math.radians(35.0),
+            "scale": 1.0 / SCALE_L7, "vessel": "KVLCC2 model L7"}
+    return _build(KVLCC2_L7, params, "kvlcc2_l7", "KVLCC2 model L7 (1/45.7), MMG standard method "
+                  "(Yasukawa & Yoshimura 2015)", meta, rudder_actuator=rudder_actuator,
+                  rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max)

@@ -1,0 +1,276 @@
+"""MMG standard method for ship manoeuvring (Yasukawa & Yoshimura 2015), generic in its parameters.
+
+States ``u, v, r, x, y, psi`` (``v`` is the sway velocity ``v_m`` at midship, ``x`` North, ``y`` East,
+``psi`` heading from North, clockwise positive); inputs ``delta`` [rad] (positive turns the ship
+to starboard, heading increases) and ``n`` [1/s] (propeller revolutions). Forces are taken at
+midship in body axes.
+
+Every ship model built here exposes
+
+* a port ``tau`` (size 3): an extra generalised force ``[X, Y, N]`` [N, N, N m] at midship in body
+  axes, added to the hull, propeller and rudder forces before the mass matrix is inverted
+  (wind, tugs, thrusters: see :mod:`casship.models.wind`);
+* process-noise channels ``w_u, w_v, w_r`` [m/s^2, m/s^2, rad/s^2] added to the accelerations;
+* outputs equal to the six states (use :meth:`casship.Model.with_outputs` for other sensors).
+
+The rigid-body part (Yasukawa & Yoshimura 2015, Eq. 4, written at midship with the centre of
+gravity ``x_G`` forward of midship)::
+
+    (m + m_x) du - (m + m_y) v r - x_G m r^2           = X
+    (m + m_y) dv + x_G m dr + (m + m_x) u r            = Y
+    (I_zG + x_G^2 m + J_z) dr + x_G m (dv + u r)       = N
+
+is shared with the low-speed model (:mod:`casship.models.lowspeed`) through :func:`rigid_body_3dof`.
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import casadi as ca
+import numpy as np
+
+from ..frames import body_to_ned
+from ..model import Model, ModelBuilder
+
+__all__ = ["mmg_standard", "MMG_PARAMS", "rigid_body_3dof", "declare_ship_states", "add_rudder_actuator",
+           "smooth_saturation"]
+
+# name -> (unit, description). The numeric values come from a preset (see casship.models.kvlcc2).
+MMG_PARAMS: dict[str, tuple[str, str]] = {
+    "rho": ("kg/m^3", "water density"),
+    "L_pp": ("m", "length between perpendiculars"),
+    "B": ("m", "breadth"),
+    "d": ("m", "draught"),
+    "nabla": ("m^3", "displacement volume"),
+    "x_G": ("m", "centre of gravity forward of midship"),
+    "k_zz": ("-", "yaw radius of gyration / L_pp"),
+    "m_x_dash": ("-", "surge added mass / (0.5 rho L^2 d)"),
+    "m_y_dash": ("-", "sway added mass / (0.5 rho L^2 d)"),
+    "J_z_dash": ("-", "yaw added moment of inertia / (0.5 rho L^4 d)"),
+    "R_0_dash": ("-", "straight-run resistance coefficient"),
+    "X_vv_dash": ("-", "hull surge derivative"), "X_vr_dash": ("-", "hull surge derivative"),
+    "X_rr_dash": ("-", "hull surge derivative"), "X_vvvv_dash": ("-", "hull surge derivative"),
+    "Y_v_dash": ("-", "hull sway derivative"), "Y_r_dash": ("-", "hull sway derivative"),
+    "Y_vvv_dash": ("-", "hull sway derivative"), "Y_vvr_dash": ("-", "hull sway derivative"),
+    "Y_vrr_dash": ("-", "hull sway derivative"), "Y_rrr_dash": ("-", "hull sway derivative"),
+    "N_v_dash": ("-", "hull yaw derivative"), "N_r_dash": ("-", "hull yaw derivative"),
+    "N_vvv_dash": ("-", "hull yaw derivative"), "N_vvr_dash": ("-", "hull yaw derivative"),
+    "N_vrr_dash": ("-", "hull yaw derivative"), "N_rrr_dash": ("-", "hull yaw derivative"),
+    "D_p": ("m", "propeller diameter"),
+    "t_P": ("-", "thrust deduction factor"),
+    "w_P0": ("-", "wake fraction at the propeller in straight run"),
+    "x_P_dash": ("-", "propeller position / L_pp (aft negative)"),
+    "k_0": ("-", "K_T polynomial constant"), "k_1": ("-", "K_T polynomial linear"),
+    "k_2": ("-", "K_T polynomial quadratic"),
+    "C_1": ("-", "wake correction constant"),
+    "C_2_plus": ("-", "wake correction constant for beta_P > 0"),
+    "C_2_minus": ("-", "wake correction constant for beta_P < 0"),
+    "A_R": ("m^2", "rudder area"),
+    "H_R": ("m", "rudder span"),
+    "t_R": ("-", "steering resistance deduction factor"),
+    "a_H": ("-", "rudder force increase factor"),
+    "x_H_dash": ("-", "position of the additional lateral force / L_pp"),
+    "x_R_dash": ("-", "rudder position / L_pp (aft negative)"),
+    "gamma_R_minus": ("-", "flow straightening coefficient for beta_R < 0"),
+    "gamma_R_plus": ("-", "flow straightening coefficient for beta_R > 0"),
+    "l_R_dash": ("-", "effective longitudinal rudder position / L_pp"),
+    "epsilon": ("-", "ratio of wake fractions at rudder and propeller"),
+    "kappa": ("-", "propeller-race inflow correction"),
+    "f_alpha": ("-", "rudder lift gradient coefficient"),
+}
+
+
+def smooth_saturation(x, limit):
+    """``limit * tanh(x / limit)``: a smooth (differentiable) saturation to ``(-limit, limit)``.
+
+    Used for the rudder rate limit so that Jacobians exist everywhere; it equals ``x`` to first
+    order for ``|x| << limit`` and approaches ``+-limit`` for large ``|x|``.
+    """
+    return limit * ca.tanh(x / limit)
+
+
+def declare_ship_states(b: ModelBuilder):
+    """Declare the shared 3-DOF ship states ``u, v, r, x, y, psi`` and return their symbols."""
+    u = b.state("u", unit="m/s", doc="surge velocity")
+    v = b.state("v", unit="m/s", doc="sway velocity at midship (v_m)")
+    r = b.state("r", unit="rad/s", doc="yaw rate")
+    x = b.state("x", unit="m", doc="North position of midship")
+    y = b.state("y", unit="m", doc="East position of midship")
+    psi = b.state("psi", unit="rad", angle=True, doc="heading from North, clockwise")
+    return u, v, r, x, y, psi
+
+
+def add_rudder_actuator(b: ModelBuilder, names: tuple[str, ...], time_constant: float, rate_limit: float,
+                        max_angle: float | None = None) -> dict[str, ca.SX]:
+    """Rudder angle states driven by commanded angles through a first-order lag with a rate limit.
+
+    For each rudder ``name`` the model gets a state ``name`` [rad] and an input ``name + "_cmd"``
+    [rad] with ``d(name)/dt = S((cmd - name) / T_rud)``, where ``S`` is :func:`smooth_saturation`
+    at ``rudder_rate_max`` (parameters ``T_rud`` [s] and ``rudder_rate_max`` [rad/s]). The command is
+    not clipped; clip it with ``max_angle`` if given (hard ``fmin``/``fmax``, documented limit).
+    """
+    T = b.param("T_rud", time_constant, bounds=(1e-6, np.inf), unit="s", doc="rudder actuator time constant")
+    rmax = b.param("rudder_rate_max", rate_limit, bounds=(1e-9, np.inf), unit="rad/s",
+                   doc="rudder rate limit (smooth tanh saturation)")
+    out = {}
+    for name in names:
+        state = b.state(name, unit="rad", doc=f"actual rudder angle {name}")
+        cmd = b.input(f"{name}_cmd", unit="rad", doc=f"commanded rudder angle {name}")
+        if max_angle is not None:
+            cmd = ca.fmin(ca.fmax(cmd, -max_angle), max_angle)
+        b.ode(**{name: smooth_saturation((cmd - state) / T, rmax)})
+        out[name] = state
+    return out
+
+
+def rigid_body_3dof(b: ModelBuilder, force: tuple, *, m, m_x, m_y, I_zG, J_z, x_G, states) -> None:
+    """Add the 3-DOF rigid-body equations at midship, the ``tau`` port, noise and kinematics.
+
+    Parameters
+    ----------
+    b : ModelBuilder
+        Builder holding the states from :func:`declare_ship_states`.
+    force : (X, Y, N)
+        Hydrodynamic force and moment at midship in body axes [N, N, N m].
+    m, m_x, m_y, I_zG, J_z, x_G : SX
+        Mass, added masses, yaw inertia about G, added yaw inertia, CG position.
+    states : tuple
+        ``(u, v, r, x, y, psi)`` symbols.
+    """
+    u, v, r, _x, _y, psi = states
+    tau = b.port("tau", 3)
+    X = force[0] + tau[0] + (m + m_y) * v * r + x_G * m * r**2
+    Y = force[1] + tau[1] - (m + m_x) * u * r
+    N = force[2] + tau[2] - x_G * m * u * r
+    # Solve the sway/yaw 2x2 block of the mass matrix explicitly.
+    m22, m23, m33 = m + m_y, x_G * m, I_zG + x_G**2 * m + J_z
+    det = m22 * m33 - m23**2
+    du = X / (m + m_x)
+    dv = (m33 * Y - m23 * N) / det
+    dr = (m22 * N - m23 * Y) / det
+    xd, yd, psid = body_to_ned(u, v, r, psi)
+    b.ode(u=du + b.noise("w_u", unit="m/s^2"), v=dv + b.noise("w_v", unit="m/s^2"),
+          r=dr + b.noise("w_r", unit="rad/s^2"), x=xd, y=yd, psi=psid)
+    for name in ("u", "v", "r", "x", "y", "psi"):
+        b.output(name, b.sym(name))
+
+
+def _param(b: ModelBuilder, name: str, values: Mapping[str, float], sources: Mapping[str, str],
+           table: Mapping[str, tuple[str, str]]):
+    if name not in values:
+        raise ValueError(f"no value given for parameter {name!r}")
+    unit, doc = table[name]
+    return b.param(name, values[name], unit=unit, doc=doc, source=sources.get(name, ""))
+
+
+def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "",
+                 sources: Mapping[str, str] | None = None, meta: Mapping | None = None,
+                 rudder_actuator: bool = False, rudder_time_constant: float = 1.0,
+                 rudder_rate_max: float = np.radians(2.32), rudder_max: float | None = None) -> Model:
+    """MMG standard-method model (Yasukawa & Yoshimura 2015) with the given parameter values.
+
+    Hull (Eq. 8): ``X_H = 0.5 rho L d U^2 (-R0' + X'vv v'^2 + X'vr v' r' + X'rr r'^2 + X'vvvv v'^4)``,
+    ``Y_H``, ``N_H`` with the cubic polynomials in ``v' = v/U``, ``r' = r L/U``.
+    Propeller (Eq. 10-16): ``X_P = (1 - t_P) rho n^2 D^4 K_T(J_P)``, ``K_T = k0 + k1 J + k2 J^2``,
+    ``J_P = u (1 - w_P) / (n D)``, wake ``(1 - w_P) = (1 - w_P0) [1 + (1 - exp(-C1 |beta_P|)) (C2 - 1)]``
+    with ``beta_P = beta - x'_P r'`` and ``C2 = C_2_plus`` for ``beta_P > 0`` else ``C_2_minus``.
+    Rudder (Eq. 17-27): ``F_N = 0.5 rho A_R U_R^2 f_alpha sin(alpha_R)``,
+    ``alpha_R = delta - atan(v_R / u_R)``, ``v_R = U gamma_R beta_R``, ``beta_R = beta - l'_R r'``,
+    ``u_R = eps u_P sqrt(eta {1 + kappa (sqrt(1 + 8 K_T / (pi J^2)) - 1)}^2 + 1 - eta)``, ``eta = D_p / H_R``;
+    ``X_R = -(1 - t_R) F_N sin(delta)``, ``Y_R = -(1 + a_H) F_N cos(delta)``,
+    ``N_R = -(x_R + a_H x_H) F_N cos(delta)``.
+
+    The propeller terms are written with ``u_P = u (1 - w_P)`` so that they stay finite at ``n = 0``:
+    ``n^2 D^4 K_T = k0 n^2 D^4 + k1 n D^3 u_P + k2 D^2 u_P^2`` and
+    ``u_P sqrt(1 + 8 K_T/(pi J^2)) = sqrt(u_P^2 + 8 n^2 D^2 K_T / pi)`` (valid for ``u_P > 0``; the
+    radicand is floored at zero). The model is meant for ahead motion (``u > 0``, ``n >= 0``); use
+    :func:`casship.models.lowspeed.yoshimura_twin_rudder` near zero speed.
+
+    Parameters
+    ----------
+    values : mapping
+        A value for every name in :data:`MMG_PARAMS`.
+    name, doc : str
+        Model name and description.
+    sources : mapping, optional
+        Parameter name -> source string (stored with each parameter).
+    meta : mapping, optional
+        Metadata copied into ``model.meta`` (``L_pp``, ``U0``, ``n0`` ...).
+    rudder_actuator : bool
+        If True, ``delta`` becomes a state driven by the input ``delta_cmd`` through
+        :func:`add_rudder_actuator` (first order, smooth rate limit ``rudder_rate_max`` [rad/s]).
+    rudder_time_constant, rudder_rate_max, rudder_max : float
+        Actuator settings (only with ``rudder_actuator``).
+
+    Returns
+    -------
+    Model
+    """
+    sources = dict(sources or {})
+    unknown = set(values) - set(MMG_PARAMS)
+    if unknown:
+        raise ValueError(f"unknown MMG parameter(s) {sorted(unknown)}; known: {list(MMG_PARAMS)}")
+    b = ModelBuilder(name, doc or "MMG standard method (Yasukawa & Yoshimura 2015)")
+    P = {k: _param(b, k, values, sources, MMG_PARAMS) for k in MMG_PARAMS}
+    states = declare_ship_states(b)
+    u, v, r = states[:3]
+    if rudder_actuator:
+        delta = add_rudder_actuator(b, ("delta",), rudder_time_constant, rudder_rate_max, rudder_max)["delta"]
+    else:
+        delta = b.input("delta", unit="rad", doc="rudder angle, positive turns to starboard")
+    n = b.input("n", unit="1/s", doc="propeller revolutions per second")
+    force = mmg_forces(P, u, v, r, delta, n)
+    rho, L, d = P["rho"], P["L_pp"], P["d"]
+    m = rho * P["nabla"]
+    m_x = P["m_x_dash"] * 0.5 * rho * L**2 * d
+    m_y = P["m_y_dash"] * 0.5 * rho * L**2 * d
+    J_z = P["J_z_dash"] * 0.5 * rho * L**4 * d
+    I_zG = m * (P["k_zz"] * L) ** 2
+    rigid_body_3dof(b, force, m=m, m_x=m_x, m_y=m_y, I_zG=I_zG, J_z=J_z, x_G=P["x_G"], states=states)
+    b.meta.update(dict(meta or {}))
+    b.meta.setdefault("kind", "mmg")
+    b.meta.setdefault("rudder_inputs", ("delta_cmd",) if rudder_actuator else ("delta",))
+    b.meta.setdefault("propeller_inputs", ("n",))
+    return b.build()
+
+
+def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n):
+    """Hull + propeller + rudder force ``(X, Y, N)`` at midship of the MMG standard method."""
+    rho, L, d = P["rho"], P["L_pp"], P["d"]
+    U = ca.sqrt(u**2 + v**2 + 1e-12)
+    rL = r * L
+    # hull (dimensional form of the polynomials; v' = v/U, r' = rL/U)
+    X_H = 0.5 * rho * L * d * (-P["R_0_dash"] * U**2 + P["X_vv_dash"] * v**2 + P["X_vr_dash"] * v * rL
+                                + P["X_rr_dash"] * rL**2 + P["X_vvvv_dash"] * v**4 / U**2)
+    Y_H = 0.5 * rho * L * d * (P["Y_v_dash"] * v * U + P["Y_r_dash"] * rL * U
+                                + (P["Y_vvv_dash"] * v**3 + P["Y_vvr_dash"] * v**2 * rL
+                                   + P["Y_vrr_dash"] * v * rL**2 + P["Y_rrr_dash"] * rL**3) / U)
+    N_H = 0.5 * rho * L**2 * d * (P["N_v_dash"] * v * U + P["N_r_dash"] * rL * U
+                                   + (P["N_vvv_dash"] * v**3 + P["N_vvr_dash"] * v**2 * rL
+                                      + P["N_vrr_dash"] * v * rL**2 + P["N_rrr_dash"] * rL**3) / U)
+    # propeller
+    beta = ca.atan2(-v, u)
+    r_dash = rL / U
+    beta_P = beta - P["x_P_dash"] * r_dash
+    C_2 = ca.if_else(beta_P > 0, P["C_2_plus"], P["C_2_minus"])
+    one_minus_wP = (1 - P["w_P0"]) * (1 + (1 - ca.exp(-P["C_1"] * ca.fabs(beta_P))) * (C_2 - 1))
+    u_P = u * one_minus_wP
+    D = P["D_p"]
+    n2KT = P["k_0"] * n**2 * D**2 + P["k_1"] * n * D * u_P + P["k_2"] * u_P**2   # n^2 D^2 K_T
+    T = rho * D**2 * n2KT
+    X_P = (1 - P["t_P"]) * T
+    # rudder
+    eta = D / P["H_R"]
+    race = ca.sqrt(ca.fmax(u_P**2 + 8 * n2KT / np.pi, 0.0))                        # u_P sqrt(1 + 8KT/(pi J^2))
+    u_R = P["epsilon"] * ca.sqrt(eta * (u_P + P["kappa"] * (race - u_P)) ** 2 + (1 - eta) * u_P**2 + 1e-12)
+    beta_R = beta - P["l_R_dash"] * r_dash
+    gamma_R = ca.if_else(beta_R < 0, P["gamma_R_minus"], P["gamma_R_plus"])
+    v_R = U * gamma_R * beta_R
+    alpha_R = delta - ca.atan2(v_R, u_R)
+    U_R2 = u_R**2 + v_R**2
+    F_N = 0.5 * rho * P["A_R"] * U_R2 * P["f_alpha"] * ca.sin(alpha_R)
+    x_R, x_H = P["x_R_dash"] * L, P["x_H_dash"] * L
+    X_R = -(1 - P["t_R"]) * F_N * ca.sin(delta)
+    Y_R = -(1 + P["a_H"]) * F_N * ca.cos(delta)
+    N_R = -(x_R + P["a_H"] * x_H) * F_N * ca.cos(delta)
+    return X_H + X_P + X_R, Y_H + Y_R, N_H + N_R
