@@ -12,9 +12,11 @@ from .simulate import measure, simulate
 from .estimators import EKF, KF, FilterResult, persistence_model
 from .estimators import UKF, rts_smooth
 from .linear import linearize, to_iosys, trim
-from . import frames, models
+from .identify import FitResult, MLEProblem, OutputErrorProblem
+from . import frames, identify, models
 
 __version__ = "0.1.0"
 
 __all__ = ["ModelBuilder", "Model", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
-           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "rts_smooth", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__"]
+           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "rts_smooth", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
+           "MLEProblem", "OutputErrorProblem", "FitResult", "identify"]
