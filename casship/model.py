@@ -168,10 +168,13 @@ class ModelBuilder:
 
     def output(self, name: str, expr, *, unit: str = "", angle: bool | None = None,
                doc: str = "") -> None:
-        """Declare an output ``y``; an output that is an angle state is an angle by default."""
+        """Declare an output ``y``; an output that is a state inherits its angle flag and unit by default."""
         expr = _as_sx(expr, f"output {name!r}")
+        measured = next((v for v in self._states if ca.is_equal(expr, self._symbols[v.name])), None)
         if angle is None:
-            angle = any(v.angle and ca.is_equal(expr, self._symbols[v.name]) for v in self._states)
+            angle = measured is not None and measured.angle
+        if not unit and measured is not None:
+            unit = measured.unit
         if not isinstance(name, str) or not name.isidentifier():
             raise ValueError(f"output name {name!r} is not a valid identifier")
         if name in self._output_expr:

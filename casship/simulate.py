@@ -122,7 +122,7 @@ def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
 
 
 def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", max_step: float | None = None,
-             w=None) -> Trajectory:
+             w=None, options: dict | None = None) -> Trajectory:
     """Simulate ``model`` from ``x0`` on the time grid ``t``.
 
     Parameters
@@ -142,6 +142,8 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
         Largest explicit sub-step [s]; by default one sub-step per interval.
     w : array (N, nw), optional
         Process-noise realisation held over each interval (zero by default).
+    options : dict, optional
+        Integrator options for ``method="cvodes"`` (e.g. ``{"abstol": 1e-12, "reltol": 1e-12}``).
 
     Returns
     -------
@@ -167,9 +169,9 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     if max_step is not None and not (np.isfinite(max_step) and max_step > 0):
         raise ValueError(f"max_step must be a positive finite number, got {max_step}")
     substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
-    dmodel = model._cached(("discretize", method, substeps),
-                           lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
-                                              substeps=substeps))
+    key = ("discretize", method, substeps, tuple(sorted((options or {}).items())))
+    dmodel = model._cached(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
+                                                   substeps=substeps, options=options))
     W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
     if U is not None:

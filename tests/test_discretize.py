@@ -1,0 +1,167 @@
+"""Discretisation: convergence orders, CVODES accuracy, Van Loan, exact step Jacobians."""
+import numpy as np
+import pytest
+import scipy.linalg
+
+import casship as cs
+from casship.models import nomoto_first_order, shi_taylor, sog_cog
+
+
+def oscillator(omega=2.0):
+    """Undamped oscillator ``q'' = -omega^2 q + u`` with the exact solution known in closed form."""
+    b = cs.ModelBuilder("oscillator")
+    q, v = b.state("q"), b.state("v")
+    u = b.input("u")
+    om = b.param("omega", omega)
+    b.ode(q=v, v=-om**2 * q + u + b.noise("w"))
+    b.output("q", q)
+    return b.build()
+
+
+def logistic():
+    b = cs.ModelBuilder("logistic")
+    x = b.state("x")
+    b.ode(x=b.param("k", 1.0) * x * (1 - x))
+    return b.build()
+
+
+def final_error(method, dt, T=2.0, omega=2.0):
+    m = oscillator(omega)
+    dm = cs.discretize(m, dt, method=method)
+    n = int(round(T / dt))
+    X = dm.fold(n)([1.0, 0.0], np.zeros((1, n)), m.params(), np.zeros((1, n)), dt)
+    exact = [np.cos(omega * T), -omega * np.sin(omega * T)]
+    return np.linalg.norm(np.array(X)[:, -1] - exact)
+
+
+@pytest.mark.parametrize("method, order", [("euler", 1), ("rk4", 4)])
+def test_convergence_order(method, order):
+    steps = [0.02, 0.01, 0.005] if method == "euler" else [0.1, 0.05, 0.025]
+    errors = [final_error(method, dt) for dt in steps]
+    observed = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+    np.testing.assert_allclose(observed, order, atol=0.1)
+
+
+def test_rk4_substeps_equal_smaller_steps():
+    m = shi_taylor()
+    x = m.states(u=8.0, v=0.1, r=0.01, psi=0.3)
+    uu = [0.1, 1.5]
+    one = cs.discretize(m, 0.5, method="rk4", substeps=4).step(x, uu)
+    small = cs.discretize(m, 0.125, method="rk4")
+    y = x
+    for _ in range(4):
+        y = small.step(y, uu)
+    np.testing.assert_allclose(one, y, rtol=1e-14, atol=1e-14)
+
+
+def test_cvodes_matches_the_logistic_solution():
+    m = logistic()
+    dm = cs.discretize(m, 1.0, method="cvodes")
+    for x0, dt in ((0.1, 1.0), (0.5, 2.5), (0.9, 0.3)):
+        exact = 1.0 / (1.0 + (1.0 / x0 - 1.0) * np.exp(-dt))
+        assert dm.step([x0], [], dt=dt)[0] == pytest.approx(exact, rel=1e-8)
+
+
+def test_dt_is_an_argument_and_f_nominal_binds_it():
+    m = nomoto_first_order()
+    dm = cs.discretize(m, 0.2)
+    x, u, p, w = [0.1, 0.01], [0.05], m.params(), [0.0]
+    np.testing.assert_array_equal(np.array(dm.F_nominal(x, u, p, w)), np.array(dm.F(x, u, p, w, 0.2)))
+    assert not np.allclose(np.array(dm.F(x, u, p, w, 0.4)), np.array(dm.F(x, u, p, w, 0.2)))
+    assert dm.F.name_in() == ["x", "u", "p", "w", "dt"] and dm.F_jac.name_out() == ["A", "B", "Fp", "G"]
+
+
+def test_fold_equals_repeated_steps():
+    m = sog_cog()
+    dm = cs.discretize(m, 0.5)
+    rng = np.random.default_rng(3)
+    W = rng.normal(size=(m.nw, 7)) * 0.01
+    x = np.array([0.0, 0.0, 5.0, 0.3, 0.01])
+    X = np.array(dm.fold(7)(x, np.zeros((0, 7)), m.params(), W, 0.5))
+    for k in range(7):
+        x = dm.step(x, [], w=W[:, k])
+        np.testing.assert_allclose(X[:, k], x, rtol=1e-15, atol=1e-15)
+    assert dm.fold(7) is dm.fold(7)
+
+
+# -- Van Loan --------------------------------------------------------------------------------------
+
+def test_van_loan_scalar_ornstein_uhlenbeck():
+    a, q, dt = 0.7, 2.0, 0.3
+    Ad, Qd = cs.van_loan(-a, 1.0, q, dt)
+    assert Ad[0, 0] == pytest.approx(np.exp(-a * dt), rel=1e-14)
+    assert Qd[0, 0] == pytest.approx(q / (2 * a) * (1 - np.exp(-2 * a * dt)), rel=1e-12)
+
+
+def test_van_loan_double_integrator():
+    q, dt = 0.3, 0.7
+    Ad, Qd = cs.van_loan([[0.0, 1.0], [0.0, 0.0]], [[0.0], [1.0]], q, dt)
+    np.testing.assert_allclose(Ad, [[1.0, dt], [0.0, 1.0]], rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(Qd, q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]), rtol=1e-12)
+
+
+def test_process_noise_uses_the_exact_linearisation():
+    m = oscillator(1.5)
+    dm = cs.discretize(m, 0.4)
+    Qd = dm.process_noise(0.2, m.states(), m.inputs())
+    A = np.array([[0.0, 1.0], [-1.5**2, 0.0]])
+    # direct quadrature of int_0^dt e^{As} G Qc G' e^{A's} ds
+    s = np.linspace(0.0, 0.4, 2001)
+    vals = np.array([scipy.linalg.expm(A * si) @ np.array([[0.0], [1.0]]) for si in s])[..., 0]
+    integrand = 0.2 * np.einsum("ki,kj->kij", vals, vals)
+    np.testing.assert_allclose(Qd, scipy.integrate.simpson(integrand, x=s, axis=0), rtol=1e-9, atol=1e-14)
+
+
+def test_rk4_linearisation_approximates_the_matrix_exponential():
+    m = oscillator(1.0)
+    A, B, G = cs.discretize(m, 0.1).linearize(m.states(), m.inputs())
+    Ad = scipy.linalg.expm(np.array([[0.0, 1.0], [-1.0, 0.0]]) * 0.1)
+    np.testing.assert_allclose(A, Ad, atol=1e-7)   # RK4 local error O(dt^5) = 1e-5 / 120
+
+
+# -- exact step Jacobians vs central differences ---------------------------------------------------
+
+def central(fun, args, k, h=1e-6):
+    args = [np.asarray(a, dtype=float) for a in args]
+    cols = []
+    for i in range(args[k].size):
+        step = h * max(1.0, abs(args[k][i]))
+        plus, minus = [a.copy() for a in args], [a.copy() for a in args]
+        plus[k][i] += step
+        minus[k][i] -= step
+        cols.append((np.array(fun(*plus)).ravel() - np.array(fun(*minus)).ravel()) / (2 * step))
+    return np.column_stack(cols)
+
+
+@pytest.mark.parametrize("method, rtol", [("euler", 1e-6), ("rk4", 1e-6), ("cvodes", 1e-6)])
+def test_step_jacobians_match_central_differences(method, rtol):
+    m = shi_taylor()
+    if method == "cvodes":
+        # tight tolerances and a larger difference step, so that the reference is not the weak side
+        dm = cs.discretize(m, 0.5, method=method, options={"abstol": 1e-14, "reltol": 1e-14})
+        h = 1e-4
+    else:
+        dm, h = cs.discretize(m, 0.5, method=method, substeps=2), 1e-6
+    rng = np.random.default_rng(11)
+    x = m.states(u=7.5, v=0.2, r=0.02, x=3.0, y=-1.0, psi=0.4)
+    u = np.array([0.15, 1.4])
+    p = m.params() * rng.uniform(0.9, 1.1, m.np)
+    w = rng.normal(scale=0.01, size=m.nw)
+    exact = dm.F_jac(x, u, p, w, 0.5)
+    for k, label in enumerate(("A", "B", "Fp", "G")):
+        approx = central(dm.F, (x, u, p, w, 0.5), k, h)
+        J = np.array(exact[k])
+        np.testing.assert_allclose(J, approx, rtol=rtol, atol=rtol * max(1.0, np.abs(J).max()), err_msg=label)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"dt": 0.1, "method": "heun"}, "unknown discretisation method 'heun'"),
+    ({"dt": 0.0}, "dt must be a positive finite number"),
+    ({"dt": np.nan}, "dt must be a positive finite number"),
+    ({"dt": 0.1, "substeps": 0}, "substeps must be >= 1"),
+])
+def test_bad_arguments(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        cs.discretize(nomoto_first_order(), **kwargs)
+    with pytest.raises(ValueError, match="fold length"):
+        cs.discretize(nomoto_first_order(), 0.1).fold(0)
