@@ -10,7 +10,7 @@ from .discretize import DiscreteModel, discretize, van_loan
 from .model import Model, ModelBuilder
 from .simulate import measure, simulate
 from .estimators import EKF, KF, FilterResult, persistence_model
-from .estimators import UKF, rts_smooth
+from .estimators import UKF, rts_smooth, EnKF, KalmanBucy, augment
 from .linear import linearize, to_iosys, trim
 from .identify import FitResult, MLEProblem, OutputErrorProblem
 from . import frames, identify, models
@@ -18,5 +18,5 @@ from . import frames, identify, models
 __version__ = "0.1.0"
 
 __all__ = ["ModelBuilder", "Model", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
-           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "rts_smooth", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
+           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "rts_smooth", "EnKF", "KalmanBucy", "augment", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
            "MLEProblem", "OutputErrorProblem", "FitResult", "identify"]

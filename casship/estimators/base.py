@@ -32,6 +32,7 @@ __all__ = ["Estimator", "FilterResult", "Health", "STEP_OUTPUTS"]
 
 STEP_INPUTS = ["carry", "u_prev", "u", "y", "mask", "dt", "p", "Q", "R", "gate"]
 STEP_OUTPUTS = ["carry_next", "x", "P", "x_pred", "P_pred", "C", "e", "S", "nis", "ll", "accepted"]
+_CONSTANT_INPUTS = (6, 7, 8)   # p, Q, R: the same for every sample of a fold; all others are per sample
 
 
 @dataclass(frozen=True)
@@ -160,6 +161,7 @@ class Estimator:
     """
 
     name = "estimator"
+    FOLD_CHUNK = 512
     _common_options = {"gate": None}
     _options: dict = {}
 
@@ -302,8 +304,29 @@ class Estimator:
         n = len(data)
         rng = np.random.default_rng(seed)
         args = [self.carry_from(prior, rng)] + [arrays[k] for k in STEP_INPUTS[1:]] + self.extra_inputs(n, rng)
-        out = self.fold(n)(*args)
-        return self._result(data.t, arrays["mask"].T, [np.asarray(o) for o in out])
+        return self._result(data.t, arrays["mask"].T, self.run_fold(args, n))
+
+    def run_fold(self, args: list, n: int) -> list[np.ndarray]:
+        """Evaluate the folded step over ``n`` samples; ``args`` as for the step Function with the
+        per-sample inputs as ``n``-column arrays.
+
+        The record is cut into pieces whose lengths are powers of two up to :attr:`FOLD_CHUNK`
+        (the binary decomposition of ``n``), so at most a few fold lengths are ever built per
+        estimator (building one ``mapaccum`` costs much more for long lengths) and the carry is
+        handed from piece to piece; the numbers equal one fold over the whole record.
+        """
+        per_sample = [i for i in range(1, len(args)) if i not in _CONSTANT_INPUTS]
+        pieces, start = [], 0
+        while start < n:
+            size = min(self.FOLD_CHUNK, 1 << ((n - start).bit_length() - 1))
+            piece = list(args)
+            for i in per_sample:
+                piece[i] = args[i][:, start:start + size]
+            out = [np.asarray(o) for o in self.fold(size)(*piece)]
+            pieces.append(out)
+            args = [out[0][:, -1]] + list(args[1:])
+            start += size
+        return [np.hstack([p[j] for p in pieces]) for j in range(len(pieces[0]))]
 
     def _check_prior(self, prior: Gaussian) -> None:
         if not isinstance(prior, Gaussian):
