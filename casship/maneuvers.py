@@ -388,7 +388,8 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
     n : float, optional
         Propeller rate; by default solved for equilibrium at ``speed``.
     duration, dt, t_exec : float, optional
-        Defaults scale with ``L/U``: turning 50 L/U, zig-zag 16 L/U, ``dt = L/U/400``,
+        Defaults scale with ``L/U``: turning 50 L/U, zig-zag 16 L/U, ``dt`` = L/U/400 rounded down
+        to 1, 2 or 5 x 10^k,
         ``t_exec = L/U / 4``.
     p : parameters, optional
     hold : float, optional
@@ -415,7 +416,7 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
     if props and n is None:
         n = propeller_rate_for_speed(model, speed, pv)
     T = L / speed
-    dt = float(dt if dt is not None else T / 400)
+    dt = float(dt if dt is not None else _nice_step(T / 400))
     t_exec = float(t_exec if t_exec is not None else round(T / 4 / dt) * dt)
     rudder = np.radians(rudder_deg)
     defaults = {"turning": 50 * T, "zigzag": 16 * T, "pullout": 40 * T, "spiral": None, "random": 20 * T}
@@ -448,6 +449,12 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
         if kind == "pullout":
             metrics = _pullout_metrics(traj, t_exec + float(hold or 20 * T))
     return ManeuverResult(traj, metrics, settings)
+
+
+def _nice_step(value: float) -> float:
+    """The largest of 1, 2, 5 x 10^k not above ``value``."""
+    base = 10.0 ** np.floor(np.log10(value))
+    return float(max(m * base for m in (1.0, 2.0, 5.0) if m * base <= value * (1 + 1e-12)))
 
 
 def _spiral_points(traj: Dataset, steps, hold) -> dict:

@@ -1,0 +1,183 @@
+"""``casship simulate MODEL``: run a standard manoeuvre (or replay measured inputs) and print metrics.
+
+Examples::
+
+    casship simulate kvlcc2 --maneuver turning --rudder-deg 35 --speed 7.97 --json
+    casship simulate kvlcc2-l7 --maneuver zigzag --rudder-deg 20 --heading-deg -20 --csv zz.csv --plot zz.png
+    casship simulate kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --json
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+_METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
+                 "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_2_deg", "overshoot_3_deg",
+                 "initial_turning_time_s", "period_s", "initial_turning_distance_m")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("simulate", help="simulate a manoeuvre of a named model and print its metrics",
+                       description="Simulate a standard manoeuvre of a registered model from a straight run "
+                                   "(or replay the measured inputs of a record) and print the metrics.")
+    p.add_argument("model", nargs="?", help="registered model name (kvlcc2, kvlcc2-l7, ...); see --list")
+    p.add_argument("--list", action="store_true", help="list the registered models")
+    p.add_argument("--maneuver", default="turning", choices=("turning", "zigzag", "pullout", "spiral", "random"),
+                   help="manoeuvre (default turning)")
+    p.add_argument("--rudder-deg", type=float, default=35.0,
+                   help="rudder angle [deg]; positive turns to starboard; negative zig-zag = port first")
+    p.add_argument("--heading-deg", type=float, default=None,
+                   help="zig-zag switch heading [deg] (default |rudder|); negative = port first")
+    p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: the preset's U0)")
+    p.add_argument("--rps", type=float, default=None,
+                   help="propeller rate [1/s]; by default solved for equilibrium at --speed")
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
+    p.add_argument("--dt", type=float, default=None, help="time step [s]")
+    p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random rudder sequence")
+    p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
+    p.add_argument("--params", default=None, help='JSON file {"params": {name: value}} overriding parameters')
+    p.add_argument("--inputs", default=None,
+                   help="replay the measured inputs of a record (CSV with header, or MARIN .dat) from "
+                        "its measured initial state")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--csv", default=None, help="save the trajectory as CSV")
+    p.add_argument("--plot", default=None, help="save a plot (PNG)")
+    p.set_defaults(func=run)
+
+
+def _load_params(path):
+    text = Path(path).read_text()
+    try:
+        obj = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(obj, dict) or not isinstance(obj.get("params"), dict):
+        raise ValueError(f'{path}: expected a JSON object with key "params": {{name: value}}')
+    return {str(k): float(v) for k, v in obj["params"].items()}
+
+
+def _load_record(path):
+    from ..data import Dataset
+    from ..io.marin import read_marin
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"input record {path} does not exist")
+    if path.suffix.lower() == ".dat":
+        return read_marin(path)
+    return Dataset.from_csv(path)
+
+
+def _clean(obj):
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if hasattr(obj, "item"):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def run(args) -> int:
+    from ..models import get_model, model_names
+
+    if args.list or not args.model:
+        for name, doc in model_names().items():
+            print(f"{name:18s} {doc}")
+        return 0
+    model = get_model(args.model)
+    p = model.params(_load_params(args.params)) if args.params else model.params()
+    L = model.meta.get("L_pp")
+    out = {"model": args.model, "L_pp_m": L}
+    measured = None
+    if args.inputs:
+        from ..validation import replay
+
+        measured = _load_record(args.inputs)
+        res = replay(model, measured, p, method=args.method)
+        traj = res.trajectory
+        out.update({"maneuver": f"replay ({res.kind})", "inputs": str(args.inputs), "replay": res.errors,
+                    "metrics": res.metrics, "measured_metrics": res.measured_metrics})
+    else:
+        from ..maneuvers import run_maneuver
+
+        res = run_maneuver(model, args.maneuver, rudder_deg=args.rudder_deg, heading_deg=args.heading_deg,
+                           speed=args.speed, n=args.rps, duration=args.duration, dt=args.dt, p=p,
+                           hold=args.hold, seed=args.seed, method=args.method)
+        traj = res.trajectory
+        s = res.settings
+        out.update({"maneuver": args.maneuver, "speed_mps": s["speed_mps"], "rps": s["n"],
+                    "rudder_deg": args.rudder_deg, "metrics": res.metrics, "settings": s})
+    if args.csv:
+        traj.to_csv(args.csv)
+        out["csv"] = str(args.csv)
+    if args.plot:
+        _plot(traj, measured, args.plot, title=f"{args.model}: {out['maneuver']}")
+        out["plot"] = str(args.plot)
+    if args.json:
+        print(json.dumps(_clean(out)))
+    else:
+        _print_text(out)
+    return 0
+
+
+def _print_text(out) -> None:
+    print(f"model {out['model']} (L_pp = {out['L_pp_m']} m), manoeuvre {out['maneuver']}")
+    if out.get("speed_mps") is not None:
+        rps = out.get("rps")
+        print(f"approach speed {out['speed_mps']:.3f} m/s" + (f", propeller {rps:.4f} 1/s" if rps is not None else ""))
+    if "replay" in out:
+        for k, v in out["replay"].items():
+            print(f"  {k:28s} {v:12.4f}")
+    metrics = out.get("metrics", {})
+    measured = out.get("measured_metrics", {})
+    keys = [k for k in _METRIC_ORDER if k in metrics or k in measured]
+    if keys:
+        print(f"  {'metric':28s} {'simulated':>12s}" + (f" {'measured':>12s}" if measured else ""))
+        for k in keys:
+            sim = f"{metrics[k]:12.2f}" if k in metrics else f"{'-':>12s}"
+            meas = (f" {measured[k]:12.2f}" if k in measured else f" {'-':>12s}") if measured else ""
+            print(f"  {k:28s} {sim}{meas}")
+    if "spiral" in metrics:
+        for row in metrics["spiral"]:
+            print(f"  rudder {row['rudder_deg']:7.2f} deg  yaw rate {row['yaw_rate_deg_s']:8.4f} deg/s")
+    for key in ("csv", "plot"):
+        if key in out:
+            print(f"{key} written to {out[key]}")
+
+
+def _plot(traj, measured, path, title="") -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    ax1.plot(traj["y"], traj["x"], label="simulated")
+    if measured is not None:
+        ax1.plot(measured["y"], measured["x"], "--", label="measured")
+    ax1.set_xlabel("East y [m]")
+    ax1.set_ylabel("North x [m]")
+    ax1.set_aspect("equal", adjustable="datalim")
+    ax1.legend()
+    ax2.plot(traj.t, np.degrees(traj["psi"]), label="heading (sim)")
+    if measured is not None:
+        ax2.plot(measured.t, np.degrees(np.unwrap(measured["psi"])), "--", label="heading (meas)")
+    for name in traj.input_names:
+        if name.startswith("delta"):
+            ax2.plot(traj.t, np.degrees(traj[name]), ":", label=f"{name} [deg]")
+    for name in traj.state_names:
+        if name.startswith("delta"):
+            ax2.plot(traj.t, np.degrees(traj[name]), ":", label=f"{name} [deg]")
+    ax2.set_xlabel("time [s]")
+    ax2.set_ylabel("[deg]")
+    ax2.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,150 @@
+"""Replay validation: simulate a model with the measured inputs of a record and compare.
+
+:func:`replay` starts the model from the measured initial state, drives it with the measured
+inputs (zero-order hold on the record's time stamps) and reports the root-mean-square errors of
+heading (wrapped differences), position and surge speed, plus the manoeuvre metrics of the
+replayed run and of the measurement, computed by the same functions of :mod:`casship.maneuvers`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .angles import wrap
+from .data import Dataset, Trajectory
+from .maneuvers import execute_time, turning_metrics, zigzag_metrics
+from .model import Model
+from .simulate import simulate
+
+__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics"]
+
+
+@dataclass
+class ReplayResult:
+    """Result of :func:`replay`.
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        The replayed simulation on the record's time stamps.
+    errors : dict
+        ``psi_rmse_deg``, ``position_rmse_m``, ``u_rmse_mps`` (keys present when the record
+        holds the columns).
+    metrics, measured_metrics : dict
+        Manoeuvre metrics of the replayed run and of the record (same functions, same execute).
+    kind : str
+        ``"turning"``, ``"zigzag"`` or ``"other"`` (from :func:`classify_maneuver`).
+    """
+
+    trajectory: Trajectory
+    errors: dict
+    metrics: dict = field(default_factory=dict)
+    measured_metrics: dict = field(default_factory=dict)
+    kind: str = "other"
+
+
+def classify_maneuver(data: Dataset, rudder: str = "delta") -> tuple[str, dict]:
+    """Guess the manoeuvre of a record from its rudder and heading.
+
+    A rudder that reverses sign at least twice (beyond half its largest deflection) is a
+    zig-zag, whose switch heading is the heading change when the rudder leaves its first side,
+    snapped to a multiple of 5 deg if within 1.5 deg (else rounded to a whole degree); a record turning through more than 180 deg otherwise is a turning circle.
+
+    Returns
+    -------
+    (kind, options)
+        ``("zigzag", {"heading_deg": h})``, ``("turning", {})`` or ``("other", {})``.
+    """
+    if rudder not in data or "psi" not in data:
+        return "other", {}
+    d = np.asarray(data[rudder]) - data[rudder][0]
+    big = np.abs(d) > 0.5 * np.abs(d).max()
+    if not big.any():
+        return "other", {}
+    signs = np.sign(d[big])
+    reversals = np.flatnonzero(np.diff(signs) != 0)
+    psi = np.unwrap(np.asarray(data["psi"], dtype=float))
+    t_exec = execute_time(data, rudder)
+    psi0 = float(np.interp(t_exec, data.t, psi))
+    if reversals.size >= 2:
+        # the rudder leaves its first side when the heading change reaches the switch angle
+        first = np.flatnonzero(big)[0]
+        cross = np.flatnonzero(big)[reversals[0] + 1]
+        side = np.sign(d[first])
+        peak = int(first + np.argmax(side * d[first:cross]))
+        leave = peak + int(np.flatnonzero(side * d[peak:cross + 1] < side * d[peak] - np.radians(0.5))[0])
+        heading = float(np.degrees(abs(psi[leave] - psi0)))
+        snapped = 5.0 * np.round(heading / 5.0)
+        heading = float(snapped if abs(snapped - heading) <= 1.5 else np.round(heading))
+        return "zigzag", {"heading_deg": max(heading, 1.0)}
+    if np.abs(psi - psi0).max() > np.pi:
+        return "turning", {}
+    return "other", {}
+
+
+def maneuver_metrics(data: Dataset, kind: str, options: dict, *, t_exec: float, L: float | None) -> dict:
+    """Metrics of ``kind`` (see :func:`classify_maneuver`) for a record, or ``{}`` if not defined."""
+    try:
+        if kind == "turning":
+            return turning_metrics(data, t_exec=t_exec, L=L)
+        if kind == "zigzag":
+            return zigzag_metrics(data, options["heading_deg"], t_exec=t_exec, L=L)
+    except ValueError:
+        return {}
+    return {}
+
+
+def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step: float | None = None,
+           x0=None) -> ReplayResult:
+    """Simulate ``model`` with the measured inputs of ``data`` from its measured initial state.
+
+    Parameters
+    ----------
+    model : Model
+        A model whose inputs are columns of ``data`` (e.g. ``delta, n`` for KVLCC2).
+    data : Dataset
+        The record (inputs must be finite; NaN in inputs is an error).
+    p : array_like or mapping, optional
+        Parameters (nominal by default), e.g. a fit's estimates.
+    method, max_step
+        Integration settings (see :func:`casship.simulate`).
+    x0 : array_like or mapping, optional
+        Initial state; by default the first row of the record's columns named like the states
+        (states without a column start at zero).
+
+    Returns
+    -------
+    ReplayResult
+    """
+    if x0 is None:
+        values = {}
+        for name in model.state_names:
+            if name in data:
+                v = float(data[name][0])
+                if not np.isfinite(v):
+                    raise ValueError(f"initial value of state {name!r} is missing (NaN) in the first row")
+                values[name] = v
+        x0 = model.states(**values)
+    traj = simulate(model, x0, data.t, data, p, method=method, max_step=max_step)
+    errors = {}
+    if "psi" in data:
+        e = wrap(traj["psi"] - data["psi"])
+        ok = np.isfinite(e)
+        errors["psi_rmse_deg"] = float(np.degrees(np.sqrt(np.mean(e[ok] ** 2))))
+    if "x" in data and "y" in data:
+        d2 = (traj["x"] - data["x"]) ** 2 + (traj["y"] - data["y"]) ** 2
+        ok = np.isfinite(d2)
+        errors["position_rmse_m"] = float(np.sqrt(np.mean(d2[ok])))
+    if "u" in data:
+        e = traj["u"] - data["u"]
+        ok = np.isfinite(e)
+        errors["u_rmse_mps"] = float(np.sqrt(np.mean(e[ok] ** 2)))
+    kind, options = classify_maneuver(data)
+    metrics, measured = {}, {}
+    if kind != "other":
+        L = model.meta.get("L_pp")
+        t_exec = execute_time(data)
+        metrics = maneuver_metrics(traj, kind, options, t_exec=t_exec, L=L)
+        measured = maneuver_metrics(data, kind, options, t_exec=t_exec, L=L)
+    return ReplayResult(traj, errors, metrics, measured, kind)
