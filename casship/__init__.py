@@ -11,6 +11,7 @@ from .model import Model, ModelBuilder
 from .simulate import measure, simulate
 from .estimators import EKF, KF, FilterResult, persistence_model
 from .estimators import UKF, rts_smooth, EnKF, KalmanBucy, augment
+from .estimators import MHE
 from .linear import linearize, to_iosys, trim
 from .identify import FitResult, MLEProblem, OutputErrorProblem
 from . import frames, identify, models
@@ -19,4 +20,4 @@ __version__ = "0.1.0"
 
 __all__ = ["ModelBuilder", "Model", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
            "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "rts_smooth", "EnKF", "KalmanBucy", "augment", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
-           "MLEProblem", "OutputErrorProblem", "FitResult", "identify"]
+           "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE"]
