@@ -210,6 +210,11 @@ class Dataset:
     def from_pandas(cls, frame, time: str = "t", units: Mapping[str, str] | None = None) -> "Dataset":
         if time not in frame.columns:
             raise ValueError(f"no time column {time!r}; columns: {list(frame.columns)}")
+        from pandas.api.types import is_numeric_dtype
+
+        non_numeric = [str(c) for c in frame.columns if not is_numeric_dtype(frame[c])]
+        if non_numeric:
+            raise ValueError(f"non-numeric column(s) {non_numeric}")
         cols = {str(c): frame[c].to_numpy(dtype=float) for c in frame.columns if c != time}
         return cls(frame[time].to_numpy(dtype=float), cols, units or frame.attrs.get("units"))
 
@@ -247,10 +252,10 @@ class Dataset:
             if unknown:
                 raise ValueError(f"{path}: cannot rename unknown column(s) {sorted(unknown)}")
             frame = frame.rename(columns=dict(rename))
-        non_numeric = [c for c in frame.columns if not np.issubdtype(frame[c].dtype, np.number)]
-        if non_numeric:
-            raise ValueError(f"{path}: non-numeric column(s) {non_numeric}")
-        data = cls.from_pandas(frame, time=time)
+        try:
+            data = Dataset.from_pandas(frame, time=time)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
         for name, factor in (scale or {}).items():
             data = data.with_columns(**{name: data[name] * factor})
         data.meta["source"] = str(path)
@@ -273,6 +278,55 @@ class Trajectory(Dataset):
         self.state_names = tuple(state_names)
         self.input_names = tuple(input_names)
         self.output_names = tuple(output_names)
+
+    def _names(self) -> dict:
+        return {"model_name": self.model_name, "state_names": list(self.state_names),
+                "input_names": list(self.input_names), "output_names": list(self.output_names)}
+
+    def slice(self, start: int | None = None, stop: int | None = None) -> "Trajectory":
+        """Rows ``start:stop`` as a Trajectory (names kept)."""
+        return Trajectory.from_dataset(super().slice(start, stop), self._names())
+
+    # -- I/O with the names kept -----------------------------------------------------------------
+    def to_pandas(self):
+        """A DataFrame with ``t`` and all columns; the model and variable names go to ``frame.attrs``."""
+        frame = super().to_pandas()
+        frame.attrs.update(self._names())
+        return frame
+
+    @classmethod
+    def from_dataset(cls, data: Dataset, model) -> "Trajectory":
+        """View a record with a column for every state and input of ``model`` as a Trajectory.
+
+        ``model`` is a :class:`~casship.Model` or a mapping with ``state_names``, ``input_names``,
+        ``output_names`` (and optionally ``model_name``), e.g. the ``attrs`` of :meth:`to_pandas`.
+        """
+        get = (lambda k: model.get(k, ())) if isinstance(model, Mapping) else (lambda k: getattr(model, k))
+        names = {k: tuple(get(k)) for k in ("state_names", "input_names", "output_names")}
+        name = model.get("model_name", "") if isinstance(model, Mapping) else model.name
+        missing = [n for n in (*names["state_names"], *names["input_names"]) if n not in data]
+        if missing:
+            raise ValueError(f"record has no column(s) {missing} for the states/inputs of model {name!r}")
+        outputs = tuple(n for n in names["output_names"] if n in data)
+        return cls(data.t, {n: data[n] for n in data.names}, model_name=name, state_names=names["state_names"],
+                   input_names=names["input_names"], output_names=outputs, units=data.units, meta=data.meta)
+
+    @classmethod
+    def from_pandas(cls, frame, time: str = "t", units: Mapping[str, str] | None = None,
+                    model=None) -> "Trajectory":
+        """Inverse of :meth:`to_pandas`; names from ``model`` or else from ``frame.attrs``."""
+        source = model if model is not None else frame.attrs
+        if model is None and "state_names" not in frame.attrs:
+            raise ValueError("Trajectory.from_pandas: the frame carries no state names; pass model=")
+        return cls.from_dataset(Dataset.from_pandas(frame, time, units), source)
+
+    @classmethod
+    def from_csv(cls, path, model=None, time: str | None = None, rename: Mapping[str, str] | None = None,
+                 scale: Mapping[str, float] | None = None) -> "Trajectory":
+        """Read a CSV written by :meth:`Dataset.to_csv`; ``model`` names the states, inputs and outputs."""
+        if model is None:
+            raise ValueError("Trajectory.from_csv needs model= (a CSV file does not store the state names)")
+        return cls.from_dataset(Dataset.from_csv(path, time=time, rename=rename, scale=scale), model)
 
     @property
     def x(self) -> np.ndarray:
