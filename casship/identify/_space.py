@@ -20,7 +20,7 @@ from .result import IdentificationError
 
 __all__ = ["Entry", "ParamSpace", "ipopt_solve", "HESSIANS"]
 
-HESSIANS = ("exact", "limited-memory")
+HESSIANS = ("exact", "limited-memory", "custom")
 _OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
 
@@ -173,16 +173,25 @@ class ParamSpace:
 
 
 def ipopt_solve(f, z, z0, lbz, ubz, *, g=None, lbg=None, ubg=None, hessian: str = "exact",
-                options: Mapping | None = None, name: str = "fit"):
+                options: Mapping | None = None, name: str = "fit", hess_f=None):
     """Minimise ``f(z)`` (subject to ``lbg <= g(z) <= ubg``) with IPOPT.
 
+    ``hessian="custom"`` uses the symmetric matrix expression ``hess_f(z)`` (e.g. a Gauss-Newton or
+    Fisher-scoring approximation of the Hessian of ``f``; unconstrained problems only).
     Returns ``(z_opt, stats, seconds)``; raises :class:`IdentificationError` naming IPOPT's status if
     it does not converge.
     """
     if hessian not in HESSIANS:
         raise ValueError(f"unknown hessian {hessian!r}; use one of {HESSIANS}")
     opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": 1e-9,
-            "ipopt.max_iter": 300, "ipopt.hessian_approximation": hessian}
+            "ipopt.max_iter": 300,
+            "ipopt.hessian_approximation": "exact" if hessian == "custom" else hessian}
+    if hessian == "custom":
+        if g is not None:
+            raise ValueError("a custom Hessian is only supported without constraints")
+        lam_f, lam_g, par = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", 0), ca.MX.sym("p", 0)
+        opts["hess_lag"] = ca.Function("nlp_hess_l", [z, par, lam_f, lam_g], [ca.triu(lam_f * hess_f)],
+                                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
     for k, v in (options or {}).items():
         opts[k if k.startswith(("ipopt.", "print_time")) else f"ipopt.{k}"] = v
     nlp = {"x": z, "f": f}

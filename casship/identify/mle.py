@@ -233,16 +233,51 @@ class MLEProblem:
         return np.asarray(self._grad(self._theta(values or {}))).reshape(-1)
 
     # -- solve -------------------------------------------------------------------------------------
+    def fisher_expr(self, z, theta) -> ca.MX:
+        """Fisher information of the innovations with respect to ``z`` (``theta`` = values at ``z``).
+
+        ``sum_k De_k' S_k^-1 De_k + 0.5 tr(S_k^-1 dS_k/dz_i S_k^-1 dS_k/dz_j)``: the expected Hessian
+        of the negative log-likelihood (Fisher scoring; always positive semi-definite).
+        """
+        ny, k = self.estimator.ny, z.shape[0]
+        outs = self._records_fn(theta)
+        outs = [outs] if isinstance(outs, ca.MX) else outs
+        e_s, S_s = ca.SX.sym("e", ny), ca.SX.sym("S", ny * ny)
+        de_s, dS_s = ca.SX.sym("de", k * ny), ca.SX.sym("dS", k * ny * ny)
+        A = ca.reshape(de_s, k, ny).T
+        Si = ca.inv(ca.reshape(S_s, ny, ny))
+        dS = ca.reshape(dS_s, k, ny * ny)
+        M = [Si @ ca.reshape(dS[i, :], ny, ny) for i in range(k)]
+        T2 = ca.SX(k, k)
+        for i in range(k):
+            for j in range(i, k):
+                T2[i, j] = T2[j, i] = 0.5 * ca.trace(M[i] @ M[j])
+        per = ca.Function("fisher_sample", [e_s, S_s, de_s, dS_s], [A.T @ Si @ A + T2])
+        info = 0
+        for r in range(len(self.records)):
+            e, S = outs[2 * r], outs[2 * r + 1]
+            n = e.shape[1]
+            J = ca.jacobian(ca.vertcat(ca.vec(e), ca.vec(S)), z).T
+            Je = ca.reshape(J[:, : ny * n], k * ny, n)
+            JS = ca.reshape(J[:, ny * n:], k * ny * ny, n)
+            info = info + per.map(f"fisher_{r}", "serial", n, [], [0])(e, S, Je, JS)
+        return 0.5 * (info + info.T)
+
     def solve(self, guess: Mapping[str, float] | None = None, *, hessian: str = "exact",
-              options: Mapping | None = None) -> FitResult:
+              information: str = "hessian", options: Mapping | None = None) -> FitResult:
         """Maximise the likelihood with IPOPT from ``guess`` (free name -> value).
 
         Parameters
         ----------
         guess : mapping, optional
             Starting values (default: the fixed parameter values, the estimator's noise and the priors).
-        hessian : {"exact", "limited-memory"}
-            Exact Hessian of the likelihood (CasADi) or IPOPT's L-BFGS approximation.
+        hessian : {"fisher", "exact", "limited-memory"}
+            Curvature IPOPT uses: the Fisher information of the innovations (scoring, from exact
+            first-order sensitivities; cheap and positive semi-definite), the exact Hessian of the
+            likelihood (second-order CasADi derivatives through the fold) or IPOPT's L-BFGS.
+        information : {"fisher", "hessian"}
+            Matrix inverted for the standard errors: Fisher information or observed information
+            (exact Hessian) at the optimum.
         options : mapping, optional
             IPOPT options (e.g. ``{"max_iter": 100, "tol": 1e-8}``).
 
@@ -255,10 +290,15 @@ class MLEProblem:
         z = ca.MX.sym("z", len(sp))
         f = self._nll(ca.vertcat(*sp.natural(z)))
         lbz, ubz = sp.z_bounds()
-        z_opt, st, seconds = ipopt_solve(f, z, sp.guess_z(guess), lbz, ubz, hessian=hessian, options=options,
-                                         name=self.method)
-        hess = ca.Function("nll_hessian", [z], [ca.hessian(f, z)[0]])
-        info = np.asarray(hess(z_opt))
+        if information not in ("fisher", "hessian"):
+            raise ValueError(f"information must be 'fisher' or 'hessian', got {information!r}")
+        theta = ca.vertcat(*sp.natural(z))
+        fisher = self.fisher_expr(z, theta) if "fisher" in (hessian, information) else None
+        z_opt, st, seconds = ipopt_solve(f, z, sp.guess_z(guess), lbz, ubz,
+                                         hessian="custom" if hessian == "fisher" else hessian,
+                                         hess_f=fisher, options=options, name=self.method)
+        mat = fisher if information == "fisher" else ca.hessian(f, z)[0]
+        info = np.asarray(ca.Function("nll_information", [z], [mat])(z_opt))
         return self._result(z_opt, info, st, seconds)
 
     def _result(self, z_opt, info, st, seconds) -> FitResult:
