@@ -135,9 +135,10 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
     """
     meta = {"L_pp": 320.0, "B": 58.0, "d": 20.8, "U0": U0_FULL, "n0": N0_FULL, "rudder_rate": RUDDER_RATE_FULL,
             "rudder_max": math.radians(35.0), "scale": 1.0, "vessel": "KVLCC2 full scale",
-            "wind": {"A_F": 1200.0, "A_L": 3600.0, "L_OA": 325.5, "B": 58.0, "A_OD": 750.0, "H_BR": 30.0,
-                     "H_C": 12.0, "C": -120.0,
-                     "source": "A_F, A_L assumed by MMGD/TUDRL; A_OD from BEMAN A_SS; H_BR, H_C, C estimated"}}
+            "wind": {"A_F": 1624.0, "A_L": 4910.0, "L_OA": 325.0, "B": 58.0, "A_OD": 750.0, "H_BR": 45.0,
+                     "H_C": 10.0, "C": 0.0,
+                     "source": "A_F (A_T), A_L, A_OD (A_SS) and C (centroid 160 m from the bow, about midship) "
+                               "from BEMAN; L_OA, H_BR and H_C are estimates (not published)"}}
     return _build(KVLCC2_FULL, params, "kvlcc2", "KVLCC2 full scale, MMG standard method (Yasukawa & "
                   "Yoshimura 2015)", meta, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max)
