@@ -34,7 +34,7 @@ from .model import Model, ModelBuilder
 __all__ = ["Nomoto", "nomoto_from_model", "fit_nomoto", "PIDGains", "pid_pole_placement", "lqr_design",
            "ReferenceModel", "Autopilot", "loop_transfer", "closed_loop_tf", "margins", "SteeringPlant",
            "steering_model", "ClosedLoopResult", "simulate_autopilot", "step_metrics", "course_scenario",
-           "plot_design"]
+           "plot_design", "plot_closed_loop", "Design", "design_autopilot"]
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -309,6 +309,9 @@ class Autopilot:
         Stop integrating while the command saturates in the direction the integrator pushes.
     feedforward : bool
         Use ``m a_d + d r_d`` from the reference model.
+    filter_T : float
+        Time constant [s] of a first-order low-pass on the command before the limits (0 = none;
+        MSS uses 1 s on the Mariner rudder command), against sensor noise on the rudder.
     """
 
     gains: PIDGains
@@ -317,22 +320,31 @@ class Autopilot:
     steer_rate_max: float = float("inf")
     anti_windup: bool = True
     feedforward: bool = True
+    filter_T: float = 0.0
 
     def __post_init__(self):
         if not self.steer_max > 0 or not self.steer_rate_max > 0:
             raise ValueError("steer_max and steer_rate_max must be positive")
+        if not (np.isfinite(self.filter_T) and self.filter_T >= 0):
+            raise ValueError(f"filter_T must be >= 0, got {self.filter_T}")
 
     @property
     def function(self) -> ca.Function:
         """``autopilot(z, ref, chi, r, dt) -> (z_next, steer, chi_d, r_d, a_d, e)`` with the memory
-        ``z = [chi_d, r_d, a_d, integral, steer_prev]``."""
+        ``z = [chi_d, r_d, a_d, integral, steer_prev, filtered]``."""
         g = self.gains
-        z, ref, chi, r, dt = ca.SX.sym("z", 5), ca.SX.sym("ref"), ca.SX.sym("chi"), ca.SX.sym("r"), ca.SX.sym("dt")
-        chi_d, r_d, a_d, integ, prev = z[0], z[1], z[2], z[3], z[4]
+        z, ref, chi, r, dt = ca.SX.sym("z", 6), ca.SX.sym("ref"), ca.SX.sym("chi"), ca.SX.sym("r"), ca.SX.sym("dt")
+        chi_d, r_d, a_d, integ, prev, filt = z[0], z[1], z[2], z[3], z[4], z[5]
         e = wrap_sym(chi - chi_d)
         ff = (g.m * a_d + g.d * r_d) if self.feedforward else 0
         raw = ff - (g.Kp * e + g.Kd * (r - r_d) + g.Ki * integ)
-        sat = ca.fmin(ca.fmax(raw, -self.steer_max), self.steer_max) if np.isfinite(self.steer_max) else raw
+        if self.filter_T > 0:
+            alpha = dt / (self.filter_T + dt)         # backward-Euler first-order low-pass
+            filt_next = filt + alpha * (raw - filt)
+        else:
+            filt_next = raw
+        sat = ca.fmin(ca.fmax(filt_next, -self.steer_max), self.steer_max) if np.isfinite(self.steer_max) \
+            else filt_next
         if np.isfinite(self.steer_rate_max):
             step = self.steer_rate_max * dt
             cmd = ca.fmin(ca.fmax(sat, prev - step), prev + step)
@@ -346,7 +358,7 @@ class Autopilot:
         else:
             integ_next = integ + dt * e
         xd_next = self.reference.symbolic_step(z[:3], ref, dt)
-        z_next = ca.vertcat(xd_next, integ_next, cmd)
+        z_next = ca.vertcat(xd_next, integ_next, cmd, filt_next)
         return ca.Function("autopilot", [z, ref, chi, r, dt], [z_next, cmd, chi_d, r_d, a_d, e],
                            ["z", "ref", "chi", "r", "dt"], ["z_next", "steer", "chi_d", "r_d", "a_d", "e"])
 
@@ -355,17 +367,19 @@ class Autopilot:
 # Linear analysis
 # ---------------------------------------------------------------------------------------------------
 def loop_transfer(nomoto: Nomoto, gains: PIDGains, *, order: int = 1, actuator_T: float = 0.0,
-                  delay: float = 0.0) -> control.TransferFunction:
+                  delay: float = 0.0, filter_T: float = 0.0) -> control.TransferFunction:
     """Open-loop transfer function ``L = C(s) G(s)`` of the course loop (cut at the steering input).
 
     ``C(s) = Kp + Kd s + Ki/s`` (``Kd`` acts on the measured rate), ``G(s) = psi/delta`` of the
-    Nomoto model of ``order``, times ``1/(1 + actuator_T s)`` and a first-order Pade delay.
+    Nomoto model of ``order``, times ``1/(1 + actuator_T s)`` (steering servo), ``1/(1 + filter_T s)``
+    (command filter of :class:`Autopilot`) and a first-order Pade delay.
     """
     s = control.tf("s")
     C = gains.Kp + gains.Kd * s + gains.Ki / s
     L = C * nomoto.heading_tf(order)
-    if actuator_T > 0:
-        L = L / (1 + actuator_T * s)
+    for tau in (actuator_T, filter_T):
+        if tau > 0:
+            L = L / (1 + tau * s)
     if delay > 0:
         num, den = control.pade(delay, 1)
         L = L * control.tf(num, den)
@@ -561,8 +575,8 @@ def course_scenario(name: str, t_end: float | None = None) -> tuple[Callable[[fl
 def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Callable[[float], float], t_end: float,
                        *, dt: float = 0.02, mode: str = "course", estimator: str = "ekf",
                        gnss_rate: float = 5.0, gnss_std: float = 0.5, compass_rate: float = 10.0,
-                       compass_std: float = np.radians(0.5), gyro_std: float = np.radians(0.05),
-                       ekf_q=(0.1, 0.01), rate: str = "estimator", x0=None, current: tuple[float, float] = (0.0, 0.0),
+                       compass_std: float = np.radians(0.5), gyro_std: float = np.radians(0.01),
+                       ekf_q=(0.1, 0.01), ekf_alpha=(0.01, 0.1), rate: str = "estimator", x0=None, current: tuple[float, float] = (0.0, 0.0),
                        step_times: Sequence[float] = (0.0,), settle_band: float = np.radians(1.0),
                        seed=0) -> ClosedLoopResult:
     """Run ship + sensors + estimator + autopilot at ``1/dt`` Hz.
@@ -585,6 +599,9 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
         ``"truth"`` feeds the true course and course rate (no sensors).
     ekf_q : (float, float)
         Process-noise variances of ``w_U`` and ``w_chi`` in the SOG/COG EKF.
+    ekf_alpha : (float, float)
+        Singer constants ``alpha1, alpha2`` [1/s] of the SOG/COG EKF (0.01, 0.1 in MSS for a USV;
+        use small values, e.g. 1e-5, for ships whose speed and turn rate change slowly).
     rate : {"estimator", "gyro"}
         Rate fed to the autopilot in course mode: the EKF's course rate ``omega_chi`` (Fossen &
         Fossen 2021) or a rate gyro's yaw rate (noise ``gyro_std``; equal to the course rate in a
@@ -625,11 +642,11 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
     xdot0 = ship()[1]
     vg0 = xdot0[[ix, iy]] + vc
     chi0 = float(np.arctan2(vg0[1], vg0[0])) if mode == "course" else float(x[ipsi])
-    ap.args[0][:] = [chi0, 0.0, 0.0, 0.0, 0.0]
+    ap.args[0][:] = [chi0, 0.0, 0.0, 0.0, 0.0, 0.0]
     gnss_every = int(round(1.0 / (gnss_rate * dt)))
     compass_every = int(round(1.0 / (compass_rate * dt)))
     if mode == "course" and estimator == "ekf":
-        ekf = EKF(discretize(sog_cog(), dt, "euler"), Q=np.diag(ekf_q), R=np.eye(2) * gnss_std**2)
+        ekf = EKF(discretize(sog_cog(*ekf_alpha), dt, "euler"), Q=np.diag(ekf_q), R=np.eye(2) * gnss_std**2)
         xh = np.array([x[ix], x[iy], float(np.hypot(*vg0)), chi0, 0.0])
         Ph = np.diag([gnss_std**2, gnss_std**2, 1.0, np.radians(5) ** 2, 0.01])
     nan2 = np.full(2, np.nan)
@@ -740,3 +757,146 @@ def step_metrics(t, y, target: float, steer=None, *, band: float = 0.02, abs_ban
                     "steer_rate_rms": float(np.sqrt(np.mean(rate**2))),
                     "steer_rate_max": float(np.max(np.abs(rate)))})
     return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# One-call design for a ship model at a speed
+# ---------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Design:
+    """An autopilot designed for a ship at an operating point (see :func:`design_autopilot`)."""
+
+    plant: SteeringPlant
+    x0: np.ndarray
+    nomoto: Nomoto
+    gains: PIDGains
+    autopilot: Autopilot
+    loop: control.TransferFunction
+    margins: dict
+    settings: dict
+
+    def summary(self) -> dict:
+        return {"nomoto": self.nomoto.as_dict(), "gains": self.gains.as_dict(), "margins": self.margins,
+                "settings": self.settings, "operating_point": dict(zip(self.plant.model.state_names,
+                                                                       map(float, self.x0))),
+                "inputs": {k: float(v) for k, v in self.plant.inputs.items()}}
+
+
+def _meta(model: Model, *keys, default=None):
+    for k in keys:
+        if k in model.meta:
+            return model.meta[k]
+    return default
+
+
+def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer: str = "delta",
+                     propeller: str | None = "auto", surge: str = "u", nomoto: Nomoto | None = None,
+                     method: str = "pid", wn: float | None = None, zeta: float = 1.0,
+                     integral: str | None = "fossen", lqr_weights: Mapping | None = None,
+                     wn_ref: float | None = None, r_max: float | None = None, steer_max: float | None = None,
+                     steer_rate_max: float | None = None, actuator_T: float = 1.0, delay: float = 0.2,
+                     filter_T: float = 0.0,
+                     inputs: Mapping[str, float] | None = None) -> Design:
+    """Design a course autopilot for ``model`` at a straight-run ``speed``.
+
+    Steps: trim (the propeller rate that holds ``speed``, :func:`casship.trim`), exact
+    linearisation and reduction to a Nomoto model (unless ``nomoto`` is given, e.g. one fitted to
+    zig-zags), PID pole placement or LQR, third-order reference model, limits, and the margins of
+    the loop on the design model (second-order Nomoto when known) with a first-order steering
+    servo ``actuator_T`` and a delay ``delay`` (e.g. the GNSS period).
+
+    Defaults come from the model's ``meta`` where present: ``wn = U/L`` (L = ``L_pp``),
+    ``r_max = 0.5 U/L``, ``steer_max`` = ``rudder_max`` or 35 deg, ``steer_rate_max`` =
+    ``rudder_rate`` or 2.32 deg/s.
+    """
+    if method not in ("pid", "lqr"):
+        raise ValueError(f"method must be 'pid' or 'lqr', got {method!r}")
+    inputs = dict(inputs or {})
+    pv = model.params(p) if p is not None else model.params()
+    if propeller == "auto":
+        propeller = next((n for n in ("n", "n_p", "n_prop") if n in model.input_names), None)
+    speed = float(speed if speed is not None else _meta(model, "U0", default=0.0))
+    x = model.states(**({surge: speed} if surge in model.state_names else {}))
+    u = model.inputs(**{k: v for k, v in inputs.items()})
+    if propeller is not None and propeller not in inputs:
+        u[model.index(propeller, "input")] = float(_meta(model, "n0", default=1.0))
+        tr = trim(model, x, u, pv, free=[propeller], zero=[surge])
+        x, u = tr.x, tr.u
+        inputs[propeller] = tr.values[propeller]
+    others = {n: float(u[model.index(n, "input")]) for n in model.input_names if n != steer}
+    others.update(inputs)
+    nom = nomoto or nomoto_from_model(model, x, u, pv, steer=steer)
+    L = _meta(model, "L_pp", "L")
+    if wn is None:
+        if L is None or speed <= 0:
+            raise ValueError("give wn (the model has no length L_pp in meta, or speed is zero)")
+        wn = speed / float(L)
+    if r_max is None:
+        r_max = 0.5 * speed / float(L) if L is not None and speed > 0 else float("inf")
+    steer_max = float(steer_max if steer_max is not None else _meta(model, "rudder_max", default=np.radians(35)))
+    steer_rate_max = float(steer_rate_max if steer_rate_max is not None
+                           else _meta(model, "rudder_rate", default=np.radians(2.32)))
+    if method == "pid":
+        gains = pid_pole_placement(nom, wn, zeta, integral=integral)
+    else:
+        w = {"q_int": (wn / 10) ** 2, "q_e": 1.0, "q_r": 1.0 / wn**2, "r_delta": (np.radians(10) / np.radians(5)) ** 2
+             * (nom.m * wn**2) ** -2}
+        w.update(lqr_weights or {})
+        gains = lqr_design(nom, **w)
+    ref = ReferenceModel(wn_ref or wn, 1.0, r_max)
+    pilot = Autopilot(gains, ref, steer_max, steer_rate_max, filter_T=filter_T)
+    order = 2 if nom.second_order else 1
+    loop = loop_transfer(nom, gains, order=order, actuator_T=actuator_T, delay=delay, filter_T=filter_T)
+    plant = SteeringPlant(model, steer, others, pv)
+    settings = {"speed_mps": speed, "method": method, "wn": wn, "zeta": zeta, "wn_ref": ref.wn,
+                "r_max_deg_s": float(np.degrees(r_max)), "steer_max": steer_max,
+                "steer_rate_max": steer_rate_max, "actuator_T_s": actuator_T, "delay_s": delay, "filter_T_s": filter_T,
+                "design_model_order": order}
+    return Design(plant, x, nom, gains, pilot, loop, margins(loop), settings)
+
+
+def plot_closed_loop(result: ClosedLoopResult, path, title: str = "", steer_label: str = "rudder [deg]",
+                     steer_scale: float = float(np.degrees(1.0))):
+    """Course (true, estimated, desired, command), steering and track of a closed-loop run (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d = result.data
+    t = d.t
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7))
+    ax = axes[0, 0]
+    key = "chi" if result.mode == "course" else "psi"
+    ax.plot(t, np.degrees(np.unwrap(d[key])), label=f"true {key}")
+    ax.plot(t, np.degrees(np.unwrap(d["chi_hat"])), lw=0.7, label="fed to autopilot")
+    ax.plot(t, np.degrees(np.unwrap(d["chi_d"])), "--", label="reference model")
+    ax.plot(t, np.degrees(d["ref"]), ":", label="command")
+    ax.set_ylabel(f"{key} [deg]")
+    ax.legend(fontsize=8)
+    ax = axes[1, 0]
+    ax.plot(t, d["steer"] * steer_scale)
+    ax.set_ylabel(steer_label)
+    ax.set_xlabel("time [s]")
+    ax = axes[0, 1]
+    ax.plot(t, np.degrees(d["omega_chi"]), label="true course rate")
+    ax.plot(t, np.degrees(d["omega_hat"]), lw=0.7, label="fed to autopilot")
+    ax.plot(t, np.degrees(d["r_d"]), "--", label="desired rate")
+    ax.set_ylabel("rate [deg/s]")
+    ax.legend(fontsize=8)
+    ax = axes[1, 1]
+    ax.plot(d["east"], d["north"])
+    ok = np.isfinite(d["gnss_north"])
+    if ok.any():
+        ax.plot(d["gnss_east"][ok], d["gnss_north"][ok], ".", ms=1.5, alpha=0.5, label="GNSS")
+        ax.legend(fontsize=8)
+    ax.set_xlabel("East [m]")
+    ax.set_ylabel("North [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    fig.suptitle(title)
+    for a in axes.ravel():
+        a.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
