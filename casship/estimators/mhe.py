@@ -346,8 +346,8 @@ class MHE(Estimator):
         common = {"expand": bool(expand), "print_time": False, "error_on_fail": False}
         if solver == "ipopt":
             iopts = {"print_level": 0, "sb": "yes", "tol": float(o["tol"]),
-                     "max_iter": int(o["max_iter"] or 100), "mu_strategy": "adaptive",
-                     "warm_start_init_point": "no"}
+                     "max_iter": 100 if o["max_iter"] is None else int(o["max_iter"]), "mu_strategy": "adaptive",
+                     "warm_start_init_point": "no", "bound_relax_factor": 0.0}
             S = ca.nlpsol(f"mhe_ipopt_{N}", "ipopt", nlp, {**common, "ipopt": iopts})
             ok = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
         else:
@@ -364,7 +364,7 @@ class MHE(Estimator):
             rti = solver == "rti"
             sopts = {**common, "hess_lag": H, "qpsol": qp, "qpsol_options": qopts,
                      "print_iteration": False, "print_header": False, "print_status": False,
-                     "max_iter": 1 if rti else int(o["max_iter"] or 50),
+                     "max_iter": 1 if rti else (50 if o["max_iter"] is None else int(o["max_iter"])),
                      "tol_pr": float(o["tol"]), "tol_du": max(float(o["tol"]), 1e-8)}
             S = ca.nlpsol(f"mhe_{solver}_{N}", "sqpmethod", nlp, sopts)
             # a vanishing search direction means the start point is already optimal
