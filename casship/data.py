@@ -63,7 +63,7 @@ def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_z
     m = 0.5 * (m + m.T)
     if n:
         eig = np.linalg.eigvalsh(m)
-        tol = 1e-12 * max(1.0, abs(eig).max())
+        tol = 1e-12 * abs(eig).max()     # relative: variances of lat/lon in rad are ~1e-14
         if eig.min() < -tol:
             raise ValueError(f"{name}: not positive semi-definite (smallest eigenvalue {eig.min():.3g}); "
                              "variances must be non-negative")
