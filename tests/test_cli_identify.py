@@ -1,0 +1,63 @@
+"""The ``casship identify`` command: CSV and MARIN records in, a fit JSON that ``simulate`` reads out."""
+import json
+
+import numpy as np
+import pytest
+
+import casship as cs
+from casship.cli import main
+
+
+@pytest.fixture(scope="module")
+def nomoto_csv(tmp_path_factory):
+    m = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    t = np.arange(0, 400.0, 1.0)
+    tr = cs.simulate(m, m.states(), t, {"delta": 0.15 * np.sign(np.sin(2 * np.pi * t / 120))})
+    data = cs.measure(tr, m, {"psi": 0.01}, seed=3)
+    return data.to_csv(tmp_path_factory.mktemp("rec") / "zz.csv")
+
+
+@pytest.mark.parametrize("method", ["mle", "oe"])
+def test_identify_csv_recovers_and_simulate_reads_fit(nomoto_csv, tmp_path, capsys, method):
+    out = tmp_path / "fit.json"
+    args = ["identify", str(nomoto_csv), "--model", "nomoto1", "--free", "K,T", "--guess", "K=0.05,T=10",
+            "--out", str(out), "--method", method, "--plot", str(tmp_path / "fit.png")]
+    if method == "mle":
+        args += ["--R", "psi=1e-4"]
+    else:
+        args += ["--sigma", "psi=0.01", "--estimate-x0", "psi"]
+    assert main(args) == 0
+    fit = json.loads(out.read_text())
+    assert fit["model"] == "nomoto1" and fit["free"][:2] == ["K", "T"]
+    for name, truth in {"K": 0.1, "T": 20.0}.items():
+        assert abs(fit["params"][name] - truth) < 4 * fit["std_errors"][name]
+    assert (tmp_path / "fit.png").stat().st_size > 0
+    assert "fit written" in capsys.readouterr().out
+    assert main(["simulate", "nomoto1", "--params", str(out), "--inputs", str(nomoto_csv), "--json"]) == 0
+    replay = json.loads(capsys.readouterr().out)["replay"]
+    assert replay["psi_rmse_deg"] < 2.0
+
+
+def test_identify_estimates_unknown_measurement_noise(nomoto_csv, tmp_path, capsys):
+    out = tmp_path / "fit.json"
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--free", "K,T", "--guess", "K=0.05,T=10",
+                 "--out", str(out), "--json"]) == 0
+    fit = json.loads(capsys.readouterr().out)
+    assert "R[psi]" in fit["free"]
+    assert abs(fit["estimates"]["R[psi]"] - 1e-4) < 4 * fit["std_errors"]["R[psi]"]
+
+
+def test_identify_bad_names_are_errors(nomoto_csv, tmp_path, capsys):
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--free", "Kx", "--out",
+                 str(tmp_path / "f.json")]) == 2
+    assert "Kx" in capsys.readouterr().err
+    assert main(["identify", str(tmp_path / "missing.csv"), "--model", "nomoto1", "--free", "K"]) == 2
+
+
+def test_identify_marin_record(data_dir, tmp_path, capsys):
+    rec = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_10_m.dat"
+    out = tmp_path / "fit.json"
+    assert main(["identify", str(rec), "--model", "kvlcc2", "--free", "N_r_dash", "--measured", "u,v,r,psi",
+                 "--decimate", "40", "--out", str(out)]) == 0
+    fit = json.loads(out.read_text())
+    assert np.isfinite(fit["std_errors"]["N_r_dash"]) and fit["std_errors"]["N_r_dash"] > 0
