@@ -24,12 +24,12 @@ def central_jacobians(model, x, u, p, w=None, h=1e-6):
     return out
 
 
-def assert_jacobians(model, x, u, p=None, rtol=1e-5, atol=1e-8):
+def assert_jacobians(model, x, u, p=None, rtol=1e-5, atol=1e-8, h=1e-6):
     """Exact ``f_jac`` equals central differences at ``(x, u, p)`` (A, B and G)."""
     p = model.params() if p is None else p
     x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
     A, B, _, G = (np.asarray(M) for M in model.f_jac(x, u, p, np.zeros(model.nw)))
-    Ad, Bd, Gd = central_jacobians(model, x, u, p)
+    Ad, Bd, Gd = central_jacobians(model, x, u, p, h=h)
     for name, exact, approx in (("A", A, Ad), ("B", B, Bd), ("G", G, Gd)):
         scale = np.maximum(np.abs(exact), np.abs(approx))
         bad = np.abs(exact - approx) > atol + rtol * np.maximum(scale, np.abs(exact).max(axis=1, keepdims=True))
