@@ -146,7 +146,7 @@ def generate_c(fun: ca.Function, directory, name: str | None = None, *, title: s
 def _c_array(ctype: str, name: str, values) -> str:
     values = np.asarray(values, dtype=float).reshape(-1, order="F")
     body = ", ".join(f"{v:.17g}" for v in values) if values.size else "0"
-    return f"static const {ctype} {name}[{max(values.size, 1)}] = {{{body}}};\n"
+    return f"CASSHIP_UNUSED static const {ctype} {name}[{max(values.size, 1)}] = {{{body}}};\n"
 
 
 def export_estimator(estimator, directory, name: str | None = None, p=None) -> CFiles:
@@ -170,13 +170,15 @@ def export_estimator(estimator, directory, name: str | None = None, p=None) -> C
     strings = lambda names: "{" + ", ".join(f'"{n}"' for n in names) + "}"  # noqa: E731
     text = (f"/* Numbers of the exported {type(estimator).__name__} '{name}' (model '{model.name}'). */\n"
             f"#ifndef {guard}\n#define {guard}\n\n"
+            "#ifndef CASSHIP_UNUSED\n#if defined(__GNUC__)\n#define CASSHIP_UNUSED __attribute__((unused))\n"
+            "#else\n#define CASSHIP_UNUSED\n#endif\n#endif\n\n"
             f"#define {name}_NX {model.nx}\n#define {name}_NU {model.nu}\n#define {name}_NP {model.np}\n"
             f"#define {name}_NW {model.nw}\n#define {name}_NY {estimator.ny}\n"
             f"#define {name}_NCARRY {files.sizes_in[0]}\n\n"
             + _c_array("double", f"{name}_p", pvec) + _c_array("double", f"{name}_Q", estimator.Q)
             + _c_array("double", f"{name}_R", estimator.R)
-            + f"static const char *{name}_states[{max(model.nx, 1)}] = {strings(model.state_names)};\n"
-            + f"static const char *{name}_measured[{max(estimator.ny, 1)}] = {strings(estimator.measured)};\n"
+            + f"CASSHIP_UNUSED static const char *const {name}_states[{max(model.nx, 1)}] = {strings(model.state_names)};\n"
+            + f"CASSHIP_UNUSED static const char *const {name}_measured[{max(estimator.ny, 1)}] = {strings(estimator.measured)};\n"
             + f"\n#endif /* {guard} */\n")
     data = files.source.parent / f"{name}_data.h"
     data.write_text(text)

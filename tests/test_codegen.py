@@ -108,3 +108,18 @@ def test_compile_errors_are_reported(tmp_path):
     bad.write_text("int main(void) { return undefined_symbol; }\n")
     with pytest.raises(RuntimeError, match="C compilation failed"):
         compile_c([bad], tmp_path / "bad")
+
+
+@needs_gcc
+def test_the_onboard_loop_in_the_docs_compiles_and_runs(tmp_path, monkeypatch):
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "codegen.md").read_text()
+    monkeypatch.chdir(tmp_path)
+    exec(re.findall(r"```python\n(.*?)```", text, re.S)[0], {})
+    (tmp_path / "main.c").write_text(re.findall(r"```c\n(.*?)```", text, re.S)[1])
+    exe = compile_c([tmp_path / "main.c", tmp_path / "build" / "heading_ekf.c"], tmp_path / "onboard",
+                    flags=("-O2", "-ffp-contract=off", "-std=c99", "-Wall", "-Werror", f"-I{tmp_path / 'build'}"))
+    out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
+    assert out.startswith("psi = ") and "nan" not in out
