@@ -42,9 +42,15 @@ _PROP_NAMES = ("n", "n1", "n2", "n1_cmd", "n2_cmd")
 
 
 # -- model introspection ---------------------------------------------------------------------------------
+def _rudder_names(model: Model) -> tuple[str, ...]:
+    if "rudder_inputs" in model.meta:
+        return tuple(model.meta["rudder_inputs"])
+    return tuple(n for n in model.input_names if n in _RUDDER_NAMES)
+
+
 def rudder_inputs(model: Model) -> tuple[str, ...]:
     """Names of the model's rudder inputs (``meta["rudder_inputs"]`` or the usual names)."""
-    names = tuple(model.meta.get("rudder_inputs") or (n for n in model.input_names if n in _RUDDER_NAMES))
+    names = _rudder_names(model)
     if not names:
         raise ValueError(f"model {model.name!r} has no rudder input (inputs: {list(model.input_names)})")
     return names
@@ -66,7 +72,8 @@ def straight_run_state(model: Model, speed: float, psi: float = 0.0) -> np.ndarr
 
 
 def _input_vector(model: Model, rudder: float = 0.0, n: float | None = None, **extra) -> np.ndarray:
-    values = {name: rudder for name in rudder_inputs(model)} if rudder is not None else {}
+    names = _rudder_names(model)
+    values = {name: rudder for name in names} if rudder is not None else {}
     if n is not None:
         values.update({name: n for name in propeller_inputs(model)})
     values.update(extra)
