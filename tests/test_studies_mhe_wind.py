@@ -1,0 +1,26 @@
+"""The mhe-wind study in quick mode: files written, table complete, tuning chosen from its grids."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from problems import get_study
+from problems.mhe_wind import D_GRID, FILTERS, Q_GRID, STATES
+
+
+def test_mhe_wind_quick(tmp_path):
+    study = get_study("mhe-wind")
+    summary = study.run(tmp_path, quick=True, workers=1)
+    for name in ("rmse.md", "rmse.png", "disturbance.png", "summary.json"):
+        assert (tmp_path / name).is_file(), name
+    assert json.loads((tmp_path / "summary.json").read_text())["study"] == "mhe-wind"
+    assert summary["tuning"]["q_ekf"] in Q_GRID and summary["tuning"]["q_dist"] in D_GRID
+    for f in FILTERS:
+        for w in ("0", "1.64"):
+            row = summary["rmse"][f"{w}/{f}"]
+            assert set(row) == set(STATES)
+            # every filter tracks the measured states better than the measurement noise (0.05)
+            assert all(np.isfinite(v) and 0 < v < 0.05 for v in row.values()), (f, w, row)
+    table = (tmp_path / "rmse.md").read_text()
+    assert table.count("| MHE |") == 2
