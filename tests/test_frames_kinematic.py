@@ -121,3 +121,18 @@ def test_tomera_and_constant_acceleration_models():
     ca_model = constant_acceleration("s")
     traj = cs.simulate(ca_model, [1.0, 2.0, 0.5], np.linspace(0.0, 4.0, 9))
     np.testing.assert_allclose(traj["s"], 1.0 + 2.0 * traj.t + 0.25 * traj.t**2, rtol=1e-13)
+
+
+def test_body_kinematics_draws_the_exact_circle():
+    m = cs.models.get_model("body-kinematics")
+    u, v, r = 4.0, 0.5, 0.02
+    t = np.linspace(0.0, 300.0, 301)
+    traj = cs.simulate(m, m.states(), t, {"u": u, "v": v, "r": r})
+    psi = r * t
+    # integral of R(psi) [u, v] with psi = r t
+    x = (u * np.sin(psi) + v * (np.cos(psi) - 1.0)) / r
+    y = (u * (1.0 - np.cos(psi)) + v * np.sin(psi)) / r
+    np.testing.assert_allclose(traj["x"], x, atol=1e-6)
+    np.testing.assert_allclose(traj["y"], y, atol=1e-6)
+    np.testing.assert_allclose(traj["psi"], psi, atol=1e-12)
+    assert m.output_names == ("x", "y", "psi") and list(m.angle_outputs) == [False, False, True]

@@ -1,5 +1,6 @@
 """Model library: factories returning :class:`casship.Model` objects, each citing its source."""
 from .kinematic import constant_acceleration, double_integrator, sog_cog, sog_cog_latlon, tomera_kinematic
+from .kinematic import body_kinematics
 from .nomoto import nomoto_first_order, nomoto_second_order
 from .registry import get_model, model_names, register
 from .kvlcc2 import kvlcc2, kvlcc2_l7
@@ -21,8 +22,9 @@ register("mmg-twin-lowspeed", esso_osaka_twin, "Yoshimura low-speed MMG, single 
 register("otter", otter, "Otter USV surge-sway-yaw, two propellers (Fossen, MSS otter.m)")
 register("mariner", mariner, "Mariner-class cargo ship, 3 DOF (Chislett & Strom-Tejsen 1965; MSS mariner.m)")
 register("tomera-kinematic", tomera_kinematic, "x, y, psi double integrators (Tomera 2011)")
+register("body-kinematics", body_kinematics, "3-DOF NED pose driven by body velocities u, v, r (Tomera 2011 Eq. 60)")
 
 __all__ = ["constant_acceleration", "double_integrator", "sog_cog", "sog_cog_latlon", "tomera_kinematic",
            "nomoto_first_order", "nomoto_second_order", "shi_taylor", "SHI_DEFAULTS", "SHI_PARAM_NAMES",
            "get_model", "model_names", "register", "kvlcc2", "kvlcc2_l7", "mmg_standard", "esso_osaka_twin",
-           "yoshimura_twin_rudder", "otter", "mariner"]
+           "yoshimura_twin_rudder", "otter", "mariner", "body_kinematics"]

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..frames import wgs84_radii
+from ..frames import body_to_ned, wgs84_radii
 from ..model import Model, ModelBuilder
 
-__all__ = ["double_integrator", "tomera_kinematic", "constant_acceleration", "sog_cog", "sog_cog_latlon"]
+__all__ = ["double_integrator", "tomera_kinematic", "constant_acceleration", "sog_cog", "sog_cog_latlon",
+           "body_kinematics"]
 
 
 def _add_double_integrator(b: ModelBuilder, pos: str, vel: str, g: tuple[float, float], angle: bool) -> None:
@@ -90,6 +91,24 @@ def sog_cog_latlon(alpha1: float = 0.01, alpha2: float = 0.1) -> Model:
     b.ode(lat=U * ca.cos(chi) / r_m, lon=U * ca.sin(chi) / (r_n * ca.cos(lat)))
     b.output("lat", lat)
     b.output("lon", lon)
+    return b.build()
+
+
+def body_kinematics() -> Model:
+    """3-DOF rigid-body kinematics: earth-fixed pose driven by body velocities (Tomera 2011, Eq. 60).
+
+    ``x' = u cos psi - v sin psi``, ``y' = u sin psi + v cos psi``, ``psi' = r`` with the body
+    velocities ``u, v, r`` as inputs (e.g. from a log or from a manoeuvring model) and noise
+    channels ``w_x, w_y, w_psi`` on the rates; outputs the pose ``x, y, psi``.
+    """
+    b = ModelBuilder("body_kinematics", "3-DOF NED pose from body velocities (Fossen 2021; Tomera 2011, Eq. 60)")
+    x, y = b.state("x", unit="m"), b.state("y", unit="m")
+    psi = b.state("psi", unit="rad", angle=True)
+    u, v, r = b.input("u", unit="m/s"), b.input("v", unit="m/s"), b.input("r", unit="rad/s")
+    xd, yd, psid = body_to_ned(u, v, r, psi)
+    b.ode(x=xd + b.noise("w_x"), y=yd + b.noise("w_y"), psi=psid + b.noise("w_psi"))
+    for name, sym in (("x", x), ("y", y), ("psi", psi)):
+        b.output(name, sym)
     return b.build()
 
 
