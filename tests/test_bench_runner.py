@@ -1,0 +1,70 @@
+"""The benchmark command: discovery, skipped rows for missing peers, error rows, table and JSON."""
+import json
+import sys
+import types
+
+import pytest
+
+import benchmarks
+from benchmarks import __main__ as runner
+
+
+def fake_module(monkeypatch, name, main=None, import_error=None):
+    full = f"benchmarks.{name}"
+    if import_error:
+        real_import = runner.importlib.import_module
+
+        def importer(mod, *args):
+            if mod == full:
+                raise ImportError(f"No module named {import_error!r}", name=import_error)
+            return real_import(mod, *args)
+
+        monkeypatch.setattr(runner.importlib, "import_module", importer)
+    else:
+        module = types.ModuleType(full)
+        module.main = main
+        monkeypatch.setitem(sys.modules, full, module)
+
+
+def test_rows_skips_and_errors(monkeypatch):
+    monkeypatch.setattr(runner, "discover", lambda only=None: ["bench_ok", "bench_peerless", "bench_broken"])
+    fake_module(monkeypatch, "bench_ok", main=lambda quick=False: [
+        benchmarks.row("thing", 0.5, "peer", 1.5, "max abs diff 1e-12")])
+    fake_module(monkeypatch, "bench_peerless", import_error="filterpy")
+
+    def broken(quick=False):
+        raise ZeroDivisionError("oops")
+
+    fake_module(monkeypatch, "bench_broken", main=broken)
+    rows = runner.run_all(quick=True, verbose=False)
+    ok, skipped, error = rows
+    assert ok["ratio"] == pytest.approx(3.0) and ok["module"] == "bench_ok"
+    assert skipped["peer_s"] is None and "filterpy" in skipped["skipped"] and "bench" in skipped["skipped"]
+    assert error["error"] == "ZeroDivisionError: oops"
+    table = benchmarks.format_table(rows)
+    assert "| thing | 0.5 | peer | 1.5 | 3 | max abs diff 1e-12 |" in table
+    assert "skipped: cannot import filterpy" in table and "error: ZeroDivisionError" in table
+
+
+def test_median_time_and_row():
+    calls = []
+    assert benchmarks.median_time(lambda: calls.append(1), repeat=3, warmup=2) >= 0.0
+    assert len(calls) == 5
+    assert benchmarks.row("b", 0.0, "p", 1.0, "")["ratio"] is None
+    with pytest.raises(ValueError, match="repeat"):
+        benchmarks.median_time(lambda: None, repeat=0)
+
+
+def test_command_writes_json(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    from casship.cli import main
+
+    assert main(["bench", "--quick", "--only", "simulate", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["quick"] and result["machine"]["casadi"]
+    names = {r["peer"] for r in result["rows"]}
+    assert "scipy solve_ivp RK45 (NumPy rhs)" in names
+    assert all(r["ratio"] > 0 for r in result["rows"])
+    assert "| benchmark | casship [s]" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        runner.main(["--only", "no_such_topic"])
