@@ -122,3 +122,15 @@ def test_run_turning_mirrors_metric_sign_convention():
     res = run_maneuver(ship, "turning", rudder_deg=-35, duration=400, dt=0.5)
     assert res.metrics["turn_direction"] == -1
     assert res.metrics["advance_m"] > 0 and res.metrics["transfer_m"] > 0
+
+
+def test_models_page_example_runs(tmp_path, monkeypatch):
+    import re
+    from pathlib import Path
+
+    monkeypatch.chdir(tmp_path)
+    page = Path(__file__).resolve().parents[1] / "docs" / "models.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), re.S)
+    assert blocks
+    for block in blocks:
+        exec(compile(block, str(page), "exec"), {})
