@@ -17,7 +17,7 @@ saturated and rate limited, and the integrator clamped while the command saturat
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable, Mapping, Sequence
 
 import casadi as ca
@@ -33,8 +33,9 @@ from .model import Model, ModelBuilder
 
 __all__ = ["Nomoto", "nomoto_from_model", "fit_nomoto", "PIDGains", "pid_pole_placement", "lqr_design",
            "ReferenceModel", "Autopilot", "loop_transfer", "closed_loop_tf", "margins", "SteeringPlant",
-           "steering_model", "ClosedLoopResult", "simulate_autopilot", "step_metrics", "course_scenario",
-           "plot_design", "plot_closed_loop", "Design", "design_autopilot"]
+           "steering_model", "twin_propeller_allocation", "twin_propeller_yaw_limit", "ClosedLoopResult",
+           "simulate_autopilot", "step_metrics", "course_scenario", "plot_design", "plot_closed_loop", "Design",
+           "design_autopilot"]
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -480,6 +481,45 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
     return b.build()
 
 
+def twin_propeller_allocation(model: Model, names: tuple[str, str] = ("n1", "n2")):
+    """Allocation ``tau_X, tau_N -> n1, n2`` for a craft steered by two propellers (e.g. the Otter).
+
+    Thrust ``T = k n |n|`` (``k_pos`` ahead, ``k_neg`` astern) on lever arms ``-+ y_pont`` (port
+    propeller ``n1``): ``tau_X = T1 + T2``, ``tau_N = y_pont (T1 - T2)``, inverted exactly. Reads
+    ``k_pos``, ``k_neg`` and ``y_pont`` from the model's parameters. Use with :func:`steering_model`.
+    """
+    missing = [n for n in names if n not in model.input_names]
+    missing += [k for k in ("k_pos", "k_neg", "y_pont") if k not in model.param_names]
+    if missing:
+        raise ValueError(f"twin-propeller allocation needs inputs {list(names)} and parameters k_pos, k_neg, "
+                         f"y_pont; model {model.name!r} lacks {missing}")
+
+    def alloc(new, p):
+        out = {}
+        for name, sign in zip(names, (1, -1)):
+            T = new["tau_X"] / 2 + sign * new["tau_N"] / (2 * p["y_pont"])
+            k = ca.if_else(T >= 0, p["k_pos"], p["k_neg"])
+            out[name] = ca.sign(T) * ca.sqrt(ca.fabs(T) / k)
+        return out
+    return alloc
+
+
+def twin_propeller_yaw_limit(model: Model, tau_X: float, p=None) -> float:
+    """Largest yaw moment [N m] that keeps both propellers inside ``meta['n_max']``/``meta['n_min']``
+    at surge force ``tau_X``."""
+    pd = model.param_dict(model.params(p) if p is not None else None)
+    n_max, n_min = model.meta.get("n_max"), model.meta.get("n_min")
+    if n_max is None or n_min is None:
+        raise ValueError(f"model {model.name!r} has no meta['n_max'] / meta['n_min']")
+    l = pd["y_pont"]
+    ahead = pd["k_pos"] * n_max**2
+    astern = pd["k_neg"] * n_min**2
+    limit = 2 * l * min(ahead - tau_X / 2, tau_X / 2 + astern)
+    if limit <= 0:
+        raise ValueError(f"surge force {tau_X} N leaves no yaw moment within the propeller limits")
+    return float(limit)
+
+
 @dataclass
 class SteeringPlant:
     """A ship model seen by an autopilot: which input steers, which states are position and heading.
@@ -576,7 +616,7 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
                        *, dt: float = 0.02, mode: str = "course", estimator: str = "ekf",
                        gnss_rate: float = 5.0, gnss_std: float = 0.5, compass_rate: float = 10.0,
                        compass_std: float = np.radians(0.5), gyro_std: float = np.radians(0.01),
-                       ekf_q=(0.1, 0.01), ekf_alpha=(0.01, 0.1), rate: str = "estimator", x0=None, current: tuple[float, float] = (0.0, 0.0),
+                       ekf_q=(0.1, 0.01), ekf_alpha=(0.01, 0.1), rate: str = "estimator", x0=None,
                        step_times: Sequence[float] = (0.0,), settle_band: float = np.radians(1.0),
                        seed=0) -> ClosedLoopResult:
     """Run ship + sensors + estimator + autopilot at ``1/dt`` Hz.
@@ -584,7 +624,10 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
     Parameters
     ----------
     plant : SteeringPlant
-        The nonlinear ship (truth), with its parameters (model error, wind inputs) bound.
+        The nonlinear ship (truth), with its parameters (model error) and other inputs bound:
+        for wind and current use a model from :func:`casship.models.wind.add_current` /
+        :func:`~casship.models.wind.add_wind` and give ``wind_speed``, ``current_speed``, ... in
+        ``plant.inputs``.
     autopilot : Autopilot
     command : callable t -> course or heading command [rad]
     t_end : float
@@ -606,9 +649,6 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
         Rate fed to the autopilot in course mode: the EKF's course rate ``omega_chi`` (Fossen &
         Fossen 2021) or a rate gyro's yaw rate (noise ``gyro_std``; equal to the course rate in a
         steady turn).
-    current : (speed [m/s], direction [rad])
-        Uniform current, added to the position rates (exact for a model written in velocities
-        relative to the water).
     step_times : sequence of float
         Times of command changes; metrics are computed for each segment.
     settle_band : float
@@ -630,7 +670,6 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
     t = np.arange(n) * dt
     ix, iy, ipsi, ir = (m.index(k) for k in (plant.north, plant.east, plant.heading, plant.yaw_rate))
     x = np.asarray(x0 if x0 is not None else plant.model.states(), dtype=float).copy()
-    vc = np.array([np.cos(current[1]), np.sin(current[1])]) * current[0]
     ship = BufferedCall(plant.step_function())
     ship.args[2][:] = plant.pvec
     ship.args[3][0] = dt
@@ -640,7 +679,7 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
     ship.args[0][:] = x
     ship.args[1][0] = 0.0
     xdot0 = ship()[1]
-    vg0 = xdot0[[ix, iy]] + vc
+    vg0 = xdot0[[ix, iy]]
     chi0 = float(np.arctan2(vg0[1], vg0[0])) if mode == "course" else float(x[ipsi])
     ap.args[0][:] = [chi0, 0.0, 0.0, 0.0, 0.0, 0.0]
     gnss_every = int(round(1.0 / (gnss_rate * dt)))
@@ -649,6 +688,7 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
         ekf = EKF(discretize(sog_cog(*ekf_alpha), dt, "euler"), Q=np.diag(ekf_q), R=np.eye(2) * gnss_std**2)
         xh = np.array([x[ix], x[iy], float(np.hypot(*vg0)), chi0, 0.0])
         Ph = np.diag([gnss_std**2, gnss_std**2, 1.0, np.radians(5) ** 2, 0.01])
+        prior_mean, prior_cov = xh.copy(), Ph.copy()
     nan2 = np.full(2, np.nan)
     cols = {k: np.empty(n) for k in ("north", "east", "psi", "r", "U", "chi", "chi_hat", "omega_hat", "U_hat",
                                      "chi_std", "steer", "chi_d", "r_d", "ref", "e", "gnss_north", "gnss_east")}
@@ -658,7 +698,7 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
         ship.args[0][:] = x
         ship.args[1][0] = ap.args[0][4]   # steer held from the previous tick (for xdot at this x)
         xdot = ship()[1]
-        vg = xdot[[ix, iy]] + vc
+        vg = xdot[[ix, iy]]
         chi_true = float(np.arctan2(vg[1], vg[0]))
         gn = ge = np.nan
         if mode == "course":
@@ -696,12 +736,14 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
         if k + 1 < n:
             ship.args[1][0] = steer_v
             x = ship()[0].copy()
-            x[ix] += vc[0] * dt
-            x[iy] += vc[1] * dt
             if not np.all(np.isfinite(x)):
                 raise FloatingPointError(f"closed-loop simulation of {m.name!r} diverged at t = {t[k]:g} s")
     cols["omega_chi"] = np.gradient(np.unwrap(cols["chi"]), t)
-    data = Dataset(t, cols, meta={"mode": mode, "estimator": estimator, "model": m.name})
+    meta = {"mode": mode, "estimator": estimator, "model": m.name, "dt": dt}
+    if mode == "course" and estimator == "ekf":
+        meta["ekf_prior"] = Gaussian(prior_mean, prior_cov)
+        meta["ekf"] = ekf
+    data = Dataset(t, cols, meta=meta)
     controlled = cols["chi"] if mode == "course" else cols["psi"]
     metrics = []
     bounds = list(step_times) + [t[-1] + dt]
@@ -819,7 +861,7 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
     x = model.states(**({surge: speed} if surge in model.state_names else {}))
     u = model.inputs(**{k: v for k, v in inputs.items()})
     if propeller is not None and propeller not in inputs:
-        u[model.index(propeller, "input")] = float(_meta(model, "n0", default=1.0))
+        u[model.index(propeller, "input")] = float(_meta(model, "n0", default=None) or 1.0)
         tr = trim(model, x, u, pv, free=[propeller], zero=[surge])
         x, u = tr.x, tr.u
         inputs[propeller] = tr.values[propeller]

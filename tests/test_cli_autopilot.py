@@ -8,7 +8,7 @@ from casship.cli import main
 
 def test_autopilot_json_reports_margins_and_metrics(capsys, tmp_path):
     code = main(["autopilot", "shi-taylor", "--speed", "8", "--wn", "0.05", "--scenario", "course-20",
-                 "--t-end", "400", "--json", "--plot", str(tmp_path)])
+                 "--t-end", "400", "--json", "--plot", str(tmp_path), "--current", "0.5", "90"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert out["model"] == "shi-taylor"

@@ -31,8 +31,10 @@ def register(sub) -> None:
     p.add_argument("--filter", type=float, default=None, dest="filter_T",
                    help="rudder command low-pass time constant [s] (default 0.125 L/U)")
     p.add_argument("--gnss-std", type=float, default=0.5, help="GNSS position noise [m] (default 0.5)")
-    p.add_argument("--current", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=(0.0, 0.0),
-                   help="uniform current speed [m/s] and direction it sets towards [deg]")
+    p.add_argument("--current", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=None,
+                   help="uniform current speed [m/s] and the direction it flows towards [deg]")
+    p.add_argument("--wind", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=None,
+                   help="true wind speed [m/s] and the direction it comes from [deg] (Fujiwara loads)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", default=None, metavar="DIR", help="save Bode/step and closed-loop plots to DIR")
@@ -54,17 +56,37 @@ def _clean(v):
 
 
 def run(args) -> int:
+    from dataclasses import replace
+
     from .. import autopilot as ap
     from ..models import get_model
+    from ..linear import trim
+    from ..models.wind import add_current, add_wind
 
     model = get_model(args.model)
+    env = {}
+    if args.current is not None:
+        model = add_current(model)
+        env.update(current_speed=args.current[0], current_dir=np.radians(args.current[1]))
+    if args.wind is not None:
+        model = add_wind(model)
+        env.update(wind_speed=args.wind[0], wind_dir=np.radians(args.wind[1]))
     speed = args.speed if args.speed is not None else model.meta.get("U0")
     if speed is None:
         raise ValueError(f"model {args.model!r} has no nominal speed; give --speed")
     L = model.meta.get("L_pp", model.meta.get("L"))
+    kw = {}
+    if "delta" not in model.input_names and tuple(model.meta.get("propeller_inputs", ())) == ("n1", "n2"):
+        # twin-propeller craft (Otter): steer by a yaw moment, hold the speed by the surge force
+        base = model
+        model = ap.steering_model(base, ["tau_X", "tau_N"], ap.twin_propeller_allocation(base),
+                                  name=f"{base.name}_tau")
+        tau_X = trim(model, {"u": speed}, {"tau_X": 10.0}, free=["tau_X"], zero=["u"]).values["tau_X"]
+        kw = dict(steer="tau_N", propeller="tau_X", steer_max=ap.twin_propeller_yaw_limit(base, tau_X),
+                  steer_rate_max=np.inf, actuator_T=0.1)
     filter_T = args.filter_T if args.filter_T is not None else (0.125 * L / speed if L else 0.0)
     design = ap.design_autopilot(model, speed, method=args.method, wn=args.wn, zeta=args.zeta, filter_T=filter_T,
-                                 delay=1.0 / 5.0)
+                                 delay=1.0 / 5.0, **kw)
     t_end = args.t_end
     if t_end is None and L:
         t_end = max(40.0, 12.0 * L)
@@ -73,10 +95,10 @@ def run(args) -> int:
     # MSS defaults with a larger process noise for small craft.
     ship = L is not None and L > 20
     ekf = dict(ekf_alpha=(1e-5, 1e-5), ekf_q=(1e-4, 1e-6)) if ship else dict(ekf_alpha=(0.01, 0.1), ekf_q=(0.1, 0.01))
-    res = ap.simulate_autopilot(design.plant, design.autopilot, command, t_end, x0=design.x0, step_times=steps,
-                                mode=args.mode, rate=args.rate, gnss_std=args.gnss_std, **ekf,
-                                current=(args.current[0], np.radians(args.current[1])), seed=args.seed)
-    out = {"model": args.model, "scenario": args.scenario, "mode": args.mode, "t_end_s": t_end,
+    plant = replace(design.plant, inputs={**design.plant.inputs, **env})     # designed in calm water
+    res = ap.simulate_autopilot(plant, design.autopilot, command, t_end, x0=design.x0, step_times=steps,
+                                mode=args.mode, rate=args.rate, gnss_std=args.gnss_std, **ekf, seed=args.seed)
+    out = {"model": args.model, "scenario": args.scenario, "mode": args.mode, "t_end_s": t_end, "environment": env,
            **design.summary(), "metrics": res.metrics}
     if args.plot:
         folder = Path(args.plot)
@@ -84,7 +106,8 @@ def run(args) -> int:
         ap.plot_design(design.loop, folder / f"{args.model}_loop.png", f"{args.model}: loop on the design model",
                        design.autopilot.reference)
         ap.plot_closed_loop(res, folder / f"{args.model}_{args.scenario}.png",
-                            f"{args.model} {args.scenario} ({args.mode}, {args.method})")
+                            f"{args.model} {args.scenario} ({args.mode}, {args.method})",
+                            **({"steer_label": "yaw moment [N m]", "steer_scale": 1.0} if kw else {}))
         out["plots"] = [str(folder / f"{args.model}_loop.png"), str(folder / f"{args.model}_{args.scenario}.png")]
     if args.json:
         print(json.dumps(_clean(out)))
@@ -97,11 +120,12 @@ def run(args) -> int:
     print(f"{design.gains.method}: Kp = {g.Kp:.4g}, Kd = {g.Kd:.4g} s, Ki = {g.Ki:.4g} 1/s")
     print(f"margins: gain {mg['gain_margin_db']:.1f} dB, phase {mg['phase_margin_deg']:.1f} deg at "
           f"{mg['gain_crossover_rad_s']:.3g} rad/s, closed loop stable: {mg['closed_loop_stable']}")
+    sc, unit = (1.0, "N m") if kw else (float(np.degrees(1.0)), "deg")
     print(f"{'segment':>8} {'target':>7} {'rise s':>8} {'over deg':>9} {'settle s':>9} {'ss err':>7} "
-          f"{'IAE deg s':>10} {'max rud':>8} {'rms rate':>9}")
+          f"{'IAE deg s':>10} {'max steer':>10} {'rms rate':>9}  (steering in {unit}, rate per s)")
     for k, m in enumerate(res.metrics):
         print(f"{k:>8d} {m['target_deg']:>7.1f} {m.get('rise_time_s', np.nan):>8.1f} "
               f"{m.get('overshoot_deg', np.nan):>9.2f} {m.get('settling_time_s', np.nan):>9.1f} "
-              f"{m['steady_state_error_deg']:>7.2f} {m['iae_deg_s']:>10.0f} {np.degrees(m['steer_max_abs']):>8.1f} "
-              f"{np.degrees(m['steer_rate_rms']):>9.2f}")
+              f"{m['steady_state_error_deg']:>7.2f} {m['iae_deg_s']:>10.0f} {sc * m['steer_max_abs']:>10.1f} "
+              f"{sc * m['steer_rate_rms']:>9.2f}")
     return 0
