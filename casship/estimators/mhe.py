@@ -36,12 +36,12 @@ import casadi as ca
 import numpy as np
 
 from .._fast import BufferedCall
-from ..angles import wrap, wrap_sym
+from ..angles import wrap_sym
 from ..data import Dataset, Gaussian, as_cov
 from ..discretize import DiscreteModel, discretize
 from ..model import Model
 from .augmented import augment
-from .base import STEP_INPUTS, Estimator, FilterResult
+from .base import Estimator, FilterResult
 from .ekf import EKF
 
 __all__ = ["MHE", "MHEFailed", "augment_model"]
