@@ -134,3 +134,27 @@ def test_models_page_example_runs(tmp_path, monkeypatch):
     assert blocks
     for block in blocks:
         exec(compile(block, str(page), "exec"), {})
+
+
+def test_reverse_spiral_holds_the_yaw_rate_target():
+    from casship.maneuvers import ReverseSpiral
+    from casship.models import mariner
+
+    ship = mariner({"Y0": 0.0, "Y0u": 0.0, "Y0uu": 0.0, "N0": 0.0, "N0u": 0.0, "N0uu": 0.0})
+    target = [np.radians(0.3), -np.radians(0.3)]
+    ctrl = ReverseSpiral(ship, target, hold=400.0, gain=20.0)
+    t = np.arange(0.0, 800.0, 0.5)
+    tr = simulate(ship, ship.states(u=7.7175), t, ctrl)
+    for k, r_t in enumerate(target):
+        seg = (t > k * 400 + 300) & (t < (k + 1) * 400)
+        assert np.mean(tr["r"][seg]) == pytest.approx(r_t, rel=0.05)
+        assert np.sign(np.mean(tr["delta"][seg])) == np.sign(r_t)
+
+
+def test_pullout_of_a_stable_ship_returns_to_straight():
+    from casship.models import mariner
+
+    ship = mariner({"Y0": 0.0, "Y0u": 0.0, "Y0uu": 0.0, "N0": 0.0, "N0u": 0.0, "N0uu": 0.0})
+    res = run_maneuver(ship, "pullout", rudder_deg=20, hold=200.0, duration=900.0, dt=0.5)
+    assert abs(res.metrics["yaw_rate_at_release_deg_s"]) > 0.3
+    assert abs(res.metrics["residual_yaw_rate_deg_s"]) < 0.01
