@@ -274,6 +274,9 @@ class Trajectory(Dataset):
     def __init__(self, t, columns, *, model_name: str, state_names, input_names, output_names,
                  units=None, meta=None):
         super().__init__(t, columns, units, meta)
+        missing = [n for n in (*state_names, *input_names, *output_names) if n not in self._columns]
+        if missing:
+            raise ValueError(f"trajectory of {model_name!r} has no column(s) {missing}")
         self.model_name = model_name
         self.state_names = tuple(state_names)
         self.input_names = tuple(input_names)

@@ -47,6 +47,8 @@ class DiscreteModel:
         substeps = int(substeps)
         if substeps < 1:
             raise ValueError(f"substeps must be >= 1, got {substeps}")
+        if options and method != "cvodes":
+            raise ValueError(f"integrator options {sorted(options)} apply to method 'cvodes' only, not {method!r}")
         self.model, self.dt, self.method, self.substeps = model, dt, method, substeps
         self.symbolic = ca.MX if method == "cvodes" else ca.SX
         sym = self.symbolic

@@ -43,9 +43,14 @@ class Parameter(Variable):
     source: str = ""
 
 
+RESERVED = ("t", "time")   # the time column of every Dataset
+
+
 def _check_name(name: str, taken: Mapping[str, str]) -> None:
     if not isinstance(name, str) or not name.isidentifier():
         raise ValueError(f"name {name!r} is not a valid identifier")
+    if name in RESERVED:
+        raise ValueError(f"name {name!r} is reserved for time stamps; choose another name")
     if name in taken:
         raise ValueError(f"name {name!r} is already declared as a {taken[name]}")
 
@@ -177,6 +182,8 @@ class ModelBuilder:
             unit = measured.unit
         if not isinstance(name, str) or not name.isidentifier():
             raise ValueError(f"output name {name!r} is not a valid identifier")
+        if name in RESERVED:
+            raise ValueError(f"output name {name!r} is reserved for time stamps; choose another name")
         if name in self._output_expr:
             raise ValueError(f"output {name!r} is already declared")
         if name in self._kinds and not (self._kinds[name] == "state" and ca.is_equal(expr, self._symbols[name])):
@@ -401,6 +408,9 @@ class Model:
                 if spec not in self.state_names:
                     raise ValueError(f"with_outputs: {spec!r} is not a state of {self.name!r}")
                 b.output(out_name, b.sym(spec))
-            else:
+            elif callable(spec):
                 b.output(out_name, spec(b))
+            else:
+                raise TypeError(f"with_outputs: output {out_name!r} must be given by a state name or a "
+                                f"callable builder -> expression, got {type(spec).__name__}")
         return b.build()

@@ -159,6 +159,7 @@ def test_step_jacobians_match_central_differences(method, rtol):
     ({"dt": 0.0}, "dt must be a positive finite number"),
     ({"dt": np.nan}, "dt must be a positive finite number"),
     ({"dt": 0.1, "substeps": 0}, "substeps must be >= 1"),
+    ({"dt": 0.1, "method": "rk4", "options": {"abstol": 1e-6}}, r"options \['abstol'\] apply to method 'cvodes' only"),
 ])
 def test_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):

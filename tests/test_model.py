@@ -107,6 +107,8 @@ def test_params_vector_of_wrong_size():
     (lambda b: b.output("2y", b.sym("r")), "output name '2y' is not a valid identifier"),
     (lambda b: b.sym("nothing"), "unknown name 'nothing'"),
     (lambda b: b.feed("tau", 1.0), "unknown port 'tau'"),
+    (lambda b: b.state("t"), "'t' is reserved for time stamps"),
+    (lambda b: b.output("time", b.sym("r")), "'time' is reserved for time stamps"),
 ])
 def test_bad_declarations_raise(declare, match):
     b = nomoto_builder()
@@ -224,6 +226,8 @@ def test_with_outputs():
     assert m.output_names == ("psi",)
     with pytest.raises(ValueError, match="'K' is not a state"):
         m.with_outputs({"y": "K"})
+    with pytest.raises(TypeError, match="output 'y' must be given by a state name or a callable"):
+        m.with_outputs({"y": 3.0})
 
 
 # -- exact Jacobians of every registered model vs central differences --------------------------------
