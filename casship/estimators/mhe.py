@@ -285,6 +285,14 @@ class MHE(Estimator):
         return self._ekf.step_function
 
     @property
+    def step_function(self) -> ca.Function:
+        """The step Function of the EKF that runs alongside the MHE (arrival cost, innovations, ``P``).
+
+        The window problem itself is a CasADi NLP solver per horizon length, not one step Function.
+        """
+        return self._step
+
+    @property
     def horizon(self) -> int:
         return int(self.options["horizon"])
 
