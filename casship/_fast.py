@@ -26,7 +26,11 @@ class BufferedCall:
                 raise ValueError(f"{fun.name()}: input {fun.name_in(i)!r} is not dense")
         self.fun = fun
         self.args = [np.zeros(fun.nnz_in(i)) for i in range(fun.n_in())]
-        self.res = [np.zeros(fun.nnz_out(i)) for i in range(fun.n_out())]
+        sizes = [fun.nnz_out(i) for i in range(fun.n_out())]
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        self.block = np.zeros(int(offsets[-1]))   # all results, contiguous (one copy snapshots them)
+        self.offsets = offsets
+        self.res = [self.block[offsets[i]:offsets[i + 1]] for i in range(fun.n_out())]
         self.arg_views = [a.reshape(fun.size_in(i), order="F") for i, a in enumerate(self.args)]
         self.res_views = [r.reshape(fun.size_out(i), order="F") for i, r in enumerate(self.res)]
         self._buf, self._trigger = fun.buffer()
@@ -34,6 +38,10 @@ class BufferedCall:
             self._buf.set_arg(i, memoryview(a))
         for i, r in enumerate(self.res):
             self._buf.set_res(i, memoryview(r))
+
+    def trigger(self) -> None:
+        """Evaluate without fetching the return status (for Functions that cannot fail: SX, compiled)."""
+        self._trigger()
 
     def __call__(self) -> list[np.ndarray]:
         self._trigger()

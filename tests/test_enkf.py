@@ -74,3 +74,14 @@ def test_bad_options(case):
     enkf = cs.EnKF(dm, Q, R, options={"members": 5})
     with pytest.raises(TypeError, match="rng"):
         enkf.step(np.zeros((2, 5)), [0.0], [0.0, 0.0], 0.1)
+
+
+def test_online_runner_reproduces_seeded_batch(case):
+    m, dm, traj, data, prior = case
+    enkf = cs.EnKF(dm, Q, R, options={"members": 25})
+    res = enkf.filter(data, prior, seed=11)
+    run = enkf.online(prior, seed=11, u=data["f"][:1])
+    Y, U = data.matrix(["y1", "y2"]), data.matrix(["f"])
+    for k in range(len(data)):
+        x = run.update(Y[k], 0.0 if k == 0 else 0.1, u_prev=U[max(k - 1, 0)], u=U[k])
+        np.testing.assert_allclose(x, res.x[k], rtol=1e-12, atol=1e-12)

@@ -135,3 +135,29 @@ def test_persistence_kf():
     res = cs.KF(dm, 1e-6, [0.01, 0.0025]).filter(data, cs.Gaussian([0.0, 3.0], [10.0, 1.0]))
     assert res["u"][-1] == pytest.approx(2.0, abs=0.05)
     assert abs(cs.wrap(res["psi"][-1] - np.pi)) < 0.02
+
+
+def test_online_runner_and_jit_equal_batch():
+    """``online()`` keeps the memory in the step's buffers; ``jit`` compiles the step and folds to C:
+    both give the batch numbers."""
+    m = _sog_with_range()
+    dm = cs.discretize(m, 0.1, method="euler")
+    t = np.arange(700) * 0.1          # > one fold piece of 512 samples plus a padded remainder
+    traj = cs.simulate(m, m.states(x_n=20.0, U=3.0, chi=3.0, omega_chi=0.05), t, method="euler")
+    data = cs.measure(traj, m, {"rng": 0.5, "chi_m": 0.05}, rates={"rng": 2.0}, seed=2)
+    prior = cs.Gaussian(m.states(x_n=18.0, U=2.0, chi=3.1), [9.0, 9.0, 1.0, 0.1, 0.01])
+    ekf = cs.EKF(dm, [1e-2, 1e-3], [0.25, 0.0025])
+    res = ekf.filter(data, prior)
+    run = ekf.online(prior)
+    Y = data.matrix(["rng", "chi_m"])
+    X = np.array([run.update(Y[k], 0.0 if k == 0 else 0.1) for k in range(len(data))])
+    np.testing.assert_allclose(X, res.x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(run.P, res.P[-1], rtol=1e-12, atol=1e-12)
+    assert run.info["nis"] == pytest.approx(res.nis[-1], rel=1e-12)
+    try:
+        fast = cs.EKF(dm, [1e-2, 1e-3], [0.25, 0.0025], options={"jit": True})
+        res_jit = fast.filter(data, prior)
+    except RuntimeError as exc:                   # no C compiler on this machine
+        pytest.skip(str(exc))
+    np.testing.assert_allclose(res_jit.x, res.x, rtol=1e-11, atol=1e-11)
+    np.testing.assert_allclose(res_jit.P, res.P, rtol=1e-11, atol=1e-11)

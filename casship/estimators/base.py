@@ -17,7 +17,8 @@ preallocated buffers.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from collections.abc import Mapping
+from typing import Sequence
 
 import casadi as ca
 import numpy as np
@@ -28,7 +29,7 @@ from ..angles import wrap, wrap_sym
 from ..data import Dataset, Gaussian, as_cov
 from ..discretize import DiscreteModel
 
-__all__ = ["Estimator", "FilterResult", "Health", "STEP_OUTPUTS"]
+__all__ = ["Estimator", "FilterResult", "Health", "OnlineFilter", "StepInfo", "STEP_OUTPUTS", "compile_function"]
 
 STEP_INPUTS = ["carry", "u_prev", "u", "y", "mask", "dt", "p", "Q", "R", "gate"]
 STEP_OUTPUTS = ["carry_next", "x", "P", "x_pred", "P_pred", "C", "e", "S", "nis", "ll", "accepted"]
@@ -145,6 +146,23 @@ class FilterResult:
         return Dataset(self.t, cols, meta={"estimator": self.estimator})
 
 
+def compile_function(fun: ca.Function) -> ca.Function:
+    """``fun`` compiled to C and loaded (CasADi JIT through the system C compiler, ``-O2``).
+
+    Raises ``RuntimeError`` naming the Function when no working C compiler is found.
+    """
+    import tempfile
+
+    ins = fun.sx_in() if fun.is_a("SXFunction") else fun.mx_in()
+    opts = {"jit": True, "compiler": "shell", "jit_cleanup": True,
+            "jit_options": {"flags": ["-O2"], "directory": tempfile.gettempdir()}}
+    try:
+        return ca.Function(f"{fun.name()}_jit", ins, fun.call(ins), fun.name_in(), fun.name_out(), opts)
+    except RuntimeError as exc:
+        raise RuntimeError(f"option 'jit': compiling {fun.name()!r} to C failed (is a C compiler "
+                           f"installed?): {str(exc).splitlines()[-1]}") from None
+
+
 class Estimator:
     """Base class of the recursive estimators (not used directly).
 
@@ -156,13 +174,14 @@ class Estimator:
     measured : sequence of str, optional
         Output names that are measured (default: all outputs of the model).
     options : mapping, optional
-        ``gate`` (probability of the chi-square innovation gate, e.g. 0.999; off by default) and
+        ``gate`` (probability of the chi-square innovation gate, e.g. 0.999; off by default),
+        ``jit`` (compile the step and its folds to C with the system compiler; off by default) and
         estimator-specific options.
     """
 
     name = "estimator"
     FOLD_CHUNK = 512
-    _common_options = {"gate": None}
+    _common_options = {"gate": None, "jit": False}
     _options: dict = {}
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured: Sequence[str] | None = None,
@@ -197,7 +216,11 @@ class Estimator:
         self.sym = dmodel.symbolic
         self._step = self._build_step()
         self._folds: dict[int, ca.Function] = {}
+        self._fold_calls: dict[int, BufferedCall] = {}
+        self._compiled_step = None
         self._online = None
+        self._gated = self.options["gate"] is not None
+        self._cannot_fail = bool(self.options["jit"]) or self._step.is_a("SXFunction")
 
     # -- symbolic helpers shared by the estimators ----------------------------------------------
     def _symbols(self):
@@ -211,11 +234,13 @@ class Estimator:
         return self.model.h(x, u, p)[self.meas_index]
 
     def residual(self, y, yhat, mask):
-        """Masked measurement residual with angle channels wrapped on the circle."""
+        """Masked measurement residual with angle channels wrapped on the circle.
+
+        Unmeasured channels (``mask = 0``) give exactly 0 even when ``y`` holds NaN there.
+        """
         e = y - yhat
-        if self.angle_meas.any():
-            e = self.sym(ca.vertcat(*[wrap_sym(e[i]) if a else e[i] for i, a in enumerate(self.angle_meas)]))
-        return mask * e
+        return ca.vertcat(*[ca.if_else(mask[i] > 0, wrap_sym(e[i]) if a else e[i], 0)
+                            for i, a in enumerate(self.angle_meas)])
 
     def masked_innovation_cov(self, HPH, R, mask):
         """``S`` with unmeasured channels replaced by unit diagonal entries (they then carry no gain)."""
@@ -308,25 +333,62 @@ class Estimator:
 
     def run_fold(self, args: list, n: int) -> list[np.ndarray]:
         """Evaluate the folded step over ``n`` samples; ``args`` as for the step Function with the
-        per-sample inputs as ``n``-column arrays.
+        per-sample inputs as ``n``-column arrays. Returns the outputs stacked over the samples
+        (``n`` columns each), except the first, which is the final carry (one column).
 
-        The record is cut into pieces whose lengths are powers of two up to :attr:`FOLD_CHUNK`
-        (the binary decomposition of ``n``), so at most a few fold lengths are ever built per
-        estimator (building one ``mapaccum`` costs much more for long lengths) and the carry is
-        handed from piece to piece; the numbers equal one fold over the whole record.
+        The record runs in pieces of :attr:`FOLD_CHUNK` samples (the last one padded up to a power
+        of two with prediction-free, update-free rows whose outputs are dropped), so only a few fold
+        lengths are ever built per estimator (building a ``mapaccum`` costs much more for long
+        lengths), and each piece is evaluated through preallocated buffers (no ``DM`` conversion).
+        The carry is handed from piece to piece; the numbers equal one fold over the whole record.
         """
         per_sample = [i for i in range(1, len(args)) if i not in _CONSTANT_INPUTS]
-        pieces, start = [], 0
+        carry = np.asarray(args[0], dtype=float).reshape(-1, order="F")
+        outs, start = None, 0
         while start < n:
-            size = min(self.FOLD_CHUNK, 1 << ((n - start).bit_length() - 1))
-            piece = list(args)
-            for i in per_sample:
-                piece[i] = args[i][:, start:start + size]
-            out = [np.asarray(o) for o in self.fold(size)(*piece)]
-            pieces.append(out)
-            args = [out[0][:, -1]] + list(args[1:])
-            start += size
-        return [np.hstack([p[j] for p in pieces]) for j in range(len(pieces[0]))]
+            size = min(self.FOLD_CHUNK, 1 << (n - start - 1).bit_length())
+            take = min(size, n - start)
+            call = self._fold_call(size)
+            views = call.arg_views
+            call.args[0][:] = carry
+            for i in range(1, len(args)):
+                if i in per_sample:
+                    src = np.asarray(args[i], dtype=float)[:, start:start + take]
+                    views[i][:, :take] = src
+                    if take < size:
+                        views[i][:, take:] = src[:, -1:] if src.shape[0] else 0.0
+                else:
+                    block = np.asarray(args[i], dtype=float).reshape(self._step.size_in(i), order="F")
+                    views[i][...] = np.tile(block, (1, size))
+            if take < size:
+                views[4][:, take:] = 0.0      # mask: no update
+                views[5][:, take:] = 0.0      # dt: no prediction
+            call()
+            res = call.res_views
+            if outs is None:    # column-major, so that each piece is one contiguous copy
+                outs = [None] + [np.empty((r.shape[0], n), order="F") for r in res[1:]]
+            for j in range(1, len(res)):
+                outs[j][:, start:start + take] = res[j][:, :take]
+            carry = res[0][:, take - 1].copy()
+            start += take
+        outs[0] = carry[:, None]
+        return outs
+
+    def _fold_call(self, size: int) -> BufferedCall:
+        """Buffered evaluation of the fold of ``size`` samples (JIT-compiled with option ``jit``)."""
+        if size not in self._fold_calls:
+            fold = self.fold(size)
+            self._fold_calls[size] = BufferedCall(compile_function(fold) if self.options["jit"] else fold)
+        return self._fold_calls[size]
+
+    @property
+    def _eval_step(self) -> ca.Function:
+        """The step Function used for numbers (compiled to C with option ``jit``)."""
+        if not self.options["jit"]:
+            return self._step
+        if self._compiled_step is None:
+            self._compiled_step = compile_function(self._step)
+        return self._compiled_step
 
     def _check_prior(self, prior: Gaussian) -> None:
         if not isinstance(prior, Gaussian):
@@ -348,40 +410,179 @@ class Estimator:
             estimator=self.name, angle_states=self.model.angle_states)
 
     # -- online -----------------------------------------------------------------------------------
+    def _buffered_step(self) -> BufferedCall:
+        """A fresh buffered evaluator of the (compiled) step with ``p``, ``Q``, ``R`` preset."""
+        call = BufferedCall(self._eval_step)
+        call.args[6][:] = self.model.params()
+        call.args[7][:] = self.Q.reshape(-1, order="F")
+        call.args[8][:] = self.R.reshape(-1, order="F")
+        call.args[9][0] = np.inf       # no gate unless set per call
+        return call
+
+    def _gate_threshold(self, n_measured: int) -> float:
+        gate = self.options["gate"]
+        if gate is None or n_measured == 0:
+            return np.inf
+        cache = self.__dict__.setdefault("_gate_cache", {})
+        if n_measured not in cache:
+            cache[n_measured] = float(stats.chi2.ppf(gate, n_measured))
+        return cache[n_measured]
+
+    def _set_measurement(self, a, y) -> np.ndarray:
+        """Write ``y`` (NaN = not measured; the step masks it) and its mask into the buffers."""
+        a[3][:] = y
+        ok = np.isfinite(a[3])
+        np.copyto(a[4], ok)
+        if self._gated:
+            a[9][0] = self._gate_threshold(int(ok.sum()))
+        return ok
+
+    def _evaluate(self, call: BufferedCall) -> None:
+        if self._cannot_fail:
+            call.trigger()      # SX and compiled code cannot fail: skip the status round trip
+        else:
+            call()
+
     def step(self, x, P, u_prev, y, dt, *, u=None, p=None):
         """One online step (predict over ``dt`` with ``u_prev``, then update with ``y``).
 
         Arguments are numpy arrays; ``y`` may hold NaN for channels not measured now. Evaluation
         goes through preallocated buffers (no CasADi ``DM`` conversion per call). Returns
-        ``(x, P, info)`` with ``info = {"e", "nis", "ll", "rejected", "x_pred", "P_pred"}``.
+        ``(x, P, info)``; ``info`` maps ``"e", "nis", "ll", "rejected", "x_pred", "P_pred"`` to
+        this step's values. For a loop over a stream, :meth:`online` avoids passing ``x, P`` around.
         """
-        m = self.model
+        nx = self.model.nx
         if self._online is None:
-            self._online = BufferedCall(self._step)
-            a = self._online.args
-            a[6][:] = m.params()
-            a[7][:] = self.Q.reshape(-1, order="F")
-            a[8][:] = self.R.reshape(-1, order="F")
+            self._online = self._buffered_step()
         call = self._online
         a = call.args
-        a[0][: m.nx] = x
-        a[0][m.nx:] = np.asarray(P).reshape(-1, order="F")
+        c = a[0]
+        c[:nx] = x
+        c[nx:] = np.asarray(P, dtype=float).ravel(order="F")
         a[1][:] = u_prev
         a[2][:] = u_prev if u is None else u
-        y = np.asarray(y, dtype=float)
-        ok = np.isfinite(y)
-        a[3][:] = np.where(ok, y, 0.0)
-        a[4][:] = ok
+        ok = self._set_measurement(a, y)
         a[5][0] = dt
         if p is not None:
-            a[6][:] = m.params(p)
-        gate = self.options["gate"]
-        a[9][0] = stats.chi2.ppf(gate, ok.sum()) if gate is not None and ok.any() else np.inf
-        r = call()
-        info = {"e": np.where(ok, r[6], np.nan), "nis": float(r[8][0]), "ll": float(r[9][0]),
-                "rejected": bool(r[10][0] < 0.5), "x_pred": r[3].copy(),
-                "P_pred": r[4].reshape(m.nx, m.nx, order="F").copy()}
-        return r[1].copy(), r[2].reshape(m.nx, m.nx, order="F").copy(), info
+            a[6][:] = self.model.params(p)
+        self._evaluate(call)
+        snap = call.block.copy()
+        o = call.offsets
+        return snap[o[1]:o[2]], snap[o[2]:o[3]].reshape(nx, nx, order="F"), StepInfo(snap, o, ok, nx)
+
+    def online(self, prior: Gaussian, p=None, *, u=None, seed=None) -> "OnlineFilter":
+        """A stateful online runner started from ``prior`` (see :class:`OnlineFilter`)."""
+        self._check_prior(prior)
+        return OnlineFilter(self, prior, p, u, seed)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.model.name!r}, measured={list(self.measured)})"
+
+
+class StepInfo(Mapping):
+    """Diagnostics of one online step, read lazily from a snapshot of the step's outputs:
+    ``e`` (innovation, NaN where not measured), ``nis``, ``ll``, ``rejected``, ``x_pred``, ``P_pred``."""
+
+    _keys = ("e", "nis", "ll", "rejected", "x_pred", "P_pred")
+
+    def __init__(self, snap, offsets, ok, nx):
+        self._snap, self._o, self._ok, self._nx = snap, offsets, ok, nx
+
+    def _out(self, i):
+        return self._snap[self._o[i]:self._o[i + 1]]
+
+    def __getitem__(self, key):
+        if key == "e":
+            return np.where(self._ok, self._out(6), np.nan)
+        if key == "nis":
+            return float(self._out(8)[0])
+        if key == "ll":
+            return float(self._out(9)[0])
+        if key == "rejected":
+            return bool(self._out(10)[0] < 0.5)
+        if key == "x_pred":
+            return self._out(3)
+        if key == "P_pred":
+            return self._out(4).reshape(self._nx, self._nx, order="F")
+        raise KeyError(key)
+
+    def __iter__(self):
+        return iter(self._keys)
+
+    def __len__(self):
+        return len(self._keys)
+
+
+class OnlineFilter:
+    """Run an estimator on a stream, one sample per :meth:`update`, keeping its memory inside.
+
+    The estimator's memory (mean and covariance, or the ensemble) stays in the step's input
+    buffer between calls, so a call writes only the new measurement and time step, evaluates the
+    (compiled) step Function and copies the memory back: the cheapest online use. Numbers equal
+    :meth:`Estimator.filter` on the same record (ensemble filters draw from ``seed`` in the same order).
+
+    Examples
+    --------
+    >>> run = ekf.online(prior)                      # doctest: +SKIP
+    >>> for y, dt in stream:                          # doctest: +SKIP
+    ...     x = run.update(y, dt)
+    """
+
+    def __init__(self, est: Estimator, prior: Gaussian, p=None, u=None, seed=None):
+        self.est = est
+        self._rng = np.random.default_rng(seed)
+        self._call = call = est._buffered_step()
+        if p is not None:
+            call.args[6][:] = est.model.params(p)
+        call.args[0][:] = est.carry_from(prior, self._rng)
+        u0 = np.zeros(est.model.nu) if u is None else np.asarray(u, dtype=float)
+        call.args[1][:] = u0
+        call.args[2][:] = u0
+        self._n_extra = len(call.args) - len(STEP_INPUTS)
+        self._first = True
+        nx = est.model.nx
+        self._x, self._P = call.res[1], call.res[2]
+        self._ok = None
+        self._nx = nx
+        self._carry_out = call.res[0]
+
+    def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
+        """Predict over ``dt`` (0 for the first sample is allowed) with the input ``u_prev`` held
+        (the previous input by default), update with ``y`` (NaN = not measured); returns a copy of
+        the new mean."""
+        a = self._call.args
+        if self._first:
+            self._first = False
+        else:
+            a[0][:] = self._carry_out
+        if u_prev is not None:
+            a[1][:] = u_prev
+            a[2][:] = u_prev if u is None else u
+        elif u is not None:
+            a[2][:] = u
+        est = self.est
+        self._ok = est._set_measurement(a, y)
+        a[5][0] = dt
+        if self._n_extra:
+            for i, z in enumerate(est.extra_inputs(1, self._rng)):
+                a[len(STEP_INPUTS) + i][:] = z[:, 0]
+        if est._cannot_fail:
+            self._call.trigger()
+        else:
+            self._call()
+        return self._x.copy()
+
+    @property
+    def x(self) -> np.ndarray:
+        """Current mean (copy)."""
+        return self._x.copy()
+
+    @property
+    def P(self) -> np.ndarray:
+        """Current covariance (copy)."""
+        return self._P.reshape(self._nx, self._nx, order="F").copy()
+
+    @property
+    def info(self) -> StepInfo:
+        """Diagnostics of the last update."""
+        return StepInfo(self._call.block.copy(), self._call.offsets, self._ok, self._nx)

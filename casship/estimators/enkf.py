@@ -127,7 +127,7 @@ class EnKF(Estimator):
             raise TypeError("EnKF.step needs rng=numpy.random.Generator for its random draws")
         m = self.model
         if self._online is None:
-            self._online = BufferedCall(self._step)
+            self._online = BufferedCall(self._eval_step)
             a = self._online.args
             a[6][:] = m.params()
             a[7][:] = self.Q.reshape(-1, order="F")
