@@ -8,6 +8,7 @@ from .mmg import mmg_standard
 from .lowspeed import esso_osaka_twin, yoshimura_twin_rudder
 from .mariner import mariner
 from .otter import otter
+from .wind import add_current, add_wind
 from .taylor import SHI_DEFAULTS, SHI_PARAM_NAMES, shi_taylor
 
 register("nomoto1", nomoto_first_order, "first-order Nomoto model (Mariner K, T)")
@@ -27,4 +28,5 @@ register("body-kinematics", body_kinematics, "3-DOF NED pose driven by body velo
 __all__ = ["constant_acceleration", "double_integrator", "sog_cog", "sog_cog_latlon", "tomera_kinematic",
            "nomoto_first_order", "nomoto_second_order", "shi_taylor", "SHI_DEFAULTS", "SHI_PARAM_NAMES",
            "get_model", "model_names", "register", "kvlcc2", "kvlcc2_l7", "mmg_standard", "esso_osaka_twin",
-           "yoshimura_twin_rudder", "otter", "mariner", "body_kinematics"]
+           "yoshimura_twin_rudder", "otter", "mariner", "body_kinematics",
+           "add_wind", "add_current"]
