@@ -197,6 +197,10 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
             "- Free-running data: positions are printed with three significant digits (about +-5 m late in the",
             "  turn); the reference point of positions and velocities is not stated in the files.",
             "- The model is 3-DOF: the roll recorded in the files (phi, p) is not modelled.",
+            "- Metric definitions (casship.maneuvers): execute = first rudder change > 1 deg; advance/transfer at",
+            "  90 deg and tactical diameter at 180 deg heading change from the execute; steady diameter = least-",
+            "  squares circle from 360 deg heading change until the rudder is returned (pull-out at the end of the",
+            "  MARIN turning run); zig-zag overshoots from the heading change at the execute.",
             "- The measured 10/10 record ends before its third rudder reversal, so it has no period.",
         ]
         for name in RUNS:
