@@ -52,13 +52,9 @@ FILTERS = ("EKF", "UKF", "MHE")
 # -- ship, wind, inputs ------------------------------------------------------------------------------------
 def ship_models():
     """``(truth, ship)``: the twin-rudder low-speed ship with Fujiwara wind (truth) and without."""
-    factory = getattr(cs.models, "lowspeed_twin_rudder", None)
-    if factory is None:
-        from casship.models.lowspeed import esso_osaka_twin as factory
-    add_wind = getattr(cs.models, "add_wind", None)
-    if add_wind is None:
-        from casship.models.wind import add_wind
-    ship = factory()
+    from casship.models.wind import add_wind
+
+    ship = cs.models.get_model("mmg-twin-lowspeed")
     return add_wind(ship), ship
 
 
