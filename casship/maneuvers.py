@@ -216,7 +216,8 @@ def random_rudder_inputs(model: Model, t, n: float | None = None, *, hold: float
     """Random rudder sequence: each rudder uniform in its range, held ``hold`` [s] (seed 002 Fig. 8).
 
     Default ranges: ``delta_s`` in [-35, 105] deg and ``delta_p`` in [-105, 35] deg for twin rudders
-    (seed 002), [-35, 35] deg for a single rudder. Deterministic for a given ``seed``.
+    (seed 002), [-35, 35] deg for a single rudder. Seed 002 does not state the hold time; 10 s is
+    an assumption. Deterministic for a given ``seed``.
     """
     t = np.asarray(t, dtype=float)
     rng = np.random.default_rng(seed)
