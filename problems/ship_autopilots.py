@@ -100,7 +100,15 @@ def run_case(case: dict) -> dict:
                                     mode=case["mode"], rate="gyro", gnss_std=0.5, seed=case["seed"], **EKF_SHIP)
     except FloatingPointError as exc:
         return {**row, "stable": False, "error": str(exc), "metrics": []}
-    stable = all(abs(m["steady_state_error_deg"]) < 2.0 for m in res.metrics)
+    # stable: bounded, settled near the command (|error| < 5 deg over the last 10 % of every segment) and
+    # the rudder off its limit there (a loop that holds the course only at full rudder has lost authority)
+    t, steer = res.data.t, np.abs(res.data["steer"])
+    bounds = list(steps) + [t[-1] + 1.0]
+    end_free = []
+    for t0, t1 in zip(bounds[:-1], bounds[1:]):
+        tail = (t >= t0 + 0.9 * (min(t1, t[-1]) - t0)) & (t < t1)
+        end_free.append(bool(steer[tail].max() < d.autopilot.steer_max - 1e-9))
+    stable = all(abs(m["steady_state_error_deg"]) < 5.0 for m in res.metrics) and all(end_free)
     out = {**row, "stable": stable, "metrics": res.metrics}
     if case.get("keep"):
         out["data"] = {k: res.data[k] for k in ("chi", "psi", "chi_hat", "chi_d", "ref", "steer", "north", "east",
@@ -173,12 +181,13 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
     next(stages)
     designs, margin_rows, nomoto_rows = {}, {}, {}
     for s in ships:
-        nomoto_rows[f"{s} (zig-zag fit)"] = {"K_1_s": ident[s]["fit"].K, "T_s": ident[s]["fit"].T,
-                                             "K_std": ident[s]["fit_std"]["K"], "T_std": ident[s]["fit_std"]["T"]}
-        nomoto_rows[f"{s} (linearisation)"] = {"K_1_s": ident[s]["linear"].K, "T_s": ident[s]["linear"].T,
-                                               "K_std": float("nan"), "T_std": float("nan")}
-        designs[s] = {m: design(s, ident[s]["fit"], m) for m in ("pid", "lqr")}
         lin = ident[s]["linear"]
+        nomoto_rows[f"{s} (zig-zag fit)"] = {"K_1_s": ident[s]["fit"].K, "T_s": ident[s]["fit"].T,
+                                             "K_std": ident[s]["fit_std"]["K"], "T_std": ident[s]["fit_std"]["T"],
+                                             "T1_s": float("nan"), "T2_s": float("nan"), "T3_s": float("nan")}
+        nomoto_rows[f"{s} (linearisation)"] = {"K_1_s": lin.K, "T_s": lin.T, "K_std": float("nan"),
+                                               "T_std": float("nan"), "T1_s": lin.T1, "T2_s": lin.T2, "T3_s": lin.T3}
+        designs[s] = {m: design(s, ident[s]["fit"], m) for m in ("pid", "lqr")}
         for method, d in designs[s].items():
             mg = d.margins
             st = d.settings
@@ -215,9 +224,10 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
           f"(heading noise {np.degrees(HEADING_NOISE):.1f} deg at 1 Hz), and from the exact linearisation at "
           "the approach speed. The zig-zag fit has a much smaller K and T than the linearisation (nonlinear "
           "yaw damping at large rates) but nearly the same K/T, i.e. the same rudder effectiveness.", "",
-          "| model | K [1/s] | T [s] | std K | std T |", "|---|---|---|---|---|"]
-    md += [f"| {k} | {_fmt(v['K_1_s'], 4)} | {_fmt(v['T_s'], 4)} | {_fmt(v['K_std'])} | {_fmt(v['T_std'])} |"
-           for k, v in nomoto_rows.items()]
+          "KVLCC2's slow yaw pole (T1 of the linearisation) makes it nearly course-unstable at this speed.", "",
+          "| model | K [1/s] | T [s] | std K | std T | T1 [s] | T2 [s] | T3 [s] |", "|---|---|---|---|---|---|---|---|"]
+    md += [f"| {k} | " + " | ".join(_fmt(v[c], 4) for c in ("K_1_s", "T_s", "K_std", "T_std", "T1_s", "T2_s", "T3_s"))
+           + " |" for k, v in nomoto_rows.items()]
     md += ["", "Designs (wn = U/L, zeta = 1, reference model wn_d = wn, r_max = 0.5 U/L; command filter 0.125 L/U; "
            "margins with a 1 s rudder servo and 0.2 s delay; the last two columns put the same controller on the "
            "linearised second-order Nomoto model of the true ship):", "",
@@ -227,7 +237,10 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
     md += ["", f"Closed-loop runs on the full nonlinear model with Fujiwara wind ({WIND_NOMINAL[0]:.0f} m/s nominal, "
            f"{WIND_ROBUST[0]:.0f} m/s in the robustness cases, from 45 deg), GNSS 5 Hz (0.5 m) into the SOG/COG EKF "
            f"at {1 / cases[0]['dt']:.0f} Hz (the loop rate), rate gyro; heading mode uses a compass (0.5 deg, 10 Hz). Rudder saturation and rate limit "
-           "of the ship; stable = steady-state error below 2 deg in every segment.", "",
+           "of the ship; stable = the course settles within 5 deg of the command with the rudder off its limit over "
+           "the last 10 % of every segment. The steady-state error column is the mean error there: its sign follows "
+           "the direction of the change (the course has not fully arrived), the slow tail of the integrator pole "
+           "near wn/10 of Fossen's PID rule, still decaying at the end of the 12 L/U segments.", "",
            "| ship | case | method | mode | segment | rise [s] | overshoot [deg] | settling [s] | ss error [deg] | "
            "IAE [deg s] | max rudder [deg] | rms rudder rate [deg/s] | stable |",
            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]

@@ -79,7 +79,7 @@ def test_reference_model_rate_saturation():
 
 def _run_ap(autopilot, chi, r, ref=0.3, n=200, dt=0.1):
     f = autopilot.function
-    z = np.zeros(5)
+    z = np.zeros(6)
     out = []
     for _ in range(n):
         z_next, steer, *_ = f(z, ref, chi, r, dt)
@@ -135,3 +135,39 @@ def test_closed_loop_on_nonlinear_ship_reaches_the_course():
     d = res.data
     assert np.all(np.abs(d["steer"]) <= np.radians(35) + 1e-12)
     assert np.max(np.abs(np.diff(d["steer"]))) <= np.radians(2.3) * 0.02 + 1e-12
+
+
+def test_fit_nomoto_recovers_a_simulated_nomoto_ship():
+    K, T = 0.08, 40.0
+    m = cs.models.nomoto_first_order(K=K, T=T)
+    t = np.arange(0.0, 600.0, 1.0)
+    delta = np.radians(10) * np.sign(np.sin(2 * np.pi * t / 150.0) + 1e-9)
+    tr = cs.simulate(m, m.states(), t, {"delta": delta}, max_step=0.1)
+    rng = np.random.default_rng(4)
+    data = cs.Dataset(t, {"delta": delta, "psi": tr["psi"] + np.radians(0.1) * rng.standard_normal(t.size)})
+    nom, fit = ap.fit_nomoto(data, heading_var=np.radians(0.1) ** 2, guess=ap.Nomoto(0.05, 20.0))
+    assert abs(nom.K - K) < 4 * fit.std_errors["K"]
+    assert abs(nom.T - T) < 4 * fit.std_errors["T"]
+    assert abs(fit.params["delta_0"]) < 4 * fit.std_errors["delta_0"]
+
+
+def test_twin_propeller_allocation_inverts_the_thrust_law():
+    import casadi as ca
+
+    otter = cs.models.get_model("otter")
+    pd = otter.param_dict()
+    alloc = ap.twin_propeller_allocation(otter)
+    tx, tn = ca.SX.sym("tx"), ca.SX.sym("tn")
+    n = alloc({"tau_X": tx, "tau_N": tn}, {k: ca.SX(v) for k, v in pd.items()})
+    f = ca.Function("f", [tx, tn], [n["n1"], n["n2"]])
+    for tau_x, tau_n in ((100.0, 10.0), (20.0, -15.0), (5.0, 30.0)):
+        n1, n2 = (float(v) for v in f(tau_x, tau_n))
+        T = [(pd["k_pos"] if v >= 0 else pd["k_neg"]) * v * abs(v) for v in (n1, n2)]
+        assert T[0] + T[1] == pytest.approx(tau_x, rel=1e-12)
+        assert pd["y_pont"] * (T[0] - T[1]) == pytest.approx(tau_n, rel=1e-12)
+    limit = ap.twin_propeller_yaw_limit(otter, 100.0)
+    n1, n2 = (float(v) for v in f(100.0, limit))
+    # at the limit one propeller sits exactly on its bound and the other inside its range
+    on_bound = [n1 == pytest.approx(otter.meta["n_max"], rel=1e-9), n2 == pytest.approx(otter.meta["n_min"], rel=1e-9)]
+    assert any(on_bound)
+    assert otter.meta["n_min"] - 1e-9 <= min(n1, n2) and max(n1, n2) <= otter.meta["n_max"] + 1e-9
