@@ -39,39 +39,14 @@ class DemoConfig:
     free: tuple = ("N_r_dash", "Y_v_dash", "N_v_dash")
     guess_factor: float = 1.25
     validation_s: float = 900.0
+    autopilot_s: float = 1000.0
     seed: int = 1
 
     @classmethod
     def make(cls, quick: bool) -> "DemoConfig":
         if quick:
-            return cls(trial_s=700.0, free=("N_r_dash", "N_v_dash"), validation_s=500.0)
+            return cls(trial_s=700.0, free=("N_r_dash", "N_v_dash"), validation_s=500.0, autopilot_s=600.0)
         return cls()
-
-
-# -- manoeuvre inputs (closed loop: the zig-zag switches on the measured heading) ------------------------
-def _zigzag(ship, rudder: float, heading: float, dt: float, n: float):
-    """A zig-zag rudder law ``(t, x) -> [delta, n]`` with the ship's rudder-rate limit."""
-    rate = float(ship.meta.get("rudder_rate", np.radians(2.32)))
-    i_psi = ship.index("psi")
-    state = {"target": rudder, "delta": 0.0}
-
-    def law(t, x):
-        psi = x[i_psi]
-        if state["target"] > 0 and psi >= heading:
-            state["target"] = -rudder
-        elif state["target"] < 0 and psi <= -heading:
-            state["target"] = rudder
-        step = rate * dt
-        state["delta"] += float(np.clip(state["target"] - state["delta"], -step, step))
-        return [state["delta"], n]
-
-    return law
-
-
-def _turning(ship, rudder: float, dt: float, n: float, t: np.ndarray):
-    rate = float(ship.meta.get("rudder_rate", np.radians(2.32)))
-    delta = np.clip(rate * (t - 10.0), 0.0, rudder) * np.sign(rudder)
-    return {"delta": delta, "n": np.full(t.size, n)}
 
 
 def _rmse(a, b) -> float:
@@ -80,10 +55,13 @@ def _rmse(a, b) -> float:
 
 # -- stages ------------------------------------------------------------------------------------------------
 def _trials(ship, cfg: DemoConfig):
-    U0, n0 = ship.meta["U0"], ship.meta["n0"]
+    from .maneuvers import ZigZag, propeller_rate_for_speed, straight_run_state
+
+    U0 = ship.meta["U0"]
+    n = propeller_rate_for_speed(ship, U0)
     t = np.arange(0.0, cfg.trial_s, cfg.dt)
-    x0 = ship.states(u=U0)
-    truth = simulate(ship, x0, t, _zigzag(ship, np.radians(20.0), np.radians(20.0), cfg.dt, n0))
+    law = ZigZag(ship, np.radians(20.0), np.radians(20.0), n, t_exec=10.0)
+    truth = simulate(ship, straight_run_state(ship, U0), t, law)
     data = measure(truth, ship, SENSORS, seed=cfg.seed)
     return truth, data
 
@@ -124,25 +102,45 @@ def _fit(ship, ekf, data, prior, cfg: DemoConfig):
     return fit, guess, rows, seconds
 
 
+METRICS = {"zigzag 10/10": ("overshoot_1_deg", "overshoot_2_deg", "period_s"),
+           "turning 35 deg": ("advance_m", "transfer_m", "tactical_diameter_m", "time_to_90_s")}
+
+
 def _validate(ship, fit, guess, cfg: DemoConfig):
-    """Manoeuvres the fit never saw: 10/10 zig-zag and 35 deg turning circle, true vs fitted vs guess."""
-    U0, n0 = ship.meta["U0"], ship.meta["n0"]
-    t = np.arange(0.0, cfg.validation_s, cfg.dt)
-    x0 = ship.states(u=U0)
+    """Manoeuvres the fit never saw (10/10 zig-zag, 35 deg turning circle): true vs fitted vs guess."""
+    from .maneuvers import run_maneuver
+
     variants = {"true": ship.params(), "fitted": ship.params(fit.params), "initial guess": ship.params(guess)}
     runs, table = {}, {}
-    for man, make in (("zigzag 10/10", lambda: _zigzag(ship, np.radians(10.0), np.radians(10.0), cfg.dt, n0)),
-                      ("turning 35 deg", lambda: _turning(ship, np.radians(35.0), cfg.dt, n0, t))):
-        runs[man] = {name: simulate(ship, x0, t, make(), p=p) for name, p in variants.items()}
-        ref = runs[man]["true"]
+    for man, (kind, rudder) in (("zigzag 10/10", ("zigzag", 10.0)), ("turning 35 deg", ("turning", 35.0))):
+        res = {name: run_maneuver(ship, kind, rudder_deg=rudder, p=p, dt=cfg.dt, duration=cfg.validation_s)
+               for name, p in variants.items()}
+        runs[man] = {name: r.trajectory for name, r in res.items()}
+        ref = res["true"].trajectory
         table[man] = {}
-        for name in ("fitted", "initial guess"):
-            tr = runs[man][name]
-            table[man][name] = {
-                "position_rms_m": float(np.sqrt(np.mean((tr["x"] - ref["x"]) ** 2 + (tr["y"] - ref["y"]) ** 2))),
-                "heading_rms_deg": float(np.degrees(_rmse(tr["psi"], ref["psi"]))),
-            }
+        for name, r in res.items():
+            tr = r.trajectory
+            row = {k: float(r.metrics[k]) for k in METRICS[man] if k in r.metrics}
+            row["position_rms_m"] = float(np.sqrt(np.mean((tr["x"] - ref["x"]) ** 2 + (tr["y"] - ref["y"]) ** 2)))
+            row["heading_rms_deg"] = float(np.degrees(_rmse(tr["psi"], ref["psi"])))
+            table[man][name] = row
     return runs, table
+
+
+def _autopilot(ship, fit, cfg: DemoConfig, out: Path):
+    """Course-keeping autopilot designed on the *fitted* model, run in closed loop on the *true* ship."""
+    from . import autopilot as ap
+
+    design = ap.design_autopilot(ship, p=fit.params)
+    plant = ap.SteeringPlant(ship, "delta", design.plant.inputs)          # truth: nominal parameters
+    command, t_end, steps = ap.course_scenario("course-20", cfg.autopilot_s)
+    run = ap.simulate_autopilot(plant, design.autopilot, command, t_end, dt=0.5, mode="heading", x0=design.x0,
+                                step_times=steps, compass_rate=1.0, compass_std=SENSORS["psi"],
+                                gyro_std=SENSORS["r"], seed=cfg.seed)
+    ap.plot_design(design.loop, out / "autopilot_design.png", "Heading autopilot on the fitted KVLCC2 model",
+                   design.autopilot.reference)
+    ap.plot_closed_loop(run, out / "autopilot_closed_loop.png", "Closed loop on the true ship (compass + rate gyro)")
+    return design, run
 
 
 # -- figures ---------------------------------------------------------------------------------------------
@@ -213,7 +211,7 @@ def run_demo(out: Path, quick: bool = False) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     cfg = DemoConfig.make(quick)
     stages = ["simulate and measure sea trials", "EKF, UKF and RTS smoother", "maximum-likelihood fit",
-              "validation manoeuvres", "report"]
+              "validation manoeuvres", "autopilot design and closed loop", "report"]
     steps = progress(stages, "demo")
     t_start = time.perf_counter()
     ship = models.kvlcc2()
@@ -234,6 +232,9 @@ def run_demo(out: Path, quick: bool = False) -> dict:
     _plot_validation(out / "validation.png", runs, L)
 
     next(steps)
+    design, loop = _autopilot(ship, fit, cfg, out)
+
+    next(steps)
     total = time.perf_counter() - t_start
     summary = {
         "ship": ship.meta.get("vessel", ship.name), "quick": quick, "dt_s": cfg.dt, "trial_s": cfg.trial_s,
@@ -243,7 +244,8 @@ def run_demo(out: Path, quick: bool = False) -> dict:
         "fit": {"status": fit.status, "iterations": fit.iterations, "seconds": fit_s, "params": fit_rows,
                 "warnings": list(fit.warnings)},
         "validation": validation,
-        "figures": ["filters.png", "validation.png"],
+        "autopilot": {"design": design.summary(), "closed_loop": loop.metrics},
+        "figures": ["filters.png", "validation.png", "autopilot_design.png", "autopilot_closed_loop.png"],
         "seconds": total,
     }
     worst_z = max(abs(r["z"]) for r in fit_rows.values())
@@ -252,6 +254,7 @@ def run_demo(out: Path, quick: bool = False) -> dict:
         "EKF+RTS RMSE v [m/s]": round(rmse["EKF+RTS"]["v"], 4),
         "fit: largest |estimate - true| / std error": round(worst_z, 2),
         "10/10 zig-zag position RMS, fitted vs true [m]": round(validation["zigzag 10/10"]["fitted"]["position_rms_m"], 2),
+        "autopilot 20 deg change: overshoot [deg]": round(loop.metrics[0]["overshoot_deg"], 2),
         "run time [s]": round(total, 1),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
@@ -289,10 +292,30 @@ def _report(s: dict, ship) -> str:
     if s["fit"]["warnings"]:
         lines += ["", "Fit diagnostics: " + "; ".join(s["fit"]["warnings"])]
     lines += ["", "## 3. Validation on manoeuvres not used in the fit", "",
-              "| manoeuvre | model | position RMS vs true [m] | heading RMS vs true [deg] |", "|---|---|---|---|"]
+              "Metrics by `casship.maneuvers` on each simulation; RMS differences against the true ship's run.", ""]
     for man, rows in s["validation"].items():
+        keys = [k for k in METRICS[man] if k in rows["true"]]
+        lines += [f"**{man}**", "", "| model | " + " | ".join(keys) + " | position RMS vs true [m] | heading RMS [deg] |",
+                  "|---" * (len(keys) + 3) + "|"]
         for name, r in rows.items():
-            lines.append(f"| {man} | {name} | {r['position_rms_m']:.2f} | {r['heading_rms_deg']:.3f} |")
-    lines += ["", "![validation](validation.png)", "",
+            lines.append(f"| {name} | " + " | ".join(f"{r[k]:.4g}" if k in r else "-" for k in keys)
+                         + f" | {r['position_rms_m']:.2f} | {r['heading_rms_deg']:.3f} |")
+        lines.append("")
+    lines += ["![validation](validation.png)", "",
+              "## 4. Autopilot designed on the fitted model, run on the true ship", ""]
+    d = s["autopilot"]["design"]
+    lines += [f"Nomoto model from the exact linearisation of the fitted model: K = {d['nomoto']['K']:.4g} 1/s, "
+              f"T = {d['nomoto']['T']:.4g} s. PID pole placement (wn = {d['settings']['wn']:.4g} rad/s, "
+              f"zeta = {d['settings']['zeta']:g}): Kp = {d['gains']['Kp']:.4g}, Kd = {d['gains']['Kd']:.4g} s, "
+              f"Ki = {d['gains']['Ki']:.4g} 1/s; gain margin {d['margins']['gain_margin_db']:.1f} dB, phase margin "
+              f"{d['margins']['phase_margin_deg']:.1f} deg (python-control). Closed loop at 2 Hz on the true "
+              "(nominal) ship with a 1 Hz compass and a rate gyro, rudder limited to 35 deg and 2.32 deg/s:", "",
+              "| step | change [deg] | rise time [s] | overshoot [deg] | settling time [s] | steady error [deg] | "
+              "max rudder [deg] |", "|---|---|---|---|---|---|---|"]
+    for i, m in enumerate(s["autopilot"]["closed_loop"]):
+        lines.append(f"| {i + 1} | {m['change_deg']:.1f} | {m['rise_time_s']:.0f} | {m['overshoot_deg']:.2f} | "
+                     f"{m['settling_time_s']:.0f} | {m['steady_state_error_deg']:.2f} | "
+                     f"{np.degrees(m['steer_max_abs']):.1f} |")
+    lines += ["", "![design](autopilot_design.png)", "", "![closed loop](autopilot_closed_loop.png)", "",
               f"Total run time: {s['seconds']:.1f} s.", ""]
     return "\n".join(lines)

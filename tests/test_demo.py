@@ -30,4 +30,9 @@ def test_demo_quick_writes_report_and_recovers_the_ship(tmp_path, capsys):
     # the fitted model predicts manoeuvres it never saw far better than the initial guess
     for rows in summary["validation"].values():
         assert rows["fitted"]["position_rms_m"] < rows["initial guess"]["position_rms_m"] / 5
+    # the autopilot designed on the fitted model holds the true ship on the commanded heading
+    for step in summary["autopilot"]["closed_loop"]:
+        assert abs(step["steady_state_error_deg"]) < 1.0
+        assert step["overshoot_deg"] < 0.25 * abs(step["change_deg"])
+    assert summary["autopilot"]["design"]["margins"]["closed_loop_stable"]
     assert np.isfinite(summary["seconds"])
