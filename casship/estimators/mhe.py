@@ -112,9 +112,23 @@ def _sqrt_factor(Q: np.ndarray, tol: float = 1e-12):
     return V[:, keep] * np.sqrt(lam[keep]), False
 
 
+def _push(buffer: np.ndarray, value) -> None:
+    """Shift a window buffer by one row (oldest out) and put ``value`` last, in place."""
+    buffer[:-1] = buffer[1:]
+    buffer[-1] = value
+
+
 def _inv_sqrt(P: np.ndarray) -> np.ndarray:
-    """``W`` with ``W' W = P^-1`` (eigenvalues floored at 1e-14 of the largest)."""
-    lam, V = np.linalg.eigh(0.5 * (P + P.T))
+    """``W`` with ``W' W = P^-1`` (Cholesky; for a near-singular ``P`` eigenvalues floored at 1e-14
+    of the largest)."""
+    P = 0.5 * (P + P.T)
+    try:
+        L = np.linalg.cholesky(P)
+        if np.all(np.diag(L) > 1e-7 * np.sqrt(np.abs(np.diag(P)).max())):
+            return np.linalg.inv(L)
+    except np.linalg.LinAlgError:
+        pass
+    lam, V = np.linalg.eigh(P)
     lam = np.maximum(lam, 1e-14 * max(lam.max(), 1e-300))
     return (V / np.sqrt(lam)).T
 
@@ -505,35 +519,25 @@ class MHE(Estimator):
         if run["Uh"] is None:
             run["Uh"] = np.tile(u, (N + 1, 1))
             run["Up"][:] = u_prev
-        run["Uh"] = np.roll(run["Uh"], -1, axis=0)
-        run["Uh"][-1] = u
-        for key, val in (("Y", y), ("M", mask)):
-            run[key] = np.roll(run[key], -1, axis=0)
-            run[key][-1] = val
-        if N > 0:
-            run["Up"] = np.roll(run["Up"], -1, axis=0)
-            run["Up"][-1] = u_prev
-            run["dt"] = np.roll(run["dt"], -1)
-            run["dt"][-1] = dt
+        for key, val in (("Uh", u), ("Y", y), ("M", mask), ("Up", u_prev), ("dt", dt)):
+            _push(run[key], val)
         # arrival-cost history: the EKF prediction of each row from the MHE estimate before it
         prev_z = run["z"]
-        run["hist_x"] = np.roll(run["hist_x"], -1, axis=0)
-        run["hist_P"] = np.roll(run["hist_P"], -1, axis=0)
-        run["hist_x"][-1], run["hist_P"][-1] = x_pred, P_pred
+        _push(run["hist_x"], x_pred)
+        _push(run["hist_P"], P_pred)
         if self.options["arrival"] == "fixed" and run["k"] > N:
             xbar, Pbar = prev_z[win.ix[1]], run["P0"]
         else:
             xbar, Pbar = run["hist_x"][0], run["hist_P"][0]
-        # warm start: shift by one stage, new last state = prediction
-        z0 = np.empty_like(prev_z)
+        # warm start: shift by one stage (z = [x_0 v_0 x_1 v_1 ... x_N]), new last state = prediction
         if first:
-            z0[:] = prev_z
+            z0 = prev_z.copy()
         else:
-            z0[win.ix[:-1]] = prev_z[win.ix[1:]]
-            z0[win.ix[-1]] = x_pred
-            if N > 1:
-                z0[win.iv[:-1]] = prev_z[win.iv[1:]]
-            z0[win.iv[-1]] = 0.0
+            stage = nx + self.nv
+            z0 = np.empty_like(prev_z)
+            z0[: win.nz - stage] = prev_z[stage:]
+            z0[win.nz - stage: win.nz - nx] = 0.0
+            z0[win.nz - nx:] = x_pred
         z0 = np.clip(z0, win.lbx, win.ubx)
         par = self._params_vector(xbar, _inv_sqrt(Pbar), run["Uh"].T, run["Up"].T, run["Y"].T, run["M"].T,
                                   run["dt"], run["p"])
