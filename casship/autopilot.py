@@ -564,15 +564,18 @@ class SteeringPlant:
         return self.model.inputs(**{**self.inputs, self.steer: steer})
 
     def step_function(self) -> ca.Function:
-        """``plant(x, steer, p, dt) -> (xf, xdot)`` with the other inputs bound (RK4 step)."""
+        """``plant(x, steer, p, dt) -> (xf, xdot_f)``: one RK4 step with the other inputs bound, and the
+        state derivative at the new state ``xf`` (same inputs; its position rates give the true
+        course and speed over ground)."""
         m = self.model
         dm = discretize(m, 1.0, "rk4")
         x, s, p, h = ca.SX.sym("x", m.nx), ca.SX.sym("steer"), ca.SX.sym("p", m.np), ca.SX.sym("dt")
         u = ca.SX(ca.DM(self.input_vector(0.0)))
         u[m.index(self.steer, "input")] = s
         w0 = ca.SX.zeros(m.nw)
-        return ca.Function("plant", [x, s, p, h], [dm.F(x, u, p, w0, h), m.f(x, u, p, w0)],
-                           ["x", "steer", "p", "dt"], ["xf", "xdot"])
+        xf = dm.F(x, u, p, w0, h)
+        return ca.Function("plant", [x, s, p, h], [xf, m.f(xf, u, p, w0)], ["x", "steer", "p", "dt"],
+                           ["xf", "xdot_f"])
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -672,14 +675,15 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
     x = np.asarray(x0 if x0 is not None else plant.model.states(), dtype=float).copy()
     ship = BufferedCall(plant.step_function())
     ship.args[2][:] = plant.pvec
-    ship.args[3][0] = dt
     ap = BufferedCall(autopilot.function)
     ap.args[4][0] = dt
-    # initial course and speed from the model derivative
+    # initial course and speed from the model derivative (a zero-length step)
     ship.args[0][:] = x
     ship.args[1][0] = 0.0
-    xdot0 = ship()[1]
-    vg0 = xdot0[[ix, iy]]
+    ship.args[3][0] = 0.0
+    xdot = ship()[1].copy()
+    ship.args[3][0] = dt
+    vg0 = xdot[[ix, iy]]
     chi0 = float(np.arctan2(vg0[1], vg0[0])) if mode == "course" else float(x[ipsi])
     ap.args[0][:] = [chi0, 0.0, 0.0, 0.0, 0.0, 0.0]
     gnss_every = int(round(1.0 / (gnss_rate * dt)))
@@ -695,9 +699,6 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
     psi_meas = float(x[ipsi])
     empty = np.zeros(0)
     for k in range(n):
-        ship.args[0][:] = x
-        ship.args[1][0] = ap.args[0][4]   # steer held from the previous tick (for xdot at this x)
-        xdot = ship()[1]
         vg = xdot[[ix, iy]]
         chi_true = float(np.arctan2(vg[1], vg[0]))
         gn = ge = np.nan
@@ -711,9 +712,9 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
                 chi_f, om_f, U_f, chi_s = xh[3], xh[4], xh[2], np.sqrt(Ph[3, 3])
                 if rate == "gyro":
                     om_f = x[ir] + gyro_std * rng.standard_normal()
-            else:
-                chi_f, om_f, U_f, chi_s = chi_true, float("nan"), float(np.hypot(*vg)), 0.0
-                om_f = xdot[ir] if k == 0 else (wrap(chi_true - cols["chi"][k - 1]) / dt)
+            else:     # true course; its rate by a backward difference (the yaw rate on the first tick)
+                om_f = x[ir] if k == 0 else wrap(chi_true - cols["chi"][k - 1]) / dt
+                chi_f, U_f, chi_s = chi_true, float(np.hypot(*vg)), 0.0
         else:
             if estimator == "ekf":
                 if k % compass_every == 0:
@@ -734,8 +735,10 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
         cols["e"][k], cols["gnss_north"][k], cols["gnss_east"][k] = e[0], gn, ge
         a[0][:] = z_next
         if k + 1 < n:
+            ship.args[0][:] = x
             ship.args[1][0] = steer_v
-            x = ship()[0].copy()
+            xf, xdot_f = ship()
+            x, xdot = xf.copy(), xdot_f.copy()
             if not np.all(np.isfinite(x)):
                 raise FloatingPointError(f"closed-loop simulation of {m.name!r} diverged at t = {t[k]:g} s")
     cols["omega_chi"] = np.gradient(np.unwrap(cols["chi"]), t)
