@@ -62,4 +62,4 @@ def test_gust_record_has_the_paper_mean_speeds():
         assert np.mean(speed) == pytest.approx(mean, abs=1e-12)
         assert np.all(speed >= 0)
     with pytest.raises(ValueError, match="unknown manoeuvre"):
-        fg.rudder_inputs("spiral", np.arange(3.0))
+        fg.rudder_inputs("spiral", np.arange(3.0), None, 10.0)
