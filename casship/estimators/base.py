@@ -29,7 +29,7 @@ from ..angles import wrap, wrap_sym
 from ..data import Dataset, Gaussian, as_cov
 from ..discretize import DiscreteModel
 
-__all__ = ["Estimator", "FilterResult", "Health", "OnlineFilter", "StepInfo", "STEP_OUTPUTS", "compile_function"]
+__all__ = ["Estimator", "FilterResult", "Health", "OnlineFilter", "StepInfo", "STEP_OUTPUTS", "compile_function", "fold_in_pieces"]
 
 STEP_INPUTS = ["carry", "u_prev", "u", "y", "mask", "dt", "p", "Q", "R", "gate"]
 STEP_OUTPUTS = ["carry_next", "x", "P", "x_pred", "P_pred", "C", "e", "S", "nis", "ll", "accepted"]
@@ -161,6 +161,48 @@ def compile_function(fun: ca.Function) -> ca.Function:
     except RuntimeError as exc:
         raise RuntimeError(f"option 'jit': compiling {fun.name()!r} to C failed (is a C compiler "
                            f"installed?): {str(exc).splitlines()[-1]}") from None
+
+
+def fold_in_pieces(fold_call, step: ca.Function, args: list, n: int, per_sample, chunk: int,
+                   pad=None) -> list[np.ndarray]:
+    """Run a ``mapaccum`` fold of ``step`` over ``n`` samples in pieces, through buffers.
+
+    ``fold_call(size)`` gives a :class:`~casship._fast.BufferedCall` of the fold of ``size``
+    samples; ``args[0]`` is the carry, ``args[i]`` for ``i`` in ``per_sample`` are ``n``-column
+    arrays, the others constants. Pieces have ``chunk`` samples, the last one padded up to a power
+    of two by repeating its last sample (``pad(views, take)`` may overwrite the padded columns);
+    padded outputs are dropped. Returns the outputs over the samples, except the first, which is
+    the final carry (one column).
+    """
+    carry = np.asarray(args[0], dtype=float).reshape(-1, order="F")
+    outs, start = None, 0
+    while start < n:
+        size = min(chunk, 1 << (n - start - 1).bit_length())
+        take = min(size, n - start)
+        call = fold_call(size)
+        views = call.arg_views
+        call.args[0][:] = carry
+        for i in range(1, len(args)):
+            if i in per_sample:
+                src = np.asarray(args[i], dtype=float)[:, start:start + take]
+                views[i][:, :take] = src
+                if take < size:
+                    views[i][:, take:] = src[:, -1:] if src.shape[0] else 0.0
+            else:
+                block = np.asarray(args[i], dtype=float).reshape(step.size_in(i), order="F")
+                views[i][...] = np.tile(block, (1, size))
+        if take < size and pad is not None:
+            pad(views, take)
+        call()
+        res = call.res_views
+        if outs is None:    # column-major, so that each piece is one contiguous copy
+            outs = [None] + [np.empty((r.shape[0], n), order="F") for r in res[1:]]
+        for j in range(1, len(res)):
+            outs[j][:, start:start + take] = res[j][:, :take]
+        carry = res[0][:, take - 1].copy()
+        start += take
+    outs[0] = carry[:, None]
+    return outs
 
 
 class Estimator:
@@ -343,36 +385,12 @@ class Estimator:
         The carry is handed from piece to piece; the numbers equal one fold over the whole record.
         """
         per_sample = [i for i in range(1, len(args)) if i not in _CONSTANT_INPUTS]
-        carry = np.asarray(args[0], dtype=float).reshape(-1, order="F")
-        outs, start = None, 0
-        while start < n:
-            size = min(self.FOLD_CHUNK, 1 << (n - start - 1).bit_length())
-            take = min(size, n - start)
-            call = self._fold_call(size)
-            views = call.arg_views
-            call.args[0][:] = carry
-            for i in range(1, len(args)):
-                if i in per_sample:
-                    src = np.asarray(args[i], dtype=float)[:, start:start + take]
-                    views[i][:, :take] = src
-                    if take < size:
-                        views[i][:, take:] = src[:, -1:] if src.shape[0] else 0.0
-                else:
-                    block = np.asarray(args[i], dtype=float).reshape(self._step.size_in(i), order="F")
-                    views[i][...] = np.tile(block, (1, size))
-            if take < size:
-                views[4][:, take:] = 0.0      # mask: no update
-                views[5][:, take:] = 0.0      # dt: no prediction
-            call()
-            res = call.res_views
-            if outs is None:    # column-major, so that each piece is one contiguous copy
-                outs = [None] + [np.empty((r.shape[0], n), order="F") for r in res[1:]]
-            for j in range(1, len(res)):
-                outs[j][:, start:start + take] = res[j][:, :take]
-            carry = res[0][:, take - 1].copy()
-            start += take
-        outs[0] = carry[:, None]
-        return outs
+
+        def no_op(views, take):
+            views[4][:, take:] = 0.0      # mask: no update
+            views[5][:, take:] = 0.0      # dt: no prediction
+
+        return fold_in_pieces(self._fold_call, self._step, args, n, per_sample, self.FOLD_CHUNK, no_op)
 
     def _fold_call(self, size: int) -> BufferedCall:
         """Buffered evaluation of the fold of ``size`` samples (JIT-compiled with option ``jit``)."""

@@ -9,7 +9,8 @@ estimate for the UKF/EnKF). With the smoother gain ``J_k = C_{k+1} (P-_{k+1})^-1
     Ps_k = P_k + J_k (Ps_{k+1} - P-_{k+1}) J_k'
 
 Differences of angle states are wrapped. The pass is one compiled fold (``mapaccum``) over the
-reversed record.
+reversed record
+(in pieces of 512 samples through preallocated buffers).
 """
 from __future__ import annotations
 
@@ -20,7 +21,8 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap_sym
-from .base import FilterResult
+from .._fast import BufferedCall
+from .base import FilterResult, fold_in_pieces
 
 __all__ = ["rts_smooth"]
 
@@ -47,9 +49,12 @@ def _backward_step(nx: int, angles: tuple) -> ca.Function:
                        ["carry", "x", "P", "x_pred_next", "P_pred_next", "C_next"], ["carry_next", "xs", "Ps", "J"])
 
 
-@lru_cache(maxsize=32)
-def _backward_fold(nx: int, angles: tuple, n: int) -> ca.Function:
-    return _backward_step(nx, angles).mapaccum(n)
+@lru_cache(maxsize=256)
+def _backward_fold(nx: int, angles: tuple, n: int) -> BufferedCall:
+    return BufferedCall(_backward_step(nx, angles).mapaccum(n))
+
+
+FOLD_CHUNK = 512
 
 
 def rts_smooth(result: FilterResult) -> FilterResult:
@@ -92,8 +97,10 @@ def rts_smooth(result: FilterResult) -> FilterResult:
     Pp = flat(result.P_pred[:0:-1]).T
     C = flat(result.C[:0:-1]).T
     carry0 = np.concatenate([result.x[-1], result.P[-1].reshape(-1, order="F")])
-    _, xs, Ps, _ = _backward_fold(nx, angles, n - 1)(carry0, x, P, xp, Pp, C)
-    xs = np.vstack([np.asarray(xs).T[::-1], result.x[-1:]])
-    Ps = np.asarray(Ps).T.reshape(n - 1, nx, nx).transpose(0, 2, 1)[::-1]
+    step = _backward_step(nx, angles)
+    _, xs, Ps, _ = fold_in_pieces(lambda size: _backward_fold(nx, angles, size), step,
+                                  [carry0, x, P, xp, Pp, C], n - 1, range(1, 6), FOLD_CHUNK)
+    xs = np.vstack([xs.T[::-1], result.x[-1:]])
+    Ps = Ps.T.reshape(n - 1, nx, nx).transpose(0, 2, 1)[::-1]
     Ps = np.concatenate([Ps, result.P[-1:]], axis=0)
     return replace(result, x=xs, P=Ps, estimator=f"{result.estimator}+RTS")
