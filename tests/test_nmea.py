@@ -205,3 +205,17 @@ def test_usv_gnss_log_round_trip_through_nmea_and_sog_cog_ekf(data_dir, tmp_path
     err_chi = cs.wrap(res["chi"][k][ok] - chi_fd[ok])
     assert np.degrees(np.sqrt(np.mean(err_chi**2))) < 10.0
     assert res.health().ok
+
+
+def test_hdg_without_variation_is_magnetic_and_vtg_in_km_per_h():
+    log = ("$GPGGA,120000,3351.000,S,07040.000,W,1,05,1.0,10.0,M,,M,,*62\n"
+           "$HCHDG,98.5,2.0,E,,*1F\n"                      # deviation 2 E, no variation
+           "$GPVTG,10.0,T,,M,,N,18.52,K,A*1C\n"            # speed only in km/h
+           "$GPGGA,120001,3351.000,S,07040.000,W,1,05,1.0,10.0,M,,M,,*63\n"
+           "$GPVTG,,T,,M,,N,,K,N*2C\n")                    # mode N: not valid, not used
+    data = read_nmea(log)
+    assert "psi" not in data.names
+    assert data["psi_mag"][0] == pytest.approx(np.radians(100.5))
+    assert data["sog"][0] == pytest.approx(18.52 / 3.6)
+    assert data["cog"][0] == pytest.approx(np.radians(10.0))
+    assert np.isnan(data["sog"][1]) and np.isnan(data["psi_mag"][1])
