@@ -13,10 +13,10 @@ def test_shi2009_quick(tmp_path):
     for info in s["smoothing"]:
         assert info["rmse"]["u"] < 0.05 and info["rmse"]["v"] < 0.05
         assert np.degrees(info["rmse"]["r"]) < 0.02
-    # the yaw and sway dynamics are identified (the paper's model over-parameterises surge)
+    # the yaw equation is identified (the paper's model over-parameterises surge)
     truth = s["truth_params"]
     for method in ("aekf_params", "mle_params"):
-        for name in ("b4", "c2", "c3"):
+        for name in ("c1", "c2", "c3"):
             assert abs(s[method][name] - truth[name]) < 0.1 * abs(truth[name]), (method, name)
     # Table 2: advance, transfer and tactical diameter within 10 % of the target ship
     for key, row in s["table2"].items():
