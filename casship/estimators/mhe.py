@@ -146,6 +146,7 @@ class _Window:
     ubx: np.ndarray
     ok_status: tuple
     gn_step: object = None   # BufferedCall of the Gauss-Newton step (solver "rti")
+    gn_parts: object = None  # its QP data, for the bounded QP step
 
 
 class MHE(Estimator):
@@ -373,25 +374,29 @@ class MHE(Estimator):
             S = ca.nlpsol(f"mhe_ipopt_{N}", "ipopt", nlp, {**common, "ipopt": iopts})
             ok = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
         else:
-            J = ca.jacobian(res, z)
-            lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", nlp["g"].numel())
-            H = ca.Function("mhe_gn_hessian", [z, par, lam_f, lam_g], [lam_f * (J.T @ J)],
-                            ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
             qp = o["qpsol"]
             qopts = {"error_on_fail": False}
             if qp == "qrqp":
                 qopts.update(print_iter=False, print_header=False, print_info=False)
             elif qp == "osqp":
                 qopts["osqp"] = {"verbose": False, "eps_abs": 1e-9, "eps_rel": 1e-9, "polish": True}
-            rti = solver == "rti"
-            sopts = {**common, "hess_lag": H, "qpsol": qp, "qpsol_options": qopts,
-                     "print_iteration": False, "print_header": False, "print_status": False,
-                     "max_iter": 1 if rti else (50 if o["max_iter"] is None else int(o["max_iter"])),
-                     "tol_pr": float(o["tol"]), "tol_du": max(float(o["tol"]), 1e-8)}
-            S = ca.nlpsol(f"mhe_{solver}_{N}", "sqpmethod", nlp, sopts)
-            # a vanishing search direction means the start point is already optimal
-            ok = ("Solve_Succeeded", "Search_Direction_Becomes_Too_Small")
-            ok = (*ok, "Maximum_Iterations_Exceeded") if rti else ok
+            if solver == "sqp":
+                J = ca.jacobian(res, z)
+                lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", nlp["g"].numel())
+                H = ca.Function("mhe_gn_hessian", [z, par, lam_f, lam_g], [lam_f * (J.T @ J)],
+                                ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+                sopts = {**common, "hess_lag": H, "qpsol": qp, "qpsol_options": qopts,
+                         "print_iteration": False, "print_header": False, "print_status": False,
+                         "max_iter": 50 if o["max_iter"] is None else int(o["max_iter"]),
+                         "tol_pr": float(o["tol"]), "tol_du": max(float(o["tol"]), 1e-8)}
+                S = ca.nlpsol(f"mhe_sqp_{N}", "sqpmethod", nlp, sopts)
+                # a vanishing search direction means the start point is already optimal
+                ok = ("Solve_Succeeded", "Search_Direction_Becomes_Too_Small")
+            else:
+                parts, step = self._gn_functions(z, par, res, nlp["g"], N)
+                sp = parts.sparsity_out
+                S = ca.conic(f"mhe_rti_qp_{N}", qp, {"h": sp(0), "a": sp(2)}, qopts)
+                ok = ()
         idx = np.arange(nz)
         blk_idx = idx[: N * (nx + nv)].reshape(N, nx + nv)
         ix = np.vstack([blk_idx[:, :nx], idx[N * (nx + nv):][None, :]])
@@ -401,25 +406,27 @@ class MHE(Estimator):
         lbx[iv], ubx[iv] = self._vlo, self._vhi
         win = _Window(N, S, ix, iv, nz, lbx, ubx, ok)
         if solver == "rti":
-            win.gn_step = BufferedCall(self._gn_step_function(z, par, res, nlp["g"], N))
+            win.gn_step, win.gn_parts = BufferedCall(step), parts
         self._windows[N, solver] = win
         return win
 
     @staticmethod
-    def _gn_step_function(z, par, res, g, N) -> ca.Function:
-        """One full Gauss-Newton SQP step of the window (equality constraints only) as one Function.
+    def _gn_functions(z, par, res, g, N):
+        """The Gauss-Newton QP data ``(J'J, J'r, G, g)`` of the window and its equality-constrained step.
 
-        The KKT system ``[J'J  G'; G  0] [dz; lam] = -[J'r; g]`` is block-banded (stages are
-        interleaved in ``z``) and solved by CasADi's sparse QR.
+        The step solves the KKT system ``[J'J  G'; G  0] [dz; lam] = -[J'r; g]``, which is
+        block-banded (stages are interleaved in ``z``), with CasADi's sparse QR, in one Function.
         """
         Jr, Jg = ca.jacobian(res, z), ca.jacobian(g, z)
-        parts = ca.Function("mhe_gn_parts", [z, par], [Jr.T @ Jr, Jr.T @ res, Jg, g]).expand()
+        parts = ca.Function(f"mhe_gn_parts_{N}", [z, par], [Jr.T @ Jr, Jr.T @ res, Jg, g],
+                            ["z", "p"], ["H", "grad", "G", "g"]).expand()
         zs, ps = ca.MX.sym("z", z.sparsity()), ca.MX.sym("p", par.sparsity())
         H, grad, G, gv = parts(zs, ps)
         ng = g.numel()
         K = ca.blockcat([[H, G.T], [G, ca.MX(ng, ng)]])
-        step = ca.solve(K, -ca.vertcat(grad, gv), "qr")
-        return ca.Function(f"mhe_gn_step_{N}", [zs, ps], [zs + step[: z.numel()]], ["z", "p"], ["z_next"])
+        dz = ca.solve(K, -ca.vertcat(grad, gv), "qr")[: z.numel()]
+        step = ca.Function(f"mhe_gn_step_{N}", [zs, ps], [zs + dz], ["z", "p"], ["z_next"])
+        return parts, step
 
     @staticmethod
     def _params_vector(xbar, W, Uh, Up, Y, M, dt, p) -> np.ndarray:
@@ -434,12 +441,25 @@ class MHE(Estimator):
             z = win.gn_step()[0]
             if np.all(np.isfinite(z)) and np.all(z >= win.lbx) and np.all(z <= win.ubx):
                 return z.copy()
+            H, grad, G, g = win.gn_parts(z0, par)
+            sol = win.solver(h=H, g=grad, a=G, lba=-g, uba=-g, lbx=win.lbx - z0, ubx=win.ubx - z0)
+            stats = win.solver.stats()
+            z = z0 + np.asarray(sol["x"]).reshape(-1)
+            if not stats["success"] or not np.all(np.isfinite(z)):
+                status = stats["return_status"]
+                raise MHEFailed(f"MHE (real-time iteration, N = {win.N}) failed at {where}: QP solver "
+                                f"{win.solver.name()} status {status!r}", status)
+            return z
         sol = win.solver(x0=z0, p=par, lbx=win.lbx, ubx=win.ubx, lbg=0.0, ubg=0.0)
         status = win.solver.stats()["return_status"]
         z = np.asarray(sol["x"]).reshape(-1)
+        gap = float(np.max(np.abs(np.asarray(sol["g"])), initial=0.0))
         if status not in win.ok_status or not np.all(np.isfinite(z)):
             raise MHEFailed(f"MHE ({win.solver.name()}) failed at {where}: "
                             f"solver status {status!r}", status)
+        if not gap <= 1e-6 * max(1.0, float(np.max(np.abs(z)))):
+            raise MHEFailed(f"MHE ({win.solver.name()}) failed at {where}: solver status {status!r} "
+                            f"but the dynamics are violated by {gap:.3g} (infeasible window)", status)
         return z
 
     # -- priors and parameters ------------------------------------------------------------------------
