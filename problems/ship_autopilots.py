@@ -242,9 +242,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
            f"{WIND_ROBUST[0]:.0f} m/s in the robustness cases, from 45 deg), GNSS 5 Hz (0.5 m) into the SOG/COG EKF "
            f"at {1 / cases[0]['dt']:.0f} Hz (the loop rate), rate gyro; heading mode uses a compass (0.5 deg, 10 Hz). Rudder saturation and rate limit "
            "of the ship; stable = the course settles within 5 deg of the command with the rudder off its limit over "
-           "the last 10 % of every segment. The steady-state error column is the mean error there: its sign follows "
-           "the direction of the change (the course has not fully arrived), the slow tail of the integrator pole "
-           "near wn/10 of Fossen's PID rule, still decaying at the end of the 12 L/U segments. The runs "
+           "the last 10 % of every segment. The steady-state error column is the mean error there; in most runs "
+           "the course has not fully arrived (sign opposite to the change): the slow tail of the integrator pole "
+           "near wn/10 of Fossen's PID rule is still decaying at the end of the 12 L/U segments. The runs "
            "'designed on the linearisation' use the first-order Nomoto model of the exact linearisation instead "
            "of the zig-zag fit: the fit's larger damping d = 1/K lowers Kd = 2 zeta wn m - d, so the fitted "
            "design is less damped on the real (small-amplitude) ship.", "",
