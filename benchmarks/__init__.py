@@ -53,6 +53,11 @@ def _fmt(value, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
+def _cell(text) -> str:
+    """Table cell text: pipes escaped so that |x| notation does not split the Markdown row."""
+    return str(text).replace("|", "\\|")
+
+
 def format_table(rows: list[dict]) -> str:
     """Markdown table of result rows (medians in seconds, ratio = peer / casship)."""
     lines = ["| benchmark | casship [s] | peer | peer [s] | ratio | accuracy check |",
@@ -61,6 +66,6 @@ def format_table(rows: list[dict]) -> str:
         note = r.get("skipped") or r.get("error")
         check = f"skipped: {note}" if r.get("skipped") else (f"error: {note}" if r.get("error")
                                                                else r.get("accuracy_check", ""))
-        lines.append(f"| {r.get('benchmark', '?')} | {_fmt(r.get('casship_s'), '.4g')} | {r.get('peer', '')} | "
-                     f"{_fmt(r.get('peer_s'), '.4g')} | {_fmt(r.get('ratio'), '.3g')} | {check} |")
+        lines.append(f"| {_cell(r.get('benchmark', '?'))} | {_fmt(r.get('casship_s'), '.4g')} | {_cell(r.get('peer', ''))} | "
+                     f"{_fmt(r.get('peer_s'), '.4g')} | {_fmt(r.get('ratio'), '.3g')} | {_cell(check)} |")
     return "\n".join(lines)

@@ -60,7 +60,16 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
     if bad.size:
         row, col = bad[0]
         raise ValueError(f"input {model.input_names[col]!r} is not finite at row {row} (t = {t[row]:g} s)")
+    check_radians(model, U)
     return U
+
+
+def check_radians(model: Model, U: np.ndarray) -> None:
+    """Reject inputs declared in radians whose magnitude exceeds 2 pi (degrees given by mistake)."""
+    for j, var in enumerate(model.input_vars):
+        if var.unit == "rad" and U.shape[0] and np.abs(U[:, j]).max() > 2 * np.pi:
+            raise ValueError(f"input {var.name!r} reaches {np.abs(U[:, j]).max():.4g} rad: angles are in "
+                             "radians (degrees given?)")
 
 
 FOLD_CHUNK = 1024
@@ -219,6 +228,8 @@ def _closed_loop(model, dmodel, x0, t, controller: Callable, p, W, dt):
             raise ValueError(f"input function returned {u!r} at t = {t[k]:g} s; expected {model.nu} finite values "
                              f"for {list(model.input_names)}")
         U[k] = u
+        if k == 0:
+            check_radians(model, U[:1])
         if k + 1 < t.size:
             x_arg[:], u_arg[:], w_arg[:], dt_arg[0] = X[k], u, W[k], dt[k]
             X[k + 1] = step()[0]

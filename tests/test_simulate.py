@@ -236,6 +236,8 @@ def test_bad_inputs_name_the_item():
         cs.simulate(m, x0, t, np.zeros((10, 2)), w=np.zeros((10, 2)))
     with pytest.raises(ValueError, match="max_step must be a positive"):
         cs.simulate(m, x0, t, np.zeros((10, 2)), max_step=-1.0)
+    with pytest.raises(ValueError, match=r"input 'delta' reaches 35 rad: angles are in radians \(degrees given\?\)"):
+        cs.simulate(m, x0, t, {"delta": 35.0, "n": 1.0})
     with pytest.raises(ValueError, match="unknown discretisation method"):
         cs.simulate(m, x0, t, np.zeros((10, 2)), method="heun")
 
