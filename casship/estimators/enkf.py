@@ -13,7 +13,7 @@ from scipy import stats
 from .._fast import BufferedCall
 from ..data import Gaussian
 from .base import STEP_INPUTS, STEP_OUTPUTS, Estimator
-from .ukf import circular_mean, deviations, psd_sqrt
+from .ukf import circular_mean, deviations, psd_sqrt, weighted_outer
 
 __all__ = ["EnKF"]
 
@@ -69,14 +69,14 @@ class EnKF(Estimator):
         xp = circular_mean(Xf, wts, ang)
         dX0 = scale * deviations(X, x0, ang)
         dXf = scale * deviations(Xf, xp, ang)
-        Pp = dXf @ dXf.T
+        Pp = weighted_outer(dXf)
         C = dX0 @ dXf.T
         # analysis with perturbed observations
         mask = s["mask"]
         Yf = ca.horzcat(*[self.h_meas(Xf[:, j], s["u"], s["p"]) for j in range(N)])
         yhat = circular_mean(Yf, wts, self.angle_meas)
         dY = ca.diag(mask) @ (scale * deviations(Yf, yhat, self.angle_meas))
-        Sm = self.masked_innovation_cov(dY @ dY.T, s["R"], mask)
+        Sm = self.masked_innovation_cov(weighted_outer(dY), s["R"], mask)
         Sm = 0.5 * (Sm + Sm.T)
         K = ca.solve(Sm, (dXf @ dY.T).T).T
         e = self.residual(s["y"], yhat, mask)
@@ -85,9 +85,9 @@ class EnKF(Estimator):
         Xa = ca.horzcat(*[Xf[:, j] + acc * K @ self.residual(s["y"] + V[:, j], Yf[:, j], mask) for j in range(N)])
         xa = circular_mean(Xa, wts, ang)
         dXa = scale * deviations(Xa, xa, ang)
-        Pa = dXa @ dXa.T
+        Pa = weighted_outer(dXa)
         vec = lambda a: ca.reshape(a, -1, 1)  # noqa: E731
-        outs = [vec(Xa), xa, vec(Pa), xp, vec(0.5 * (Pp + Pp.T)), vec(C), e, vec(Sm), nis, ll, acc]
+        outs = [vec(Xa), xa, vec(Pa), xp, vec(Pp), vec(C), e, vec(Sm), nis, ll, acc]
         ins = [carry] + [s[k] for k in STEP_INPUTS[1:]] + [zw, zv]
         return ca.Function("enkf_step", ins, outs, STEP_INPUTS + ["z_w", "z_v"], STEP_OUTPUTS)
 

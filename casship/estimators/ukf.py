@@ -12,10 +12,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..angles import wrap_sym
 from .base import STEP_INPUTS, STEP_OUTPUTS, Estimator
 
-__all__ = ["UKF", "psd_sqrt", "sigma_weights"]
+__all__ = ["UKF", "psd_sqrt", "sigma_weights", "circular_mean", "deviations", "wrap_fast", "weighted_outer"]
 
 
 def psd_sqrt(P, tol: float = 0.0):
@@ -51,6 +50,12 @@ def sigma_weights(n: int, alpha: float, beta: float, kappa: float):
     return c, wm, wc
 
 
+def wrap_fast(angle):
+    """Symbolic wrap to [-pi, pi) by ``floor`` (four cheap operations instead of ``atan2(sin, cos)``;
+    derivative 1 almost everywhere), for the many sigma-point and ensemble deviations."""
+    return angle - 2 * np.pi * ca.floor((angle + np.pi) / (2 * np.pi))
+
+
 def circular_mean(points, wm, angles):
     """Weighted mean of sigma points (columns); angle rows averaged on the circle.
 
@@ -61,11 +66,22 @@ def circular_mean(points, wm, angles):
     rows = []
     for i in range(points.shape[0]):
         if angles[i]:
-            dev = ca.horzcat(*[wrap_sym(points[i, j] - ref[i]) for j in range(points.shape[1])])
+            dev = ca.horzcat(*[wrap_fast(points[i, j] - ref[i]) for j in range(points.shape[1])])
             rows.append(ref[i] + ca.mtimes(dev, ca.DM(wm)))
         else:
             rows.append(ca.mtimes(points[i, :], ca.DM(wm)))
     return ca.vertcat(*rows)
+
+
+def weighted_outer(D, w=None):
+    """Symmetric ``sum_k w_k D[:, k] D[:, k]'`` (``w = 1`` if None), computing the upper triangle only."""
+    n = D.shape[0]
+    Dw = D if w is None else D @ ca.DM(np.diag(w))
+    rows = [[None] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i, n):
+            rows[i][j] = rows[j][i] = ca.dot(Dw[i, :], D[j, :])
+    return ca.vertcat(*[ca.horzcat(*r) for r in rows]) if n else D @ D.T
 
 
 def deviations(points, mean, angles):
@@ -73,7 +89,7 @@ def deviations(points, mean, angles):
     d = points - ca.repmat(mean, 1, points.shape[1])
     if not np.any(angles):
         return d
-    return ca.vertcat(*[ca.horzcat(*[wrap_sym(d[i, j]) for j in range(d.shape[1])]) if angles[i] else d[i, :]
+    return ca.vertcat(*[ca.horzcat(*[wrap_fast(d[i, j]) for j in range(d.shape[1])]) if angles[i] else d[i, :]
                         for i in range(d.shape[0])])
 
 
@@ -126,8 +142,8 @@ class UKF(Estimator):
         dX0 = deviations(X, x, ang_x)
         dXf = deviations(Xf, xp, ang_x)
         G = dm.F_jac(x, s["u_prev"], s["p"], w0, s["dt"])[3]
-        Pp = dXf @ Wc @ dXf.T + G @ s["Q"] @ G.T
-        Pp = 0.5 * (Pp + Pp.T)
+        GQG = G @ s["Q"] @ G.T
+        Pp = weighted_outer(dXf, wc) + 0.5 * (GQG + GQG.T)
         C = dX0 @ Wc @ dXf.T
         # update with redrawn points
         mask = s["mask"]
@@ -136,7 +152,7 @@ class UKF(Estimator):
         yhat = circular_mean(Y, wm, self.angle_meas)
         dY = ca.diag(mask) @ deviations(Y, yhat, self.angle_meas)
         dXp = deviations(Xp, xp, ang_x)
-        Pyy = dY @ Wc @ dY.T
+        Pyy = weighted_outer(dY, wc)
         Pxy = dXp @ Wc @ dY.T
         e = self.residual(s["y"], yhat, mask)
         Sm = self.masked_innovation_cov(Pyy, s["R"], mask)
