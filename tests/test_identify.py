@@ -165,3 +165,39 @@ def test_bad_input_is_named():
         MLEProblem(ekf, data.select(["psi"]), free=["K"])
     with pytest.raises(TypeError):
         MLEProblem(ekf, [np.zeros(3)], free=["K"])
+
+
+def test_likelihood_through_ukf_gradient_and_recovery():
+    """The same problem through the UKF: exact gradient, and the fit agrees with the EKF's (linear
+    measurement, mildly nonlinear dynamics: the two likelihoods are almost the same)."""
+    data = _record(21)
+    m = cs.models.nomoto_first_order(K=K_TRUE, T=T_TRUE)
+    ukf = cs.UKF(cs.discretize(m, DT), Q=1e-7, R=1e-4)
+    prob = MLEProblem(ukf, data, free=["K", "T"], x0=PRIOR)
+    at = {"K": 0.09, "T": 18.0}
+    g = prob.gradient(at)
+    for i, name in enumerate(prob.free):
+        h = 1e-5 * at[name]
+        up, dn = dict(at), dict(at)
+        up[name] += h
+        dn[name] -= h
+        assert g[i] == pytest.approx((prob.negloglik(up) - prob.negloglik(dn)) / (2 * h), rel=1e-5)
+    fit = prob.solve(guess={"K": 0.05, "T": 10.0})
+    ref = MLEProblem(_ekf(), data, free=["K", "T"], x0=PRIOR).solve(guess={"K": 0.05, "T": 10.0})
+    for name in ("K", "T"):
+        assert fit.estimates[name] == pytest.approx(ref.estimates[name], abs=0.1 * ref.std_errors[name])
+
+
+@pytest.mark.slow
+def test_coverage_large_monte_carlo():
+    """100 seeds, 200 intervals: coverage of the 95 % intervals within the binomial 99.9 % band."""
+    ekf = _ekf()
+    covered, total = 0, 0
+    for seed in range(100):
+        fit = MLEProblem(ekf, _record(1000 + seed), free=["K", "T"], x0=PRIOR).solve(guess={"K": 0.05, "T": 10.0})
+        for name, value in {"K": K_TRUE, "T": T_TRUE}.items():
+            lo, hi = fit.interval(name, 0.95)
+            covered += lo <= value <= hi
+            total += 1
+    lo, hi = stats.binom.ppf([0.0005, 0.9995], total, 0.95)
+    assert lo <= covered <= hi, f"{covered}/{total}"
