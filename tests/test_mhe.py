@@ -85,6 +85,12 @@ def test_online_step_reproduces_filter():
     mhe.reset()
     x2, _, _ = mhe.step(prior.mean, prior.cov, U[0], Y[0], 0.0, u=U[0])
     np.testing.assert_allclose(x2, batch.x[0], atol=1e-10)
+    run = mhe.online(prior, u=U[0])
+    for k in range(len(data)):
+        dt = data.t[k] - data.t[k - 1] if k else 0.0
+        x = run.update(Y[k], dt, u_prev=U[max(k - 1, 0)], u=U[k])
+        np.testing.assert_allclose(x, batch.x[k], atol=1e-10)
+        np.testing.assert_allclose(run.P, batch.P[k], atol=1e-14)
 
 
 def gps_case(seed, duration=60.0, dt=0.5):

@@ -44,7 +44,7 @@ from .augmented import augment
 from .base import Estimator, FilterResult
 from .ekf import EKF
 
-__all__ = ["MHE", "MHEFailed", "augment_model"]
+__all__ = ["MHE", "MHEOnline", "MHEFailed", "augment_model"]
 
 _SOLVERS = ("ipopt", "sqp", "rti")
 _ARRIVALS = ("ekf", "fixed")
@@ -660,6 +660,13 @@ class MHE(Estimator):
         info["rejected"] = False
         return xk.copy(), Pk.copy(), info
 
+    def online(self, prior: Gaussian, p=None, *, u=None, seed=None) -> "MHEOnline":
+        """A stateful online runner started from ``prior`` (``update(y, dt, u_prev=None, u=None) -> x``).
+
+        Same use as :meth:`Estimator.online`; numbers equal :meth:`filter` on the same record.
+        """
+        return MHEOnline(self, prior, p, u)
+
     def smooth(self, data: Dataset, prior: Gaussian, p=None, *, guess: FilterResult | None = None) -> FilterResult:
         """Full-information estimation: one window over the whole record (batch MAP smoother).
 
@@ -766,3 +773,57 @@ def _bound_pair(name: str, lo, hi):
     if np.isnan(lo) or np.isnan(hi) or lo > hi:
         raise ValueError(f"bounds of {name!r} must satisfy lower <= upper, got ({lo}, {hi})")
     return lo, hi
+
+
+class MHEOnline:
+    """Run an :class:`MHE` on a stream, one sample per :meth:`update`, keeping the window inside.
+
+    Examples
+    --------
+    >>> run = mhe.online(prior)                      # doctest: +SKIP
+    >>> for y, dt in stream:                          # doctest: +SKIP
+    ...     x = run.update(y, dt)
+    """
+
+    def __init__(self, est: MHE, prior: Gaussian, p=None, u=None):
+        self.est = est
+        prior = est.augmented_prior(prior, p)
+        self._run = est._new_run(prior, est._full_params(p)[est._kept_params])
+        nu = est.model.nu
+        self._u_prev = np.zeros(nu) if u is None else np.asarray(u, dtype=float).reshape(nu)
+        self._u = self._u_prev
+        self._info: dict = {}
+
+    def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
+        """Predict over ``dt`` with ``u_prev`` held (the previous input by default), add the sample
+        ``y`` (NaN = not measured) and solve the shifted window; returns a copy of the new estimate."""
+        if u_prev is not None:
+            self._u_prev = np.asarray(u_prev, dtype=float).reshape(-1)
+            self._u = self._u_prev if u is None else np.asarray(u, dtype=float).reshape(-1)
+        elif u is not None:
+            self._u = np.asarray(u, dtype=float).reshape(-1)
+        y = np.asarray(y, dtype=float).reshape(-1)
+        if y.size != self.est.ny:
+            raise ValueError(f"y has {y.size} entries; measured outputs are {list(self.est.measured)}")
+        ok = np.isfinite(y)
+        k = self._run["k"]
+        _, _, info = self.est._advance(self._run, self._u_prev, self._u, np.where(ok, y, 0.0), ok.astype(float),
+                                       float(dt), f"online sample {k}")
+        info["e"] = np.where(ok, info["e"], np.nan)
+        self._info = info
+        return self._run["x"].copy()
+
+    @property
+    def x(self) -> np.ndarray:
+        """Current estimate (copy)."""
+        return self._run["x"].copy()
+
+    @property
+    def P(self) -> np.ndarray:
+        """Current covariance (copy; see :class:`MHE` for what it is)."""
+        return self._run["P"].copy()
+
+    @property
+    def info(self) -> dict:
+        """Diagnostics of the last update (innovation ``e``, ``nis``, ``ll``, ``x_pred``, ``P_pred``, ...)."""
+        return dict(self._info)
