@@ -278,3 +278,17 @@ def test_correlated_measurement_noise_and_partial_rows_equal_kf():
     kf = cs.KF(dm, Q, R).filter(data, prior)
     res = cs.MHE(dm, Q, R, options={"horizon": 3, "solver": "rti"}).filter(data, prior)
     np.testing.assert_allclose(res.x, kf.x, atol=1e-8)
+
+
+def test_irregular_time_stamps_equal_kf():
+    m = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    dm = cs.discretize(m, 0.5, "rk4")
+    rng = np.random.default_rng(21)
+    t = np.cumsum(rng.uniform(0.2, 1.0, 80))
+    tr = cs.simulate(m, m.states(), t, {"delta": 0.1 * np.sign(np.sin(2 * np.pi * t / 20.0))})
+    data = cs.measure(tr, m, {"psi": 0.01}, seed=rng)
+    prior = cs.Gaussian([0.0, 0.0], [1e-3, 1e-5])
+    kf = cs.KF(dm, Q_LIN, R_LIN).filter(data, prior)
+    for solver in ("ipopt", "rti"):
+        res = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 6, "solver": solver}).filter(data, prior)
+        np.testing.assert_allclose(res.x, kf.x, atol=1e-9)
