@@ -166,3 +166,17 @@ def test_bad_arguments(kwargs, match):
         cs.discretize(nomoto_first_order(), **kwargs)
     with pytest.raises(ValueError, match="fold length"):
         cs.discretize(nomoto_first_order(), 0.1).fold(0)
+
+
+def test_cvodes_step_drives_the_ekf():
+    """An adaptive-integrator discretisation (MX) works in the estimators like the explicit ones."""
+    m = nomoto_first_order()
+    t = np.arange(0.0, 100.0, 0.5)
+    truth = cs.simulate(m, m.states(), t, {"delta": 0.1 * np.sin(t / 10.0)})
+    data = cs.measure(truth, m, {"psi": 0.01}, seed=0)
+    prior = cs.Gaussian(m.states(), [1e-2, 1e-4])
+    adaptive = cs.EKF(cs.discretize(m, 0.5, method="cvodes"), Q=1e-8, R=1e-4).filter(data, prior)
+    fine = cs.EKF(cs.discretize(m, 0.5, method="rk4", substeps=20), Q=1e-8, R=1e-4).filter(data, prior)
+    np.testing.assert_allclose(adaptive.x, fine.x, atol=1e-7)
+    np.testing.assert_allclose(adaptive.P, fine.P, rtol=1e-6, atol=1e-12)
+    assert adaptive.loglik == pytest.approx(fine.loglik, rel=1e-7)

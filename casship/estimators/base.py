@@ -36,6 +36,17 @@ STEP_OUTPUTS = ["carry_next", "x", "P", "x_pred", "P_pred", "C", "e", "S", "nis"
 _CONSTANT_INPUTS = (6, 7, 8)   # p, Q, R: the same for every sample of a fold; all others are per sample
 
 
+_CHOL: dict[int, ca.Function] = {}
+
+
+def _chol_function(n: int) -> ca.Function:
+    """Cholesky factor as an SX Function, callable on MX (``ca.chol`` has no MX overload)."""
+    if n not in _CHOL:
+        S = ca.SX.sym("S", n, n)
+        _CHOL[n] = ca.Function(f"chol{n}", [S], [ca.chol(S)], ["S"], ["L"])
+    return _CHOL[n]
+
+
 @dataclass(frozen=True)
 class Health:
     """NIS-based divergence monitor of a filter run.
@@ -292,7 +303,7 @@ class Estimator:
     @staticmethod
     def gaussian_terms(e, S, mask):
         """NIS and log-likelihood of a masked innovation."""
-        L = ca.chol(S)          # upper triangular, S = L' L
+        L = ca.chol(S) if isinstance(S, ca.SX) else _chol_function(S.shape[0])(S)   # upper, S = L' L
         z = ca.solve(L.T, e)
         nis = ca.dot(z, z)
         logdet = 2 * ca.sum1(ca.log(ca.diag(L)))
