@@ -88,11 +88,36 @@ def machine_info() -> dict:
             "cpu_count": os.cpu_count(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
 
 
+START, END = "<!-- results: written by python -m benchmarks --markdown -->", "<!-- end of results -->"
+
+
+def results_markdown(rows: list[dict], info: dict, quick: bool, command: str) -> str:
+    """The results section: command, machine, table."""
+    return (f"{START}\n\nMeasured {info['date_utc']} UTC with `{command}`"
+            + (" (quick sizes)" if quick else "") + " on:\n\n"
+            f"- CPU: {info['cpu']}, {info['cpu_count']} logical CPUs ({info['platform']})\n"
+            f"- Python {info['python']}, CasADi {info['casadi']}, NumPy {info['numpy']}, SciPy {info['scipy']}\n\n"
+            + format_table(rows) + f"\n\n{END}")
+
+
+def write_markdown(path: Path, section: str) -> None:
+    """Replace the results section of ``path`` (between the markers), or append it."""
+    text = path.read_text() if path.exists() else "# Benchmarks\n\n"
+    if START in text and END in text:
+        head, rest = text.split(START, 1)
+        text = head + section + rest.split(END, 1)[1]
+    else:
+        text = text.rstrip() + "\n\n" + section + "\n"
+    path.write_text(text)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
     parser.add_argument("--json", default=None, help="write rows and machine description to this file")
     parser.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")
+    parser.add_argument("--markdown", default=None,
+                        help="write the table and machine into the results section of this Markdown page")
     args = parser.parse_args(argv)
     try:
         names = discover(args.only)
@@ -109,6 +134,11 @@ def main(argv: list[str] | None = None) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(json.dumps({"machine": info, "quick": args.quick, "rows": rows}, indent=2, default=str))
         print(f"rows written to {out}")
+    if args.markdown:
+        command = "python -m benchmarks" + (" --quick" if args.quick else "") + \
+            (f" --only {' '.join(args.only)}" if args.only else "")
+        write_markdown(Path(args.markdown), results_markdown(rows, info, args.quick, command))
+        print(f"results section written to {args.markdown}")
     return 1 if any(r.get("error") for r in rows) else 0
 
 

@@ -68,3 +68,15 @@ def test_command_writes_json(tmp_path, capsys):
     assert "| benchmark | casship [s]" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         runner.main(["--only", "no_such_topic"])
+
+
+def test_markdown_results_section_is_replaced_in_place(tmp_path):
+    page = tmp_path / "benchmarks.md"
+    page.write_text(f"# B\n\nintro\n\n{runner.START}\nold table\n{runner.END}\n\nnotes stay\n")
+    info = runner.machine_info()
+    rows = [benchmarks.row("x", 1.0, "p", 2.0, "ok")]
+    runner.write_markdown(page, runner.results_markdown(rows, info, False, "python -m benchmarks"))
+    text = page.read_text()
+    assert "old table" not in text and "| x | 1 | p | 2 | 2 | ok |" in text
+    assert text.startswith("# B\n\nintro") and text.rstrip().endswith("notes stay")
+    assert info["cpu"] in text and f"CasADi {info['casadi']}" in text

@@ -10,6 +10,7 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
     p.add_argument("--json", default=None, help="write rows and machine description to this JSON file")
     p.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")
+    p.add_argument("--markdown", default=None, help="write the results section of this Markdown page")
     p.set_defaults(func=run)
 
 
@@ -32,4 +33,6 @@ def run(args) -> int:
     argv = (["--quick"] if args.quick else []) + (["--json", args.json] if args.json else [])
     if args.only:
         argv += ["--only", *args.only]
+    if args.markdown:
+        argv += ["--markdown", args.markdown]
     return runner.main(argv)
