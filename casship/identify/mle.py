@@ -22,6 +22,8 @@ from .result import FitResult, finish
 
 __all__ = ["MLEProblem", "default_prior"]
 
+CHUNK = 200  # samples per folded chunk of a record
+
 
 def _as_records(datasets) -> list[Dataset]:
     records = [datasets] if isinstance(datasets, Dataset) else list(datasets)
@@ -187,11 +189,20 @@ class MLEProblem:
                 for e, v in x0_items:
                     mean[e.index] = v
                 carry = ca.vertcat(*mean, ca.MX(carry[self.model.nx:]))
-            gate = np.full((1, n), np.inf)
-            args = [carry] + [arr[s] for s in STEP_INPUTS[1:6]] + [p, Q, R, gate] + est.extra_inputs(n, rng)
-            out = est.fold(n)(*args)
-            nll = nll - ca.sum2(out[9])
-            rec_out += [out[6], out[7]]
+            extra = est.extra_inputs(n, rng)
+            e_parts, S_parts = [], []
+            # chunks of one cached fold: derivative graphs are built per chunk length, not per record length
+            for start in range(0, n, CHUNK):
+                sl = slice(start, min(start + CHUNK, n))
+                m_ = sl.stop - sl.start
+                args = ([carry] + [arr[s][:, sl] for s in STEP_INPUTS[1:6]] + [p, Q, R, np.full((1, m_), np.inf)]
+                        + [x[:, sl] for x in extra])
+                out = est.fold(m_)(*args)
+                carry = out[0][:, -1]
+                nll = nll - ca.sum2(out[9])
+                e_parts.append(out[6])
+                S_parts.append(out[7])
+            rec_out += [ca.horzcat(*e_parts), ca.horzcat(*S_parts)]
         self._nll = ca.Function("nll", [theta], [nll], ["theta"], ["nll"])
         self._grad = ca.Function("nll_grad", [theta], [ca.gradient(nll, theta)], ["theta"], ["g"])
         self._records_fn = ca.Function("records", [theta], rec_out)
@@ -293,12 +304,16 @@ class MLEProblem:
         if information not in ("fisher", "hessian"):
             raise ValueError(f"information must be 'fisher' or 'hessian', got {information!r}")
         theta = ca.vertcat(*sp.natural(z))
-        fisher = self.fisher_expr(z, theta) if "fisher" in (hessian, information) else None
+        curv = {"fisher": self.fisher_expr(z, theta) if "fisher" in (hessian, information) else None}
+        if "exact" in (hessian,) or information == "hessian":
+            # forward-over-reverse directional derivatives along the unit vectors: the dense Hessian
+            # without a sparsity sweep through the whole record
+            H = ca.jtimes(ca.gradient(f, z), z, ca.MX.eye(len(sp)))
+            curv["exact"] = curv["hessian"] = 0.5 * (H + H.T)
         z_opt, st, seconds = ipopt_solve(f, z, sp.guess_z(guess), lbz, ubz,
-                                         hessian="custom" if hessian == "fisher" else hessian,
-                                         hess_f=fisher, options=options, name=self.method)
-        mat = fisher if information == "fisher" else ca.hessian(f, z)[0]
-        info = np.asarray(ca.Function("nll_information", [z], [mat])(z_opt))
+                                         hessian="limited-memory" if hessian == "limited-memory" else "custom",
+                                         hess_f=curv.get(hessian), options=options, name=self.method)
+        info = np.asarray(ca.Function("nll_information", [z], [curv[information]])(z_opt))
         return self._result(z_opt, info, st, seconds)
 
     def _result(self, z_opt, info, st, seconds) -> FitResult:
