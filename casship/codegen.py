@@ -33,7 +33,8 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-__all__ = ["CFiles", "generate_c", "export_estimator", "write_harness", "compile_c", "read_harness_output"]
+__all__ = ["CFiles", "generate_c", "export_estimator", "export_mhe_rti", "write_harness", "compile_c",
+           "read_harness_output"]
 
 
 @dataclass(frozen=True)
@@ -183,6 +184,39 @@ def export_estimator(estimator, directory, name: str | None = None, p=None) -> C
     data = files.source.parent / f"{name}_data.h"
     data.write_text(text)
     return CFiles(files.name, files.source, files.header, files.inputs, files.outputs, data)
+
+
+def export_mhe_rti(mhe, directory, name: str | None = None) -> CFiles:
+    """Export the real-time-iteration step of a moving-horizon estimator's window as C.
+
+    The exported function is ``NAME(z, p) -> z_next``: one Gauss-Newton step of the window problem
+    of :class:`casship.MHE` (horizon ``N`` = the estimator's ``horizon`` option), solving the
+    equality-constrained KKT system with a sparse QR factorisation (what ``solver="rti"`` does
+    when no bound is active). The layouts (column-major throughout):
+
+    * ``z``: for each stage ``j = 0 .. N-1`` the state ``x_j`` (nx) and whitened process noise
+      ``v_j`` (nv), then ``x_N``;
+    * ``p``: ``xbar`` (nx, arrival-cost mean), ``W`` (nx x nx, arrival-cost whitening
+      ``P^-1/2``), ``U`` (nu x N+1), ``U_prev`` (nu x N), ``Y`` (ny x N+1, 0 where missing),
+      ``M`` (ny x N+1 mask), ``dt`` (1 x N), the model parameters (np).
+
+    The arrival cost of the next window comes from the EKF step running alongside the MHE, which
+    :func:`export_estimator` exports (``mhe.step_function``). Bounds on states or noise need the QP
+    solver and are not part of this export.
+    """
+    if type(mhe).__name__ != "MHE" or not hasattr(mhe, "_window"):
+        raise TypeError(f"export_mhe_rti needs a casship.MHE, got {type(mhe).__name__}")
+    N = int(mhe.options["horizon"])
+    window = mhe._window(N, "rti")
+    if window.gn_step is None:
+        raise ValueError("this MHE window has no Gauss-Newton step to export")
+    name = _check_name(name or f"mhe_rti_step_{N}")
+    m = mhe.model
+    title = (f"{name}: MHE real-time-iteration step, model '{m.name}', horizon N = {N} "
+             f"(nx = {m.nx}, nv = {mhe.nv}, nu = {m.nu}, ny = {mhe.ny}, np = {m.np}; "
+             f"measured {', '.join(mhe.measured)}). z = [x_0 v_0 ... x_N-1 v_N-1 x_N]; "
+             "p = [xbar, W, U, U_prev, Y, M, dt, params]")
+    return generate_c(window.gn_step.fun, directory, name, title=title)
 
 
 HARNESS = r"""/* Test harness for {name}: reads input sets from stdin, prints the outputs.

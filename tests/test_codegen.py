@@ -123,3 +123,32 @@ def test_the_onboard_loop_in_the_docs_compiles_and_runs(tmp_path, monkeypatch):
                     flags=("-O2", "-ffp-contract=off", "-std=c99", "-Wall", "-Werror", f"-I{tmp_path / 'build'}"))
     out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout
     assert out.startswith("psi = ") and "nan" not in out
+
+
+@needs_gcc
+def test_compiled_mhe_rti_step_equals_python(tmp_path):
+    from casship.codegen import export_mhe_rti
+
+    m = cs.models.nomoto_first_order()
+    mhe = cs.MHE(cs.discretize(m, 0.5), Q=1e-6, R=1e-4, options={"horizon": 8, "solver": "rti"})
+    files = export_mhe_rti(mhe, tmp_path)
+    assert files.name == "mhe_rti_step_8" and "horizon N = 8" in files.header.read_text()
+    exe = compile_c([write_harness(files), files.source], tmp_path / "mhe_harness")
+    fun = mhe._window(8, "rti").gn_step.fun
+    nz, npar = fun.size1_in(0), fun.size1_in(1)
+    rng = np.random.default_rng(4)
+    sets = []
+    for _ in range(5):
+        z = rng.normal(scale=0.05, size=nz)
+        xbar = rng.normal(scale=0.05, size=m.nx)
+        W = np.diag(1.0 / rng.uniform(0.01, 0.1, m.nx))
+        rest = npar - m.nx - m.nx**2 - m.np
+        data = rng.uniform(0.0, 1.0, rest)
+        sets.append(np.concatenate([z, xbar, W.ravel(order="F"), data, m.params()]))
+    text = "\n".join(" ".join(f"{v:.17g}" for v in s) for s in sets)
+    out = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=True).stdout
+    for s, (c,) in zip(sets, read_harness_output(out, files)):
+        py = np.array(fun(s[:nz], s[nz:])).ravel()
+        np.testing.assert_allclose(c.ravel(), py, rtol=1e-12, atol=1e-12 * np.abs(py).max())
+    with pytest.raises(TypeError, match="needs a casship.MHE"):
+        export_mhe_rti(heading_ekf(), tmp_path)
