@@ -231,7 +231,7 @@ def _plots(out: Path, raw, smoothed, aug_runs, checks):
     plt.close(fig)
 
 
-def run(out: Path, quick: bool = False, workers=None, scheduler=None, seed: int = 0, hessian: str = "exact") -> dict:
+def run(out: Path, quick: bool = False, workers=None, scheduler=None, seed: int = 0, hessian: str = "fisher") -> dict:
     out = Path(out)
     duration = 500.0 if quick else 1200.0
     stages = ["truth model", "raw data", "smoothing", "augmented EKF", "maximum likelihood", "validation"]

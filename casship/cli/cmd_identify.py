@@ -42,8 +42,8 @@ def register(sub) -> None:
                    help="states whose initial values are estimated per record a,b,...")
     p.add_argument("--decimate", type=int, default=1, help="keep every k-th sample (default 1)")
     p.add_argument("--shooting", default="single", choices=("single", "multiple"), help="oe: shooting")
-    p.add_argument("--hessian", default="exact", choices=("exact", "fisher", "limited-memory"),
-                   help="curvature used by IPOPT (mle; default exact)")
+    p.add_argument("--hessian", default="fisher", choices=("fisher", "exact", "limited-memory"),
+                   help="curvature used by IPOPT (mle; default fisher)")
     p.add_argument("--plot", default=None, help="PNG of measured vs predicted outputs")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of a table")
     p.set_defaults(func=run)
