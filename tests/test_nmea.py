@@ -219,3 +219,21 @@ def test_hdg_without_variation_is_magnetic_and_vtg_in_km_per_h():
     assert data["sog"][0] == pytest.approx(18.52 / 3.6)
     assert data["cog"][0] == pytest.approx(np.radians(10.0))
     assert np.isnan(data["sog"][1]) and np.isnan(data["psi_mag"][1])
+
+
+def test_data_import_guide_runs_as_written(tmp_path, monkeypatch):
+    """The Python blocks of docs/data.md, run in order (they write their own small files)."""
+    import re
+    from pathlib import Path
+
+    page = Path(__file__).resolve().parents[1] / "docs" / "data.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), re.S)
+    assert len(blocks) >= 3
+    monkeypatch.chdir(tmp_path)
+    namespace: dict = {}
+    for block in blocks:
+        exec(compile(block, str(page), "exec"), namespace)
+    # the guide's EKF recovers the boat's 2 m/s and its final course (0.3 deg/s for 119 s)
+    result = namespace["result"]
+    assert abs(result["U"][-1] - 2.0) < 0.1
+    assert abs(np.degrees(result["chi"][-1]) - 0.3 * 119) < 2.0
