@@ -18,23 +18,6 @@ def oscillator(k: float = 0.5, c: float = 0.3):
     return b.build()
 
 
-def pendulum_heading():
-    """Nonlinear model with an angle state: heading driven by a rate with sinusoidal dynamics."""
-    b = cs.ModelBuilder("heading_pendulum")
-    psi, r = b.state("psi", angle=True), b.state("r")
-    d = b.input("delta")
-    a = b.param("a", 0.2)
-    b.ode(psi=r, r=-a * r - 0.05 * np.sin(1.0) * ca_sin(psi) + 0.1 * d + b.noise("w_r"))
-    b.output("psi", psi)
-    return b.build()
-
-
-def ca_sin(x):
-    import casadi as ca
-
-    return ca.sin(x)
-
-
 def linear_record(model, dt=0.1, n=300, q=0.05, r=(0.04, 0.09), seed=1):
     """Simulate a linear model with held process noise and measure its outputs."""
     rng = np.random.default_rng(seed)

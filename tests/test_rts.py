@@ -88,3 +88,15 @@ def test_rts_angle_wrap():
 def test_rts_rejects_bad_input(case):
     with pytest.raises(TypeError, match="FilterResult"):
         cs.rts_smooth(case[3])
+
+
+def test_compiled_backward_pass_equals_interpreted(case):
+    m, dm, traj, data, prior = case
+    res = cs.KF(dm, Q, R).filter(data.slice(0, 257), prior)      # one fold piece of 256 steps
+    try:
+        fast = cs.rts_smooth(res, jit=True)
+    except RuntimeError as exc:                                   # no C compiler here
+        pytest.skip(str(exc))
+    ref = cs.rts_smooth(res)
+    np.testing.assert_allclose(fast.x, ref.x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(fast.P, ref.P, rtol=1e-12, atol=1e-13)

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..angles import wrap_sym
 from .._fast import BufferedCall
-from .base import FilterResult, fold_in_pieces
+from .base import FilterResult, compile_function, fold_in_pieces
 
 __all__ = ["rts_smooth"]
 
@@ -42,22 +42,27 @@ def _backward_step(nx: int, angles: tuple) -> ca.Function:
         d = ca.vertcat(*[wrap_sym(d[i]) if angles[i] else d[i] for i in range(nx)])
     J = ca.solve(0.5 * (Pp1 + Pp1.T), C.T).T
     xs = x + J @ d
-    Ps = P + J @ (Ps1 - Pp1) @ J.T
-    Ps = 0.5 * (Ps + Ps.T)
+    DJ = (0.5 * ((Ps1 - Pp1) + (Ps1 - Pp1).T)) @ J.T
+    rows = [[None] * nx for _ in range(nx)]
+    for i in range(nx):                      # J D J' is symmetric: upper triangle only
+        for j in range(i, nx):
+            rows[i][j] = rows[j][i] = P[i, j] + ca.dot(J[i, :].T, DJ[:, j])
+    Ps = ca.vertcat(*[ca.horzcat(*r) for r in rows])
     vec = lambda a: ca.reshape(a, -1, 1)  # noqa: E731
     return ca.Function("rts_step", [carry, x, Pv, xp1, Ppv, Cv], [ca.vertcat(xs, vec(Ps)), xs, vec(Ps), vec(J)],
                        ["carry", "x", "P", "x_pred_next", "P_pred_next", "C_next"], ["carry_next", "xs", "Ps", "J"])
 
 
 @lru_cache(maxsize=256)
-def _backward_fold(nx: int, angles: tuple, n: int) -> BufferedCall:
-    return BufferedCall(_backward_step(nx, angles).mapaccum(n))
+def _backward_fold(nx: int, angles: tuple, n: int, jit: bool = False) -> BufferedCall:
+    fold = _backward_step(nx, angles).mapaccum(n)
+    return BufferedCall(compile_function(fold) if jit else fold)
 
 
 FOLD_CHUNK = 512
 
 
-def rts_smooth(result: FilterResult) -> FilterResult:
+def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
     """Fixed-interval (RTS) smoothing of a filter run.
 
     Parameters
@@ -65,6 +70,9 @@ def rts_smooth(result: FilterResult) -> FilterResult:
     result : FilterResult
         Output of ``KF``, ``EKF`` (discrete or continuous-discrete), ``UKF`` or ``EnKF``
         ``.filter``; its predictions and cross-covariances ``C`` drive the backward pass.
+    jit : bool
+        Compile the backward fold to C with the system compiler (one-off cost per fold length,
+        cached for the session).
 
     Returns
     -------
@@ -98,7 +106,7 @@ def rts_smooth(result: FilterResult) -> FilterResult:
     C = flat(result.C[:0:-1]).T
     carry0 = np.concatenate([result.x[-1], result.P[-1].reshape(-1, order="F")])
     step = _backward_step(nx, angles)
-    _, xs, Ps, _ = fold_in_pieces(lambda size: _backward_fold(nx, angles, size), step,
+    _, xs, Ps, _ = fold_in_pieces(lambda size: _backward_fold(nx, angles, size, bool(jit)), step,
                                   [carry0, x, P, xp, Pp, C], n - 1, range(1, 6), FOLD_CHUNK)
     xs = np.vstack([xs.T[::-1], result.x[-1:]])
     Ps = Ps.T.reshape(n - 1, nx, nx).transpose(0, 2, 1)[::-1]
