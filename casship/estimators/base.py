@@ -51,8 +51,11 @@ def _chol_function(n: int) -> ca.Function:
 class Health:
     """NIS-based divergence monitor of a filter run.
 
-    A window of ``window`` samples is flagged when its summed NIS lies outside the two-sided
-    ``1 - alpha`` chi-square interval for the number of scalar measurements in it.
+    A window of ``window`` samples is flagged when its summed NIS (of the accepted updates) lies
+    outside the two-sided ``1 - alpha`` chi-square interval for the number of scalar measurements
+    in it, or when the innovation gate rejected most of its measured samples (more than half and
+    at least three): a filter that rejects everything it is told has lost track, even though its
+    accepted NIS looks fine.
     """
 
     window: int
@@ -61,6 +64,7 @@ class Health:
     window_start: np.ndarray     # first row of each window
     nis_sum: np.ndarray
     dof: np.ndarray
+    rejected: np.ndarray = None  # (n_windows,) gated samples per window
 
     @property
     def ok(self) -> bool:
@@ -72,8 +76,8 @@ class Health:
         if not self.ok:
             first = int(self.window_start[np.argmax(self.flagged)])
             raise RuntimeError(f"filter health check failed: {int(self.flagged.sum())} of {self.flagged.size} "
-                               f"NIS windows outside the {100 * (1 - self.alpha):.0f}% chi-square interval "
-                               f"(first at row {first})")
+                               f"windows flagged (NIS outside the {100 * (1 - self.alpha):.0f}% chi-square "
+                               f"interval or most samples rejected by the gate; first at row {first})")
 
 
 @dataclass(frozen=True)
@@ -140,14 +144,18 @@ class FilterResult:
         n = self.nis.size // window
         if n == 0:
             empty = np.zeros(0)
-            return Health(window, alpha, empty.astype(bool), empty.astype(int), empty, empty)
+            return Health(window, alpha, empty.astype(bool), empty.astype(int), empty, empty, empty.astype(int))
         used = ~self.rejected
-        nis = np.where(used, self.nis, 0.0)[: n * window].reshape(n, window).sum(axis=1)
-        dof = np.where(used, self.n_measured, 0)[: n * window].reshape(n, window).sum(axis=1)
+        blocks = lambda a: a[: n * window].reshape(n, window).sum(axis=1)  # noqa: E731
+        nis = blocks(np.where(used, self.nis, 0.0))
+        dof = blocks(np.where(used, self.n_measured, 0))
         lo = stats.chi2.ppf(alpha / 2, np.maximum(dof, 1))
         hi = stats.chi2.ppf(1 - alpha / 2, np.maximum(dof, 1))
-        flagged = (dof > 0) & ((nis < lo) | (nis > hi))
-        return Health(window, alpha, flagged, np.arange(n) * window, nis, dof)
+        measured = self.n_measured > 0
+        rejected = blocks((self.rejected & measured).astype(int))
+        lost = (rejected >= 3) & (2 * rejected > blocks(measured.astype(int)))
+        flagged = ((dof > 0) & ((nis < lo) | (nis > hi))) | lost
+        return Health(window, alpha, flagged, np.arange(n) * window, nis, dof, rejected)
 
     def to_dataset(self) -> Dataset:
         """Estimates and their standard deviations (``<state>_std``) as a :class:`Dataset`."""
