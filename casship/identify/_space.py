@@ -22,6 +22,7 @@ __all__ = ["Entry", "ParamSpace", "ipopt_solve", "HESSIANS"]
 
 HESSIANS = ("exact", "limited-memory", "custom")
 _OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+VAR_FLOOR = 1e-10  # lower bound of an estimated variance, relative to its starting value
 
 
 @dataclass(frozen=True)
@@ -88,7 +89,8 @@ class ParamSpace:
                     raise ValueError(f"bounds of {e.name!r} must be (lower, upper) with lower < upper, got {b}")
                 lo, hi = max(lo, float(b[0])), min(hi, float(b[1]))
             if e.log:
-                lo = max(lo, 0.0)
+                # a variance the data cannot tell from zero stops at this floor (reported as at a bound)
+                lo = max(lo, VAR_FLOOR * guess[e.name])
             s = float(scale.get(e.name, 0.0))
             if e.name in scale and not (np.isfinite(s) and s > 0):
                 raise ValueError(f"scale of {e.name!r} must be positive, got {scale[e.name]}")
@@ -184,7 +186,7 @@ def ipopt_solve(f, z, z0, lbz, ubz, *, g=None, lbg=None, ubg=None, hessian: str 
     if hessian not in HESSIANS:
         raise ValueError(f"unknown hessian {hessian!r}; use one of {HESSIANS}")
     opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": 1e-9,
-            "ipopt.max_iter": 300,
+            "ipopt.acceptable_tol": 1e-5, "ipopt.acceptable_iter": 5, "ipopt.max_iter": 300,
             "ipopt.hessian_approximation": "exact" if hessian == "custom" else hessian}
     if hessian == "custom":
         if g is not None:
