@@ -12,7 +12,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..data import Dataset, Gaussian
+from ..data import Dataset, Gaussian, as_cov
 from ..discretize import discretize
 from ..model import Model, Variable
 from .base import FilterResult
@@ -134,8 +134,6 @@ def augmented_ekf(model: Model, params: Sequence[str], data: Dataset, *, dt: flo
         return arr.astype(float)
 
     q = per_param(q_params, "q_params")
-    from ..data import as_cov
-
     Qm = as_cov(Q, model.nw, "Q", model.noise_names)
     Qa = np.zeros((aug.nw, aug.nw))
     Qa[: model.nw, : model.nw] = Qm

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from scipy import stats
 
 from .._fast import BufferedCall
 from ..data import Gaussian
@@ -147,8 +146,7 @@ class EnKF(Estimator):
         a[5][0] = dt
         if p is not None:
             a[6][:] = m.params(p)
-        gate = self.options["gate"]
-        a[9][0] = stats.chi2.ppf(gate, ok.sum()) if gate is not None and ok.any() else np.inf
+        a[9][0] = self._gate_threshold(int(ok.sum()))
         nw, nv = self._draw_size()
         z = rng.standard_normal(nw + nv)
         a[10][:], a[11][:] = z[:nw], z[nw:]

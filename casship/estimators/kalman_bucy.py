@@ -5,7 +5,8 @@ Between two samples the estimate and the covariance follow
     dx/dt = f(x, u, p, 0) + L (y - h(x, u, p)),      L = P H' Rc^-1
     dP/dt = A P + P A' - P H' Rc^-1 H P + G Qc G'
 
-with the latest sample ``y`` held over the interval that it ends, ``A, G, H`` the exact
+with the latest sample ``y`` held over the interval that it ends (integrated in sub-steps, by
+default with a splitting that is stable for any prior, see :class:`KalmanBucy`), ``A, G, H`` the exact
 Jacobians (for a linear model the classical Kalman-Bucy filter ``A x + B u + L (y - C x)``),
 ``Qc`` the power spectral density of ``w`` and ``Rc = R * dt`` the spectral density that
 corresponds to the sampled measurement covariance ``R`` averaged over the nominal step ``dt``
@@ -22,7 +23,7 @@ __all__ = ["KalmanBucy"]
 
 
 class KalmanBucy(Estimator):
-    """Kalman-Bucy filter integrated between the samples of a record (RK4 sub-steps).
+    """Kalman-Bucy filter integrated between the samples of a record.
 
     Parameters are those of every estimator, with ``Q`` the power spectral density of ``w``
     and ``R`` the covariance of a *sampled* measurement (converted to ``Rc = R * dmodel.dt``).
