@@ -1,7 +1,6 @@
 """NMEA 0183 reader, WGS-84 local frame, CSV with units; a real GNSS log round trip through NMEA."""
 from __future__ import annotations
 
-import warnings
 from datetime import datetime, timedelta, timezone
 
 import numpy as np
