@@ -236,3 +236,13 @@ def test_data_import_guide_runs_as_written(tmp_path, monkeypatch):
     result = namespace["result"]
     assert abs(result["U"][-1] - 2.0) < 0.1
     assert abs(np.degrees(result["chi"][-1]) - 0.3 * 119) < 2.0
+
+
+def test_ais_and_proprietary_sentences_are_checked_and_counted_not_used():
+    ais = "!AIVDM,1,1,,B,177KQJ5000G?tO`K>RA1wUbN0TKH,0*5C"
+    log = GOOD + ais + "\n$PGRME,15.0,M,45.0,M,25.0,M*1C\n"
+    data = read_nmea(log)
+    assert data.meta["nmea"]["ignored"] == {"VDM": 1, "GRME": 1}
+    with pytest.raises(NMEAError, match="checksum") as info:
+        read_nmea(GOOD + ais.replace("*5C", "*5D") + "\n")
+    assert info.value.line_number == 6

@@ -213,6 +213,20 @@ class _Report:
     superseded: dict = field(default_factory=dict)     # column -> count of overwritten values
 
 
+def _encapsulated_problem(text: str) -> str | None:
+    """Checksum check of a ``!``-sentence (AIS payloads use characters pynmea2 does not accept)."""
+    body, star, given = text[1:].partition("*")
+    if not re.match(r"^[A-Z]{5},", body):
+        return "encapsulated sentence without a talker/type field"
+    if star:
+        calc = 0
+        for ch in body:
+            calc ^= ord(ch)
+        if given.strip().upper() != f"{calc:02X}":
+            return f"checksum error (checksum does not match: {given.strip()} != {calc:02X})"
+    return None
+
+
 def _first_text(exc: Exception) -> str:
     """The message of a pynmea2 exception (whose first argument may be a tuple)."""
     arg = exc.args[0] if exc.args else str(exc)
@@ -303,6 +317,14 @@ def read_nmea(source, *, origin_deg: tuple[float, float] | None = None, skip_bad
             continue
         if require_checksum and not re.search(r"\*[0-9A-Fa-f]{2}$", text):
             bad(lineno, line, "no checksum")
+            continue
+        if text.startswith("!"):                 # encapsulated (AIS) sentences: checked, counted, not used
+            reason = _encapsulated_problem(text)
+            if reason:
+                bad(lineno, line, reason)
+            else:
+                kind = text[1:].split(",", 1)[0][2:] or "?"
+                report.ignored[kind] = report.ignored.get(kind, 0) + 1
             continue
         try:
             msg = pynmea2.parse(text)
