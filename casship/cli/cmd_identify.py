@@ -76,7 +76,13 @@ def load_record(path):
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"record {path} does not exist")
-    data = read_marin(path) if path.suffix.lower() == ".dat" else Dataset.from_csv(path)
+    if path.suffix.lower() == ".dat":
+        from ..angles import wrap
+
+        data = read_marin(path)
+        data = data.with_columns(psi=wrap(data["psi"]))   # the files hold a continuous heading
+    else:
+        data = Dataset.from_csv(path)
     data.meta.setdefault("name", path.name)
     return data
 
