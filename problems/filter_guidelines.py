@@ -40,7 +40,8 @@ WIND_MEANS = (0.0, 0.82, 1.64)      # m/s
 NOISE_STDS = (0.05, 0.10, 0.20)
 DATA_STD = 0.05                     # observation noise of the data in experiments 1 and 3
 STATES = ("x", "u", "y", "v", "psi", "r")      # seed 002 order
-FILTERS = ("UKF Q=0", "UKF tuned", "EnKF Q=0", "EnKF tuned", "KF", "EKF Q=0", "EKF tuned")
+FILTERS = ("UKF Q=0", "UKF tuned", "EnKF Q=0", "EnKF tuned", "KF", "EKF Q=0", "EKF tuned", "EnKF Q=1e-4")
+# "EnKF Q=1e-4": the EnKF with the UKF's tuned Q, to separate the filter from the choice of Q
 
 
 @dataclass(frozen=True)
@@ -176,6 +177,8 @@ def _filters(q_kf: dict):
             "EnKF Q=0": cs.EnKF(dm, zero, R, measured=list(STATES), options={"members": MEMBERS}),
             "EnKF tuned": cs.EnKF(dm, _q_channels(fm, Q_TUNED["EnKF"]), R, measured=list(STATES),
                                   options={"members": MEMBERS}),
+            "EnKF Q=1e-4": cs.EnKF(dm, _q_channels(fm, Q_TUNED["UKF"]), R, measured=list(STATES),
+                                   options={"members": MEMBERS}),
             "EKF Q=0": cs.EKF(dm, zero, R, measured=list(STATES)),
             "EKF tuned": cs.EKF(dm, _q_channels(fm, Q_TUNED["EKF"]), R, measured=list(STATES)),
         }
@@ -499,6 +502,9 @@ def findings(table: dict, times: dict) -> dict:
         f[f"tuned Q gain {name}"] = _mean_over_states(q0) / _mean_over_states(tuned)
         f[f"tuned Q states improved {name}"] = int(sum(g > 1 for g in gains.values()))
         f[f"tuned Q best gain {name}"] = float(max(gains.values()))
+    q0, alt = W[w2]["EnKF Q=0"], W[w2]["EnKF Q=1e-4"]
+    f["tuned Q gain EnKF with Q=1e-4"] = _mean_over_states(q0) / _mean_over_states(alt)
+    f["tuned Q states improved EnKF with Q=1e-4"] = int(sum(q0[s]["mean"] > alt[s]["mean"] for s in STATES))
     for name in ("UKF Q=0", "EnKF Q=0", "KF"):
         f[f"noise growth {name}"] = _mean_over_states(N[str(NOISE_STDS[-1])][name]) / \
             _mean_over_states(N[str(NOISE_STDS[0])][name])
@@ -536,10 +542,12 @@ def verdicts(f: dict) -> list[tuple[str, str, bool, str]]:
          f"{f['tuned Q best gain UKF']:.1f})",
          f["tuned Q states improved EnKF"] >= 1 and f["tuned Q best gain EnKF"] > f["tuned Q best gain UKF"],
          "The paper's EnKF Q (1e-2 on every state, 100 times the UKF's) lets the ensemble follow the "
-         "measurements: the positions and heading, where the wind error accumulates, improve strongly, but the "
-         "velocities become as noisy as the raw data. The UKF's much smaller Q (1e-4) is enough to absorb the "
-         "wind drift on this ship, so the UKF gains more; the paper's conclusion that the UKF depends more on "
-         "an accurate model is not supported by our numbers."),
+         "measurements, which helps where the wind error accumulates (positions, heading) and makes the "
+         "velocities nearly as noisy as the raw data. The UKF's much smaller Q (1e-4) absorbs the wind drift "
+         "without that cost. Given the UKF's Q, the EnKF improves "
+         f"{f['tuned Q states improved EnKF with Q=1e-4']}/6 states (x{f['tuned Q gain EnKF with Q=1e-4']:.2f} "
+         "overall, column 'EnKF Q=1e-4'): the difference lies in the choice of Q, not in the filter. The "
+         "paper's conclusion that the UKF depends more on an accurate model is not supported by our numbers."),
         ("Observation noise matters less than modelling error",
          f"data noise std 0.05 -> 0.20: UKF x{f['noise growth UKF Q=0']:.2f}, EnKF x{f['noise growth EnKF Q=0']:.2f}; "
          f"wind 0 -> {w} m/s: UKF x{f['wind growth UKF Q=0']:.2f}",
