@@ -15,6 +15,7 @@ from .estimators import MHE
 from .linear import linearize, to_iosys, trim
 from .identify import FitResult, MLEProblem, OutputErrorProblem
 from . import frames, identify, models
+from . import io  # data import: read_csv (units), read_nmea (NMEA 0183), read_marin
 
 __version__ = "0.1.0"
 
