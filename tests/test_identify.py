@@ -201,3 +201,15 @@ def test_coverage_large_monte_carlo():
             total += 1
     lo, hi = stats.binom.ppf([0.0005, 0.9995], total, 0.95)
     assert lo <= covered <= hi, f"{covered}/{total}"
+
+
+def test_identification_guide_examples_run(tmp_path, monkeypatch):
+    import re
+    from pathlib import Path
+
+    monkeypatch.chdir(tmp_path)
+    page = Path(__file__).resolve().parents[1] / "docs" / "identification.md"
+    namespace: dict = {}
+    for block in re.findall(r"```python\n(.*?)```", page.read_text(), re.S):
+        exec(compile(block, str(page), "exec"), namespace)
+    assert (tmp_path / "fit.json").exists() and (tmp_path / "fit.png").exists()
