@@ -50,6 +50,7 @@ class DiscreteModel:
         if options and method != "cvodes":
             raise ValueError(f"integrator options {sorted(options)} apply to method 'cvodes' only, not {method!r}")
         self.model, self.dt, self.method, self.substeps = model, dt, method, substeps
+        self._options = dict(options or {})
         self.symbolic = ca.MX if method == "cvodes" else ca.SX
         sym = self.symbolic
         x, u = sym.sym("x", model.nx), sym.sym("u", model.nu)
@@ -93,6 +94,10 @@ class DiscreteModel:
         opts.update(options)
         integ = ca.integrator(f"{m.name}_cvodes", "cvodes", ode, 0.0, 1.0, opts)
         return integ(x0=x, p=ca.vertcat(u, p, w, h))["xf"]
+
+    def __reduce__(self):
+        """Pickle as the recipe (model, dt, method, substeps, options); rebuilt on loading."""
+        return DiscreteModel, (self.model, self.dt, self.method, self.substeps, self._options or None)
 
     # -- convenience ----------------------------------------------------------------------------------
     @property

@@ -312,6 +312,14 @@ class Model:
     def _freeze(self):
         object.__setattr__(self, "_frozen", True)
 
+    def __reduce__(self):
+        """Pickle through the builder's declarations (for process pools), rebuilt on loading."""
+        import pickle
+
+        with ca.global_pickle_context():
+            data = pickle.dumps(vars(self._builder))
+        return _model_from_pickle, (data,)
+
     def _cached(self, key, make: Callable[[], object]):
         """A derived object (e.g. a discretisation or a mapped Function) built once per key."""
         if key not in self._cache:
@@ -414,3 +422,13 @@ class Model:
                 raise TypeError(f"with_outputs: output {out_name!r} must be given by a state name or a "
                                 f"callable builder -> expression, got {type(spec).__name__}")
         return b.build()
+
+
+def _model_from_pickle(data: bytes) -> Model:
+    import pickle
+
+    with ca.global_unpickle_context():
+        state = pickle.loads(data)
+    builder = ModelBuilder.__new__(ModelBuilder)
+    builder.__dict__.update(state)
+    return Model(builder)

@@ -285,3 +285,23 @@ def test_registered_models_are_documented_and_named(name):
     assert len(set(m.state_names + m.input_names + m.param_names + m.noise_names)) == \
         m.nx + m.nu + m.np + m.nw
     assert isinstance(repr(m), str) and m.name in repr(m)
+
+
+@pytest.mark.parametrize("name", ["nomoto1", "shi-taylor", "sog-cog-latlon"])
+def test_models_and_discretisations_pickle(name):
+    """Models travel to worker processes (casship.parallel) by pickling their declarations."""
+    import pickle
+
+    m = get_model(name)
+    m2 = pickle.loads(pickle.dumps(m))
+    assert (m2.name, m2.state_names, m2.param_names, m2.output_names) == \
+        (m.name, m.state_names, m.param_names, m.output_names)
+    x, u, p, w = random_point(m, np.random.default_rng(0))
+    np.testing.assert_array_equal(np.array(m2.f(x, u, p, w)), np.array(m.f(x, u, p, w)))
+    np.testing.assert_array_equal(np.array(m2.h_jac(x, u, p)[0]), np.array(m.h_jac(x, u, p)[0]))
+    with pytest.raises(AttributeError, match="immutable"):
+        m2.name = "x"
+    dm = cs.discretize(m, 0.2, method="rk4", substeps=3)
+    dm2 = pickle.loads(pickle.dumps(dm))
+    assert (dm2.dt, dm2.method, dm2.substeps) == (0.2, "rk4", 3)
+    np.testing.assert_array_equal(dm2.step(x, u, p, w), dm.step(x, u, p, w))
