@@ -13,7 +13,7 @@ Models compose through *ports*: named additive placeholders (for example a gener
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Callable, Iterable, Mapping, Sequence
 

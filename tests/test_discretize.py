@@ -101,15 +101,14 @@ def test_van_loan_double_integrator():
 
 
 def test_process_noise_uses_the_exact_linearisation():
-    m = oscillator(1.5)
-    dm = cs.discretize(m, 0.4)
-    Qd = dm.process_noise(0.2, m.states(), m.inputs())
-    A = np.array([[0.0, 1.0], [-1.5**2, 0.0]])
-    # direct quadrature of int_0^dt e^{As} G Qc G' e^{A's} ds
-    s = np.linspace(0.0, 0.4, 2001)
-    vals = np.array([scipy.linalg.expm(A * si) @ np.array([[0.0], [1.0]]) for si in s])[..., 0]
-    integrand = 0.2 * np.einsum("ki,kj->kij", vals, vals)
-    np.testing.assert_allclose(Qd, scipy.integrate.simpson(integrand, x=s, axis=0), rtol=1e-9, atol=1e-14)
+    """Undamped oscillator: e^{As} G = [sin(ws)/w, cos(ws)], so Qd is known in closed form."""
+    w, q, dt = 1.5, 0.2, 0.4
+    m = oscillator(w)
+    Qd = cs.discretize(m, dt).process_noise(q, m.states(), m.inputs())
+    s2 = np.sin(2 * w * dt) / (4 * w)
+    exact = q * np.array([[(dt / 2 - s2) / w**2, np.sin(w * dt) ** 2 / (2 * w**2)],
+                          [np.sin(w * dt) ** 2 / (2 * w**2), dt / 2 + s2]])
+    np.testing.assert_allclose(Qd, exact, rtol=1e-12)
 
 
 def test_rk4_linearisation_approximates_the_matrix_exponential():

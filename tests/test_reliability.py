@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 
 import casship as cs
-from casship.frames import ne_to_latlon, wgs84_radii
+from casship.frames import wgs84_radii
 from casship.models import sog_cog, sog_cog_latlon, tomera_kinematic
 
 Q_SOG = np.diag([1e-2, 1e-3])
