@@ -30,11 +30,19 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
         missing = [k for k in model.input_names if k not in inputs]
         if missing:
             raise ValueError(f"data has no column for input(s) {missing} of model {model.name!r}")
-        if len(inputs) != n:
-            raise ValueError(f"input data has {len(inputs)} rows, time grid has {n}")
-        if not np.allclose(inputs.t, t, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(t).max()))):
-            raise ValueError("input data time stamps differ from the simulation time grid t")
-        return inputs.matrix(model.input_names, finite=True, what="input")
+        U = inputs.matrix(model.input_names, finite=True, what="input")
+        tol = 1e-9 * max(1.0, float(np.abs(t).max()))
+        if len(inputs) == n and np.allclose(inputs.t, t, rtol=0.0, atol=tol):
+            U_out = U
+        else:
+            # another grid: hold each recorded value until the next record (zero-order hold)
+            if t[0] < inputs.t[0] - tol or t[-1] > inputs.t[-1] + tol:
+                raise ValueError(f"input data cover t = [{inputs.t[0]:g}, {inputs.t[-1]:g}] s, the simulation "
+                                 f"needs [{t[0]:g}, {t[-1]:g}] s")
+            rows = np.clip(np.searchsorted(inputs.t, t + tol, side="right") - 1, 0, len(inputs) - 1)
+            U_out = U[rows]
+        check_radians(model, U_out)
+        return U_out
     if isinstance(inputs, Mapping):
         unknown = set(inputs) - set(model.input_names)
         if unknown:
@@ -141,7 +149,8 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     t : array_like (N,)
         Strictly increasing time grid [s]; the result is sampled on it.
     inputs : array (N, nu), mapping name -> array or constant, Dataset, or callable
-        Inputs held constant over each interval (zero-order hold). A callable
+        Inputs held constant over each interval (zero-order hold). A Dataset may have its own
+        time stamps covering ``t``: each grid point then takes the latest recorded value. A callable
         ``inputs(t, x) -> u`` is evaluated at every grid point (closed loop).
     p : array_like or mapping, optional
         Parameters (nominal by default).

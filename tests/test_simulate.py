@@ -112,8 +112,15 @@ def test_dataset_inputs():
     a = cs.simulate(m, m.states(), t, data)
     b = cs.simulate(m, m.states(), t, {"delta": 0.1})
     np.testing.assert_array_equal(a.x, b.x)
-    with pytest.raises(ValueError, match="time stamps differ"):
+    with pytest.raises(ValueError, match=r"input data cover t = \[0, 9.9\] s, the simulation needs \[1, 10.9\] s"):
         cs.simulate(m, m.states(), t + 1.0, data)
+    # a record on its own (coarser, irregular) grid is held between its time stamps
+    t_log = np.array([0.0, 2.05, 5.0, 9.95])
+    log = cs.Dataset(t_log, {"delta": [0.1, -0.2, 0.05, 0.3]})
+    held = cs.simulate(m, m.states(), t, log)
+    expected = np.array([0.1, -0.2, 0.05, 0.3])[np.searchsorted(t_log, t + 1e-12, side="right") - 1]
+    np.testing.assert_array_equal(held["delta"], expected)
+    assert held["delta"][20] == 0.1 and held["delta"][21] == -0.2 and held["delta"][50] == 0.05
     with pytest.raises(ValueError, match=r"no column for input\(s\) \['delta'\]"):
         cs.simulate(m, m.states(), t, data.select(["other"]))
 
