@@ -14,7 +14,7 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap
-from ..data import Dataset, Gaussian, as_cov
+from ..data import Dataset, Gaussian
 from ..discretize import DiscreteModel
 from ..estimators.base import STEP_INPUTS, Estimator
 from ._space import ParamSpace, ipopt_solve
