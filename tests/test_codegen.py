@@ -12,12 +12,12 @@ from casship.estimators.base import STEP_INPUTS
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: C export not compiled")
 
 
-def heading_ekf(gate=None):
-    """EKF on the Shi et al. model with kinematics: angle output (wrapped residual), three rates."""
+def heading_ekf(gate=None, cls=None):
+    """EKF (or ``cls``) on the Shi et al. model with kinematics: angle output (wrapped residual)."""
     m = cs.models.shi_taylor().with_outputs(["u", "r", "psi"])
     dm = cs.discretize(m, 0.5, method="rk4", substeps=2)
-    return cs.EKF(dm, Q=np.diag([1e-4, 1e-4, 1e-6]), R={"u": 0.01, "r": 1e-5, "psi": 1e-4},
-                  options={"gate": gate})
+    return (cls or cs.EKF)(dm, Q=np.diag([1e-4, 1e-4, 1e-6]), R={"u": 0.01, "r": 1e-5, "psi": 1e-4},
+                           options={"gate": gate})
 
 
 def step_inputs(ekf, seed=0, n=12):
@@ -50,10 +50,11 @@ def python_outputs(fun, args):
 
 
 @needs_gcc
-@pytest.mark.parametrize("gate", [None, 0.999])
-def test_compiled_ekf_step_equals_python(tmp_path, gate):
-    ekf = heading_ekf(gate)
-    files = export_estimator(ekf, tmp_path, "ekf_step")
+@pytest.mark.parametrize("gate, cls", [(None, cs.EKF), (0.999, cs.EKF), (0.999, cs.UKF)],
+                         ids=["ekf", "ekf-gated", "ukf-gated"])
+def test_compiled_estimator_step_equals_python(tmp_path, gate, cls):
+    ekf = heading_ekf(gate, cls)
+    files = export_estimator(ekf, tmp_path, "est_step")
     exe = compile_c([write_harness(files), files.source], tmp_path / "harness")
     sets, res = step_inputs(ekf)
     text = "\n".join(" ".join(f"{v:.17g}" for v in np.concatenate([np.ravel(a, order="F") for a in args]))
