@@ -11,7 +11,23 @@ from .data import Dataset, Trajectory, check_time
 from .discretize import DiscreteModel, discretize
 from .model import Model
 
-__all__ = ["simulate", "measure", "input_matrix", "fold_steps"]
+__all__ = ["simulate", "measure", "input_matrix", "fold_steps", "IntegrationError"]
+
+
+class IntegrationError(RuntimeError):
+    """An integrator (CVODES) failed; ``status`` is its return flag, ``step`` the first step of the
+    block of steps in which it failed."""
+
+    def __init__(self, message: str, status: str, step: int):
+        super().__init__(message)
+        self.status, self.step = status, step
+
+
+def _status(exc: Exception) -> str:
+    import re
+
+    found = re.findall(r'returned "?([A-Za-z_]+)"?', str(exc))
+    return found[-1] if found else "unknown"
 
 
 def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | None:
@@ -119,7 +135,13 @@ def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
     blocks, x = [], x0
     for start in range(0, total, size):
         cols = slice(start, start + size)
-        X = np.asarray(fold(x, Uc[:, cols], p, Wc[:, cols], dtc[:, cols]))
+        try:
+            X = np.asarray(fold(x, Uc[:, cols], p, Wc[:, cols], dtc[:, cols]))
+        except RuntimeError as exc:
+            status = _status(exc)
+            raise IntegrationError(f"integration of {dmodel.model.name!r} ({dmodel.method}) failed in steps "
+                                   f"{start}..{min(start + size, steps) - 1}: solver status {status}",
+                                   status, start) from exc
         blocks.append(X)
         x = X[:, -1]
     return np.vstack([x0[None, :], np.hstack(blocks)[:, :steps].T])
@@ -193,7 +215,10 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
     if U is not None:
-        X = fold_steps(dmodel, x0, U, p, W, dt)
+        try:
+            X = fold_steps(dmodel, x0, U, p, W, dt)
+        except IntegrationError as exc:
+            raise IntegrationError(f"{exc} (from t = {t[exc.step]:g} s)", exc.status, exc.step) from exc
     else:
         X, U = _closed_loop(model, dmodel, x0, t, inputs, p, W, dt)
     if not np.all(np.isfinite(X)):

@@ -255,3 +255,14 @@ def test_divergence_is_reported():
     b.ode(x=x**2)
     with pytest.raises(FloatingPointError, match="diverged at t ="):
         cs.simulate(b.build(), [1.0], np.arange(0.0, 5.0, 0.1))
+
+
+def test_integrator_failure_names_the_solver_status():
+    from casship.simulate import IntegrationError
+
+    b = cs.ModelBuilder("blowup")
+    x = b.state("x")
+    b.ode(x=x**2)                                   # finite-time blow-up at t = 1 s
+    with pytest.raises(IntegrationError, match=r"'blowup' \(cvodes\) failed .*solver status CV_\w+") as info:
+        cs.simulate(b.build(), [1.0], np.arange(0.0, 5.0, 0.1), method="cvodes")
+    assert info.value.status.startswith("CV_") and isinstance(info.value, RuntimeError)
