@@ -134,6 +134,17 @@ class ModelBuilder:
         par = Parameter(name, unit, False, doc, value, lower, upper, source)
         return self._declare("param", par, self._params)
 
+    def param_as_state(self, name: str, *, doc: str = "") -> ca.SX:
+        """Turn the declared parameter ``name`` into a state (same symbol and unit; for augmented-state
+        estimation). Give it an equation with :meth:`ode`, e.g. a random walk ``b.noise(...)``."""
+        if self._kinds.get(name) != "param":
+            raise ValueError(f"param_as_state: {name!r} is not a declared parameter of {self.name!r}")
+        var = next(v for v in self._params if v.name == name)
+        self._params = [v for v in self._params if v.name != name]
+        self._kinds[name] = "state"
+        self._states.append(Variable(name, var.unit, False, doc or var.doc))
+        return self._symbols[name]
+
     def noise(self, name: str, *, unit: str = "", doc: str = "") -> ca.SX:
         """Declare a process-noise channel ``w`` (zero mean; covariance given to estimators)."""
         return self._declare("noise", Variable(name, unit, False, doc), self._noises)

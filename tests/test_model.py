@@ -305,3 +305,16 @@ def test_models_and_discretisations_pickle(name):
     dm2 = pickle.loads(pickle.dumps(dm))
     assert (dm2.dt, dm2.method, dm2.substeps) == (0.2, "rk4", 3)
     np.testing.assert_array_equal(dm2.step(x, u, p, w), dm.step(x, u, p, w))
+
+
+def test_param_as_state():
+    b = nomoto_builder().build().builder("nomoto_aug")
+    K = b.param_as_state("K")
+    b.ode(K=b.noise("w_K"))
+    m = b.build()
+    assert m.state_names == ("psi", "r", "K") and m.param_names == ("T",) and m.noise_names == ("w_r", "w_K")
+    assert m.state_vars[2].unit == "1/s"
+    xdot = np.array(m.f([0.0, 0.1, 0.08], [0.3], [25.0], [0.0, 0.01])).ravel()
+    np.testing.assert_allclose(xdot, [0.1, (0.08 * 0.3 - 0.1) / 25.0, 0.01], rtol=1e-15)
+    with pytest.raises(ValueError, match="'psi' is not a declared parameter"):
+        b.param_as_state("psi")
