@@ -2,7 +2,8 @@
 
 Problem: the Shi et al. (2009) response model (states ``u, v, r``, inputs rudder and propeller rate,
 all three states measured, as in the paper), Euler-discretised at 1 s as in the paper, simulated
-with process noise over a zig-zag-like rudder record; the seven sway/yaw parameters
+with process noise over a zig-zag-like rudder record with propeller-rate steps (so that the speed
+varies and ``b2`` and ``b4`` are separable); the seven sway/yaw parameters
 ``b1..b4, c1..c3`` are estimated from a guess 30 % off, with ``Q`` and ``R`` known.
 
 * casship: ``MLEProblem(EKF, data, free=...).solve()`` -- the negative log-likelihood is the EKF step
@@ -39,7 +40,8 @@ def make_data(n: int, seed: int = 0):
     t = np.arange(n) * DT
     delta = np.radians(20.0) * np.sign(np.sin(2 * np.pi * t / 140.0) + 1e-9)
     w = rng.standard_normal((n, 3)) * np.sqrt(Q_VAR)
-    tr = cs.simulate(model, model.states(u=8.0), t, {"delta": delta, "n": N_PROP}, method="euler", w=w)
+    n_prop = N_PROP * (1.0 + 0.25 * np.sign(np.sin(2 * np.pi * t / 500.0) + 1e-9))  # speed changes separate b2, b4
+    tr = cs.simulate(model, model.states(u=8.0), t, {"delta": delta, "n": n_prop}, method="euler", w=w)
     data = cs.measure(tr, model, dict(zip(("u", "v", "r"), np.sqrt(R_VAR))), seed=rng)
     return model, data
 
