@@ -51,15 +51,22 @@ def wgs84_radii(lat):
 def latlon_to_ne(lat, lon, lat0, lon0):
     """Local North/East [m] of ``lat, lon`` (rad) about the origin ``lat0, lon0`` (rad).
 
-    Uses the WGS-84 ellipsoid tangent plane (exact to millimetres over a few km); for long tracks
-    use a proper geodesic library.
+    Uses the WGS-84 ellipsoid tangent plane (second-order accurate: under a metre at 2 km from the
+    origin); for long tracks use a proper geodesic library. The longitude difference is taken on
+    the circle (across the date line). Works on CasADi symbols too (e.g. in a measurement model).
     """
+    lib = _lib(lat, lon)
     r_n, r_m = wgs84_radii(lat0)
+    if lib is ca:
+        dlon = ca.atan2(ca.sin(lon - lon0), ca.cos(lon - lon0))
+        return (lat - lat0) * r_m, dlon * r_n * np.cos(lat0)
     dlon = np.angle(np.exp(1j * (np.asarray(lon) - lon0)))
     return (np.asarray(lat) - lat0) * r_m, dlon * r_n * np.cos(lat0)
 
 
 def ne_to_latlon(north, east, lat0, lon0):
-    """Inverse of :func:`latlon_to_ne`."""
+    """Inverse of :func:`latlon_to_ne` (numbers or CasADi symbols)."""
     r_n, r_m = wgs84_radii(lat0)
+    if _lib(north, east) is ca:
+        return lat0 + north / r_m, lon0 + east / (r_n * np.cos(lat0))
     return lat0 + np.asarray(north) / r_m, lon0 + np.asarray(east) / (r_n * np.cos(lat0))

@@ -136,3 +136,14 @@ def test_body_kinematics_draws_the_exact_circle():
     np.testing.assert_allclose(traj["y"], y, atol=1e-6)
     np.testing.assert_allclose(traj["psi"], psi, atol=1e-12)
     assert m.output_names == ("x", "y", "psi") and list(m.angle_outputs) == [False, False, True]
+
+
+def test_tangent_plane_conversions_work_on_symbols():
+    s = ca.SX.sym("s", 2)
+    to_ne = ca.Function("to_ne", [s], [ca.vertcat(*frames.latlon_to_ne(s[0], s[1], LAT0, LON0))])
+    to_ll = ca.Function("to_ll", [s], [ca.vertcat(*frames.ne_to_latlon(s[0], s[1], LAT0, LON0))])
+    lat, lon = LAT0 + 1e-4, LON0 - 2e-4
+    np.testing.assert_allclose(np.array(to_ne([lat, lon])).ravel(), frames.latlon_to_ne(lat, lon, LAT0, LON0),
+                               rtol=1e-14)
+    np.testing.assert_allclose(np.array(to_ll([120.0, -40.0])).ravel(), frames.ne_to_latlon(120.0, -40.0, LAT0, LON0),
+                               rtol=1e-15)
