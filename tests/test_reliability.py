@@ -274,6 +274,8 @@ def test_bad_estimator_input_is_named(nomoto_case, cls):
         est.filter(data.with_columns(psi=np.where(np.arange(len(data)) == 3, np.inf, data["psi"])), prior)
     with pytest.raises(ValueError, match="prior has 3 entries"):
         est.filter(data, cs.Gaussian(np.zeros(3), 1.0))
+    with pytest.raises(ValueError, match="prior mean of angle state 'psi' is 45: .*degrees given"):
+        est.filter(data, cs.Gaussian([45.0, 0.0], [1e-2, 1e-4]))
     with pytest.raises(TypeError, match="prior must be a casship.Gaussian"):
         est.filter(data, (np.zeros(2), np.eye(2)))
 

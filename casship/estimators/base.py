@@ -433,6 +433,10 @@ class Estimator:
         if prior.mean.size != self.model.nx:
             raise ValueError(f"prior has {prior.mean.size} entries, model {self.model.name!r} has "
                              f"{self.model.nx} states {list(self.model.state_names)}")
+        for i in np.flatnonzero(self.model.angle_states):
+            if abs(prior.mean[i]) > 2 * np.pi + 1e-9:
+                raise ValueError(f"prior mean of angle state {self.model.state_names[i]!r} is {prior.mean[i]:.4g}: "
+                                 "angles are in radians (degrees given?)")
 
     def _result(self, t, mask, out) -> FilterResult:
         nx, ny, n = self.model.nx, self.ny, t.size
