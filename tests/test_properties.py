@@ -175,3 +175,23 @@ def test_turning_metrics_are_those_of_the_circle_whatever_the_pose(radius, psi0,
     assert m["tactical_diameter_m"] == pytest.approx(2 * radius, abs=tol)
     assert m["steady_diameter_m"] == pytest.approx(2 * radius, rel=1e-6)
     assert m["time_to_90_s"] == pytest.approx(0.5 * np.pi * radius / 5.0, abs=0.5)
+
+
+@SLOWER
+@given(st.floats(min_value=12.0, max_value=40.0), st.sampled_from([10.0, 5.0]),
+       st.floats(min_value=-np.pi, max_value=np.pi), st.sampled_from([1, -1]),
+       st.floats(min_value=60.0, max_value=400.0))
+def test_zigzag_metrics_of_a_sinusoidal_heading(amplitude_deg, heading_deg, psi0, side, period):
+    """Heading change A sin(2 pi t / T) after the execute: overshoots A - heading, period T, first side,
+    whatever the initial heading (also across +-180 deg)."""
+    maneuvers = pytest.importorskip("casship.maneuvers")
+    t = np.arange(0.0, 10.0 + 3.2 * period, 0.1)
+    change = side * np.radians(amplitude_deg) * np.sin(2 * np.pi * np.maximum(t - 10.0, 0.0) / period)
+    data = cs.Dataset(t, {"psi": wrap(psi0 + change)})
+    m = maneuvers.zigzag_metrics(data, heading_deg, t_exec=10.0)
+    assert m["first_side"] == side
+    for k in (1, 2):
+        assert m[f"overshoot_{k}_deg"] == pytest.approx(amplitude_deg - heading_deg, abs=1e-3 * amplitude_deg)
+    assert m["period_s"] == pytest.approx(period, abs=0.01)
+    t_first = np.arcsin(heading_deg / amplitude_deg) * period / (2 * np.pi)
+    assert m["initial_turning_time_s"] == pytest.approx(t_first, abs=0.01)
