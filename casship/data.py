@@ -58,7 +58,7 @@ def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_z
         raise ValueError(f"{name}: expected shape ({n}, {n}), got {m.shape}")
     if not np.all(np.isfinite(m)):
         raise ValueError(f"{name}: contains non-finite entries")
-    if not np.allclose(m, m.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(m).max(initial=0.0))):
+    if not np.allclose(m, m.T, rtol=1e-10, atol=1e-12 * np.abs(m).max(initial=0.0)):   # relative to the scale
         raise ValueError(f"{name}: matrix is not symmetric")
     m = 0.5 * (m + m.T)
     if n:

@@ -122,6 +122,9 @@ def test_check_time_and_covariances():
                          ({"a": 1.0, "b": 1.0, "c": 1.0}, r"unknown channel name\(s\) \['c'\]")):
         with pytest.raises(ValueError, match=match):
             as_cov(value, 2, "Q", ["a", "b"])
+    with pytest.raises(ValueError, match="not symmetric"):           # small scales (rad^2 of lat/lon) too
+        as_cov([[1e-14, 5e-15], [0.0, 1e-14]], 2, "R")
+    np.testing.assert_array_equal(as_cov([[1e-14, 0.0], [0.0, 2e-14]], 2, "R"), np.diag([1e-14, 2e-14]))
     with pytest.raises(ValueError, match="R: must be positive definite"):
         as_cov([1.0, 0.0], 2, "R", allow_zero=False)
 
