@@ -213,3 +213,16 @@ def test_identification_guide_examples_run(tmp_path, monkeypatch):
     for block in re.findall(r"```python\n(.*?)```", page.read_text(), re.S):
         exec(compile(block, str(page), "exec"), namespace)
     assert (tmp_path / "fit.json").exists() and (tmp_path / "fit.png").exists()
+
+
+def test_output_error_gauss_newton_matches_exact_hessian():
+    m = cs.models.nomoto_first_order(K=K_TRUE, T=T_TRUE)
+    data = [_record(31, 200, q=0.0), _record(32, 150, q=0.0)]
+    prob = OutputErrorProblem(m, data, free=["K", "T"], sigma={"psi": 0.01}, estimate_x0=["psi"])
+    gn = prob.solve(guess={"K": 0.05, "T": 10.0})
+    ex = prob.solve(guess={"K": 0.05, "T": 10.0}, hessian="exact")
+    for name in gn.free:
+        assert gn.estimates[name] == pytest.approx(ex.estimates[name], rel=1e-6, abs=1e-9)
+    assert gn.free == ["K", "T", "psi@0", "psi@1"]
+    with pytest.raises(ValueError, match="single shooting"):
+        OutputErrorProblem(m, data, free=["K"], shooting="multiple").solve(hessian="gauss-newton")

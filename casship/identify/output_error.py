@@ -187,23 +187,44 @@ class OutputErrorProblem:
         return 0.5 * float(sum(np.sum(r**2) for r in self.residuals(values)))
 
     # -- solve -------------------------------------------------------------------------------------
-    def solve(self, guess: Mapping[str, float] | None = None, *, hessian: str = "exact",
+    def solve(self, guess: Mapping[str, float] | None = None, *, hessian: str | None = None,
               options: Mapping | None = None) -> FitResult:
-        """Minimise the weighted output error with IPOPT (see :meth:`MLEProblem.solve`)."""
+        """Minimise the weighted output error with IPOPT.
+
+        Parameters
+        ----------
+        guess : mapping, optional
+            Starting values of the free quantities.
+        hessian : {"gauss-newton", "exact", "limited-memory"}, optional
+            Curvature IPOPT uses: ``J'J`` of the residuals (single shooting; the default there), the
+            exact Hessian of the Lagrangian (the default for multiple shooting) or L-BFGS.
+        options : mapping, optional
+            IPOPT options.
+        """
         sp, m = self.space, self.model
+        hessian = hessian or ("gauss-newton" if self.shooting == "single" else "exact")
+        if hessian not in ("gauss-newton", "exact", "limited-memory"):
+            raise ValueError(f"unknown hessian {hessian!r}; use 'gauss-newton', 'exact' or 'limited-memory'")
+        if hessian == "gauss-newton" and self.shooting == "multiple":
+            raise ValueError("hessian='gauss-newton' is for single shooting; use 'exact' with multiple shooting")
         z = ca.MX.sym("z", len(sp))
         nat = sp.natural(z)
         z0 = sp.guess_z(guess)
         lbz, ubz = sp.z_bounds()
         if self.shooting == "single":
-            res = self._single(nat)
-            f = 0.5 * sum(ca.sumsqr(r) for r in res)
-            z_opt, st, seconds = ipopt_solve(f, z, z0, lbz, ubz, hessian=hessian, options=options, name="output_error")
+            res = ca.vertcat(*[ca.vec(r) for r in self._single(nat)])
+            f = 0.5 * ca.sumsqr(res)
+            hess_f = None
+            if hessian == "gauss-newton":
+                J = ca.jtimes(res, z, ca.MX.eye(len(sp)))
+                hess_f = J.T @ J
+            z_opt, st, seconds = ipopt_solve(f, z, z0, lbz, ubz, hessian="custom" if hess_f is not None else hessian,
+                                             hess_f=hess_f, options=options, name="output_error")
         else:
             z_opt, st, seconds = self._solve_multiple(z, nat, z0, lbz, ubz, hessian, options)
         # information (Gauss-Newton) from the single-shooting residuals at the optimum
         r_all = ca.vertcat(*[ca.vec(r) for r in self._single(nat)])
-        jac = ca.Function("oe_jac", [z], [r_all, ca.jacobian(r_all, z)])
+        jac = ca.Function("oe_jac", [z], [r_all, ca.jtimes(r_all, z, ca.MX.eye(len(sp)))])
         r_opt, J = (np.asarray(a) for a in jac(z_opt))
         cost = 0.5 * float(np.sum(r_opt**2))
         n_obs = int(sum(a["mask"].sum() for a in self._arrays))
