@@ -11,8 +11,10 @@ at the start. Two input cases:
   with recorded inputs or a digital autopilot); the same problem for ``solve_ivp`` means one solve per
   0.1 s interval (the input is discontinuous at every sample).
 
-* casship: ``casship.simulate`` (classical RK4, one step per 0.1 s sample, the whole record in one
-  CasADi ``mapaccum`` fold), timed end to end including building the fold.
+* casship: ``casship.simulate`` (classical RK4, one step per 0.1 s sample, the whole record through
+  CasADi ``mapaccum`` folds), timed end to end (the fold is built on the first call and cached);
+  for the constant-rudder case also ``method="cvodes"`` (one adaptive CVODES run with outputs on
+  the grid), adaptive against adaptive.
 * peer: ``scipy.integrate.solve_ivp`` (RK45, rtol = atol = 1e-9, ``t_eval`` on the same grid) on the
   same right-hand side, once written in NumPy and once as the model's CasADi Function ``f``.
 
@@ -90,6 +92,14 @@ def main(quick: bool = False) -> list[dict]:
     name = f"simulate {duration / 3600:.2g} h, 6 states, 10 Hz, constant rudder"
     rows = [row(name, t_cs, "scipy solve_ivp RK45 (NumPy rhs)", t_np, check, samples=int(t.size)),
             row(name, t_cs, "scipy solve_ivp RK45 (CasADi f rhs)", t_ca, check, samples=int(t.size))]
+    # adaptive against adaptive: casship's CVODES with outputs on the grid (constant inputs: one run)
+    adaptive = lambda: cs.simulate(model, x0, t, inputs, method="cvodes",  # noqa: E731
+                                   options={"abstol": 1e-9, "reltol": 1e-9})
+    err = np.abs(adaptive().x - ref.y.T).max(axis=0)
+    check = (f"max abs diff u,v,r = {err[:3].max():.1e}, x,y = {err[3:5].max():.1e} m, "
+             f"psi = {err[5]:.1e} rad (both tolerances 1e-9)")
+    rows.append(row(name + ", casship cvodes", median_time(adaptive, repeat=repeat),
+                    "scipy solve_ivp RK45 (NumPy rhs)", t_np, check, samples=int(t.size)))
     return rows + _sampled_case(model, t if not quick else t[:601], repeat)
 
 

@@ -152,6 +152,9 @@ def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
     n = X.shape[0]
     if model.ny == 0:
         return np.zeros((n, 0))
+    direct = model._cached(("output_selection",), lambda: _output_selection(model))
+    if direct is not None:                      # every output is a state or an input: no evaluation
+        return np.column_stack([(X if kind == "x" else U)[:, j] for kind, j in direct])
     size = _chunk(n)
     hmap = model._cached(("h_map", size), lambda: model.h.map(size))
     total = -(-n // size) * size
@@ -177,7 +180,9 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     p : array_like or mapping, optional
         Parameters (nominal by default).
     method : {"rk4", "euler", "cvodes"}
-        Integration method per interval (see :func:`casship.discretize`).
+        Integration method per interval (see :func:`casship.discretize`). With ``"cvodes"`` and
+        inputs (and noise) constant over the record, one adaptive integration with outputs on the
+        grid replaces the restart at every sample.
     max_step : float, optional
         Largest explicit sub-step [s]; by default one sub-step per interval.
     w : array (N, nw), optional
@@ -214,7 +219,9 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
                                                    substeps=substeps, options=options))
     W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
-    if U is not None:
+    if U is not None and method == "cvodes" and t.size > 2 and _constant_rows(U) and _constant_rows(W):
+        X = _adaptive_on_grid(model, x0, t, U[0], p, W[0], options)
+    elif U is not None:
         try:
             X = fold_steps(dmodel, x0, U, p, W, dt)
         except IntegrationError as exc:
@@ -232,6 +239,46 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     return Trajectory(t, cols, model_name=model.name, state_names=model.state_names,
                       input_names=model.input_names, output_names=model.output_names, units=units,
                       meta={"model": model.name, "method": method, "params": model.param_dict(p)})
+
+
+def _output_selection(model: Model):
+    """``[("x" | "u", index), ...]`` if every output is a state or an input symbol, else None."""
+    import casadi as ca
+
+    found = []
+    for i in range(model.ny):
+        yi = model.y[i]
+        hit = next((("x", j) for j in range(model.nx) if ca.is_equal(yi, model.x[j])), None) or \
+            next((("u", j) for j in range(model.nu) if ca.is_equal(yi, model.u[j])), None)
+        if hit is None:
+            return None
+        found.append(hit)
+    return found
+
+
+def _constant_rows(A: np.ndarray) -> bool:
+    return bool(A.shape[1] == 0 or np.all(A == A[:1]))
+
+
+def _adaptive_on_grid(model: Model, x0, t, u, p, w, options) -> np.ndarray:
+    """Inputs constant over the whole record: one CVODES integration with outputs on the grid
+    (no restart at every sample, which only piecewise-constant inputs need)."""
+    import casadi as ca
+
+    x = ca.MX.sym("x", model.nx)
+    theta = ca.MX.sym("theta", model.nu + model.np + model.nw)
+    us, ps, ws = theta[:model.nu], theta[model.nu:model.nu + model.np], theta[model.nu + model.np:]
+    opts = {"abstol": 1e-10, "reltol": 1e-10}
+    opts.update(options or {})
+    integ = ca.integrator(f"{model.name}_cvodes_grid", "cvodes", {"x": x, "p": theta, "ode": model.f(x, us, ps, ws)},
+                          float(t[0]), [float(v) for v in t[1:]], opts)
+    try:
+        xf = integ(x0=x0, p=np.concatenate([u, p, w]))["xf"]
+    except RuntimeError as exc:
+        status = _status(exc)
+        raise IntegrationError(f"integration of {model.name!r} (cvodes) failed between t = {t[0]:g} and "
+                               f"{t[-1]:g} s: solver status {status}", status, 0) from exc
+    return np.vstack([x0[None, :], np.asarray(xf).T])
 
 
 def _noise_matrix(model: Model, t: np.ndarray, w) -> np.ndarray:

@@ -31,11 +31,13 @@ def test_matches_solve_ivp_with_constant_inputs(method, tol):
     assert np.max(np.abs(traj.x - ref.y.T) / scale) < tol
 
 
-def test_zero_order_hold_inputs_match_solve_ivp_per_interval():
+@pytest.mark.parametrize("method", ["rk4", "cvodes"])
+def test_zero_order_hold_inputs_match_solve_ivp_per_interval(method):
     m = nomoto_first_order()
     t = np.linspace(0.0, 20.0, 41)
     delta = 0.2 * np.sin(t / 3.0)
-    traj = cs.simulate(m, [0.1, 0.0], t, {"delta": delta}, max_step=0.05)
+    kwargs = {"max_step": 0.05} if method == "rk4" else {"options": {"abstol": 1e-14, "reltol": 1e-12}}
+    traj = cs.simulate(m, [0.1, 0.0], t, {"delta": delta}, method=method, **kwargs)
     x = np.array([0.1, 0.0])
     for k in range(t.size - 1):
         x = solve_ivp(rhs_of(m, [delta[k]]), (t[k], t[k + 1]), x, rtol=1e-12, atol=1e-14).y[:, -1]
@@ -266,3 +268,27 @@ def test_integrator_failure_names_the_solver_status():
     with pytest.raises(IntegrationError, match=r"'blowup' \(cvodes\) failed .*solver status CV_\w+") as info:
         cs.simulate(b.build(), [1.0], np.arange(0.0, 5.0, 0.1), method="cvodes")
     assert info.value.status.startswith("CV_") and isinstance(info.value, RuntimeError)
+
+
+def test_piecewise_constant_inputs_fail_with_the_step_and_time():
+    from casship.simulate import IntegrationError
+
+    b = cs.ModelBuilder("blowup_u")
+    x = b.state("x")
+    b.ode(x=x**2 + b.input("a"))
+    t = np.arange(0.0, 5.0, 0.1)
+    with pytest.raises(IntegrationError, match=r"failed in steps 0\.\.48: solver status CV_\w+ \(from t = 0 s\)"):
+        cs.simulate(b.build(), [1.0], t, {"a": 0.01 * np.sin(t)}, method="cvodes")
+
+
+def test_outputs_are_evaluated_or_taken_from_the_states():
+    m = shi_taylor()
+    inputs = {"delta": 0.1, "n": 1.5}
+    t = np.arange(0.0, 300.0, 0.5)                  # several blocks of the output map
+    plain = cs.simulate(m, m.states(u=7.0), t, inputs)
+    np.testing.assert_array_equal(plain.y, plain.x[:, :3])
+    derived = m.with_outputs({"speed": lambda b: (b.sym("u") ** 2 + b.sym("v") ** 2) ** 0.5, "psi": "psi",
+                              "rudder": lambda b: b.sym("delta")})
+    traj = cs.simulate(derived, derived.states(u=7.0), t, inputs)
+    np.testing.assert_allclose(traj["speed"], np.hypot(traj["u"], traj["v"]), rtol=1e-15)
+    np.testing.assert_array_equal(traj["rudder"], traj["delta"])
