@@ -138,12 +138,10 @@ def rudder_inputs(kind: str, t: np.ndarray, ship, n: float, seed: int = 7) -> di
         tr = cs.simulate(ship, ship.states(u=ship.meta["U0"]), t, law, method="euler")
         return {"delta_s": tr["delta_s"], "delta_p": tr["delta_p"]}
     if kind == "random":
-        rng = np.random.default_rng(seed)
-        hold = 50                                          # a new command every 5 s
-        k = int(np.ceil(t.size / hold))
-        ds = np.repeat(rng.uniform(np.radians(-35.0), np.radians(105.0), k), hold)[: t.size]
-        dp = np.repeat(rng.uniform(np.radians(-105.0), np.radians(35.0), k), hold)[: t.size]
-        return {"delta_s": ds, "delta_p": dp}
+        from casship.maneuvers import random_rudder_inputs
+
+        u = random_rudder_inputs(ship, t, n, hold=5.0, seed=seed)       # seed 002 ranges by default
+        return {"delta_s": u["delta_s"], "delta_p": u["delta_p"]}
     raise ValueError(f"unknown manoeuvre {kind!r}; use 'zigzag' or 'random'")
 
 
