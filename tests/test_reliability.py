@@ -208,17 +208,11 @@ def check_covariances(P):
     assert np.linalg.eigvalsh(P).min() > 0                      # positive definite throughout
 
 
-def test_covariance_symmetric_positive_definite_over_a_long_run():
-    *_, res = long_run(20_000)
-    check_covariances(res.P)
-    check_covariances(res.P_pred)
-    assert np.isfinite(res.x).all()
-
-
-@pytest.mark.slow
 def test_covariance_symmetric_positive_definite_over_1e5_steps():
     *_, res = long_run(100_000)
     check_covariances(res.P)
+    check_covariances(res.P_pred)
+    assert np.isfinite(res.x).all()
     assert res.health(window=500).ok
 
 
@@ -234,13 +228,6 @@ def online_matches_batch(n):
     return res, x, P
 
 
-def test_online_steps_do_not_drift_from_the_batch_fold():
-    res, x, P = online_matches_batch(5_000)
-    np.testing.assert_allclose(x, res.x[-1], rtol=1e-10, atol=1e-9)
-    np.testing.assert_allclose(P, res.P[-1], rtol=1e-10, atol=1e-12)
-
-
-@pytest.mark.slow
 def test_online_steps_do_not_drift_over_1e5_steps():
     res, x, P = online_matches_batch(100_000)
     np.testing.assert_allclose(x, res.x[-1], rtol=1e-9, atol=1e-8)
