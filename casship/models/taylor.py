@@ -11,9 +11,11 @@ __all__ = ["shi_taylor", "SHI_PARAM_NAMES", "SHI_DEFAULTS"]
 SHI_PARAM_NAMES = ("a1", "a2", "a3", "a4", "a5", "a6", "a7", "a8", "a9",
                    "b1", "b2", "b3", "b4", "c1", "c2", "c3")
 
-# An illustrative stable set for a ship of about 8 m/s at n = 1.5 rps (equilibrium u0 = 8 m/s,
-# surge time constant 10 s, K ~ 0.07 1/s, T ~ 33 s). NOT the paper's Table 1, which has no real
-# straight-run equilibrium; studies identify their own truth sets (see problems/shi2009).
+# An illustrative set for a ship of about 8 m/s at n = 1.5 rps (equilibrium u0 = 8 m/s, surge time
+# constant 10 s, K ~ 0.07 1/s, T ~ 33 s). Like many full-form ships it is slightly directionally
+# unstable on a straight run: the sway-yaw linearisation at u0 = 8 m/s has eigenvalues +0.01 and
+# -0.09 1/s (stable for c1 > -0.000625). NOT the paper's Table 1, which has no real straight-run
+# equilibrium; studies identify their own truth sets (see problems/shi2009).
 SHI_DEFAULTS = {"a1": -0.003125, "a2": 0.0, "a3": -0.5, "a4": -0.005, "a5": 0.0, "a6": 0.0, "a7": 0.0,
                 "a8": 0.0, "a9": 0.0889, "b1": -0.05, "b2": 0.0, "b3": 0.05, "b4": -0.3,
                 "c1": -0.001, "c2": -0.03, "c3": 0.002}
@@ -28,7 +30,8 @@ def shi_taylor(params: dict | None = None, *, kinematics: bool = True) -> Model:
     Parameters
     ----------
     params : dict, optional
-        Overrides of the nominal values (``SHI_DEFAULTS``, an illustrative stable set).
+        Overrides of the nominal values (``SHI_DEFAULTS``, an illustrative set, slightly
+        directionally unstable on a straight run; ``{"c1": 0.001}`` makes it stable).
     kinematics : bool
         Add earth-fixed ``x, y, psi`` states (for manoeuvre validation); outputs stay ``u, v, r``
         as in the paper (``H = [I3 0]``).
