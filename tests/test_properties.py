@@ -9,8 +9,11 @@ from hypothesis import strategies as st
 import casship as cs
 from casship.angles import unwrap, wrap, wrap_sym
 
-FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-SLOWER = settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# derandomized: the same examples on every run (reproducible in CI), no example database on disk
+FAST = settings(max_examples=60, deadline=None, derandomize=True, database=None,
+                suppress_health_check=[HealthCheck.too_slow])
+SLOWER = settings(max_examples=15, deadline=None, derandomize=True, database=None,
+                  suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 
 finite_angles = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False, allow_infinity=False)
 
