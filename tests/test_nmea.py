@@ -246,3 +246,18 @@ def test_ais_and_proprietary_sentences_are_checked_and_counted_not_used():
     with pytest.raises(NMEAError, match="checksum") as info:
         read_nmea(GOOD + ais.replace("*5C", "*5D") + "\n")
     assert info.value.line_number == 6
+
+
+def test_sources_path_text_single_sentence_stream_and_lines(tmp_path):
+    import io
+
+    path = tmp_path / "log.nmea"
+    path.write_text(GOOD)
+    ref = read_nmea(path)
+    for source in (str(path), GOOD, io.StringIO(GOOD), GOOD.splitlines()):
+        data = read_nmea(source)
+        assert np.array_equal(data.t, ref.t) and np.allclose(data["lat"], ref["lat"])
+    one = read_nmea(GOOD.splitlines()[0])                 # a single sentence is text, not a file name
+    assert len(one) == 1
+    with pytest.raises(FileNotFoundError):
+        read_nmea(tmp_path / "missing.nmea")

@@ -236,7 +236,8 @@ def _first_text(exc: Exception) -> str:
 
 
 def _lines(source) -> tuple[str, Iterable[tuple[int, str]]]:
-    if isinstance(source, (str, Path)) and not (isinstance(source, str) and "\n" in source):
+    is_text = isinstance(source, str) and ("\n" in source or source.lstrip().startswith(("$", "!")))
+    if isinstance(source, (str, Path)) and not is_text:
         path = Path(source)
         raw = path.read_bytes()
         return str(path), enumerate(raw.decode("ascii", errors="surrogateescape").splitlines(), 1)
