@@ -25,6 +25,11 @@ def test_quick_study_writes_figures_tables_and_comparison(quick):
     assert report.count("| UKF Q=0 |") >= 3 + 3 + 2          # one row per condition of each experiment
     assert set(summary["rmse"]) == {"wind", "noise", "maneuver"}
     assert set(summary["time_per_step"]) == {"UKF", "EnKF", "KF", "EKF"}
+    # the MHE column ran, and on the same records it is as accurate as the tuned UKF (within 20 %)
+    for row in summary["mhe"].values():
+        assert "error" not in row, row
+        for s in fg.STATES:
+            assert row["rmse"][s] < 1.2 * row["ukf_same_record"][s]
 
 
 def test_model_based_filters_beat_the_measurements_without_modelling_error(quick):
