@@ -226,3 +226,21 @@ def test_output_error_gauss_newton_matches_exact_hessian():
     assert gn.free == ["K", "T", "psi@0", "psi@1"]
     with pytest.raises(ValueError, match="single shooting"):
         OutputErrorProblem(m, data, free=["K"], shooting="multiple").solve(hessian="gauss-newton")
+
+
+def test_compiled_likelihood_gives_the_same_fit_and_is_reused():
+    import casship.identify.mle as mle_module
+
+    ekf = _ekf()
+    data = [_record(41, 120), _record(42, 120)]
+    ref = MLEProblem(ekf, data, free=["K", "T"], x0=PRIOR).solve(guess={"K": 0.05, "T": 10.0})
+    fit = MLEProblem(ekf, data, free=["K", "T"], x0=PRIOR, jit=True).solve(guess={"K": 0.05, "T": 10.0})
+    for name in ("K", "T"):
+        assert fit.estimates[name] == pytest.approx(ref.estimates[name], rel=1e-8)
+        assert fit.std_errors[name] == pytest.approx(ref.std_errors[name], rel=1e-6)
+    n_compiled = len(mle_module._COMPILED)
+    other = MLEProblem(ekf, [_record(43, 120), _record(44, 120)], free=["K", "T"], x0=PRIOR, jit=True)
+    again = other.solve(guess={"K": 0.05, "T": 10.0})
+    assert len(mle_module._COMPILED) == n_compiled          # same structure: compiled code reused
+    plain = MLEProblem(ekf, other.records, free=["K", "T"], x0=PRIOR).solve(guess={"K": 0.05, "T": 10.0})
+    assert again.estimates["K"] == pytest.approx(plain.estimates["K"], rel=1e-8)

@@ -18,7 +18,7 @@ import numpy as np
 from ..model import Model
 from .result import IdentificationError
 
-__all__ = ["Entry", "ParamSpace", "ipopt_solve", "HESSIANS"]
+__all__ = ["Entry", "ParamSpace", "ipopt_solve", "hess_lag_function", "HESSIANS"]
 
 HESSIANS = ("exact", "limited-memory", "custom")
 _OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -156,15 +156,18 @@ class ParamSpace:
                 hi.append(e.upper / e.scale)
         return np.array(lo), np.array(hi)
 
-    def param_vector(self, nat) -> ca.MX | np.ndarray:
-        """The full parameter vector with free entries replaced by ``nat`` (symbolic or numeric)."""
+    def param_vector(self, nat, base=None) -> ca.MX | np.ndarray:
+        """The full parameter vector with free entries replaced by ``nat`` (symbolic or numeric).
+
+        ``base`` (symbolic) replaces the fixed values, for problems whose data are parameters.
+        """
         if isinstance(nat, np.ndarray):
             p = self.base.copy()
             for e, v in zip(self.entries, nat):
                 if e.kind == "param":
                     p[e.index] = v
             return p
-        items = [ca.MX(float(v)) for v in self.base]
+        items = [ca.MX(float(v)) for v in self.base] if base is None else [base[i] for i in range(self.base.size)]
         for e, v in zip(self.entries, nat):
             if e.kind == "param":
                 items[e.index] = v
@@ -174,33 +177,49 @@ class ParamSpace:
         return {e.name: (0.0 if e.log else e.scale) for e in self.entries}
 
 
+def hess_lag_function(z, par, hess_f) -> ca.Function:
+    """IPOPT's ``nlp_hess_l(x, p, lam_f, lam_g)``: the upper triangle of ``lam_f * hess_f`` (no constraints)."""
+    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", 0)
+    return ca.Function("nlp_hess_l", [z, par, lam_f, lam_g], [ca.triu(lam_f * hess_f)],
+                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+
+
 def ipopt_solve(f, z, z0, lbz, ubz, *, g=None, lbg=None, ubg=None, hessian: str = "exact",
-                options: Mapping | None = None, name: str = "fit", hess_f=None):
+                options: Mapping | None = None, name: str = "fit", hess_f=None, par=None, par_value=None,
+                functions: Mapping | None = None):
     """Minimise ``f(z)`` (subject to ``lbg <= g(z) <= ubg``) with IPOPT.
 
     ``hessian="custom"`` uses the symmetric matrix expression ``hess_f(z)`` (e.g. a Gauss-Newton or
-    Fisher-scoring approximation of the Hessian of ``f``; unconstrained problems only).
+    Fisher-scoring approximation of the Hessian of ``f``; unconstrained problems only). ``par`` is a
+    symbolic parameter of ``f`` (and ``hess_f``) with value ``par_value``. ``functions`` may give
+    ready-made (e.g. compiled) ``grad_f: (x, p) -> (f, grad)`` and ``hess_lag: (x, p, lam_f, lam_g) ->
+    triu(H)`` Functions, used by IPOPT instead of CasADi's own.
     Returns ``(z_opt, stats, seconds)``; raises :class:`IdentificationError` naming IPOPT's status if
     it does not converge.
     """
     if hessian not in HESSIANS:
         raise ValueError(f"unknown hessian {hessian!r}; use one of {HESSIANS}")
-    opts = {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": 1e-9,
+    par_sym = ca.MX.sym("p", 0) if par is None else par
+    opts = {"print_time": False, "calc_lam_p": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": 1e-9,
             "ipopt.acceptable_tol": 1e-5, "ipopt.acceptable_iter": 5, "ipopt.max_iter": 300,
             "ipopt.hessian_approximation": "exact" if hessian == "custom" else hessian}
+    functions = dict(functions or {})
     if hessian == "custom":
         if g is not None:
             raise ValueError("a custom Hessian is only supported without constraints")
-        lam_f, lam_g, par = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", 0), ca.MX.sym("p", 0)
-        opts["hess_lag"] = ca.Function("nlp_hess_l", [z, par, lam_f, lam_g], [ca.triu(lam_f * hess_f)],
-                                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+        opts["hess_lag"] = functions.pop("hess_lag", None) or hess_lag_function(z, par_sym, hess_f)
+    opts.update(functions)
     for k, v in (options or {}).items():
         opts[k if k.startswith(("ipopt.", "print_time")) else f"ipopt.{k}"] = v
     nlp = {"x": z, "f": f}
+    if par is not None:
+        nlp["p"] = par
     if g is not None:
         nlp["g"] = g
     solver = ca.nlpsol(re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "fit", "ipopt", nlp, opts)
     args = dict(x0=z0, lbx=lbz, ubx=ubz)
+    if par is not None:
+        args["p"] = par_value
     if g is not None:
         args.update(lbg=lbg, ubg=ubg)
     t0 = time.perf_counter()

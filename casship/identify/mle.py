@@ -16,13 +16,14 @@ import numpy as np
 from ..angles import wrap
 from ..data import Dataset, Gaussian
 from ..discretize import DiscreteModel
-from ..estimators.base import STEP_INPUTS, Estimator
-from ._space import ParamSpace, ipopt_solve
+from ..estimators.base import STEP_INPUTS, Estimator, compile_function
+from ._space import ParamSpace, hess_lag_function, ipopt_solve
 from .result import FitResult, finish
 
 __all__ = ["MLEProblem", "default_prior"]
 
 CHUNK = 200  # samples per folded chunk of a record
+_COMPILED: dict = {}  # compiled objective, gradient and curvature per problem structure (jit=True)
 
 
 def _as_records(datasets) -> list[Dataset]:
@@ -80,6 +81,13 @@ class MLEProblem:
         For any free quantity (model bounds apply too).
     Q, R, measured
         Only with a DiscreteModel: the filter's noise covariances and measured outputs.
+    seed : int
+        For stochastic estimators (EnKF): fixes the draws (common random numbers across evaluations).
+    jit : bool
+        Compile the objective, its gradient and the curvature to C (system compiler) before solving.
+        The compiled code does not depend on the data and is kept per problem structure (estimator,
+        record lengths, free quantities), so repeated fits of equally long records (Monte Carlo,
+        bootstrap, cross-validation) pay the compilation once.
 
     Examples
     --------
@@ -98,7 +106,7 @@ class MLEProblem:
 
     def __init__(self, estimator, datasets, free: Sequence[str] = (), *, params=None, noise: Mapping | None = None,
                  x0=None, estimate_x0: Sequence[str] = (), prior_var: float = 1.0, bounds: Mapping | None = None,
-                 scale: Mapping | None = None, Q=None, R=None, measured=None, seed=0):
+                 scale: Mapping | None = None, Q=None, R=None, measured=None, seed=0, jit: bool = False):
         if isinstance(estimator, DiscreteModel):
             from ..estimators import EKF
 
@@ -127,6 +135,7 @@ class MLEProblem:
         if not len(self.space):
             raise ValueError("nothing to estimate: give free parameters, noise or estimate_x0")
         self._seed = seed
+        self.jit = bool(jit)
         self._build()
 
     # -- set-up ------------------------------------------------------------------------------------
@@ -169,54 +178,77 @@ class MLEProblem:
         return out
 
     def _build(self) -> None:
-        est, sp = self.estimator, self.space
+        est, sp, m = self.estimator, self.space, self.model
         k = len(sp)
-        theta = ca.MX.sym("theta", k)
-        nat = [theta[i] for i in range(k)]
-        p = sp.param_vector(nat)
-        Q, R = self._cov_sym(nat, "Q", est.Q), self._cov_sym(nat, "R", est.R)
         rng = np.random.default_rng(self._seed)
-        nll, rec_out, self._arrays = 0, [], []
+        # The records, initial carries, fixed parameters and base covariances are packed into one
+        # parameter vector: the symbolic functions (and their compiled versions) do not embed the data.
+        blocks, layout, self._arrays = [], [], []
         for r, data in enumerate(self.records):
             arr = est.prepare(data)
             self._arrays.append(arr)
-            n = len(data)
-            prior = self._priors[r]
-            carry = est.carry_from(prior, rng)
+            rows = [np.atleast_2d(arr[name]) for name in STEP_INPUTS[1:6]] + list(est.extra_inputs(len(data), rng))
+            D = np.vstack(rows)
+            carry = np.asarray(est.carry_from(self._priors[r], rng), dtype=float).reshape(-1)
+            layout.append((D.shape, [x.shape[0] for x in rows], carry.size))
+            blocks += [D.reshape(-1, order="F"), carry]
+        blocks += [sp.base, est.Q.reshape(-1, order="F"), est.R.reshape(-1, order="F")]
+        self._pnum = np.concatenate(blocks)
+        P = ca.MX.sym("data", self._pnum.size)
+        offset = [0]
+
+        def take(size):
+            v = P[offset[0]: offset[0] + size]
+            offset[0] += size
+            return v
+
+        recs = [(ca.reshape(take(shape[0] * shape[1]), shape[0], shape[1]), sizes, take(nc))
+                for shape, sizes, nc in layout]
+        pb = take(m.np)
+        Q0 = ca.reshape(take(m.nw * m.nw), m.nw, m.nw)
+        R0 = ca.reshape(take(est.ny * est.ny), est.ny, est.ny)
+        theta = ca.MX.sym("theta", k)
+        nat = [theta[i] for i in range(k)]
+        p = sp.param_vector(nat, base=pb)
+        Q, R = self._cov_sym(nat, "Q", Q0), self._cov_sym(nat, "R", R0)
+        nll, rec_out = 0, []
+        for r, (D, sizes, c0) in enumerate(recs):
+            n = D.shape[1]
+            carry = c0
             x0_items = [(e, v) for e, v in zip(sp.entries, nat) if e.kind == "x0" and e.record == r]
             if x0_items:
-                mean = [ca.MX(float(v)) for v in prior.mean]
+                mean = [c0[i] for i in range(m.nx)]
                 for e, v in x0_items:
                     mean[e.index] = v
-                carry = ca.vertcat(*mean, ca.MX(carry[self.model.nx:]))
-            extra = est.extra_inputs(n, rng)
+                carry = ca.vertcat(*mean, c0[m.nx:])
+            cuts = np.cumsum([0, *sizes])
             e_parts, S_parts = [], []
             # chunks of one cached fold: derivative graphs are built per chunk length, not per record length
             for start in range(0, n, CHUNK):
-                sl = slice(start, min(start + CHUNK, n))
-                m_ = sl.stop - sl.start
-                args = ([carry] + [arr[s][:, sl] for s in STEP_INPUTS[1:6]] + [p, Q, R, np.full((1, m_), np.inf)]
-                        + [x[:, sl] for x in extra])
-                out = est.fold(m_)(*args)
+                stop = min(start + CHUNK, n)
+                rows = [D[int(cuts[i]):int(cuts[i + 1]), start:stop] for i in range(len(sizes))]
+                args = [carry] + rows[:5] + [p, Q, R, np.full((1, stop - start), np.inf)] + rows[5:]
+                out = est.fold(stop - start)(*args)
                 carry = out[0][:, -1]
                 nll = nll - ca.sum2(out[9])
                 e_parts.append(out[6])
                 S_parts.append(out[7])
             rec_out += [ca.horzcat(*e_parts), ca.horzcat(*S_parts)]
-        self._nll = ca.Function("nll", [theta], [nll], ["theta"], ["nll"])
-        self._grad = ca.Function("nll_grad", [theta], [ca.gradient(nll, theta)], ["theta"], ["g"])
-        self._records_fn = ca.Function("records", [theta], rec_out)
+        self._nll = ca.Function("nll", [theta, P], [nll], ["theta", "data"], ["nll"])
+        self._grad = ca.Function("nll_grad", [theta, P], [ca.gradient(nll, theta)], ["theta", "data"], ["g"])
+        self._records_fn = ca.Function("records", [theta, P], rec_out)
 
-    def _cov_sym(self, nat, kind, mat):
+    def _cov_sym(self, nat, kind, base):
         free = [(e.index, v) for e, v in zip(self.space.entries, nat) if e.kind == kind]
         if not free:
-            return mat
-        base = mat.copy()
-        diag = [ca.MX(0.0)] * base.shape[0]
+            return base
+        n = base.shape[0]
+        drop = np.zeros(n)
+        diag = [ca.MX(0.0)] * n
         for i, v in free:
-            base[i, i] = 0.0
+            drop[i] = 1.0
             diag[i] = v
-        return ca.MX(base) + ca.diag(ca.vertcat(*diag))
+        return base - ca.diag(ca.diag(base) * ca.DM(drop)) + ca.diag(ca.vertcat(*diag))
 
     # -- evaluation --------------------------------------------------------------------------------
     @property
@@ -237,21 +269,22 @@ class MLEProblem:
 
     def negloglik(self, values=None) -> float:
         """Negative log-likelihood at the free values (mapping by name or vector ordered like ``free``)."""
-        return float(self._nll(self._theta(values or {})))
+        return float(self._nll(self._theta(values or {}), self._pnum))
 
     def gradient(self, values=None) -> np.ndarray:
         """Exact gradient of :meth:`negloglik` with respect to the free values."""
-        return np.asarray(self._grad(self._theta(values or {}))).reshape(-1)
+        return np.asarray(self._grad(self._theta(values or {}), self._pnum)).reshape(-1)
 
     # -- solve -------------------------------------------------------------------------------------
-    def fisher_expr(self, z, theta) -> ca.MX:
-        """Fisher information of the innovations with respect to ``z`` (``theta`` = values at ``z``).
+    def fisher_expr(self, z, theta, data) -> ca.MX:
+        """Fisher information of the innovations with respect to ``z`` (``theta`` = values at ``z``,
+        ``data`` the symbolic data vector).
 
         ``sum_k De_k' S_k^-1 De_k + 0.5 tr(S_k^-1 dS_k/dz_i S_k^-1 dS_k/dz_j)``: the expected Hessian
         of the negative log-likelihood (Fisher scoring; always positive semi-definite).
         """
         ny, k = self.estimator.ny, z.shape[0]
-        outs = self._records_fn(theta)
+        outs = self._records_fn(theta, data)
         outs = [outs] if isinstance(outs, ca.MX) else outs
         e_s, S_s = ca.SX.sym("e", ny), ca.SX.sym("S", ny * ny)
         de_s, dS_s = ca.SX.sym("de", k * ny), ca.SX.sym("dS", k * ny * ny)
@@ -299,30 +332,62 @@ class MLEProblem:
             If IPOPT does not converge (the message and ``.status`` give IPOPT's status).
         """
         sp = self.space
-        z = ca.MX.sym("z", len(sp))
-        f = self._nll(ca.vertcat(*sp.natural(z)))
-        lbz, ubz = sp.z_bounds()
+        if hessian not in ("fisher", "exact", "limited-memory"):
+            raise ValueError(f"unknown hessian {hessian!r}; use 'fisher', 'exact' or 'limited-memory'")
         if information not in ("fisher", "hessian"):
             raise ValueError(f"information must be 'fisher' or 'hessian', got {information!r}")
+        z = ca.MX.sym("z", len(sp))
+        P = ca.MX.sym("data", self._pnum.size)
         theta = ca.vertcat(*sp.natural(z))
-        curv = {"fisher": self.fisher_expr(z, theta) if "fisher" in (hessian, information) else None}
-        if "exact" in (hessian,) or information == "hessian":
+        f = self._nll(theta, P)
+        lbz, ubz = sp.z_bounds()
+        info_kind = "fisher" if information == "fisher" else "exact"
+
+        def curvature(kind):
+            if kind == "fisher":
+                return self.fisher_expr(z, theta, P)
             # forward-over-reverse directional derivatives along the unit vectors: the dense Hessian
             # without a sparsity sweep through the whole record
             H = ca.jtimes(ca.gradient(f, z), z, ca.MX.eye(len(sp)))
-            curv["exact"] = curv["hessian"] = 0.5 * (H + H.T)
+            return 0.5 * (H + H.T)
+
+        kinds = sorted({hessian, info_kind} - {"limited-memory"})
+        functions = None
+        if self.jit:
+            key = (type(self.estimator).__name__, self.estimator.step_function.serialize(),
+                   tuple(len(d) for d in self.records), CHUNK, self._pnum.size,
+                   tuple((e.kind, e.index, e.record, e.log, e.scale) for e in sp.entries), hessian, info_kind)
+            if key not in _COMPILED:
+                comp = {"grad_f": compile_function(ca.Function("nlp_grad_f", [z, P], [f, ca.gradient(f, z)],
+                                                               ["x", "p"], ["f", "grad_f_x"]))}
+                for kind in kinds:
+                    comp[kind] = compile_function(hess_lag_function(z, P, curvature(kind)))
+                _COMPILED[key] = comp
+            comp = _COMPILED[key]
+            functions = {"grad_f": comp["grad_f"]}
+            if hessian != "limited-memory":
+                functions["hess_lag"] = comp[hessian]
+            curv = {}
+        else:
+            curv = {kind: curvature(kind) for kind in kinds}
         z_opt, st, seconds = ipopt_solve(f, z, sp.guess_z(guess), lbz, ubz,
                                          hessian="limited-memory" if hessian == "limited-memory" else "custom",
-                                         hess_f=curv.get(hessian), options=options, name=self.method)
-        info = np.asarray(ca.Function("nll_information", [z], [curv[information]])(z_opt))
+                                         hess_f=curv.get(hessian), options=options, name=self.method,
+                                         par=P, par_value=self._pnum, functions=functions)
+        if self.jit:
+            upper = np.asarray(_COMPILED[key][info_kind](z_opt, self._pnum, 1.0, np.zeros(0)))
+            info = upper + upper.T - np.diag(np.diag(upper))
+        else:
+            info = np.asarray(ca.Function("nll_information", [z, P], [curv[info_kind]])(z_opt, self._pnum))
         return self._result(z_opt, info, st, seconds)
 
     def _result(self, z_opt, info, st, seconds) -> FitResult:
         sp, m, est = self.space, self.model, self.estimator
         values = sp.natural_numeric(z_opt)
-        cost = float(self._nll(values))
+        cost = float(self._nll(values, self._pnum))
         p = sp.param_vector(values)
-        outs = [np.asarray(o) for o in self._records_fn(values)]
+        outs = self._records_fn(values, self._pnum)
+        outs = [np.asarray(o) for o in ([outs] if isinstance(outs, ca.DM) else outs)]
         residuals, predictions, n_obs = [], [], 0
         ny = est.ny
         for r, data in enumerate(self.records):
