@@ -498,6 +498,9 @@ class Estimator:
         call = self._online
         a = call.args
         c = a[0]
+        if c.size != nx + nx * nx:
+            raise ValueError(f"{type(self).__name__} with these options keeps more memory than x and P "
+                             "(e.g. a re-acquisition counter); use online(prior) for step-by-step use")
         c[:nx] = x
         c[nx:] = np.asarray(P, dtype=float).ravel(order="F")
         a[1][:] = u_prev

@@ -23,6 +23,12 @@ class EKF(Estimator):
         continuous white noise, by RK4 with ``substeps`` sub-steps between samples.
     substeps : int
         Sub-steps of the continuous-discrete prediction.
+    reacquire : int or None
+        With a gate: after this many consecutive rejected samples the next measurement is used
+        regardless of the gate, with the predicted covariance inflated by ``max(1, NIS / m)`` (``m``
+        scalar measurements) so that the innovation becomes consistent. This lets a gated filter
+        that trusted a faulty sensor (e.g. a frozen fix) find the ship again instead of rejecting
+        every correct fix that follows. Reported as accepted samples; off by default.
 
     Examples
     --------
@@ -32,25 +38,48 @@ class EKF(Estimator):
     """
 
     name = "EKF"
-    _options = {"covariance": "discrete", "substeps": 1}
+    _options = {"covariance": "discrete", "substeps": 1, "reacquire": None}
 
     def _build_step(self) -> ca.Function:
         if self.options["covariance"] not in ("discrete", "continuous"):
             raise ValueError(f"option 'covariance' must be 'discrete' or 'continuous', "
                              f"got {self.options['covariance']!r}")
+        reacquire = self.options["reacquire"]
+        if reacquire is not None and (int(reacquire) != reacquire or reacquire < 1):
+            raise ValueError(f"option 'reacquire' is a positive number of samples, got {reacquire!r}")
+        if reacquire is not None and self.options["gate"] is None:
+            raise ValueError("option 'reacquire' needs a 'gate'")
         m, S = self.model, self.sym
         s = self._symbols()
-        carry = S.sym("carry", m.nx + m.nx * m.nx)
-        x, P = carry[: m.nx], ca.reshape(carry[m.nx:], m.nx, m.nx)
+        n_carry = m.nx + m.nx * m.nx + (reacquire is not None)
+        carry = S.sym("carry", n_carry)
+        x, P = carry[: m.nx], ca.reshape(carry[m.nx:m.nx + m.nx * m.nx], m.nx, m.nx)
         if self.options["covariance"] == "discrete":
             xp, Pp, C = self._predict_discrete(x, P, s)
         else:
             xp, Pp, C = self._predict_continuous(x, P, s)
         xu, Pu, e, Sm, nis, ll, acc = self._update(xp, Pp, s)
         vec = lambda a: ca.reshape(a, -1, 1)  # noqa: E731
-        outs = [ca.vertcat(xu, vec(Pu)), xu, vec(Pu), xp, vec(Pp), vec(C), e, vec(Sm), nis, ll, acc]
+        carry_next = ca.vertcat(xu, vec(Pu))
+        if reacquire is not None:
+            # Count consecutive rejected samples (rows without measurements leave the count alone);
+            # once the count reaches `reacquire`, redo the update ungated on an inflated covariance.
+            count = carry[-1]
+            force = (count >= reacquire) * (1 - acc) * (ca.sum1(s["mask"]) > 0)
+            inflation = ca.fmax(1, nis / ca.fmax(1, ca.sum1(s["mask"])))
+            xf, Pf, _, _, _, _, _ = self._update(xp, inflation * Pp, {**s, "gate": ca.inf})
+            xu = ca.if_else(force, xf, xu)
+            Pu = ca.if_else(force, Pf, Pu)
+            acc = ca.fmax(acc, force)
+            new_count = ca.if_else(acc, 0, ca.if_else(ca.sum1(s["mask"]) > 0, count + 1, count))
+            carry_next = ca.vertcat(xu, vec(Pu), new_count)
+        outs = [carry_next, xu, vec(Pu), xp, vec(Pp), vec(C), e, vec(Sm), nis, ll, acc]
         ins = [carry] + [s[k] for k in STEP_INPUTS[1:]]
         return ca.Function(f"{self.name.lower()}_step", ins, outs, STEP_INPUTS, STEP_OUTPUTS)
+
+    def carry_from(self, prior, seed=None):
+        carry = super().carry_from(prior, seed)
+        return carry if self.options["reacquire"] is None else np.concatenate([carry, [0.0]])
 
     def _predict_discrete(self, x, P, s):
         dm, m = self.dmodel, self.model
