@@ -41,6 +41,20 @@ def median_time(func: Callable[[], object], repeat: int = 5, warmup: int = 1,
     return times[mid] if len(times) % 2 else 0.5 * (times[mid - 1] + times[mid])
 
 
+def solve_ivp_held(rhs_at: Callable[[int], Callable], t, x0, rtol: float = 1e-9, atol: float = 1e-9):
+    """What users do without a fold: one ``scipy.integrate.solve_ivp`` (RK45) call per sampling
+    interval, the input held over it (``rhs_at(k)`` is the right-hand side on interval ``k``).
+    Returns the (len(t), nx) states on the grid."""
+    import numpy as np
+    from scipy.integrate import solve_ivp
+
+    X = np.empty((len(t), len(x0)))
+    X[0] = x0
+    for k in range(len(t) - 1):
+        X[k + 1] = solve_ivp(rhs_at(k), (t[k], t[k + 1]), X[k], method="RK45", rtol=rtol, atol=atol).y[:, -1]
+    return X
+
+
 def row(benchmark: str, casship_s: float, peer: str, peer_s: float | None, accuracy_check: str,
         **extra) -> dict:
     """A result row; ``ratio = peer_s / casship_s`` (how many times faster casship is)."""

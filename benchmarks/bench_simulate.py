@@ -28,7 +28,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 import casship as cs
-from benchmarks import format_table, median_time, row
+from benchmarks import format_table, median_time, row, solve_ivp_held
 
 PARAMS = {"c1": 0.001}
 DELTA, N_PROP = np.radians(5.0), 1.5
@@ -114,14 +114,12 @@ def _sampled_case(model, t, repeat) -> list[dict]:
     def run_casship():
         return cs.simulate(model, x0, t, inputs)
 
+    def rhs_at(k):
+        held["value"] = delta[k]
+        return rhs
+
     def run_scipy():
-        X = np.empty((t.size, model.nx))
-        X[0] = x0
-        for k in range(t.size - 1):
-            held["value"] = delta[k]
-            sol = solve_ivp(rhs, (t[k], t[k + 1]), X[k], method="RK45", rtol=1e-9, atol=1e-9)
-            X[k + 1] = sol.y[:, -1]
-        return X
+        return solve_ivp_held(rhs_at, t, x0)
 
     err = np.abs(run_casship().x - run_scipy()).max(axis=0)
     check = (f"max abs diff u,v,r = {err[:3].max():.1e}, x,y = {err[3:5].max():.1e} m, "

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 import casship as cs
-from benchmarks import format_table, median_time, row
+from benchmarks import format_table, median_time, row, solve_ivp_held
 from casship.maneuvers import propeller_rate_for_speed
 
 SPEED, RUDDER = 7.97, np.radians(35.0)
@@ -131,12 +131,7 @@ def _sampled_rudder(ship, n, t, repeat) -> dict:
         return cs.simulate(cs.models.kvlcc2(), x0, t, {"delta": delta, "n": n})
 
     def run_scipy():
-        X = np.empty((t.size, ship.nx))
-        X[0] = x0
-        for k in range(t.size - 1):
-            sol = solve_ivp(numpy_mmg(P, delta[k], n), (t[k], t[k + 1]), X[k], method="RK45", rtol=1e-9, atol=1e-9)
-            X[k + 1] = sol.y[:, -1]
-        return X
+        return solve_ivp_held(lambda k: numpy_mmg(P, delta[k], n), t, x0)
 
     err = np.abs(run_casship().x - run_scipy()).max(axis=0)
     check = (f"max abs diff u,v = {err[:2].max():.1e} m/s, x,y = {err[3:5].max():.1e} m, psi = {err[5]:.1e} rad "
