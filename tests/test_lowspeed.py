@@ -1,6 +1,5 @@
 """Yoshimura low-speed twin-rudder model: cross-flow integrals, Jacobians, symmetry, sanity."""
 import numpy as np
-import pytest
 
 from casship import simulate
 from casship.maneuvers import propeller_rate_for_speed, random_rudder_inputs

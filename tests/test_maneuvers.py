@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from casship import Dataset, simulate
-from casship.maneuvers import (ZigZag, imo_check, imo_table, propeller_rate_for_speed, random_rudder_inputs,
+from casship.maneuvers import (imo_check, imo_table, propeller_rate_for_speed, random_rudder_inputs,
                                run_maneuver, spiral_inputs, turning_inputs, turning_metrics, zigzag_metrics)
 from casship.models import kvlcc2
 

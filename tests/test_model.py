@@ -309,7 +309,7 @@ def test_models_and_discretisations_pickle(name):
 
 def test_param_as_state():
     b = nomoto_builder().build().builder("nomoto_aug")
-    K = b.param_as_state("K")
+    b.param_as_state("K")
     b.ode(K=b.noise("w_K"))
     m = b.build()
     assert m.state_names == ("psi", "r", "K") and m.param_names == ("T",) and m.noise_names == ("w_r", "w_K")

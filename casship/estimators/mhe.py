@@ -501,7 +501,7 @@ class MHE(Estimator):
     def _new_run(self, prior: Gaussian, p_aug: np.ndarray) -> dict:
         m, N = self.model, self.horizon
         win = self._window(N)
-        nx, nu, ny = m.nx, m.nu, self.ny
+        nu, ny = m.nu, self.ny
         xs = np.tile(prior.mean, (N + 1, 1))
         z = np.zeros(win.nz)
         z[win.ix] = xs

@@ -1,7 +1,6 @@
 """Second-order Taylor response model of Shi, Zhao, Peng & Shen (2009), their Eq. 2."""
 from __future__ import annotations
 
-import casadi as ca
 
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder
