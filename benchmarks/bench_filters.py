@@ -32,25 +32,22 @@ import time
 import numpy as np
 
 import casship as cs
-from benchmarks import format_table, row, skipped_row
+from benchmarks import format_table, median_time, row, skipped_row
 
 DT, GNSS_HZ = 0.02, 5.0
 
 
-def median_time(func, repeat: int = 5, warmup: int = 1) -> float:
-    """Median CPU time [s] of ``func()`` (``time.process_time``) after ``warmup`` untimed runs.
-
-    Every timed code here is single-threaded, so CPU time measures the work itself and is not
-    inflated by other jobs sharing the machine (wall-clock medians are, unevenly between runs).
-    """
-    for _ in range(warmup):
-        func()
-    times = []
-    for _ in range(repeat):
-        t0 = time.process_time()
-        func()
-        times.append(time.process_time() - t0)
-    return float(np.median(times))
+def _run_peer(f, Y, predict, update) -> np.ndarray:
+    """The peer filter ``f`` over the measurements ``Y`` (NaN rows: predict only); means as rows."""
+    out = np.empty((Y.shape[0], f.x.size))
+    ok = np.isfinite(Y[:, 0])
+    for k in range(Y.shape[0]):
+        if k:
+            predict()
+        if ok[k]:
+            update(Y[k])
+        out[k] = f.x
+    return out
 Q_SOG = np.diag([1e-2, 1e-3])
 R_SOG = np.diag([1.0, 1.0])
 ALPHA1, ALPHA2 = 0.01, 0.1
@@ -101,17 +98,13 @@ def _filterpy_ekf(Y, prior):
 
     f = EKF(5, 2)
     f.x, f.P, f.Q, f.R = prior.mean.copy(), prior.cov.copy(), _QX, R_SOG
-    out = np.empty((Y.shape[0], 5))
-    ok = np.isfinite(Y[:, 0])
     hj = lambda x: _H  # noqa: E731
-    for k in range(Y.shape[0]):
-        if k:
-            f.F = _F(f.x)
-            f.predict()
-        if ok[k]:
-            f.update(Y[k], hj, _hx)
-        out[k] = f.x
-    return out
+
+    def predict():
+        f.F = _F(f.x)
+        f.predict()
+
+    return _run_peer(f, Y, predict, lambda y: f.update(y, hj, _hx))
 
 
 def _filterpy_ukf(Y, prior):
@@ -120,16 +113,11 @@ def _filterpy_ukf(Y, prior):
     pts = JulierSigmaPoints(5, kappa=3.0)
     f = UnscentedKalmanFilter(5, 2, DT, _hx, lambda x, dt: _fx(x, dt), pts)
     f.x, f.P, f.Q, f.R = prior.mean.copy(), prior.cov.copy(), _QX, R_SOG
-    out = np.empty((Y.shape[0], 5))
-    ok = np.isfinite(Y[:, 0])
-    for k in range(Y.shape[0]):
-        if k:
-            f.predict()
-        if ok[k]:
-            f.sigmas_f = pts.sigma_points(f.x, f.P)      # redraw (as casship and seed 002)
-            f.update(Y[k])
-        out[k] = f.x
-    return out
+    def update(y):
+        f.sigmas_f = pts.sigma_points(f.x, f.P)      # redraw (as casship and seed 002)
+        f.update(y)
+
+    return _run_peer(f, Y, f.predict, update)
 
 
 def _filterpy_enkf(Y, prior, N, seed):
@@ -138,15 +126,7 @@ def _filterpy_enkf(Y, prior, N, seed):
     np.random.seed(seed)
     f = EnsembleKalmanFilter(prior.mean.copy(), prior.cov.copy(), 2, DT, N, _hx, lambda x, dt: _fx(x, dt))
     f.Q, f.R = _QX, R_SOG
-    out = np.empty((Y.shape[0], 5))
-    ok = np.isfinite(Y[:, 0])
-    for k in range(Y.shape[0]):
-        if k:
-            f.predict()
-        if ok[k]:
-            f.update(Y[k])
-        out[k] = f.x
-    return out
+    return _run_peer(f, Y, f.predict, f.update)
 
 
 def _online(est, data, prior):

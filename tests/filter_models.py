@@ -27,3 +27,10 @@ def linear_record(model, dt=0.1, n=300, q=0.05, r=(0.04, 0.09), seed=1):
     traj = cs.simulate(model, model.states(x1=1.0), t, {"f": u}, w=w)
     std = dict(zip(model.output_names, np.sqrt(r)))
     return traj, cs.measure(traj, model, std, seed=rng)
+
+
+def oscillator_case(n: int):
+    """``(model, dmodel, trajectory, data, prior)`` of the oscillator over ``n`` samples at 0.1 s."""
+    m = oscillator()
+    traj, data = linear_record(m, n=n)
+    return m, cs.discretize(m, 0.1), traj, data, cs.Gaussian([0.0, 0.0], [1.0, 1.0])

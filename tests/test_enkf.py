@@ -3,17 +3,14 @@ import numpy as np
 import pytest
 
 import casship as cs
-from filter_models import linear_record, oscillator
+from filter_models import oscillator_case
 
 Q, R = 0.05, [0.04, 0.09]
 
 
 @pytest.fixture(scope="module")
 def case():
-    m = oscillator()
-    dm = cs.discretize(m, 0.1)
-    traj, data = linear_record(m, n=120)
-    return m, dm, traj, data, cs.Gaussian([0.0, 0.0], [1.0, 1.0])
+    return oscillator_case(120)
 
 
 def test_seeded_and_online_equals_batch(case):
