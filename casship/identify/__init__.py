@@ -2,8 +2,6 @@
 
 * :class:`MLEProblem` -- prediction-error maximum likelihood through an EKF/UKF, exact derivatives.
 * :class:`OutputErrorProblem` -- weighted least squares of simulated outputs (single or multiple shooting).
-* :func:`smooth_trial`, :func:`inverse_dynamics` -- EKF + RTS smoothing of a trial and the regression of
-  the coefficients the model is linear in (the starting point of a refinement).
 * :class:`FitResult` -- estimates, standard errors, correlation, identifiability warnings, AIC/BIC,
   residual whiteness, JSON and a plot.
 """
