@@ -245,7 +245,6 @@ ALLOWED = frozenset({
     "casship.models.wind.add_current",
     "casship.models.wind.fujiwara_loads",
     "casship.models.wind.relative_wind",
-    "casship.progress.progress",
     "casship.simulate.IntegrationError",
     "casship.simulate.fold_steps",
     "casship.simulate.input_matrix",
