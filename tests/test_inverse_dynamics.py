@@ -115,3 +115,29 @@ def test_smoother_input_checks():
     with pytest.raises(ValueError, match="no column"):
         smooth_trial(data.select(["x", "y", "delta"]), sigma={"x": 1.0, "y": 1.0, "psi": 0.01},
                      jerk={"u": 1, "v": 1, "r": 1})
+
+
+def test_autocorrelation_sets_the_equation_weights_from_the_effective_samples(truth):
+    """AR(1) equation errors (phi = 0.9: tau = 19 samples) weigh as N / tau samples: sigma = rms sqrt(tau)."""
+    data, _ = _trial(truth, seconds=3000.0)
+    rng = np.random.default_rng(2)
+    phi, n = 0.9, len(data)
+    noisy = {}
+    for name, scale in (("u_dot", 1e-4), ("v_dot", 1e-4), ("r_dot", 1e-6)):
+        e = np.zeros(n)
+        for k in range(1, n):
+            e[k] = phi * e[k - 1] + scale * rng.standard_normal()
+        noisy[name] = data[name] + e
+    d = data.with_columns(**noisy)
+    ship = kvlcc2(truth, asymmetry=True)                 # the fixed coefficients at their true values
+    free = ["N_r_dash", "N_v_dash", "Y_v_dash", "Y_r_dash", "R_0_dash"]
+    prior_std = {k: 0.2 * abs(ship.param_dict()[k]) for k in free}
+    fit = inverse_dynamics(ship, d, free, sigma={"u": 1.0, "v": 1.0, "r": 1.0}, prior=prior_std, autocorrelation=True)
+    for name in ("u_dot", "v_dot", "r_dot"):
+        rms = np.sqrt(np.mean((d[name] - data[name]) ** 2))
+        ratio = fit.noise["sigma"][name] / rms
+        assert ratio == pytest.approx(np.sqrt((1 + phi) / (1 - phi)), rel=0.25), name
+    white = {s: fit.noise["sigma"][f"{s}_dot"] / np.sqrt((1 + phi) / (1 - phi)) for s in ("u", "v", "r")}
+    plain = inverse_dynamics(ship, d, free, sigma=white, prior=prior_std)
+    for k in free:                       # honest (larger) sigmas give wider posterior intervals
+        assert fit.std_errors[k] > plain.std_errors[k]

@@ -117,8 +117,12 @@ def test_asymmetry_terms_are_zero_by_default_and_leave_the_published_model_uncha
     for x, u in _random_points(pub, 20, 5):
         np.testing.assert_array_equal(np.asarray(ext.f(x, u, ext.params(), np.zeros(3))),
                                       np.asarray(pub.f(x, u, pub.params(), np.zeros(3))))
-    assert pub.meta["options"] == {"asymmetry": False, "smooth": False}
-    assert ext.meta["options"] == {"asymmetry": True, "smooth": False}
+    assert pub.meta["options"] == {}
+    assert ext.meta["options"] == {"asymmetry": True}
+    both = kvlcc2(asymmetry=True, smooth=True, rudder_actuator=True)
+    assert both.meta["options"] == {"asymmetry": True, "smooth": True, "rudder_actuator": True}
+    again = get_model("kvlcc2", **both.meta["options"])
+    assert again.param_names == both.param_names and again.state_names == both.state_names
     assert pub.vessel.param_set == "kvlcc2/YY2015-full-scale"
     assert ext.vessel.param_set == "kvlcc2/YY2015-full-scale+asymmetry"
     assert get_model("kvlcc2", asymmetry=True, smooth=True).vessel.param_set.endswith("+asymmetry+smooth")

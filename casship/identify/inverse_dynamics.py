@@ -178,8 +178,8 @@ def linear_in(model: Model, names: Sequence[str], states: Sequence[str] = _BODY)
 
 
 def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[str, float] | None = None,
-                     prior: Mapping[str, float] | None = None, params=None,
-                     states: Sequence[str] = _BODY) -> FitResult:
+                     prior: Mapping[str, float] | None = None, params=None, states: Sequence[str] = _BODY,
+                     autocorrelation: bool = False) -> FitResult:
     """Least-squares regression of the coefficients ``free`` on smoothed accelerations.
 
     Minimises ``sum_k sum_s ((xdot_s,k - f_s(x_k, u_k, p)) / sigma_s)^2 + sum_i ((p_i - p0_i) /
@@ -201,18 +201,25 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
         ``<state>_dot_std`` column, or 1).
     prior : mapping name -> float, optional
         Standard deviations of a Gaussian prior around the values in ``params`` (ridge
-        regularisation; a parameter left out is unregularised).
+        regularisation; a parameter left out is unregularised). With a prior the ``sigma`` are taken
+        as stated (they set the weight of the data against the prior).
     params : array or mapping, optional
         Values of the fixed parameters and prior means (default nominal).
     states : sequence of str
         States whose rate equations are used (default ``u, v, r``).
+    autocorrelation : bool
+        Equation errors of smoothed trials are coloured (model-structure error, smoothing); with
+        ``True`` each equation's ``sigma`` is set to ``rms * sqrt(tau)`` from the residuals of a
+        first solve, ``tau`` the integrated autocorrelation time (initial positive sequence, Geyer
+        1992), so that ``N`` correlated samples weigh as ``N / tau`` independent ones, and the
+        regression is solved again.
 
     Returns
     -------
     FitResult
-        ``method="inverse-dynamics"``; ``estimates`` and ``std_errors`` (from the weighted normal
-        equations, scaled by the mean squared weighted residual), ``params`` with the estimates,
-        residuals of the rate equations per record.
+        ``method="inverse-dynamics"``; ``estimates``, ``std_errors`` (posterior with a prior; else
+        from the weighted normal equations scaled by the mean squared weighted residual),
+        ``params`` with the estimates, ``noise["sigma"]`` the equation weights used.
 
     Examples
     --------
@@ -236,6 +243,44 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
     unknown = sorted(set(prior) - set(free))
     if unknown:
         raise ValueError(f"inverse_dynamics: prior given for {unknown}, which are not free {free}")
+    if any(not (np.isfinite(prior[n]) and prior[n] > 0) for n in prior):
+        raise ValueError("inverse_dynamics: prior standard deviations must be positive")
+    A, y, sizes = _regression(model, records, free, states, base)
+    sig = _equation_sigma(records, states, sigma)
+    idx = model.indices(free, "param")
+    p0 = base[idx]
+    w_prior = np.array([1.0 / prior[n] if n in prior else 0.0 for n in free])
+    scale = np.where(np.abs(p0) > 0, np.abs(p0), 1.0)          # column scaling for conditioning
+    eq = np.tile(np.arange(len(states)), A.shape[0] // len(states))
+    est, res = _solve(A, y, 1.0 / sig[eq], w_prior, p0, scale)
+    if autocorrelation:
+        per_record = _split(res, sizes, len(states))
+        tau = np.array([_tau([r[:, j] for r in per_record]) for j in range(len(states))])
+        rms = np.sqrt([np.mean(res[eq == j] ** 2) for j in range(len(states))])
+        sig = rms * np.sqrt(tau)
+        est, res = _solve(A, y, 1.0 / sig[eq], w_prior, p0, scale)
+    w = 1.0 / sig[eq]
+    wres = res * w
+    n_obs = res.size
+    s2 = 1.0 if prior else float(wres @ wres) / max(n_obs - len(free), 1)
+    As = np.vstack([A * w[:, None] * scale, np.diag(w_prior * scale)])
+    info = (As.T @ As) / s2
+    cost = 0.5 * float(wres @ wres) + 0.5 * float(np.sum((w_prior * (est - p0)) ** 2))
+    fitted = base.copy()
+    fitted[idx] = est
+    loglik = -0.5 * n_obs * (1 + np.log(2 * np.pi * s2)) - float(n_obs / len(states) * np.sum(np.log(sig)))
+    return finish(model=model.name, params=model.param_dict(fitted), names=free, values=est, info=info,
+                  jac_nat=scale, scale=dict(zip(free, scale)), cost=cost, loglik=loglik, n_obs=n_obs,
+                  residuals=[r / np.sqrt(s2) for r in _split(wres, sizes, len(states))],
+                  output_names=[f"{s}_dot" for s in states], method="inverse-dynamics",
+                  status="least-squares", iterations=0, solve_time_s=time.perf_counter() - t0,
+                  noise={"sigma": {f"{s}_dot": float(v * np.sqrt(s2)) for s, v in zip(states, sig)},
+                         "weight_scale": float(np.sqrt(s2)), "prior": dict(prior)},
+                  x0=[], predictions=[])
+
+
+def _regression(model: Model, records, free, states, base):
+    """Rows ``y = A theta`` of every record (unweighted), one row per sample and rate equation."""
     rows = model.indices(states, "state")
     idx = model.indices(free, "param")
     # f(theta) = A theta + b per sample: A from the Jacobian, b from theta = 0
@@ -247,7 +292,6 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
     f = ca.vertcat(*[fx[i] for i in rows])
     reg = ca.Function("regressors", [model.x, model.u], [ca.jacobian(f, theta), ca.substitute(f, theta, 0)],
                       ["x", "u"], ["A", "b"])
-    sig = _equation_sigma(records, states, sigma)
     blocks_A, blocks_y, sizes = [], [], []
     for k, d in enumerate(records):
         X, U, Y = _record_arrays(model, d, states, k)
@@ -255,41 +299,48 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
         out = reg.map(n)(X.T, U.T)
         A = np.asarray(out[0]).reshape(len(states), len(idx), n, order="F")     # (eq, param, sample)
         b = np.asarray(out[1]).reshape(len(states), n, order="F")
-        A = np.transpose(A, (2, 0, 1)) / sig[None, :, None]                     # (sample, eq, param)
-        y = (Y - b.T) / sig[None, :]
-        blocks_A.append(A.reshape(n * len(states), len(idx)))
-        blocks_y.append(y.reshape(-1))
+        blocks_A.append(np.transpose(A, (2, 0, 1)).reshape(n * len(states), len(idx)))
+        blocks_y.append((Y - b.T).reshape(-1))
         sizes.append(n)
-    A, y = np.vstack(blocks_A), np.concatenate(blocks_y)
-    p0 = base[idx]
-    w_prior = np.array([1.0 / prior[n] if n in prior else 0.0 for n in free])
-    if any(not (np.isfinite(prior[n]) and prior[n] > 0) for n in prior):
-        raise ValueError("inverse_dynamics: prior standard deviations must be positive")
-    scale = np.where(np.abs(p0) > 0, np.abs(p0), 1.0)          # column scaling for conditioning
-    As = np.vstack([A * scale, np.diag(w_prior * scale)])
-    ys = np.concatenate([y, w_prior * p0])
+    return np.vstack(blocks_A), np.concatenate(blocks_y), sizes
+
+
+def _solve(A, y, w, w_prior, p0, scale):
+    """Weighted, regularised least squares in scaled columns: returns (estimates, residuals y - A est)."""
+    As = np.vstack([A * w[:, None] * scale, np.diag(w_prior * scale)])
+    ys = np.concatenate([y * w, w_prior * p0])
     z, *_ = np.linalg.lstsq(As, ys, rcond=None)
     est = z * scale
-    res = y - A @ est
-    n_obs = res.size
-    s2 = float(res @ res) / max(n_obs - len(free), 1)
-    info = (As.T @ As) / s2
-    values = est
-    cost = 0.5 * float(res @ res) + 0.5 * float(np.sum((w_prior * (est - p0)) ** 2))
-    residuals, start = [], 0
+    return est, y - A @ est
+
+
+def _split(res, sizes, n_eq):
+    out, start = [], 0
     for n in sizes:
-        residuals.append(res[start:start + n * len(states)].reshape(n, len(states)) / np.sqrt(s2))
-        start += n * len(states)
-    fitted = base.copy()
-    fitted[idx] = est
-    loglik = -0.5 * n_obs * (1 + np.log(2 * np.pi * s2)) - float(n_obs / len(states) * np.sum(np.log(sig)))
-    return finish(model=model.name, params=model.param_dict(fitted), names=free, values=values, info=info,
-                  jac_nat=scale, scale=dict(zip(free, scale)), cost=cost, loglik=loglik, n_obs=n_obs,
-                  residuals=residuals, output_names=[f"{s}_dot" for s in states], method="inverse-dynamics",
-                  status="least-squares", iterations=0, solve_time_s=time.perf_counter() - t0,
-                  noise={"sigma": {f"{s}_dot": float(v * np.sqrt(s2)) for s, v in zip(states, sig)},
-                         "weight_scale": float(np.sqrt(s2)), "prior": dict(prior)},
-                  x0=[], predictions=[])
+        out.append(res[start:start + n * n_eq].reshape(n, n_eq))
+        start += n * n_eq
+    return out
+
+
+def _tau(series) -> float:
+    """Integrated autocorrelation time pooled over records: ``sum N / sum (N / tau_r)``, each
+    ``tau_r = 1 + 2 sum rho`` over the initial positive sequence of pair sums (Geyer 1992)."""
+    n_tot, n_eff = 0, 0.0
+    for x in series:
+        x = np.asarray(x, dtype=float) - np.mean(x)
+        n = x.size
+        spec = np.fft.rfft(x, 2 * n)
+        acov = np.fft.irfft(spec * np.conj(spec))[:n]
+        rho = acov / acov[0] if acov[0] > 0 else np.zeros(n)
+        tau = 1.0
+        for lag in range(1, n - 1, 2):
+            pair = rho[lag] + rho[lag + 1]
+            if pair <= 0:
+                break
+            tau += 2 * pair
+        n_tot += n
+        n_eff += n / tau
+    return n_tot / n_eff
 
 
 def _equation_sigma(records, states, sigma) -> np.ndarray:

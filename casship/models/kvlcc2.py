@@ -27,6 +27,7 @@ implementations above do) ignores scale effects on resistance and wake.
 """
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Mapping
 
@@ -100,8 +101,15 @@ def _variant(param_set: str, asymmetry: bool, smooth: bool) -> str:
     return param_set + ("+asymmetry" if asymmetry else "") + ("+smooth" if smooth else "")
 
 
+def _options(factory, given: Mapping) -> dict:
+    """The build options of a preset that differ from its defaults (recorded in ``model.meta``)."""
+    defaults = {k: v.default for k, v in inspect.signature(factory).parameters.items()
+                if v.kind is inspect.Parameter.KEYWORD_ONLY}
+    return {k: v for k, v in given.items() if v != defaults[k]}
+
+
 def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | None, name: str, doc: str,
-           vessel: Vessel, *, asymmetry: bool, smooth: bool, **options) -> Model:
+           vessel: Vessel, *, asymmetry: bool, smooth: bool, options: Mapping, **actuator) -> Model:
     values = dict(KVLCC2_COMMON)
     values.update(particulars)
     known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {})}
@@ -112,7 +120,7 @@ def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | No
         values[key] = float(val)
     vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth))
     return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, vessel=vessel, asymmetry=asymmetry,
-                        smooth=smooth, **options)
+                        smooth=smooth, meta={"options": dict(options)}, **actuator)
 
 
 def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
@@ -144,7 +152,8 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
         ``vessel`` holds the particulars, the approach speed ``U0`` (15.5 kn) and rate ``n0``
         (1.53 rps), the rudder limits, the wind geometry and the parameter set
         (``kvlcc2/YY2015-full-scale``, with ``+asymmetry`` / ``+smooth`` for the variants);
-        ``meta["options"]`` records ``asymmetry`` and ``smooth``.
+        ``meta["options"]`` records the build options that differ from the defaults (so that
+        ``get_model("kvlcc2", **model.meta["options"])`` rebuilds the variant).
 
     Examples
     --------
@@ -163,7 +172,9 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
     return _build(KVLCC2_FULL, params, "kvlcc2", "KVLCC2 full scale, MMG standard method (Yasukawa & "
                   "Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
-                  asymmetry=asymmetry, smooth=smooth)
+                  asymmetry=asymmetry, smooth=smooth, options=_options(kvlcc2, dict(
+                      rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
+                      rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth)))
 
 
 def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
@@ -183,4 +194,6 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
     return _build(KVLCC2_L7, params, "kvlcc2-l7", "KVLCC2 model L7 (1/45.7), MMG standard method "
                   "(Yasukawa & Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
-                  asymmetry=asymmetry, smooth=smooth)
+                  asymmetry=asymmetry, smooth=smooth, options=_options(kvlcc2_l7, dict(
+                      rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
+                      rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth)))

@@ -203,7 +203,7 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
                  sources: Mapping[str, str] | None = None, vessel: Vessel | None = None,
                  rudder_actuator: bool = False, rudder_time_constant: float = 1.0,
                  rudder_rate_max: float = np.radians(2.32), rudder_max: float | None = None,
-                 asymmetry: bool = False, smooth: bool = False) -> Model:
+                 asymmetry: bool = False, smooth: bool = False, meta: Mapping | None = None) -> Model:
     """MMG standard-method model (Yasukawa & Yoshimura 2015) with the given parameter values.
 
     Hull (Eq. 8): ``X_H = 0.5 rho L d U^2 (-R0' + X'vv v'^2 + X'vr v' r' + X'rr r'^2 + X'vvvv v'^4)``,
@@ -263,12 +263,13 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
         gives them).
     smooth : bool
         Smooth sign switches of ``C_2`` and ``gamma_R`` (see above).
+    meta : mapping, optional
+        Entries for ``model.meta`` (a preset records its build options under ``"options"`` there,
+        so that a fit file rebuilds the same variant).
 
     Returns
     -------
     Model
-        ``model.meta["options"]`` records ``asymmetry`` and ``smooth`` (a fit file stores them so that
-        the same variant is rebuilt to replay it).
     """
     sources = dict(sources or {})
     known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {})}
@@ -280,7 +281,7 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     P = {k: _param(b, k, values, sources, MMG_PARAMS) for k in MMG_PARAMS}
     if asymmetry:
         P.update({k: _param(b, k, values, sources, MMG_ASYMMETRY_PARAMS, default=0.0) for k in MMG_ASYMMETRY_PARAMS})
-    b.meta["options"] = {"asymmetry": bool(asymmetry), "smooth": bool(smooth)}
+    b.meta.update(dict(meta or {}))
     states = declare_ship_states(b)
     u, v, r = states[:3]
     if rudder_actuator:
