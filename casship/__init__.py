@@ -8,6 +8,7 @@ from .angles import wrap, unwrap
 from .data import Dataset, Gaussian, Trajectory
 from .discretize import DiscreteModel, discretize, van_loan
 from .model import Model, ModelBuilder
+from .vessel import Limit, Vessel
 from .simulate import measure, simulate
 from .estimators import EKF, KF, FilterResult, persistence_model
 from .estimators import UKF, rts_smooth, EnKF, KalmanBucy, augment
@@ -19,6 +20,6 @@ from . import io  # data import: read_csv (units), read_nmea (NMEA 0183), read_m
 
 __version__ = "0.1.0"
 
-__all__ = ["ModelBuilder", "Model", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
+__all__ = ["ModelBuilder", "Model", "Vessel", "Limit", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
            "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "rts_smooth", "EnKF", "KalmanBucy", "augment", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
            "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE"]

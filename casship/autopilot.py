@@ -478,6 +478,8 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
     for i, v in enumerate(model.output_vars):
         b.output(v.name, y[i], unit=v.unit, angle=v.angle, doc=v.doc)
     b.meta.update(dict(model.meta))
+    if model.vessel is not None:      # the new inputs are generalised forces, not rudders or propellers
+        b.vessel = model.vessel.replace(rudders=(), propellers=())
     return b.build()
 
 
@@ -505,12 +507,12 @@ def twin_propeller_allocation(model: Model, names: tuple[str, str] = ("n1", "n2"
 
 
 def twin_propeller_yaw_limit(model: Model, tau_X: float, p=None) -> float:
-    """Largest yaw moment [N m] that keeps both propellers inside ``meta['n_max']``/``meta['n_min']``
+    """Largest yaw moment [N m] that keeps both propellers inside ``model.vessel.propeller_range``
     at surge force ``tau_X``."""
     pd = model.param_dict(model.params(p) if p is not None else None)
-    n_max, n_min = model.meta.get("n_max"), model.meta.get("n_min")
-    if n_max is None or n_min is None:
-        raise ValueError(f"model {model.name!r} has no meta['n_max'] / meta['n_min']")
+    if model.vessel is None or model.vessel.propeller_range is None:
+        raise ValueError(f"model {model.name!r} has no vessel propeller_range")
+    n_min, n_max = model.vessel.propeller_range
     l = pd["y_pont"]
     ahead = pd["k_pos"] * n_max**2
     astern = pd["k_neg"] * n_min**2
@@ -828,11 +830,9 @@ class Design:
                 "inputs": {k: float(v) for k, v in self.plant.inputs.items()}}
 
 
-def _meta(model: Model, *keys, default=None):
-    for k in keys:
-        if k in model.meta:
-            return model.meta[k]
-    return default
+def _vessel(model: Model, key: str, default=None):
+    value = getattr(model.vessel, key, None) if model.vessel is not None else None
+    return default if value is None else value
 
 
 def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer: str = "delta",
@@ -851,7 +851,7 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
     the loop on the design model (second-order Nomoto when known) with a first-order steering
     servo ``actuator_T`` and a delay ``delay`` (e.g. the GNSS period).
 
-    Defaults come from the model's ``meta`` where present: ``wn = U/L`` (L = ``L_pp``),
+    Defaults come from the model's ``vessel`` where present: ``wn = U/L`` (L = ``L_pp``),
     ``r_max = 0.5 U/L``, ``steer_max`` = ``rudder_max`` or 35 deg, ``steer_rate_max`` =
     ``rudder_rate`` or 2.32 deg/s.
     """
@@ -860,28 +860,29 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
     inputs = dict(inputs or {})
     pv = model.params(p) if p is not None else model.params()
     if propeller == "auto":
-        propeller = next((n for n in ("n", "n_p", "n_prop") if n in model.input_names), None)
-    speed = float(speed if speed is not None else _meta(model, "U0", default=0.0))
+        props = _vessel(model, "propellers", default=())
+        propeller = props[0] if len(props) == 1 else None
+    speed = float(speed if speed is not None else _vessel(model, "U0", default=0.0))
     x = model.states(**({surge: speed} if surge in model.state_names else {}))
     u = model.inputs(**{k: v for k, v in inputs.items()})
     if propeller is not None and propeller not in inputs:
-        u[model.index(propeller, "input")] = float(_meta(model, "n0", default=None) or 1.0)
+        u[model.index(propeller, "input")] = float(_vessel(model, "n0", default=1.0))
         tr = trim(model, x, u, pv, free=[propeller], zero=[surge])
         x, u = tr.x, tr.u
         inputs[propeller] = tr.values[propeller]
     others = {n: float(u[model.index(n, "input")]) for n in model.input_names if n != steer}
     others.update(inputs)
     nom = nomoto or nomoto_from_model(model, x, u, pv, steer=steer)
-    L = _meta(model, "L_pp", "L")
+    L = _vessel(model, "L_pp")
     if wn is None:
         if L is None or speed <= 0:
-            raise ValueError("give wn (the model has no length L_pp in meta, or speed is zero)")
+            raise ValueError("give wn (the model has no vessel length L_pp, or speed is zero)")
         wn = speed / float(L)
     if r_max is None:
         r_max = 0.5 * speed / float(L) if L is not None and speed > 0 else float("inf")
-    steer_max = float(steer_max if steer_max is not None else _meta(model, "rudder_max", default=np.radians(35)))
+    steer_max = float(steer_max if steer_max is not None else _vessel(model, "rudder_max", default=np.radians(35)))
     steer_rate_max = float(steer_rate_max if steer_rate_max is not None
-                           else _meta(model, "rudder_rate", default=np.radians(2.32)))
+                           else _vessel(model, "rudder_rate", default=np.radians(2.32)))
     if method == "pid":
         gains = pid_pole_placement(nom, wn, zeta, integral=integral)
     else:

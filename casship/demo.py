@@ -60,7 +60,7 @@ def _trials(ship, cfg: DemoConfig) -> list:
     """Identification records ``[(name, truth, data), ...]``: a 20/20 zig-zag (and a random rudder run)."""
     from .maneuvers import ZigZag, propeller_rate_for_speed, random_rudder_inputs, straight_run_state
 
-    U0 = ship.meta["U0"]
+    U0 = ship.vessel.U0
     n = propeller_rate_for_speed(ship, U0)
     t = np.arange(0.0, cfg.trial_s, cfg.dt)
     x0 = straight_run_state(ship, U0)
@@ -78,7 +78,7 @@ def _prior(ship, data) -> Gaussian:
     v = 1 mm/s keeps the start off v = r = 0, where the MMG wake and flow-straightening terms switch
     with the sign of the drift (not twice differentiable there, which the fit's exact Hessian would see).
     """
-    return Gaussian(ship.states(u=0.95 * ship.meta["U0"], v=1e-3, x=data["x"][0], y=data["y"][0],
+    return Gaussian(ship.states(u=0.95 * ship.vessel.U0, v=1e-3, x=data["x"][0], y=data["y"][0],
                                 psi=data["psi"][0]), np.diag([1.0, 0.1, 1e-6, 4.0, 4.0, 1e-4]))
 
 
@@ -229,7 +229,7 @@ def run_demo(out: Path, quick: bool = False) -> dict:
     steps = progress(stages, "demo")
     t_start = time.perf_counter()
     ship = models.kvlcc2()
-    L = ship.meta["L_pp"]
+    L = ship.vessel.L_pp
 
     next(steps)
     records = _trials(ship, cfg)
@@ -252,7 +252,7 @@ def run_demo(out: Path, quick: bool = False) -> dict:
     next(steps)
     total = time.perf_counter() - t_start
     summary = {
-        "ship": ship.meta.get("vessel", ship.name), "quick": quick, "dt_s": cfg.dt, "trial_s": cfg.trial_s,
+        "ship": ship.vessel.name, "quick": quick, "dt_s": cfg.dt, "trial_s": cfg.trial_s,
         "identification_records": [name for name, _, _ in records],
         "sensors_std": {k: float(v) for k, v in SENSORS.items()},
         "rmse": rmse, "filter_health_ok": health,
@@ -282,8 +282,8 @@ def run_demo(out: Path, quick: bool = False) -> dict:
 def _report(s: dict, ship) -> str:
     lines = [
         "# casship demo: KVLCC2 from noisy trials to an identified model", "",
-        f"Ship: {s['ship']} (MMG standard method, L_pp = {ship.meta['L_pp']:g} m), approach speed "
-        f"{ship.meta['U0']:.2f} m/s. Identification records: {' and '.join(s['identification_records'])}, "
+        f"Ship: {s['ship']} (MMG standard method, L_pp = {ship.vessel.L_pp:g} m), approach speed "
+        f"{ship.vessel.U0:.2f} m/s. Identification records: {' and '.join(s['identification_records'])}, "
         f"{s['trial_s']:g} s each at dt = {s['dt_s']:g} s" + (" (quick mode)." if s["quick"] else "."), "",
         "## 1. Sensors and state estimation", "",
         "Measured: GNSS position (std 2 m), heading (0.2 deg), rate of turn (0.02 deg/s). Surge u and sway v "

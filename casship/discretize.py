@@ -101,7 +101,7 @@ class DiscreteModel:
         ode = {"x": xs, "p": theta, "ode": hs * m.f(xs, us, ps, ws)}
         opts = {"abstol": 1e-10, "reltol": 1e-10}
         opts.update(options)
-        integ = ca.integrator(f"{m.name}_cvodes", "cvodes", ode, 0.0, 1.0, opts)
+        integ = ca.integrator(f"{m.c_name}_cvodes", "cvodes", ode, 0.0, 1.0, opts)
         return integ(x0=x, p=ca.vertcat(u, p, w, h))["xf"]
 
     def __reduce__(self):

@@ -37,30 +37,28 @@ __all__ = ["rudder_inputs", "propeller_inputs", "propeller_rate_for_speed", "str
            "imo_check", "imo_table", "MANEUVERS"]
 
 MANEUVERS = ("turning", "zigzag", "pullout", "spiral", "random")
-_RUDDER_NAMES = ("delta", "delta_cmd", "delta_s", "delta_p", "delta_s_cmd", "delta_p_cmd")
-_PROP_NAMES = ("n", "n1", "n2", "n1_cmd", "n2_cmd")
 
 
 # -- model introspection ---------------------------------------------------------------------------------
-def _rudder_names(model: Model) -> tuple[str, ...]:
-    if "rudder_inputs" in model.meta:
-        return tuple(model.meta["rudder_inputs"])
-    return tuple(n for n in model.input_names if n in _RUDDER_NAMES)
+def vessel_of(model: Model):
+    """The model's :class:`~casship.vessel.Vessel`; ``ValueError`` naming the model if it has none."""
+    if model.vessel is None:
+        raise ValueError(f"model {model.name!r} has no vessel (particulars, rudder and propeller inputs); "
+                         "build it with ModelBuilder.vessel = casship.Vessel(...)")
+    return model.vessel
 
 
 def rudder_inputs(model: Model) -> tuple[str, ...]:
-    """Names of the model's rudder inputs (``meta["rudder_inputs"]`` or the usual names)."""
-    names = _rudder_names(model)
+    """Names of the model's rudder inputs (``model.vessel.rudders``)."""
+    names = vessel_of(model).rudders
     if not names:
-        raise ValueError(f"model {model.name!r} has no rudder input (inputs: {list(model.input_names)})")
+        raise ValueError(f"model {model.name!r} has no rudder input (vessel {model.vessel.name!r} names none)")
     return names
 
 
 def propeller_inputs(model: Model) -> tuple[str, ...]:
-    """Names of the model's propeller inputs (``meta["propeller_inputs"]`` or the usual names)."""
-    if "propeller_inputs" in model.meta:
-        return tuple(model.meta["propeller_inputs"])
-    return tuple(n for n in model.input_names if n in _PROP_NAMES)
+    """Names of the model's propeller inputs (``model.vessel.propellers``)."""
+    return vessel_of(model).propellers
 
 
 def straight_run_state(model: Model, speed: float, psi: float = 0.0) -> np.ndarray:
@@ -72,7 +70,7 @@ def straight_run_state(model: Model, speed: float, psi: float = 0.0) -> np.ndarr
 
 
 def _input_vector(model: Model, rudder: float = 0.0, n: float | None = None, **extra) -> np.ndarray:
-    names = _rudder_names(model)
+    names = vessel_of(model).rudders
     values = {name: rudder for name in names} if rudder is not None else {}
     if n is not None:
         values.update({name: n for name in propeller_inputs(model)})
@@ -96,7 +94,7 @@ def propeller_rate_for_speed(model: Model, speed: float, p=None, *, guess: float
     p : array_like or mapping, optional
         Parameters (nominal by default).
     guess : float, optional
-        Starting rate; by default ``model.meta["n0"]`` or a scan.
+        Starting rate; by default ``model.vessel.n0`` or a scan.
     inputs : mapping, optional
         Other inputs held fixed (e.g. a wind speed).
 
@@ -128,7 +126,7 @@ def propeller_rate_for_speed(model: Model, speed: float, p=None, *, guess: float
         u_sym[model.index(name, "input")] = n
     g = model.f(x, u_sym, p, np.zeros(model.nw))[iu]
     G = ca.Function("du", [n], [g])
-    start = guess if guess is not None else model.meta.get("n0")
+    start = guess if guess is not None else vessel_of(model).n0
     if start is None:
         grid = np.concatenate([np.linspace(0.0, 10.0, 201)[1:], np.geomspace(10.0, 1e4, 121)[1:]])
         vals = np.asarray(G.map(grid.size)(grid[None, :])).ravel()
@@ -159,7 +157,7 @@ def _rate(model: Model, rate) -> float | None:
     if rate == "model":
         if any(n.endswith("_cmd") for n in rudder_inputs(model)):
             return None                    # the actuator states limit the rate
-        return model.meta.get("rudder_rate")
+        return vessel_of(model).rudder_rate
     return rate
 
 
@@ -167,7 +165,7 @@ def turning_inputs(model: Model, t, rudder: float, n: float | None = None, *, t_
                    rate: float | None | str = "model", **extra) -> dict[str, np.ndarray]:
     """Turning circle: rudder from 0 to ``rudder`` [rad] at ``t_exec``, moved at ``rate`` [rad/s].
 
-    ``rate="model"`` uses ``model.meta["rudder_rate"]`` (no ramp for models with a rudder actuator
+    ``rate="model"`` uses ``model.vessel.rudder_rate`` (no ramp for models with a rudder actuator
     state, which limits the rate itself); ``None`` steps at once. Propeller inputs get ``n``;
     ``extra`` sets other inputs (constants or arrays).
     """
@@ -268,7 +266,7 @@ class ZigZag:
     The rudder goes to ``rudder`` [rad] (its sign is the first side: positive = starboard first)
     at ``t_exec``; whenever the heading change from the heading at execute reaches the switch
     angle on the side the ship is turning to, the rudder is reversed. The rudder moves at
-    ``rate`` [rad/s] (``"model"``: ``model.meta["rudder_rate"]``; models with a rudder actuator
+    ``rate`` [rad/s] (``"model"``: ``model.vessel.rudder_rate``; models with a rudder actuator
     get the command directly). Create a new instance for every run (it keeps the rudder state).
 
     Parameters
@@ -339,7 +337,8 @@ class ReverseSpiral:
         if hold <= 0:
             raise ValueError(f"hold must be positive, got {hold}")
         self.model, self.yaw_rates, self.hold, self.gain, self.t0 = model, list(yaw_rates), hold, gain, t0
-        self.rudder_max = rudder_max if rudder_max is not None else model.meta.get("rudder_max", np.radians(35))
+        vessel_max = vessel_of(model).rudder_max
+        self.rudder_max = rudder_max if rudder_max is not None else vessel_max if vessel_max else np.radians(35)
         self.rate = _rate(model, rate)
         self.base = _input_vector(model, 0.0, n, **extra)
         self.rudder_index = model.indices(rudder_inputs(model), "input")
@@ -392,7 +391,7 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
         Zig-zag switch heading [deg] (default ``|rudder_deg|``); its sign, if negative, also
         selects port first.
     speed : float, optional
-        Approach speed [m/s] (default ``model.meta["U0"]``).
+        Approach speed [m/s] (default ``model.vessel.U0``).
     n : float, optional
         Propeller rate; by default solved for equilibrium at ``speed``.
     duration, dt, t_exec : float, optional
@@ -415,10 +414,12 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
     """
     if kind not in MANEUVERS:
         raise ValueError(f"unknown manoeuvre {kind!r}; use one of {MANEUVERS}")
-    L = float(model.meta.get("L_pp", 100.0))
-    speed = float(speed if speed is not None else model.meta.get("U0", 0.0))
+    vessel = vessel_of(model)
+    L = vessel.L_pp
+    speed = float(speed if speed is not None else vessel.U0 or 0.0)
     if not speed > 0:
-        raise ValueError(f"model {model.name!r}: give an approach speed (no meta['U0'])")
+        raise ValueError(f"model {model.name!r}: the approach speed must be positive, got {speed} m/s "
+                         f"(vessel {vessel.name!r} U0 = {vessel.U0})")
     pv = model.params(p) if p is not None else model.params()
     props = propeller_inputs(model)
     if props and n is None:

@@ -13,12 +13,15 @@ Models compose through *ports*: named additive placeholders (for example a gener
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Callable, Iterable, Mapping, Sequence
 
 import casadi as ca
 import numpy as np
+
+from .vessel import Limit, Vessel
 
 __all__ = ["ModelBuilder", "Model", "Variable", "Parameter"]
 
@@ -103,6 +106,8 @@ class ModelBuilder:
         self._output_expr: dict[str, ca.SX] = {}
         self._ports: dict[str, ca.SX] = {}
         self._port_terms: dict[str, list[ca.SX]] = {}
+        self._limits: dict[str, Limit] = {}
+        self.vessel: Vessel | None = None
         self.meta: dict = {}
 
     # -- declarations -------------------------------------------------------------------------
@@ -167,6 +172,16 @@ class ModelBuilder:
             raise ValueError(f"port {port!r} has shape {self._ports[port].shape}, got {expr.shape}")
         self._port_terms[port].append(expr)
 
+    def limit(self, name: str, lower: float = -np.inf, upper: float = np.inf, *, why: str = "") -> None:
+        """Declare the range ``[lower, upper]`` a state or input is valid for (see :class:`~casship.vessel.Limit`).
+
+        Simulators, manoeuvre runners, trim and the command line check inputs against it and raise a
+        ``ValueError`` naming the variable and the range (unless the caller opts in to out-of-range use).
+        """
+        if self._kinds.get(name) not in ("state", "input"):
+            raise ValueError(f"limit: {name!r} is not a declared state or input of {self.name!r}")
+        self._limits[name] = Limit(name, lower, upper, why)
+
     # -- equations ----------------------------------------------------------------------------
     def ode(self, **rhs) -> None:
         """Set the time derivative of states by name, e.g. ``b.ode(psi=r, r=...)``."""
@@ -223,6 +238,10 @@ class ModelBuilder:
             raise ValueError(f"model {self.name!r}: states without an equation: {missing}")
         if not self._states:
             raise ValueError(f"model {self.name!r} has no states")
+        if self.vessel is not None:
+            if not isinstance(self.vessel, Vessel):
+                raise TypeError(f"model {self.name!r}: vessel must be a casship.Vessel, got {type(self.vessel).__name__}")
+            self.vessel.check_inputs([v.name for v in self._inputs])
         return Model(self)
 
     def copy(self, name: str | None = None) -> "ModelBuilder":
@@ -235,8 +254,18 @@ class ModelBuilder:
         new._ode, new._output_expr = dict(self._ode), dict(self._output_expr)
         new._ports = dict(self._ports)
         new._port_terms = {k: list(v) for k, v in self._port_terms.items()}
+        new._limits = dict(self._limits)
+        new.vessel = self.vessel
         new.meta = dict(self.meta)
         return new
+
+
+def _c_name(name: str) -> str:
+    """``name`` as an identifier usable in CasADi Function names (``kvlcc2-l7+wind`` -> ``kvlcc2_l7_wind``)."""
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"model name must be a non-empty string, got {name!r}")
+    ident = re.sub(r"\W", "_", name.strip())
+    return ident if ident[0].isalpha() else f"m_{ident}"
 
 
 def _vec(symbols: Iterable[ca.SX]) -> ca.SX:
@@ -249,6 +278,14 @@ class Model:
 
     Attributes
     ----------
+    name : str
+        Model name (for registered models, the registry key: ``get_model(model.name)`` rebuilds it).
+    c_name : str
+        ``name`` as an identifier, used in the names of generated CasADi Functions.
+    vessel : Vessel or None
+        The ship the model describes (particulars, rudder and propeller inputs, parameter set).
+    limits : mapping name -> Limit
+        Declared validity ranges of states and inputs.
     f, h : casadi.Function
         ``f(x,u,p,w)->xdot`` and ``h(x,u,p)->y`` with named inputs and outputs.
     f_jac, h_jac : casadi.Function
@@ -260,7 +297,11 @@ class Model:
         self._builder = builder.copy()
         b = self._builder
         self.name = b.name
+        self.c_name = _c_name(b.name)
         self.doc = b.doc
+        self.vessel = b.vessel
+        self.limits = MappingProxyType({n: b._limits[n] for n in (*(v.name for v in b._states),
+                                                                    *(v.name for v in b._inputs)) if n in b._limits})
         self.meta = MappingProxyType(dict(b.meta))
         self.state_vars = tuple(b._states)
         self.input_vars = tuple(b._inputs)

@@ -270,7 +270,7 @@ def _adaptive_on_grid(model: Model, x0, t, u, p, w, options) -> np.ndarray:
     us, ps, ws = theta[:model.nu], theta[model.nu:model.nu + model.np], theta[model.nu + model.np:]
     opts = {"abstol": 1e-10, "reltol": 1e-10}
     opts.update(options or {})
-    integ = ca.integrator(f"{model.name}_cvodes_grid", "cvodes", {"x": x, "p": theta, "ode": model.f(x, us, ps, ws)},
+    integ = ca.integrator(f"{model.c_name}_cvodes_grid", "cvodes", {"x": x, "p": theta, "ode": model.f(x, us, ps, ws)},
                           float(t[0]), [float(v) for v in t[1:]], opts)
     try:
         xf = integ(x0=x0, p=np.concatenate([u, p, w]))["xf"]

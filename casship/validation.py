@@ -143,7 +143,7 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     kind, options = classify_maneuver(data)
     metrics, measured = {}, {}
     if kind != "other":
-        L = model.meta.get("L_pp")
+        L = model.vessel.L_pp if model.vessel is not None else None
         t_exec = execute_time(data)
         metrics = maneuver_metrics(traj, kind, options, t_exec=t_exec, L=L)
         measured = maneuver_metrics(data, kind, options, t_exec=t_exec, L=L)

@@ -74,7 +74,7 @@ def ship_models():
 
 def propeller_rate(ship) -> float:
     """Propeller rate [1/s] that holds the preset's speed ``U0`` in a straight run (exact trim)."""
-    return float(cs.trim(ship, x={"u": ship.meta["U0"]}, u={"n": 10.0}, free=["n"], zero=["u"]).values["n"])
+    return float(cs.trim(ship, x={"u": ship.vessel.U0}, u={"n": 10.0}, free=["n"], zero=["u"]).values["n"])
 
 
 def filter_model(ship):
@@ -135,7 +135,7 @@ def rudder_inputs(kind: str, t: np.ndarray, ship, n: float, seed: int = 7) -> di
         from casship.maneuvers import ZigZag
 
         law = ZigZag(ship, np.radians(20.0), np.radians(20.0), n, t_exec=1.0)
-        tr = cs.simulate(ship, ship.states(u=ship.meta["U0"]), t, law, method="euler")
+        tr = cs.simulate(ship, ship.states(u=ship.vessel.U0), t, law, method="euler")
         return {"delta_s": tr["delta_s"], "delta_p": tr["delta_p"]}
     if kind == "random":
         from casship.maneuvers import random_rudder_inputs
@@ -151,7 +151,7 @@ def truth_record(truth, ship, kind: str, wind_mean: float, duration: float):
     n = propeller_rate(ship)
     inputs = {"n": np.full(t.size, n), **rudder_inputs(kind, t, ship, n),
               "wind_speed": speed, "wind_dir": direction}
-    x0 = ship.states(u=ship.meta["U0"])
+    x0 = ship.states(u=ship.vessel.U0)
     return cs.simulate(truth, x0, t, inputs, method="euler")
 
 

@@ -60,12 +60,12 @@ def ship_models():
 
 def propeller_rate(ship) -> float:
     """The ship's nominal propeller rate, or the rate that holds its nominal speed ``U0`` straight ahead."""
-    n0 = ship.meta.get("n0")
+    n0 = ship.vessel.n0
     if n0:
         return float(n0)
     from scipy.optimize import brentq
 
-    x = ship.states(u=ship.meta["U0"])
+    x = ship.states(u=ship.vessel.U0)
     j = ship.index("n", "input")
 
     def surge_acc(n):
@@ -102,7 +102,7 @@ def truth_record(truth, ship, wind_mean: float, duration: float):
     speed, direction = gusts(t, wind_mean)
     inputs = {"n": np.full(t.size, propeller_rate(ship)), "delta_s": rudder, "delta_p": rudder,
               "wind_speed": speed, "wind_dir": direction}
-    tr = cs.simulate(truth, ship.states(u=ship.meta["U0"]), t, inputs, method="euler")
+    tr = cs.simulate(truth, ship.states(u=ship.vessel.U0), t, inputs, method="euler")
     X, Uw, U = tr.x.T, tr.matrix(truth.input_names).T, tr.matrix(ship.input_names).T
     n = t.size
     with_wind = np.asarray(truth.f.map(n)(X, Uw, truth.params(), np.zeros((truth.nw, n))))

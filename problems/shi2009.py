@@ -46,6 +46,11 @@ TABLE2 = ("advance_m", "transfer_m", "tactical_diameter_m")
 ZIGZAG = ("overshoot_1_deg", "overshoot_2_deg", "initial_turning_time_s", "period_s")
 
 
+def _target_vessel() -> cs.Vessel:
+    """The ship the Taylor models stand for: KVLCC2 at full scale (its truth parameters come from it)."""
+    return cs.models.get_model("kvlcc2").vessel.replace(param_set="shi-taylor/fitted-to-kvlcc2")
+
+
 def truth_params(dt: float = 2.0) -> dict:
     """Taylor-model parameters by equation-error least squares on KVLCC2 MMG simulations."""
     k = cs.models.get_model("kvlcc2")
@@ -146,7 +151,7 @@ def validate(params: dict | None, u0: float, n0: float, duration: float) -> dict
     """Zig-zag 20/20 and 35 deg turning metrics of a Taylor model (NaN where it fails)."""
     out = {"zigzag": {}, "turning": {}, "traj": {}}
     try:
-        model = cs.models.shi_taylor(params)
+        model = cs.models.shi_taylor(params, vessel=_target_vessel())
     except ValueError:
         return out
     for kind in ("zigzag", "turning"):
@@ -239,9 +244,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, seed: int 
     steps = progress(stages, "shi2009")
     next(steps)
     truth_p = truth_params()
-    n0 = float(cs.models.get_model("kvlcc2").meta["n0"])
+    n0 = float(cs.models.get_model("kvlcc2").vessel.n0)
     u0 = straight_speed(truth_p, n0)
-    truth = cs.models.shi_taylor(truth_p)
+    truth = cs.models.shi_taylor(truth_p, vessel=_target_vessel())
     next(steps)
     raw = raw_records(truth, u0, n0, seed, duration)
     next(steps)

@@ -65,7 +65,7 @@ def identify(name: str, seed: int = 0):
         records.append(cs.Dataset(t, {"delta": np.interp(t, tr.t, tr["delta"]), "psi": psi}))
         overshoots[f"{abs(rudder):.0f}/{abs(rudder):.0f}"] = res.metrics.get("overshoot_1_deg")
     nom_fit, fit = ap.fit_nomoto(records, heading_var=HEADING_NOISE**2, guess=ap.Nomoto(0.1, 100.0))
-    speed = float(base.meta["U0"])
+    speed = float(base.vessel.U0)
     design_lin = ap.design_autopilot(base, speed)
     return {"fit": nom_fit, "fit_std": fit.std_errors, "linear": design_lin.nomoto, "records": records,
             "zigzag_overshoot_1_deg": overshoots}
@@ -74,8 +74,8 @@ def identify(name: str, seed: int = 0):
 def design(name: str, nomoto: ap.Nomoto, method: str = "pid"):
     """Autopilot for the ship (wind model, calm water) on the given Nomoto model."""
     model, base = ship_model(name)
-    speed = float(base.meta["U0"])
-    L = float(base.meta["L_pp"])
+    speed = float(base.vessel.U0)
+    L = float(base.vessel.L_pp)
     return ap.design_autopilot(model, speed, nomoto=nomoto, method=method, wn=speed / L,
                                filter_T=0.125 * L / speed, actuator_T=1.0, delay=0.2)
 
@@ -85,7 +85,7 @@ def run_case(case: dict) -> dict:
     name = case["ship"]
     d = design(name, ap.Nomoto(**case["nomoto"]), case["method"])
     base = get_model(name)
-    L, U = float(base.meta["L_pp"]), float(base.meta["U0"])
+    L, U = float(base.vessel.L_pp), float(base.vessel.U0)
     truth = d.plant.model.params(d.plant.pvec)
     for pname in case.get("perturb", []):
         truth[d.plant.model.index(pname, "param")] *= 1.0 + case["scale"]

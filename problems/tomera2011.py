@@ -52,7 +52,7 @@ FULL_SCALE_WIND = {"A_F": 1624.0, "A_L": 4910.0, "L_OA": 325.0, "B": 58.0, "A_OD
 
 def _wind_geometry(scale: float) -> dict:
     """KVLCC2 above-water geometry scaled to the model (lengths x scale, areas x scale^2)."""
-    base = get_model("kvlcc2").meta.get("wind") or FULL_SCALE_WIND
+    base = get_model("kvlcc2").vessel.wind or FULL_SCALE_WIND
     areas = {"A_F", "A_L", "A_OD"}
     return {k: float(v) * (scale**2 if k in areas else scale) for k, v in base.items() if k != "source"}
 
@@ -60,9 +60,9 @@ def _wind_geometry(scale: float) -> dict:
 def simulate_truth(duration: float, seed: int = 1):
     """KVLCC2 L7 with 2 m/s wind from North, rudder +-20 deg, measured x, y, psi at 10 Hz."""
     ship = get_model("kvlcc2-l7")
-    scale = ship.meta["L_pp"] / 320.0
+    scale = ship.vessel.L_pp / 320.0
     windy = add_wind(ship, _wind_geometry(scale))
-    U0 = ship.meta["U0"]
+    U0 = ship.vessel.U0
     n0 = propeller_rate_for_speed(ship, U0)
     t = np.arange(0.0, duration + 1e-9, DT)
     delta = np.deg2rad(20.0) * np.tanh(3.0 * np.sin(2 * np.pi * t / 90.0))
@@ -107,7 +107,7 @@ def model_based_ekf(ship, data):
     dm = cs.discretize(m, DT, method="rk4")
     Qc = np.diag([1e-5, 1e-5, 1e-7])        # PSD of the unmodelled accelerations (wind ~ 1e-3 m/s^2)
     R = np.diag([R_XY, R_XY, R_PSI])
-    prior = cs.Gaussian(m.states(u=ship.meta["U0"], x=data["x"][0], y=data["y"][0], psi=data["psi"][0]),
+    prior = cs.Gaussian(m.states(u=ship.vessel.U0, x=data["x"][0], y=data["y"][0], psi=data["psi"][0]),
                         [0.01, 0.01, 1e-4, R_XY, R_XY, R_PSI])
     ekf = cs.EKF(dm, Qc / DT, R, options={"covariance": "continuous"})      # Q: covariance over DT, PSD Qc
     return ekf.filter(data, prior)

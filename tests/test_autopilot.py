@@ -168,6 +168,6 @@ def test_twin_propeller_allocation_inverts_the_thrust_law():
     limit = ap.twin_propeller_yaw_limit(otter, 100.0)
     n1, n2 = (float(v) for v in f(100.0, limit))
     # at the limit one propeller sits exactly on its bound and the other inside its range
-    on_bound = [n1 == pytest.approx(otter.meta["n_max"], rel=1e-9), n2 == pytest.approx(otter.meta["n_min"], rel=1e-9)]
+    on_bound = [n1 == pytest.approx(otter.vessel.propeller_range[1], rel=1e-9), n2 == pytest.approx(otter.vessel.propeller_range[0], rel=1e-9)]
     assert any(on_bound)
-    assert otter.meta["n_min"] - 1e-9 <= min(n1, n2) and max(n1, n2) <= otter.meta["n_max"] + 1e-9
+    assert otter.vessel.propeller_range[0] - 1e-9 <= min(n1, n2) and max(n1, n2) <= otter.vessel.propeller_range[1] + 1e-9

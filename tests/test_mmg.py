@@ -11,11 +11,11 @@ from model_checks import assert_jacobians
 def test_jacobians_match_central_differences(factory):
     ship = factory()
     rng = np.random.default_rng(3)
-    U0 = ship.meta["U0"]
-    n0 = 1.8 * np.sqrt(320.0 / ship.meta["L_pp"])
+    U0 = ship.vessel.U0
+    n0 = 1.8 * np.sqrt(320.0 / ship.vessel.L_pp)
     for _ in range(5):
         x = ship.states(u=U0 * rng.uniform(0.3, 1.1), v=U0 * rng.uniform(-0.2, 0.2),
-                        r=U0 / ship.meta["L_pp"] * rng.uniform(-0.6, 0.6), x=rng.normal(0, 100),
+                        r=U0 / ship.vessel.L_pp * rng.uniform(-0.6, 0.6), x=rng.normal(0, 100),
                         y=rng.normal(0, 100), psi=rng.uniform(-np.pi, np.pi))
         u = ship.inputs(delta=rng.uniform(-0.6, 0.6), n=n0 * rng.uniform(0.5, 1.2))
         assert_jacobians(ship, x, u)
@@ -23,7 +23,7 @@ def test_jacobians_match_central_differences(factory):
 
 def test_registered_names():
     assert get_model("kvlcc2").name == "kvlcc2"
-    assert get_model("kvlcc2-l7").meta["L_pp"] == 7.0
+    assert get_model("kvlcc2-l7").vessel.L_pp == 7.0
 
 
 def test_port_starboard_symmetry():

@@ -28,9 +28,9 @@ def test_otter_jacobians(propeller_dynamics):
 
 def test_otter_constants_and_thrust_asymmetry():
     boat = otter()
-    assert boat.meta["draft"] == pytest.approx(80 / 1025 / (2 * 0.4 * 0.25 * 2.0))
-    assert boat.meta["C_D"] == pytest.approx(hoerner_cd(0.25, boat.meta["draft"]))
-    assert boat.meta["n_max"] == pytest.approx(np.sqrt(0.5 * 24.4 * 9.81 / (0.02216 / 2)))
+    assert boat.vessel.draught == pytest.approx(80 / 1025 / (2 * 0.4 * 0.25 * 2.0))
+    assert boat.meta["C_D"] == pytest.approx(hoerner_cd(0.25, boat.vessel.draught))
+    assert boat.vessel.propeller_range[1] == pytest.approx(np.sqrt(0.5 * 24.4 * 9.81 / (0.02216 / 2)))
     # at rest, forward thrust k_pos n^2 exceeds astern thrust k_neg n^2 by k_pos/k_neg
     x0 = boat.states()
     fwd = np.asarray(boat.f(x0, boat.inputs(n1=50, n2=50), boat.params(), np.zeros(3))).ravel()[0]

@@ -24,7 +24,7 @@ def test_shi2009_quick(tmp_path):
     for key in ("overshoot_1_deg", "overshoot_2_deg"):
         assert abs(s["zigzag"][key]["mle"] - s["zigzag"][key]["truth"]) < 2.0
     fit = json.loads((tmp_path / "fit_mle.json").read_text())
-    assert fit["model"] == "shi_taylor" and len(fit["params"]) == 16
+    assert fit["model"] == "shi-taylor" and len(fit["params"]) == 16
     for name in ("table2.md", "parameters.md", "fig_turning.png", "fig_zigzag.png", "fig_convergence.png",
                  "fig_rate_of_turn.png"):
         assert (tmp_path / name).exists(), name

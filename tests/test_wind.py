@@ -70,7 +70,7 @@ def test_wind_term_enters_tau():
     P = ship.param_dict()
     m = P["rho"] * P["nabla"]
     m_x = P["m_x_dash"] * 0.5 * P["rho"] * P["L_pp"] ** 2 * P["d"]
-    geom = dict(ship.meta["wind"])
+    geom = dict(ship.vessel.wind)
     geom.pop("source")
     X, Y, N = fujiwara_loads(21.0, 0.0, geom)          # head wind 15 + 6 m/s
     assert f1[0] - f0[0] == pytest.approx(X / (m + m_x), rel=1e-9)

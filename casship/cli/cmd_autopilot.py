@@ -71,12 +71,13 @@ def run(args) -> int:
     if args.wind is not None:
         model = add_wind(model)
         env.update(wind_speed=args.wind[0], wind_dir=np.radians(args.wind[1]))
-    speed = args.speed if args.speed is not None else model.meta.get("U0")
+    vessel = model.vessel
+    speed = args.speed if args.speed is not None else (vessel.U0 if vessel is not None else None)
     if speed is None:
         raise ValueError(f"model {args.model!r} has no nominal speed; give --speed")
-    L = model.meta.get("L_pp", model.meta.get("L"))
+    L = vessel.L_pp if vessel is not None else None
     kw = {}
-    if "delta" not in model.input_names and tuple(model.meta.get("propeller_inputs", ())) == ("n1", "n2"):
+    if vessel is not None and not vessel.rudders and len(vessel.propellers) == 2:
         # twin-propeller craft (Otter): steer by a yaw moment, hold the speed by the surge force
         base = model
         model = ap.steering_model(base, ["tau_X", "tau_N"], ap.twin_propeller_allocation(base),

@@ -91,7 +91,7 @@ def run(args) -> int:
         return 0
     model = get_model(args.model)
     p = model.params(_load_params(args.params)) if args.params else model.params()
-    L = model.meta.get("L_pp")
+    L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
     measured = None
     if args.inputs:

@@ -9,11 +9,11 @@ from .lowspeed import esso_osaka_twin, yoshimura_twin_rudder
 from .mariner import mariner
 from .otter import otter
 from .wind import add_current, add_wind
-from .taylor import SHI_DEFAULTS, SHI_PARAM_NAMES, shi_taylor
+from .taylor import SHI_DEFAULTS, SHI_PARAM_NAMES, shi_taylor, shi_taylor_preset
 
 register("nomoto1", nomoto_first_order, "first-order Nomoto model (Mariner K, T)")
 register("nomoto2", nomoto_second_order, "second-order Nomoto model (Mariner K, T1, T2, T3)")
-register("shi-taylor", shi_taylor, "Shi et al. (2009) 16-parameter Taylor response model with kinematics")
+register("shi-taylor", shi_taylor_preset, "Shi et al. (2009) 16-parameter Taylor response model with kinematics")
 register("sog-cog", sog_cog, "five-state SOG/COG/course-rate model, North-East (Fossen & Fossen 2021)")
 register("sog-cog-latlon", sog_cog_latlon, "five-state SOG/COG/course-rate model, lat/lon (Fossen & Fossen 2021)")
 register("kvlcc2", kvlcc2, "KVLCC2 tanker, full scale 320 m, MMG standard method (Yasukawa & Yoshimura 2015)")

@@ -39,7 +39,7 @@ def tomera_kinematic(g_xy: tuple[float, float] = (1.0, 0.01), g_psi: tuple[float
 
     States ``x, vx, y, vy, psi, r``; outputs ``x, y`` (DGPS) and ``psi`` (gyro-compass).
     """
-    b = ModelBuilder("tomera_kinematic", "x, y, psi double integrators (Tomera 2011, Eq. 56-62)")
+    b = ModelBuilder("tomera-kinematic", "x, y, psi double integrators (Tomera 2011, Eq. 56-62)")
     _add_double_integrator(b, "x", "vx", g_xy, False)
     _add_double_integrator(b, "y", "vy", g_xy, False)
     _add_double_integrator(b, "psi", "r", g_psi, True)
@@ -67,7 +67,7 @@ def sog_cog(alpha1: float = 0.01, alpha2: float = 0.1) -> Model:
     ``x_n' = U cos chi``, ``y_n' = U sin chi``, ``U' = -alpha1 U + w_U``, ``chi' = omega_chi``,
     ``omega_chi' = -alpha2 omega_chi + w_chi``; outputs the GNSS position ``x_n, y_n``.
     """
-    b = ModelBuilder("sog_cog", "5-state SOG/COG EKF model, North-East (Fossen & Fossen 2021)")
+    b = ModelBuilder("sog-cog", "5-state SOG/COG EKF model, North-East (Fossen & Fossen 2021)")
     xn, yn = b.state("x_n", unit="m"), b.state("y_n", unit="m")
     _add_speed_course(b, alpha1, alpha2)
     U, chi = b.sym("U"), b.sym("chi")
@@ -82,7 +82,7 @@ def sog_cog_latlon(alpha1: float = 0.01, alpha2: float = 0.1) -> Model:
 
     ``lat' = U cos chi / R_M``, ``lon' = U sin chi / (R_N cos lat)``; outputs ``lat, lon`` (rad).
     """
-    b = ModelBuilder("sog_cog_latlon", "5-state SOG/COG EKF model, latitude/longitude (Fossen & Fossen 2021)")
+    b = ModelBuilder("sog-cog-latlon", "5-state SOG/COG EKF model, latitude/longitude (Fossen & Fossen 2021)")
     lat = b.state("lat", unit="rad", angle=True)
     lon = b.state("lon", unit="rad", angle=True)
     _add_speed_course(b, alpha1, alpha2)
@@ -101,7 +101,7 @@ def body_kinematics() -> Model:
     velocities ``u, v, r`` as inputs (e.g. from a log or from a manoeuvring model) and noise
     channels ``w_x, w_y, w_psi`` on the rates; outputs the pose ``x, y, psi``.
     """
-    b = ModelBuilder("body_kinematics", "3-DOF NED pose from body velocities (Fossen 2021; Tomera 2011, Eq. 60)")
+    b = ModelBuilder("body-kinematics", "3-DOF NED pose from body velocities (Fossen 2021; Tomera 2011, Eq. 60)")
     x, y = b.state("x", unit="m"), b.state("y", unit="m")
     psi = b.state("psi", unit="rad", angle=True)
     u, v, r = b.input("u", unit="m/s"), b.input("v", unit="m/s"), b.input("r", unit="rad/s")

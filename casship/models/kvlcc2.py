@@ -33,6 +33,7 @@ from typing import Mapping
 import numpy as np
 
 from ..model import Model
+from ..vessel import Vessel
 from .mmg import MMG_PARAMS, mmg_standard
 
 __all__ = ["kvlcc2", "kvlcc2_l7", "KVLCC2_COMMON", "KVLCC2_FULL", "KVLCC2_L7", "KVLCC2_SOURCES"]
@@ -95,14 +96,14 @@ RUDDER_RATE_FULL = math.radians(2.32)    # rad/s (S2020)
 
 
 def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | None, name: str, doc: str,
-           meta: dict, **options) -> Model:
+           vessel: Vessel, **options) -> Model:
     values = dict(KVLCC2_COMMON)
     values.update(particulars)
     for key, val in (overrides or {}).items():
         if key not in MMG_PARAMS:
             raise ValueError(f"unknown KVLCC2 parameter {key!r}; known: {list(MMG_PARAMS)}")
         values[key] = float(val)
-    return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, meta=meta, **options)
+    return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, vessel=vessel, **options)
 
 
 def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
@@ -124,23 +125,25 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
     -------
     Model
         States ``u, v, r, x, y, psi`` (+ ``delta``), inputs ``delta`` (or ``delta_cmd``) and ``n``;
-        ``meta`` holds ``L_pp``, ``B``, ``d``, ``U0`` (15.5 kn), ``n0`` (1.53 rps), ``rudder_rate``.
+        ``vessel`` holds the particulars, the approach speed ``U0`` (15.5 kn) and rate ``n0``
+        (1.53 rps), the rudder limits and the wind geometry.
 
     Examples
     --------
     >>> from casship.models import kvlcc2
     >>> ship = kvlcc2()
-    >>> ship.meta["L_pp"]
+    >>> ship.vessel.L_pp
     320.0
     """
-    meta = {"L_pp": 320.0, "B": 58.0, "d": 20.8, "U0": U0_FULL, "n0": N0_FULL, "rudder_rate": RUDDER_RATE_FULL,
-            "rudder_max": math.radians(35.0), "scale": 1.0, "vessel": "KVLCC2 full scale",
-            "wind": {"A_F": 1624.0, "A_L": 4910.0, "L_OA": 325.0, "B": 58.0, "A_OD": 750.0, "H_BR": 45.0,
+    vessel = Vessel("KVLCC2", L_pp=320.0, B=58.0, draught=20.8, mass=1025.0 * KVLCC2_FULL["nabla"], scale=1.0,
+                    U0=U0_FULL, n0=N0_FULL, rudder_max=math.radians(35.0), rudder_rate=RUDDER_RATE_FULL,
+                    propeller_range=(0.0, 2.0 * N0_FULL), param_set="kvlcc2/YY2015-full-scale",
+                    source="Yasukawa & Yoshimura (2015); SIMMAN 2020 test conditions", wind={"A_F": 1624.0, "A_L": 4910.0, "L_OA": 325.0, "B": 58.0, "A_OD": 750.0, "H_BR": 45.0,
                      "H_C": 10.0, "C": 0.0,
                      "source": "A_F (A_T), A_L, A_OD (A_SS) and C (centroid 160 m from the bow, about midship) "
-                               "from BEMAN; L_OA, H_BR and H_C are estimates (not published)"}}
+                               "from BEMAN; L_OA, H_BR and H_C are estimates (not published)"})
     return _build(KVLCC2_FULL, params, "kvlcc2", "KVLCC2 full scale, MMG standard method (Yasukawa & "
-                  "Yoshimura 2015)", meta, rudder_actuator=rudder_actuator,
+                  "Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max)
 
 
@@ -150,11 +153,14 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
     """KVLCC2 model L7 (L_pp = 7 m, scale 1/45.7), MMG standard method.
 
     Same options as :func:`kvlcc2`; the default rudder rate is the Froude-scaled 15.68 deg/s.
-    ``meta["U0"]`` is 1.18 m/s (Fn 0.142, S2020); ``meta["n0"]`` is not given (sources disagree).
+    ``vessel.U0`` is 1.18 m/s (Fn 0.142, S2020); ``vessel.n0`` is not given (sources disagree); the
+    valid propeller range is the Froude-scaled full-scale one.
     """
-    meta = {"L_pp": 7.0, "B": 1.27, "d": 0.46, "U0": U0_L7, "n0": None,
-            "rudder_rate": RUDDER_RATE_FULL * np.sqrt(SCALE_L7), "rudder_max": math.radians(35.0),
-            "scale": 1.0 / SCALE_L7, "vessel": "KVLCC2 model L7"}
-    return _build(KVLCC2_L7, params, "kvlcc2_l7", "KVLCC2 model L7 (1/45.7), MMG standard method "
-                  "(Yasukawa & Yoshimura 2015)", meta, rudder_actuator=rudder_actuator,
+    n_full_scaled = N0_FULL * np.sqrt(SCALE_L7)
+    vessel = Vessel("KVLCC2 model L7", L_pp=7.0, B=1.27, draught=0.46, mass=1025.0 * KVLCC2_L7["nabla"],
+                    scale=SCALE_L7, U0=U0_L7, rudder_max=math.radians(35.0),
+                    rudder_rate=RUDDER_RATE_FULL * np.sqrt(SCALE_L7), propeller_range=(0.0, 2.0 * n_full_scaled),
+                    param_set="kvlcc2/YY2015-L7", source="Yasukawa & Yoshimura (2015); SIMMAN 2020 test conditions")
+    return _build(KVLCC2_L7, params, "kvlcc2-l7", "KVLCC2 model L7 (1/45.7), MMG standard method "
+                  "(Yasukawa & Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max)

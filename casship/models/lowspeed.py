@@ -38,7 +38,8 @@ import casadi as ca
 import numpy as np
 
 from ..model import Model, ModelBuilder
-from .mmg import _param, declare_ship_states, rigid_body_3dof
+from ..vessel import Vessel
+from .mmg import _param, declare_ship_limits, declare_ship_states, rigid_body_3dof
 
 __all__ = ["yoshimura_twin_rudder", "esso_osaka_twin", "crossflow_integrals", "LOWSPEED_PARAMS",
            "ESSO_OSAKA_TWIN", "ESSO_OSAKA_SOURCES"]
@@ -132,8 +133,8 @@ def crossflow_integrals(a, b):
     return np.where(same, I0_same, I0_cross), np.where(same, I1_same, I1_cross)
 
 
-def yoshimura_twin_rudder(values: Mapping[str, float], *, name: str = "mmg_twin_lowspeed", doc: str = "",
-                          sources: Mapping[str, str] | None = None, meta: Mapping | None = None,
+def yoshimura_twin_rudder(values: Mapping[str, float], *, name: str = "mmg-twin-lowspeed", doc: str = "",
+                          sources: Mapping[str, str] | None = None, vessel: Vessel | None = None,
                           smooth_speed: float = 1e-4) -> Model:
     """Low-speed MMG model (Yoshimura hull, single propeller, twin rudders) with given parameters.
 
@@ -144,8 +145,9 @@ def yoshimura_twin_rudder(values: Mapping[str, float], *, name: str = "mmg_twin_
     name, doc : str
     sources : mapping, optional
         Parameter name -> source text.
-    meta : mapping, optional
-        Copied into ``model.meta``.
+    vessel : Vessel, optional
+        The ship; its ``rudders`` become ``("delta_s", "delta_p")`` and ``propellers`` ``("n",)``, and
+        the rudders get the validity limit ``vessel.rudder_max``.
     smooth_speed : float
         ``e`` [m/s] of the smooth ``|u|``, ``U`` and ``|beta|`` (see the module docstring).
 
@@ -204,10 +206,9 @@ def yoshimura_twin_rudder(values: Mapping[str, float], *, name: str = "mmg_twin_
                     m_x=P["m_x_dash"] * 0.5 * rho * L**2 * d, m_y=P["m_y_dash"] * 0.5 * rho * L**2 * d,
                     I_zG=m * (P["k_zz"] * L) ** 2, J_z=P["J_z_dash"] * 0.5 * rho * L**4 * d,
                     x_G=P["x_G_dash"] * L, states=states)
-    b.meta.update(dict(meta or {}))
-    b.meta.setdefault("kind", "mmg-lowspeed")
-    b.meta.setdefault("rudder_inputs", ("delta_s", "delta_p"))
-    b.meta.setdefault("propeller_inputs", ("n",))
+    if vessel is not None:
+        b.vessel = vessel.replace(rudders=("delta_s", "delta_p"), propellers=("n",))
+        declare_ship_limits(b, vessel.replace(U0=None, rudders=("delta_s", "delta_p"), propellers=("n",)))
     return b.build()
 
 
@@ -237,13 +238,14 @@ def esso_osaka_twin(params: Mapping[str, float] | None = None, *, smooth_speed: 
         if key not in LOWSPEED_PARAMS:
             raise ValueError(f"unknown low-speed parameter {key!r}; known: {list(LOWSPEED_PARAMS)}")
         values[key] = float(val)
-    meta = {"L_pp": values["L_pp"], "B": values["B"], "d": values["d"], "U0": 0.4, "n0": None,
-            "rudder_rate": np.radians(20.0), "rudder_max": np.radians(105.0),
-            "vessel": "Esso Osaka 3 m model, single propeller, twin rudders",
-            "wind": {"A_F": 0.0535, "A_L": 0.2306, "L_OA": 3.08, "B": 0.48925, "A_OD": 0.062, "H_BR": 0.25,
+    vessel = Vessel("Esso Osaka 3 m model, single propeller, twin rudders", L_pp=values["L_pp"], B=values["B"],
+                    draught=values["d"], scale=1.0, U0=0.4, rudder_rate=np.radians(20.0),
+                    rudder_max=np.radians(105.0), param_set="esso-osaka/Yoshimura-lowspeed+assumed",
+                    source="Yoshimura low-speed hull (reference table section 5); propeller and rudder assumed",
+                    wind={"A_F": 0.0535, "A_L": 0.2306, "L_OA": 3.08, "B": 0.48925, "A_OD": 0.062, "H_BR": 0.25,
                      "H_C": 0.045, "C": -0.35,
-                     "source": "estimated above-water geometry of a 3 m tanker model (not published)"}}
-    return yoshimura_twin_rudder(values, name="mmg_twin_lowspeed",
+                     "source": "estimated above-water geometry of a 3 m tanker model (not published)"})
+    return yoshimura_twin_rudder(values, name="mmg-twin-lowspeed",
                                  doc="Esso Osaka 3 m, Yoshimura low-speed hull, single propeller, twin rudders "
                                      "(seed 002 Eq. 20-22)",
-                                 sources=ESSO_OSAKA_SOURCES, meta=meta, smooth_speed=smooth_speed)
+                                 sources=ESSO_OSAKA_SOURCES, vessel=vessel, smooth_speed=smooth_speed)

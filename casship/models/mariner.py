@@ -20,7 +20,8 @@ import numpy as np
 
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder
-from .mmg import add_rudder_actuator, declare_ship_states
+from ..vessel import Vessel
+from .mmg import add_rudder_actuator, declare_ship_limits, declare_ship_states
 
 __all__ = ["mariner", "MARINER"]
 
@@ -60,7 +61,7 @@ def mariner(params: Mapping[str, float] | None = None, *, U0: float = U0_MARINER
     -------
     Model
         States ``u, v, r, x, y, psi`` (+ ``delta``), input ``delta`` (or ``delta_cmd``);
-        ``meta``: ``L_pp``, ``U0``, ``rudder_rate`` (5 deg/s), ``rudder_max`` (40 deg).
+        ``vessel``: ``L_pp``, ``U0``, ``rudder_rate`` (5 deg/s), ``rudder_max`` (40 deg).
     """
     values = dict(MARINER)
     values.update({"L": L_MARINER, "U0": U0, "rho": 1025.0})
@@ -113,7 +114,8 @@ def mariner(params: Mapping[str, float] | None = None, *, U0: float = U0_MARINER
           r=dr + b.noise("w_r", unit="rad/s^2"), x=xd, y=yd, psi=psid)
     for name in ("u", "v", "r", "x", "y", "psi"):
         b.output(name, b.sym(name))
-    b.meta.update({"L_pp": L_MARINER, "U0": U0, "n0": None, "rudder_rate": np.radians(5.0),
-                   "rudder_max": np.radians(40.0), "vessel": "Mariner-class cargo ship", "kind": "mariner",
-                   "rudder_inputs": ("delta_cmd",) if rudder_actuator else ("delta",), "propeller_inputs": ()})
+    b.vessel = Vessel("Mariner-class cargo ship", L_pp=L_MARINER, U0=U0, rudder_rate=np.radians(5.0),
+                      rudder_max=np.radians(40.0), rudders=("delta_cmd",) if rudder_actuator else ("delta",),
+                      param_set="mariner/Chislett-Strom-Tejsen-1965", source=_SOURCE)
+    declare_ship_limits(b, b.vessel)
     return b.build()

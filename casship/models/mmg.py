@@ -31,9 +31,10 @@ import numpy as np
 
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder
+from ..vessel import Vessel
 
-__all__ = ["mmg_standard", "MMG_PARAMS", "rigid_body_3dof", "declare_ship_states", "add_rudder_actuator",
-           "smooth_saturation"]
+__all__ = ["mmg_standard", "MMG_PARAMS", "rigid_body_3dof", "declare_ship_states", "declare_ship_limits",
+           "add_rudder_actuator", "smooth_saturation"]
 
 # name -> (unit, description). The numeric values come from a preset (see casship.models.kvlcc2).
 MMG_PARAMS: dict[str, tuple[str, str]] = {
@@ -164,7 +165,7 @@ def _param(b: ModelBuilder, name: str, values: Mapping[str, float], sources: Map
 
 
 def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "",
-                 sources: Mapping[str, str] | None = None, meta: Mapping | None = None,
+                 sources: Mapping[str, str] | None = None, vessel: Vessel | None = None,
                  rudder_actuator: bool = False, rudder_time_constant: float = 1.0,
                  rudder_rate_max: float = np.radians(2.32), rudder_max: float | None = None) -> Model:
     """MMG standard-method model (Yasukawa & Yoshimura 2015) with the given parameter values.
@@ -194,8 +195,11 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
         Model name and description.
     sources : mapping, optional
         Parameter name -> source string (stored with each parameter).
-    meta : mapping, optional
-        Metadata copied into ``model.meta`` (``L_pp``, ``U0``, ``n0`` ...).
+    vessel : Vessel, optional
+        The ship (particulars, approach condition, parameter set). Its ``rudders`` and
+        ``propellers`` are set to the model's inputs; the rudder and propeller inputs and the surge
+        velocity get validity limits from it (rudder stop, propeller ahead up to twice the approach
+        rate, ahead motion up to twice the approach speed).
     rudder_actuator : bool
         If True, ``delta`` becomes a state driven by the input ``delta_cmd`` through
         :func:`add_rudder_actuator` (first order, smooth rate limit ``rudder_rate_max`` [rad/s]).
@@ -227,11 +231,24 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     J_z = P["J_z_dash"] * 0.5 * rho * L**4 * d
     I_zG = m * (P["k_zz"] * L) ** 2
     rigid_body_3dof(b, force, m=m, m_x=m_x, m_y=m_y, I_zG=I_zG, J_z=J_z, x_G=P["x_G"], states=states)
-    b.meta.update(dict(meta or {}))
-    b.meta.setdefault("kind", "mmg")
-    b.meta.setdefault("rudder_inputs", ("delta_cmd",) if rudder_actuator else ("delta",))
-    b.meta.setdefault("propeller_inputs", ("n",))
+    if vessel is not None:
+        rudder = "delta_cmd" if rudder_actuator else "delta"
+        b.vessel = vessel.replace(rudders=(rudder,), propellers=("n",))
+        declare_ship_limits(b, b.vessel)
     return b.build()
+
+
+def declare_ship_limits(b: ModelBuilder, vessel: Vessel) -> None:
+    """Validity ranges of a conventional ship model from its vessel: rudder stop on every rudder
+    input, propeller rates in ``vessel.propeller_range`` and ahead motion ``0 <= u <= 2 U0``."""
+    if vessel.rudder_max is not None:
+        for name in vessel.rudders:
+            b.limit(name, -vessel.rudder_max, vessel.rudder_max, why="rudder stop")
+    if vessel.propeller_range is not None:
+        for name in vessel.propellers:
+            b.limit(name, *vessel.propeller_range, why="propeller rates the model is valid for")
+    if vessel.U0 is not None and b.has("u"):
+        b.limit("u", 0.0, 2.0 * vessel.U0, why="ahead motion up to twice the approach speed")
 
 
 def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n):

@@ -35,6 +35,7 @@ import numpy as np
 
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder
+from ..vessel import Vessel
 from .lowspeed import crossflow_integrals
 from .mmg import declare_ship_states
 
@@ -79,7 +80,9 @@ def otter(params: Mapping[str, float] | None = None, *, propeller_dynamics: bool
     -------
     Model
         States ``u, v, r, x, y, psi`` (+ ``n1, n2``), inputs ``n1, n2`` [rad/s] (or ``*_cmd``);
-        ``meta``: ``L_pp``, ``U0`` (2 m/s), ``n_max``, ``n_min``, ``draft``, ``C_D``.
+        ``vessel``: ``L_pp``, ``B``, ``draught``, ``mass``, ``U0`` (2 m/s) and the propeller range
+        ``(n_min, n_max)`` [rad/s] (the MSS saturation; ``vessel.propeller_range``); the propeller
+        inputs get it as their validity limit. ``meta["C_D"]``: the cross-flow drag coefficient.
     """
     values = dict(OTTER)
     for key, val in (params or {}).items():
@@ -145,9 +148,11 @@ def otter(params: Mapping[str, float] | None = None, *, propeller_dynamics: bool
     for name in ("u", "v", "r", "x", "y", "psi"):
         b.output(name, b.sym(name))
     g = values["g"]
-    b.meta.update({"L_pp": values["L"], "B": values["B"], "U0": 2.0, "n0": None, "draft": draft,
-                   "C_D": hoerner_cd(values["B_pont"], draft), "vessel": "Otter USV", "kind": "otter",
-                   "n_max": float(np.sqrt(0.5 * 24.4 * g / values["k_pos"])),
-                   "n_min": float(-np.sqrt(0.5 * 13.6 * g / values["k_neg"])),
-                   "rudder_inputs": (), "propeller_inputs": ("n1_cmd", "n2_cmd") if propeller_dynamics else ("n1", "n2")})
+    n_range = (float(-np.sqrt(0.5 * 13.6 * g / values["k_neg"])), float(np.sqrt(0.5 * 24.4 * g / values["k_pos"])))
+    b.vessel = Vessel("Otter USV", L_pp=values["L"], B=values["B"], draught=float(draft), mass=float(m_tot), U0=2.0,
+                      propellers=("n1_cmd", "n2_cmd") if propeller_dynamics else ("n1", "n2"),
+                      propeller_range=n_range, param_set="otter/MSS", source=_SRC)
+    b.meta["C_D"] = hoerner_cd(values["B_pont"], draft)
+    for name in b.vessel.propellers:
+        b.limit(name, *n_range, why="propeller saturation (MSS otter.m)")
     return b.build()

@@ -18,12 +18,24 @@ def register(name: str, factory: Callable[..., Model], doc: str) -> None:
 
 
 def get_model(name: str, **options) -> Model:
-    """Build the registered model ``name`` (keyword options go to its factory)."""
+    """Build the registered model ``name`` (keyword options go to its factory).
+
+    The registry key is the model's name: ``get_model(name).name == name``.
+
+    Examples
+    --------
+    >>> get_model("kvlcc2-l7").name
+    'kvlcc2-l7'
+    """
     try:
         factory = _FACTORIES[name][0]
     except KeyError:
         raise ValueError(f"unknown model {name!r}; known models: {sorted(_FACTORIES)}") from None
-    return factory(**options)
+    model = factory(**options)
+    if model.name != name:
+        raise RuntimeError(f"registered model {name!r} builds a model named {model.name!r}; "
+                           "register it under its own name")
+    return model
 
 
 def model_names() -> dict[str, str]:

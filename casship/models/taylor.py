@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder
+from ..vessel import Vessel
 
-__all__ = ["shi_taylor", "SHI_PARAM_NAMES", "SHI_DEFAULTS"]
+__all__ = ["shi_taylor", "shi_taylor_preset", "SHI_PARAM_NAMES", "SHI_DEFAULTS", "SHI_ILLUSTRATIVE_VESSEL"]
 
 SHI_PARAM_NAMES = ("a1", "a2", "a3", "a4", "a5", "a6", "a7", "a8", "a9",
                    "b1", "b2", "b3", "b4", "c1", "c2", "c3")
@@ -20,7 +21,19 @@ SHI_DEFAULTS = {"a1": -0.003125, "a2": 0.0, "a3": -0.5, "a4": -0.005, "a5": 0.0,
                 "c1": -0.001, "c2": -0.03, "c3": 0.002}
 
 
-def shi_taylor(params: dict | None = None, *, kinematics: bool = True) -> Model:
+#: The ship :data:`SHI_DEFAULTS` stand for: illustrative, not a published vessel (the length is an
+#: assumption used to scale manoeuvre metrics; 8 m/s at 1.5 rps as above).
+SHI_ILLUSTRATIVE_VESSEL = Vessel("illustrative ship (Shi et al. 2009 model form)", L_pp=100.0, U0=8.0, n0=1.5,
+                                 rudder_max=0.6108652381980153, param_set="shi-taylor/illustrative",
+                                 source="casship illustrative set (assumed L_pp = 100 m), not the paper's Table 1")
+
+
+def shi_taylor_preset(params: dict | None = None, *, kinematics: bool = True) -> Model:
+    """:func:`shi_taylor` with :data:`SHI_DEFAULTS` on the illustrative vessel (registered as ``shi-taylor``)."""
+    return shi_taylor(params, kinematics=kinematics, vessel=SHI_ILLUSTRATIVE_VESSEL)
+
+
+def shi_taylor(params: dict | None = None, *, kinematics: bool = True, vessel: Vessel | None = None) -> Model:
     """Shi et al. (2009) 3-DOF response model, 16 parameters.
 
     ``u' = a1 u^2 + a2 v^2 + a3 r^2 + a4 delta^2 + a5 v r + a6 v delta + a7 r delta + a8 u n + a9 n^2``,
@@ -34,13 +47,16 @@ def shi_taylor(params: dict | None = None, *, kinematics: bool = True) -> Model:
     kinematics : bool
         Add earth-fixed ``x, y, psi`` states (for manoeuvre validation); outputs stay ``u, v, r``
         as in the paper (``H = [I3 0]``).
+    vessel : Vessel, optional
+        The ship the parameters describe (for manoeuvres: length, approach speed, rudder limit);
+        its rudder and propeller inputs become ``delta`` and ``n``.
     """
     values = dict(SHI_DEFAULTS)
     for k, v in (params or {}).items():
         if k not in values:
             raise ValueError(f"unknown Shi et al. parameter {k!r}; known: {list(SHI_PARAM_NAMES)}")
         values[k] = v
-    b = ModelBuilder("shi_taylor", "3-DOF second-order Taylor response model (Shi et al. 2009, Eq. 2)")
+    b = ModelBuilder("shi-taylor", "3-DOF second-order Taylor response model (Shi et al. 2009, Eq. 2)")
     u, v, r = b.state("u", unit="m/s"), b.state("v", unit="m/s"), b.state("r", unit="rad/s")
     delta, n = b.input("delta", unit="rad"), b.input("n", unit="1/s")
     a = [b.param(f"a{i}", values[f"a{i}"]) for i in range(1, 10)]
@@ -59,4 +75,6 @@ def shi_taylor(params: dict | None = None, *, kinematics: bool = True) -> Model:
         b.ode(x=xd, y=yd, psi=psid)
     for name in ("u", "v", "r"):
         b.output(name, b.sym(name))
+    if vessel is not None:
+        b.vessel = vessel.replace(rudders=("delta",), propellers=("n",))
     return b.build()

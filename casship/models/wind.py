@@ -127,7 +127,7 @@ def add_wind(model: Model, geometry: Mapping[str, float] | None = None, *, rho_a
     model : Model
         A 3-DOF ship with states ``u, v, r, x, y, psi`` and a port ``tau`` (all casship ships).
     geometry : mapping, optional
-        Values for :data:`WIND_GEOMETRY_NAMES`; by default ``model.meta["wind"]``. They become
+        Values for :data:`WIND_GEOMETRY_NAMES`; by default ``model.vessel.wind``. They become
         parameters ``wind_A_F, wind_A_L, ...`` (so they can be identified) plus ``rho_air``.
     rho_air : float
         Air density [kg/m^3].
@@ -147,12 +147,13 @@ def add_wind(model: Model, geometry: Mapping[str, float] | None = None, *, rho_a
     >>> ship.input_names
     ('delta', 'n', 'wind_speed', 'wind_dir')
     """
-    geometry = dict(geometry if geometry is not None else model.meta.get("wind") or {})
+    default = model.vessel.wind if model.vessel is not None else None
+    geometry = dict(geometry if geometry is not None else default or {})
     geometry.pop("source", None)
     missing = [k for k in WIND_GEOMETRY_NAMES if k not in geometry]
     if missing:
         raise ValueError(f"add_wind: no value for wind geometry {missing} (model {model.name!r} has no "
-                         "meta['wind']; pass geometry=...)")
+                         "vessel wind geometry; pass geometry=...)")
     unknown = set(geometry) - set(WIND_GEOMETRY_NAMES)
     if unknown:
         raise ValueError(f"add_wind: unknown wind geometry name(s) {sorted(unknown)}; known: {WIND_GEOMETRY_NAMES}")
@@ -171,7 +172,6 @@ def add_wind(model: Model, geometry: Mapping[str, float] | None = None, *, rho_a
         U_A, gamma = relative_wind(u, v, psi, speed, direction)
         X, Y, N = fujiwara_loads(U_A, gamma, g, rho)
         b.feed("tau", ca.vertcat(X, Y, N))
-        b.meta["wind_inputs"] = ("wind_speed", "wind_dir")
 
     return model.extend(term, name or f"{model.name}+wind")
 
