@@ -22,6 +22,7 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap_sym
+from ..estimators.base import CONSTANT_INPUTS, SAMPLE_INPUTS
 from ._compile import compiled
 
 __all__ = ["CHUNK", "OutputErrorEngine", "LikelihoodEngine", "StepSlots"]
@@ -265,48 +266,37 @@ class OutputErrorEngine(_Engine):
 
 
 class StepSlots:
-    """An estimator's step Function seen through its slot names.
+    """An estimator's step Function seen through its slot names (the estimator contract).
 
-    Gives the memory slots (inputs carried from sample to sample, with the names of the outputs that
-    continue them), the per-sample and per-record inputs, where the state mean sits in the memory,
-    the initial memory for a prior and the per-step random draws.
+    Gives the memory slots (carried from sample to sample under the same names), the per-sample
+    and per-record inputs, the per-step random draws, where the state mean sits in the memory, and
+    the initial memory for a prior, all flattened to vectors (the sensitivities are taken with
+    respect to flat slots).
     """
 
-    SAMPLE = ("u_prev", "u", "y", "mask", "dt", "gate")
-    RECORD = ("p", "Q", "R")
+    SAMPLE = SAMPLE_INPUTS
+    RECORD = CONSTANT_INPUTS
 
     def __init__(self, est):
         self.est = est
-        if hasattr(est, "memory"):          # named memory slots, continued under the same name
-            self.step = est.step_function(("e", "S", "ll"))
-            self.memory = {n: n for n in est.memory}
-        else:                               # one "carry" slot continued by "carry_next"
-            self.step = est.step_function
-            self.memory = {"carry": "carry_next"}
-        names = self.step.name_in()
+        self.step = est.step_function(("e", "S", "ll"))
+        self.memory = {n: n for n in est.memory}
         known = set(self.memory) | set(self.SAMPLE) | set(self.RECORD)
-        self.draw_names = tuple(n for n in names if n not in known)
-        nx = est.model.nx
-        self.mean = None                    # (slot, first row) of the state mean in the memory
-        if "x" in self.memory:
-            self.mean = ("x", 0)
-        elif "carry" in self.memory and self.step.nnz_in("carry") >= nx + nx * nx:
-            self.mean = ("carry", 0)
+        self.draw_names = tuple(n for n in self.step.name_in() if n not in known)
+        self.mean = ("x", 0) if "x" in self.memory else None    # (slot, first row) of the state mean
 
     def initial(self, prior, rng) -> dict:
         """Flat initial memory (name -> vector) for a Gaussian prior."""
-        if hasattr(self.est, "memory_from"):
-            mem = self.est.memory_from(prior, rng)
-            return {n: np.asarray(mem[n], dtype=float).reshape(-1, order="F") for n in self.memory}
-        return {"carry": np.asarray(self.est.carry_from(prior, rng), dtype=float).reshape(-1)}
+        mem = self.est.memory_from(prior, rng)
+        return {n: np.asarray(mem[n], dtype=float).reshape(-1, order="F") for n in self.memory}
 
     def draws(self, n: int, rng) -> dict:
-        """Per-step draws for ``n`` steps (name -> array, steps side by side)."""
-        if not self.draw_names:
-            return {}
-        if hasattr(self.est, "draws"):
-            return dict(self.est.draws(n, rng))
-        return dict(zip(self.draw_names, self.est.extra_inputs(n, rng)))
+        """Per-step draws for ``n`` steps, each step's block flattened to a column (name -> array)."""
+        out = {}
+        for name, a in self.est.draws(n, rng).items():
+            r, c = self.step.size1_in(name), self.step.size2_in(name)
+            out[name] = np.asarray(a, dtype=float).reshape(r, n, c).transpose(2, 0, 1).reshape(c * r, n)
+        return out
 
 
 class LikelihoodEngine(_Engine):

@@ -7,9 +7,10 @@ residuals, and each sample then carries much less information than the matrix as
 * :func:`whiteness` -- Ljung-Box test per output channel (statistics summed over records).
 * :func:`effective_samples` -- per channel, the number of independent samples the residuals are
   worth (record length over the integrated autocorrelation time).
-* :func:`sandwich_covariance` -- the honest alternative used by casship: ``A^-1 B A^-1`` with ``A``
-  the information (plus prior precision) and ``B`` the long-run covariance of the per-sample
-  scores (gradient contributions), estimated with Bartlett weights and Andrews' (1991) AR(1)
+* :func:`sandwich_covariance` -- the honest alternative used by casship: the Godambe information
+  ``H B^-1 H`` (the sandwich ``H^-1 B H^-1`` inverted) plus the prior's precision, with ``H`` the
+  information of the data and ``B`` the long-run covariance of the per-sample scores (gradient
+  contributions), estimated with Bartlett weights and Andrews' (1991) AR(1)
   plug-in bandwidth (at most a quarter of the record), records independent. It is chosen over an effective-sample-size inflation
   because it is consistent under misspecification (White 1982), accounts for each parameter's own
   score autocorrelation (a channel-wide correction inflates all parameters alike), and combines
@@ -154,24 +155,34 @@ def _bandwidth(s: np.ndarray) -> int:
     return int(min(n // 4, np.ceil(1.1447 * (alpha * n) ** (1 / 3))))
 
 
-def sandwich_covariance(Ainv: np.ndarray, scores: Sequence[tuple[np.ndarray, np.ndarray]], k: int):
-    """Heteroscedasticity- and autocorrelation-consistent covariance ``A^-1 B A^-1``.
+def sandwich_covariance(H: np.ndarray, prior_precision: np.ndarray, scores: Sequence[tuple[np.ndarray, np.ndarray]],
+                        k: int, names: Sequence[str]):
+    """Robust covariance from the Godambe (sandwich) information ``H B^-1 H``, plus the prior's precision.
+
+    Without a prior this is the heteroscedasticity- and autocorrelation-consistent covariance
+    ``H^-1 B H^-1``; with one, the posterior covariance with the data's curvature replaced by its
+    robust counterpart. When the residuals are white and the model right, ``B = H`` and it equals
+    the model-based covariance.
 
     Parameters
     ----------
-    Ainv : (k, k) array
-        Inverse of the information matrix (the model-based covariance, prior included; see
-        :func:`covariance_from_information`), NaN/inf in directions the data do not determine.
+    H : (k, k) array
+        Information of the data (curvature of the data cost at the optimum).
+    prior_precision : (k,) array
+        Precision of the prior (0 without one).
     scores : sequence of (scores, cols)
         Per record the per-sample score contributions ``(N_r, k_r)`` and the positions ``cols`` of
         its free values among the ``k``; records are independent.
     k : int
         Number of free values.
+    names : sequence of str
+        Names of the free values (for warnings about singular directions).
 
     Returns
     -------
     (cov, lags)
-        The covariance ``(k, k)`` and the Bartlett bandwidth used in each record.
+        The covariance ``(k, k)`` (inf/NaN where the data do not determine a direction) and the
+        Bartlett bandwidth used in each record.
     """
     B = np.zeros((k, k))
     lags = []
@@ -188,12 +199,11 @@ def sandwich_covariance(Ainv: np.ndarray, scores: Sequence[tuple[np.ndarray, np.
             G += w * (C + C.T)
         B[np.ix_(cols, cols)] += G
         lags.append(L)
-    bad = ~np.isfinite(np.diag(Ainv))
-    A0 = np.where(np.isfinite(Ainv), Ainv, 0.0)
-    cov = A0 @ B @ A0
-    cov[bad, :] = cov[:, bad] = np.nan
-    cov[bad, bad] = np.inf
-    return cov, lags
+    d = np.sqrt(np.abs(np.diag(B)))
+    d[d == 0] = 1.0
+    Binv = np.linalg.pinv(B / np.outer(d, d), rcond=COND_WARN, hermitian=True) / np.outer(d, d)
+    G = H @ Binv @ H + np.diag(prior_precision)
+    return covariance_from_information(0.5 * (G + G.T), names)[0], lags
 
 
 def covariance_from_information(info: np.ndarray, names: Sequence[str]):
