@@ -14,6 +14,7 @@ filter, priors, identifiability and the fit result.
 from .identifiability import Identifiability
 from .mle import MLEProblem, default_prior
 from .output_error import OutputErrorProblem
+from .params_file import read_params
 from .prior import Prior
 from .problem import IdentificationProblem
 from .records import decimate, initial_states, noise_std, share_labels
@@ -21,4 +22,4 @@ from .result import FitResult, IdentificationError, IdentificationWarning
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
            "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std", "decimate",
-           "share_labels", "initial_states"]
+           "share_labels", "initial_states", "read_params"]
