@@ -9,8 +9,11 @@ filter, priors, identifiability and the fit result.
 * :class:`FitResult` -- estimates, model-based and robust (sandwich) standard errors, correlations,
   warnings, channel shares, residual whiteness, the model's identity, JSON and a plot.
 * :class:`Identifiability` -- Fisher-information analysis before fitting, and a proposed free set.
+* :func:`cross_validate` -- leave-one-run-out / leave-one-group-out replays against the published
+  values, as a :class:`CrossValidation` value with a table and overlay figures.
 * :func:`noise_std`, :func:`decimate`, :func:`share_labels`, :func:`initial_states` -- record helpers.
 """
+from .crossval import CrossValidation, cross_validate
 from .identifiability import Identifiability
 from .mle import MLEProblem, default_prior
 from .output_error import OutputErrorProblem
@@ -22,4 +25,4 @@ from .result import FitResult, IdentificationError, IdentificationWarning
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
            "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std", "decimate",
-           "share_labels", "initial_states", "read_params"]
+           "share_labels", "initial_states", "read_params", "cross_validate", "CrossValidation"]

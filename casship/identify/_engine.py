@@ -187,22 +187,25 @@ class OutputErrorEngine(_Engine):
             return _fold(fun, {"x": "x_next"}, ("p", "w"))
         return self._fun("value", make)
 
-    def _sens_fold(self, k: int):
+    def _sens_fold(self, k: int, seeds: tuple):
+        """The sensitivity fold for ``k`` free values entering through the inputs ``seeds`` (a subset of
+        ``p, u, y``; the state always)."""
         def make():
             m = self.model
             s = self._symbols(k)
             sym = self.dmodel.symbolic
-            d = {"dx": sym.sym("dx", m.nx, k), "du": sym.sym("du", m.nu, k), "dy": sym.sym("dy", len(self.meas_index), k),
-                 "dp": sym.sym("dp", m.np, k)}
-            wrt = ca.vertcat(s["x"], s["u"], s["y"], s["p"])
-            seeds = ca.vertcat(d["dx"], d["du"], d["dy"], d["dp"])
-            Jx = ca.jtimes(s["x_next"], wrt, seeds)
-            Jr = ca.jtimes(s["r"], wrt, seeds)
-            names = ["x", "dx", "u", "y", "mask", "dt", "p", "w", "dp", "du", "dy"]
-            fun = ca.Function(f"oe_sens{k}", [s.get(n, d.get(n)) for n in names], [s["x_next"], Jx, s["r"], Jr],
-                              names, ["x_next", "dx_next", "r", "J"])
-            return compiled(_fold(fun, {"x": "x_next", "dx": "dx_next"}, ("p", "w", "dp", "du", "dy")), jit=self.jit)
-        return self._fun(("sens", k), make)
+            d = {"dx": sym.sym("dx", m.nx, k)}
+            d.update({f"d{n}": sym.sym(f"d{n}", s[n].numel(), k) for n in seeds})
+            wrt = ca.vertcat(s["x"], *(s[n] for n in seeds))
+            seed = ca.vertcat(d["dx"], *(d[f"d{n}"] for n in seeds))
+            Jx = ca.jtimes(s["x_next"], wrt, seed)
+            Jr = ca.jtimes(s["r"], wrt, seed)
+            names = ["x", "dx", "u", "y", "mask", "dt", "p", "w", *(f"d{n}" for n in seeds)]
+            fun = ca.Function(f"oe_sens{k}_{''.join(seeds)}", [s.get(n, d.get(n)) for n in names],
+                              [s["x_next"], Jx, s["r"], Jr], names, ["x_next", "dx_next", "r", "J"])
+            consts = ("p", "w", *(f"d{n}" for n in seeds))
+            return compiled(_fold(fun, {"x": "x_next", "dx": "dx_next"}, consts), jit=self.jit)
+        return self._fun(("sens", k, seeds), make)
 
     def _inputs(self, r, theta):
         rm = self.space.record_map(r)
@@ -247,8 +250,10 @@ class OutputErrorEngine(_Engine):
     def _record_derivatives(self, r, theta) -> dict:
         rm, v, const, U, Y = self._inputs(r, theta)
         a, k = self.arrays[r], rm.k
-        fold = self._sens_fold(k)
-        const.update(dp=rm.E["p"], du=rm.E["u"], dy=-rm.E["y"])
+        blocks = {"p": rm.E["p"], "u": rm.E["u"], "y": -rm.E["y"]}
+        seeds = tuple(n for n, E in blocks.items() if E.any())
+        fold = self._sens_fold(k, seeds)
+        const.update({f"d{n}": blocks[n] for n in seeds})
         x, dx = v["x0"], rm.E["x0"]
         R, J = [], []
         for start, stop in _pieces(U.shape[1]):
@@ -342,20 +347,22 @@ class LikelihoodEngine(_Engine):
             return _fold(fun, dict(zip(mem_in, mem_out)), StepSlots.RECORD)
         return self._fun("value", make)
 
-    def _sens_fold(self, k: int):
+    def _sens_fold(self, k: int, seeds: tuple):
+        """The sensitivity fold for ``k`` free values entering through the inputs ``seeds`` (a subset of
+        ``u_prev, u, y, p, Q, R``; the memory always)."""
         def make():
             sl, ny = self.slots, self.ny
             sym, flat, outs = self._symbols()
-            d = {n: sym.sym(f"d_{n}", flat[n].numel(), k) for n in (*sl.memory, "u_prev", "u", "y", "p", "Q", "R")}
+            wrt = (*sl.memory, *seeds)
+            d = {n: sym.sym(f"d_{n}", flat[n].numel(), k) for n in wrt}
             Hin = sym.sym("H", k, k)
-            wrt = list(d)
             mem_next = [ca.vec(outs[o]) for o in sl.memory.values()]
             S = ca.reshape(outs["S"], ny, ny)
             J = ca.jtimes(ca.vertcat(*mem_next, outs["ll"], ca.vec(outs["e"]), ca.vec(S)),
                           ca.vertcat(*(flat[n] for n in wrt)), ca.vertcat(*(d[n] for n in wrt)))
             sizes = np.cumsum([0] + [v.numel() for v in mem_next] + [1, ny, ny * ny])
-            dmem = [J[sizes[i]:sizes[i + 1], :] for i in range(len(mem_next))]
             nm = len(mem_next)
+            dmem = [J[sizes[i]:sizes[i + 1], :] for i in range(nm)]
             dll = J[sizes[nm]:sizes[nm + 1], :]
             de = J[sizes[nm + 1]:sizes[nm + 2], :]
             dS = J[sizes[nm + 2]:sizes[nm + 3], :]
@@ -368,17 +375,16 @@ class LikelihoodEngine(_Engine):
             mem_in = {f"m_{n}": flat[n] for n in sl.memory}
             dmem_in = {f"dm_{n}": d[n] for n in sl.memory}
             rest = [n for n in flat if n not in sl.memory]
-            consts = [f"d_{n}" for n in ("u_prev", "u", "y", "p", "Q", "R")]
+            consts = [f"d_{n}" for n in seeds]
             names_in = [*mem_in, *dmem_in, "H", *rest, *consts]
-            ins = [*mem_in.values(), *dmem_in.values(), Hin, *(flat[n] for n in rest),
-                   *(d[c[2:]] for c in consts)]
+            ins = [*mem_in.values(), *dmem_in.values(), Hin, *(flat[n] for n in rest), *(d[n] for n in seeds)]
             names_out = [*(f"{n}_next" for n in mem_in), *(f"{n}_next" for n in dmem_in), "H_next", "ll", "dll", "e",
                          "S"]
-            fun = ca.Function(f"ll_sens{k}", ins, [*mem_next, *dmem, Hn, outs["ll"], dll, ca.vec(outs["e"]), ca.vec(S)],
-                              names_in, names_out)
+            fun = ca.Function(f"ll_sens{k}_{'_'.join(seeds)}", ins,
+                              [*mem_next, *dmem, Hn, outs["ll"], dll, ca.vec(outs["e"]), ca.vec(S)], names_in, names_out)
             accumulate = {n: f"{n}_next" for n in (*mem_in, *dmem_in, "H")}
             return compiled(_fold(fun, accumulate, (*StepSlots.RECORD, *consts)), jit=self.jit)
-        return self._fun(("sens", k), make)
+        return self._fun(("sens", k, seeds), make)
 
     # -- numbers ---------------------------------------------------------------------------------
     def _record_inputs(self, r, theta):
@@ -454,12 +460,12 @@ class LikelihoodEngine(_Engine):
     def _record_derivatives(self, r, theta) -> dict:
         rm, mem, per, const = self._record_inputs(r, theta)
         k = rm.k
-        fold = self._sens_fold(k)
         E = rm.E
-        nQ, nR = self.Q.shape[0], self.R.shape[0]
-        dQ = np.column_stack([np.diag(E["Q"][:, c]).reshape(-1, order="F") for c in range(k)]) if k else np.zeros((nQ * nQ, 0))
-        dR = np.column_stack([np.diag(E["R"][:, c]).reshape(-1, order="F") for c in range(k)]) if k else np.zeros((nR * nR, 0))
-        const.update(d_u_prev=E["u"], d_u=E["u"], d_y=-E["y"], d_p=E["p"], d_Q=dQ, d_R=dR)
+        diag = lambda D: np.column_stack([np.diag(D[:, c]).reshape(-1, order="F") for c in range(k)])  # noqa: E731
+        blocks = {"u_prev": E["u"], "u": E["u"], "y": -E["y"], "p": E["p"], "Q": E["Q"], "R": E["R"]}
+        seeds = tuple(n for n, D in blocks.items() if D.any())
+        fold = self._sens_fold(k, seeds)
+        const.update({f"d_{n}": diag(blocks[n]) if n in ("Q", "R") else blocks[n] for n in seeds})
         dmem = {}
         for n in self.slots.memory:
             dm = np.zeros((mem[n].size, k))

@@ -3,9 +3,11 @@
 :meth:`~casship.identify.OutputErrorProblem.identifiability` (and the same method of
 :class:`~casship.identify.MLEProblem`) evaluates the Fisher information of the free quantities at a
 point (exact sensitivities of the outputs or innovations) and returns an :class:`Identifiability`
-value. Everything is in *relative* units: the information is scaled by each quantity's magnitude
-(its value, or its typical scale when the value is 0), so an eigenvalue ``lam`` says that the data
-determine the direction to a relative standard error ``1 / sqrt(lam)``.
+value. Model parameters are analysed in *relative* units: the information is scaled by each
+parameter's magnitude (its value, or its typical scale when the value is 0), so an eigenvalue
+``lam`` says that the data determine the direction to a relative standard error ``1 / sqrt(lam)``.
+Initial states, biases and noise variances, whose values may sit near zero, are analysed in their
+own units (magnitude 1).
 """
 from __future__ import annotations
 
@@ -53,6 +55,9 @@ class Identifiability:
     max_rel_std, max_corr : float
         Thresholds of the report: quantities with ``rel_std`` above ``max_rel_std`` are reported as
         not seen by the data, pairs with ``|correlation|`` above ``max_corr`` as correlated.
+    kinds : list of str, optional
+        Kind of each quantity (``param``, ``x0``, ``bias_in``, ``bias_out``, ``Q``, ``R``): by
+        default :meth:`propose` chooses among the parameters and keeps the others.
 
     Attributes
     ----------
@@ -81,9 +86,11 @@ class Identifiability:
     correlation: np.ndarray = field(init=False)
     max_rel_std: float = MAX_REL_STD
     max_corr: float = MAX_CORR
+    kinds: list = None
 
     def __post_init__(self):
         self.names = list(self.names)
+        self.kinds = list(self.kinds) if self.kinds is not None else ["param"] * len(self.names)
         S = self._relative(with_prior=False)
         lam, vec = np.linalg.eigh(S)
         order = np.argsort(-lam)
@@ -117,7 +124,8 @@ class Identifiability:
 
     @property
     def not_seen(self) -> list[str]:
-        """Quantities whose relative standard error (all free) exceeds :attr:`max_rel_std`."""
+        """Quantities whose relative standard error (all free) exceeds :attr:`max_rel_std` (own units for
+        initial states, biases and noise)."""
         return [n for n, s in zip(self.names, self.rel_std) if not (np.isfinite(s) and s <= self.max_rel_std)]
 
     def direction(self, j: int, top: int = 4) -> str:
@@ -135,7 +143,8 @@ class Identifiability:
         return " ".join(f"{v[i]:+.2f}*{self.names[i]}" for i in order if abs(v[i]) > 0.05)
 
     def propose(self, *, max_rel_std: float | None = None, max_corr: float | None = None,
-                candidates: Sequence[str] | None = None, keep: Sequence[str] = (), with_prior: bool = False) -> list[str]:
+                candidates: Sequence[str] | None = None, keep: Sequence[str] | None = None,
+                with_prior: bool = False) -> list[str]:
         """A free set chosen by a stated criterion: greedy D-optimal forward selection.
 
         Starting from ``keep``, add one at a time the candidate that most increases the determinant of
@@ -148,10 +157,10 @@ class Identifiability:
         max_rel_std, max_corr : float, optional
             Thresholds (default: the value's own).
         candidates : sequence of str, optional
-            Quantities to choose from (default: all not in ``keep``).
-        keep : sequence of str
-            Quantities always free (e.g. initial states or biases); they enter the information of
-            the set but not the criteria.
+            Quantities to choose from (default: the model parameters not in ``keep``).
+        keep : sequence of str, optional
+            Quantities always free; they enter the information of the set but not the criteria
+            (default: the quantities that are not model parameters: initial states, biases, noise).
         with_prior : bool
             Count the prior's precision as information.
 
@@ -168,11 +177,15 @@ class Identifiability:
         tol_s = self.max_rel_std if max_rel_std is None else float(max_rel_std)
         tol_c = self.max_corr if max_corr is None else float(max_corr)
         index = {n: i for i, n in enumerate(self.names)}
-        unknown = [n for n in (*keep, *(candidates or ())) if n not in index]
+        if keep is None:
+            keep = [n for n, k in zip(self.names, self.kinds) if k != "param"]
+        if candidates is None:
+            candidates = [n for n, k in zip(self.names, self.kinds) if k == "param"]
+        unknown = [n for n in (*keep, *candidates) if n not in index]
         if unknown:
             raise ValueError(f"unknown quantities {unknown}; free: {self.names}")
         chosen = [index[n] for n in keep]
-        pool = [index[n] for n in (candidates if candidates is not None else self.names) if n not in keep]
+        pool = [index[n] for n in candidates if n not in keep]
         while pool:
             best, best_val = None, -np.inf
             for c in pool:

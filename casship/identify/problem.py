@@ -348,9 +348,9 @@ class IdentificationProblem:
 
         theta = self.space.theta(at)
         H = self.engine.derivatives(theta)[2]
-        scales = self.space.scales()
-        mags = np.array([abs(v) if v != 0 else (scales[n] or 1.0) for n, v in zip(self.space.names, theta)])
+        mags = np.array([(abs(v) or e.scale) if e.kind == "param" else 1.0 for e, v in zip(self.space.entries, theta)])
         return Identifiability(self.free, dict(zip(self.free, theta.tolist())), mags, H, self._prec.copy(),
+                               kinds=[e.kind for e in self.space.entries],
                                max_rel_std=MAX_REL_STD if max_rel_std is None else float(max_rel_std),
                                max_corr=MAX_CORR if max_corr is None else float(max_corr))
 

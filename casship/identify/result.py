@@ -346,7 +346,7 @@ class FitResult:
 
         names = list(self.predictions[0]["measured"])
         nrec = len(self.predictions)
-        fig, axes = plt.subplots(nrec, len(names), figsize=(3.4 * len(names) + 0.6, 1.9 * nrec + 0.8),
+        fig, axes = plt.subplots(nrec, len(names), figsize=(max(6.0, 3.4 * len(names) + 0.6), 1.9 * nrec + 0.8),
                                  squeeze=False, sharex="row")
         for r, rec in enumerate(self.predictions):
             units, angle = rec.get("units", {}), rec.get("angle", {})
