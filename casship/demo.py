@@ -300,7 +300,7 @@ def _report(s: dict, ship) -> str:
               "## 2. Maximum-likelihood fit through the EKF", "",
               f"Free hull derivatives start {100 * (DemoConfig().guess_factor - 1):.0f} % off their true values; "
               "one likelihood over all identification records (the estimation part above shows the first). "
-              f"IPOPT: {s['fit']['status']} after {s['fit']['iterations']} iterations ({s['fit']['seconds']:.1f} s).", "",
+              f"solver status: {s['fit']['status']} after {s['fit']['iterations']} iterations ({s['fit']['seconds']:.1f} s).", "",
               "| parameter | true | initial guess | estimate | std error | (estimate - true) / std error |",
               "|---|---|---|---|---|---|"]
     for k, r in s["fit"]["params"].items():
