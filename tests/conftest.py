@@ -1,20 +1,24 @@
-"""Shared fixtures: the measured data folder (tests needing it skip with a reason when absent)."""
+"""Shared fixtures: the measured data folder (tests needing it skip with a reason when it is absent)."""
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import matplotlib
 import pytest
 
-matplotlib.use("Agg")
+from casship.io import DATA_ENV, data_dir as find_data_dir
 
-DATA_DIR = Path(os.environ.get("CASSHIP_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+matplotlib.use("Agg")
 
 
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
-    """``../shared/data`` next to the repository (or ``$CASSHIP_DATA``); skips when absent."""
-    if not DATA_DIR.is_dir():
-        pytest.skip(f"measured data folder {DATA_DIR} is absent (set CASSHIP_DATA to its location)")
-    return DATA_DIR
+    """The measured-data folder by casship's rule (``$CASSHIP_DATA``, else ``../shared/data`` beside
+    the checkout; :func:`casship.io.data_dir`); skips with the reason when there is none."""
+    try:
+        folder = find_data_dir()
+    except FileNotFoundError as exc:
+        pytest.skip(f"measured data: {exc}")
+    if folder is None:
+        pytest.skip(f"measured data folder absent (../shared/data beside the checkout; set {DATA_ENV} to its location)")
+    return folder

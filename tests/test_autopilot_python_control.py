@@ -98,7 +98,8 @@ def test_lqg_estimator_is_control_lqe_and_casships_kf_converges_to_dlqe():
     assert np.all(np.real(lqg.estimator.poles()) < 0)
     dt = 0.5
     obs = ap.heading_observer(nom.K, nom.T)
-    kf = ap.heading_kf(obs, dt, compass_std=np.sqrt(heading_var), gyro_std=np.sqrt(rate_var), q_r=q_r, q_b=1e-8)
+    kf = ap.heading_kf(obs, dt, compass_std=np.sqrt(heading_var), gyro_std=np.sqrt(rate_var), q_r=q_r, q_b=1e-8,
+                      options={"outputs": ("x", "P", "P_pred")})
     dm = cs.discretize(obs, dt, "rk4")
     A, _, _, G = (np.asarray(v) for v in dm.F_jac(np.zeros(3), 0.0, obs.params(), np.zeros(obs.nw), dt))
     C = np.eye(2, 3)

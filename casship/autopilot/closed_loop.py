@@ -97,21 +97,17 @@ class LoopEstimator:
 
     @property
     def step(self) -> ca.Function:
-        """The estimator's step Function (named slots)."""
-        fun = getattr(self.est, "step", None)
-        return fun if isinstance(fun, ca.Function) else self.est.step_function
+        """The estimator's step Function (named slots; memory and ``x, P``)."""
+        return self.est.step
 
     @property
     def memory(self) -> tuple[str, ...]:
         """Names of the step's memory slots (the estimator's memory)."""
-        mem = getattr(self.est, "memory", None)
-        return tuple(mem) if mem is not None else ("carry",)
+        return tuple(self.est.memory)
 
     def memory0(self) -> dict:
-        """Initial memory by slot name."""
-        if self.memory == ("carry",):
-            return {"carry": np.asarray(self.est.carry_from(self.prior), float)}
-        return {"x": self.prior.mean, "P": self.prior.cov}
+        """Initial memory by slot name (:meth:`Estimator.memory_from` of the prior)."""
+        return self.est.memory_from(self.prior)
 
     def state_index(self, name: str) -> int:
         return self.est.model.index(name)
@@ -286,7 +282,7 @@ class ClosedLoop:
         out = fun.call(call)
         xh = out["x"]
         P = ca.reshape(out["P"], model.nx, model.nx)
-        memory = {n: out[f"{n}_next" if f"{n}_next" in out else n] for n in est.memory}
+        memory = {n: out[n] for n in est.memory}
         ix = est.state_index
         if est.kind == "course":
             angle, rate_est = xh[ix("chi")], xh[ix("omega_chi")]

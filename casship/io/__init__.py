@@ -1,7 +1,9 @@
 """Data import: NMEA 0183 logs, CSV files/pandas frames with units, WGS-84 local frames."""
 from .csv import UNITS, from_frame, read_csv
+from .datadir import DATA_ENV, data_dir
 from .geodesy import geodetic_to_ne, ne_to_geodetic
 from .nmea import NMEAError, read_nmea
 from .marin import marin_runs, read_marin
 
-__all__ = ["read_nmea", "NMEAError", "read_csv", "from_frame", "UNITS", "geodetic_to_ne", "ne_to_geodetic", "read_marin", "marin_runs"]
+__all__ = ["read_nmea", "NMEAError", "read_csv", "from_frame", "UNITS", "geodetic_to_ne", "ne_to_geodetic", "read_marin", "marin_runs",
+           "data_dir", "DATA_ENV"]

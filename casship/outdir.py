@@ -1,0 +1,193 @@
+"""Output folders and files that are never overwritten by surprise.
+
+One rule for every command that writes results (``casship demo``, ``casship study``,
+``casship identify --out`` ...):
+
+* an existing, non-empty folder (or an existing file) is refused unless the caller passes
+  ``overwrite=True`` (the ``--overwrite`` flag);
+* with ``overwrite=True`` the old folder is removed as a whole, so no stale file of an earlier run
+  stays beside the new ones; only a folder written by casship (it holds the marker file
+  :data:`MARKER`) or an empty one is ever removed;
+* results are written into a temporary sibling folder (or file) that is renamed into place when
+  the run succeeds, so a failed run leaves neither a half-written folder nor a damaged old one.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> from casship.outdir import output_folder
+>>> root = pathlib.Path(tempfile.mkdtemp())
+>>> with output_folder(root / "report") as folder:
+...     _ = (folder / "report.md").write_text("# results")
+>>> sorted(p.name for p in (root / "report").iterdir())
+['.casship-output', 'report.md']
+"""
+from __future__ import annotations
+
+import os
+import shutil
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+__all__ = ["output_folder", "output_file", "check_output_folder", "check_output_file", "MARKER"]
+
+#: Name of the marker file written into every output folder (it allows ``overwrite`` to clear it).
+MARKER = ".casship-output"
+
+
+def _protected(path: Path) -> str | None:
+    """Reason why ``path`` must never be removed (the working folder, an ancestor of it, home, root)."""
+    resolved = path.resolve()
+    cwd = Path.cwd().resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        return "it is the working folder or contains it"
+    if resolved == Path.home().resolve() or resolved.parent == resolved:
+        return "it is the home or root folder"
+    return None
+
+
+def check_output_folder(path, *, overwrite: bool = False, what: str = "--out") -> Path:
+    """Check that the report folder ``path`` may be written; raise with the reason if not.
+
+    Parameters
+    ----------
+    path : str or Path
+        The folder a run will write.
+    overwrite : bool
+        Allow replacing an existing non-empty folder (one written by casship, or empty).
+    what : str
+        Name of the option or argument, used in messages (e.g. ``"--out"``).
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` is a non-empty folder and ``overwrite`` is false, or it is a file.
+    PermissionError
+        ``overwrite`` is true but the folder was not written by casship or is protected.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise FileExistsError(f"{what} {path}: is a file, not a folder; choose a folder name")
+    if path.is_dir() and any(path.iterdir()):
+        if not overwrite:
+            raise FileExistsError(f"{what} {path}: folder exists and is not empty; pass --overwrite to replace "
+                                  "it (its files are removed first) or choose another folder")
+        reason = _protected(path)
+        if reason is None and not (path / MARKER).is_file():
+            reason = f"it was not written by casship (no {MARKER} file in it)"
+        if reason:
+            raise PermissionError(f"{what} {path}: will not replace this folder: {reason}; choose another folder")
+    return path
+
+
+@contextmanager
+def output_folder(path, *, overwrite: bool = False, what: str = "--out") -> Iterator[Path]:
+    """Context manager yielding a temporary folder that replaces ``path`` when the block succeeds.
+
+    Parameters
+    ----------
+    path : str or Path
+        The report folder.
+    overwrite : bool
+        Replace an existing non-empty folder written by casship (see :func:`check_output_folder`).
+    what : str
+        Name of the option, used in messages.
+
+    Yields
+    ------
+    Path
+        A fresh, empty sibling folder of ``path`` to write into. On success it is renamed to ``path``
+        (an old ``path`` is removed first); if the block raises, it is removed and ``path`` is left
+        as it was.
+    """
+    path = check_output_folder(path, overwrite=overwrite, what=what)
+    parent = path.absolute().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = parent / f".{path.name}.partial-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    try:
+        (tmp / MARKER).write_text("written by casship; 'casship ... --overwrite' may replace this folder\n")
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if path.exists():
+        old = parent / f".{path.name}.old-{os.getpid()}"
+        path.rename(old)              # the new folder takes its place before the old one is removed
+        tmp.rename(path)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        tmp.rename(path)
+
+
+def check_output_file(path, *, overwrite: bool = False, what: str = "--out") -> Path:
+    """Check that the result file ``path`` may be written; raise with the reason if not.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file a run will write.
+    overwrite : bool
+        Allow replacing an existing file.
+    what : str
+        Name of the option, used in messages.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists and ``overwrite`` is false.
+    IsADirectoryError
+        ``path`` is a folder.
+    FileNotFoundError
+        The folder ``path`` would go into does not exist.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{what} {path}: is a folder; give a file name")
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{what} {path}: file exists; pass --overwrite to replace it or choose another name")
+    if not path.absolute().parent.is_dir():
+        raise FileNotFoundError(f"{what} {path}: folder {path.absolute().parent} does not exist")
+    return path
+
+
+@contextmanager
+def output_file(path, *, overwrite: bool = False, what: str = "--out") -> Iterator[Path]:
+    """Context manager yielding a temporary file name that replaces ``path`` when the block succeeds.
+
+    Parameters
+    ----------
+    path : str or Path
+        The result file.
+    overwrite : bool
+        Replace an existing file.
+    what : str
+        Name of the option, used in messages.
+
+    Yields
+    ------
+    Path
+        A temporary sibling name with the same suffix; on success it is renamed to ``path``; if the
+        block raises, it is removed and ``path`` is left as it was.
+    """
+    path = check_output_file(path, overwrite=overwrite, what=what)
+    tmp = path.absolute().parent / f".{path.stem}.partial-{os.getpid()}{path.suffix}"
+    try:
+        yield tmp
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    if not tmp.exists():
+        raise FileNotFoundError(f"{what} {path}: nothing was written")
+    os.replace(tmp, path)
