@@ -30,7 +30,8 @@ from ..data import Dataset, Gaussian
 from ..discretize import discretize
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder
-from .result import FitResult, finish
+from .result import FitResult
+from .uncertainty import covariance_from_information, whiteness
 
 __all__ = ["rates_model", "smooth_trial", "inverse_dynamics", "linear_in"]
 
@@ -269,7 +270,7 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
     fitted = base.copy()
     fitted[idx] = est
     loglik = -0.5 * n_obs * (1 + np.log(2 * np.pi * s2)) - float(n_obs / len(states) * np.sum(np.log(sig)))
-    return finish(model=model.name, params=model.param_dict(fitted), names=free, values=est, info=info,
+    return _fit_result(model=model, params=model.param_dict(fitted), names=free, values=est, info=info,
                   jac_nat=scale, scale=dict(zip(free, scale)), cost=cost, loglik=loglik, n_obs=n_obs,
                   residuals=[r / np.sqrt(s2) for r in _split(wres, sizes, len(states))],
                   output_names=[f"{s}_dot" for s in states], method="inverse-dynamics",
@@ -277,6 +278,30 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
                   noise={"sigma": {f"{s}_dot": float(v * np.sqrt(s2)) for s, v in zip(states, sig)},
                          "weight_scale": float(np.sqrt(s2)), "prior": dict(prior)},
                   x0=[], predictions=[])
+
+
+def _fit_result(*, model: Model, params: dict, names, values, info, jac_nat, scale, cost, loglik, n_obs,
+                residuals, output_names, method, status, iterations, solve_time_s, noise, x0, predictions):
+    """The regression's :class:`FitResult`: covariance from the information matrix (delta method to
+    natural units through ``jac_nat``), residual whiteness, and the model's identity."""
+    del scale                                   # the covariance is already in natural units below
+    names = list(names)
+    cov_z, warn = covariance_from_information(info, names)
+    with np.errstate(invalid="ignore"):
+        cov = cov_z * np.outer(jac_nat, jac_nat)
+        std = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(std, std)
+    k = len(names)
+    vessel = model.vessel
+    return FitResult(model=model.name, params=dict(params), free=names,
+                     estimates={n: float(v) for n, v in zip(names, values)},
+                     std_errors={n: float(v) for n, v in zip(names, std)}, correlation=corr, covariance=cov,
+                     cost=float(cost), loglik=float(loglik), n_obs=int(n_obs), aic=float(2 * k - 2 * loglik),
+                     bic=float(k * np.log(max(n_obs, 1)) - 2 * loglik),
+                     whiteness=whiteness(residuals, output_names), warnings=warn, method=method, status=status,
+                     iterations=int(iterations), solve_time_s=float(solve_time_s), noise=noise, x0=x0,
+                     predictions=predictions, model_options=dict(model.meta.get("options", {})),
+                     param_set=vessel.param_set if vessel is not None else "", param_names=list(model.param_names))
 
 
 def _regression(model: Model, records, free, states, base):
