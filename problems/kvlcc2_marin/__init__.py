@@ -55,12 +55,13 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     if not quick and len(facilities) > 1:
         folds += [tuple(r.name for r in runs if r.facility == fac) for fac in facilities]
     everything = fit_fold(runs, smoothed, dt=dt, max_free=max_free)
+    in_sample = [evaluate(r, everything)["row"] for r in runs]
     results = []
     for held in track(folds, "kvlcc2-marin folds", unit="fold"):
         fold = fit_fold([r for r in runs if r.name not in held], smoothed, dt=dt, max_free=max_free)
         rows = [evaluate(r, fold) for r in runs if r.name in held]
         results.append({"held": held, "fold": fold, "evaluations": rows})
-    return write_outputs(out, runs, everything, results, quick=quick)
+    return write_outputs(out, runs, everything, results, in_sample, quick=quick)
 
 
 STUDY = Study("kvlcc2-marin", "KVLCC2 MMG identified on the MARIN and HSVA free-running runs, "

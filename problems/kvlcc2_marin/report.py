@@ -24,8 +24,8 @@ def _slug(name: str) -> str:
     return name.replace(" ", "_")
 
 
-def _cv_table(rows) -> str:
-    lines = ["| held-out run | psi RMSE [deg] pub -> fit | u RMSE [m/s] pub -> fit | track RMSE [m] pub -> fit | "
+def _cv_table(rows, first: str = "held-out run") -> str:
+    lines = [f"| {first} | psi RMSE [deg] pub -> fit | u RMSE [m/s] pub -> fit | track RMSE [m] pub -> fit | "
              "indices: published / fit / measured | psi better | indices closer |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         errs = [f"{fmt(r[f'{k}_published'], '.3g')} -> {fmt(r[f'{k}_fit'], '.3g')}" for k in ERRORS]
@@ -114,7 +114,22 @@ def _departures() -> list[Departure]:
     ]
 
 
-def write_outputs(out: Path, runs, everything, results, *, quick: bool) -> dict:
+def _shortfalls(rows) -> str:
+    worse = [r["run"] for r in rows if not r["psi_better"]]
+    farther = [r["run"] for r in rows if not r["indices_closer"]]
+    return (f"Not achieved: psi RMSE not lower on {', '.join(worse) or 'none'}; indices not all closer on "
+            f"{', '.join(farther) or 'none'}.")
+
+
+_PROCESS = ("How the method was fixed: the candidates, prior, weights and selection rule were set before any "
+            "cross-validation. One change was made after a first cross-validation run: the inverse-dynamics "
+            "regression had weighted its strongly autocorrelated equation errors as white, so it moved cubic hull "
+            "derivatives far on zig-zag data alone, and the turning circle held out was replayed with 28 deg psi "
+            "RMSE; its weights now count effective samples (`autocorrelation=True`). Nothing was tuned to the "
+            "numbers below after that.")
+
+
+def write_outputs(out: Path, runs, everything, results, in_sample, *, quick: bool) -> dict:
     """Write the fit files, tables, figures and report; return the summary."""
     out = Path(out)
     fit_marin = dataclasses.replace(everything.fit, params=params_for(everything, "MARIN"))
@@ -144,11 +159,15 @@ def write_outputs(out: Path, runs, everything, results, *, quick: bool) -> dict:
     n_better = sum(r["psi_better"] for r in rows_loro)
     n_closer = sum(r["indices_closer"] for r in rows_loro)
     rep.add(f"psi RMSE lower than with the published constants on {n_better} of {len(rows_loro)} held-out runs; "
-            f"indices closer to the measured ones on {n_closer} of {len(rows_loro)}.", _cv_table(rows_loro))
+            f"indices closer to the measured ones on {n_closer} of {len(rows_loro)}. " + _shortfalls(rows_loro),
+            _cv_table(rows_loro), _PROCESS)
     if rows_lofo:
         rep.section("Leave-one-facility-out: one facility's runs predicted by a fit on the other's")
         rep.add(f"psi RMSE lower on {sum(r['psi_better'] for r in rows_lofo)} of {len(rows_lofo)}; indices "
-                f"closer on {sum(r['indices_closer'] for r in rows_lofo)} of {len(rows_lofo)}.", _cv_table(rows_lofo))
+                f"closer on {sum(r['indices_closer'] for r in rows_lofo)} of {len(rows_lofo)}. "
+                + _shortfalls(rows_lofo), _cv_table(rows_lofo))
+    rep.section("In training: the fit on all runs replayed on each of them")
+    rep.add("What the model variant can do at best with this free set (not a prediction).", _cv_table(in_sample, "run (in training)"))
     rep.section("Free set, prior and estimates (fit on all runs)")
     rep.add("Free set chosen by the rule of `workflow.select_free` from the Fisher information at the "
             "inverse-dynamics start (not by trying sets against the runs):",
@@ -179,7 +198,7 @@ def write_outputs(out: Path, runs, everything, results, *, quick: bool) -> dict:
                "model_options": MODEL_OPTIONS, "free": everything.free, "R_0_dash": everything.R_0,
                "estimates": everything.fit.estimates, "fit_seconds": everything.fit.solve_time_s,
                "workflow_seconds": everything.seconds, "leave_one_run_out": rows_loro,
-               "leave_one_facility_out": rows_lofo, "propulsion": prop_rows, "fit_json": str(out / "fit.json"),
+               "leave_one_facility_out": rows_lofo, "in_sample": in_sample, "propulsion": prop_rows, "fit_json": str(out / "fit.json"),
                "folds": {", ".join(res["held"]): {"free": res["fold"].free, "seconds": res["fold"].seconds,
                                                    "train": res["fold"].train} for res in results}}
     return write_json(out / "summary.json", summary)

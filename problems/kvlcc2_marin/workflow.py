@@ -31,12 +31,13 @@ thrust confirms the propeller and the straight-run balance fixes the resistance.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 import casship as cs
-from casship.identify import Prior, inverse_dynamics, smooth_trial
+from casship.identify import IdentificationWarning, Prior, inverse_dynamics, smooth_trial
 from casship.identify.uncertainty import effective_samples
 from casship.models import kvlcc2
 
@@ -167,7 +168,9 @@ def fit_fold(train: list[Run], smoothed: dict, *, dt: float = 2.0, max_free: int
                                    share=share, scale=_scale(declared),
                                    prior=Prior(prior_std(model, declared)))
     guess = {q: v for q, v in at.items() if q in chosen}
-    fit = refine.solve(guess=guess, show=show)
+    with warnings.catch_warnings():        # coloured residuals are expected here; fit.warnings keeps them
+        warnings.simplefilter("ignore", IdentificationWarning)
+        fit = refine.solve(guess=guess, show=show)
     return FoldFit([r.name for r in train], R_0, per_run, start, sigma, list(CANDIDATES), rows, chosen, fit,
                    time.perf_counter() - t0, idfit, idf)
 
