@@ -16,7 +16,16 @@ __all__ = ["simulate", "measure", "input_matrix", "fold_steps", "IntegrationErro
 
 class IntegrationError(RuntimeError):
     """An integrator (CVODES) failed; ``status`` is its return flag, ``step`` the first step of the
-    block of steps in which it failed."""
+    block of steps in which it failed.
+
+    Parameters
+    ----------
+    message : str
+    status : str
+        The integrator's return flag.
+    step : int
+        First step of the block in which it failed.
+    """
 
     def __init__(self, message: str, status: str, step: int):
         super().__init__(message)
@@ -32,6 +41,15 @@ def _status(exc: Exception) -> str:
 
 def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | None:
     """Inputs as an (N, nu) array from an array, a mapping name -> array/constant or a Dataset.
+
+    Parameters
+    ----------
+    model : Model
+    t : array
+        The time grid.
+    inputs : array, mapping, Dataset, callable or None
+    x0 : array, optional
+        Unused (kept for callers that pass it).
 
     Returns ``None`` for a callable (evaluated during the simulation).
     """
@@ -115,6 +133,16 @@ def _padded(a: np.ndarray, total: int) -> np.ndarray:
 
 def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
     """Run ``x[k+1] = F(x[k], U[k], p, W[k], dt[k])`` over all steps through a compiled fold.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    x0 : array
+    U, W : arrays (steps, nu) and (steps, nw)
+        Inputs and noise held over each step.
+    p : array
+    dt : array
+        Step lengths.
 
     The record is processed in blocks by one cached ``mapaccum`` of the step Function (building a
     fold of the full length would cost more than evaluating it); the state is carried from block

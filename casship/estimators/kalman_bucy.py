@@ -35,6 +35,8 @@ class KalmanBucyOptions(EstimatorOptions):
 
     Parameters
     ----------
+    gate, jit, outputs
+        The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     substeps : int
         Sub-steps of the coupled estimate/Riccati equations between two samples.
     integrator : {"auto", "rk4", "split"}
@@ -170,7 +172,13 @@ class KalmanBucy(Estimator):
                 "nis": nis, "ll": ll, "accepted": S(1)}
 
     def smooth(self, data, prior, p=None, *, seed=None):
-        """Not available: a continuous filter has no one-step predictions to smooth (raises ``ValueError``)."""
+        """Not available: a continuous filter has no one-step predictions to smooth (raises ``ValueError``).
+
+        Parameters
+        ----------
+        data, prior, p, seed
+            As for :meth:`filter`.
+        """
         raise ValueError("KalmanBucy has no smoother: a continuous filter has no one-step predictions to "
                          "smooth; use KF, EKF, UKF, EnKF or MHE")
 
@@ -180,6 +188,13 @@ class KalmanBucy(Estimator):
         Linearises the model at ``(x, u, p)`` (zeros and nominal parameters by default) and hands
         ``A, G, H, Qc = Q dt, Rc = R dt`` to python-control, which solves
         ``A P + P A' - P H' Rc^-1 H P + G Qc G' = 0``.
+
+        Parameters
+        ----------
+        x, u : array, optional
+            Operating point (zeros by default).
+        p : array or mapping, optional
+            Parameters (nominal by default).
 
         Returns
         -------

@@ -121,7 +121,15 @@ class MHE(Estimator):
         return self.options.horizon
 
     def window(self, N: int, solver: str | None = None) -> Window:
-        """The window problem of horizon ``N`` (built once per horizon and solver)."""
+        """The window problem of horizon ``N`` (built once per horizon and solver).
+
+        Parameters
+        ----------
+        N : int
+            Horizon (steps in the window).
+        solver : {"ipopt", "sqp", "rti"}, optional
+            Default: the ``solver`` option.
+        """
         solver = solver or self.options.solver
         if (N, solver) not in self._windows:
             self._windows[N, solver] = build_window(self, N, solver)
@@ -137,6 +145,12 @@ class MHE(Estimator):
         A prior over the original states is extended with the estimated parameters (mean: their
         value in ``p``, std: option ``estimate``) and the disturbances (mean 0, std from option
         ``disturbances``), independent of the rest. A prior over the augmented states is returned as is.
+
+        Parameters
+        ----------
+        prior : Gaussian
+        p : array or mapping, optional
+            Parameters of the original model (the prior means of the estimated ones).
         """
         if not isinstance(prior, Gaussian):
             raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
@@ -155,7 +169,13 @@ class MHE(Estimator):
         Estimator._check_prior(self, self.augmented_prior(prior))
 
     def prepare(self, data: Dataset, p=None) -> dict:
-        """The step inputs of a record (``p`` of the original model; estimated parameters dropped)."""
+        """The step inputs of a record (``p`` of the original model; estimated parameters dropped).
+
+        Parameters
+        ----------
+        data : Dataset
+        p : array or mapping, optional
+        """
         return super().prepare(data, self._full_params(p)[self._kept_params])
 
     # -- the estimator contract ---------------------------------------------------------------------
@@ -202,13 +222,31 @@ class MHE(Estimator):
 
     def online(self, prior: Gaussian, p=None, *, u=None, seed=None) -> OnlineRun:
         """A stateful runner on a stream (``update(y, dt, u_prev=None, u=None) -> x``), started from
-        ``prior``; numbers equal :meth:`filter` on the same record."""
+        ``prior``; numbers equal :meth:`filter` on the same record.
+
+        Parameters
+        ----------
+        prior : Gaussian
+        p : array or mapping, optional
+            Parameters of the original model.
+        u : array, optional
+            Inputs before the first update.
+        seed : ignored (the MHE draws nothing)
+        """
         self._check_prior(prior)
         return OnlineRun(WindowEngine(self, self.augmented_prior(prior, p), self._full_params(p)[self._kept_params], u))
 
     def predict(self, result: FilterResult, t, u=None, p=None, *, seed=None) -> FilterResult:
         """Predict past the last sample of ``result`` with the EKF that runs alongside the MHE
-        (with nothing measured the window adds nothing to it); see :meth:`Estimator.predict`."""
+        (with nothing measured the window adds nothing to it).
+
+        Parameters
+        ----------
+        result, t, u, seed
+            As for :meth:`Estimator.predict`.
+        p : array or mapping, optional
+            Parameters of the original model.
+        """
         pred = self._ekf.predict(result, t, u, self._full_params(p)[self._kept_params])
         return pred.replace(estimator=f"{self.name} prediction")
 
@@ -220,6 +258,14 @@ class MHE(Estimator):
         The initial guess is the EKF run (or ``guess``). Covariances are the diagonal blocks of the
         inverse Gauss-Newton Hessian at the solution. The real-time-iteration solver is iterated to
         convergence here (``"sqp"``).
+
+        Parameters
+        ----------
+        data, prior, p
+            As for :meth:`filter`.
+        seed : ignored
+        guess : FilterResult, optional
+            Initial guess of the trajectory (default: the EKF run).
 
         Returns
         -------
