@@ -311,6 +311,12 @@ class Estimator:
             start += size
         return out
 
+    def _operating_point(self, x=None, u=None, p=None):
+        """``(x, u, p)`` as arrays: zeros and the nominal parameters where not given."""
+        m = self.model
+        return (m.states() if x is None else np.asarray(x, dtype=float),
+                m.inputs() if u is None else np.asarray(u, dtype=float), m.params() if p is None else m.params(p))
+
     def _check_prior(self, prior: Gaussian) -> None:
         if not isinstance(prior, Gaussian):
             raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")

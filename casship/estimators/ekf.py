@@ -164,9 +164,7 @@ class EKF(Estimator):
             raise ValueError("steady_state: a continuous-discrete EKF has no constant discrete gain; "
                              "use covariance='discrete' or KalmanBucy.steady_state")
         m = self.model
-        x = m.states() if x is None else np.asarray(x, dtype=float)
-        u = m.inputs() if u is None else np.asarray(u, dtype=float)
-        p = m.params() if p is None else m.params(p)
+        x, u, p = self._operating_point(x, u, p)
         A, _, G = self.dmodel.linearize(x, u, p)
         H = np.array(m.h_jac(x, u, p)[0])[self.meas_index]
         L, P, _ = control.dlqe(A, G, H, self.Q, self.R)

@@ -204,9 +204,7 @@ class KalmanBucy(Estimator):
         import control
 
         m = self.model
-        x = m.states() if x is None else np.asarray(x, dtype=float)
-        u = m.inputs() if u is None else np.asarray(u, dtype=float)
-        p = m.params() if p is None else m.params(p)
+        x, u, p = self._operating_point(x, u, p)
         A, _, _, G = (np.array(M) for M in m.f_jac(x, u, p, np.zeros(m.nw)))
         H = np.array(m.h_jac(x, u, p)[0])[self.meas_index, :]
         dt = self.dmodel.dt
