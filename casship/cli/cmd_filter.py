@@ -12,7 +12,6 @@ Estimators are looked up by name in :data:`casship.estimators.ESTIMATORS` (``kf`
 """
 from __future__ import annotations
 
-import inspect
 import json
 from pathlib import Path
 
@@ -43,7 +42,7 @@ def register(sub) -> None:
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
     p.add_argument("--estimator", default="ekf", help="estimator name (default ekf); see --list")
     p.add_argument("--list", action="store_true", help="list the estimators and presets and exit")
-    p.add_argument("--smooth", action="store_true", help="RTS fixed-interval smoothing after filtering")
+    p.add_argument("--smooth", action="store_true", help="smooth instead of filter (est.smooth: RTS for the Kalman filters, full information for mhe)")
     p.add_argument("--preset", default=None, help=f"column/noise preset: {', '.join(PRESETS)}")
     p.add_argument("--columns", default=None,
                    help="NEW=SOURCE[:UNIT],... columns to read and convert to SI (e.g. psi=heading:deg); "
@@ -204,7 +203,7 @@ def filter_file(args):
     """Run the command's estimation; returns ``(summary, result, data, measured)``."""
     from ..data import Gaussian
     from ..discretize import discretize
-    from ..estimators import ESTIMATORS, rts_smooth
+    from ..estimators import ESTIMATORS
     from ..frames import wgs84_radii
     from ..models import get_model
 
@@ -280,10 +279,7 @@ def filter_file(args):
     elif P0v is not None:
         P0[:] = P0v
     prior = Gaussian(x0, P0)
-    kwargs = {"seed": args.seed} if "seed" in inspect.signature(est.filter).parameters else {}
-    result = est.filter(data, prior, **kwargs)
-    if args.smooth:
-        result = rts_smooth(result)
+    result = (est.smooth if args.smooth else est.filter)(data, prior, seed=args.seed)
     health = result.health()
     summary = {"model": args.model, "estimator": result.estimator, "rows": len(data), "dt_s": dt,
                "measured": list(meas), "updates": int((result.n_measured > 0).sum()),
