@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 import casship as cs
+from casship.maneuvers import propeller_rate_for_speed
 from casship.parallel import run_cases
 from casship.progress import progress
 
@@ -74,7 +75,7 @@ def ship_models():
 
 def propeller_rate(ship) -> float:
     """Propeller rate [1/s] that holds the preset's speed ``U0`` in a straight run (exact trim)."""
-    return float(cs.trim(ship, x={"u": ship.vessel.U0}, u={"n": 10.0}, free=["n"], zero=["u"]).values["n"])
+    return propeller_rate_for_speed(ship, ship.vessel.U0, guess=10.0)
 
 
 def filter_model(ship):

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 import casship as cs
+from casship.maneuvers import propeller_rate_for_speed
 from casship.parallel import run_cases
 from casship.progress import progress
 
@@ -63,17 +64,7 @@ def propeller_rate(ship) -> float:
     n0 = ship.vessel.n0
     if n0:
         return float(n0)
-    from scipy.optimize import brentq
-
-    x = ship.states(u=ship.vessel.U0)
-    j = ship.index("n", "input")
-
-    def surge_acc(n):
-        u = np.zeros(ship.nu)
-        u[j] = n
-        return float(ship.f(x, u, ship.params(), np.zeros(ship.nw))[0])
-
-    return float(brentq(surge_acc, 0.1, 100.0))
+    return propeller_rate_for_speed(ship, ship.vessel.U0)
 
 
 def gusts(t: np.ndarray, mean: float, seed: int = 2021):
