@@ -84,8 +84,9 @@ def findings(table: dict, times: dict) -> dict:
                                                         for s in STATES))
     f["KF beats EnKF Q=0 at max wind (states)"] = int(sum(W[W2]["KF"][s]["mean"] < W[W2]["EnKF Q=0"][s]["mean"]
                                                          for s in STATES))
-    f["KF beats UKF tuned at no wind (states)"] = int(sum(W[W0]["KF"][s]["mean"] < W[W0]["UKF tuned"][s]["mean"]
-                                                         for s in STATES))
+    f["KF beats UKF tuned at no wind, states"] = [s for s in STATES if W[W0]["KF"][s]["mean"] <
+                                                  W[W0]["UKF tuned"][s]["mean"]]
+    f["KF beats UKF tuned at no wind (states)"] = len(f["KF beats UKF tuned at no wind, states"])
     f["EnKF/UKF time batch"] = times["EnKF"]["batch_s_per_step"] / times["UKF"]["batch_s_per_step"]
     f["EnKF/UKF time online"] = times["EnKF"]["online_s_per_step"] / times["UKF"]["online_s_per_step"]
     f["all real time (online < 0.1 s)"] = bool(all(v["online_s_per_step"] < DT for v in times.values()))
@@ -101,12 +102,15 @@ def verdicts(f: dict) -> list[tuple[str, str, bool, str]]:
          f["wind growth UKF Q=0"] > 1.1 and f["wind growth EnKF Q=0"] > 1.1,
          "With a short record the wind has little time to push the ship off the model's track."),
         ("EnKF is hit harder by the modelling error than UKF",
-         f"EnKF x{f['wind growth EnKF Q=0']:.2f} vs UKF x{f['wind growth UKF Q=0']:.2f}",
+         f"growth EnKF x{f['wind growth EnKF Q=0']:.2f} vs UKF x{f['wind growth UKF Q=0']:.2f}; absolute gap "
+         f"EnKF - UKF at {w} m/s: x {f['EnKF-UKF gap x at max wind']:+.3g} m, psi "
+         f"{f['EnKF-UKF gap psi at max wind']:+.3g} rad (table in experiment 1)",
          f["wind growth EnKF Q=0"] > 1.1 * f["wind growth UKF Q=0"],
          "With Q = 0 both filters trust the wind-free model equally: the EnKF's ensemble collapses towards "
          "the model trajectory just as the UKF's covariance does, and the perturbed observations keep only a "
-         "little extra spread, so the two grow by similar factors (row above). The paper's stronger EnKF "
-         "degradation is not reproduced on this ship."),
+         "little extra spread, so the two grow by similar factors; the EnKF ends somewhat further off in "
+         "absolute terms (the gap above), not by a different growth. The paper's stronger EnKF degradation is "
+         "not reproduced on this ship."),
         ("Tuned Q improves both filters, the EnKF remarkably, the UKF less",
          f"states improved at {w} m/s: EnKF {f['tuned Q states improved EnKF']}/6 (best x"
          f"{f['tuned Q best gain EnKF']:.1f}), UKF {f['tuned Q states improved UKF']}/6 (best x"
@@ -135,8 +139,12 @@ def verdicts(f: dict) -> list[tuple[str, str, bool, str]]:
          f"{f['KF beats EnKF Q=0 at max wind (states)']}/6 states at {w} m/s; better than the tuned UKF in "
          f"{f['KF beats UKF tuned at no wind (states)']}/6 states without wind",
          f["KF beats UKF Q=0 at max wind (states)"] >= 1 and f["KF beats UKF tuned at no wind (states)"] == 0,
-         "The persistence KF has no ship model, so it only wins where the model-based filters drift; on a "
-         "short record (quick mode) the wind has not yet pushed the ship far enough from the model's track."),
+         "The persistence KF has no ship model, so it wins where the model-based filters drift with the wind "
+         "(which needs a long enough record: in a quick run the wind has not yet pushed the ship far from the "
+         "model's track). Without wind it beats the tuned UKF only in "
+         + (", ".join(f["KF beats UKF tuned at no wind, states"]) or "no state")
+         + ": with the paper's noisy data (std 0.224) a persistence filter tuned per state smooths a slowly "
+           "varying state about as well as a model whose small Q still lets the measurement noise in."),
         ("The EnKF (N = 100) takes about four times the UKF's time per step",
          f"batch x{f['EnKF/UKF time batch']:.1f}, online x{f['EnKF/UKF time online']:.1f}",
          2.0 <= f["EnKF/UKF time online"] <= 6.0,
