@@ -695,11 +695,11 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
         xh = np.array([x[ix], x[iy], float(np.hypot(*vg0)), chi0, 0.0])
         Ph = np.diag([gnss_std**2, gnss_std**2, 1.0, np.radians(5) ** 2, 0.01])
         prior_mean, prior_cov = xh.copy(), Ph.copy()
+        ekf_run = ekf.online(Gaussian(prior_mean, prior_cov))
     nan2 = np.full(2, np.nan)
     cols = {k: np.empty(n) for k in ("north", "east", "psi", "r", "U", "chi", "chi_hat", "omega_hat", "U_hat",
                                      "chi_std", "steer", "chi_d", "r_d", "ref", "e", "gnss_north", "gnss_east")}
     psi_meas = float(x[ipsi])
-    empty = np.zeros(0)
     for k in range(n):
         vg = xdot[[ix, iy]]
         chi_true = float(np.arctan2(vg[1], vg[0]))
@@ -710,7 +710,8 @@ def simulate_autopilot(plant: SteeringPlant, autopilot: Autopilot, command: Call
                 if k % gnss_every == 0:
                     gn, ge = x[ix] + gnss_std * rng.standard_normal(), x[iy] + gnss_std * rng.standard_normal()
                     y = np.array([gn, ge])
-                xh, Ph, _ = ekf.step(xh, Ph, empty, y, dt if k else 0.0)
+                xh = ekf_run.update(y, dt if k else 0.0)
+                Ph = ekf_run.P
                 chi_f, om_f, U_f, chi_s = xh[3], xh[4], xh[2], np.sqrt(Ph[3, 3])
                 if rate == "gyro":
                     om_f = x[ir] + gyro_std * rng.standard_normal()

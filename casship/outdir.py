@@ -1,12 +1,25 @@
-"""Output folders that never overwrite by surprise and never keep half a result.
+"""Output folders and files that are never overwritten by surprise.
 
-:func:`output_folder` is the one way casship's commands write a folder of results (``casship study``,
-and any command with ``--out``):
+One rule for every command that writes results (``casship demo``, ``casship study``,
+``casship identify --out`` ...):
 
-* a folder that exists and is not empty is refused unless ``overwrite=True`` (``--overwrite``);
-* the work is written into a hidden staging folder beside the target and moved into place only
-  when it succeeds, so a failed run leaves no half folder and an overwritten folder keeps no stale
-  files from an earlier run (its old contents are removed just before the new ones move in).
+* an existing, non-empty folder (or an existing file) is refused unless the caller passes
+  ``overwrite=True`` (the ``--overwrite`` flag);
+* with ``overwrite=True`` the old folder is removed as a whole, so no stale file of an earlier run
+  stays beside the new ones; only a folder written by casship (it holds the marker file
+  :data:`MARKER`) or an empty one is ever removed;
+* results are written into a temporary sibling folder (or file) that is renamed into place when
+  the run succeeds, so a failed run leaves neither a half-written folder nor a damaged old one.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> from casship.outdir import output_folder
+>>> root = pathlib.Path(tempfile.mkdtemp())
+>>> with output_folder(root / "report") as folder:
+...     _ = (folder / "report.md").write_text("# results")
+>>> sorted(p.name for p in (root / "report").iterdir())
+['.casship-output', 'report.md']
 """
 from __future__ import annotations
 
@@ -16,71 +29,165 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["output_folder"]
+__all__ = ["output_folder", "output_file", "check_output_folder", "check_output_file", "MARKER"]
 
-_PROTECTED = (".git", "pyproject.toml", "setup.py")
-
-
-def _check_target(path: Path, overwrite: bool) -> None:
-    if path.exists() and not path.is_dir():
-        raise ValueError(f"output folder {str(path)!r} is a file, not a folder")
-    if not path.is_dir() or not any(path.iterdir()):
-        return
-    if not overwrite:
-        raise ValueError(f"output folder {str(path)!r} is not empty; choose another folder or pass "
-                         "--overwrite to replace its contents")
-    found = [name for name in _PROTECTED if (path / name).exists()]
-    if found or path == Path.home().resolve() or path == Path(path.anchor):
-        raise ValueError(f"refusing to overwrite {str(path)!r}: it looks like a project or home folder "
-                         f"({', '.join(found) or 'home/root'})")
+#: Name of the marker file written into every output folder (it allows ``overwrite`` to clear it).
+MARKER = ".casship-output"
 
 
-@contextmanager
-def output_folder(path: str | os.PathLike, *, overwrite: bool = False) -> Iterator[Path]:
-    """Write a folder of results safely: yields a staging folder, moved to ``path`` on success.
+def _protected(path: Path) -> str | None:
+    """Reason why ``path`` must never be removed (the working folder, an ancestor of it, home, root)."""
+    resolved = path.resolve()
+    cwd = Path.cwd().resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        return "it is the working folder or contains it"
+    if resolved == Path.home().resolve() or resolved.parent == resolved:
+        return "it is the home or root folder"
+    return None
+
+
+def check_output_folder(path, *, overwrite: bool = False, what: str = "--out") -> Path:
+    """Check that the report folder ``path`` may be written; raise with the reason if not.
 
     Parameters
     ----------
-    path : path
-        The output folder. It may not exist yet; if it exists it must be empty unless ``overwrite``.
+    path : str or Path
+        The folder a run will write.
     overwrite : bool
-        Replace the contents of a non-empty ``path`` (its old files are removed, none survive
-        beside the new ones).
+        Allow replacing an existing non-empty folder (one written by casship, or empty).
+    what : str
+        Name of the option or argument, used in messages (e.g. ``"--out"``).
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` is a non-empty folder and ``overwrite`` is false, or it is a file.
+    PermissionError
+        ``overwrite`` is true but the folder was not written by casship or is protected.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise FileExistsError(f"{what} {path}: is a file, not a folder; choose a folder name")
+    if path.is_dir() and any(path.iterdir()):
+        if not overwrite:
+            raise FileExistsError(f"{what} {path}: folder exists and is not empty; pass --overwrite to replace "
+                                  "it (its files are removed first) or choose another folder")
+        reason = _protected(path)
+        if reason is None and not (path / MARKER).is_file():
+            reason = f"it was not written by casship (no {MARKER} file in it)"
+        if reason:
+            raise PermissionError(f"{what} {path}: will not replace this folder: {reason}; choose another folder")
+    return path
+
+
+@contextmanager
+def output_folder(path, *, overwrite: bool = False, what: str = "--out") -> Iterator[Path]:
+    """Context manager yielding a temporary folder that replaces ``path`` when the block succeeds.
+
+    Parameters
+    ----------
+    path : str or Path
+        The report folder.
+    overwrite : bool
+        Replace an existing non-empty folder written by casship (see :func:`check_output_folder`).
+    what : str
+        Name of the option, used in messages.
 
     Yields
     ------
     Path
-        An empty staging folder beside ``path``; write everything there. When the block ends
-        normally its contents become ``path``; when it raises, the staging folder is removed and
-        ``path`` is left as it was.
+        A fresh, empty sibling folder of ``path`` to write into. On success it is renamed to ``path``
+        (an old ``path`` is removed first); if the block raises, it is removed and ``path`` is left
+        as it was.
+    """
+    path = check_output_folder(path, overwrite=overwrite, what=what)
+    parent = path.absolute().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = parent / f".{path.name}.partial-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    try:
+        (tmp / MARKER).write_text("written by casship; 'casship ... --overwrite' may replace this folder\n")
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if path.exists():
+        old = parent / f".{path.name}.old-{os.getpid()}"
+        path.rename(old)              # the new folder takes its place before the old one is removed
+        tmp.rename(path)
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        tmp.rename(path)
+
+
+def check_output_file(path, *, overwrite: bool = False, what: str = "--out") -> Path:
+    """Check that the result file ``path`` may be written; raise with the reason if not.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file a run will write.
+    overwrite : bool
+        Allow replacing an existing file.
+    what : str
+        Name of the option, used in messages.
+
+    Returns
+    -------
+    Path
 
     Raises
     ------
-    ValueError
-        ``path`` is a file, or a non-empty folder without ``overwrite``, or a project/home folder.
-
-    Examples
-    --------
-    >>> from casship.outdir import output_folder
-    >>> with output_folder(tmp / "run1") as out:          # doctest: +SKIP
-    ...     (out / "report.md").write_text("# results")
+    FileExistsError
+        ``path`` exists and ``overwrite`` is false.
+    IsADirectoryError
+        ``path`` is a folder.
+    FileNotFoundError
+        The folder ``path`` would go into does not exist.
     """
-    target = Path(path).expanduser().resolve()
-    _check_target(target, overwrite)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    staging = target.parent / f".{target.name}.partial-{os.getpid()}"
-    if staging.exists():
-        shutil.rmtree(staging)
-    staging.mkdir()
+    path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{what} {path}: is a folder; give a file name")
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{what} {path}: file exists; pass --overwrite to replace it or choose another name")
+    if not path.absolute().parent.is_dir():
+        raise FileNotFoundError(f"{what} {path}: folder {path.absolute().parent} does not exist")
+    return path
+
+
+@contextmanager
+def output_file(path, *, overwrite: bool = False, what: str = "--out") -> Iterator[Path]:
+    """Context manager yielding a temporary file name that replaces ``path`` when the block succeeds.
+
+    Parameters
+    ----------
+    path : str or Path
+        The result file.
+    overwrite : bool
+        Replace an existing file.
+    what : str
+        Name of the option, used in messages.
+
+    Yields
+    ------
+    Path
+        A temporary sibling name with the same suffix; on success it is renamed to ``path``; if the
+        block raises, it is removed and ``path`` is left as it was.
+    """
+    path = check_output_file(path, overwrite=overwrite, what=what)
+    tmp = path.absolute().parent / f".{path.stem}.partial-{os.getpid()}{path.suffix}"
     try:
-        yield staging
+        yield tmp
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
+        tmp.unlink(missing_ok=True)
         raise
-    try:
-        if target.exists():
-            shutil.rmtree(target)
-        staging.rename(target)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
+    if not tmp.exists():
+        raise FileNotFoundError(f"{what} {path}: nothing was written")
+    os.replace(tmp, path)

@@ -115,7 +115,22 @@ def studies() -> dict[str, Study]:
 
 
 def get_study(name: str) -> Study:
-    """The study called ``name``; an unknown name raises ``ValueError`` listing the known ones."""
+    """The study called ``name``.
+
+    Parameters
+    ----------
+    name : str
+        Study name (``casship study --list`` shows them).
+
+    Returns
+    -------
+    Study
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, listing the known ones.
+    """
     table = studies()
     if name not in table:
         raise ValueError(f"unknown study {name!r}; known: {list(table)}")

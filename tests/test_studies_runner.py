@@ -8,7 +8,7 @@ import pytest
 
 from casship.cli import main
 from casship.io import data_dir
-from casship.outdir import output_folder
+from casship.outdir import MARKER, output_folder
 from casship.studies import Study, get_study, run_study, studies
 
 
@@ -45,17 +45,17 @@ def test_checkout_default_is_shared_data_beside_the_clone(monkeypatch):
 # -- output folders --------------------------------------------------------------------------------------
 def test_output_folder_refuses_a_non_empty_folder_without_overwrite(tmp_path):
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "old.png").write_text("stale")
-    with pytest.raises(ValueError, match="not empty.*--overwrite"):
+    with output_folder(out) as staging:
+        (staging / "old.png").write_text("stale")
+    with pytest.raises(FileExistsError, match="not empty.*--overwrite"):
         with output_folder(out):
             pass
     assert (out / "old.png").read_text() == "stale"
     with output_folder(out, overwrite=True) as staging:
-        assert staging != out and not any(staging.iterdir())
+        assert staging != out and [p.name for p in staging.iterdir()] == [MARKER]
         (staging / "report.md").write_text("new")
-    assert sorted(p.name for p in out.iterdir()) == ["report.md"]       # the stale file is gone
-    assert [p.name for p in tmp_path.iterdir()] == ["out"]              # no staging folder left
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "report.md"]  # the stale file is gone
+    assert [p.name for p in tmp_path.iterdir()] == ["out"]                 # no staging folder left
 
 
 def test_failed_run_leaves_no_half_folder_and_keeps_the_old_one(tmp_path):
@@ -65,8 +65,8 @@ def test_failed_run_leaves_no_half_folder_and_keeps_the_old_one(tmp_path):
             raise RuntimeError("boom")
     assert list(tmp_path.iterdir()) == []
     old = tmp_path / "old"
-    old.mkdir()
-    (old / "report.md").write_text("kept")
+    with output_folder(old) as staging:
+        (staging / "report.md").write_text("kept")
     with pytest.raises(RuntimeError):
         with output_folder(old, overwrite=True) as staging:
             raise RuntimeError("boom")
@@ -74,16 +74,17 @@ def test_failed_run_leaves_no_half_folder_and_keeps_the_old_one(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["old"]
 
 
-def test_output_folder_refuses_a_file_and_a_project_folder(tmp_path):
+def test_output_folder_refuses_a_file_and_a_folder_casship_did_not_write(tmp_path):
     (tmp_path / "f").write_text("x")
-    with pytest.raises(ValueError, match="is a file"):
+    with pytest.raises(FileExistsError, match="is a file"):
         with output_folder(tmp_path / "f"):
             pass
     (tmp_path / "proj").mkdir()
     (tmp_path / "proj" / "pyproject.toml").write_text("")
-    with pytest.raises(ValueError, match="project or home"):
+    with pytest.raises(PermissionError, match="not written by casship"):
         with output_folder(tmp_path / "proj", overwrite=True):
             pass
+    assert (tmp_path / "proj" / "pyproject.toml").exists()
 
 
 # -- discovery and the runner ----------------------------------------------------------------------------

@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     try:
         return int(args.func(args) or 0)
-    except (ValueError, TypeError, FileNotFoundError, RuntimeError) as exc:
+    except (ValueError, TypeError, OSError, RuntimeError) as exc:   # user errors: one line, exit 2
         print(f"casship {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -16,7 +16,8 @@ import numpy as np
 from ..angles import wrap
 from ..data import Dataset, Gaussian
 from ..discretize import DiscreteModel
-from ..estimators.base import STEP_INPUTS, Estimator, compile_function
+from .._fast import compile_function
+from ..estimators.base import SAMPLE_INPUTS, Estimator
 from ._space import ParamSpace, hess_lag_function, ipopt_solve
 from .result import FitResult, finish
 
@@ -128,8 +129,8 @@ class MLEProblem:
         m.indices(estimate_x0, "state")
         x0_entries = [(f"{s}@{k}", k, m.index(s), self._priors[k].mean[m.index(s)])
                       for k in range(len(self.records)) for s in estimate_x0]
-        if x0_entries and est.carry_from(self._priors[0], 0).size != m.nx + m.nx**2:
-            raise ValueError(f"estimate_x0 needs a mean/covariance filter; {est.name} carries an ensemble")
+        if x0_entries and "x" not in est.memory:
+            raise ValueError(f"estimate_x0 needs a mean/covariance filter; {est.name} keeps {list(est.memory)}")
         self.space = ParamSpace(m, free, base, bounds=bounds, scale=scale, noise_entries=noise_entries,
                                 x0_entries=x0_entries)
         if not len(self.space):
@@ -181,17 +182,18 @@ class MLEProblem:
         est, sp, m = self.estimator, self.space, self.model
         k = len(sp)
         rng = np.random.default_rng(self._seed)
-        # The records, initial carries, fixed parameters and base covariances are packed into one
+        # The records, initial memories, fixed parameters and base covariances are packed into one
         # parameter vector: the symbolic functions (and their compiled versions) do not embed the data.
         blocks, layout, self._arrays = [], [], []
         for r, data in enumerate(self.records):
             arr = est.prepare(data)
             self._arrays.append(arr)
-            rows = [np.atleast_2d(arr[name]) for name in STEP_INPUTS[1:6]] + list(est.extra_inputs(len(data), rng))
-            D = np.vstack(rows)
-            carry = np.asarray(est.carry_from(self._priors[r], rng), dtype=float).reshape(-1)
-            layout.append((D.shape, [x.shape[0] for x in rows], carry.size))
-            blocks += [D.reshape(-1, order="F"), carry]
+            named = {k: arr[k] for k in SAMPLE_INPUTS if k != "gate"}
+            named.update(est.draws(len(data), rng))
+            named.update({f"memory:{k}": v for k, v in est.memory_from(self._priors[r], rng).items()})
+            shapes = {k: np.atleast_2d(np.asarray(v, dtype=float).T).T.shape for k, v in named.items()}
+            layout.append(shapes)
+            blocks += [np.asarray(v, dtype=float).reshape(-1, order="F") for v in named.values()]
         blocks += [sp.base, est.Q.reshape(-1, order="F"), est.R.reshape(-1, order="F")]
         self._pnum = np.concatenate(blocks)
         P = ca.MX.sym("data", self._pnum.size)
@@ -202,8 +204,7 @@ class MLEProblem:
             offset[0] += size
             return v
 
-        recs = [(ca.reshape(take(shape[0] * shape[1]), shape[0], shape[1]), sizes, take(nc))
-                for shape, sizes, nc in layout]
+        recs = [{k: ca.reshape(take(r * c), r, c) for k, (r, c) in shapes.items()} for shapes in layout]
         pb = take(m.np)
         Q0 = ca.reshape(take(m.nw * m.nw), m.nw, m.nw)
         R0 = ca.reshape(take(est.ny * est.ny), est.ny, est.ny)
@@ -212,27 +213,29 @@ class MLEProblem:
         p = sp.param_vector(nat, base=pb)
         Q, R = self._cov_sym(nat, "Q", Q0), self._cov_sym(nat, "R", R0)
         nll, rec_out = 0, []
-        for r, (D, sizes, c0) in enumerate(recs):
-            n = D.shape[1]
-            carry = c0
+        ny = est.ny
+        for r, rec in enumerate(recs):
+            n = rec["dt"].shape[1]
+            memory = {name[len("memory:"):]: v for name, v in rec.items() if name.startswith("memory:")}
             x0_items = [(e, v) for e, v in zip(sp.entries, nat) if e.kind == "x0" and e.record == r]
             if x0_items:
-                mean = [c0[i] for i in range(m.nx)]
+                mean = [memory["x"][i] for i in range(m.nx)]
                 for e, v in x0_items:
                     mean[e.index] = v
-                carry = ca.vertcat(*mean, c0[m.nx:])
-            cuts = np.cumsum([0, *sizes])
+                memory["x"] = ca.vertcat(*mean)
+            per = {name: v for name, v in rec.items() if not name.startswith("memory:")}
             e_parts, S_parts = [], []
             # chunks of one cached fold: derivative graphs are built per chunk length, not per record length
             for start in range(0, n, CHUNK):
                 stop = min(start + CHUNK, n)
-                rows = [D[int(cuts[i]):int(cuts[i + 1]), start:stop] for i in range(len(sizes))]
-                args = [carry] + rows[:5] + [p, Q, R, np.full((1, stop - start), np.inf)] + rows[5:]
-                out = est.fold(stop - start)(*args)
-                carry = out[0][:, -1]
-                nll = nll - ca.sum2(out[9])
-                e_parts.append(out[6])
-                S_parts.append(out[7])
+                width = stop - start
+                args = {name: v[:, start * (v.shape[1] // n): stop * (v.shape[1] // n)] for name, v in per.items()}
+                out = est.fold(width, ("x", "P", "e", "S", "ll")).call(
+                    {**memory, **args, "p": p, "Q": Q, "R": R, "gate": ca.DM.inf(1, width)})
+                memory = {name: out[name][:, -(out[name].shape[1] // width):] for name in est.memory}
+                nll = nll - ca.sum2(out["ll"])
+                e_parts.append(out["e"])
+                S_parts.append(ca.reshape(out["S"], ny * ny, width))
             rec_out += [ca.horzcat(*e_parts), ca.horzcat(*S_parts)]
         self._nll = ca.Function("nll", [theta, P], [nll], ["theta", "data"], ["nll"])
         self._grad = ca.Function("nll_grad", [theta, P], [ca.gradient(nll, theta)], ["theta", "data"], ["g"])
@@ -354,7 +357,7 @@ class MLEProblem:
         kinds = sorted({hessian, info_kind} - {"limited-memory"})
         functions = None
         if self.jit:
-            key = (type(self.estimator).__name__, self.estimator.step_function.serialize(),
+            key = (type(self.estimator).__name__, self.estimator.step_function("all").serialize(),
                    tuple(len(d) for d in self.records), CHUNK, self._pnum.size,
                    tuple((e.kind, e.index, e.record, e.log, e.scale) for e in sp.entries), hessian, info_kind)
             if key not in _COMPILED:

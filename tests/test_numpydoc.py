@@ -1,0 +1,429 @@
+"""Every public function and class of casship has a numpydoc docstring documenting its parameters.
+
+Public means: listed in the module's ``__all__`` (or, without one, a name not starting with ``_``
+defined in that module), in every module of the package except the command line (``casship.cli``,
+whose functions are not an API). For each such function, class and public method:
+
+* a docstring exists;
+* every parameter of the signature (``self``/``cls`` and names starting with ``_`` aside; ``*args``
+  and ``**kwargs`` as ``*args``/``**kwargs``) is documented in a numpydoc ``Parameters`` (or ``Other
+  Parameters``) section; a class documents its constructor's parameters in the class docstring.
+
+``ALLOWED`` lists today's offenders. It only shrinks: an entry that no longer offends fails the test
+(remove it), and a new offender fails it too. The idea follows python-control's docstring test.
+"""
+from __future__ import annotations
+
+import importlib
+import inspect
+import pkgutil
+import warnings
+
+import pytest
+
+import casship
+from numpydoc import docscrape as numpydoc_docscrape
+
+SKIP_PACKAGES = ("casship.cli", "casship.__main__")
+
+# Current offenders ("module.qualname"). Fix one, then delete its line here.
+ALLOWED = frozenset({
+    "casship.angles.deg",
+    "casship.angles.rad",
+    "casship.angles.unwrap",
+    "casship.angles.wrap",
+    "casship.angles.wrap_sym",
+    "casship.autopilot.ClosedLoopResult",
+    "casship.autopilot.ClosedLoopResult.summary",
+    "casship.autopilot.Design",
+    "casship.autopilot.Design.summary",
+    "casship.autopilot.Nomoto",
+    "casship.autopilot.Nomoto.as_dict",
+    "casship.autopilot.Nomoto.d",
+    "casship.autopilot.Nomoto.heading_tf",
+    "casship.autopilot.Nomoto.m",
+    "casship.autopilot.Nomoto.second_order",
+    "casship.autopilot.Nomoto.yaw_rate_tf",
+    "casship.autopilot.PIDGains",
+    "casship.autopilot.PIDGains.as_dict",
+    "casship.autopilot.ReferenceModel",
+    "casship.autopilot.ReferenceModel.response",
+    "casship.autopilot.ReferenceModel.symbolic_step",
+    "casship.autopilot.ReferenceModel.tf",
+    "casship.autopilot.SteeringPlant.input_vector",
+    "casship.autopilot.closed_loop_tf",
+    "casship.autopilot.course_scenario",
+    "casship.autopilot.design_autopilot",
+    "casship.autopilot.fit_nomoto",
+    "casship.autopilot.loop_transfer",
+    "casship.autopilot.lqr_design",
+    "casship.autopilot.margins",
+    "casship.autopilot.nomoto_from_model",
+    "casship.autopilot.pid_pole_placement",
+    "casship.autopilot.plot_closed_loop",
+    "casship.autopilot.plot_design",
+    "casship.autopilot.simulate_autopilot",
+    "casship.autopilot.steering_model",
+    "casship.autopilot.step_metrics",
+    "casship.autopilot.twin_propeller_allocation",
+    "casship.autopilot.twin_propeller_yaw_limit",
+    "casship.codegen.CFiles",
+    "casship.codegen.CFiles.sizes_in",
+    "casship.codegen.CFiles.sizes_out",
+    "casship.codegen.compile_c",
+    "casship.codegen.export_mhe_rti",
+    "casship.codegen.read_harness_output",
+    "casship.codegen.write_harness",
+    "casship.data.Dataset.between",
+    "casship.data.Dataset.dt",
+    "casship.data.Dataset.from_csv",
+    "casship.data.Dataset.from_pandas",
+    "casship.data.Dataset.matrix",
+    "casship.data.Dataset.names",
+    "casship.data.Dataset.select",
+    "casship.data.Dataset.slice",
+    "casship.data.Dataset.to_csv",
+    "casship.data.Dataset.to_pandas",
+    "casship.data.Dataset.with_columns",
+    "casship.data.Gaussian.sample",
+    "casship.data.Gaussian.std",
+    "casship.data.Trajectory",
+    "casship.data.Trajectory.from_csv",
+    "casship.data.Trajectory.from_dataset",
+    "casship.data.Trajectory.from_pandas",
+    "casship.data.Trajectory.slice",
+    "casship.data.Trajectory.u",
+    "casship.data.Trajectory.y",
+    "casship.data.as_cov",
+    "casship.data.check_time",
+    "casship.demo.DemoConfig",
+    "casship.demo.DemoConfig.make",
+    "casship.discretize.DiscreteModel",
+    "casship.discretize.DiscreteModel.check_steps",
+    "casship.discretize.DiscreteModel.fold",
+    "casship.discretize.DiscreteModel.linearize",
+    "casship.discretize.DiscreteModel.name",
+    "casship.discretize.DiscreteModel.process_noise",
+    "casship.discretize.DiscreteModel.require_continuous",
+    "casship.discretize.DiscreteModel.step",
+    "casship.discretize.discretize",
+    "casship.discretize.rk4",
+    "casship.estimators.augmented.AugmentedResult",
+    "casship.estimators.augmented.AugmentedResult.trajectory",
+    "casship.estimators.augmented.augmented_ekf",
+    "casship.estimators.augmented.augmented_noise",
+    "casship.estimators.augmented.augmented_prior",
+    "casship.estimators.augmented.per_name",
+    "casship.estimators.base.Estimator.draws",
+    "casship.estimators.base.Estimator.fold",
+    "casship.estimators.base.Estimator.gate_threshold",
+    "casship.estimators.base.Estimator.h_meas",
+    "casship.estimators.base.Estimator.memory_from",
+    "casship.estimators.base.Estimator.online",
+    "casship.estimators.base.Estimator.prepare",
+    "casship.estimators.base.Estimator.residual",
+    "casship.estimators.base.Estimator.result",
+    "casship.estimators.base.Estimator.smooth",
+    "casship.estimators.base.per_sample",
+    "casship.estimators.ekf.EKF.memory_from",
+    "casship.estimators.ekf.EKF.steady_state",
+    "casship.estimators.ekf.EKFOptions",
+    "casship.estimators.ekf.persistence_model",
+    "casship.estimators.enkf.EnKF.ensemble",
+    "casship.estimators.enkf.EnKF.memory_from",
+    "casship.estimators.enkf.EnKFOptions",
+    "casship.estimators.kalman_bucy.KalmanBucy.smooth",
+    "casship.estimators.kalman_bucy.KalmanBucy.steady_state",
+    "casship.estimators.kalman_bucy.KalmanBucyOptions",
+    "casship.estimators.mhe.arrival.arrival_prior",
+    "casship.estimators.mhe.arrival.inv_sqrt",
+    "casship.estimators.mhe.estimator.MHE.augmented_prior",
+    "casship.estimators.mhe.estimator.MHE.online",
+    "casship.estimators.mhe.estimator.MHE.predict",
+    "casship.estimators.mhe.estimator.MHE.prepare",
+    "casship.estimators.mhe.estimator.MHE.smooth",
+    "casship.estimators.mhe.estimator.MHE.window",
+    "casship.estimators.mhe.options.MHEOptions",
+    "casship.estimators.mhe.problem.Window",
+    "casship.estimators.mhe.problem.build_window",
+    "casship.estimators.mhe.problem.params_vector",
+    "casship.estimators.mhe.problem.sqrt_factor",
+    "casship.estimators.mhe.runner.WindowEngine",
+    "casship.estimators.mhe.runner.WindowEngine.P",
+    "casship.estimators.mhe.runner.WindowEngine.advance",
+    "casship.estimators.mhe.runner.WindowEngine.info",
+    "casship.estimators.mhe.runner.WindowEngine.update",
+    "casship.estimators.mhe.runner.WindowEngine.x",
+    "casship.estimators.mhe.solvers.MHEFailed",
+    "casship.estimators.mhe.solvers.solve_window",
+    "casship.estimators.online.OnlineRun",
+    "casship.estimators.online.OnlineRun.update",
+    "casship.estimators.online.StepEngine",
+    "casship.estimators.online.StepEngine.P",
+    "casship.estimators.online.StepEngine.info",
+    "casship.estimators.online.StepEngine.update",
+    "casship.estimators.online.StepEngine.x",
+    "casship.estimators.options.EstimatorOptions.from_value",
+    "casship.estimators.options.EstimatorOptions.replace",
+    "casship.estimators.options.check_int",
+    "casship.estimators.result.FilterResult",
+    "casship.estimators.result.FilterResult.health",
+    "casship.estimators.result.FilterResult.load",
+    "casship.estimators.result.FilterResult.nees",
+    "casship.estimators.result.FilterResult.plot",
+    "casship.estimators.result.FilterResult.replace",
+    "casship.estimators.result.FilterResult.save",
+    "casship.estimators.result.Health",
+    "casship.estimators.result.not_positive_definite",
+    "casship.estimators.ukf.UKFOptions",
+    "casship.estimators.ukf.circular_mean",
+    "casship.estimators.ukf.deviations",
+    "casship.estimators.ukf.psd_sqrt",
+    "casship.estimators.ukf.sigma_weights",
+    "casship.estimators.ukf.weighted_outer",
+    "casship.estimators.ukf.wrap_fast",
+    "casship.estimators.update.gaussian_terms",
+    "casship.estimators.update.joseph_update",
+    "casship.estimators.update.masked_innovation_cov",
+    "casship.estimators.update.residual",
+    "casship.estimators.update.spd_solve",
+    "casship.estimators.update.symmetric",
+    "casship.frames.body_to_ned",
+    "casship.frames.course_speed",
+    "casship.frames.latlon_to_ne",
+    "casship.frames.ne_to_latlon",
+    "casship.frames.ned_to_body",
+    "casship.frames.wgs84_radii",
+    "casship.identify.mle.MLEProblem.fisher_expr",
+    "casship.identify.mle.MLEProblem.free",
+    "casship.identify.mle.MLEProblem.gradient",
+    "casship.identify.mle.MLEProblem.negloglik",
+    "casship.identify.mle.default_prior",
+    "casship.identify.output_error.OutputErrorProblem.cost",
+    "casship.identify.output_error.OutputErrorProblem.free",
+    "casship.identify.output_error.OutputErrorProblem.residuals",
+    "casship.identify.result.FitResult",
+    "casship.identify.result.FitResult.from_dict",
+    "casship.identify.result.FitResult.from_json",
+    "casship.identify.result.FitResult.interval",
+    "casship.identify.result.FitResult.plot",
+    "casship.identify.result.FitResult.to_dict",
+    "casship.identify.result.FitResult.to_json",
+    "casship.identify.result.IdentificationError",
+    "casship.identify.result.covariance_from_information",
+    "casship.identify.result.identifiability_warnings",
+    "casship.identify.result.ljung_box",
+    "casship.io.csv.from_frame",
+    "casship.io.csv.read_csv",
+    "casship.io.geodesy.ne_to_geodetic",
+    "casship.io.marin.marin_runs",
+    "casship.io.nmea.NMEAError",
+    "casship.linear.TrimResult",
+    "casship.linear.output_map",
+    "casship.linear.to_iosys",
+    "casship.linear.trim",
+    "casship.maneuvers.ReverseSpiral",
+    "casship.maneuvers.ReverseSpiral.target",
+    "casship.maneuvers.execute_time",
+    "casship.maneuvers.imo_table",
+    "casship.maneuvers.propeller_inputs",
+    "casship.maneuvers.pullout_inputs",
+    "casship.maneuvers.random_rudder_inputs",
+    "casship.maneuvers.rudder_inputs",
+    "casship.maneuvers.spiral_inputs",
+    "casship.maneuvers.straight_run_state",
+    "casship.maneuvers.turning_inputs",
+    "casship.maneuvers.turning_metrics",
+    "casship.maneuvers.zigzag_metrics",
+    "casship.model.Model",
+    "casship.model.Model.builder",
+    "casship.model.Model.extend",
+    "casship.model.Model.index",
+    "casship.model.Model.indices",
+    "casship.model.Model.inputs",
+    "casship.model.Model.param_dict",
+    "casship.model.Model.params",
+    "casship.model.Model.states",
+    "casship.model.Model.with_outputs",
+    "casship.model.ModelBuilder.add_to_ode",
+    "casship.model.ModelBuilder.copy",
+    "casship.model.ModelBuilder.feed",
+    "casship.model.ModelBuilder.has",
+    "casship.model.ModelBuilder.input",
+    "casship.model.ModelBuilder.limit",
+    "casship.model.ModelBuilder.noise",
+    "casship.model.ModelBuilder.ode",
+    "casship.model.ModelBuilder.output",
+    "casship.model.ModelBuilder.param",
+    "casship.model.ModelBuilder.param_as_state",
+    "casship.model.ModelBuilder.port",
+    "casship.model.ModelBuilder.state",
+    "casship.model.ModelBuilder.sym",
+    "casship.model.Parameter",
+    "casship.model.Variable",
+    "casship.models.kinematic.constant_acceleration",
+    "casship.models.kinematic.double_integrator",
+    "casship.models.kinematic.sog_cog",
+    "casship.models.kinematic.sog_cog_latlon",
+    "casship.models.kinematic.tomera_kinematic",
+    "casship.models.kvlcc2.kvlcc2_l7",
+    "casship.models.lowspeed.crossflow_integrals",
+    "casship.models.mmg.add_rudder_actuator",
+    "casship.models.mmg.declare_ship_limits",
+    "casship.models.mmg.declare_ship_states",
+    "casship.models.mmg.smooth_saturation",
+    "casship.models.nomoto.nomoto_first_order",
+    "casship.models.nomoto.nomoto_second_order",
+    "casship.models.otter.hoerner_cd",
+    "casship.models.registry.get_model",
+    "casship.models.registry.register",
+    "casship.models.taylor.shi_taylor_preset",
+    "casship.models.wind.add_current",
+    "casship.models.wind.fujiwara_loads",
+    "casship.models.wind.relative_wind",
+    "casship.simulate.IntegrationError",
+    "casship.simulate.fold_steps",
+    "casship.simulate.input_matrix",
+    "casship.validation.ReplayResult",
+    "casship.validation.classify_maneuver",
+    "casship.validation.maneuver_metrics",
+    "casship.vessel.Limit.contains",
+    "casship.vessel.Limit.describe",
+    "casship.vessel.Vessel.check_inputs",
+    "casship.vessel.Vessel.replace",
+})
+
+
+def _modules():
+    for info in pkgutil.walk_packages(casship.__path__, "casship."):
+        name = info.name
+        if name.startswith(SKIP_PACKAGES) or any(part.startswith("_") for part in name.split(".")[1:]):
+            continue
+        yield importlib.import_module(name)
+
+
+def _public(module):
+    names = getattr(module, "__all__", None)
+    if names is None:
+        names = [n for n in vars(module) if not n.startswith("_")]
+    for name in names:
+        obj = getattr(module, name, None)
+        if (inspect.isfunction(obj) or inspect.isclass(obj)) and getattr(obj, "__module__", "") == module.__name__:
+            yield name, obj
+
+
+def _documented(doc) -> set[str]:
+    names = set()
+    for section in ("Parameters", "Other Parameters"):
+        for par in doc[section]:
+            for part in par.name.split(","):
+                names.add(part.strip().lstrip("*") if part.strip().startswith("*") else part.strip())
+    return names
+
+
+def _wanted(func, skip_first: bool) -> list[str]:
+    try:
+        sig = inspect.signature(func)
+    except (TypeError, ValueError):
+        return []
+    params = list(sig.parameters.values())
+    if skip_first and params:
+        params = params[1:]
+    return [p.name for p in params if not p.name.startswith("_")]
+
+
+def _problems(obj, doc_cls, skip_first: bool, doc_text=None) -> list[str]:
+    text = inspect.getdoc(obj) if doc_text is None else doc_text
+    if not text or not text.strip():
+        return ["no docstring"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            doc = numpydoc_docscrape.NumpyDocString(text)
+        except Exception as exc:   # numpydoc raises on malformed sections
+            return [f"docstring does not parse as numpydoc ({exc})"]
+    wanted = _wanted(obj if doc_cls is None else doc_cls, skip_first)
+    missing = [n for n in wanted if n not in _documented(doc)]
+    if missing:
+        return [f"parameter(s) {missing} not in a Parameters section"]
+    return []
+
+
+def _class_problems(cls) -> dict[str, list[str]]:
+    out = {}
+    init = cls.__dict__.get("__init__")
+    if init is not None or "__dataclass_fields__" in cls.__dict__:
+        # constructor parameters belong in the class docstring (or, failing that, __init__'s)
+        text = inspect.getdoc(cls) or ""
+        if init is not None and inspect.getdoc(init) and "Parameters" not in text:
+            text = inspect.getdoc(init)
+        problems = _problems(cls, cls, skip_first=False, doc_text=text)
+    else:
+        problems = [] if (inspect.getdoc(cls) or "").strip() else ["no docstring"]
+    if problems:
+        out[cls.__qualname__] = problems
+    for name, member in vars(cls).items():
+        if name.startswith("_"):
+            continue
+        if isinstance(member, (staticmethod, classmethod)):
+            func, skip = member.__func__, isinstance(member, classmethod)
+        elif inspect.isfunction(member):
+            func, skip = member, True
+        elif isinstance(member, property):
+            if not (member.__doc__ or "").strip():
+                out[f"{cls.__qualname__}.{name}"] = ["no docstring"]
+            continue
+        else:
+            continue
+        problems = _problems(func, None, skip_first=skip)
+        if problems:
+            out[f"{cls.__qualname__}.{name}"] = problems
+    return out
+
+
+def offenders() -> dict[str, list[str]]:
+    """Mapping ``module.qualname`` -> problems, over every public function, class and method."""
+    found = {}
+    for module in _modules():
+        for name, obj in _public(module):
+            if inspect.isclass(obj):
+                for qual, problems in _class_problems(obj).items():
+                    found[f"{module.__name__}.{qual}"] = problems
+            else:
+                problems = _problems(obj, None, skip_first=False)
+                if problems:
+                    found[f"{module.__name__}.{name}"] = problems
+    return found
+
+
+def test_public_api_has_numpydoc_parameters():
+    found = offenders()
+    new = {k: v for k, v in found.items() if k not in ALLOWED}
+    fixed = sorted(ALLOWED - set(found))
+    lines = [f"{k}: {'; '.join(v)}" for k, v in sorted(new.items())]
+    assert not new, "public API without a numpydoc Parameters section:\n" + "\n".join(lines)
+    assert not fixed, "fixed, now remove from ALLOWED in tests/test_numpydoc.py:\n" + "\n".join(fixed)
+
+
+def test_checker_catches_a_missing_parameter():
+    def documented(a, b):
+        """Add.
+
+        Parameters
+        ----------
+        a, b : float
+            Terms.
+        """
+
+    def half(a, b):
+        """Add.
+
+        Parameters
+        ----------
+        a : float
+            First term.
+        """
+
+    assert _problems(documented, None, skip_first=False) == []
+    assert _problems(half, None, skip_first=False) == ["parameter(s) ['b'] not in a Parameters section"]
+    assert _problems(lambda x: x, None, skip_first=False) == ["no docstring"]
