@@ -123,8 +123,20 @@ def fujiwara1998_coefficients(g: Mapping) -> dict:
 
 
 def fourier_wind_coefficients(gamma, coeffs: Mapping):
-    """``(C_X, C_Y, C_N)`` of Eq. 34 for the apparent wind angle ``gamma`` [rad] (off the bow, + from
-    starboard), body axes (x forward, y to starboard, N clockwise seen from above)."""
+    """``(C_X, C_Y, C_N)`` of Eq. 34 in body axes (x forward, y to starboard, N clockwise from above).
+
+    Parameters
+    ----------
+    gamma : float, array or CasADi symbol
+        Apparent wind angle [rad] off the bow, positive for wind from starboard.
+    coeffs : mapping
+        The Fourier coefficients (:func:`fujiwara1998_coefficients`).
+
+    Returns
+    -------
+    tuple
+        ``C_X, C_Y, C_N``.
+    """
     lib = _lib(gamma, *coeffs.values())
     a = 2.0 * np.pi - gamma
     c = coeffs
@@ -135,7 +147,24 @@ def fourier_wind_coefficients(gamma, coeffs: Mapping):
 
 
 def fourier_wind_loads(U_A, gamma, g: Mapping, rho_air: float = 1.225):
-    """Wind force ``(X, Y, N)`` [N, N, N m] in body axes by Eq. 34 for apparent wind ``U_A``, ``gamma``."""
+    """Wind force ``(X, Y, N)`` [N, N, N m] in body axes by Eq. 34.
+
+    Parameters
+    ----------
+    U_A : float, array or CasADi symbol
+        Apparent wind speed [m/s].
+    gamma : float, array or CasADi symbol
+        Apparent wind angle [rad] off the bow, positive for wind from starboard.
+    g : mapping
+        Geometry (:data:`FOURIER_GEOMETRY_NAMES`).
+    rho_air : float
+        Air density [kg/m^3].
+
+    Returns
+    -------
+    tuple
+        ``X, Y, N``.
+    """
     C_X, C_Y, C_N = fourier_wind_coefficients(gamma, fujiwara1998_coefficients(g))
     q = 0.5 * rho_air * U_A**2
     return q * g["A_F"] * C_X, q * g["A_L"] * C_Y, q * g["A_L"] * g["L_OA"] * C_N
