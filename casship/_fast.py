@@ -4,15 +4,17 @@ Calling a Function with numpy arrays converts every argument to ``DM`` and every
 which costs tens of microseconds per call. :class:`BufferedCall` instead binds preallocated numpy
 arrays once, addressed by the Function's input and output *names*; a call only triggers the
 evaluation. :func:`run_fold` runs a folded step Function (``mapaccum``) over a long record in
-pieces through such buffers, and :func:`compile_function` compiles a Function to C.
+pieces through such buffers; :func:`compile_function` (from :mod:`casship.compile`) compiles a Function
+to C through the on-disk cache.
 """
 from __future__ import annotations
 
-import tempfile
 from typing import Callable, Mapping
 
 import casadi as ca
 import numpy as np
+
+from .compile import compile_function  # noqa: F401  (the one compile path, re-exported)
 
 __all__ = ["BufferedCall", "compile_function", "run_fold", "DUPLICATE_NAMES"]
 
@@ -137,21 +139,6 @@ class BufferedCall:
         return self.res
 
 
-def compile_function(fun: ca.Function) -> ca.Function:
-    """``fun`` compiled to C and loaded (CasADi JIT through the system C compiler, ``-O2``).
-
-    Raises ``RuntimeError`` naming the Function when no working C compiler is found.
-    """
-    ins = fun.sx_in() if fun.is_a("SXFunction") else fun.mx_in()
-    opts = {"jit": True, "compiler": "shell", "jit_cleanup": True, **DUPLICATE_NAMES,
-            "jit_options": {"flags": ["-O2"], "directory": tempfile.gettempdir()}}
-    try:
-        return ca.Function(f"{fun.name()}_jit", ins, fun.call(ins), fun.name_in(), fun.name_out(), opts)
-    except RuntimeError as exc:
-        raise RuntimeError(f"option 'jit': compiling {fun.name()!r} to C failed (is a C compiler "
-                           f"installed?): {str(exc).splitlines()[-1]}") from None
-
-
 def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, memory: Mapping[str, np.ndarray],
              per_sample: Mapping[str, np.ndarray], constants: Mapping[str, np.ndarray],
              pad: Mapping[str, float] | None = None, keep=None) -> tuple[dict, dict]:
@@ -182,20 +169,24 @@ def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, me
     memory : dict
         The memory after the last sample.
     outputs : dict name -> array
-        Each kept output over the samples, with a sample's columns at ``[:, k*c:(k+1)*c]``.
+        Each kept output per sample, shape ``(n, rows, cols)`` (a view of a contiguous array: the
+        pieces are copied in one block each).
     """
     pad = dict(pad or {})
     mem = {k: np.array(v, dtype=float) for k, v in memory.items()}
-    widths = None
-    outs, start, primed = {}, 0, set()
+    shapes = None
+    outs, flat, start, primed = {}, {}, 0, set()
     while start < n:
         size = min(chunk, 1 << (n - start - 1).bit_length())
         take = min(size, n - start)
         call = fold_call(size)
-        if widths is None:
+        if shapes is None:
             keep = list(call.names_out if keep is None else keep)
-            widths = {k: call.out(k).shape[1] // size for k in call.names_out}
-            outs = {k: np.empty((call.out(k).shape[0], widths[k] * n), order="F") for k in keep}
+            shapes = {k: (call.out(k).shape[0], call.out(k).shape[1] // size) for k in call.names_out}
+            for k in keep:
+                r, c = shapes[k]
+                block = np.empty((n, c, r))           # sample k's matrix in column-major order, as CasADi has it
+                outs[k], flat[k] = block.transpose(0, 2, 1), block.reshape(-1)
         if id(call) not in primed:
             for k, v in constants.items():
                 call[k] = v
@@ -213,10 +204,13 @@ def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, me
                     view[:, take * c:] = np.tile(src[:, (start + take - 1) * c:(start + take) * c], (1, size - take))
         call()
         for k in keep:
-            c = widths[k]
-            outs[k][:, start * c:(start + take) * c] = call.out(k)[:, :take * c]
+            r, c = shapes[k]
+            flat[k][start * r * c:(start + take) * r * c] = call.flat_out(k)[:take * r * c]
         for k in mem:
-            c = widths[k]
+            c = shapes[k][1]
             mem[k] = call.out(k)[:, (take - 1) * c:take * c].copy()
         start += take
+    for k in flat:                                # read-only: results may share them without a copy
+        for a in (flat[k].base, flat[k], outs[k]):
+            a.setflags(write=False)
     return mem, outs

@@ -90,13 +90,12 @@ def part_c(otter, quick, *, wn=WN, gnss_std=GNSS_STD, seed=3, tau_x=TAU_X, gnss_
     tr = cs.trim(steer_model, x={"u": 1.0}, u={"tau_X": tau_x}, free=["u"], zero=["u"])
     speed = tr.values["u"]
     tau_n_max = ap.twin_propeller_yaw_limit(otter, tau_x)       # keeps both propellers in range
-    design = ap.design_autopilot(steer_model, speed, steer="tau_N", propeller=None, inputs={"tau_X": tau_x},
-                                 wn=wn, zeta=ZETA, wn_ref=min(WN_D, wn), r_max=R_MAX, steer_max=tau_n_max,
-                                 steer_rate_max=np.inf, actuator_T=0.1, delay=1.0 / gnss_rate)
+    design = ap.design_autopilot(steer_model, speed, steer="tau_N", inputs={"tau_X": tau_x}, wn=wn, zeta=ZETA,
+                                 wn_ref=min(WN_D, wn), r_max=R_MAX, steer_max=tau_n_max, steer_rate_max=np.inf,
+                                 actuator_T=0.1, delay=1.0 / gnss_rate, mode="course", rate="estimator", dt=DT,
+                                 gnss_rate=gnss_rate, gnss_std=gnss_std, ekf_q=EKF_Q, ekf_alpha=EKF_ALPHA)
     command, t_end, steps = course_command(quick)
-    res = ap.simulate_autopilot(design.plant, design.autopilot, command, t_end, dt=DT, x0=design.x0,
-                                step_times=steps, mode="course", rate="estimator", gnss_rate=gnss_rate,
-                                gnss_std=gnss_std, ekf_q=EKF_Q, ekf_alpha=EKF_ALPHA, seed=seed)
+    res = ap.simulate_autopilot(design, command, t_end, step_times=steps, seed=seed)
     # propeller rates from the allocation
     tx, tn = ca.SX.sym("tx"), ca.SX.sym("tn")
     p_sym = {n: ca.SX(v) for n, v in otter.param_dict().items()}
@@ -114,7 +113,7 @@ def part_a(res, seed=5):
     truth = {"U": d["U"], "chi": d["chi"], "omega_chi": d["omega_chi"]}
     ne = cs.Dataset(t, {"x_n": d["gnss_north"], "y_n": d["gnss_east"]})
     ekf_ne = cs.EKF(cs.discretize(sog_cog(*EKF_ALPHA), DT, "euler"), Q=np.diag(EKF_Q), R=np.eye(2) * GNSS_STD**2)
-    prior = d.meta["ekf_prior"]
+    prior = d.meta["estimator_prior"]
     # the loop's EKF started from this prior (first step: update only): the batch filter must agree
     res_ne = ekf_ne.filter(ne, prior)
     online_vs_batch = float(np.max(np.abs(res_ne.x[:, 3] - d["chi_hat"])))
@@ -247,8 +246,8 @@ def _plots(out: Path, design, res, n12, fits):
         axes[0, 1].set_title(f"zoom: GNSS fixes ({GNSS_RATE:g} Hz) as lines")
         axes[2, 0].set_xlabel("time [s]")
         axes[2, 1].set_xlabel("time [s]")
-    ap.plot_design(design.loop, out / "otter_loop_bode_step.png", "Otter course loop (Nomoto design model)",
-                   design.autopilot.reference)
+    ap.plot_design(design.loop, out / "otter_loop_bode_step.png", "Otter course loop (linearised Otter)",
+                   design.closed_loop)
     for fname, (tt, r, raw, cog_log, head_log) in fits.items():
         with figure(out / f"real_{Path(fname).stem}.png", 2, 1, figsize=(9, 6), sharex=True) as (fig, axes):
             axes[0].plot(tt, raw["sog_log"], label="log speed (knots -> m/s)")
@@ -285,7 +284,7 @@ def _q_effect(res) -> str:
     for factor in (1.0, 10.0, 0.1):
         ekf = cs.EKF(cs.discretize(sog_cog(*EKF_ALPHA), DT, "euler"), Q=np.diag(EKF_Q) * factor,
                      R=np.eye(2) * GNSS_STD**2)
-        e = _errors(ekf.filter(data, d.meta["ekf_prior"]).x[:, 2:], truth, skip=int(5.0 / DT))
+        e = _errors(ekf.filter(data, d.meta["estimator_prior"]).x[:, 2:], truth, skip=int(5.0 / DT))
         out.append(f"Q x {factor:g}: COG {e['chi_rmse_deg']:.3g} deg, SOG {e['U_rmse_mps']:.3g} m/s")
     return "batch EKF on the same record, " + "; ".join(out)
 

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 import casship as cs
+from casship.maneuvers import propeller_rate_for_speed
 from casship.progress import progress
 
 from . import Study
@@ -62,7 +63,7 @@ def propeller_rate(ship) -> float:
     """The ship's nominal propeller rate, or the rate that holds its nominal speed ``U0`` straight ahead."""
     if ship.vessel.n0:
         return float(ship.vessel.n0)
-    return float(cs.trim(ship, x={"u": ship.vessel.U0}, u={"n": 10.0}, free=["n"], zero=["u"]).values["n"])
+    return propeller_rate_for_speed(ship, ship.vessel.U0, guess=10.0)
 
 
 def truth_record(truth, ship, wind_mean: float, duration: float):

@@ -37,7 +37,9 @@ def register(sub) -> None:
     p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
     p.add_argument("--seed", type=int, default=0, help="seed of the random rudder sequence")
     p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
-    p.add_argument("--params", default=None, help='JSON file {"params": {name: value}} overriding parameters')
+    p.add_argument("--params", default=None,
+                   help='JSON file {"params": {name: value}} overriding parameters (a fit file rebuilds the '
+                        'model variant it was fitted on)')
     p.add_argument("--inputs", default=None,
                    help="replay the measured inputs of a record (CSV with header, or MARIN .dat) from "
                         "its measured initial state")
@@ -45,17 +47,6 @@ def register(sub) -> None:
     p.add_argument("--csv", default=None, help="save the trajectory as CSV")
     p.add_argument("--plot", default=None, help="save a plot (PNG)")
     p.set_defaults(func=run)
-
-
-def _load_params(path):
-    text = Path(path).read_text()
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(obj, dict) or not isinstance(obj.get("params"), dict):
-        raise ValueError(f'{path}: expected a JSON object with key "params": {{name: value}}')
-    return {str(k): float(v) for k, v in obj["params"].items()}
 
 
 def _load_record(path):
@@ -89,8 +80,13 @@ def run(args) -> int:
         for name, doc in model_names().items():
             print(f"{name:18s} {doc}")
         return 0
-    model = get_model(args.model)
-    p = model.params(_load_params(args.params)) if args.params else model.params()
+    if args.params:
+        from ..identify import read_params
+
+        model, p = read_params(args.params, args.model)     # the fitted variant, checked against the file
+    else:
+        model = get_model(args.model)
+        p = model.params()
     L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
     measured = None

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import casship as cs
+from casship.maneuvers import propeller_rate_for_speed
 from casship.models.wind import add_wind
 from casship.models.wind_fourier import ESSO_OSAKA_3M_WIND, add_fourier_wind
 
@@ -65,7 +66,7 @@ def ship_models(wind_form: str = "eq34"):
 
 def propeller_rate(ship) -> float:
     """Propeller rate [1/s] that holds the preset's speed ``U0`` in a straight run (exact trim)."""
-    return float(cs.trim(ship, x={"u": ship.vessel.U0}, u={"n": 10.0}, free=["n"], zero=["u"]).values["n"])
+    return propeller_rate_for_speed(ship, ship.vessel.U0, guess=10.0)
 
 
 def filter_model(ship):
