@@ -5,7 +5,7 @@ Examples::
     casship identify run1.csv run2.csv --model nomoto1 --free K,T --R psi=1e-4 --out fit.json
     casship identify ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --model kvlcc2 \\
         --free N_r_dash,Y_v_dash --measured u,v,r,psi --decimate 20 --out fit.json --plot fit.png
-    casship simulate kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
+    casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
 units, radians) or MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
