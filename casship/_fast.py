@@ -1,51 +1,216 @@
-"""Low-overhead numeric calls of CasADi Functions through ``Function.buffer``.
+"""Low-overhead numeric calls of CasADi Functions: named buffers, compiled code and folds in pieces.
 
 Calling a Function with numpy arrays converts every argument to ``DM`` and every result back,
-which costs tens of microseconds per call. Online estimator steps instead bind preallocated
-numpy arrays once and only trigger the evaluation.
+which costs tens of microseconds per call. :class:`BufferedCall` instead binds preallocated numpy
+arrays once, addressed by the Function's input and output *names*; a call only triggers the
+evaluation. :func:`run_fold` runs a folded step Function (``mapaccum``) over a long record in
+pieces through such buffers; :func:`compile_function` (from :mod:`casship.compile`) compiles a Function
+to C through the on-disk cache.
 """
 from __future__ import annotations
+
+from typing import Callable, Mapping
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["BufferedCall"]
+from .compile import compile_function  # noqa: F401  (the one compile path, re-exported)
+
+__all__ = ["BufferedCall", "compile_function", "run_fold", "DUPLICATE_NAMES"]
+
+# Step Functions name their memory slots alike on both sides (input ``x``, output ``x``).
+DUPLICATE_NAMES = {"allow_duplicate_io_names": True}
 
 
 class BufferedCall:
-    """Evaluate ``fun`` repeatedly on preallocated arrays.
+    """Evaluate ``fun`` repeatedly on preallocated arrays addressed by name.
 
-    ``args[i]`` and ``res[i]`` are flat numpy arrays holding the entries of dense inputs and
-    outputs in CasADi's column-major order; ``arg_views``/``res_views`` show them with their
-    matrix shapes. Write inputs in place, call, read the results (no copies, no ``DM``).
+    Write an input with ``call["dt"] = 0.1`` (any array with the input's number of entries, in
+    column-major order, or a scalar broadcast to all of them), evaluate with ``call()`` and read an
+    output with ``call.out("x")`` (a view with the output's matrix shape, overwritten by the next
+    call). ``call.arg(name)`` is the writable view of an input for loops that write it in place.
+    All outputs live in one contiguous block (``call.block``), so one copy snapshots them.
+
+    Examples
+    --------
+    >>> import casadi as ca
+    >>> x = ca.SX.sym("x", 2)
+    >>> call = BufferedCall(ca.Function("f", [x], [2 * x], ["x"], ["y"]))
+    >>> call["x"] = [1.0, 2.0]
+    >>> _ = call()
+    >>> call.out("y").ravel().tolist()
+    [2.0, 4.0]
     """
 
-    def __init__(self, fun: ca.Function):
+    def __init__(self, fun: ca.Function, *, cannot_fail: bool = False, bind_in: Mapping | None = None,
+                 bind_out: Mapping | None = None):
         for i in range(fun.n_in()):
             if not fun.sparsity_in(i).is_dense():
                 raise ValueError(f"{fun.name()}: input {fun.name_in(i)!r} is not dense")
         self.fun = fun
-        self.args = [np.zeros(fun.nnz_in(i)) for i in range(fun.n_in())]
+        self.names_in = tuple(fun.name_in())
+        self.names_out = tuple(fun.name_out())
+        bind_in, bind_out = dict(bind_in or {}), dict(bind_out or {})
+        self.args = [bind_in.get(n, np.zeros(fun.nnz_in(i))) for i, n in enumerate(self.names_in)]
         sizes = [fun.nnz_out(i) for i in range(fun.n_out())]
         offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
-        self.block = np.zeros(int(offsets[-1]))   # all results, contiguous (one copy snapshots them)
+        self.block = np.zeros(int(offsets[-1]))
         self.offsets = offsets
-        self.res = [self.block[offsets[i]:offsets[i + 1]] for i in range(fun.n_out())]
-        self.arg_views = [a.reshape(fun.size_in(i), order="F") for i, a in enumerate(self.args)]
-        self.res_views = [r.reshape(fun.size_out(i), order="F") for i, r in enumerate(self.res)]
+        self.res = [bind_out.get(n, self.block[offsets[i]:offsets[i + 1]]) for i, n in enumerate(self.names_out)]
+        for kind, arrays, sizes_ in (("input", self.args, [fun.nnz_in(i) for i in range(fun.n_in())]),
+                                     ("output", self.res, sizes)):
+            for a, s in zip(arrays, sizes_):
+                if a.dtype != np.float64 or a.ndim != 1 or a.size != s or not a.flags.c_contiguous:
+                    raise ValueError(f"{fun.name()}: a bound {kind} array must be a contiguous float vector of {s}")
+        self._in = {n: a.reshape(fun.size_in(i), order="F") for i, (n, a) in enumerate(zip(self.names_in, self.args))}
+        self._out = {n: r.reshape(fun.size_out(i), order="F") for i, (n, r) in enumerate(zip(self.names_out, self.res))}
+        self._flat_in = dict(zip(self.names_in, self.args))
+        self._flat_out = dict(zip(self.names_out, self.res))
         self._buf, self._trigger = fun.buffer()
         for i, a in enumerate(self.args):
             self._buf.set_arg(i, memoryview(a))
         for i, r in enumerate(self.res):
             self._buf.set_res(i, memoryview(r))
+        # SX Functions (and compiled code, when the caller says so) cannot fail: no status round trip
+        self._checked = not (cannot_fail or fun.is_a("SXFunction"))
+
+    def _unknown(self, name, kind, names):
+        return ValueError(f"{self.fun.name()} has no {kind} {name!r}; {kind}s: {list(names)}")
+
+    def arg(self, name: str) -> np.ndarray:
+        """Writable view of input ``name`` with its matrix shape."""
+        try:
+            return self._in[name]
+        except KeyError:
+            raise self._unknown(name, "input", self.names_in) from None
+
+    def out(self, name: str) -> np.ndarray:
+        """View of output ``name`` with its matrix shape (valid until the next call)."""
+        try:
+            return self._out[name]
+        except KeyError:
+            raise self._unknown(name, "output", self.names_out) from None
+
+    def __setitem__(self, name: str, value) -> None:
+        flat = self._flat_in.get(name)
+        if flat is None:
+            raise self._unknown(name, "input", self.names_in)
+        v = np.asarray(value, dtype=float)
+        if v.size == flat.size:
+            flat[:] = v.reshape(-1, order="F")
+        elif v.size == 1:
+            flat[:] = v.reshape(())
+        else:
+            raise ValueError(f"{self.fun.name()}: input {name!r} has shape {self._in[name].shape}, "
+                             f"got {v.size} values (shape {v.shape})")
+
+    def flat_in(self, name: str) -> np.ndarray:
+        """The flat (column-major) array bound to input ``name``."""
+        self.arg(name)
+        return self._flat_in[name]
+
+    def flat_out(self, name: str) -> np.ndarray:
+        """The flat (column-major) array bound to output ``name``."""
+        self.out(name)
+        return self._flat_out[name]
+
+    def partner(self, memory) -> "BufferedCall":
+        """A second buffered call of the same Function that reads the ``memory`` outputs of this one
+        and writes its ``memory`` outputs into this one's ``memory`` inputs (all other inputs and
+        outputs shared): alternating the two calls hands the memory over without a copy."""
+        bind_in = {n: self.flat_in(n) for n in self.names_in}
+        bind_out = {n: self.flat_out(n) for n in self.names_out}
+        for n in memory:
+            bind_in[n], bind_out[n] = self.flat_out(n), self.flat_in(n)
+        return BufferedCall(self.fun, cannot_fail=not self._checked, bind_in=bind_in, bind_out=bind_out)
 
     def trigger(self) -> None:
-        """Evaluate without fetching the return status (for Functions that cannot fail: SX, compiled)."""
+        """Evaluate without fetching the return status (for Functions that cannot fail)."""
         self._trigger()
 
-    def __call__(self) -> list[np.ndarray]:
+    def __call__(self) -> list:
+        """Evaluate; raises ``RuntimeError`` if the evaluation reports a failure. Read the results
+        by name with :meth:`out` (the flat output arrays are also returned, in output order)."""
         self._trigger()
-        status = self._buf.ret()
-        if status != 0:
-            raise RuntimeError(f"evaluation of {self.fun.name()} failed (status {status})")
+        if self._checked:
+            status = self._buf.ret()
+            if status != 0:
+                raise RuntimeError(f"evaluation of {self.fun.name()} failed (status {status})")
         return self.res
+
+
+def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, memory: Mapping[str, np.ndarray],
+             per_sample: Mapping[str, np.ndarray], constants: Mapping[str, np.ndarray],
+             pad: Mapping[str, float] | None = None, keep=None) -> tuple[dict, dict]:
+    """Run a folded step (``mapaccum`` over the memory slots) over ``n`` samples in pieces.
+
+    Parameters
+    ----------
+    fold_call : callable
+        ``fold_call(size)`` gives a :class:`BufferedCall` of the fold over ``size`` samples; its
+        inputs are named like ``memory``, ``per_sample`` and ``constants``, its outputs are the
+        memory slots and diagnostics at every sample (columns of a sample side by side).
+    n, chunk : int
+        Samples in the record and per piece; the last piece is padded up to a power of two.
+    memory : mapping name -> array
+        Initial memory (matrices keep their shape).
+    per_sample : mapping name -> array
+        Inputs that change per sample: the columns of sample ``k`` at ``[:, k*c:(k+1)*c]``.
+    constants : mapping name -> array
+        Inputs that are the same for every sample (written once per piece length).
+    pad : mapping name -> value
+        Value of a per-sample input in the padded columns (other inputs repeat their last
+        column); it must make the padded steps leave the memory alone.
+    keep : sequence of str, optional
+        Outputs to return (default: all).
+
+    Returns
+    -------
+    memory : dict
+        The memory after the last sample.
+    outputs : dict name -> array
+        Each kept output per sample, shape ``(n, rows, cols)`` (a view of a contiguous array: the
+        pieces are copied in one block each).
+    """
+    pad = dict(pad or {})
+    mem = {k: np.array(v, dtype=float) for k, v in memory.items()}
+    shapes = None
+    outs, flat, start, primed = {}, {}, 0, set()
+    while start < n:
+        size = min(chunk, 1 << (n - start - 1).bit_length())
+        take = min(size, n - start)
+        call = fold_call(size)
+        if shapes is None:
+            keep = list(call.names_out if keep is None else keep)
+            shapes = {k: (call.out(k).shape[0], call.out(k).shape[1] // size) for k in call.names_out}
+            for k in keep:
+                r, c = shapes[k]
+                block = np.empty((n, c, r))           # sample k's matrix in column-major order, as CasADi has it
+                outs[k], flat[k] = block.transpose(0, 2, 1), block.reshape(-1)
+        if id(call) not in primed:
+            for k, v in constants.items():
+                call[k] = v
+            primed.add(id(call))
+        for k, v in mem.items():
+            call[k] = v
+        for k, src in per_sample.items():
+            view = call.arg(k)
+            c = view.shape[1] // size
+            view[:, :take * c] = src[:, start * c:(start + take) * c]
+            if take < size:
+                if k in pad:
+                    view[:, take * c:] = pad[k]
+                elif src.shape[0]:
+                    view[:, take * c:] = np.tile(src[:, (start + take - 1) * c:(start + take) * c], (1, size - take))
+        call()
+        for k in keep:
+            r, c = shapes[k]
+            flat[k][start * r * c:(start + take) * r * c] = call.flat_out(k)[:take * r * c]
+        for k in mem:
+            c = shapes[k][1]
+            mem[k] = call.out(k)[:, (take - 1) * c:take * c].copy()
+        start += take
+    for k in flat:                                # read-only: results may share them without a copy
+        for a in (flat[k].base, flat[k], outs[k]):
+            a.setflags(write=False)
+    return mem, outs

@@ -18,9 +18,11 @@ matrices stored column-major, every input and output dense)::
 
 Sizes and names of the inputs and outputs are listed in a comment at the top of ``NAME.h`` and
 queried at run time with ``NAME_n_in()``, ``NAME_name_in(i)``, ``NAME_sparsity_in(i)``.
-For an estimator step the inputs are ``carry, u_prev, u, y, mask, dt, p, Q, R, gate`` (see
-:mod:`casship.estimators.base`); ``export_estimator`` also writes ``NAME_data.h`` with the
-estimator's parameter vector, ``Q``, ``R`` and the measured channel names.
+For an estimator step the inputs are its memory slots (``x, P`` for the Kalman family), then
+``u_prev, u, y, mask, dt, p, Q, R, gate``; the outputs are the memory slots under the same names,
+then the diagnostics chosen when exporting (see :mod:`casship.estimators.base`).
+``export_estimator`` also writes ``NAME_data.h`` with the estimator's parameter vector, ``Q``,
+``R`` and the measured channel names.
 """
 from __future__ import annotations
 
@@ -32,6 +34,8 @@ from typing import Sequence
 
 import casadi as ca
 import numpy as np
+
+from ._fast import DUPLICATE_NAMES
 
 __all__ = ["CFiles", "generate_c", "export_estimator", "export_mhe_rti", "write_harness", "compile_c",
            "read_harness_output"]
@@ -70,7 +74,7 @@ def _dense_copy(fun: ca.Function, name: str) -> ca.Function:
     for i in range(fun.n_in()):
         if not fun.sparsity_in(i).is_dense():
             raise ValueError(f"{fun.name()}: input {fun.name_in(i)!r} is not dense; cannot export")
-    return ca.Function(name, ins, outs, fun.name_in(), fun.name_out())
+    return ca.Function(name, ins, outs, fun.name_in(), fun.name_out(), DUPLICATE_NAMES)
 
 
 def _layout_comment(fun: ca.Function, title: str) -> str:
@@ -95,7 +99,7 @@ def generate_c(fun: ca.Function, directory, name: str | None = None, *, title: s
     Parameters
     ----------
     fun : casadi.Function
-        Any Function with dense inputs (e.g. an estimator's ``step_function``). Functions that
+        Any Function with dense inputs (e.g. an estimator's ``step``). Functions that
         embed a CVODES integrator or an external solver cannot be exported.
     directory : path
         Created if missing.
@@ -113,7 +117,7 @@ def generate_c(fun: ca.Function, directory, name: str | None = None, *, title: s
     >>> import casship as cs
     >>> from casship.codegen import generate_c
     >>> ekf = cs.EKF(cs.discretize(cs.models.nomoto_first_order(), 0.1), Q=1e-8, R=1e-4)
-    >>> files = generate_c(ekf.step_function, "build", "ekf_step")     # doctest: +SKIP
+    >>> files = generate_c(ekf.step, "build", "ekf_step")     # doctest: +SKIP
     """
     if not isinstance(fun, ca.Function):
         raise TypeError(f"generate_c needs a casadi.Function, got {type(fun).__name__}")
@@ -150,17 +154,30 @@ def _c_array(ctype: str, name: str, values) -> str:
     return f"CASSHIP_UNUSED static const {ctype} {name}[{max(values.size, 1)}] = {{{body}}};\n"
 
 
-def export_estimator(estimator, directory, name: str | None = None, p=None) -> CFiles:
+def export_estimator(estimator, directory, name: str | None = None, p=None, outputs=None) -> CFiles:
     """Export an estimator's step Function as C, plus ``NAME_data.h`` with its numbers.
 
-    The data header holds the dimensions (``NAME_NX``, ``NAME_NU``, ``NAME_NY``, ...), the parameter
-    vector ``NAME_p`` (nominal unless ``p`` is given), the covariances ``NAME_Q`` and ``NAME_R``
-    (column-major) and the measured channel and state names in order, so that an onboard program can
-    assemble the step's inputs without Python.
+    Parameters
+    ----------
+    estimator : Estimator
+    directory : path
+    name : str, optional
+        C name (default ``<estimator>_step``).
+    p : array or mapping, optional
+        Parameter vector written to the data header (nominal by default).
+    outputs : sequence of str or "all", optional
+        Diagnostics the exported step returns besides its memory (default: the estimator's
+        ``outputs`` option, ``x`` and ``P`` unless asked otherwise); only these are computed.
+
+    The data header holds the dimensions (``NAME_NX``, ``NAME_NU``, ``NAME_NY``, ...), the size of
+    each memory slot (``NAME_SIZE_x``, ``NAME_SIZE_P``, ...), the parameter vector ``NAME_p``, the
+    covariances ``NAME_Q`` and ``NAME_R`` (column-major) and the measured channel and state names
+    in order, so that an onboard program can assemble the step's inputs without Python.
     """
-    fun = getattr(estimator, "step_function", None)
-    if not isinstance(fun, ca.Function):
-        raise TypeError(f"{type(estimator).__name__} has no step_function to export")
+    step_function = getattr(estimator, "step_function", None)
+    if not callable(step_function):
+        raise TypeError(f"{type(estimator).__name__} has no step Function to export")
+    fun = step_function(outputs)
     model = estimator.model
     name = _check_name(name or f"{type(estimator).__name__.lower()}_step")
     title = (f"{name}: {type(estimator).__name__} step of model '{model.name}' "
@@ -175,7 +192,7 @@ def export_estimator(estimator, directory, name: str | None = None, p=None) -> C
             "#else\n#define CASSHIP_UNUSED\n#endif\n#endif\n\n"
             f"#define {name}_NX {model.nx}\n#define {name}_NU {model.nu}\n#define {name}_NP {model.np}\n"
             f"#define {name}_NW {model.nw}\n#define {name}_NY {estimator.ny}\n"
-            f"#define {name}_NCARRY {files.sizes_in[0]}\n\n"
+            + "".join(f"#define {name}_SIZE_{slot} {fun.nnz_in(slot)}\n" for slot in estimator.memory) + "\n"
             + _c_array("double", f"{name}_p", pvec) + _c_array("double", f"{name}_Q", estimator.Q)
             + _c_array("double", f"{name}_R", estimator.R)
             + f"CASSHIP_UNUSED static const char *const {name}_states[{max(model.nx, 1)}] = {strings(model.state_names)};\n"
@@ -201,13 +218,13 @@ def export_mhe_rti(mhe, directory, name: str | None = None) -> CFiles:
       ``M`` (ny x N+1 mask), ``dt`` (1 x N), the model parameters (np).
 
     The arrival cost of the next window comes from the EKF step running alongside the MHE, which
-    :func:`export_estimator` exports (``mhe.step_function``). Bounds on states or noise need the QP
+    :func:`export_estimator` exports (``mhe.step``). Bounds on states or noise need the QP
     solver and are not part of this export.
     """
-    if type(mhe).__name__ != "MHE" or not hasattr(mhe, "_window"):
+    if type(mhe).__name__ != "MHE" or not hasattr(mhe, "window"):
         raise TypeError(f"export_mhe_rti needs a casship.MHE, got {type(mhe).__name__}")
-    N = int(mhe.options["horizon"])
-    window = mhe._window(N, "rti")
+    N = mhe.horizon
+    window = mhe.window(N, "rti")
     if window.gn_step is None:
         raise ValueError("this MHE window has no Gauss-Newton step to export")
     name = _check_name(name or f"mhe_rti_step_{N}")

@@ -48,8 +48,6 @@ class DemoConfig:
         The fit starts at ``guess_factor`` times the true values.
     validation_s : float
         Length of the validation manoeuvres [s].
-    autopilot_s : float
-        Length of the closed-loop course change [s].
     seed : int
         Seed of the random rudder and the sensor noise.
     """
@@ -60,7 +58,6 @@ class DemoConfig:
     random_record: bool = True         # a second identification record: random rudder (+-20 deg)
     guess_factor: float = 1.25
     validation_s: float = 900.0
-    autopilot_s: float = 1000.0
     seed: int = 1
 
     @classmethod
@@ -77,8 +74,7 @@ class DemoConfig:
         DemoConfig
         """
         if quick:
-            return cls(trial_s=600.0, free=("N_r_dash", "N_v_dash"), random_record=False, validation_s=500.0,
-                       autopilot_s=600.0)
+            return cls(trial_s=600.0, free=("N_r_dash", "N_v_dash"), random_record=False, validation_s=500.0)
         return cls()
 
 
@@ -185,14 +181,12 @@ def _autopilot(ship, fit, cfg: DemoConfig, out: Path):
     """Course-keeping autopilot designed on the *fitted* model, run in closed loop on the *true* ship."""
     from . import autopilot as ap
 
-    design = ap.design_autopilot(ship, p=fit.params)
-    plant = ap.SteeringPlant(ship, "delta", design.plant.inputs)          # truth: nominal parameters
-    command, t_end, steps = ap.course_scenario("course-20", cfg.autopilot_s)
-    run = ap.simulate_autopilot(plant, design.autopilot, command, t_end, dt=0.5, mode="heading", x0=design.x0,
-                                step_times=steps, compass_rate=1.0, compass_std=SENSORS["psi"],
-                                gyro_std=SENSORS["r"], seed=cfg.seed)
+    design = ap.design_autopilot(ship, p=fit.params, mode="heading", compass_rate=1.0, compass_std=SENSORS["psi"],
+                                 gyro_std=SENSORS["r"])
+    truth = design.plant.replace(p=None)                                  # truth: nominal parameters
+    run = design.simulate("course-20", plant=truth, seed=cfg.seed)        # two segments of the design's length
     ap.plot_design(design.loop, out / "autopilot_design.png", "Heading autopilot on the fitted KVLCC2 model",
-                   design.autopilot.reference)
+                   design.closed_loop)
     ap.plot_closed_loop(run, out / "autopilot_closed_loop.png", "Closed loop on the true ship (compass + rate gyro)")
     return design, run
 
@@ -317,7 +311,7 @@ def _run(out: Path, quick: bool) -> dict:
         "fit": {"status": fit.status, "iterations": fit.iterations, "seconds": fit_s, "params": fit_rows,
                 "warnings": list(fit.warnings)},
         "validation": validation,
-        "autopilot": {"design": design.summary(), "closed_loop": loop.metrics},
+        "autopilot": {"design": design.summary(), "closed_loop": loop.metrics, "performance": loop.performance},
         "figures": ["filters.png", "validation.png", "autopilot_design.png", "autopilot_closed_loop.png"],
         "seconds": total,
     }
@@ -363,7 +357,7 @@ def _report(s: dict, ship) -> str:
               "## 2. Maximum-likelihood fit through the EKF", "",
               f"Free hull derivatives start {100 * (DemoConfig().guess_factor - 1):.0f} % off their true values; "
               "one likelihood over all identification records (the estimation part above shows the first). "
-              f"IPOPT: {s['fit']['status']} after {s['fit']['iterations']} iterations ({s['fit']['seconds']:.1f} s).", "",
+              f"solver status: {s['fit']['status']} after {s['fit']['iterations']} iterations ({s['fit']['seconds']:.1f} s).", "",
               "| parameter | true | initial guess | estimate | std error | (estimate - true) / std error |",
               "|---|---|---|---|---|---|"]
     for k, r in s["fit"]["params"].items():
@@ -388,8 +382,10 @@ def _report(s: dict, ship) -> str:
               f"T = {d['nomoto']['T']:.4g} s. PID pole placement (wn = {d['settings']['wn']:.4g} rad/s, "
               f"zeta = {d['settings']['zeta']:g}): Kp = {d['gains']['Kp']:.4g}, Kd = {d['gains']['Kd']:.4g} s, "
               f"Ki = {d['gains']['Ki']:.4g} 1/s; gain margin {d['margins']['gain_margin_db']:.1f} dB, phase margin "
-              f"{d['margins']['phase_margin_deg']:.1f} deg (python-control). Closed loop at 2 Hz on the true "
-              "(nominal) ship with a 1 Hz compass and a rate gyro, rudder limited to 35 deg and 2.32 deg/s:", "",
+              f"{d['margins']['phase_margin_deg']:.1f} deg (python-control). Closed loop at "
+              f"{1 / d['settings']['dt']:g} Hz on the true (nominal) ship with a 1 Hz compass and a rate gyro into "
+              "the heading observer, rudder limited to 35 deg and 2.32 deg/s (rate limit active "
+              f"{100 * s['autopilot']['performance']['rate_limited_fraction']:.1f} % of the time):", "",
               "| step | change [deg] | rise time [s] | overshoot [deg] | settling time [s] | steady error [deg] | "
               "max rudder angle [deg] | max rudder rate [deg/s] | RMS rudder rate [deg/s] |",
               "|---|---|---|---|---|---|---|---|---|"]

@@ -13,9 +13,22 @@ import scipy.linalg
 
 from .model import Model
 
-__all__ = ["DiscreteModel", "discretize", "van_loan"]
+__all__ = ["DiscreteModel", "discretize", "van_loan", "rk4"]
 
 METHODS = ("euler", "rk4", "cvodes")
+
+
+def rk4(rhs, z: tuple, h) -> tuple:
+    """One classical Runge-Kutta step of ``dz/dt = rhs(*z)`` for a tuple of (symbolic) arrays ``z``.
+
+    ``rhs`` returns a tuple shaped like ``z``; the one RK4 of casship (the explicit discretisation,
+    the continuous-discrete EKF covariance, the Kalman-Bucy filter).
+    """
+    k1 = rhs(*z)
+    k2 = rhs(*(a + h / 2 * k for a, k in zip(z, k1)))
+    k3 = rhs(*(a + h / 2 * k for a, k in zip(z, k2)))
+    k4 = rhs(*(a + h * k for a, k in zip(z, k3)))
+    return tuple(a + h / 6 * (p + 2 * q + 2 * r + s) for a, p, q, r, s in zip(z, k1, k2, k3, k4))
 
 
 class DiscreteModel:
@@ -76,11 +89,7 @@ class DiscreteModel:
         f = self.model.f
         if self.method == "euler":
             return x + h * f(x, u, p, w)
-        k1 = f(x, u, p, w)
-        k2 = f(x + h / 2 * k1, u, p, w)
-        k3 = f(x + h / 2 * k2, u, p, w)
-        k4 = f(x + h * k3, u, p, w)
-        return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return rk4(lambda xi: (f(xi, u, p, w),), (x,), h)[0]
 
     def _cvodes(self, x, u, p, w, h, options):
         m = self.model
@@ -98,6 +107,13 @@ class DiscreteModel:
     def __reduce__(self):
         """Pickle as the recipe (model, dt, method, substeps, options); rebuilt on loading."""
         return DiscreteModel, (self.model, self.dt, self.method, self.substeps, self._options or None)
+
+    def require_continuous(self, what: str) -> None:
+        """Raise ``ValueError`` if ``what`` needs the continuous model and this one has none."""
+
+    def check_steps(self, dt: np.ndarray, t: np.ndarray | None = None) -> None:
+        """Check the time steps of a record against this discretisation (any positive step works
+        for a discretised continuous model)."""
 
     # -- convenience ----------------------------------------------------------------------------------
     @property

@@ -296,7 +296,7 @@ def aggregate(results: list[dict]) -> dict:
 
 
 def timing(cfg: Config, q_kf: dict, repeats: int = 3) -> dict:
-    """Seconds per 0.1 s step: batch (whole record in one compiled fold) and online (``step`` calls).
+    """Seconds per 0.1 s step: batch (whole record in one compiled fold) and online (``run.update`` calls).
 
     Each figure is the best of ``repeats`` runs, so that other load on the machine inflates it less.
     """
@@ -319,17 +319,10 @@ def timing(cfg: Config, q_kf: dict, repeats: int = 3) -> dict:
             t0 = time.perf_counter()
             e.filter(data, prior, **kw)
             batch.append((time.perf_counter() - t0) / n)
-            if name.startswith("EnKF"):
-                rng = np.random.default_rng(1)
-                ens = e.ensemble(prior, rng)
-                t0 = time.perf_counter()
-                for j in range(1, k + 1):
-                    ens, _ = e.step(ens, u_rows[j - 1], Y[j], DT, rng=rng)
-            else:
-                x, P = prior.mean, prior.cov
-                t0 = time.perf_counter()
-                for j in range(1, k + 1):
-                    x, P, _ = e.step(x, P, u_rows[j - 1], Y[j], DT)
+            run = e.online(prior, seed=1, u=u_rows[0])
+            t0 = time.perf_counter()
+            for j in range(1, k + 1):
+                run.update(Y[j], DT, u_prev=u_rows[j - 1])
             online.append((time.perf_counter() - t0) / k)
         out[name.split()[0]] = {"batch_s_per_step": min(batch), "online_s_per_step": min(online)}
     return out

@@ -79,13 +79,12 @@ def part_c(otter, quick, *, wn=WN, gnss_std=GNSS_STD, seed=3):
     tr = cs.trim(steer_model, x={"u": 1.0}, u={"tau_X": TAU_X}, free=["u"], zero=["u"])
     speed = tr.values["u"]
     tau_n_max = ap.twin_propeller_yaw_limit(otter, TAU_X)       # keeps both propellers in range
-    design = ap.design_autopilot(steer_model, speed, steer="tau_N", propeller=None, inputs={"tau_X": TAU_X},
-                                 wn=wn, zeta=ZETA, wn_ref=min(WN_D, wn), r_max=R_MAX, steer_max=tau_n_max,
-                                 steer_rate_max=np.inf, actuator_T=0.1, delay=1.0 / GNSS_RATE)
+    design = ap.design_autopilot(steer_model, speed, steer="tau_N", inputs={"tau_X": TAU_X}, wn=wn, zeta=ZETA,
+                                 wn_ref=min(WN_D, wn), r_max=R_MAX, steer_max=tau_n_max, steer_rate_max=np.inf,
+                                 actuator_T=0.1, delay=1.0 / GNSS_RATE, mode="course", rate="estimator", dt=DT,
+                                 gnss_rate=GNSS_RATE, gnss_std=gnss_std, ekf_q=EKF_Q, ekf_alpha=EKF_ALPHA)
     command, t_end, steps = ap.course_scenario("course-20", 50.0 if not quick else 40.0)
-    res = ap.simulate_autopilot(design.plant, design.autopilot, command, t_end, dt=DT, x0=design.x0,
-                                step_times=steps, mode="course", rate="estimator", gnss_rate=GNSS_RATE,
-                                gnss_std=gnss_std, ekf_q=EKF_Q, ekf_alpha=EKF_ALPHA, seed=seed)
+    res = ap.simulate_autopilot(design, command, t_end, step_times=steps, seed=seed)
     # propeller rates from the allocation
     tx, tn = ca.SX.sym("tx"), ca.SX.sym("tn")
     p_sym = {n: ca.SX(v) for n, v in otter.param_dict().items()}
@@ -103,7 +102,7 @@ def part_a(res, seed=5):
     truth = {"U": d["U"], "chi": d["chi"], "omega_chi": d["omega_chi"]}
     ne = cs.Dataset(t, {"x_n": d["gnss_north"], "y_n": d["gnss_east"]})
     ekf_ne = cs.EKF(cs.discretize(sog_cog(*EKF_ALPHA), DT, "euler"), Q=np.diag(EKF_Q), R=np.eye(2) * GNSS_STD**2)
-    prior = d.meta["ekf_prior"]
+    prior = d.meta["estimator_prior"]
     # the loop's EKF started from this prior (first step: update only): the batch filter must agree
     res_ne = ekf_ne.filter(ne, prior)
     online_vs_batch = float(np.max(np.abs(res_ne.x[:, 3] - d["chi_hat"])))
@@ -250,8 +249,8 @@ def _plots(out: Path, design, res, n12, res_ll, fits):
     fig.tight_layout()
     fig.savefig(out / "fig6_sog_cog_rate.png", dpi=110)
     plt.close(fig)
-    ap.plot_design(design.loop, out / "otter_loop_bode_step.png", "Otter course loop (Nomoto design model)",
-                   design.autopilot.reference)
+    ap.plot_design(design.loop, out / "otter_loop_bode_step.png", "Otter course loop (linearised Otter)",
+                   design.closed_loop)
     # real data
     for fname, (tt, r, raw, cog_log, head_log) in fits.items():
         fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)

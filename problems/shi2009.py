@@ -108,13 +108,14 @@ def smooth_axis(t, z, r_var):
     the estimated jerk intensity.
     """
     model = cs.models.constant_acceleration("s")
-    kf = cs.KF(cs.discretize(model, T), Q=1e-6, R=r_var, options={"covariance": "continuous", "substeps": 8})
+    # Q is the covariance over a step T (casship's one meaning); the jerk PSD is Q T
+    kf = cs.KF(cs.discretize(model, T), Q=1e-6 / T, R=r_var, options={"covariance": "continuous", "substeps": 8})
     data = cs.Dataset(t, {"s": z}).slice(1)
     prior = cs.Gaussian([z[1], (z[1] - z[0]) / T, 0.0],
                         np.array([[r_var, r_var / T, 0.0], [r_var / T, 2 * r_var / T**2, 0.0], [0.0, 0.0, 0.0]]))
     q = cs.MLEProblem(kf, data, noise={"Q": True}, x0=prior).solve(hessian="fisher").noise["Q"]["w_s"]
     kf = cs.KF(cs.discretize(model, T), Q=q, R=r_var, options={"covariance": "continuous", "substeps": 8})
-    return cs.rts_smooth(kf.filter(data, prior)), q
+    return kf.smooth(data, prior), q * T
 
 
 def preprocess(raw: cs.Dataset) -> tuple[cs.Dataset, dict]:

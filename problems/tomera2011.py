@@ -86,7 +86,7 @@ def kinematic_filters(data, reading: dict, substeps: int = 5):
     prior = cs.Gaussian(m.states(x=data["x"][0], y=data["y"][0], psi=data["psi"][0]),
                         [R_XY, 1.0, R_XY, 1.0, R_PSI, 0.01])
     kf = cs.KF(dm, Qc / DT, R).filter(data, prior)
-    kb_est = cs.KalmanBucy(dm, Qc, R, options={"substeps": substeps})
+    kb_est = cs.KalmanBucy(dm, Qc / DT, R, options={"substeps": substeps})   # Q: covariance over DT, PSD Qc
     kb = kb_est.filter(data, prior)
     L, _ = kb_est.steady_state()
     H = np.array(m.h_jac(m.states(), m.inputs(), m.params())[0])
@@ -109,7 +109,7 @@ def model_based_ekf(ship, data):
     R = np.diag([R_XY, R_XY, R_PSI])
     prior = cs.Gaussian(m.states(u=ship.vessel.U0, x=data["x"][0], y=data["y"][0], psi=data["psi"][0]),
                         [0.01, 0.01, 1e-4, R_XY, R_XY, R_PSI])
-    ekf = cs.EKF(dm, Qc, R, options={"covariance": "continuous"})
+    ekf = cs.EKF(dm, Qc / DT, R, options={"covariance": "continuous"})      # Q: covariance over DT, PSD Qc
     return ekf.filter(data, prior)
 
 

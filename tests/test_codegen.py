@@ -7,7 +7,7 @@ import pytest
 
 import casship as cs
 from casship.codegen import compile_c, export_estimator, generate_c, read_harness_output, write_harness
-from casship.estimators.base import STEP_INPUTS
+from casship.estimators.base import SAMPLE_INPUTS
 
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: C export not compiled")
 
@@ -21,7 +21,7 @@ def heading_ekf(gate=None, cls=None):
 
 
 def step_inputs(ekf, seed=0, n=12):
-    """Input sets of consecutive filter steps (carry from the Python filter), some channels missing."""
+    """Named input sets of consecutive filter steps (memory from the Python filter), some channels missing."""
     m = ekf.model
     t = np.arange(n) * 0.5
     truth = cs.simulate(m, m.states(u=7.0, psi=3.1), t, {"delta": 0.2 * np.sin(t / 2.0), "n": 1.5})
@@ -33,20 +33,18 @@ def step_inputs(ekf, seed=0, n=12):
     prior = cs.Gaussian(m.states(u=6.5, psi=3.0), np.diag([1.0, 0.1, 1e-4, 10.0, 10.0, 0.1]))
     res = ekf.filter(data, prior)
     arrays = ekf.prepare(data)
-    carries = [ekf.carry_from(prior)] + [np.concatenate([res.x[k], res.P[k].reshape(-1, order="F")])
-                                         for k in range(n - 1)]
     sets = []
     for k in range(n):
-        args = [carries[k]]
-        for name in STEP_INPUTS[1:]:
-            a = np.asarray(arrays[name])
-            args.append(a[:, k] if a.ndim == 2 and a.shape[1] == n and name not in ("Q", "R") else a)
+        args = {"x": prior.mean, "P": prior.cov} if k == 0 else {"x": res.x[k - 1], "P": res.P[k - 1]}
+        args.update({name: arrays[name][:, k] for name in SAMPLE_INPUTS})
+        args.update({name: arrays[name] for name in ("p", "Q", "R")})
         sets.append(args)
     return sets, res
 
 
 def python_outputs(fun, args):
-    return [np.array(o) for o in fun(*args)]
+    out = fun.call(args)
+    return [np.array(out[name]) for name in fun.name_out()]
 
 
 @needs_gcc
@@ -54,24 +52,28 @@ def python_outputs(fun, args):
                          ids=["ekf", "ekf-gated", "ukf-gated"])
 def test_compiled_estimator_step_equals_python(tmp_path, gate, cls):
     ekf = heading_ekf(gate, cls)
-    files = export_estimator(ekf, tmp_path, "est_step")
+    files = export_estimator(ekf, tmp_path, "est_step", outputs="all")
+    fun = ekf.step_function("all")
+    assert [n for n, _ in files.outputs] == fun.name_out()
     exe = compile_c([write_harness(files), files.source], tmp_path / "harness")
     sets, res = step_inputs(ekf)
-    text = "\n".join(" ".join(f"{v:.17g}" for v in np.concatenate([np.ravel(a, order="F") for a in args]))
+    text = "\n".join(" ".join(f"{v:.17g}" for v in np.concatenate([np.ravel(args[n], order="F") for n in fun.name_in()]))
                      for args in sets)
     proc = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=True)
     c_sets = read_harness_output(proc.stdout, files)
     assert len(c_sets) == len(sets)
     worst = 0.0
     for args, c_out in zip(sets, c_sets):
-        for (name, _), py, c in zip(files.outputs, python_outputs(ekf.step_function, args), c_out):
+        for (name, _), py, c in zip(files.outputs, python_outputs(fun, args), c_out):
             py = py.reshape(c.shape, order="F") if py.size == c.size else py
             assert c.shape == py.shape, name
             worst = max(worst, float(np.max(np.abs(c - py) / np.maximum(1.0, np.abs(py)), initial=0.0)))
     print(f"max relative difference C vs Python: {worst:.3g}")
     assert worst <= 1e-12
     # the C outputs reproduce the Python filter's estimates as well
-    np.testing.assert_allclose(np.array([c[1].ravel() for c in c_sets]), res.x, rtol=1e-12, atol=1e-12)
+    ix, iP = fun.index_out("x"), fun.index_out("P")
+    np.testing.assert_allclose(np.array([c[ix].ravel() for c in c_sets]), res.x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.array([c[iP] for c in c_sets]), res.P, rtol=1e-12, atol=1e-12)
 
 
 def test_generated_files_document_the_layout(tmp_path):
@@ -79,11 +81,13 @@ def test_generated_files_document_the_layout(tmp_path):
     files = export_estimator(ekf, tmp_path, "nav_ekf")
     header = files.header.read_text()
     assert "int nav_ekf(const casadi_real** arg" in header
-    assert "arg[0] carry      42 x 1" in header and "arg[9] gate       1 x 1" in header
-    assert "res[2] P          36 x 1" in header
-    assert [n for n, _ in files.inputs] == STEP_INPUTS
+    assert "arg[0] x          6 x 1" in header and "arg[1] P          6 x 6" in header
+    assert "arg[10] gate       1 x 1" in header
+    assert "res[1] P          6 x 6" in header and "res[2]" not in header     # lean by default: x and P
+    assert [n for n, _ in files.inputs] == ["x", "P", "u_prev", "u", "y", "mask", "dt", "p", "Q", "R", "gate"]
     data = files.data_header.read_text()
     assert "#define nav_ekf_NX 6" in data and "#define nav_ekf_NY 3" in data
+    assert "#define nav_ekf_SIZE_x 6" in data and "#define nav_ekf_SIZE_P 36" in data
     assert '{"u", "r", "psi"}' in data
     # the data header's numbers are the estimator's
     q = data.split("nav_ekf_Q[9] = {")[1].split("}")[0]
@@ -96,10 +100,10 @@ def test_export_rejects_what_cannot_be_generated(tmp_path):
         generate_c(cs.discretize(m, 0.1, method="cvodes").F, tmp_path, "cvodes_step")
     ekf = cs.EKF(cs.discretize(m, 0.1), Q=1e-8, R=1e-4)
     with pytest.raises(ValueError, match="not a valid C identifier"):
-        generate_c(ekf.step_function, tmp_path, "ekf-step")
+        generate_c(ekf.step, tmp_path, "ekf-step")
     with pytest.raises(TypeError, match="needs a casadi.Function"):
         generate_c(ekf, tmp_path)
-    with pytest.raises(TypeError, match="has no step_function"):
+    with pytest.raises(TypeError, match="has no step Function"):
         export_estimator(m, tmp_path)
 
 
@@ -135,7 +139,7 @@ def test_compiled_mhe_rti_step_equals_python(tmp_path):
     files = export_mhe_rti(mhe, tmp_path)
     assert files.name == "mhe_rti_step_8" and "horizon N = 8" in files.header.read_text()
     exe = compile_c([write_harness(files), files.source], tmp_path / "mhe_harness")
-    fun = mhe._window(8, "rti").gn_step.fun
+    fun = mhe.window(8, "rti").gn_step.fun
     nz, npar = fun.size1_in(0), fun.size1_in(1)
     rng = np.random.default_rng(4)
     sets = []

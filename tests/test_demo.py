@@ -32,7 +32,7 @@ def test_demo_quick_writes_report_and_recovers_the_ship(tmp_path, capsys):
     assert all(summary["filter_health_ok"].values())
     # the maximum-likelihood fit converges and its standard errors cover the truth (fixed seed)
     fit = summary["fit"]
-    assert fit["status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    assert fit["status"] == "converged"
     for row in fit["params"].values():
         assert abs(row["z"]) < 4.0
         assert abs(row["estimate"] - row["true"]) < abs(row["guess"] - row["true"]) / 10

@@ -21,13 +21,21 @@ def test_seeded_and_online_equals_batch(case):
     c = enkf.filter(data, prior, seed=8)
     np.testing.assert_array_equal(a.x, b.x)
     assert np.abs(a.x - c.x).max() > 1e-6
+    # the step Function by its named slots, with the draws in the order filter() takes them
     rng = np.random.default_rng(7)
     X = enkf.ensemble(prior, rng)
     Y, U = data.matrix(["y1", "y2"]), data.matrix(["f"])
+    step = enkf.step
+    assert step.name_in()[0] == "X" and step.name_out()[:3] == ["X", "x", "P"]
     for k in range(len(data)):
-        X, info = enkf.step(X, U[max(k - 1, 0)], Y[k], 0.0 if k == 0 else 0.1, u=U[k], rng=rng)
-        np.testing.assert_allclose(info["x"], a.x[k], atol=1e-12, rtol=1e-12)
-        np.testing.assert_allclose(info["P"], a.P[k], atol=1e-12, rtol=1e-12)
+        z = rng.standard_normal(3 * 30)
+        ok = np.isfinite(Y[k])
+        out = step(X=X, u_prev=U[max(k - 1, 0)], u=U[k], y=np.where(ok, Y[k], 0.0), mask=ok, dt=0.1 if k else 0.0,
+                   p=m.params(), Q=enkf.Q, R=enkf.R, gate=np.inf, z_w=z[:30].reshape(1, 30),
+                   z_v=z[30:].reshape(30, 2).T)
+        X = np.array(out["X"])
+        np.testing.assert_allclose(np.array(out["x"]).ravel(), a.x[k], atol=1e-12, rtol=1e-12)
+        np.testing.assert_allclose(np.array(out["P"]), a.P[k], atol=1e-12, rtol=1e-12)
 
 
 def test_large_ensemble_approaches_kf(case):
@@ -68,9 +76,10 @@ def test_bad_options(case):
     _, dm, *_ = case
     with pytest.raises(ValueError, match="members"):
         cs.EnKF(dm, Q, R, options={"members": 1})
-    enkf = cs.EnKF(dm, Q, R, options={"members": 5})
-    with pytest.raises(TypeError, match="rng"):
-        enkf.step(np.zeros((2, 5)), [0.0], [0.0, 0.0], 0.1)
+    with pytest.raises(ValueError, match="members"):
+        cs.EnKF(dm, Q, R, options={"members": 2.5})
+    with pytest.raises(ValueError, match=r"unknown option\(s\) \['member'\]"):
+        cs.EnKF(dm, Q, R, options={"member": 5})
 
 
 def test_online_runner_reproduces_seeded_batch(case):

@@ -1,12 +1,18 @@
-"""Kalman-Bucy filter: steady state equals control.lqe; agrees with the discrete KF for small steps."""
+"""Kalman-Bucy filter: steady state equals control.lqe; agrees with the discrete KF for small steps.
+
+``Q`` and ``R`` have the one meaning of every estimator (covariances over a sampling interval);
+the filter's spectral densities are ``Qc = Q dt`` and ``Rc = R dt``.
+"""
 import control
 import numpy as np
 import pytest
 
 import casship as cs
+from casship.estimators.rts import rts_smooth
 from filter_models import linear_record, oscillator
 
 Qc, R = 0.05, [0.04, 0.09]
+Q = Qc / 0.1                    # the covariance over the 0.1 s step whose spectral density is Qc
 
 
 @pytest.fixture(scope="module")
@@ -25,12 +31,15 @@ def _lqe(m, R):
     return L, P, H
 
 
-def test_riccati_rk4_converges_to_lqe(case):
+@pytest.mark.parametrize("integrator", ["auto", "rk4"])
+def test_riccati_converges_to_lqe(case, integrator):
+    """The default integrator (and plain RK4) has the algebraic Riccati solution as its fixed point."""
     m, dm, traj, data = case
-    kb = cs.KalmanBucy(dm, Qc, R, options={"integrator": "rk4"})
+    kb = cs.KalmanBucy(dm, Q, R, options={"integrator": integrator})
     res = kb.filter(data, cs.Gaussian([0.0, 0.0], [0.01, 0.01]))
     L, P, H = _lqe(m, R)
     np.testing.assert_allclose(res.P[-1], P, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(res.K[-1], L, rtol=1e-8)
     L2, P2 = kb.steady_state()
     np.testing.assert_allclose(L2, L, rtol=1e-12)
     np.testing.assert_allclose(P2, P, rtol=1e-12)
@@ -45,14 +54,18 @@ def test_split_integrator_second_order_and_stable(case):
     prior = cs.Gaussian([0.0, 0.0], [1e4, 1e4])
     errs = []
     for sub in (5, 10, 20):
-        res = cs.KalmanBucy(dm, Qc, R, options={"substeps": sub}).filter(data.slice(0, 300), prior)
+        res = cs.KalmanBucy(dm, Q, R, options={"substeps": sub, "integrator": "split"}).filter(data.slice(0, 300), prior)
         assert np.all(np.isfinite(res.x))
         errs.append(np.abs(res.P[-1] - P).max() / np.abs(P).max())
     assert errs[2] < 1e-3
     ratios = np.array(errs[:-1]) / np.array(errs[1:])
     assert np.all((ratios > 3.5) & (ratios < 4.5)), ratios
-    rk4 = cs.KalmanBucy(dm, Qc, R, options={"integrator": "rk4", "substeps": 5}).filter(data.slice(0, 20), prior)
+    rk4 = cs.KalmanBucy(dm, Q, R, options={"integrator": "rk4", "substeps": 5}).filter(data.slice(0, 20), prior)
     assert not np.all(np.isfinite(rk4.P))
+    # the default switches to the splitting where RK4 would diverge, and is exact in the steady state
+    auto = cs.KalmanBucy(dm, Q, R, options={"substeps": 5}).filter(data.slice(0, 300), prior)
+    assert np.all(np.isfinite(auto.P)) and auto.health().not_pd.size == 0
+    np.testing.assert_allclose(auto.P[-1], P, rtol=1e-8, atol=1e-12)
 
 
 def test_steady_state_filter_uses_lqe_gain(case):
@@ -61,7 +74,7 @@ def test_steady_state_filter_uses_lqe_gain(case):
     import scipy.linalg
 
     m, dm, traj, data = case
-    kb = cs.KalmanBucy(dm, Qc, R, options={"steady_state": True, "substeps": 20})
+    kb = cs.KalmanBucy(dm, Q, R, options={"steady_state": True, "substeps": 20})
     L, P = kb.steady_state()
     res = kb.filter(data.slice(0, 50), cs.Gaussian([0.3, 0.0], [1.0, 1.0]))
     np.testing.assert_allclose(res.P[-1], P, rtol=1e-12)
@@ -87,12 +100,12 @@ def test_close_to_discrete_kf_for_fast_sampling():
     dm = cs.discretize(m, dt, method="euler")
     traj, data = linear_record(m, dt=dt, n=2000, q=Qc / dt, seed=5)
     prior = cs.Gaussian([1.0, 0.0], [0.1, 0.1])
-    kb = cs.KalmanBucy(dm, Qc, R, options={"substeps": 2}).filter(data, prior)
-    kf = cs.KF(dm, Qc / dt, R).filter(data, prior)
+    kb = cs.KalmanBucy(dm, Qc / dt, R, options={"substeps": 2}).filter(data, prior)
+    kf = cs.KF(dm, Qc / dt, R).filter(data, prior)          # the same Q and R for both
     # Tomera's derivation: the discrete steady gain over dt tends to the Kalman-Bucy gain
     z = (m.states(), m.inputs(), m.params(), [0.0])
     H = np.array(m.h_jac(*z[:3])[0])
-    L = cs.KalmanBucy(dm, Qc, R).steady_state()[0]
+    L = cs.KalmanBucy(dm, Qc / dt, R).steady_state()[0]
     gaps = []
     for h in (0.01, 0.001):
         A, _, G = cs.discretize(m, h, method="euler").linearize(m.states(), m.inputs())
@@ -104,10 +117,13 @@ def test_close_to_discrete_kf_for_fast_sampling():
     np.testing.assert_allclose(rmse(kb), rmse(kf), rtol=0.1)
 
 
-def test_rts_refuses_and_gate_unavailable(case):
+def test_smoothing_refused_and_gate_unavailable(case):
     m, dm, traj, data = case
-    res = cs.KalmanBucy(dm, Qc, R).filter(data.slice(0, 20), cs.Gaussian([0.0, 0.0], [1.0, 1.0]))
+    kb = cs.KalmanBucy(dm, Q, R)
+    prior = cs.Gaussian([0.0, 0.0], [1.0, 1.0])
+    with pytest.raises(ValueError, match="KalmanBucy has no smoother"):
+        kb.smooth(data.slice(0, 20), prior)
     with pytest.raises(ValueError, match="KalmanBucy"):
-        cs.rts_smooth(res)
+        rts_smooth(kb.filter(data.slice(0, 20), prior))
     with pytest.raises(ValueError, match="gate"):
-        cs.KalmanBucy(dm, Qc, R, options={"gate": 0.99})
+        cs.KalmanBucy(dm, Q, R, options={"gate": 0.99})

@@ -26,6 +26,10 @@ def test_kf_equals_ekf_and_dlqe(linear_case):
     np.testing.assert_allclose(kf.P_pred[-1], P, rtol=1e-10)
     K = kf.P_pred[-1] @ H.T @ np.linalg.inv(kf.S[-1])          # filter gain; dlqe gives the predictor gain A K
     np.testing.assert_allclose(A @ K, L, rtol=1e-9)
+    np.testing.assert_allclose(kf.K[-1], K, rtol=1e-9)           # the result carries the gain applied
+    L2, P2 = cs.KF(dm, Q, R).steady_state()                     # python-control on the exact linearisation
+    np.testing.assert_allclose(L2, L, rtol=1e-12)
+    np.testing.assert_allclose(P2, P, rtol=1e-12)
 
 
 def test_continuous_discrete_covariance_equals_van_loan(linear_case):
@@ -34,7 +38,7 @@ def test_continuous_discrete_covariance_equals_van_loan(linear_case):
     res = ekf.filter(data.slice(0, 5), prior)
     A = np.array(m.f_jac(m.states(), m.inputs(), m.params(), [0.0])[0])
     G = np.array(m.f_jac(m.states(), m.inputs(), m.params(), [0.0])[3])
-    Ad, Qd = cs.van_loan(A, G, np.atleast_2d(Q), 0.1)
+    Ad, Qd = cs.van_loan(A, G, np.atleast_2d(Q) * 0.1, 0.1)       # the spectral density of Q is Q dt
     for k in range(1, 5):
         np.testing.assert_allclose(res.P_pred[k], Ad @ res.P[k - 1] @ Ad.T + Qd, rtol=1e-9, atol=1e-13)
 
@@ -109,17 +113,20 @@ def test_online_equals_batch(cls):
     t = np.arange(150) * 0.1
     traj = cs.simulate(m, m.states(x_n=20.0, U=3.0, chi=3.0, omega_chi=0.05), t)
     data = cs.measure(traj, m, {"rng": 0.5, "chi_m": 0.05}, rates={"rng": 2.0}, seed=2)
-    est = cls(dm, [1e-2, 1e-3], [0.25, 0.0025], options={"gate": 0.999})
+    data = data.with_columns(chi_m=data["chi_m"] + np.where(np.arange(150) == 60, 0.5, 0.0))   # an outlier
+    est = cls(dm, [1e-2, 1e-3], [0.25, 0.0025], options={"gate": 0.999, "outputs": "all"})
     prior = cs.Gaussian(m.states(x_n=18.0, U=2.0, chi=3.1), [9.0, 9.0, 1.0, 0.1, 0.01])
     res = est.filter(data, prior)
-    x, P = prior.mean, prior.cov
+    assert 0 < res.rejected.sum() < len(data)                   # the gate acts on this record
+    run = est.online(prior)
     Y = data.matrix(["rng", "chi_m"])
     for k in range(len(data)):
-        x, P, info = est.step(x, P, np.zeros(0), Y[k], 0.0 if k == 0 else 0.1)
+        x = run.update(Y[k], 0.0 if k == 0 else 0.1)
         np.testing.assert_allclose(x, res.x[k], rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(P, res.P[k], rtol=1e-12, atol=1e-12)
-        assert info["rejected"] == res.rejected[k]
-        assert info["nis"] == pytest.approx(res.nis[k], rel=1e-12, abs=1e-12)
+        np.testing.assert_allclose(run.P, res.P[k], rtol=1e-12, atol=1e-12)
+        assert run.info["rejected"] == res.rejected[k]
+        assert run.info["nis"] == pytest.approx(res.nis[k], rel=1e-12, abs=1e-12)
+        np.testing.assert_allclose(run.info["K"], res.K[k], rtol=1e-12, atol=1e-12)
 
 
 def test_persistence_kf():
@@ -143,7 +150,7 @@ def test_online_runner_and_jit_equal_batch():
     traj = cs.simulate(m, m.states(x_n=20.0, U=3.0, chi=3.0, omega_chi=0.05), t, method="euler")
     data = cs.measure(traj, m, {"rng": 0.5, "chi_m": 0.05}, rates={"rng": 2.0}, seed=2)
     prior = cs.Gaussian(m.states(x_n=18.0, U=2.0, chi=3.1), [9.0, 9.0, 1.0, 0.1, 0.01])
-    ekf = cs.EKF(dm, [1e-2, 1e-3], [0.25, 0.0025])
+    ekf = cs.EKF(dm, [1e-2, 1e-3], [0.25, 0.0025], options={"outputs": ("x", "P", "nis")})
     res = ekf.filter(data, prior)
     run = ekf.online(prior)
     Y = data.matrix(["rng", "chi_m"])
@@ -151,10 +158,12 @@ def test_online_runner_and_jit_equal_batch():
     np.testing.assert_allclose(X, res.x, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(run.P, res.P[-1], rtol=1e-12, atol=1e-12)
     assert run.info["nis"] == pytest.approx(res.nis[-1], rel=1e-12)
-    try:
-        fast = cs.EKF(dm, [1e-2, 1e-3], [0.25, 0.0025], options={"jit": True})
-        res_jit = fast.filter(data, prior)
-    except RuntimeError as exc:                   # no C compiler on this machine
-        pytest.skip(str(exc))
+    with pytest.raises(KeyError, match="'ll' is not among the diagnostics"):
+        run.info["ll"]                            # lean: only what the options asked for is computed
+    fast = cs.EKF(dm, [1e-2, 1e-3], [0.25, 0.0025], options={"jit": True})
+    res_jit = fast.filter(data, prior)
     np.testing.assert_allclose(res_jit.x, res.x, rtol=1e-11, atol=1e-11)
     np.testing.assert_allclose(res_jit.P, res.P, rtol=1e-11, atol=1e-11)
+    run_jit = fast.online(prior)
+    X_jit = np.array([run_jit.update(Y[k], 0.0 if k == 0 else 0.1) for k in range(len(data))])
+    np.testing.assert_allclose(X_jit, res.x, rtol=1e-11, atol=1e-11)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import casship as cs
-from casship.estimators.mhe import MHEFailed, augment_model
+from casship.estimators import MHEFailed
 
 Q_LIN, R_LIN = 1e-6, 1e-4
 
@@ -49,7 +49,7 @@ def test_linear_mhe_equals_kalman_filter(solver, N):
 
 def test_full_information_equals_rts_smoother():
     _, dm, _, data, prior = linear_case()
-    smooth = cs.rts_smooth(cs.KF(dm, Q_LIN, R_LIN).filter(data, prior))
+    smooth = cs.KF(dm, Q_LIN, R_LIN).smooth(data, prior)
     full = cs.MHE(dm, Q_LIN, R_LIN).smooth(data, prior)
     assert full.estimator == "MHE-full"
     np.testing.assert_allclose(full.x, smooth.x, rtol=0, atol=1e-9)
@@ -70,27 +70,21 @@ def test_heading_across_pi_is_wrapped():
     np.testing.assert_allclose(res["r"], kf["r"], atol=1e-9)
 
 
-def test_online_step_reproduces_filter():
+def test_online_runner_reproduces_filter():
     _, dm, _, data, prior = linear_case(duration=20.0)
     mhe = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 6, "solver": "ipopt"})
     batch = mhe.filter(data, prior)
     U, Y = data.matrix(["delta"]), data.matrix(["psi"])
-    x, P = prior.mean, prior.cov
-    for k in range(len(data)):
-        dt = data.t[k] - data.t[k - 1] if k else 0.0
-        x, P, info = mhe.step(x, P, U[max(k - 1, 0)], Y[k], dt, u=U[k])
-        np.testing.assert_allclose(x, batch.x[k], atol=1e-10)
-        np.testing.assert_allclose(P, batch.P[k], atol=1e-14)
-        assert np.isnan(info["e"]).all() == np.isnan(Y[k]).all()
-    mhe.reset()
-    x2, _, _ = mhe.step(prior.mean, prior.cov, U[0], Y[0], 0.0, u=U[0])
-    np.testing.assert_allclose(x2, batch.x[0], atol=1e-10)
     run = mhe.online(prior, u=U[0])
     for k in range(len(data)):
         dt = data.t[k] - data.t[k - 1] if k else 0.0
         x = run.update(Y[k], dt, u_prev=U[max(k - 1, 0)], u=U[k])
         np.testing.assert_allclose(x, batch.x[k], atol=1e-10)
         np.testing.assert_allclose(run.P, batch.P[k], atol=1e-14)
+        assert np.isnan(run.info["e"]).all() == np.isnan(Y[k]).all()
+        assert run.info["nis"] == pytest.approx(batch.nis[k], rel=1e-9, abs=1e-12)
+    with pytest.raises(ValueError, match="y must hold 1 values"):
+        run.update([0.0, 0.0], 0.5)
 
 
 def gps_case(seed, duration=60.0, dt=0.5):
@@ -219,7 +213,7 @@ def test_parameter_and_disturbance_estimation():
 
 def test_augment_model_names():
     m = cs.models.nomoto_first_order()
-    aug = augment_model(m, ["K"], ["r"])
+    aug = cs.augment(m, ["K"], disturbances=["r"])
     assert aug.state_names == ("psi", "r", "K", "d_r")
     assert aug.noise_names == ("w_r", "w_K", "w_d_r")
     assert "K" not in aug.param_names

@@ -53,8 +53,8 @@ def test_reacquire_changes_nothing_on_clean_data_and_online_equals_batch():
     xs = [run_online.update(np.array([clean["x_n"][k], clean["y_n"][k]]), 0.0 if k == 0 else 0.1)
           for k in range(300)]
     np.testing.assert_allclose(np.array(xs), res.x[:300], rtol=0, atol=1e-10)
-    with pytest.raises(ValueError, match="use online"):
-        ekf.step(prior.mean, prior.cov, np.zeros(0), np.array([0.0, 0.0]), 0.1)
+    assert ekf.memory == ("x", "P", "rejections")             # the count of rejections is memory too
+    assert ekf.step.name_out()[:3] == ["x", "P", "rejections"]
 
 
 def test_reacquire_needs_a_gate_and_a_positive_count():

@@ -209,14 +209,12 @@ def test_covariance_symmetric_positive_definite_over_1e5_steps():
 
 def online_matches_batch(n):
     m, data, prior, res = long_run(n)
-    est = ekf()
-    x, P = prior.mean, prior.cov
-    u = np.zeros(0)
+    run = ekf().online(prior)
     y = data.matrix(["x_n", "y_n"])
     dt = np.concatenate([[0.0], np.diff(data.t)])
     for k in range(n):
-        x, P, _ = est.step(x, P, u, y[k], dt[k])
-    return res, x, P
+        x = run.update(y[k], dt[k])
+    return res, x, run.P
 
 
 def test_online_steps_do_not_drift_over_1e5_steps():

@@ -77,10 +77,10 @@ def test_ukf_online_equals_batch():
     ukf = cs.UKF(dm, Q=[1e-3, 1e-4], R=1.0)
     prior = cs.Gaussian(m.states(x_n=0.0, y_n=0.0, U=1.5, chi=2.9), [4.0, 4.0, 1.0, 0.1, 1e-3])
     res = ukf.filter(data, prior)
-    x, P = prior.mean, prior.cov
+    run = ukf.online(prior)
     Y = data.matrix(["x_n", "y_n"])
     for k in range(len(data)):
-        x, P, info = ukf.step(x, P, np.zeros(0), Y[k], 0.0 if k == 0 else 0.1)
+        x = run.update(Y[k], 0.0 if k == 0 else 0.1)
         np.testing.assert_allclose(x, res.x[k], atol=1e-12, rtol=1e-12)
-        np.testing.assert_allclose(P, res.P[k], atol=1e-12, rtol=1e-12)
+        np.testing.assert_allclose(run.P, res.P[k], atol=1e-12, rtol=1e-12)
     assert np.sqrt(np.mean((res["U"][100:] - 2.0) ** 2)) < 0.3

@@ -41,7 +41,9 @@ def register(sub) -> None:
     p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
     p.add_argument("--seed", type=int, default=0, help="seed of the random rudder sequence")
     p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
-    p.add_argument("--params", default=None, help='JSON file {"params": {name: value}} overriding parameters')
+    p.add_argument("--params", default=None,
+                   help='JSON file {"params": {name: value}} overriding parameters (a fit file rebuilds the '
+                        'model variant it was fitted on)')
     p.add_argument("--inputs", default=None,
                    help="replay the measured inputs of a record (CSV, MARIN .dat, NMEA; see casship.io.read_record) "
                         "from its measured initial state")
@@ -51,20 +53,6 @@ def register(sub) -> None:
     add_overwrite_option(p)
     add_limits_option(p)
     p.set_defaults(func=run, parser=p)
-
-
-def _load_params(path):
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"--params {path}: no such file")
-    text = path.read_text()
-    try:
-        obj = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(obj, dict) or not isinstance(obj.get("params"), dict):
-        raise ValueError(f'{path}: expected a JSON object with key "params": {{name: value}}')
-    return {str(k): float(v) for k, v in obj["params"].items()}
 
 
 def _load_record(path):
@@ -97,8 +85,13 @@ def run(args) -> int:
     for option, path in (("--csv", args.csv), ("--plot", args.plot)):
         if path:
             check_output_file(path, overwrite=args.overwrite, what=option)
-    model = load_model(args.model)
-    p = model.params(_load_params(args.params)) if args.params else model.params()
+    if args.params:
+        from ..identify import read_params
+
+        model, p = read_params(args.params, args.model)     # the fitted variant, checked against the file
+    else:
+        model = load_model(args.model)
+        p = model.params()
     L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
     measured = None

@@ -1,16 +1,26 @@
-"""Recursive and optimisation-based state estimators sharing one interface."""
-from .base import Estimator, FilterResult, Health
-from .ekf import EKF, KF, persistence_model
-from .ukf import UKF
+"""Estimators sharing one contract (``docs/architecture.md``): KF, EKF, UKF, EnKF, Kalman-Bucy, MHE.
+
+Every estimator is built as ``Est(dmodel, Q, R, *, measured=None, options=None)`` and offers
+``filter``, ``smooth``, ``predict``, ``online`` and the step Function ``step`` with named slots.
+:data:`ESTIMATORS` maps names to classes; registering an estimator there also runs the
+conformance suite ``tests/test_estimator_contract.py`` on it.
+"""
+from .options import EstimatorOptions
+from .result import FilterResult, Health
+from .base import Estimator
+from .online import OnlineRun
+from .ekf import EKF, KF, EKFOptions, persistence_model
+from .ukf import UKF, UKFOptions
 from .rts import rts_smooth
-from .enkf import EnKF
-from .kalman_bucy import KalmanBucy
+from .enkf import EnKF, EnKFOptions
+from .kalman_bucy import KalmanBucy, KalmanBucyOptions
 from .augmented import AugmentedResult, augment, augmented_ekf
-from .mhe import MHE, MHEFailed
+from .mhe import MHE, MHEFailed, MHEOptions
 
 # Estimators by command-line name (``casship filter --estimator NAME``); other modules may add theirs.
 ESTIMATORS = {"kf": KF, "ekf": EKF, "ukf": UKF, "enkf": EnKF, "kalman-bucy": KalmanBucy, "mhe": MHE}
 
-__all__ = ["Estimator", "FilterResult", "Health", "EKF", "KF", "persistence_model",
-           "UKF", "rts_smooth",
-           "EnKF", "KalmanBucy", "augment", "augmented_ekf", "AugmentedResult", "ESTIMATORS", "MHE", "MHEFailed"]
+__all__ = ["Estimator", "EstimatorOptions", "FilterResult", "Health", "OnlineRun", "EKF", "KF", "EKFOptions",
+           "persistence_model", "UKF", "UKFOptions", "rts_smooth", "EnKF", "EnKFOptions", "KalmanBucy",
+           "KalmanBucyOptions", "augment", "augmented_ekf", "AugmentedResult", "ESTIMATORS", "MHE", "MHEFailed",
+           "MHEOptions"]

@@ -15,30 +15,36 @@ import numpy as np
 from ..data import Dataset, Gaussian, as_cov
 from ..discretize import discretize
 from ..model import Model, Variable
-from .base import FilterResult
+from .result import FilterResult
 from .ekf import EKF
 
-__all__ = ["augment", "augmented_ekf", "AugmentedResult"]
+__all__ = ["augment", "augmented_ekf", "AugmentedResult", "per_name", "augmented_prior", "augmented_noise"]
 
 
-def augment(model: Model, params: Sequence[str], *, noise_prefix: str = "w_", name: str | None = None) -> Model:
-    """A model whose named parameters are random-walk states.
+def augment(model: Model, params: Sequence[str] = (), *, disturbances: Sequence[str] = (), noise_prefix: str = "w_",
+            name: str | None = None) -> Model:
+    """A model whose named parameters are random-walk states, optionally with random-walk disturbances.
 
     Parameters
     ----------
     model : Model
     params : sequence of str
-        Parameter names to estimate; they are appended to the states in this order.
+        Parameter names to estimate; they are appended to the states in this order, each with
+        ``dK/dt = w_K`` (a random walk driven by the new noise channel ``<noise_prefix>K``).
+    disturbances : sequence of str
+        States ``s`` whose derivative gets an unknown additive term ``d_s``; ``d_s`` is a new state
+        with ``d_s' = w_d_s`` (a random walk driven by the new noise channel ``w_d_s``).
     noise_prefix : str
-        The random walk of parameter ``K`` is driven by the noise channel ``<noise_prefix>K``.
+        Prefix of the parameters' noise channels.
     name : str, optional
         Name of the new model (default ``"<model>_aug"``).
 
     Returns
     -------
     Model
-        States ``(*model.state_names, *params)``, noise ``(*model.noise_names, w_<param>...)``, the
-        other parameters unchanged; ``meta["augmented_params"]`` lists ``params``.
+        States ``(*model.state_names, *params, *("d_" + s for s in disturbances))``, noise
+        ``(*model.noise_names, w_<param>..., w_d_<state>...)``, the other parameters unchanged;
+        ``meta["augmented_params"]`` lists ``params``.
 
     Examples
     --------
@@ -47,15 +53,21 @@ def augment(model: Model, params: Sequence[str], *, noise_prefix: str = "w_", na
     >>> aug.state_names
     ('psi', 'r', 'K', 'T')
     """
-    params = list(params)
-    if not params:
-        raise ValueError("augment: name at least one parameter")
+    params, disturbances = list(params), list(disturbances)
+    if not params and not disturbances:
+        raise ValueError("augment: name at least one parameter or disturbance")
     unknown = [p for p in params if p not in model.param_names]
     if unknown:
         raise ValueError(f"augment: unknown parameter(s) {unknown} of model {model.name!r}; "
                          f"parameters: {list(model.param_names)}")
     if len(set(params)) != len(params):
         raise ValueError(f"augment: parameter names repeated in {params}")
+    for state in disturbances:
+        if state not in model.state_names:
+            raise ValueError(f"cannot add a disturbance to {state!r}: not a state of {model.name!r}; "
+                             f"states: {list(model.state_names)}")
+    if len(set(disturbances)) != len(disturbances):
+        raise ValueError(f"disturbances repeat a state: {disturbances}")
     b = model.builder(name or f"{model.name}_aug")
     by_name = {v.name: v for v in model.param_vars}
     b._params = [v for v in b._params if v.name not in params]
@@ -64,9 +76,50 @@ def augment(model: Model, params: Sequence[str], *, noise_prefix: str = "w_", na
         b._kinds[pname] = "state"
         b._states.append(Variable(pname, var.unit, False, var.doc or "augmented parameter (random walk)"))
         b._ode[pname] = b.noise(f"{noise_prefix}{pname}")
+    for state in disturbances:
+        unit = model.state_vars[model.index(state)].unit
+        d = b.state(f"d_{state}", unit=f"{unit}/s" if unit else "", doc=f"additive disturbance on d{state}/dt")
+        b.add_to_ode(**{state: d})
+        b.ode(**{f"d_{state}": b.noise(f"w_d_{state}")})
     b.meta["augmented_params"] = tuple(params)
     b.meta["augmented_from"] = model.name
     return b.build()
+
+
+def per_name(value, names: Sequence[str], what: str) -> np.ndarray:
+    """One value per name from a scalar, a sequence or a mapping with exactly ``names`` as keys."""
+    names = list(names)
+    if isinstance(value, Mapping):
+        missing, extra = [n for n in names if n not in value], sorted(set(value) - set(names))
+        if missing or extra:
+            raise ValueError(f"{what}: give exactly the names {names} (missing {missing}, unknown {extra})")
+        return np.array([float(value[n]) for n in names])
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim and arr.size != len(names):
+        raise ValueError(f"{what}: expected {len(names)} values for {names}, got {arr.size}")
+    arr = np.broadcast_to(arr, (len(names),)).astype(float)
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ValueError(f"{what}: values must be finite and >= 0, got {arr.tolist()}")
+    return arr
+
+
+def augmented_prior(prior: Gaussian, mean, var) -> Gaussian:
+    """``prior`` extended by independent entries of mean ``mean`` and variance ``var``."""
+    mean, var = np.asarray(mean, dtype=float), np.asarray(var, dtype=float)
+    n = prior.mean.size
+    cov = np.zeros((n + mean.size, n + mean.size))
+    cov[:n, :n] = prior.cov
+    cov[n:, n:] = np.diag(var)
+    return Gaussian(np.concatenate([prior.mean, mean]), cov)
+
+
+def augmented_noise(Q: np.ndarray, variances) -> np.ndarray:
+    """Block-diagonal ``diag(Q, variances)`` for the noise of an augmented model."""
+    v = np.asarray(variances, dtype=float)
+    Qa = np.zeros((Q.shape[0] + v.size,) * 2)
+    Qa[:Q.shape[0], :Q.shape[0]] = Q
+    Qa[Q.shape[0]:, Q.shape[0]:] = np.diag(v)
+    return Qa
 
 
 @dataclass(frozen=True)
@@ -123,30 +176,13 @@ def augmented_ekf(model: Model, params: Sequence[str], data: Dataset, *, dt: flo
     """
     aug = augment(model, params)
     names = list(params)
-
-    def per_param(value, what):
-        if isinstance(value, Mapping):
-            missing = [n for n in names if n not in value]
-            if missing or set(value) - set(names):
-                raise ValueError(f"{what}: give exactly the parameters {names}")
-            return np.array([value[n] for n in names], dtype=float)
-        arr = np.broadcast_to(np.asarray(value, dtype=float), (len(names),))
-        return arr.astype(float)
-
-    q = per_param(q_params, "q_params")
-    Qm = as_cov(Q, model.nw, "Q", model.noise_names)
-    Qa = np.zeros((aug.nw, aug.nw))
-    Qa[: model.nw, : model.nw] = Qm
-    Qa[model.nw:, model.nw:] = np.diag(q)
+    Qa = augmented_noise(as_cov(Q, model.nw, "Q", model.noise_names), per_name(q_params, names, "q_params"))
     guess = dict(guess or {})
     unknown = set(guess) - set(names)
     if unknown:
         raise ValueError(f"guess: unknown parameter(s) {sorted(unknown)}; estimated: {names}")
-    mean = np.concatenate([prior.mean, [guess.get(n, 0.0) for n in names]])
-    cov = np.zeros((aug.nx, aug.nx))
-    cov[: model.nx, : model.nx] = prior.cov
-    cov[model.nx:, model.nx:] = np.diag(per_param(p0_params, "p0_params"))
+    prior_a = augmented_prior(prior, [guess.get(n, 0.0) for n in names], per_name(p0_params, names, "p0_params"))
     rest = model.params() if p is None else model.params(p)
     p_aug = aug.params({k: v for k, v in zip(model.param_names, rest) if k not in names})
     ekf = EKF(discretize(aug, dt, method=method), Qa, R, measured=measured, options=options)
-    return AugmentedResult(ekf.filter(data, Gaussian(mean, cov), p_aug), tuple(names))
+    return AugmentedResult(ekf.filter(data, prior_a, p_aug), tuple(names))

@@ -1,134 +1,172 @@
 """Extended Kalman filter, discrete and continuous-discrete, from the exact model Jacobians."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import casadi as ca
 import numpy as np
 
-from .base import STEP_INPUTS, STEP_OUTPUTS, Estimator
+from ..discretize import rk4
+from .base import Estimator
+from .options import EstimatorOptions, check_int
+from .update import joseph_update, symmetric
 
-__all__ = ["EKF", "KF"]
+__all__ = ["EKF", "KF", "EKFOptions", "persistence_model"]
 
 
-class EKF(Estimator):
-    """Extended Kalman filter with exact Jacobians, Joseph-form update and angle-aware residuals.
+@dataclass(frozen=True)
+class EKFOptions(EstimatorOptions):
+    """Options of :class:`EKF` and :class:`KF` (and those of every estimator, see :class:`EstimatorOptions`).
 
-    Options
-    -------
-    gate : float or None
-        Chi-square innovation gate probability (e.g. 0.999); rejected updates are reported.
+    Parameters
+    ----------
     covariance : {"discrete", "continuous"}
-        ``"discrete"`` propagates ``P`` with the Jacobians of the discretised step and treats
-        ``Q`` as the covariance of ``w`` held over a step. ``"continuous"`` (continuous-discrete
-        EKF) integrates ``P' = A P + P A' + G Q G'`` with ``Q`` the power spectral density of
-        continuous white noise, by RK4 with ``substeps`` sub-steps between samples.
+        ``"discrete"`` propagates ``P`` with the Jacobians of the discretised step
+        (``A P A' + G Q G'``). ``"continuous"`` (continuous-discrete EKF) integrates
+        ``P' = A P + P A' + G Qc G'`` between samples with the spectral density ``Qc = Q dt``
+        (``dt`` = ``dmodel.dt``, the one meaning of ``Q``), by RK4 with ``substeps`` sub-steps.
     substeps : int
         Sub-steps of the continuous-discrete prediction.
     reacquire : int or None
         With a gate: after this many consecutive rejected samples the next measurement is used
         regardless of the gate, with the predicted covariance inflated by ``max(1, NIS / m)`` (``m``
-        scalar measurements) so that the innovation becomes consistent. This lets a gated filter
-        that trusted a faulty sensor (e.g. a frozen fix) find the ship again instead of rejecting
-        every correct fix that follows. Reported as accepted samples; off by default.
+        scalar measurements) so that the innovation becomes consistent. A gated filter that
+        trusted a faulty sensor (a frozen fix) then finds the ship again instead of rejecting every
+        correct fix that follows. Adds the memory slot ``rejections``.
+    """
+
+    covariance: str = "discrete"
+    substeps: int = 1
+    reacquire: int | None = None
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.covariance not in ("discrete", "continuous"):
+            raise ValueError(f"option 'covariance' must be 'discrete' or 'continuous', got {self.covariance!r}")
+        object.__setattr__(self, "substeps", check_int(self.substeps, "substeps", 1))
+        if self.reacquire is not None:
+            if isinstance(self.reacquire, bool) or not float(self.reacquire).is_integer() or self.reacquire < 1:
+                raise ValueError(f"option 'reacquire' is a positive number of samples, got {self.reacquire!r}")
+            if self.gate is None:
+                raise ValueError("option 'reacquire' needs a 'gate'")
+            object.__setattr__(self, "reacquire", int(self.reacquire))
+
+
+class EKF(Estimator):
+    """Extended Kalman filter with exact Jacobians, Joseph-form update and angle-aware residuals.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    Q, R : process and measurement noise covariances (the one meaning, ``docs/architecture.md``)
+    measured : sequence of str, optional
+    options : EKFOptions or mapping
+        ``gate``, ``jit``, ``outputs``, ``covariance``, ``substeps``, ``reacquire``.
 
     Examples
     --------
     >>> import casship as cs
     >>> m = cs.models.nomoto_first_order()
     >>> ekf = cs.EKF(cs.discretize(m, 0.1), Q=1e-8, R=1e-4)
+    >>> ekf.memory
+    ('x', 'P')
     """
 
     name = "EKF"
-    _options = {"covariance": "discrete", "substeps": 1, "reacquire": None}
+    Options = EKFOptions
 
-    def _build_step(self) -> ca.Function:
-        if self.options["covariance"] not in ("discrete", "continuous"):
-            raise ValueError(f"option 'covariance' must be 'discrete' or 'continuous', "
-                             f"got {self.options['covariance']!r}")
-        reacquire = self.options["reacquire"]
-        if reacquire is not None and (int(reacquire) != reacquire or reacquire < 1):
-            raise ValueError(f"option 'reacquire' is a positive number of samples, got {reacquire!r}")
-        if reacquire is not None and self.options["gate"] is None:
-            raise ValueError("option 'reacquire' needs a 'gate'")
-        m, S = self.model, self.sym
-        s = self._symbols()
-        n_carry = m.nx + m.nx * m.nx + (reacquire is not None)
-        carry = S.sym("carry", n_carry)
-        x, P = carry[: m.nx], ca.reshape(carry[m.nx:m.nx + m.nx * m.nx], m.nx, m.nx)
-        if self.options["covariance"] == "discrete":
+    def _check_options(self) -> None:
+        if self.options.covariance == "continuous":
+            self.dmodel.require_continuous(f"{self.name} option covariance='continuous'")
+
+    def _memory_shapes(self) -> dict:
+        shapes = super()._memory_shapes()
+        if self.options.reacquire is not None:
+            shapes["rejections"] = (1, 1)
+        return shapes
+
+    def memory_from(self, prior, rng=None) -> dict:
+        mem = super().memory_from(prior, rng)
+        if self.options.reacquire is not None:
+            mem["rejections"] = np.zeros(1)
+        return mem
+
+    def _build(self, s: dict) -> dict:
+        x, P = s["x"], s["P"]
+        if self.options.covariance == "discrete":
             xp, Pp, C = self._predict_discrete(x, P, s)
         else:
             xp, Pp, C = self._predict_continuous(x, P, s)
-        xu, Pu, e, Sm, nis, ll, acc = self._update(xp, Pp, s)
-        vec = lambda a: ca.reshape(a, -1, 1)  # noqa: E731
-        carry_next = ca.vertcat(xu, vec(Pu))
+        up = self._update(xp, Pp, s)
+        out = {**up, "x_pred": xp, "P_pred": Pp, "C": C}
+        reacquire = self.options.reacquire
         if reacquire is not None:
             # Count consecutive rejected samples (rows without measurements leave the count alone);
             # once the count reaches `reacquire`, redo the update ungated on an inflated covariance.
-            count = carry[-1]
-            force = (count >= reacquire) * (1 - acc) * (ca.sum1(s["mask"]) > 0)
-            inflation = ca.fmax(1, nis / ca.fmax(1, ca.sum1(s["mask"])))
-            xf, Pf, _, _, _, _, _ = self._update(xp, inflation * Pp, {**s, "gate": ca.inf})
-            xu = ca.if_else(force, xf, xu)
-            Pu = ca.if_else(force, Pf, Pu)
-            acc = ca.fmax(acc, force)
-            new_count = ca.if_else(acc, 0, ca.if_else(ca.sum1(s["mask"]) > 0, count + 1, count))
-            carry_next = ca.vertcat(xu, vec(Pu), new_count)
-        outs = [carry_next, xu, vec(Pu), xp, vec(Pp), vec(C), e, vec(Sm), nis, ll, acc]
-        ins = [carry] + [s[k] for k in STEP_INPUTS[1:]]
-        return ca.Function(f"{self.name.lower()}_step", ins, outs, STEP_INPUTS, STEP_OUTPUTS)
-
-    def carry_from(self, prior, seed=None):
-        carry = super().carry_from(prior, seed)
-        return carry if self.options["reacquire"] is None else np.concatenate([carry, [0.0]])
+            count, measured = s["rejections"], ca.sum1(s["mask"])
+            force = (count >= reacquire) * (1 - up["accepted"]) * (measured > 0)
+            inflation = ca.fmax(1, up["nis"] / ca.fmax(1, measured))
+            forced = self._update(xp, inflation * Pp, {**s, "gate": ca.inf})
+            for k in ("x", "P", "K"):
+                out[k] = ca.if_else(force, forced[k], up[k])
+            out["accepted"] = ca.fmax(up["accepted"], force)
+            out["rejections"] = ca.if_else(out["accepted"], 0, ca.if_else(measured > 0, count + 1, count))
+        return out
 
     def _predict_discrete(self, x, P, s):
-        dm, m = self.dmodel, self.model
-        w0 = self.sym.zeros(m.nw)
-        xp = dm.F(x, s["u_prev"], s["p"], w0, s["dt"])
-        A, _, _, G = dm.F_jac(x, s["u_prev"], s["p"], w0, s["dt"])
-        Pp = A @ P @ A.T + G @ s["Q"] @ G.T
-        return xp, 0.5 * (Pp + Pp.T), P @ A.T
+        w0 = self.sym.zeros(self.model.nw)
+        xp = self.dmodel.F(x, s["u_prev"], s["p"], w0, s["dt"])
+        A, _, _, G = self.dmodel.F_jac(x, s["u_prev"], s["p"], w0, s["dt"])
+        return xp, symmetric(A @ P @ A.T + G @ s["Q"] @ G.T), P @ A.T
 
     def _predict_continuous(self, x, P, s):
         m = self.model
-        n_sub = int(self.options["substeps"])
-        if n_sub < 1:
-            raise ValueError(f"option 'substeps' must be >= 1, got {n_sub}")
         w0 = self.sym.zeros(m.nw)
-        u, p, Qc = s["u_prev"], s["p"], s["Q"]
+        u, p, Qc = s["u_prev"], s["p"], s["Q"] * self.dmodel.dt
 
         def rhs(xi, Pi):
             A, _, _, G = m.f_jac(xi, u, p, w0)
             return m.f(xi, u, p, w0), A @ Pi + Pi @ A.T + G @ Qc @ G.T
 
-        h = s["dt"] / n_sub
+        h = s["dt"] / self.options.substeps
         xi, Pi = x, P
-        for _ in range(n_sub):
-            k1x, k1P = rhs(xi, Pi)
-            k2x, k2P = rhs(xi + h / 2 * k1x, Pi + h / 2 * k1P)
-            k3x, k3P = rhs(xi + h / 2 * k2x, Pi + h / 2 * k2P)
-            k4x, k4P = rhs(xi + h * k3x, Pi + h * k3P)
-            xi = xi + h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
-            Pi = Pi + h / 6 * (k1P + 2 * k2P + 2 * k3P + k4P)
-        Phi = ca.jacobian(xi, x)
-        return xi, 0.5 * (Pi + Pi.T), P @ Phi.T
+        for _ in range(self.options.substeps):
+            xi, Pi = rk4(rhs, (xi, Pi), h)
+        return xi, symmetric(Pi), P @ ca.jacobian(xi, x).T
+
+    def steady_state(self, x=None, u=None, p=None):
+        """Steady-state gain and covariance of the linearised filter, from ``control.dlqe``.
+
+        The exact Jacobians of the discretised step at ``(x, u, p)`` (zeros and nominal parameters
+        by default; for a linear model the operating point does not matter) are handed to
+        python-control, which solves the discrete Riccati equation.
+
+        Returns
+        -------
+        L : (nx, ny) array
+            Predictor gain (``x-_{k+1} = A x-_k + B u_k + L (y_k - H x-_k)``); the filter gain of the
+            update is ``K = P H' (H P H' + R)^-1`` and ``L = A K``.
+        P : (nx, nx) array
+            Steady-state predicted covariance.
+        """
+        import control
+
+        if self.options.covariance != "discrete":
+            raise ValueError("steady_state: a continuous-discrete EKF has no constant discrete gain; "
+                             "use covariance='discrete' or KalmanBucy.steady_state")
+        m = self.model
+        x = m.states() if x is None else np.asarray(x, dtype=float)
+        u = m.inputs() if u is None else np.asarray(u, dtype=float)
+        p = m.params() if p is None else m.params(p)
+        A, _, G = self.dmodel.linearize(x, u, p)
+        H = np.array(m.h_jac(x, u, p)[0])[self.meas_index]
+        L, P, _ = control.dlqe(A, G, H, self.Q, self.R)
+        return np.asarray(L), np.asarray(P)
 
     def _update(self, xp, Pp, s):
-        m = self.model
-        mask = s["mask"]
-        yhat = self.h_meas(xp, s["u"], s["p"])
-        H = ca.diag(mask) @ self.model.h_jac(xp, s["u"], s["p"])[0][self.meas_index, :]
-        e = self.residual(s["y"], yhat, mask)
-        Sm = self.masked_innovation_cov(H @ Pp @ H.T, s["R"], mask)
-        Sm = 0.5 * (Sm + Sm.T)
-        K = ca.solve(Sm, H @ Pp).T
-        nis, ll = self.gaussian_terms(e, Sm, mask)
-        acc = nis <= s["gate"]
-        Rm = ca.diag(mask) @ s["R"] @ ca.diag(mask)
-        IKH = ca.DM.eye(m.nx) - acc * K @ H
-        Pu = IKH @ Pp @ IKH.T + acc * K @ Rm @ K.T
-        xu = xp + acc * K @ e
-        return xu, 0.5 * (Pu + Pu.T), e, Sm, nis, ll, acc
+        H = self.model.h_jac(xp, s["u"], s["p"])[0][self.meas_index, :]
+        e = self.residual(s["y"], self.h_meas(xp, s["u"], s["p"]), s["mask"])
+        return {**joseph_update(xp, Pp, H, e, s["R"], s["mask"], s["gate"]), "e": e}
 
 
 class KF(EKF):
@@ -137,24 +175,26 @@ class KF(EKF):
     Raises ``ValueError`` if the discretised model is not linear in its states, inputs and noise
     (its Jacobians would depend on them), so a nonlinear model is never filtered as if linear.
     For a linear model the KF and the EKF give identical numbers.
+
+    Examples
+    --------
+    >>> import casship as cs
+    >>> kf = cs.KF(cs.discretize(cs.models.double_integrator(), 0.1), Q=[0.1, 0.2], R=0.01)
+    >>> L, P = kf.steady_state()
     """
 
     name = "KF"
 
-    def _build_step(self) -> ca.Function:
+    def _check_options(self) -> None:
+        super()._check_options()
         m, dm = self.model, self.dmodel
-        Ssym = dm.symbolic
-        x, u, p, w, dt = (Ssym.sym("x", m.nx), Ssym.sym("u", m.nu), Ssym.sym("p", m.np),
-                          Ssym.sym("w", m.nw), Ssym.sym("dt"))
-        xf = dm.F(x, u, p, w, dt)
-        y = m.h(x, u, p)
+        S = dm.symbolic
+        x, u, p, w, dt = (S.sym("x", m.nx), S.sym("u", m.nu), S.sym("p", m.np), S.sym("w", m.nw), S.sym("dt"))
         z = ca.vertcat(x, u, w)
-        for what, expr in (("dynamics", xf), ("outputs", y)):
+        for what, expr in (("dynamics", dm.F(x, u, p, w, dt)), ("outputs", m.h(x, u, p))):
             if ca.depends_on(ca.jacobian(expr, z), z):
                 raise ValueError(f"KF: the {what} of model {m.name!r} are not linear in states, inputs and "
                                  "noise; use EKF, UKF or EnKF")
-        return super()._build_step()
-
 
 def persistence_model(names, name: str = "persistence"):
     """A random-walk (persistence, ``A = I``) model measuring each named state directly.

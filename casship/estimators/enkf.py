@@ -1,20 +1,84 @@
 """Ensemble Kalman filter with perturbed observations (Evensen 1994; Burgers et al. 1998; seed 002).
 
-The random draws are generated in numpy before the run (from the ``seed``) and enter the
-compiled step as per-step inputs, so a seeded run is reproducible and the batch fold and the
-online stepper give identical numbers for the same draws.
+The random draws are generated in numpy (from the ``seed``) and enter the compiled step as the
+per-step inputs ``z_w`` (nw x N) and ``z_v`` (ny x N), so a seeded run is reproducible and the
+batch fold and the online runner give identical numbers for the same draws.
+
+The members go through one member step ``map``-ped over the ensemble (model step, outputs and
+analysis), and the ensemble statistics are matrix products, so the size of the step Function and
+its compile time do not grow with the number of members.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from .._fast import BufferedCall
 from ..data import Gaussian
-from .base import STEP_INPUTS, STEP_OUTPUTS, Estimator
-from .ukf import circular_mean, deviations, psd_sqrt, weighted_outer
+from .base import Estimator
+from .options import EstimatorOptions, check_int
+from .ukf import psd_sqrt
+from .update import gaussian_terms, masked_innovation_cov, residual, spd_solve, symmetric
 
-__all__ = ["EnKF"]
+__all__ = ["EnKF", "EnKFOptions"]
+
+
+@dataclass(frozen=True)
+class EnKFOptions(EstimatorOptions):
+    """Options of :class:`EnKF` (and those of every estimator, see :class:`EstimatorOptions`).
+
+    Parameters
+    ----------
+    members : int
+        Ensemble size ``N`` (seed 002: 100).
+    """
+
+    members: int = 100
+
+    def __post_init__(self):
+        super().__post_init__()
+        object.__setattr__(self, "members", check_int(self.members, "members", 2))
+
+
+def _rows(X, angles, angle_op, other_op):
+    """``X`` with ``angle_op`` applied to its angle rows and ``other_op`` to the others (matrix operations)."""
+    angles = np.asarray(angles, dtype=bool)
+    if not angles.any():
+        return other_op(X)
+    if angles.all():
+        return angle_op(X)
+    ia, io = np.flatnonzero(angles).tolist(), np.flatnonzero(~angles).tolist()
+    A, O = angle_op(X[ia, :]), other_op(X[io, :])
+    rows = {i: A[j, :] for j, i in enumerate(ia)} | {i: O[j, :] for j, i in enumerate(io)}
+    return ca.vertcat(*[rows[i] for i in range(X.shape[0])])
+
+
+def _wrap(D):
+    return D - 2 * np.pi * ca.floor((D + np.pi) / (2 * np.pi))
+
+
+def _mean(X, angles):
+    """Ensemble mean of the columns of ``X``; angle rows averaged on the circle around the first member."""
+    N = X.shape[1]
+
+    def circular(Xa):
+        ref = Xa[:, 0]
+        return ref + ca.sum2(_wrap(Xa - ca.repmat(ref, 1, N))) / N
+
+    return _rows(X, angles, circular, lambda Xo: ca.sum2(Xo) / N)
+
+
+def _deviations(X, mean, angles):
+    """Columns of ``X`` minus ``mean``, angle rows wrapped to [-pi, pi)."""
+    return _rows(X - ca.repmat(mean, 1, X.shape[1]), angles, _wrap, lambda D: D)
+
+
+def _member(name, inputs: dict, outputs: dict) -> tuple[ca.Function, list]:
+    """A member Function of the non-empty ``inputs`` (name -> SX) and the names it takes (empty
+    inputs, e.g. a model without inputs, are left out: a mapped empty input makes CasADi's C invalid)."""
+    used = [k for k, v in inputs.items() if v.numel()]
+    return ca.Function(name, [inputs[k] for k in used], list(outputs.values()), used, list(outputs)), used
 
 
 class EnKF(Estimator):
@@ -23,137 +87,103 @@ class EnKF(Estimator):
     Each member is propagated through the discretised model with its own process-noise draw
     ``w ~ N(0, Q)`` held over the step; the update uses the ensemble cross-covariances and the
     observation perturbed by ``v ~ N(0, R)``. Means of angle states and outputs are taken on the
-    circle, residuals wrapped. The reported ``x, P`` are the ensemble mean and sample covariance;
-    ``C`` is the sample cross-covariance of consecutive ensembles (so :func:`rts_smooth` applies).
+    circle, residuals wrapped. The memory is the ensemble ``X`` (nx x N); the reported ``x, P`` are
+    the ensemble mean and sample covariance, ``C`` the sample cross-covariance of consecutive
+    ensembles (so smoothing applies).
 
-    Options
-    -------
-    members : int
-        Ensemble size ``N`` (seed 002: 100).
-    gate : float or None
-        Chi-square innovation gate on the ensemble-mean innovation.
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    Q, R : process and measurement noise covariances (the one meaning, ``docs/architecture.md``)
+    measured : sequence of str, optional
+    options : EnKFOptions or mapping
+        ``gate`` (on the ensemble-mean innovation), ``jit``, ``outputs``, ``members``.
 
     Examples
     --------
     >>> import casship as cs
     >>> m = cs.models.sog_cog()
     >>> enkf = cs.EnKF(cs.discretize(m, 0.1), Q=[1e-3, 1e-4], R=1.0, options={"members": 50})
+    >>> enkf.memory
+    ('X',)
     """
 
     name = "EnKF"
-    _options = {"members": 100}
+    Options = EnKFOptions
+    stochastic = True
 
     @property
     def members(self) -> int:
-        return int(self.options["members"])
+        """Ensemble size."""
+        return self.options.members
 
-    def _build_step(self) -> ca.Function:
-        N = int(self.options["members"])
-        if N < 2 or N != self.options["members"]:
-            raise ValueError(f"option 'members' must be an integer >= 2, got {self.options['members']!r}")
-        m, S, dm = self.model, self.sym, self.dmodel
-        n, ny = m.nx, self.ny
-        s = self._symbols()
-        carry = S.sym("carry", n * N)
-        zw, zv = S.sym("z_w", m.nw * N), S.sym("z_v", ny * N)
-        X = ca.reshape(carry, n, N)
-        W = psd_sqrt(s["Q"]) @ ca.reshape(zw, m.nw, N)
-        V = psd_sqrt(s["R"]) @ ca.reshape(zv, ny, N)
-        wts = np.full(N, 1.0 / N)
-        scale = 1.0 / np.sqrt(N - 1)
-        ang = m.angle_states
-        # forecast
-        Xf = ca.horzcat(*[dm.F(X[:, j], s["u_prev"], s["p"], W[:, j], s["dt"]) for j in range(N)])
-        x0 = circular_mean(X, wts, ang)
-        xp = circular_mean(Xf, wts, ang)
-        dX0 = scale * deviations(X, x0, ang)
-        dXf = scale * deviations(Xf, xp, ang)
-        Pp = weighted_outer(dXf)
-        C = dX0 @ dXf.T
-        # analysis with perturbed observations
-        mask = s["mask"]
-        Yf = ca.horzcat(*[self.h_meas(Xf[:, j], s["u"], s["p"]) for j in range(N)])
-        yhat = circular_mean(Yf, wts, self.angle_meas)
-        dY = ca.diag(mask) @ (scale * deviations(Yf, yhat, self.angle_meas))
-        Sm = self.masked_innovation_cov(weighted_outer(dY), s["R"], mask)
-        Sm = 0.5 * (Sm + Sm.T)
-        K = ca.solve(Sm, (dXf @ dY.T).T).T
-        e = self.residual(s["y"], yhat, mask)
-        nis, ll = self.gaussian_terms(e, Sm, mask)
-        acc = nis <= s["gate"]
-        Xa = ca.horzcat(*[Xf[:, j] + acc * K @ self.residual(s["y"] + V[:, j], Yf[:, j], mask) for j in range(N)])
-        xa = circular_mean(Xa, wts, ang)
-        dXa = scale * deviations(Xa, xa, ang)
-        Pa = weighted_outer(dXa)
-        vec = lambda a: ca.reshape(a, -1, 1)  # noqa: E731
-        outs = [vec(Xa), xa, vec(Pa), xp, vec(Pp), vec(C), e, vec(Sm), nis, ll, acc]
-        ins = [carry] + [s[k] for k in STEP_INPUTS[1:]] + [zw, zv]
-        return ca.Function("enkf_step", ins, outs, STEP_INPUTS + ["z_w", "z_v"], STEP_OUTPUTS)
+    def _symbolic(self):
+        return ca.MX
 
-    # -- ensemble memory and random draws ----------------------------------------------------------
+    def _memory_shapes(self) -> dict:
+        return {"X": (self.model.nx, self.members)}
+
+    def _draw_shapes(self) -> dict:
+        return {"z_w": (self.model.nw, self.members), "z_v": (self.ny, self.members)}
+
+    def memory_from(self, prior: Gaussian, rng=None) -> dict:
+        return {"X": self.ensemble(prior, rng)}
+
     def ensemble(self, prior: Gaussian, seed=None) -> np.ndarray:
         """Initial ensemble (nx, N) drawn from ``prior``."""
         self._check_prior(prior)
         return prior.sample(self.members, np.random.default_rng(seed)).T.copy()
 
-    def carry_from(self, prior: Gaussian, seed=None) -> np.ndarray:
-        return self.ensemble(prior, seed).reshape(-1, order="F")
+    def _member_functions(self):
+        """The per-member Functions (SX) with the names of their inputs, to be mapped over the ensemble."""
+        m, dm = self.model, self.dmodel
+        S = dm.symbolic
+        x, u, p, w, dt = S.sym("x", m.nx), S.sym("u", m.nu), S.sym("p", m.np), S.sym("w", m.nw), S.sym("dt")
+        forecast = _member("enkf_member_forecast", {"x": x, "u": u, "p": p, "w": w, "dt": dt},
+                           {"xf": dm.F(x, u, p, w, dt)})
+        output = _member("enkf_member_output", {"x": x, "u": u, "p": p}, {"y": self.h_meas(x, u, p)})
+        yf, v, y, mask = S.sym("yf", self.ny), S.sym("v", self.ny), S.sym("y", self.ny), S.sym("mask", self.ny)
+        K = S.sym("K", m.nx, self.ny)
+        analysis = _member("enkf_member_analysis", {"xf": x, "yf": yf, "v": v, "y": y, "mask": mask, "K": K},
+                           {"xa": x + K @ residual(y + v, yf, mask, self.angle_meas)})
+        return forecast, output, analysis
 
-    def _draw_size(self) -> tuple[int, int]:
-        return self.model.nw * self.members, self.ny * self.members
+    def _build(self, s: dict) -> dict:
+        m, N = self.model, self.members
+        (forecast, f_in), (output, o_in), (analysis, a_in) = self._member_functions()
+        ang, angy = m.angle_states, self.angle_meas
+        scale = 1.0 / np.sqrt(N - 1)
+        X, mask = s["X"], s["mask"]
+        # one factor per step for all members (an SX Function of the small Q and R)
+        Qs, Rs = ca.SX.sym("Q", m.nw, m.nw), ca.SX.sym("R", self.ny, self.ny)
+        LQ, LR = ca.Function("enkf_noise_roots", [Qs, Rs], [psd_sqrt(Qs), psd_sqrt(Rs)])(s["Q"], s["R"])
 
-    def extra_inputs(self, n: int, seed) -> list[np.ndarray]:
-        """Standard-normal process and observation draws for ``n`` steps (one row per step, in the
-        order the online :meth:`step` draws them)."""
-        nw, nv = self._draw_size()
-        z = np.random.default_rng(seed).standard_normal((n, nw + nv))
-        return [z[:, :nw].T.copy(), z[:, nw:].T.copy()]
+        def mapped(fun, names, args):
+            return fun.map(N)(*[args[k] for k in names])
 
-    def filter(self, data, prior: Gaussian, p=None, *, seed=None):
-        """Run the EnKF over a record (see :meth:`Estimator.filter`); ``seed`` fixes every draw."""
-        return super().filter(data, prior, p, seed=seed)
+        # forecast: every member through the model with its own held noise
+        Xf = mapped(forecast, f_in, {"x": X, "u": s["u_prev"], "p": s["p"], "w": LQ @ s["z_w"], "dt": s["dt"]})
+        x0, xp = _mean(X, ang), _mean(Xf, ang)
+        dX0, dXf = scale * _deviations(X, x0, ang), scale * _deviations(Xf, xp, ang)
+        # analysis with perturbed observations
+        Yf = mapped(output, o_in, {"x": Xf, "u": s["u"], "p": s["p"]})
+        yhat = _mean(Yf, angy)
+        dY = ca.diag(mask) @ (scale * _deviations(Yf, yhat, angy))
+        Sm = masked_innovation_cov(dY @ dY.T, s["R"], mask)
+        e = residual(s["y"], yhat, mask, angy)
+        K, nis, ll, acc = self._gain_function()(Sm, dXf @ dY.T, e, mask, s["gate"])
+        Xa = mapped(analysis, a_in, {"xf": Xf, "yf": Yf, "v": LR @ s["z_v"], "y": s["y"], "mask": mask, "K": K})
+        xa = _mean(Xa, ang)
+        dXa = scale * _deviations(Xa, xa, ang)
+        return {"X": Xa, "x": xa, "P": symmetric(dXa @ dXa.T), "x_pred": xp, "P_pred": symmetric(dXf @ dXf.T),
+                "C": dX0 @ dXf.T, "e": e, "S": Sm, "K": K, "nis": nis, "ll": ll, "accepted": acc}
 
-    # -- online -----------------------------------------------------------------------------------
-    def step(self, ensemble, u_prev, y, dt, *, u=None, p=None, rng=None):
-        """One online step on an ensemble (nx, N).
-
-        ``rng`` (a ``numpy.random.Generator``, required) supplies the draws in the same order as
-        :meth:`filter`, so stepping with ``rng = default_rng(seed)`` after
-        ``ensemble(prior, rng)`` reproduces ``filter(..., seed=seed)``. Returns
-        ``(ensemble_next, info)`` with ``info = {"x", "P", "e", "nis", "ll", "rejected", "x_pred", "P_pred"}``.
-        """
-        if not isinstance(rng, np.random.Generator):
-            raise TypeError("EnKF.step needs rng=numpy.random.Generator for its random draws")
-        m = self.model
-        if self._online is None:
-            self._online = BufferedCall(self._eval_step)
-            a = self._online.args
-            a[6][:] = m.params()
-            a[7][:] = self.Q.reshape(-1, order="F")
-            a[8][:] = self.R.reshape(-1, order="F")
-        call = self._online
-        a = call.args
-        ens = np.asarray(ensemble, dtype=float)
-        if ens.shape != (m.nx, self.members):
-            raise ValueError(f"ensemble must have shape ({m.nx}, {self.members}), got {ens.shape}")
-        a[0][:] = ens.reshape(-1, order="F")
-        a[1][:] = u_prev
-        a[2][:] = u_prev if u is None else u
-        y = np.asarray(y, dtype=float)
-        ok = np.isfinite(y)
-        a[3][:] = np.where(ok, y, 0.0)
-        a[4][:] = ok
-        a[5][0] = dt
-        if p is not None:
-            a[6][:] = m.params(p)
-        a[9][0] = self._gate_threshold(int(ok.sum()))
-        nw, nv = self._draw_size()
-        z = rng.standard_normal(nw + nv)
-        a[10][:], a[11][:] = z[:nw], z[nw:]
-        r = call()
-        nx = m.nx
-        info = {"x": r[1].copy(), "P": r[2].reshape(nx, nx, order="F").copy(),
-                "e": np.where(ok, r[6], np.nan), "nis": float(r[8][0]), "ll": float(r[9][0]),
-                "rejected": bool(r[10][0] < 0.5), "x_pred": r[3].copy(),
-                "P_pred": r[4].reshape(nx, nx, order="F").copy()}
-        return r[0].reshape(nx, self.members, order="F").copy(), info
+    def _gain_function(self) -> ca.Function:
+        """Gain (zero when gated out), NIS, log-likelihood and acceptance from ``S`` and ``Pxy`` (SX)."""
+        nx, ny = self.model.nx, self.ny
+        S, Pxy, e = ca.SX.sym("S", ny, ny), ca.SX.sym("Pxy", nx, ny), ca.SX.sym("e", ny)
+        mask, gate = ca.SX.sym("mask", ny), ca.SX.sym("gate")
+        nis, ll = gaussian_terms(e, S, mask)
+        acc = nis <= gate
+        return ca.Function("enkf_gain", [S, Pxy, e, mask, gate], [acc * spd_solve(S, Pxy.T).T, nis, ll, acc],
+                           ["S", "Pxy", "e", "mask", "gate"], ["K", "nis", "ll", "accepted"])

@@ -12,9 +12,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .base import STEP_INPUTS, STEP_OUTPUTS, Estimator
+from dataclasses import dataclass
 
-__all__ = ["UKF", "psd_sqrt", "sigma_weights", "circular_mean", "deviations", "wrap_fast", "weighted_outer"]
+from .base import Estimator
+from .options import EstimatorOptions
+from .update import gaussian_terms, masked_innovation_cov, spd_solve, symmetric
+
+__all__ = ["UKF", "UKFOptions", "psd_sqrt", "sigma_weights", "circular_mean", "deviations", "wrap_fast", "weighted_outer"]
 
 
 def psd_sqrt(P, tol: float = 0.0):
@@ -93,6 +97,32 @@ def deviations(points, mean, angles):
                         for i in range(d.shape[0])])
 
 
+@dataclass(frozen=True)
+class UKFOptions(EstimatorOptions):
+    """Options of :class:`UKF` (and those of every estimator, see :class:`EstimatorOptions`).
+
+    Parameters
+    ----------
+    alpha, beta, kappa : float
+        Scaled unscented transform parameters. The default ``alpha = 1, beta = 0, kappa = 3`` is
+        the unscaled form of seed 002; ``alpha = 1e-3, beta = 2, kappa = 0`` is the common scaled form.
+    """
+
+    alpha: float = 1.0
+    beta: float = 0.0
+    kappa: float = 3.0
+
+    def __post_init__(self):
+        super().__post_init__()
+        for name in ("alpha", "beta", "kappa"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not np.isfinite(float(v)):
+                raise ValueError(f"option {name!r} must be a finite number, got {v!r}")
+            object.__setattr__(self, name, float(v))
+        if self.alpha <= 0:
+            raise ValueError(f"option 'alpha' must be positive, got {self.alpha}")
+
+
 class UKF(Estimator):
     """Unscented Kalman filter with ``2n+1`` sigma points, angle-aware means and residuals.
 
@@ -100,13 +130,13 @@ class UKF(Estimator):
     the mean, ``P- = sum Wc (X_i - x-)(X_i - x-)' + G Q G'`` (exact for models linear in ``w``).
     Sigma points are redrawn from the predicted belief before the update (as in seed 002).
 
-    Options
-    -------
-    gate : float or None
-        Chi-square innovation gate probability; rejected updates are reported.
-    alpha, beta, kappa : float
-        Scaled unscented transform parameters. The default ``alpha = 1, beta = 0, kappa = 3`` is
-        the unscaled form of seed 002; ``alpha = 1e-3, beta = 2, kappa = 0`` is the common scaled form.
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    Q, R : process and measurement noise covariances (the one meaning, ``docs/architecture.md``)
+    measured : sequence of str, optional
+    options : UKFOptions or mapping
+        ``gate``, ``jit``, ``outputs``, ``alpha``, ``beta``, ``kappa``.
 
     Examples
     --------
@@ -116,22 +146,22 @@ class UKF(Estimator):
     """
 
     name = "UKF"
-    _options = {"alpha": 1.0, "beta": 0.0, "kappa": 3.0}
+    Options = UKFOptions
 
-    def _build_step(self) -> ca.Function:
+    def _check_options(self) -> None:
+        o = self.options
+        self.sigma_scale, self.wm, self.wc = sigma_weights(self.model.nx, o.alpha, o.beta, o.kappa)
+
+    def _build(self, s: dict) -> dict:
         m, S, dm = self.model, self.sym, self.dmodel
         n = m.nx
-        opt = self.options
-        c, wm, wc = sigma_weights(n, float(opt["alpha"]), float(opt["beta"]), float(opt["kappa"]))
-        self.sigma_scale, self.wm, self.wc = c, wm, wc
+        c, wm, wc = self.sigma_scale, self.wm, self.wc
         ang_x = m.angle_states
-        s = self._symbols()
-        carry = S.sym("carry", n + n * n)
-        x, P = carry[:n], ca.reshape(carry[n:], n, n)
+        x, P = s["x"], s["P"]
         Wc = ca.DM(np.diag(wc))
 
         def points(mean, cov):
-            L = np.sqrt(c) * psd_sqrt(0.5 * (cov + cov.T))
+            L = np.sqrt(c) * psd_sqrt(symmetric(cov))
             return ca.horzcat(mean, ca.repmat(mean, 1, n) + L, ca.repmat(mean, 1, n) - L)
 
         # predict
@@ -142,8 +172,7 @@ class UKF(Estimator):
         dX0 = deviations(X, x, ang_x)
         dXf = deviations(Xf, xp, ang_x)
         G = dm.F_jac(x, s["u_prev"], s["p"], w0, s["dt"])[3]
-        GQG = G @ s["Q"] @ G.T
-        Pp = weighted_outer(dXf, wc) + 0.5 * (GQG + GQG.T)
+        Pp = weighted_outer(dXf, wc) + symmetric(G @ s["Q"] @ G.T)
         C = dX0 @ Wc @ dXf.T
         # update with redrawn points
         mask = s["mask"]
@@ -155,15 +184,17 @@ class UKF(Estimator):
         Pyy = weighted_outer(dY, wc)
         Pxy = dXp @ Wc @ dY.T
         e = self.residual(s["y"], yhat, mask)
-        Sm = self.masked_innovation_cov(Pyy, s["R"], mask)
-        Sm = 0.5 * (Sm + Sm.T)
-        K = ca.solve(Sm, Pxy.T).T
-        nis, ll = self.gaussian_terms(e, Sm, mask)
+        Sm = masked_innovation_cov(Pyy, s["R"], mask)
+        K = spd_solve(Sm, Pxy.T).T
+        nis, ll = gaussian_terms(e, Sm, mask)
         acc = nis <= s["gate"]
-        xu = xp + acc * K @ e
-        Pu = Pp - acc * K @ Sm @ K.T
-        Pu = 0.5 * (Pu + Pu.T)
-        vec = lambda a: ca.reshape(a, -1, 1)  # noqa: E731
-        outs = [ca.vertcat(xu, vec(Pu)), xu, vec(Pu), xp, vec(Pp), vec(C), e, vec(Sm), nis, ll, acc]
-        ins = [carry] + [s[k] for k in STEP_INPUTS[1:]]
-        return ca.Function("ukf_step", ins, outs, STEP_INPUTS, STEP_OUTPUTS)
+        Ka = acc * K
+        if np.all(wc >= 0):
+            # Joseph form in sigma points: sum_i Wc_i (dX_i - K dY_i)(dX_i - K dY_i)' + K R K' equals
+            # Pp - K S K' but is a sum of positive semi-definite terms (no loss of definiteness)
+            D = dXp - Ka @ dY
+            P_upd = weighted_outer(D, wc) + Ka @ (ca.diag(mask) @ s["R"] @ ca.diag(mask)) @ Ka.T
+        else:            # a negative central weight (scaled form): the plain update
+            P_upd = Pp - Ka @ Sm @ Ka.T
+        return {"x": xp + Ka @ e, "P": symmetric(P_upd), "x_pred": xp, "P_pred": Pp, "C": C,
+                "e": e, "S": Sm, "K": Ka, "nis": nis, "ll": ll, "accepted": acc}

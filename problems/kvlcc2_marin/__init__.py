@@ -37,7 +37,7 @@ from casship.io import marin_runs, read_marin
 from casship.progress import progress
 from casship.validation import replay
 
-from . import DATA_DIR, Study
+from .. import DATA_DIR, Study
 
 FREE = ["gamma_R_minus", "gamma_R_plus", "R_0_dash", "X_vr_dash"]
 FREE_QUICK = FREE  # quick mode: same parameters, coarser data, one fold

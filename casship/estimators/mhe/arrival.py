@@ -1,0 +1,42 @@
+"""Arrival cost of the MHE window: the prior on the first state of the window.
+
+``arrival="ekf"`` (default): the EKF prediction, with exact Jacobians, of the MHE's own filtered
+estimate ``x_{s-1|s-1}`` and its covariance (the "filtering update" of Rao, Rawlings & Lee 2001).
+It carries the information of the samples that have left the window exactly once.
+``arrival="fixed"``: the previous window's estimate of ``x_s`` with the fixed initial covariance;
+that estimate already used ``y_s .. y_{k-1}``, which the window then counts a second time. It is
+kept for comparison only.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["inv_sqrt", "arrival_prior"]
+
+
+def inv_sqrt(P: np.ndarray) -> np.ndarray:
+    """``W`` with ``W' W = P^-1`` (Cholesky; for a near-singular ``P`` eigenvalues floored at 1e-14
+    of the largest)."""
+    P = 0.5 * (P + P.T)
+    try:
+        L = np.linalg.cholesky(P)
+        if np.all(np.diag(L) > 1e-7 * np.sqrt(np.abs(np.diag(P)).max())):
+            return np.linalg.inv(L)
+    except np.linalg.LinAlgError:
+        pass
+    lam, V = np.linalg.eigh(P)
+    lam = np.maximum(lam, 1e-14 * max(lam.max(), 1e-300))
+    return (V / np.sqrt(lam)).T
+
+
+def arrival_prior(kind: str, k: int, N: int, hist_x: np.ndarray, hist_P: np.ndarray, previous_x1: np.ndarray,
+                  P0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and whitening ``W`` of the arrival cost of the window ending at sample ``k``.
+
+    ``hist_x, hist_P`` hold the EKF predictions of the window's samples from the MHE estimate
+    before each (oldest first); ``previous_x1`` is the previous window's estimate of this window's
+    first state, ``P0`` the prior covariance.
+    """
+    if kind == "fixed" and k > N:
+        return previous_x1, inv_sqrt(P0)
+    return hist_x[0], inv_sqrt(hist_P[0])

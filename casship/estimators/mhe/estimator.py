@@ -1,0 +1,282 @@
+"""The moving-horizon estimator: the estimator contract around the window problem.
+
+Covariances in the :class:`FilterResult`
+    ``filter``: the covariance of the EKF recursion that runs alongside the MHE, linearised at and
+    centred on the MHE estimates (the same recursion that supplies the arrival cost). For a linear
+    model it equals the Kalman filter covariance. ``smooth``: the inverse Gauss-Newton Hessian's
+    diagonal blocks (a forward Kalman pass and an RTS pass linearised at the MAP trajectory).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..._fast import DUPLICATE_NAMES
+from ...data import Dataset, Gaussian, as_cov
+from ...discretize import DiscreteModel, discretize
+from ..augmented import augment, augmented_noise, augmented_prior
+from ..base import Estimator, per_sample
+from ..ekf import EKF
+from ..online import OnlineRun
+from ..result import FilterResult
+from ..rts import rts_smooth
+from ..update import joseph_update
+from .options import MHEOptions, bound_pair
+from .problem import Window, build_window, params_vector, sqrt_factor
+from .arrival import inv_sqrt
+from .runner import WindowEngine
+from .solvers import solve_window
+
+__all__ = ["MHE"]
+
+
+class MHE(Estimator):
+    """Moving-horizon estimator with the contract of the Kalman filters.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+        An explicit discretisation (``"euler"`` or ``"rk4"``).
+    Q, R : process and measurement noise covariances, the one meaning of ``docs/architecture.md``
+        (``Q``: covariance of ``w`` held over a step, as for the :class:`~casship.EKF`)
+    measured : sequence of str, optional
+    options : MHEOptions or mapping
+        ``horizon``, ``solver``, ``qpsol``, ``arrival``, ``huber``, ``bounds``, ``noise_bounds``,
+        ``estimate``, ``disturbances``, ``max_iter``, ``tol``, ``expand``, ``jit``, ``outputs``.
+
+    Notes
+    -----
+    The states of the result are those of the augmented model (:func:`~casship.augment`): the
+    original states, then the estimated parameters, then the disturbances ``d_<state>``. The ``p``
+    given to :meth:`filter` is a parameter vector (or mapping) of the original model. Solver
+    failures raise :class:`MHEFailed` (a ``RuntimeError``) naming the row and the solver's return
+    status. :attr:`step` is the step Function of the EKF that runs alongside the MHE (arrival cost,
+    innovations, ``P``); the window problem itself is :meth:`window`.
+
+    Examples
+    --------
+    >>> import casship as cs
+    >>> m = cs.models.nomoto_first_order()
+    >>> mhe = cs.MHE(cs.discretize(m, 0.1), Q=1e-8, R=1e-4, options={"horizon": 10})
+    """
+
+    name = "MHE"
+    Options = MHEOptions
+
+    def __init__(self, dmodel: DiscreteModel, Q, R, *, measured=None, options=None):
+        if not isinstance(dmodel, DiscreteModel):
+            raise TypeError(f"MHE needs a DiscreteModel (use casship.discretize), got {type(dmodel).__name__}")
+        opts = MHEOptions.from_value(options, "MHE")
+        base = dmodel.model
+        self.base_model = base
+        est, dist = tuple(opts.estimate), tuple(opts.disturbances)
+        aug = augment(base, est, disturbances=dist, name=f"{base.name}+mhe") if est or dist else base
+        self._extra_names, self._extra_std, extra_var = opts.extra_priors()
+        self._est_names = est
+        self._kept_params = [base.index(n, "param") for n in base.param_names if n not in est]
+        Qa = augmented_noise(as_cov(Q, base.nw, "Q", base.noise_names), extra_var)
+        adm = dmodel if aug is base else discretize(aug, dmodel.dt, dmodel.method, dmodel.substeps)
+        self._windows: dict[tuple, Window] = {}
+        self._covariance_step = None
+        super().__init__(adm, Qa, R, measured=measured, options=opts)
+
+    # -- configuration -----------------------------------------------------------------------------
+    def _check_options(self) -> None:
+        o, m, b = self.options, self.model, self.base_model
+        self.LQ, q_diag = sqrt_factor(self.Q)
+        self.nv = self.LQ.shape[1]
+        lo, hi = np.full(m.nx, -np.inf), np.full(m.nx, np.inf)
+        for n in self._est_names:                      # estimated parameters: their model bounds
+            i, j = m.index(n), b.index(n, "param")
+            lo[i], hi[i] = b.param_lower[j], b.param_upper[j]
+        for n, (a, c) in o.bounds.items():
+            i = m.index(n)
+            lo[i], hi[i] = bound_pair(n, a, c)
+        self.x_bounds = (lo, hi)
+        vlo, vhi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)
+        if o.noise_bounds and not q_diag:
+            raise ValueError("option 'noise_bounds' needs a diagonal Q")
+        cols = np.flatnonzero(np.diag(self.Q) > 0) if q_diag else np.arange(self.nv)
+        for n, (a, c) in o.noise_bounds.items():
+            i = m.index(n, "noise")
+            a, c = bound_pair(n, a, c)
+            if i not in cols:
+                if a > 0 or c < 0:
+                    raise ValueError(f"noise bound on {n!r} excludes 0, but Q gives it zero variance")
+                continue
+            j = int(np.flatnonzero(cols == i)[0])
+            s = np.sqrt(self.Q[i, i])
+            vlo[j], vhi[j] = a / s, c / s
+        self.v_bounds = (vlo, vhi)
+        self.R_diagonal = np.count_nonzero(self.R - np.diag(np.diag(self.R))) == 0
+
+    def _build_expressions(self) -> None:
+        # the step is that of the EKF that runs alongside the MHE (arrival cost, innovations, P)
+        self._ekf = EKF(self.dmodel, self.Q, self.R, measured=self.measured, options={"jit": self.options.jit})
+        self._inputs, self._exprs = self._ekf._inputs, self._ekf._exprs
+
+    @property
+    def horizon(self) -> int:
+        """The number of steps ``N`` of the window."""
+        return self.options.horizon
+
+    def window(self, N: int, solver: str | None = None) -> Window:
+        """The window problem of horizon ``N`` (built once per horizon and solver)."""
+        solver = solver or self.options.solver
+        if (N, solver) not in self._windows:
+            self._windows[N, solver] = build_window(self, N, solver)
+        return self._windows[N, solver]
+
+    # -- priors and parameters ------------------------------------------------------------------------
+    def _full_params(self, p) -> np.ndarray:
+        return self.base_model.params() if p is None else self.base_model.params(p)
+
+    def augmented_prior(self, prior: Gaussian, p=None) -> Gaussian:
+        """The prior over the augmented states.
+
+        A prior over the original states is extended with the estimated parameters (mean: their
+        value in ``p``, std: option ``estimate``) and the disturbances (mean 0, std from option
+        ``disturbances``), independent of the rest. A prior over the augmented states is returned as is.
+        """
+        if not isinstance(prior, Gaussian):
+            raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
+        m, b = self.model, self.base_model
+        if prior.mean.size == m.nx:
+            return prior
+        if prior.mean.size != b.nx:
+            raise ValueError(f"prior has {prior.mean.size} entries; expected {b.nx} (states of {b.name!r}) "
+                             f"or {m.nx} (augmented states {list(m.state_names)})")
+        pf = self._full_params(p)
+        mean = np.concatenate([pf[[b.index(n, "param") for n in self._est_names]],
+                               np.zeros(len(self._extra_names) - len(self._est_names))])
+        return augmented_prior(prior, mean, self._extra_std ** 2)
+
+    def _check_prior(self, prior: Gaussian) -> None:
+        Estimator._check_prior(self, self.augmented_prior(prior))
+
+    def prepare(self, data: Dataset, p=None) -> dict:
+        """The step inputs of a record (``p`` of the original model; estimated parameters dropped)."""
+        return super().prepare(data, self._full_params(p)[self._kept_params])
+
+    # -- the estimator contract ---------------------------------------------------------------------
+    def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None, progress=None) -> FilterResult:
+        """Moving-horizon estimates over a record (one window solve per sample).
+
+        Parameters
+        ----------
+        data : Dataset
+            Inputs (finite) and measured outputs (NaN = not measured).
+        prior : Gaussian
+            Belief about the (original or augmented) state at the first time stamp.
+        p : array or mapping, optional
+            Parameters of the original model (estimated ones: prior means).
+        seed : ignored (the MHE draws nothing)
+        progress : callable, optional
+            ``progress(k, n)`` called after each sample.
+
+        Returns
+        -------
+        FilterResult
+            ``x``: the last state of each window; ``P``: the EKF covariance run alongside;
+            predictions, innovations and likelihood terms from that EKF step.
+        """
+        self._check_prior(prior)
+        prior = self.augmented_prior(prior, p)
+        arrays = self.prepare(data, p)
+        n = len(data)
+        engine = WindowEngine(self, prior, arrays["p"])
+        nx = self.model.nx
+        out = {k: [] for k in ("x", "P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll")}
+        U, Up, Y, M, dt = arrays["u"].T, arrays["u_prev"].T, arrays["y"].T, arrays["mask"].T, arrays["dt"][0]
+        for k in range(n):
+            x, P, info = engine.advance(Up[k], U[k], Y[k], M[k], dt[k], f"row {k} (t = {data.t[k]:g} s)")
+            out["x"].append(x.copy())
+            out["P"].append(P.reshape(nx, nx))
+            for key in ("x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll"):
+                out[key].append(info[key])
+            if progress is not None:
+                progress(k + 1, n)
+        out = {k: np.array(v) for k, v in out.items()}
+        out["accepted"] = np.ones(n)
+        return self.result(data, arrays, out)
+
+    def online(self, prior: Gaussian, p=None, *, u=None, seed=None) -> OnlineRun:
+        """A stateful runner on a stream (``update(y, dt, u_prev=None, u=None) -> x``), started from
+        ``prior``; numbers equal :meth:`filter` on the same record."""
+        self._check_prior(prior)
+        return OnlineRun(WindowEngine(self, self.augmented_prior(prior, p), self._full_params(p)[self._kept_params], u))
+
+    def predict(self, result: FilterResult, t, u=None, p=None, *, seed=None) -> FilterResult:
+        """Predict past the last sample of ``result`` with the EKF that runs alongside the MHE
+        (with nothing measured the window adds nothing to it); see :meth:`Estimator.predict`."""
+        pred = self._ekf.predict(result, t, u, self._full_params(p)[self._kept_params])
+        return pred.replace(estimator=f"{self.name} prediction")
+
+    def smooth(self, data: Dataset, prior: Gaussian, p=None, *, seed=None, guess: FilterResult | None = None
+               ) -> FilterResult:
+        """Full-information estimation: one window over the whole record (batch MAP smoother).
+
+        The same NLP as the moving window with ``N = len(data) - 1`` and the prior as arrival cost.
+        The initial guess is the EKF run (or ``guess``). Covariances are the diagonal blocks of the
+        inverse Gauss-Newton Hessian at the solution. The real-time-iteration solver is iterated to
+        convergence here (``"sqp"``).
+
+        Returns
+        -------
+        FilterResult
+            ``x``: MAP states; ``P``: their covariances; predictions and innovations of the forward
+            pass linearised at the MAP trajectory; ``estimator = "MHE-full"``.
+        """
+        self._check_prior(prior)
+        prior = self.augmented_prior(prior, p)
+        arrays = self.prepare(data, p)
+        n = len(data)
+        if n < 2:
+            raise ValueError("smooth needs at least two samples")
+        win = self.window(n - 1, "sqp" if self.options.solver == "rti" else None)
+        if guess is None:
+            guess = self._ekf.filter(data, prior, arrays["p"])
+        z0 = np.zeros(win.nz)
+        z0[win.ix] = guess.x
+        z0 = np.clip(z0, win.lbx, win.ubx)
+        par = params_vector(prior.mean, inv_sqrt(prior.cov), arrays["u"], arrays["u_prev"][:, 1:], arrays["y"],
+                            arrays["mask"], arrays["dt"][:, 1:], arrays["p"])
+        z = solve_window(win, z0, par, f"the full record ({n} samples)")
+        return self._covariances(data, z[win.ix], z[win.iv], arrays, prior)
+
+    # -- covariances of the MAP trajectory ------------------------------------------------------------
+    def _covariances(self, data, X, Vv, arrays, prior) -> FilterResult:
+        """Forward Kalman pass and RTS pass linearised at the MAP trajectory (inverse GN Hessian blocks)."""
+        m, n = self.model, len(data)
+        W = np.zeros((n, m.nw))
+        if self.nv:
+            W[1:] = Vv @ self.LQ.T
+        fold = self._linearised_step().mapaccum("mhe_gn_fold", n, ["P"], ["P"], DUPLICATE_NAMES)
+        res = fold(P=prior.cov, x_prev=np.vstack([X[:1], X[:-1]]).T, w_prev=W.T, x_map=X.T,
+                   **{k: arrays[k] for k in ("u_prev", "u", "y", "mask", "dt", "p", "R")})
+        out = {k: per_sample(np.asarray(v), n) for k, v in res.items()}
+        out["x"], out["accepted"] = X, np.ones(n)
+        forward = self.result(data, arrays, out, estimator="MHE-full")
+        return forward.replace(P=rts_smooth(forward).P)
+
+    def _linearised_step(self) -> ca.Function:
+        """The EKF covariance step linearised at given states and noise, with named slots."""
+        if self._covariance_step is None:
+            m, dm, S = self.model, self.dmodel, ca.SX
+            P = S.sym("P", m.nx, m.nx)
+            xprev, wprev, x = S.sym("x_prev", m.nx), S.sym("w_prev", m.nw), S.sym("x_map", m.nx)
+            up, u, mask, dt, p = S.sym("u_prev", m.nu), S.sym("u", m.nu), S.sym("mask", self.ny), S.sym("dt"), S.sym("p", m.np)
+            y, R = S.sym("y", self.ny), S.sym("R", self.ny, self.ny)
+            A, _, _, G = dm.F_jac(xprev, up, p, wprev, dt)
+            xp = dm.F(xprev, up, p, S.zeros(m.nw), dt)
+            Pp = A @ P @ A.T + G @ ca.DM(self.Q) @ G.T
+            Pp = 0.5 * (Pp + Pp.T)
+            e = self.residual(y, self.h_meas(xp, u, p), mask)
+            up_ = joseph_update(xp, Pp, m.h_jac(x, u, p)[0][self.meas_index, :], e, R, mask, ca.inf)
+            names_in = ["P", "x_prev", "w_prev", "x_map", "u_prev", "u", "y", "mask", "dt", "p", "R"]
+            names_out = ["P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll"]
+            self._covariance_step = ca.Function(
+                "mhe_gn_forward", [P, xprev, wprev, x, up, u, y, mask, dt, p, R],
+                [up_["P"], xp, Pp, P @ A.T, e, up_["S"], up_["K"], up_["nis"], up_["ll"]], names_in, names_out,
+                DUPLICATE_NAMES)
+        return self._covariance_step

@@ -1,0 +1,183 @@
+"""The window problem of the MHE: a multiple-shooting least-squares NLP built once per horizon length.
+
+Over the samples ``s .. k`` (``N + 1`` samples) the unknowns are the states ``x_s .. x_k`` and the
+whitened process noise ``v_s .. v_{k-1}`` (``w = L_Q v``, ``Q = L_Q L_Q'``, so a singular ``Q``
+simply has fewer noise variables)::
+
+    min  |W (x_s - xbar_s)|^2 + sum_j |v_j|^2 + sum_j rho(|R^-1/2 mask_j * wrap(y_j - h(x_j))|^2)
+    s.t. x_{j+1} = F(x_j, u_j, p, L_Q v_j, dt_{j+1}),  bounds on x and w
+
+with ``rho`` quadratic or Huber. The stage Functions are mapped over the window and the data
+enter as NLP parameters, so the problem is built once per horizon and re-solved per sample.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..._fast import BufferedCall
+from ...angles import wrap_sym
+
+__all__ = ["Window", "build_window", "params_vector", "sqrt_factor"]
+
+
+def sqrt_factor(Q: np.ndarray, tol: float = 1e-12):
+    """``L`` with ``L L' = Q`` and full column rank (columns for the nonzero variance directions),
+    and whether ``Q`` is diagonal."""
+    n = Q.shape[0]
+    if n == 0:
+        return np.zeros((0, 0)), True
+    if np.count_nonzero(Q - np.diag(np.diag(Q))) == 0:
+        d = np.diag(Q)
+        keep = d > tol * max(1.0, d.max())
+        return np.diag(np.sqrt(d))[:, keep], True
+    lam, V = np.linalg.eigh(Q)
+    keep = lam > tol * max(1.0, lam.max())
+    return V[:, keep] * np.sqrt(lam[keep]), False
+
+
+@dataclass
+class Window:
+    """The NLP of one horizon length and the index maps into its decision vector ``z``.
+
+    ``z = [x_0 v_0 x_1 v_1 ... x_N]``; the parameter vector is :func:`params_vector`.
+    """
+
+    N: int
+    solver: ca.Function
+    ix: np.ndarray       # (N+1, nx) positions of the states in z
+    iv: np.ndarray       # (N, nv) positions of the noise variables in z
+    nz: int
+    lbx: np.ndarray
+    ubx: np.ndarray
+    ok_status: tuple
+    gn_step: BufferedCall | None = None   # the Gauss-Newton step (solver "rti")
+    gn_parts: ca.Function | None = None   # its QP data, for the bounded QP step
+
+
+def params_vector(xbar, W, Uh, Up, Y, M, dt, p) -> np.ndarray:
+    """The window's NLP parameters: arrival mean and whitening, inputs, measurements, mask, steps, parameters."""
+    f = lambda a: np.asarray(a, dtype=float).reshape(-1, order="F")  # noqa: E731
+    return np.concatenate([f(xbar), f(W), f(Uh), f(Up), f(Y), f(M), f(dt), f(p)])
+
+
+def _meas_residual(mhe, x, u, p, y, mask):
+    """Whitened (and Huber-transformed) measurement residual of one sample."""
+    e = mhe.residual(y, mhe.h_meas(x, u, p), mask)
+    if mhe.R_diagonal:
+        r = e / np.sqrt(np.diag(mhe.R))
+    else:
+        Dm = ca.diag(mask)
+        L = ca.chol(Dm @ ca.DM(mhe.R) @ Dm + ca.diag(1 - mask))
+        r = ca.solve(L.T, e)
+    delta = mhe.options.huber
+    if delta is not None:
+        a = ca.fabs(r)
+        r = ca.if_else(a <= delta, r, ca.sign(r) * ca.sqrt(ca.fmax(2 * delta * a - delta**2, 0)))
+    return r
+
+
+def _stage_functions(mhe):
+    m, S, nv = mhe.model, ca.SX, mhe.nv
+    if mhe.dmodel.symbolic is ca.MX:
+        raise ValueError("MHE needs an explicit discretisation ('euler' or 'rk4')")
+    x, xn, v = S.sym("x", m.nx), S.sym("x_next", m.nx), S.sym("v", nv)
+    u, up, dt, p = S.sym("u", m.nu), S.sym("u_next_prev", m.nu), S.sym("dt"), S.sym("p", m.np)
+    y, mask = S.sym("y", mhe.ny), S.sym("mask", mhe.ny)
+    w = ca.DM(mhe.LQ) @ v if nv else S.zeros(m.nw)
+    gap = mhe.dmodel.F(x, up, p, w, dt) - xn
+    r = ca.vertcat(_meas_residual(mhe, x, u, p, y, mask), v)
+    stage = ca.Function("mhe_stage", [x, v, xn, u, y, mask, up, dt, p], [gap, r],
+                        ["x", "v", "x_next", "u", "y", "mask", "u_prev_next", "dt_next", "p"], ["gap", "r"])
+    term = ca.Function("mhe_terminal", [x, u, y, mask, p], [_meas_residual(mhe, x, u, p, y, mask)],
+                       ["x", "u", "y", "mask", "p"], ["r"])
+    xbar, W = S.sym("xbar", m.nx), S.sym("W", m.nx, m.nx)
+    d = x - xbar
+    if m.angle_states.any():
+        d = ca.vertcat(*[wrap_sym(d[i]) if a else d[i] for i, a in enumerate(m.angle_states)])
+    arrival = ca.Function("mhe_arrival", [x, xbar, W], [W @ d], ["x", "xbar", "W"], ["r"])
+    return stage, term, arrival
+
+
+def _qp_options(qp: str) -> dict:
+    qopts = {"error_on_fail": False}
+    if qp == "qrqp":
+        qopts.update(print_iter=False, print_header=False, print_info=False)
+    elif qp == "osqp":
+        qopts["osqp"] = {"verbose": False, "eps_abs": 1e-9, "eps_rel": 1e-9, "polish": True}
+    return qopts
+
+
+def build_window(mhe, N: int, solver: str) -> Window:
+    """The window NLP of horizon ``N`` for ``solver`` (``"ipopt"``, ``"sqp"`` or ``"rti"``)."""
+    m, o = mhe.model, mhe.options
+    nx, nv, ny, nu = m.nx, mhe.nv, mhe.ny, m.nu
+    stage, term, arrival = _stage_functions(mhe)
+    nz = (N + 1) * nx + N * nv
+    z = ca.MX.sym("z", nz)
+    blk = ca.reshape(z[: N * (nx + nv)], nx + nv, N)
+    X, V, xN = blk[:nx, :], blk[nx:, :], z[N * (nx + nv):]
+    Xn = ca.horzcat(X[:, 1:], xN) if N > 1 else xN
+    xbar, W = ca.MX.sym("xbar", nx), ca.MX.sym("W", nx, nx)
+    Uh, Up = ca.MX.sym("U", nu, N + 1), ca.MX.sym("U_prev", nu, N)
+    Y, M = ca.MX.sym("Y", ny, N + 1), ca.MX.sym("M", ny, N + 1)
+    dt, p = ca.MX.sym("dt", 1, N), ca.MX.sym("p", m.np)
+    G, Rs = stage.map(N)(X, V, Xn, Uh[:, :N], Y[:, :N], M[:, :N], Up, dt, p)
+    res = ca.vertcat(arrival(X[:, 0], xbar, W), ca.vec(Rs), term(xN, Uh[:, N], Y[:, N], M[:, N], p))
+    par = ca.vertcat(xbar, ca.vec(W), ca.vec(Uh), ca.vec(Up), ca.vec(Y), ca.vec(M), ca.vec(dt), p)
+    nlp = {"x": z, "p": par, "f": 0.5 * ca.sumsqr(res), "g": ca.vec(G)}
+    expand = o.expand if o.expand is not None else N <= 200
+    common = {"expand": bool(expand), "print_time": False, "error_on_fail": False}
+    gn = None
+    if solver == "ipopt":
+        iopts = {"print_level": 0, "sb": "yes", "tol": o.tol, "max_iter": 100 if o.max_iter is None else o.max_iter,
+                 "mu_strategy": "adaptive", "warm_start_init_point": "no", "bound_relax_factor": 0.0}
+        S = ca.nlpsol(f"mhe_ipopt_{N}", "ipopt", nlp, {**common, "ipopt": iopts})
+        ok = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    elif solver == "sqp":
+        J = ca.jacobian(res, z)
+        lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", nlp["g"].numel())
+        H = ca.Function("mhe_gn_hessian", [z, par, lam_f, lam_g], [lam_f * (J.T @ J)],
+                        ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
+        sopts = {**common, "hess_lag": H, "qpsol": o.qpsol, "qpsol_options": _qp_options(o.qpsol),
+                 "print_iteration": False, "print_header": False, "print_status": False,
+                 "max_iter": 50 if o.max_iter is None else o.max_iter, "tol_pr": o.tol, "tol_du": max(o.tol, 1e-8)}
+        S = ca.nlpsol(f"mhe_sqp_{N}", "sqpmethod", nlp, sopts)
+        # a vanishing search direction means the start point is already optimal
+        ok = ("Solve_Succeeded", "Search_Direction_Becomes_Too_Small")
+    else:
+        gn = _gauss_newton(z, par, res, nlp["g"], N)
+        sp = gn[0].sparsity_out
+        S = ca.conic(f"mhe_rti_qp_{N}", o.qpsol, {"h": sp(0), "a": sp(2)}, _qp_options(o.qpsol))
+        ok = ()
+    idx = np.arange(nz)
+    blk_idx = idx[: N * (nx + nv)].reshape(N, nx + nv)
+    ix = np.vstack([blk_idx[:, :nx], idx[N * (nx + nv):][None, :]])
+    iv = blk_idx[:, nx:]
+    lbx, ubx = np.empty(nz), np.empty(nz)
+    lbx[ix], ubx[ix] = mhe.x_bounds
+    lbx[iv], ubx[iv] = mhe.v_bounds
+    win = Window(N, S, ix, iv, nz, lbx, ubx, ok)
+    if gn is not None:
+        win.gn_parts, win.gn_step = gn[0], BufferedCall(gn[1])
+    return win
+
+
+def _gauss_newton(z, par, res, g, N):
+    """The Gauss-Newton QP data ``(J'J, J'r, G, g)`` of the window and its equality-constrained step.
+
+    The step solves the KKT system ``[J'J  G'; G  0] [dz; lam] = -[J'r; g]``, which is block-banded
+    (stages are interleaved in ``z``), with CasADi's sparse QR, in one Function.
+    """
+    Jr, Jg = ca.jacobian(res, z), ca.jacobian(g, z)
+    parts = ca.Function(f"mhe_gn_parts_{N}", [z, par], [Jr.T @ Jr, Jr.T @ res, Jg, g],
+                        ["z", "p"], ["H", "grad", "G", "g"]).expand()
+    zs, ps = ca.MX.sym("z", z.sparsity()), ca.MX.sym("p", par.sparsity())
+    H, grad, G, gv = parts(zs, ps)
+    ng = g.numel()
+    K = ca.blockcat([[H, G.T], [G, ca.MX(ng, ng)]])
+    dz = ca.solve(K, -ca.vertcat(grad, gv), "qr")[: z.numel()]
+    step = ca.Function(f"mhe_gn_step_{N}", [zs, ps], [zs + dz], ["z", "p"], ["z_next"])
+    return parts, step

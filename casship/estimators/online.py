@@ -1,0 +1,187 @@
+"""The one online protocol: ``run = est.online(prior, p); x = run.update(y, dt, u_prev=None, u=None)``.
+
+:class:`OnlineRun` is what every estimator's ``online`` returns. The work per sample is done by an
+engine: :class:`StepEngine` for the recursive estimators (one compiled call of the step per update,
+memory kept in bound buffers), the window runner of the MHE.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from ..data import Gaussian
+from .options import DIAGNOSTICS
+
+__all__ = ["OnlineRun", "StepEngine"]
+
+
+class OnlineRun:
+    """An estimator running on a stream, one sample per :meth:`update`, its memory kept inside.
+
+    Numbers equal :meth:`Estimator.filter` on the same record (tested for every estimator).
+
+    Examples
+    --------
+    >>> run = ekf.online(prior)                      # doctest: +SKIP
+    >>> for y, dt in stream:                          # doctest: +SKIP
+    ...     x = run.update(y, dt)
+    >>> run.P, run.info["nis"]                        # doctest: +SKIP
+    """
+
+    def __init__(self, engine):
+        self._engine = engine
+
+    def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
+        """Predict over ``dt`` (0: no prediction, e.g. the first sample) with the input ``u_prev`` held
+        (default: the ``u`` of the previous update), then update with ``y`` (NaN = not measured now)
+        using the outputs at input ``u`` (default: ``u_prev``). Returns a copy of the new mean."""
+        return self._engine.update(y, dt, u_prev, u)
+
+    @property
+    def x(self) -> np.ndarray:
+        """Current mean (copy)."""
+        return self._engine.x
+
+    @property
+    def P(self) -> np.ndarray:
+        """Current covariance (copy)."""
+        return self._engine.P
+
+    @property
+    def info(self) -> Mapping:
+        """Named diagnostics of the last update (those the estimator was built to return, see the
+        ``outputs`` option; ``e`` is NaN where not measured, ``rejected`` is ``not accepted``)."""
+        return self._engine.info
+
+    def __repr__(self) -> str:
+        return f"OnlineRun({self._engine.name}, samples={self._engine.samples})"
+
+
+class _Info(Mapping):
+    """Diagnostics of one update, copied when read."""
+
+    def __init__(self, values: dict, available: tuple, estimator: str):
+        self._values, self._available, self._estimator = values, available, estimator
+
+    def __getitem__(self, key):
+        if key not in self._values:
+            hint = (f"; build the estimator with options={{'outputs': 'all'}} (or include {key!r})"
+                    if key in DIAGNOSTICS or key == "rejected" else "")
+            raise KeyError(f"{key!r} is not among the diagnostics of this {self._estimator} run "
+                           f"{list(self._values)}{hint}")
+        return self._values[key]
+
+    def __iter__(self):
+        return iter(self._values)
+
+    def __len__(self):
+        return len(self._values)
+
+
+class StepEngine:
+    """Online engine of a recursive estimator: its step Function through two bound buffer sets.
+
+    The two calls hand the memory to each other (one writes the memory the other reads), so an
+    update writes the new sample into the shared input buffers, triggers one compiled evaluation
+    and flips: no copy of the memory, no ``DM`` conversion, no per-field Python work.
+    """
+
+    def __init__(self, est, prior: Gaussian, p, u, rng):
+        self.name, self.samples = est.name, 0
+        self._est, self._rng = est, rng
+        self._prior = prior
+        m = est.model
+        fun = est._compiled_function(("step", est.options.outputs), lambda: est.step_function())
+        from .._fast import BufferedCall
+
+        first = BufferedCall(fun, cannot_fail=est.options.jit)
+        self._calls = (first, first.partner(est.memory))
+        self._cur = 0                                   # the call whose inputs hold the memory now
+        for k, v in est.memory_from(prior, rng).items():
+            first[k] = v
+        first["p"] = m.params() if p is None else m.params(p)
+        first["Q"], first["R"], first["gate"] = est.Q, est.R, np.inf
+        u0 = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
+        if u0.size != m.nu or not np.all(np.isfinite(u0)):
+            raise ValueError(f"u must be {m.nu} finite values for the inputs {list(m.input_names)}, got {u0}")
+        first["u_prev"], first["u"] = u0, u0
+        self._y, self._mask = first.flat_in("y"), first.flat_in("mask")
+        self._dt, self._gate = first.flat_in("dt"), first.flat_in("gate")
+        self._u_prev, self._u = first.flat_in("u_prev"), first.flat_in("u")
+        self._ok = np.zeros(est.ny, dtype=bool)
+        self._nu, self._ny = m.nu, est.ny
+        self._gated = est.options.gate is not None
+        self._thresholds = np.array([est.gate_threshold(c) for c in range(est.ny + 1)])
+        self._draws = [(first.flat_in(k), r * c) for k, (r, c) in est._draw_shapes().items()]
+        self._n_draws = sum(size for _, size in self._draws)
+        self._trig = [c.trigger if not c._checked else c for c in self._calls]
+        self._x = [c.flat_out("x") for c in self._calls]
+        self._P = [c.out("P") for c in self._calls]
+
+    def update(self, y, dt, u_prev, u):
+        if not dt >= 0:
+            raise ValueError(f"dt must be >= 0 and finite, got {dt}")
+        try:
+            self._y[:] = y
+        except (ValueError, TypeError):
+            raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got {np.shape(y)}") from None
+        ok = self._ok
+        np.isfinite(self._y, out=ok)
+        self._mask[:] = ok
+        if self._gated:
+            self._gate[0] = self._thresholds[np.count_nonzero(ok)]
+        self._dt[0] = dt
+        if self._nu:
+            self._inputs(u_prev, u)
+        if self._n_draws:
+            z = self._rng.standard_normal(self._n_draws)
+            start = 0
+            for buf, size in self._draws:
+                buf[:] = z[start:start + size]
+                start += size
+        cur = self._cur
+        self._trig[cur]()
+        self._cur = 1 - cur
+        self.samples += 1
+        return self._x[cur].copy()
+
+    def _inputs(self, u_prev, u):
+        if u_prev is not None:
+            self._u_prev[:] = u_prev
+        else:
+            self._u_prev[:] = self._u                   # the input applied since the previous sample
+        if u is not None:
+            self._u[:] = u
+        else:
+            self._u[:] = self._u_prev
+        if not (np.all(np.isfinite(self._u_prev)) and np.all(np.isfinite(self._u))):
+            raise ValueError(f"inputs must be finite, got u_prev = {self._u_prev}, u = {self._u}")
+
+    @property
+    def x(self) -> np.ndarray:
+        return self._x[1 - self._cur].copy() if self.samples else self._prior.mean.copy()
+
+    @property
+    def P(self) -> np.ndarray:
+        return self._P[1 - self._cur].copy() if self.samples else self._prior.cov.copy()
+
+    @property
+    def info(self) -> Mapping:
+        if not self.samples:
+            return _Info({}, (), self.name)
+        call = self._calls[1 - self._cur]
+        values = {}
+        for k in call.names_out:
+            if k in self._est.memory and k not in DIAGNOSTICS or k in ("x", "P"):
+                continue
+            v = call.out(k)
+            if k == "e":
+                values[k] = np.where(self._ok, v.ravel(), np.nan)
+            elif k == "accepted":
+                values["rejected"] = bool(v[0, 0] < 0.5)
+            elif v.size == 1:
+                values[k] = float(v[0, 0])
+            else:
+                values[k] = (v.ravel() if v.shape[1] == 1 else v).copy()
+        return _Info(values, tuple(values), self.name)

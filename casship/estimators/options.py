@@ -1,0 +1,93 @@
+"""Typed estimator options: one frozen dataclass per estimator, built from a dataclass or a mapping.
+
+``EKF(dm, Q, R, options={"gate": 0.999})`` and ``EKF(dm, Q, R, options=EKFOptions(gate=0.999))``
+are the same; an unknown key raises ``ValueError`` naming it and listing the known ones, and a
+value out of range raises naming the option.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+from typing import Mapping
+
+__all__ = ["EstimatorOptions", "DIAGNOSTICS", "check_int"]
+
+# Diagnostics a step Function can return besides its memory slots, in their fixed order.
+DIAGNOSTICS = ("x", "P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll", "accepted")
+
+
+def check_int(value, name: str, low: int) -> int:
+    """``value`` as an int ``>= low``, or ``ValueError`` naming the option."""
+    if isinstance(value, bool) or not float(value).is_integer() or int(value) < low:
+        raise ValueError(f"option {name!r} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class EstimatorOptions:
+    """Options of every estimator.
+
+    Parameters
+    ----------
+    gate : float or None
+        Probability of the chi-square innovation gate (e.g. 0.999); off by default. A sample whose
+        normalised innovation squared exceeds the quantile for the number of channels measured is
+        not used for the update and is reported as rejected.
+    jit : bool
+        Compile the step and its folds to C with the system compiler (CasADi JIT).
+    outputs : tuple of str or "all"
+        Diagnostics the step Function :attr:`Estimator.step` (and the online runner) returns
+        besides the memory: a subset of ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted``
+        that contains ``x`` and ``P``. The compiled code computes only what is asked for; the
+        default is the lean ``("x", "P")``. ``filter`` always computes every diagnostic.
+    """
+
+    gate: float | None = None
+    jit: bool = False
+    outputs: tuple = ("x", "P")
+
+    def __post_init__(self):
+        if self.gate is not None:
+            gate = float(self.gate)
+            if not 0 < gate < 1:
+                raise ValueError(f"option 'gate' is a probability in (0, 1), got {self.gate!r}")
+            object.__setattr__(self, "gate", gate)
+        if not isinstance(self.jit, bool):
+            raise ValueError(f"option 'jit' is True or False, got {self.jit!r}")
+        outputs = DIAGNOSTICS if self.outputs == "all" else self.outputs
+        if isinstance(outputs, str):
+            outputs = (outputs,)
+        outputs = tuple(outputs)
+        unknown = [o for o in outputs if o not in DIAGNOSTICS]
+        if unknown:
+            raise ValueError(f"option 'outputs': unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)} or 'all'")
+        if "x" not in outputs or "P" not in outputs:
+            raise ValueError(f"option 'outputs' must contain 'x' and 'P', got {list(outputs)}")
+        object.__setattr__(self, "outputs", tuple(o for o in DIAGNOSTICS if o in outputs))
+
+    @classmethod
+    def known(cls) -> list[str]:
+        """Names of the options."""
+        return [f.name for f in fields(cls)]
+
+    @classmethod
+    def from_value(cls, value, owner: str) -> "EstimatorOptions":
+        """Options from ``None`` (defaults), an instance of this class or a mapping of names to values."""
+        if value is None:
+            return cls()
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, EstimatorOptions):
+            raise TypeError(f"{owner} takes {cls.__name__}, got {type(value).__name__}")
+        if not isinstance(value, Mapping):
+            raise TypeError(f"options of {owner} must be a {cls.__name__} or a mapping, got {type(value).__name__}")
+        unknown = sorted(set(value) - set(cls.known()))
+        if unknown:
+            raise ValueError(f"unknown option(s) {unknown} for {owner}; known: {sorted(cls.known())}")
+        return cls(**dict(value))
+
+    def replace(self, **changes) -> "EstimatorOptions":
+        """A copy with some options changed (checked like the constructor)."""
+        unknown = sorted(set(changes) - set(self.known()))
+        if unknown:
+            raise ValueError(f"unknown option(s) {unknown}; known: {sorted(self.known())}")
+        return replace(self, **changes)
