@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 from ._common import add_limits_option, add_model_option, add_overwrite_option, load_model, require
 
