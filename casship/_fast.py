@@ -4,15 +4,17 @@ Calling a Function with numpy arrays converts every argument to ``DM`` and every
 which costs tens of microseconds per call. :class:`BufferedCall` instead binds preallocated numpy
 arrays once, addressed by the Function's input and output *names*; a call only triggers the
 evaluation. :func:`run_fold` runs a folded step Function (``mapaccum``) over a long record in
-pieces through such buffers, and :func:`compile_function` compiles a Function to C.
+pieces through such buffers; :func:`compile_function` (from :mod:`casship.compile`) compiles a Function
+to C through the on-disk cache.
 """
 from __future__ import annotations
 
-import tempfile
 from typing import Callable, Mapping
 
 import casadi as ca
 import numpy as np
+
+from .compile import compile_function  # noqa: F401  (the one compile path, re-exported)
 
 __all__ = ["BufferedCall", "compile_function", "run_fold", "DUPLICATE_NAMES"]
 
@@ -135,21 +137,6 @@ class BufferedCall:
             if status != 0:
                 raise RuntimeError(f"evaluation of {self.fun.name()} failed (status {status})")
         return self.res
-
-
-def compile_function(fun: ca.Function) -> ca.Function:
-    """``fun`` compiled to C and loaded (CasADi JIT through the system C compiler, ``-O2``).
-
-    Raises ``RuntimeError`` naming the Function when no working C compiler is found.
-    """
-    ins = fun.sx_in() if fun.is_a("SXFunction") else fun.mx_in()
-    opts = {"jit": True, "compiler": "shell", "jit_cleanup": True, **DUPLICATE_NAMES,
-            "jit_options": {"flags": ["-O2"], "directory": tempfile.gettempdir()}}
-    try:
-        return ca.Function(f"{fun.name()}_jit", ins, fun.call(ins), fun.name_in(), fun.name_out(), opts)
-    except RuntimeError as exc:
-        raise RuntimeError(f"option 'jit': compiling {fun.name()!r} to C failed (is a C compiler "
-                           f"installed?): {str(exc).splitlines()[-1]}") from None
 
 
 def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, memory: Mapping[str, np.ndarray],

@@ -296,6 +296,18 @@ def _c_name(name: str) -> str:
     return ident if ident[0].isalpha() else f"m_{ident}"
 
 
+def _check_finite_constants(model: str, kind: str, names: Sequence[str], exprs: ca.SX, args) -> None:
+    """Reject expressions holding a NaN or infinite constant (e.g. ``math.cos`` applied to a CasADi
+    symbol returns NaN), naming the state or output whose expression holds it."""
+    for i, name in enumerate(names):
+        fun = ca.Function("check", args, [exprs[i]])
+        for k in range(fun.n_instructions()):
+            if fun.instruction_id(k) == ca.OP_CONST and not np.isfinite(fun.instruction_constant(k)):
+                raise ValueError(f"model {model!r}: the {kind} {name!r} contains the constant "
+                                 f"{fun.instruction_constant(k)} (a math/numpy function applied to a CasADi symbol? "
+                                 "use casadi's functions, e.g. ca.cos)")
+
+
 def _vec(symbols: Iterable[ca.SX]) -> ca.SX:
     symbols = list(symbols)
     return ca.vertcat(*symbols) if symbols else ca.SX(0, 1)
@@ -368,6 +380,8 @@ class Model:
                              f"{sorted(str(s) for s in free)}")
         if ca.depends_on(y, w):
             raise ValueError(f"model {self.name!r}: outputs must not depend on process noise")
+        _check_finite_constants(self.name, "equation of state", self.state_names, xdot, [x, u, p, w])
+        _check_finite_constants(self.name, "output", self.output_names, y, [x, u, p])
         self.x, self.u, self.p, self.w = x, u, p, w
         self.xdot, self.y = xdot, y
         self.f = ca.Function("f", [x, u, p, w], [xdot], ["x", "u", "p", "w"], ["xdot"])

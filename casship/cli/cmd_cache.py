@@ -1,0 +1,28 @@
+"""``casship cache info`` / ``casship cache clear``: the on-disk cache of compiled code (:mod:`casship.compile`)."""
+from __future__ import annotations
+
+
+def register(sub) -> None:
+    p = sub.add_parser("cache", help="show or empty the cache of compiled C code (option jit)",
+                       description="Compiled steps, folds and likelihoods are kept as shared libraries in a "
+                                   "cache directory ($CASSHIP_CACHE_DIR, else $XDG_CACHE_HOME/casship or "
+                                   "~/.cache/casship), so that a new process does not compile them again.")
+    p.add_argument("action", choices=("info", "clear"), help="info: where, how many entries, how big; "
+                                                             "clear: delete every compiled library")
+    p.add_argument("--dir", default=None, help="the cache directory (default: as described above)")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..compile import cache_info, clear_cache
+
+    if args.action == "info":
+        print(cache_info(args.dir).summary())
+        return 0
+    info = cache_info(args.dir)
+    if info.path is None:
+        print("compile cache is off; nothing to clear")
+        return 0
+    removed = clear_cache(args.dir)
+    print(f"removed {removed} file(s) ({info.bytes / 1e6:.1f} MB) from {info.path}")
+    return 0
