@@ -13,6 +13,7 @@ import numpy as np
 
 from ..._fast import DUPLICATE_NAMES
 from ...data import Dataset, Gaussian, as_cov
+from ...progress import track
 from ...discretize import DiscreteModel, discretize
 from ..augmented import augment, augmented_noise, augmented_prior
 from ..base import Estimator, per_sample
@@ -179,7 +180,7 @@ class MHE(Estimator):
         return super().prepare(data, self._full_params(p)[self._kept_params])
 
     # -- the estimator contract ---------------------------------------------------------------------
-    def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None, progress=None) -> FilterResult:
+    def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
         """Moving-horizon estimates over a record (one window solve per sample).
 
         Parameters
@@ -191,8 +192,6 @@ class MHE(Estimator):
         p : array or mapping, optional
             Parameters of the original model (estimated ones: prior means).
         seed : ignored (the MHE draws nothing)
-        progress : callable, optional
-            ``progress(k, n)`` called after each sample.
 
         Returns
         -------
@@ -208,14 +207,12 @@ class MHE(Estimator):
         nx = self.model.nx
         out = {k: [] for k in ("x", "P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll")}
         U, Up, Y, M, dt = arrays["u"].T, arrays["u_prev"].T, arrays["y"].T, arrays["mask"].T, arrays["dt"][0]
-        for k in range(n):
+        for k in track(range(n), f"MHE (N = {self.horizon}, {self.options.solver})", unit="sample"):
             x, P, info = engine.advance(Up[k], U[k], Y[k], M[k], dt[k], f"row {k} (t = {data.t[k]:g} s)")
             out["x"].append(x.copy())
             out["P"].append(P.reshape(nx, nx))
             for key in ("x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll"):
                 out[key].append(info[key])
-            if progress is not None:
-                progress(k + 1, n)
         out = {k: np.array(v) for k, v in out.items()}
         out["accepted"] = np.ones(n)
         return self.result(data, arrays, out)
