@@ -128,10 +128,11 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
         "aekf_params": taylor["aekf"], "mle_params": taylor["mle"], "mle_free": taylor["free"],
         "mle_std_errors": {k: taylor["fit"].std_errors[k] for k in taylor["free"]},
         "mle_z_scores": {k: (taylor["mle"][k] - truth_p[k]) / taylor["fit"].std_errors[k] for k in taylor["free"]},
-        "mle_iterations": taylor["fit"].iterations, "smoothing": smoothing, "table2": taylor["table2"],
+        "mle_iterations": taylor["fit"].iterations, "mle_status": taylor["fit"].status, "smoothing": smoothing, "table2": taylor["table2"],
         "zigzag": taylor["zigzag"], "errors": taylor["errors"], "convergence": taylor["conv"],
         "claim": taylor["claim"], "readings": readings, "headline": main,
         "mmg": {"u0": mmg["u0"], "n0": mmg["n0"], "aekf_params": mmg["aekf"], "mle_params": mmg["mle"],
+                "mle_status": mmg["fit"].status, "mle_iterations": mmg["fit"].iterations,
                 "table2": mmg["table2"], "zigzag": mmg["zigzag"], "errors": mmg["errors"],
                 "convergence": mmg["conv"], "claim": mmg["claim"], "smoothing": [i for _, i in mmg["pre"]]},
         "departures": [d.__dict__ for d in deps], "figures": sorted(p.name for p in out.glob("*.png"))})
@@ -169,6 +170,8 @@ def _report(out, quick, duration, cases, t1, t2, zz, conv, deps) -> None:
             for kind, err in errs.items():
                 if err:
                     rep.add(f"{c['label']}, {m} {kind} failed: {err}")
+        rep.add(f"{c['label']}, ML fit: status {c['fit'].status}, {c['fit'].iterations} iterations, free "
+                f"{', '.join(c['free'])}.")
         if c["fit"].warnings:
             rep.add(f"{c['label']}, ML fit warnings: " + "; ".join(c["fit"].warnings))
     rep.departures(deps, "Headline numbers for the effects: the augmented EKF's Table 2 errors on the Taylor truth "
