@@ -6,8 +6,9 @@ A fixed-step discretisation (``euler``, ``rk4``) predicts over a sample interval
 stability limit of the discretisation at the start (:func:`casship.validity.stable_step` times the
 sub-steps; no limit for adaptive or exact discretisations). A longer gap raises ``ValueError``
 naming it (``on_gap="raise"``, the default) or, with ``on_gap="bridge"``, is bridged by
-prediction-only steps no longer than the limit (the covariance grows with the process noise over
-the gap) with a warning; in a batch run the bridging rows appear in the result.
+prediction-only steps no longer than half the limit (at the limit itself a fixed-step prediction
+no longer damps the mode; at half of it rk4 damps it by 0.29 per step), the covariance propagated over
+the gap with the process noise, with a warning; in a batch run the bridging rows appear in the result.
 """
 from __future__ import annotations
 
@@ -18,7 +19,22 @@ import numpy as np
 from ..data import Dataset
 from ..validity import stable_step
 
-__all__ = ["gap_limit", "bridge_gaps"]
+__all__ = ["gap_limit", "bridge_gaps", "bridge_pieces"]
+
+
+def bridge_pieces(gap: float, limit: float) -> int:
+    """Number of equal prediction steps that bridge ``gap`` [s], each at most half of ``limit``.
+
+    Parameters
+    ----------
+    gap, limit : float
+        The interval and the one-step limit [s].
+
+    Returns
+    -------
+    int
+    """
+    return int(np.ceil(gap / (0.5 * limit)))
 
 
 def gap_limit(est, x, u, p=None) -> float:
@@ -98,7 +114,7 @@ def bridge_gaps(est, data: Dataset, x, p=None) -> Dataset:
         raise ValueError(_message(est, where, float(data.dt[k]), limit))
     inserted = []
     for k in long:
-        pieces = int(np.ceil(data.dt[k] / limit))
+        pieces = bridge_pieces(float(data.dt[k]), limit)
         inserted.append(data.t[k] + np.arange(1, pieces) * (data.dt[k] / pieces))
     t_new = np.concatenate(inserted)
     t = np.concatenate([data.t, t_new])

@@ -133,7 +133,7 @@ class StepEngine:
 
     def _bridged(self, y, dt, u_prev, u) -> bool:
         """A gap longer than the one-step limit: raise, or predict across it in shorter steps."""
-        from .gaps import _message, gap_limit
+        from .gaps import _message, bridge_pieces, gap_limit
 
         x = self._x[1 - self._cur] if self.samples else self._prior.mean
         held = self._u if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
@@ -146,7 +146,7 @@ class StepEngine:
             raise ValueError(_message(self._est, where, float(dt), limit))
         import warnings
 
-        pieces = int(np.ceil(dt / limit))
+        pieces = bridge_pieces(float(dt), limit)
         warnings.warn(f"{self._est.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
                       f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=3)
         nothing = np.full(self._ny, np.nan)
