@@ -395,3 +395,12 @@ def test_results_read_short(tmp_path):
     labels = [(ax.get_xlabel(), ax.get_ylabel()) for ax in fig.axes]
     assert all("[" in x and "[" in y for x, y in labels), labels
     assert res.plot(tmp_path / "replay.png").stat().st_size > 10_000
+
+
+def test_identify_refuses_to_overwrite_a_fit(capsys, nomoto_record, tmp_path):
+    path, _ = nomoto_record
+    out = tmp_path / "fit.json"
+    out.write_text("{}")
+    _fails(capsys, ["identify", str(path), "--model", "nomoto1", "--free", "K", "--out", str(out)],
+           "--out", "fit.json: file exists; pass --overwrite")
+    assert out.read_text() == "{}"
