@@ -20,7 +20,7 @@ import numpy as np
 from . import models
 from .data import Gaussian
 from .discretize import discretize
-from .estimators import EKF, UKF, rts_smooth
+from .estimators import EKF, UKF
 from .progress import progress
 from .simulate import measure, simulate
 
@@ -131,7 +131,7 @@ def _filters(ship, data, truth, cfg: DemoConfig):
         out[name] = est.filter(data, prior)
         out[name + "_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    out["EKF+RTS"] = rts_smooth(out["EKF"])
+    out["EKF+RTS"] = ekf.smooth(data, prior)          # filter and backward pass
     out["EKF+RTS_s"] = time.perf_counter() - t0
     rmse = {name: {s: _rmse(out[name][s], truth[s]) for s in ("u", "v", "r")} for name in ("EKF", "UKF", "EKF+RTS")}
     health = {name: bool(out[name].health().ok) for name in ("EKF", "UKF")}

@@ -208,7 +208,7 @@ def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
     return Y[:, :n].T.reshape(n, model.ny)
 
 
-def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", max_step: float | None = None,
+def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = None, max_step: float | None = None,
              w=None, options: dict | None = None, check_limits: bool = True) -> Trajectory:
     """Simulate ``model`` from ``x0`` on the time grid ``t``.
 
@@ -225,9 +225,11 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     p : array_like or mapping, optional
         Parameters (nominal by default).
     method : {"rk4", "euler", "cvodes"}
-        Integration method per interval (see :func:`casship.discretize`). With ``"cvodes"`` and
-        inputs (and noise) constant over the record, one adaptive integration with outputs on the
-        grid replaces the restart at every sample.
+        Integration method per interval (see :func:`casship.discretize`; default ``"rk4"``). With
+        ``"cvodes"`` and inputs (and noise) constant over the record, one adaptive integration with
+        outputs on the grid replaces the restart at every sample. A discrete-time model
+        (``ModelBuilder(name, dt=...)``) takes no method: it steps ``x[k+1] = F(x, u, p, w)`` on a
+        grid of its own ``dt``.
     max_step : float, optional
         Largest explicit sub-step [s]; by default one sub-step per interval.
     w : array (N, nw), optional
@@ -274,10 +276,19 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     dt = np.diff(t)
     if max_step is not None and not (np.isfinite(max_step) and max_step > 0):
         raise ValueError(f"max_step must be a positive finite number, got {max_step}")
-    substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
-    key = ("discretize", method, substeps, tuple(sorted((options or {}).items())))
-    dmodel = model._cached(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
-                                                   substeps=substeps, options=options))
+    if model.dt is not None:
+        if method is not None or max_step is not None or options:
+            raise ValueError(f"model {model.name!r} is discrete-time: it steps x[k+1] = F(x, u, p, w) itself "
+                             "(no method, max_step or integrator options)")
+        dmodel = model._cached(("discretize", "discrete"), lambda: discretize(model))
+        dmodel.check_steps(dt, t)
+        method, substeps = "discrete", 1      # it steps itself: no integrator stability limit to check
+    else:
+        method = "rk4" if method is None else method
+        substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
+        key = ("discretize", method, substeps, tuple(sorted((options or {}).items())))
+        dmodel = model._cached(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
+                                                       substeps=substeps, options=options))
     W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
     if check_limits:

@@ -13,7 +13,6 @@ Estimators are looked up by name in :data:`casship.estimators.ESTIMATORS` (``kf`
 from __future__ import annotations
 
 import argparse
-import inspect
 import json
 from pathlib import Path
 
@@ -59,7 +58,8 @@ def register(sub) -> None:
     add_model_option(p)
     p.add_argument("--estimator", default="ekf", help="estimator name (see --list)")
     p.add_argument("--list", action="store_true", help="list the estimators and presets and exit")
-    p.add_argument("--smooth", action="store_true", help="RTS fixed-interval smoothing after filtering")
+    p.add_argument("--smooth", action="store_true",
+                   help="smooth instead of filter (est.smooth: RTS for the Kalman filters, full information for mhe)")
     p.add_argument("--preset", default=None, choices=sorted(PRESETS), help="column/noise preset")
     p.add_argument("--columns", default=None,
                    help="NEW=SOURCE[:UNIT],... CSV columns to read and convert to SI (e.g. psi=heading:deg); "
@@ -221,7 +221,7 @@ def filter_file(args, model=None):
     """Run the command's estimation; returns ``(summary, result, data, measured)``."""
     from ..data import Gaussian
     from ..discretize import discretize
-    from ..estimators import ESTIMATORS, rts_smooth
+    from ..estimators import ESTIMATORS
     from ..frames import wgs84_radii
     from ..validity import check_inputs, check_step
 
@@ -308,10 +308,7 @@ def filter_file(args, model=None):
         k = int(np.argmax(data.dt))
         check_step(model, float(data.dt[k]), x0, U[0] if model.nu else np.zeros(0), model.params(),
                    args.method, where=f" (the data step from t = {data.t[k]:g} to {data.t[k + 1]:g} s)")
-    kwargs = {"seed": args.seed} if "seed" in inspect.signature(est.filter).parameters else {}
-    result = est.filter(data, prior, **kwargs)
-    if args.smooth:
-        result = rts_smooth(result)
+    result = (est.smooth if args.smooth else est.filter)(data, prior, seed=args.seed)
     health = result.health()
     summary = {"model": args.model, "estimator": result.estimator, "rows": len(data), "dt_s": dt,
                "measured": list(meas), "updates": int((result.n_measured > 0).sum()),

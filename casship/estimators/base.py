@@ -74,6 +74,7 @@ class Estimator:
     FOLD_CHUNK = 512
     continuous = False       # Q and R enter as spectral densities Q dt, R dt
     stochastic = False       # draws random numbers (reproducible with ``seed``)
+    linear = False           # needs a model linear in states, inputs and noise
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured: Sequence[str] | None = None, options=None):
         if not isinstance(dmodel, DiscreteModel):
