@@ -3,7 +3,8 @@
 Problem: the SOG/COG EKF case of ``bench_filters`` (Fossen & Fossen 2021 model, 50 Hz, GNSS at 5 Hz,
 NaN rows predict only). casship's EKF step Function is exported with ``export_estimator``, compiled
 with ``gcc -O2 -ffp-contract=off`` together with a small driver that loops over the record the way
-an onboard program would (the carry copied back after every call), and timed in C with the process
+an onboard program would (two copies of the memory ``x, P`` that swap roles after every call; the
+step exported lean, with ``x`` and ``P`` only), and timed in C with the process
 CPU clock (median of repeats). Peers: filterpy's ``ExtendedKalmanFilter`` on the same discrete model
 with a hand-written Jacobian (as in ``bench_filters``) and, for reference, casship's own batch filter
 (the same step folded by CasADi's virtual machine). Accuracy: every filtered state of the C loop
@@ -33,7 +34,8 @@ DRIVER = r"""#define _POSIX_C_SOURCE 199309L
 
 #define NX bench_ekf_NX
 #define NY bench_ekf_NY
-#define NC bench_ekf_NCARRY
+#define SX bench_ekf_SIZE_x
+#define SP bench_ekf_SIZE_P
 
 static int cmp(const void *a, const void *b) {
     double d = *(const double *)a - *(const double *)b;
@@ -41,32 +43,35 @@ static int cmp(const void *a, const void *b) {
 }
 
 int main(int argc, char **argv) {
-    /* input file: n, repeats, prior carry (NC), then per sample y (NY), mask (NY), dt */
+    /* input file: n, repeats, prior x (SX) and P (SP), then per sample y (NY), mask (NY), dt */
     FILE *in = fopen(argv[1], "rb"), *out = fopen(argv[2], "wb");
-    double head[2], prior[NC], times[64];
+    double head[2], prior[SX + SP], times[64];
     long n, k, r, repeats;
+    int now;
     if (!in || !out || fread(head, sizeof(double), 2, in) != 2) return 2;
     n = (long)head[0]; repeats = (long)head[1];
-    if (repeats > 64 || fread(prior, sizeof(double), NC, in) != NC) return 2;
+    if (repeats > 64 || fread(prior, sizeof(double), SX + SP, in) != SX + SP) return 2;
     double *rec = malloc(sizeof(double) * n * (2 * NY + 1)), *xs = malloc(sizeof(double) * n * NX);
     if ((long)fread(rec, sizeof(double), n * (2 * NY + 1), in) != n * (2 * NY + 1)) return 2;
-    static double carry[NC], next[NC], x[NX], P[NX * NX], xp[NX], Pp[NX * NX], C[NX * NX];
-    static double e[NY], S[NY * NY], nis, ll, accepted, dt, gate = 1e300, none[1];
+    static double x[2][SX], P[2][SP], dt, gate = 1e300, none[1];
     static casadi_int iw[bench_ekf_SZ_IW + 1];
     static double w[bench_ekf_SZ_W + 1];
-    const double *arg[bench_ekf_SZ_ARG] = {carry, none, none, 0, 0, &dt, bench_ekf_p, bench_ekf_Q, bench_ekf_R, &gate};
-    double *res[bench_ekf_SZ_RES] = {next, x, P, xp, Pp, C, e, S, &nis, &ll, &accepted};
+    const double *arg[bench_ekf_SZ_ARG] = {0, 0, none, none, 0, 0, &dt, bench_ekf_p, bench_ekf_Q, bench_ekf_R, &gate};
+    double *res[bench_ekf_SZ_RES] = {0, 0};
     int mem = bench_ekf_checkout();
     for (r = 0; r < repeats; r++) {
         struct timespec t0, t1;
-        memcpy(carry, prior, sizeof(prior));
+        memcpy(x[0], prior, sizeof(double) * SX);
+        memcpy(P[0], prior + SX, sizeof(double) * SP);
+        now = 0;
         clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t0);
         for (k = 0; k < n; k++) {
             const double *row = rec + k * (2 * NY + 1);
-            arg[3] = row; arg[4] = row + NY; dt = row[2 * NY];
+            arg[4] = row; arg[5] = row + NY; dt = row[2 * NY];
+            arg[0] = x[now]; arg[1] = P[now]; res[0] = x[1 - now]; res[1] = P[1 - now];
             if (bench_ekf(arg, res, iw, w, mem)) return 1;
-            memcpy(carry, next, sizeof(next));
-            memcpy(xs + k * NX, x, sizeof(x));
+            now = 1 - now;
+            memcpy(xs + k * NX, x[now], sizeof(double) * NX);
         }
         clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t1);
         times[r] = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
@@ -100,7 +105,8 @@ def main(quick: bool = False) -> list[dict]:
         (folder / "driver.c").write_text(DRIVER)
         exe = compile_c([folder / "driver.c", files.source], folder / "driver",
                         flags=("-O2", "-ffp-contract=off", "-std=c99", f"-I{folder}"))
-        np.concatenate([[n, repeats], ekf.carry_from(prior), record.ravel()]).astype(np.float64).tofile(
+        memory = ekf.memory_from(prior)
+        np.concatenate([[n, repeats], memory["x"], memory["P"].ravel(order="F"), record.ravel()]).astype(np.float64).tofile(
             folder / "in.bin")
         subprocess.run([str(exe), str(folder / "in.bin"), str(folder / "out.bin")], check=True)
         out = np.fromfile(folder / "out.bin", dtype=np.float64)

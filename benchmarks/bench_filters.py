@@ -15,8 +15,9 @@ Linear case (KF, RTS): the Tomera (2011) double-integrator model (x, y, psi) at 
 ``pykalman.KalmanFilter.filter`` / ``.smooth``.
 
 Batch = the whole record in one call (casship: ``filter`` through the folded step; peers: their
-loop). Online = one Python call per sample (casship: ``run.update`` of ``est.online(prior)``, and
-the stateless ``step(x, P, ...)``, through preallocated buffers). casship runs twice: with the step
+loop). Online = one Python call per sample (casship: ``run.update`` of ``est.online(prior)``, one
+compiled call through bound buffers; with the lean step that returns ``x, P`` only, the default,
+and with every diagnostic, ``options={"outputs": "all"}``). casship runs twice: with the step
 evaluated by CasADi's virtual machine ("interpreted", the default) and compiled to C by the system
 compiler (option ``jit``). Times are medians after one warm-up run, so folds are built and compiled
 already; the EnKF rows also report the first run (``first_run_s``, including compilation). Times
@@ -32,6 +33,7 @@ import time
 import numpy as np
 
 import casship as cs
+from casship.estimators.rts import rts_smooth
 from benchmarks import format_table, median_time, row, skipped_row
 
 DT, GNSS_HZ = 0.02, 5.0
@@ -141,18 +143,6 @@ def _online(est, data, prior):
     return out
 
 
-def _stateless(est, data, prior):
-    """The stateless ``step(x, P, ...)`` call per sample."""
-    Y = data.matrix(est.measured)
-    x, P = prior.mean, prior.cov
-    none = np.zeros(0)
-    out = np.empty((len(data), prior.mean.size))
-    for k in range(len(data)):
-        x, P, _ = est.step(x, P, none, Y[k], 0.0 if k == 0 else DT)
-        out[k] = x
-    return out
-
-
 def _rmse(x, traj):
     return np.sqrt(np.mean((x[:, :2] - traj.x[:, :2]) ** 2))
 
@@ -195,12 +185,11 @@ def _nonlinear_rows(quick: bool) -> list[dict]:
             t_on = median_time(lambda: _online(est, data, prior), repeat=rep)
             rows.append(_per_step(row(f"{name} online (run.update per sample), {how}, {label}", t_on, peer_name,
                                       t_fp, check), n))
-            if jit:
-                stateless = _stateless(est, data, prior)
-                t_st = median_time(lambda: _stateless(est, data, prior), repeat=max(1, rep // 2))
-                rows.append(_per_step(row(f"{name} online (step(x, P, ...) per sample), {how}, {label}", t_st,
-                                          peer_name, t_fp,
-                                          f"max |x_step - x_batch| = {np.abs(stateless - res.x).max():.1e}"), n))
+            full = cls(dm, Q_SOG, R_SOG, options={"jit": jit, "outputs": "all"})
+            rich = _online(full, data, prior)
+            t_full = median_time(lambda: _online(full, data, prior), repeat=rep)
+            rows.append(_per_step(row(f"{name} online, all diagnostics (outputs='all'), {how}, {label}", t_full,
+                                      peer_name, t_fp, f"max |x_all - x_lean| = {np.abs(rich - online).max():.1e}"), n))
 
     N = 100
     peer = _filterpy_enkf(Y, prior, N, 3)
@@ -252,19 +241,19 @@ def _linear_rows(quick: bool) -> list[dict]:
     t_cs = median_time(lambda: kf.filter(data, prior), repeat=rep)
     t_pk = median_time(lambda: pk.filter(Y), repeat=rep)
     rows = [_per_step(row(f"KF batch, {label}", t_cs, "pykalman KalmanFilter.filter", t_pk, check), n)]
-    sm = cs.rts_smooth(res)
+    sm = kf.smooth(data, prior)
     xs, Ps = pk.smooth(Y)
     check = f"max |xs - xs_pykalman| = {np.abs(sm.x - xs).max():.1e}, |Ps - Ps_pk| = {np.abs(sm.P - Ps).max():.1e}"
-    t_cs = median_time(lambda: cs.rts_smooth(kf.filter(data, prior)), repeat=rep)
+    t_cs = median_time(lambda: kf.smooth(data, prior), repeat=rep)
     t_pk = median_time(lambda: pk.smooth(Y), repeat=rep)
     rows.append(_per_step(row(f"KF + RTS smoother, {label}", t_cs, "pykalman KalmanFilter.smooth", t_pk, check), n))
-    t_rts = median_time(lambda: cs.rts_smooth(res), repeat=rep)
+    t_rts = median_time(lambda: rts_smooth(res), repeat=rep)
     t_pk_backward = max(t_pk - median_time(lambda: pk.filter(Y), repeat=rep), 0.0)
     rows.append(_per_step(row(f"RTS backward pass only, interpreted, {label}", t_rts,
                               "pykalman smooth minus filter time", t_pk_backward,
                               "same smoothed estimates as the row above"), n))
-    fast = cs.rts_smooth(res, jit=True)
-    t_rts = median_time(lambda: cs.rts_smooth(res, jit=True), repeat=rep)
+    fast = rts_smooth(res, jit=True)
+    t_rts = median_time(lambda: rts_smooth(res, jit=True), repeat=rep)
     rows.append(_per_step(row(f"RTS backward pass only, compiled (jit), {label}", t_rts,
                               "pykalman smooth minus filter time", t_pk_backward,
                               f"max |xs - xs_pykalman| = {np.abs(fast.x - xs).max():.1e}"), n))

@@ -76,13 +76,12 @@ def run_casship(dm, data, prior, Q, R, N, solver):
     model = dm.model
     U = data.matrix(model.input_names)
     Y = data.matrix(mhe.measured)
-    x, P = prior.mean, prior.cov
+    run = mhe.online(prior, u=U[0])
     X, times = np.empty((len(data), model.nx)), []
     for k in range(len(data)):
         t0 = time.perf_counter()
-        x, P, _ = mhe.step(x, P, U[max(k - 1, 0)], Y[k], DT, u=U[k])
+        X[k] = run.update(Y[k], DT if k else 0.0, u_prev=U[max(k - 1, 0)], u=U[k])
         times.append(time.perf_counter() - t0)
-        X[k] = x
     return X, np.median(times[N:])
 
 

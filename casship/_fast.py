@@ -169,20 +169,24 @@ def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, me
     memory : dict
         The memory after the last sample.
     outputs : dict name -> array
-        Each kept output over the samples, with a sample's columns at ``[:, k*c:(k+1)*c]``.
+        Each kept output per sample, shape ``(n, rows, cols)`` (a view of a contiguous array: the
+        pieces are copied in one block each).
     """
     pad = dict(pad or {})
     mem = {k: np.array(v, dtype=float) for k, v in memory.items()}
-    widths = None
-    outs, start, primed = {}, 0, set()
+    shapes = None
+    outs, flat, start, primed = {}, {}, 0, set()
     while start < n:
         size = min(chunk, 1 << (n - start - 1).bit_length())
         take = min(size, n - start)
         call = fold_call(size)
-        if widths is None:
+        if shapes is None:
             keep = list(call.names_out if keep is None else keep)
-            widths = {k: call.out(k).shape[1] // size for k in call.names_out}
-            outs = {k: np.empty((call.out(k).shape[0], widths[k] * n), order="F") for k in keep}
+            shapes = {k: (call.out(k).shape[0], call.out(k).shape[1] // size) for k in call.names_out}
+            for k in keep:
+                r, c = shapes[k]
+                block = np.empty((n, c, r))           # sample k's matrix in column-major order, as CasADi has it
+                outs[k], flat[k] = block.transpose(0, 2, 1), block.reshape(-1)
         if id(call) not in primed:
             for k, v in constants.items():
                 call[k] = v
@@ -200,10 +204,13 @@ def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, me
                     view[:, take * c:] = np.tile(src[:, (start + take - 1) * c:(start + take) * c], (1, size - take))
         call()
         for k in keep:
-            c = widths[k]
-            outs[k][:, start * c:(start + take) * c] = call.out(k)[:, :take * c]
+            r, c = shapes[k]
+            flat[k][start * r * c:(start + take) * r * c] = call.flat_out(k)[:take * r * c]
         for k in mem:
-            c = widths[k]
+            c = shapes[k][1]
             mem[k] = call.out(k)[:, (take - 1) * c:take * c].copy()
         start += take
+    for k in flat:                                # read-only: results may share them without a copy
+        for a in (flat[k].base, flat[k], outs[k]):
+            a.setflags(write=False)
     return mem, outs

@@ -50,10 +50,21 @@ class DiscreteModel:
         ``F_nominal(x, u, p, w) -> xf`` with ``dt`` bound to the nominal step.
     """
 
-    def __init__(self, model: Model, dt: float, method: str = "rk4", substeps: int = 1,
+    def __init__(self, model: Model, dt: float | None = None, method: str | None = None, substeps: int = 1,
                  options: dict | None = None):
-        if method not in METHODS:
-            raise ValueError(f"unknown discretisation method {method!r}; use one of {METHODS}")
+        if model.dt is not None:                      # a discrete-time model: its own step, exactly
+            if dt is not None and not np.isclose(float(dt), model.dt, rtol=1e-12, atol=0.0):
+                raise ValueError(f"model {model.name!r} is discrete-time with dt = {model.dt:g} s; got dt = {dt}")
+            if method not in (None, "discrete") or substeps != 1 or options:
+                raise ValueError(f"model {model.name!r} is discrete-time: it has its own step (no method, "
+                                 f"substeps or integrator options), got method={method!r}")
+            dt, method = model.dt, "discrete"
+        else:
+            method = "rk4" if method is None else method
+            if method not in METHODS:
+                raise ValueError(f"unknown discretisation method {method!r}; use one of {METHODS}")
+            if dt is None:
+                raise ValueError(f"model {model.name!r} is continuous-time: give the step dt")
         dt = float(dt)
         if not np.isfinite(dt) or dt <= 0:
             raise ValueError(f"dt must be a positive finite number, got {dt}")
@@ -71,6 +82,9 @@ class DiscreteModel:
         h = sym.sym("dt")
         if method == "cvodes":
             xf = self._cvodes(x, u, p, w, h, options or {})
+        elif method == "discrete":
+            # x[k+1] = x + dt f (f is the model's rate over its step); a step of length 0 is no step
+            xf = ca.if_else(h > 0, x + dt * model.f(x, u, p, w), x)
         else:
             xf = x
             hs = h / substeps
@@ -108,12 +122,43 @@ class DiscreteModel:
         """Pickle as the recipe (model, dt, method, substeps, options); rebuilt on loading."""
         return DiscreteModel, (self.model, self.dt, self.method, self.substeps, self._options or None)
 
-    def require_continuous(self, what: str) -> None:
-        """Raise ``ValueError`` if ``what`` needs the continuous model and this one has none."""
+    @property
+    def discrete(self) -> bool:
+        """True for a model written in discrete time (:class:`~casship.ModelBuilder` with ``dt``)."""
+        return self.method == "discrete"
 
-    def check_steps(self, dt: np.ndarray, t: np.ndarray | None = None) -> None:
-        """Check the time steps of a record against this discretisation (any positive step works
-        for a discretised continuous model)."""
+    def require_continuous(self, what: str) -> None:
+        """Raise ``ValueError`` if ``what`` needs a continuous-time model and this one is discrete-time.
+
+        Parameters
+        ----------
+        what : str
+            The feature that needs it, for the message.
+        """
+        if self.discrete:
+            raise ValueError(f"{what} needs a continuous-time model; {self.model.name!r} is discrete-time "
+                             f"(dt = {self.dt:g} s)")
+
+    def check_steps(self, dt, t=None) -> None:
+        """Check the time steps of a record: any positive step for a discretised continuous model,
+        the model's own step for a discrete-time one (``ValueError`` naming the row otherwise).
+
+        Parameters
+        ----------
+        dt : array
+            The steps between consecutive samples.
+        t : array, optional
+            The time stamps (for the message).
+        """
+        if not self.discrete:
+            return
+        dt = np.asarray(dt, dtype=float)
+        bad = np.flatnonzero(~np.isclose(dt, self.dt, rtol=1e-6, atol=0.0))
+        if bad.size:
+            k = int(bad[0]) + 1
+            when = f" (t = {t[k]:g} s)" if t is not None else ""
+            raise ValueError(f"discrete-time model {self.model.name!r} steps dt = {self.dt:g} s; row {k}{when} "
+                             f"comes {dt[k - 1]:g} s after the previous one")
 
     # -- convenience ----------------------------------------------------------------------------------
     @property
@@ -156,26 +201,31 @@ class DiscreteModel:
         Uses Van Loan's method on the exact linearisation at ``(x, u, p)``; compare with the
         zero-order-hold convention ``G Qd G'`` that the filters use when ``w`` is held over a step.
         """
+        self.require_continuous("process_noise (continuous white noise)")
         m = self.model
         p = m.params() if p is None else p
         A, _, _, G = m.f_jac(x, u, p, np.zeros(m.nw))
         return van_loan(np.array(A), np.array(G), np.atleast_2d(Qc), self.dt if dt is None else dt)[1]
 
 
-def discretize(model: Model, dt: float, method: str = "rk4", substeps: int = 1,
+def discretize(model: Model, dt: float | None = None, method: str | None = None, substeps: int = 1,
                options: dict | None = None) -> DiscreteModel:
-    """Discretise ``model`` with step ``dt``.
+    """Discretise ``model`` with step ``dt`` (a discrete-time model: its own step).
 
     Parameters
     ----------
     model : Model
     dt : float
-        Nominal step [s]. The step Function also accepts other ``dt`` values.
-    method : {"euler", "rk4", "cvodes"}
-        Explicit Euler (as in the seed papers), classical RK4 with ``substeps`` sub-steps, or
-        CasADi's adaptive CVODES integrator (tolerances 1e-10 unless ``options`` say otherwise).
+        Nominal step [s]. The step Function also accepts other ``dt`` values. For a discrete-time
+        model (``ModelBuilder(name, dt=...)``) it may be left out and must equal the model's.
+    method : {"rk4", "euler", "cvodes"}
+        Classical RK4 with ``substeps`` sub-steps (default), explicit Euler (as in the seed papers),
+        or CasADi's adaptive CVODES integrator (tolerances 1e-10 unless ``options`` say otherwise).
+        A discrete-time model takes none (its method is ``"discrete"``).
     substeps : int
         Number of equal sub-steps for the explicit methods.
+    options : dict, optional
+        Integrator options for ``"cvodes"``.
 
     Examples
     --------

@@ -37,8 +37,20 @@ def _vector(model: Model, value, kind: str) -> np.ndarray:
 def output_map(model: Model, outputs: Sequence[str] | None = None) -> tuple[tuple[str, ...], ca.Function]:
     """Names and Function ``y(x, u, p)`` of the selected outputs.
 
-    ``outputs`` may name model outputs or states (a state name not declared as an output is
-    measured directly). By default: the model's outputs, or all states if it declares none.
+    Parameters
+    ----------
+    model : Model
+        The model.
+    outputs : sequence of str, optional
+        Model outputs or states (a state name not declared as an output is measured directly).
+        By default: the model's outputs, or all states if it declares none.
+
+    Returns
+    -------
+    names : tuple of str
+        The selected outputs.
+    function : casadi.Function
+        ``y_sel(x, u, p) -> (y, C, D)`` with the outputs and their Jacobians.
     """
     if outputs is None:
         outputs = model.output_names or model.state_names
@@ -71,6 +83,7 @@ def linearize(model: Model, x=None, u=None, p=None, outputs: Sequence[str] | Non
     Parameters
     ----------
     model : Model
+        The model (with at least one input: python-control systems need one).
     x, u : array_like or mapping name -> value
         Operating point (unnamed entries are zero).
     p : array_like or mapping, optional
@@ -95,9 +108,13 @@ def linearize(model: Model, x=None, u=None, p=None, outputs: Sequence[str] | Non
     >>> sys.A.tolist(), sys.B.ravel().tolist(), sys.state_labels
     ([[0.0, 1.0], [0.0, -0.05]], [0.0, 0.005], ['psi', 'r'])
     """
+    if model.nu == 0:
+        raise ValueError(f"linearize: model {model.name!r} has no inputs, and a python-control StateSpace needs "
+                         "at least one; use model.f_jac for the Jacobian A, or declare an input")
     xv, uv = _vector(model, x, "state"), _vector(model, u, "input")
     pv = model.params(p) if p is not None else model.params()
-    A, B, _, _ = (np.array(v) for v in model.f_jac(xv, uv, pv, np.zeros(model.nw)))
+    jac = model.f_jac(x=xv, u=uv, p=pv, w=np.zeros(model.nw))
+    A, B = np.array(jac["A"]), np.array(jac["B"])
     names, ysel = output_map(model, outputs)
     y, C, D = (np.array(v) for v in ysel(xv, uv, pv))
     sys = control.ss(A, B.reshape(model.nx, model.nu), C.reshape(len(names), model.nx),
@@ -116,6 +133,21 @@ def to_iosys(model: Model, p=None, outputs: Sequence[str] | None = None, *,
     buffers. The system's ``params`` are the model's parameters by name; pass
     ``params={"K": ...}`` to python-control's simulation functions to change some of them.
 
+    Parameters
+    ----------
+    model : Model
+        The model.
+    p : array_like or mapping, optional
+        Parameters (nominal by default).
+    outputs : sequence of str, optional
+        Output or state names (see :func:`output_map`).
+    name : str, optional
+        System name (default: the model name).
+
+    Returns
+    -------
+    control.NonlinearIOSystem
+
     Examples
     --------
     >>> import numpy as np, control, casship as cs
@@ -129,26 +161,32 @@ def to_iosys(model: Model, p=None, outputs: Sequence[str] | None = None, *,
     names, ysel = output_map(model, outputs)
     f_call = BufferedCall(model.f)
     y_call = BufferedCall(ysel)
+    f_in = dict(zip(model.f.name_in(), f_call.args))        # slots by name
+    y_in = dict(zip(ysel.name_in(), y_call.args))
+    xdot_out = dict(zip(model.f.name_out(), f_call.res))["xdot"]
+    y_out = dict(zip(ysel.name_out(), y_call.res))["y"]
     pnames = model.param_names
 
-    def set_params(call, params):
+    def set_params(slots, params):
         if params:
-            call.args[2][:] = model.params(pv, **{k: params[k] for k in pnames if k in params})
+            slots["p"][:] = model.params(pv, **{k: params[k] for k in pnames if k in params})
 
-    f_call.args[2][:] = pv
-    y_call.args[2][:] = pv
+    f_in["p"][:] = pv
+    y_in["p"][:] = pv
 
     def updfcn(t, x, u, params):
-        set_params(f_call, params)
-        f_call.args[0][:] = x
-        f_call.args[1][:] = np.ravel(u) if model.nu else 0.0
-        return f_call()[0].copy()
+        set_params(f_in, params)
+        f_in["x"][:] = x
+        f_in["u"][:] = np.ravel(u) if model.nu else 0.0
+        f_call()
+        return xdot_out.copy()
 
     def outfcn(t, x, u, params):
-        set_params(y_call, params)
-        y_call.args[0][:] = x
-        y_call.args[1][:] = np.ravel(u) if model.nu else 0.0
-        return y_call()[0].copy()
+        set_params(y_in, params)
+        y_in["x"][:] = x
+        y_in["u"][:] = np.ravel(u) if model.nu else 0.0
+        y_call()
+        return y_out.copy()
 
     return control.nlsys(updfcn, outfcn, states=list(model.state_names), inputs=list(model.input_names),
                          outputs=list(names), params=model.param_dict(pv), name=name or model.name)
@@ -156,15 +194,24 @@ def to_iosys(model: Model, p=None, outputs: Sequence[str] | None = None, *,
 
 @dataclass(frozen=True)
 class TrimResult:
-    """An equilibrium (trim) point.
+    """An equilibrium (trim) point found by :func:`trim`.
 
-    Attributes
+    Parameters
     ----------
-    x, u : state and input vectors at the trim point
-    p : parameter vector used
-    xdot : state derivative there (zero in the ``zero`` entries)
-    residual : max-norm of the zeroed derivatives
-    values : mapping name -> solved value of each free variable
+    x, u : numpy.ndarray
+        State and input vectors at the trim point.
+    p : numpy.ndarray
+        Parameter vector used.
+    xdot : numpy.ndarray
+        State derivative there (zero in the ``zero`` entries).
+    residual : float
+        Max-norm of the zeroed derivatives.
+    values : dict
+        Mapping name -> solved value of each free variable (tied variables share one value).
+    state_names, input_names : tuple of str
+        Names of the entries of ``x`` and ``u``.
+    model_name : str
+        The model the point belongs to.
     """
 
     x: np.ndarray
@@ -173,6 +220,26 @@ class TrimResult:
     xdot: np.ndarray
     residual: float
     values: dict
+    state_names: tuple = ()
+    input_names: tuple = ()
+    model_name: str = ""
+
+    def __repr__(self) -> str:
+        solved = ", ".join(f"{k}={v:.6g}" for k, v in self.values.items())
+        return f"TrimResult({self.model_name!r}, {solved}, residual={self.residual:.2g})"
+
+    def summary(self) -> str:
+        """The solved values, the operating point by name and the residual, one line each.
+
+        Returns
+        -------
+        str
+        """
+        lines = [f"trim of {self.model_name!r}: residual {self.residual:.3g}"]
+        lines += [f"  solved {k:12s} = {v:.6g}" for k, v in self.values.items()]
+        lines += [f"  state  {n:12s} = {v:.6g}" for n, v in zip(self.state_names, self.x)]
+        lines += [f"  input  {n:12s} = {v:.6g}" for n, v in zip(self.input_names, self.u)]
+        return "\n".join(lines)
 
 
 def _default_zero(model: Model) -> list[str]:
@@ -184,30 +251,60 @@ def _default_zero(model: Model) -> list[str]:
     return out
 
 
-def trim(model: Model, x=None, u=None, p=None, *, free: Sequence[str], zero: Sequence[str] | None = None,
-         tol: float = 1e-10, max_iter: int = 100) -> TrimResult:
+def _free_slots(model: Model, free) -> tuple[list[str], list[list[tuple[str, int]]]]:
+    """Labels and ``[(kind, index), ...]`` slots of each free entry (a name, or a tuple of tied names)."""
+    labels, slots = [], []
+    for entry in free:
+        names = (entry,) if isinstance(entry, str) else tuple(entry)
+        if not names:
+            raise ValueError("trim: an empty group in free")
+        group = []
+        for n in names:
+            if n in model.state_names:
+                group.append(("x", model.index(n)))
+            elif n in model.input_names:
+                group.append(("u", model.index(n, "input")))
+            else:
+                raise ValueError(f"trim: unknown free variable {n!r}; states: {list(model.state_names)}, "
+                                 f"inputs: {list(model.input_names)}")
+        labels.append(names[0] if len(names) == 1 else "=".join(names))
+        slots.append(group)
+    return labels, slots
+
+
+def trim(model: Model, x=None, u=None, p=None, *, free: Sequence, zero: Sequence[str] | None = None,
+         tol: float = 1e-10, max_iter: int = 100, check_limits: bool = True) -> TrimResult:
     """Solve for an equilibrium: the ``free`` states/inputs such that the ``zero`` derivatives vanish.
 
-    A Newton root finder (CasADi ``rootfinder``) with exact Jacobians solves the square system
-    ``f_zero(x, u, p) = 0`` for the free variables; the other entries of ``x`` and ``u`` are held
-    at the values given (which also serve as initial guesses for the free ones).
+    The one equilibrium solver of casship (the propeller rate of a straight run,
+    :func:`casship.maneuvers.propeller_rate_for_speed`, is a trim). A Newton root finder (CasADi
+    ``rootfinder``) with exact Jacobians solves the square system ``f_zero(x, u, p) = 0`` for the
+    free variables; the other entries of ``x`` and ``u`` are held at the values given (which also
+    serve as initial guesses for the free ones).
 
     Parameters
     ----------
     model : Model
+        The model.
     x, u : array_like or mapping, optional
         Fixed values and initial guesses (zeros for unnamed entries).
     p : array_like or mapping, optional
         Parameters (nominal by default).
-    free : sequence of str
+    free : sequence of str or tuple of str
         Names of states and/or inputs to solve for (e.g. ``["n"]`` for the propeller rate that
-        holds a given speed).
+        holds a given speed). A tuple of names is one unknown shared by all of them (e.g.
+        ``[("n1", "n2")]``: both propellers at the same rate).
     zero : sequence of str, optional
         States whose derivatives must vanish, as many as ``free``. By default the states whose
         derivative depends on themselves (velocities; pure integrators such as positions and
         heading are left free to move).
     tol : float
         Convergence tolerance on the residual (max-norm).
+    max_iter : int
+        Largest number of Newton iterations.
+    check_limits : bool
+        Check the given operating point and the solution against the model's declared ranges
+        (``model.limits``); ``False`` is the explicit opt-in for an out-of-range study.
 
     Returns
     -------
@@ -218,6 +315,8 @@ def trim(model: Model, x=None, u=None, p=None, *, free: Sequence[str], zero: Seq
     ValueError
         Unknown names, a non-square system, or a root finder that does not converge (the
         message gives the residual and the solver status).
+    casship.validity.ValidityError
+        A given value or the solution outside the model's declared ranges.
 
     Examples
     --------
@@ -227,9 +326,11 @@ def trim(model: Model, x=None, u=None, p=None, *, free: Sequence[str], zero: Seq
     >>> round(tr.values["delta"], 6)
     -0.01
     """
+    from .validity import check_inputs, check_states
+
     xv, uv = _vector(model, x, "state"), _vector(model, u, "input")
     pv = model.params(p) if p is not None else model.params()
-    free = list(free)
+    free = [free] if isinstance(free, str) else list(free)
     if not free:
         raise ValueError("trim: name at least one free state or input")
     zero = _default_zero(model) if zero is None else list(zero)
@@ -237,25 +338,19 @@ def trim(model: Model, x=None, u=None, p=None, *, free: Sequence[str], zero: Seq
     if len(free) != len(zero):
         raise ValueError(f"trim: {len(free)} free variable(s) {free} but {len(zero)} zeroed derivative(s) "
                          f"{zero}; pass zero=[...] naming as many states as free variables")
-    sel = []
-    for n in free:
-        if n in model.state_names:
-            sel.append(("x", model.index(n)))
-        elif n in model.input_names:
-            sel.append(("u", model.index(n, "input")))
-        else:
-            raise ValueError(f"trim: unknown free variable {n!r}; states: {list(model.state_names)}, "
-                             f"inputs: {list(model.input_names)}")
+    labels, slots = _free_slots(model, free)
+    freed = {(kind, i) for group in slots for kind, i in group}
+    if check_limits:
+        check_states(model, {n: xv[i] for i, n in enumerate(model.state_names) if ("x", i) not in freed})
+        check_inputs(model, {n: uv[i] for i, n in enumerate(model.input_names) if ("u", i) not in freed})
     z = ca.SX.sym("z", len(free))
     xs, us = ca.SX(ca.DM(xv)), ca.SX(ca.DM(uv)) if model.nu else ca.SX(0, 1)
-    for k, (kind, i) in enumerate(sel):
-        if kind == "x":
-            xs[i] = z[k]
-        else:
-            us[i] = z[k]
+    for k, group in enumerate(slots):
+        for kind, i in group:
+            (xs if kind == "x" else us)[i] = z[k]
     res = model.f(xs, us, pv, np.zeros(model.nw))[z_idx]
     g = ca.Function("trim_residual", [z], [res])
-    z0 = np.array([xv[i] if kind == "x" else uv[i] for kind, i in sel])
+    z0 = np.array([(xv if group[0][0] == "x" else uv)[group[0][1]] for group in slots])
     try:
         solver = ca.rootfinder("trim", "newton", g, {"abstol": tol, "max_iter": max_iter,
                                                      "error_on_fail": False})
@@ -263,15 +358,24 @@ def trim(model: Model, x=None, u=None, p=None, *, free: Sequence[str], zero: Seq
     except RuntimeError as exc:
         reason = "the zeroed derivatives do not depend on the free variables" \
             if "singular" in str(exc) else str(exc).splitlines()[-1]
-        raise ValueError(f"trim of {model.name!r} failed for free {free}, zero {zero}: {reason}") from None
+        raise ValueError(f"trim of {model.name!r} failed for free {labels}, zero {zero}: {reason}") from None
     status = solver.stats().get("return_status", "")
     resid = np.array(g(zs)).reshape(-1)
     rnorm = float(np.max(np.abs(resid))) if resid.size else 0.0
     if not np.all(np.isfinite(zs)) or not np.isfinite(rnorm) or rnorm > max(tol * 100, 1e-8) \
             or not solver.stats().get("success", True):
         raise ValueError(f"trim of {model.name!r} did not converge (status {status!r}, residual {rnorm:.3g}) "
-                         f"for free {free} from {dict(zip(free, z0))}; try another initial guess")
-    for k, (kind, i) in enumerate(sel):
-        (xv if kind == "x" else uv)[i] = zs[k]
+                         f"for free {labels} from {dict(zip(labels, z0))}; try another initial guess")
+    for k, group in enumerate(slots):
+        for kind, i in group:
+            (xv if kind == "x" else uv)[i] = zs[k]
+    if check_limits:
+        try:
+            check_states(model, {n: xv[i] for i, n in enumerate(model.state_names) if ("x", i) in freed},
+                         "trim solution: state")
+            check_inputs(model, {n: uv[i] for i, n in enumerate(model.input_names) if ("u", i) in freed})
+        except ValueError as exc:
+            raise type(exc)(f"trim of {model.name!r} for zero {zero}: {exc}") from None
     xdot = np.array(model.f(xv, uv, pv, np.zeros(model.nw))).reshape(-1)
-    return TrimResult(x=xv, u=uv, p=pv, xdot=xdot, residual=rnorm, values=dict(zip(free, map(float, zs))))
+    return TrimResult(x=xv, u=uv, p=pv, xdot=xdot, residual=rnorm, values=dict(zip(labels, map(float, zs))),
+                      state_names=model.state_names, input_names=model.input_names, model_name=model.name)

@@ -10,6 +10,7 @@ from .angles import wrap
 from .data import Dataset, Trajectory, check_time
 from .discretize import DiscreteModel, discretize
 from .model import Model
+from .validity import check_inputs, check_states, check_step, warn_states
 
 __all__ = ["simulate", "measure", "input_matrix", "fold_steps", "IntegrationError"]
 
@@ -163,8 +164,8 @@ def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
     return Y[:, :n].T.reshape(n, model.ny)
 
 
-def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", max_step: float | None = None,
-             w=None, options: dict | None = None) -> Trajectory:
+def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = None, max_step: float | None = None,
+             w=None, options: dict | None = None, check_limits: bool = True) -> Trajectory:
     """Simulate ``model`` from ``x0`` on the time grid ``t``.
 
     Parameters
@@ -180,19 +181,37 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     p : array_like or mapping, optional
         Parameters (nominal by default).
     method : {"rk4", "euler", "cvodes"}
-        Integration method per interval (see :func:`casship.discretize`). With ``"cvodes"`` and
-        inputs (and noise) constant over the record, one adaptive integration with outputs on the
-        grid replaces the restart at every sample.
+        Integration method per interval (see :func:`casship.discretize`; default ``"rk4"``). With
+        ``"cvodes"`` and inputs (and noise) constant over the record, one adaptive integration with
+        outputs on the grid replaces the restart at every sample. A discrete-time model
+        (``ModelBuilder(name, dt=...)``) takes no method: it steps ``x[k+1] = F(x, u, p, w)`` on a
+        grid of its own ``dt``.
     max_step : float, optional
         Largest explicit sub-step [s]; by default one sub-step per interval.
     w : array (N, nw), optional
         Process-noise realisation held over each interval (zero by default).
     options : dict, optional
         Integrator options for ``method="cvodes"`` (e.g. ``{"abstol": 1e-12, "reltol": 1e-12}``).
+    check_limits : bool
+        Check the initial state and the inputs against the model's declared ranges (``model.limits``)
+        and a fixed step (``euler``, ``rk4``) against its stability limit at the start (see
+        :mod:`casship.validity`); both raise :class:`~casship.validity.ValidityError`. A state
+        leaving its range during the run gives a :class:`~casship.validity.ValidityWarning`.
+        ``False`` is the explicit opt-in for a deliberate out-of-range study.
 
     Returns
     -------
     Trajectory
+
+    Raises
+    ------
+    ValueError
+        Bad time grid (not increasing, NaN), shapes, unknown input names, non-finite inputs.
+    casship.validity.ValidityError
+        An input or the initial state outside the model's ranges, or a step beyond the stability
+        limit (e.g. a long time gap with ``rk4``), unless ``check_limits=False``.
+    IntegrationError
+        The adaptive integrator failed (its status is given).
 
     Examples
     --------
@@ -213,12 +232,26 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     dt = np.diff(t)
     if max_step is not None and not (np.isfinite(max_step) and max_step > 0):
         raise ValueError(f"max_step must be a positive finite number, got {max_step}")
-    substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
-    key = ("discretize", method, substeps, tuple(sorted((options or {}).items())))
-    dmodel = model._cached(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
-                                                   substeps=substeps, options=options))
+    if model.dt is not None:
+        if method is not None or max_step is not None or options:
+            raise ValueError(f"model {model.name!r} is discrete-time: it steps x[k+1] = F(x, u, p, w) itself "
+                             "(no method, max_step or integrator options)")
+        dmodel = model._cached(("discretize", "discrete"), lambda: discretize(model))
+        dmodel.check_steps(dt, t)
+        method, substeps = "discrete", 1      # it steps itself: no integrator stability limit to check
+    else:
+        method = "rk4" if method is None else method
+        substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
+        key = ("discretize", method, substeps, tuple(sorted((options or {}).items())))
+        dmodel = model._cached(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
+                                                       substeps=substeps, options=options))
     W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
+    if check_limits:
+        check_states(model, x0, "initial state")
+        if U is not None:
+            check_inputs(model, U, t)
+            _check_steps(model, dt, substeps, x0, U[0], p, method)
     if U is not None and method == "cvodes" and t.size > 2 and _constant_rows(U) and _constant_rows(W):
         X = _adaptive_on_grid(model, x0, t, U[0], p, W[0], options)
     elif U is not None:
@@ -227,10 +260,15 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
         except IntegrationError as exc:
             raise IntegrationError(f"{exc} (from t = {t[exc.step]:g} s)", exc.status, exc.step) from exc
     else:
-        X, U = _closed_loop(model, dmodel, x0, t, inputs, p, W, dt)
+        first = (lambda u: _check_steps(model, dt, substeps, x0, u, p, method)) if check_limits else None
+        X, U = _closed_loop(model, dmodel, x0, t, inputs, p, W, dt, first)
+        if check_limits:
+            check_inputs(model, U, t)
     if not np.all(np.isfinite(X)):
         row = int(np.argwhere(~np.isfinite(X))[0, 0])
         raise FloatingPointError(f"simulation of {model.name!r} diverged at t = {t[row]:g} s")
+    if check_limits:
+        warn_states(model, X, t)
     Y = eval_outputs(model, X, U, p)
     cols = {n: X[:, i] for i, n in enumerate(model.state_names)}
     cols.update({n: U[:, i] for i, n in enumerate(model.input_names)})
@@ -239,6 +277,16 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     return Trajectory(t, cols, model_name=model.name, state_names=model.state_names,
                       input_names=model.input_names, output_names=model.output_names, units=units,
                       meta={"model": model.name, "method": method, "params": model.param_dict(p)})
+
+
+def _check_steps(model: Model, dt: np.ndarray, substeps: int, x0, u0, p, method: str) -> None:
+    """The longest fixed (sub-)step against the stability limit at the start (see :func:`check_step`)."""
+    if dt.size == 0 or method not in ("euler", "rk4"):
+        return
+    k = int(np.argmax(dt))
+    h = float(dt[k]) / substeps
+    where = f" (interval {k}, {dt[k]:.4g} s long" + (f" in {substeps} sub-steps)" if substeps > 1 else ")")
+    check_step(model, h, x0, u0, p, method, where=where)
 
 
 def _output_selection(model: Model):
@@ -296,10 +344,11 @@ def _noise_matrix(model: Model, t: np.ndarray, w) -> np.ndarray:
     return W
 
 
-def _closed_loop(model, dmodel, x0, t, controller: Callable, p, W, dt):
+def _closed_loop(model, dmodel, x0, t, controller: Callable, p, W, dt, first=None):
     step = BufferedCall(dmodel.F)
-    x_arg, u_arg, p_arg, w_arg, dt_arg = step.args
-    p_arg[:] = p
+    slot = dict(zip(dmodel.F.name_in(), step.args))          # input slots by name
+    x_next = dict(zip(dmodel.F.name_out(), step.res))["xf"]
+    slot["p"][:] = p
     X = np.empty((t.size, model.nx))
     U = np.empty((t.size, model.nu))
     X[0] = x0
@@ -311,9 +360,12 @@ def _closed_loop(model, dmodel, x0, t, controller: Callable, p, W, dt):
         U[k] = u
         if k == 0:
             check_radians(model, U[:1])
+            if first is not None:
+                first(u)
         if k + 1 < t.size:
-            x_arg[:], u_arg[:], w_arg[:], dt_arg[0] = X[k], u, W[k], dt[k]
-            X[k + 1] = step()[0]
+            slot["x"][:], slot["u"][:], slot["w"][:], slot["dt"][:] = X[k], u, W[k], dt[k]
+            step()
+            X[k + 1] = x_next
     return X, U
 
 

@@ -1,4 +1,5 @@
-"""Autopilot designs, reference model, limits, metrics and the closed loop."""
+"""Autopilot building blocks: Nomoto models, designs, reference model, law, steering gear, metrics."""
+import casadi as ca
 import control
 import numpy as np
 import pytest
@@ -36,19 +37,51 @@ def test_course_unstable_ship_is_stabilised():
     nom = ap.Nomoto(K=-0.019, T=-124.1 + 16.4 - 46.0)          # MSS tanker, course-unstable
     g = ap.pid_pole_placement(nom, 0.05, 1.0, integral="exact")
     assert np.all(np.real(ap.closed_loop_tf(nom, g).poles()) < 0)
-    mg = ap.margins(ap.loop_transfer(nom, g))
-    assert mg["closed_loop_stable"]
+    assert ap.margins(ap.loop_transfer(nom, g))["closed_loop_stable"]
 
 
-def test_lqr_gains_equal_control_lqr_and_stabilise(nomoto):
+def test_lqr_gains_equal_control_lqr_on_the_hand_written_model(nomoto):
     g = ap.lqr_design(nomoto, q_int=1e-4, q_e=1.0, q_r=100.0, r_delta=1.0)
     a, b = 1 / nomoto.T, nomoto.K / nomoto.T
     A = np.array([[0, 1, 0], [0, 0, 1], [0, 0, -a]])
     B = np.array([[0], [0], [b]])
     K, _, E = control.lqr(A, B, np.diag([1e-4, 1.0, 100.0]), [[1.0]])
-    np.testing.assert_allclose([g.Ki, g.Kp, g.Kd], np.ravel(K))
-    np.testing.assert_allclose(np.sort_complex(ap.closed_loop_tf(nomoto, g).poles()), np.sort_complex(E),
-                               atol=1e-8)
+    np.testing.assert_allclose([g.Ki, g.Kp, g.Kd], np.ravel(K), rtol=1e-9)
+    np.testing.assert_allclose(np.sort_complex(ap.closed_loop_tf(nomoto, g).poles()), np.sort_complex(E), atol=1e-8)
+
+
+def test_design_from_the_labelled_linearisation_equals_design_from_its_nomoto_model():
+    ship = cs.models.get_model("kvlcc2")
+    plant = ap.steering_plant(ship)
+    lin = ap.course_linearization(plant)
+    assert lin.input_labels == ["delta"] and lin.output_labels == ["chi", "psi", "r"]
+    nom = ap.nomoto_from_linear(lin)
+    full = ap.nomoto_from_model(ship, plant.x0, plant.input_vector(0.0), steer="delta")
+    assert (nom.K, nom.T1, nom.T2, nom.T3) == pytest.approx((full.K, full.T1, full.T2, full.T3), rel=1e-9)
+    assert ap.pid_pole_placement(lin, 0.02) == ap.pid_pole_placement(nom, 0.02)
+    assert ap.lqr_design(lin, q_int=1e-6, q_e=1.0) == ap.lqr_design(nom, q_int=1e-6, q_e=1.0)
+
+
+def test_course_output_of_the_linearisation_is_exact():
+    """The linearised course-over-ground output against central differences of atan2(y', x')."""
+    otter = cs.models.get_model("otter")
+    plant = ap.steering_plant(otter)
+    lin = ap.course_linearization(plant)
+    m, x0 = plant.model, plant.x0.copy()
+    x0[m.index("v")], x0[m.index("r")] = 0.05, 0.02          # off the straight run, so that beta matters
+    lin = ap.course_linearization(plant, x0)
+
+    def chi(x, s):
+        xd = np.ravel(m.f(x, plant.input_vector(s), plant.pvec, np.zeros(m.nw)))
+        return np.arctan2(xd[m.index("y")], xd[m.index("x")])
+
+    h = 1e-6
+    row = dict(zip(lin.state_labels, np.ravel(lin.C[0])))
+    for name in ("v", "r", "psi"):
+        e = np.zeros(m.nx)
+        e[m.index(name)] = h
+        assert row[name] == pytest.approx((chi(x0 + e, 0.0) - chi(x0 - e, 0.0)) / (2 * h), rel=1e-6, abs=1e-9)
+    assert float(lin.D[0, 0]) == pytest.approx((chi(x0, h) - chi(x0, -h)) / (2 * h), rel=1e-6, abs=1e-12)
 
 
 def test_nomoto_from_linearised_second_order_model():
@@ -56,6 +89,8 @@ def test_nomoto_from_linearised_second_order_model():
     nom = ap.nomoto_from_model(m, steer="delta", yaw_rate="r")
     assert (nom.K, nom.T1, nom.T2, nom.T3) == pytest.approx((0.185, 118.0, 7.8, 18.5), rel=1e-6)
     assert nom.T == pytest.approx(118.0 + 7.8 - 18.5, rel=1e-6)
+    with pytest.raises(ValueError, match="no output 'r'"):
+        ap.nomoto_from_linear(cs.linearize(m, outputs=["psi"]))
 
 
 def test_reference_model_is_the_linear_filter_without_saturation():
@@ -65,9 +100,11 @@ def test_reference_model_is_the_linear_filter_without_saturation():
     lin = control.step_response(ref.tf(), t).outputs * 0.2
     np.testing.assert_allclose(X[:, 0], lin, atol=2e-4)       # Euler at dt = 1 ms
     assert X[-1, 0] == pytest.approx(0.2, abs=1e-6)
+    # the labelled state space and the transfer function have the same characteristic polynomial
+    np.testing.assert_allclose(np.poly(ref.system().A), np.ravel(ref.tf().den[0][0]), rtol=1e-12)
 
 
-def test_reference_model_rate_saturation():
+def test_reference_model_rate_saturation_and_wrap():
     ref = ap.ReferenceModel(wn=1.0, zeta=1.0, r_max=np.radians(2))
     X = ref.response(np.arange(0, 60, 0.02), np.radians(40))
     assert np.max(np.abs(X[:, 1])) <= np.radians(2) + 1e-12
@@ -77,29 +114,50 @@ def test_reference_model_rate_saturation():
     assert np.all(np.abs(Xw[:, 0]) > np.radians(165))
 
 
-def _run_ap(autopilot, chi, r, ref=0.3, n=200, dt=0.1):
+def _run_law(autopilot, chi, r, ref=0.3, n=200, dt=0.1):
     f = autopilot.function
-    z = np.zeros(6)
+    mem = autopilot.memory0(0.0)
     out = []
     for _ in range(n):
-        z_next, steer, *_ = f(z, ref, chi, r, dt)
-        z = np.ravel(np.array(z_next))
-        out.append((float(steer), z[3]))
+        o = f.call({"memory": mem, "ref": ref, "chi": chi, "r": r, "dt": dt})
+        mem = np.ravel(np.array(o["memory_next"]))
+        out.append((float(o["steer"]), mem[Autopilot_memory_index("z")]))
     return np.array(out)
 
 
-def test_saturation_rate_limit_and_anti_windup(nomoto):
+def Autopilot_memory_index(name):
+    return ap.Autopilot.MEMORY.index(name)
+
+
+def test_saturation_and_anti_windup(nomoto):
     g = ap.pid_pole_placement(nomoto, 0.05)
     ref = ap.ReferenceModel(10.0)                 # fast: chi_d follows the command
-    lim = ap.Autopilot(g, ref, steer_max=np.radians(10), steer_rate_max=np.radians(2), anti_windup=True)
-    out = _run_ap(lim, chi=0.0, r=0.0)
+    lim = ap.Autopilot(g, ref, steer_max=np.radians(10), anti_windup=True)
+    out = _run_law(lim, chi=0.0, r=0.0)
     assert np.max(np.abs(out[:, 0])) <= np.radians(10) + 1e-12
-    assert np.max(np.abs(np.diff(out[:, 0]))) <= np.radians(2) * 0.1 + 1e-12
-    assert out[-1, 0] == pytest.approx(-np.radians(10)) or out[-1, 0] == pytest.approx(np.radians(10))
+    assert abs(out[-1, 0]) == pytest.approx(np.radians(10))
     # held error with the command saturated: the integrator stops (anti-windup), without it it grows
-    free = ap.Autopilot(g, ref, steer_max=np.radians(10), steer_rate_max=np.radians(2), anti_windup=False)
-    wind = _run_ap(free, chi=0.0, r=0.0)
+    free = ap.Autopilot(g, ref, steer_max=np.radians(10), anti_windup=False)
+    wind = _run_law(free, chi=0.0, r=0.0)
     assert abs(out[-1, 1]) < 0.5 * abs(wind[-1, 1])
+
+
+def test_actuator_servo_rate_limit_and_flag():
+    act = ap.Actuator(steer_max=np.radians(35), rate_max=np.radians(2.32), T=1.0)
+    s, c, h = ca.SX.sym("s"), ca.SX.sym("c"), ca.SX.sym("h")
+    o = act.symbolic_step(s, c, h)
+    f = ca.Function("a", [s, c, h], [o["steer"], o["rate_limited"]])
+    dt = 0.1
+    # small command: first-order servo, rate limit inactive
+    nxt, flag = (float(v) for v in f(0.0, np.radians(0.1), dt))
+    assert nxt == pytest.approx(np.radians(0.1) * (1 - np.exp(-dt)), rel=1e-12) and flag == 0.0
+    # hard over: the change is the rate limit, flagged; the command is clipped to the angle limit
+    nxt, flag = (float(v) for v in f(0.0, np.radians(90), dt))
+    assert nxt == pytest.approx(np.radians(2.32) * dt, rel=1e-12) and flag == 1.0
+    nxt, _ = (float(v) for v in f(np.radians(34.99), np.radians(90), dt))
+    assert nxt <= np.radians(35) + 1e-15
+    with pytest.raises(ValueError, match="rate_max"):
+        ap.Actuator(rate_max=0.0)
 
 
 def test_step_metrics_on_known_responses():
@@ -120,21 +178,13 @@ def test_step_metrics_on_known_responses():
     assert m2["steer_rate_max"] == pytest.approx(1.0, abs=1e-3)
 
 
-def test_closed_loop_on_nonlinear_ship_reaches_the_course():
-    m = cs.models.shi_taylor(params={"c1": 0.0005})
-    tr = cs.trim(m, x={"u": 8.0}, u={"n": 1.0}, free=["n"], zero=["u"])
-    nom = ap.nomoto_from_model(m, tr.x, tr.u)
-    g = ap.pid_pole_placement(nom, 0.05)
-    pilot = ap.Autopilot(g, ap.ReferenceModel(0.05, 1.0, np.radians(1.0)), np.radians(35), np.radians(2.3))
-    plant = ap.SteeringPlant(m, "delta", {"n": tr.values["n"]})
-    cmd, t_end, steps = ap.course_scenario("course-20", 600)
-    res = ap.simulate_autopilot(plant, pilot, cmd, t_end, step_times=steps, x0=tr.x, estimator="truth")
-    first, second = res.metrics
-    assert abs(first["steady_state_error_deg"]) < 0.2 and abs(second["steady_state_error_deg"]) < 0.2
-    assert first["overshoot_deg"] < 2.0
-    d = res.data
-    assert np.all(np.abs(d["steer"]) <= np.radians(35) + 1e-12)
-    assert np.max(np.abs(np.diff(d["steer"]))) <= np.radians(2.3) * 0.02 + 1e-12
+def test_course_scenarios():
+    cmd, t_end, steps = ap.course_scenario("course-30", 100.0)
+    assert (t_end, steps) == (100.0, [0.0, 50.0])
+    assert cmd(49.9) == pytest.approx(np.radians(30)) and cmd(50.0) == 0.0
+    assert ap.course_scenario("step-10", segment=70.0)[1] == 70.0
+    with pytest.raises(ValueError, match="zigzag"):
+        ap.course_scenario("zigzag")
 
 
 def test_fit_nomoto_recovers_a_simulated_nomoto_ship():
@@ -152,8 +202,6 @@ def test_fit_nomoto_recovers_a_simulated_nomoto_ship():
 
 
 def test_twin_propeller_allocation_inverts_the_thrust_law():
-    import casadi as ca
-
     otter = cs.models.get_model("otter")
     pd = otter.param_dict()
     alloc = ap.twin_propeller_allocation(otter)
@@ -167,7 +215,19 @@ def test_twin_propeller_allocation_inverts_the_thrust_law():
         assert pd["y_pont"] * (T[0] - T[1]) == pytest.approx(tau_n, rel=1e-12)
     limit = ap.twin_propeller_yaw_limit(otter, 100.0)
     n1, n2 = (float(v) for v in f(100.0, limit))
-    # at the limit one propeller sits exactly on its bound and the other inside its range
-    on_bound = [n1 == pytest.approx(otter.vessel.propeller_range[1], rel=1e-9), n2 == pytest.approx(otter.vessel.propeller_range[0], rel=1e-9)]
-    assert any(on_bound)
-    assert otter.vessel.propeller_range[0] - 1e-9 <= min(n1, n2) and max(n1, n2) <= otter.vessel.propeller_range[1] + 1e-9
+    lo, hi = otter.vessel.propeller_range
+    # at the limit one propeller sits on its bound, the other inside the range
+    assert min(abs(n1 - hi), abs(n2 - lo)) < 1e-9 * hi
+    assert lo - 1e-9 <= min(n1, n2) and max(n1, n2) <= hi + 1e-9
+
+
+def test_steering_plant_of_a_two_propeller_craft_and_errors():
+    otter = cs.models.get_model("otter")
+    plant = ap.steering_plant(otter, 1.5)
+    assert plant.steer == "tau_N" and plant.x0[plant.model.index("u")] == pytest.approx(1.5)
+    xdot = np.ravel(plant.model.f(plant.x0, plant.input_vector(0.0), plant.pvec, np.zeros(plant.model.nw)))
+    assert abs(xdot[plant.model.index("u")]) < 1e-9          # the surge force holds the speed
+    with pytest.raises(ValueError, match="names no rudder"):
+        ap.steering_plant(cs.models.get_model("sog-cog"), 1.0)
+    with pytest.raises(ValueError, match="unknown input"):
+        ap.SteeringPlant(otter, "n1", {"n2": 1.0, "tau": 2.0})

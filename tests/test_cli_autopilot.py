@@ -1,32 +1,65 @@
-"""``casship autopilot`` on the command line."""
+"""``casship autopilot`` on the command line: the same design as the Python API, defaults in --help."""
 import json
 
+import numpy as np
 import pytest
 
+import casship as cs
+from casship import autopilot as ap
 from casship.cli import main
 
 
-def test_autopilot_json_reports_margins_and_metrics(capsys, tmp_path):
-    code = main(["autopilot", "shi-taylor", "--speed", "8", "--wn", "0.05", "--scenario", "course-20",
-                 "--t-end", "400", "--json", "--plot", str(tmp_path), "--current", "0.5", "90"])
+def test_autopilot_json_reports_margins_metrics_and_performance(capsys, tmp_path):
+    code = main(["autopilot", "shi-taylor", "--scenario", "course-20", "--t-end", "600", "--json", "--plot",
+                 str(tmp_path), "--current", "0.5", "90"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert out["model"] == "shi-taylor"
-    assert set(out["margins"]) >= {"gain_margin_db", "phase_margin_deg", "closed_loop_stable"}
+    assert set(out["margins"]) >= {"gain_margin_db", "upper_gain_margin_db", "lower_gain_margin_db",
+                                   "phase_margin_deg", "closed_loop_stable"}
     assert out["margins"]["closed_loop_stable"]
     assert len(out["metrics"]) == 2
     first = out["metrics"][0]
     assert first["target_deg"] == pytest.approx(20.0)
     assert abs(first["steady_state_error_deg"]) < 1.0
     assert out["inputs"]["n"] > 0
+    assert 0.0 <= out["performance"]["rate_limited_fraction"] < 1.0
     assert (tmp_path / "shi-taylor_course-20.png").exists() and (tmp_path / "shi-taylor_loop.png").exists()
 
 
+@pytest.mark.parametrize("name, args, api", [
+    ("kvlcc2", [], {}),
+    ("otter", ["--mode", "course", "--gnss-std", "0.1", "--compass-std-deg", "1.0"],
+     {"mode": "course", "gnss_std": 0.1, "compass_std": np.radians(1.0)}),
+])
+def test_cli_and_api_give_the_same_design(capsys, name, args, api):
+    assert main(["autopilot", name, "--show-defaults", "--json", *args]) == 0
+    cli = json.loads(capsys.readouterr().out)["settings"]
+    d = ap.design_autopilot(cs.models.get_model(name), **api)
+    for key, value in d.settings.as_dict().items():
+        got = cli[key]["value"]
+        if isinstance(value, (float, int)) and not isinstance(value, bool):
+            assert got == pytest.approx(value, rel=1e-12), key
+        elif isinstance(value, list):
+            assert got == pytest.approx(value, rel=1e-12), key
+        else:
+            assert got == value, key
+        assert cli[key]["source"] == d.settings.sources[key], key
+
+
+def test_help_shows_the_rules(capsys):
+    with pytest.raises(SystemExit):
+        main(["autopilot", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for rule in ("vessel.U0", "vessel.rudder_max", "U/L", "control.dlqe", "--r-max-deg-s"):
+        assert rule in text
+
+
 def test_autopilot_text_output_and_errors(capsys):
-    assert main(["autopilot", "shi-taylor", "--speed", "8", "--wn", "0.05", "--t-end", "100"]) == 0
+    assert main(["autopilot", "shi-taylor", "--t-end", "200", "--wn", "0.05"]) == 0
     text = capsys.readouterr().out
-    assert "margins" in text and "Nomoto" in text
-    assert main(["autopilot", "no-such-ship", "--speed", "8"]) == 2
+    assert "margins (python-control)" in text and "Nomoto" in text and "rate limit active" in text
+    assert main(["autopilot", "no-such-ship"]) == 2
     assert "no-such-ship" in capsys.readouterr().err
-    assert main(["autopilot", "shi-taylor", "--speed", "8", "--wn", "0.05", "--scenario", "zigzag"]) == 2
+    assert main(["autopilot", "shi-taylor", "--scenario", "zigzag"]) == 2
     assert "zigzag" in capsys.readouterr().err

@@ -100,3 +100,46 @@ def test_trim_reports_failures_clearly():
         trim(m, x={"u": 8.0}, u={"n": 1.0}, p={"a9": -0.1}, free=["n"], zero=["u"])
     with pytest.raises(ValueError, match="bogus"):
         trim(m, free=["bogus"], zero=["u"])
+
+
+def test_trim_checks_the_declared_ranges():
+    from casship.validity import ValidityError
+
+    ship = cs.models.get_model("kvlcc2")
+    # 100 m/s is outside the model's speed range (it would "solve" for about -16 rps)
+    with pytest.raises(ValidityError, match=r"state 'u' = 100 m/s is outside its valid range \[0, 15.95\] m/s"):
+        trim(ship, x={"u": 100.0}, u={"n": 1.0}, free=["n"], zero=["u"])
+    # a solution outside the propeller range is named with the range
+    with pytest.raises(ValidityError, match=r"trim of 'kvlcc2' for zero \['u'\]: input 'n' = .* is outside its valid "
+                                            r"range \[0, 3.06\] 1/s"):
+        trim(ship, x={"u": 15.9}, u={"n": 3.0}, p={"R_0_dash": 0.06}, free=["n"], zero=["u"])
+    tr = trim(ship, x={"u": 100.0}, u={"n": 10.0}, free=["n"], zero=["u"], check_limits=False)
+    assert abs(tr.xdot[ship.index("u")]) < 1e-8
+
+
+def test_trim_ties_free_variables_to_one_value():
+    boat = cs.models.get_model("otter")
+    tr = trim(boat, x={"u": 1.5}, u={"n1": 50.0, "n2": 50.0}, free=[("n1", "n2")], zero=["u"])
+    (label, n), = tr.values.items()
+    assert label == "n1=n2"
+    assert tr.u[boat.index("n1", "input")] == tr.u[boat.index("n2", "input")] == n
+    assert abs(tr.xdot[boat.index("u")]) < 1e-9
+    assert abs(tr.xdot[boat.index("r")]) < 1e-9                  # equal rates: no yaw moment
+
+
+def test_trim_result_reads_short():
+    m = cs.models.shi_taylor()
+    tr = trim(m, x={"u": 8.0}, u={"n": 1.0}, free=["n"], zero=["u"])
+    assert repr(tr).startswith("TrimResult('shi-taylor', n=") and "residual=" in repr(tr)
+    assert len(repr(tr)) < 80
+    text = tr.summary()
+    assert "solved n" in text and "state  u" in text and "input  delta" in text
+
+
+def test_linearize_without_inputs_says_why():
+    b = cs.ModelBuilder("oscillator")
+    pos, vel = b.state("pos"), b.state("vel")
+    b.ode(pos=vel, vel=-pos)
+    b.output("pos", pos)
+    with pytest.raises(ValueError, match=r"model 'oscillator' has no inputs"):
+        linearize(b.build())

@@ -98,3 +98,120 @@ def test_rudder_actuator_rate_limit():
 def test_unknown_parameter_raises():
     with pytest.raises(ValueError, match="R0"):
         kvlcc2({"R0": 0.1})
+
+
+# -- extended variant: asymmetry terms and smooth sign switches ---------------------------------
+def _random_points(ship, count, seed):
+    rng = np.random.default_rng(seed)
+    U0 = ship.vessel.U0
+    for _ in range(count):
+        x = ship.states(u=U0 * rng.uniform(0.3, 1.1), v=U0 * rng.uniform(-0.2, 0.2),
+                        r=U0 / ship.vessel.L_pp * rng.uniform(-0.6, 0.6), psi=rng.uniform(-np.pi, np.pi))
+        yield x, ship.inputs(delta=rng.uniform(-0.6, 0.6), n=1.53 * rng.uniform(0.5, 1.2))
+
+
+def test_asymmetry_terms_are_zero_by_default_and_leave_the_published_model_unchanged():
+    pub, ext = kvlcc2(), kvlcc2(asymmetry=True)
+    assert {"delta_0", "Y_0_dash", "N_0_dash"} <= set(ext.param_names)
+    assert all(ext.param_dict()[k] == 0.0 for k in ("delta_0", "Y_0_dash", "N_0_dash"))
+    for x, u in _random_points(pub, 20, 5):
+        np.testing.assert_array_equal(np.asarray(ext.f(x, u, ext.params(), np.zeros(3))),
+                                      np.asarray(pub.f(x, u, pub.params(), np.zeros(3))))
+    assert pub.meta["options"] == {}
+    assert ext.meta["options"] == {"asymmetry": True}
+    both = kvlcc2(asymmetry=True, smooth=True, rudder_actuator=True)
+    assert both.meta["options"] == {"asymmetry": True, "smooth": True, "rudder_actuator": True}
+    again = get_model("kvlcc2", **both.meta["options"])
+    assert again.param_names == both.param_names and again.state_names == both.state_names
+    assert pub.vessel.param_set == "kvlcc2/YY2015-full-scale"
+    assert ext.vessel.param_set == "kvlcc2/YY2015-full-scale+asymmetry"
+    assert get_model("kvlcc2", asymmetry=True, smooth=True).vessel.param_set.endswith("+asymmetry+smooth")
+    with pytest.raises(ValueError, match="asymmetry=True"):
+        kvlcc2({"N_0_dash": 0.01})
+
+
+def test_propeller_induced_force_scales_with_thrust():
+    """``Y_P = Y'_0 T`` and ``N_P = N'_0 L T`` enter like an extra force at midship."""
+    Y0, N0 = 0.01, -0.002
+    ext = kvlcc2({"Y_0_dash": Y0, "N_0_dash": N0}, asymmetry=True)
+    pub = kvlcc2()
+    P = pub.param_dict()
+    for x, u in _random_points(pub, 5, 11):
+        U = np.hypot(x[0], x[1])
+        beta_P = np.arctan2(-x[1], x[0]) - P["x_P_dash"] * x[2] * P["L_pp"] / U
+        C2 = P["C_2_plus"] if beta_P > 0 else P["C_2_minus"]
+        u_P = x[0] * (1 - P["w_P0"]) * (1 + (1 - np.exp(-P["C_1"] * abs(beta_P))) * (C2 - 1))
+        n, D = u[1], P["D_p"]
+        T = P["rho"] * D**2 * (P["k_0"] * n**2 * D**2 + P["k_1"] * n * D * u_P + P["k_2"] * u_P**2)
+        pushed = pub.extend(lambda b: b.feed("tau", __import__("casadi").vertcat(0, Y0 * T, N0 * P["L_pp"] * T)))
+        np.testing.assert_allclose(np.asarray(ext.f(x, u, ext.params(), np.zeros(3))).ravel(),
+                                   np.asarray(pushed.f(x, u, pushed.params(), np.zeros(3))).ravel(),
+                                   rtol=1e-10, atol=1e-14)
+
+
+def test_rudder_neutral_angle_holds_a_straight_course():
+    """With the rudder at ``delta_0`` the rudder gives no side force: the ship runs straight."""
+    d0 = np.radians(1.5)
+    ship = kvlcc2({"delta_0": d0}, asymmetry=True)
+    t = np.arange(0, 300, 1.0)
+    tr = simulate(ship, ship.states(u=7.97), t, {"delta": d0, "n": 1.53})
+    np.testing.assert_allclose(tr["psi"], 0.0, atol=1e-12)
+    np.testing.assert_allclose(tr["v"], 0.0, atol=1e-12)
+    turned = simulate(ship, ship.states(u=7.97), t, {"delta": 0.0, "n": 1.53})
+    assert turned["psi"][-1] < -np.radians(5)        # delta = 0 is now a port rudder
+    with pytest.raises(ValueError, match="bounds"):
+        kvlcc2({"delta_0": np.radians(20)}, asymmetry=True)
+
+
+@pytest.mark.parametrize("kind, rudder", [("turning", 35.0), ("turning", -35.0), ("zigzag", 10.0), ("zigzag", -20.0)])
+def test_smooth_switches_keep_the_published_indices_within_one_percent(kind, rudder):
+    from casship.maneuvers import run_maneuver
+
+    exact = run_maneuver(kvlcc2(), kind, rudder_deg=rudder, speed=7.97, n=1.53).metrics
+    smooth = run_maneuver(kvlcc2(smooth=True), kind, rudder_deg=rudder, speed=7.97, n=1.53).metrics
+    keys = (("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m") if kind == "turning"
+            else ("overshoot_1_deg", "overshoot_2_deg", "initial_turning_time_s", "period_s"))
+    for k in keys:
+        assert smooth[k] == pytest.approx(exact[k], rel=0.01), k
+
+
+def test_smooth_wake_within_stated_tolerance_and_differentiable():
+    """The smooth wake differs by < 0.007 from the published one; its derivative in v is continuous
+    at zero drift where the published one jumps."""
+    import casadi as ca
+
+    pub, smo = kvlcc2(), kvlcc2(smooth=True)
+    u_in = pub.inputs(delta=0.0, n=1.53)
+    for ship in (pub, smo):
+        A = [np.asarray(ship.f_jac(ship.states(u=7.97, v=s), u_in, ship.params(), np.zeros(3))[0])
+             for s in (-1e-7, 1e-7)]
+        jump = abs(A[0][0, 1] - A[1][0, 1])           # d(du)/dv across v = 0
+        if ship is pub:
+            assert jump > 1e-4
+        else:
+            assert jump < 1e-8
+    # the documented bound on the wake factor (1 - w_P), over drift angles of +-1 rad
+    from casship.models.mmg import SMOOTH_WIDTH, smooth_abs, smooth_step
+
+    P = pub.param_dict()
+    b = np.linspace(-1, 1, 20001)
+    sa = np.asarray(ca.Function("a", [x := ca.SX.sym("x")], [smooth_abs(x, SMOOTH_WIDTH)]).map(b.size)(b)).ravel()
+    st = np.asarray(ca.Function("s", [x], [smooth_step(x, SMOOTH_WIDTH)]).map(b.size)(b)).ravel()
+    exact = 1 + (1 - np.exp(-P["C_1"] * np.abs(b))) * (np.where(b > 0, P["C_2_plus"], P["C_2_minus"]) - 1)
+    smooth = 1 + (1 - np.exp(-P["C_1"] * sa)) * (P["C_2_minus"] + (P["C_2_plus"] - P["C_2_minus"]) * st - 1)
+    assert np.abs((1 - P["w_P0"]) * (exact - smooth)).max() < 0.007
+    assert np.all(np.abs(sa - np.abs(b)) <= SMOOTH_WIDTH)
+    for x, u in _random_points(smo, 5, 7):
+        assert_jacobians(smo, x, u)
+    ext = kvlcc2({"delta_0": 0.01, "Y_0_dash": 0.02, "N_0_dash": -0.01}, asymmetry=True, smooth=True)
+    for x, u in _random_points(ext, 5, 8):
+        assert_jacobians(ext, x, u)
+
+
+def test_physical_bounds_on_interaction_factors():
+    ship = kvlcc2()
+    lo, hi = dict(zip(ship.param_names, ship.param_lower)), dict(zip(ship.param_names, ship.param_upper))
+    assert (lo["w_P0"], hi["w_P0"]) == (0.0, 1.0) and (lo["kappa"], hi["kappa"]) == (0.0, 1.0)
+    assert lo["epsilon"] == 0.0 and lo["R_0_dash"] == 0.0 and (lo["t_P"], hi["t_P"]) == (0.0, 1.0)
+    with pytest.raises(ValueError, match="w_P0"):
+        kvlcc2({"w_P0": 1.2})

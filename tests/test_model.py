@@ -318,3 +318,19 @@ def test_param_as_state():
     np.testing.assert_allclose(xdot, [0.1, (0.08 * 0.3 - 0.1) / 25.0, 0.01], rtol=1e-15)
     with pytest.raises(ValueError, match="'psi' is not a declared parameter"):
         b.param_as_state("psi")
+
+
+def test_nan_or_inf_constants_are_rejected_at_build_naming_the_state():
+    import math
+
+    b = cs.ModelBuilder("bad_math")
+    psi, r = b.state("psi"), b.state("r")
+    b.ode(psi=r, r=math.cos(psi) - r)            # math.cos on a CasADi symbol gives a float NaN
+    with pytest.raises(ValueError, match=r"model 'bad_math': the equation of state 'r' contains the constant nan"):
+        b.build()
+    b = cs.ModelBuilder("bad_output")
+    x = b.state("x")
+    b.ode(x=-x)
+    b.output("y", x + np.inf)
+    with pytest.raises(ValueError, match=r"the output 'y' contains the constant inf"):
+        b.build()

@@ -292,3 +292,102 @@ def test_outputs_are_evaluated_or_taken_from_the_states():
     traj = cs.simulate(derived, derived.states(u=7.0), t, inputs)
     np.testing.assert_allclose(traj["speed"], np.hypot(traj["u"], traj["v"]), rtol=1e-15)
     np.testing.assert_array_equal(traj["rudder"], traj["delta"])
+
+
+# -- validity: declared ranges and the stability limit of fixed steps -------------------------------------
+def _kvlcc2():
+    ship = cs.models.get_model("kvlcc2")
+    return ship, ship.states(u=ship.vessel.U0)
+
+
+def test_inputs_outside_the_declared_range_raise_naming_input_value_and_range():
+    from casship.validity import ValidityError
+
+    ship, x0 = _kvlcc2()
+    t = np.arange(0.0, 20.0, 1.0)
+    delta = np.where(t < 10, 0.0, np.radians(200.0))
+    with pytest.raises(ValidityError, match=r"input 'delta' = 200 deg at t = 10 s is outside its valid range "
+                                            r"\[-35, 35\] deg \(rudder stop\) of model 'kvlcc2'; pass check_limits=False"):
+        cs.simulate(ship, x0, t, {"delta": delta, "n": 1.5})
+    with pytest.raises(ValidityError, match=r"input 'n' = -2 1/s .* \[0, 3.06\] 1/s"):
+        cs.simulate(ship, x0, t, {"delta": 0.0, "n": -2.0})
+    with pytest.raises(ValidityError, match=r"initial state 'u' = 30 m/s is outside its valid range \[0, 15.95\] m/s"):
+        cs.simulate(ship, ship.states(u=30.0), t, {"delta": 0.0, "n": 1.5})
+
+
+def test_closed_loop_inputs_are_checked_after_the_run():
+    from casship.validity import ValidityError
+
+    ship, x0 = _kvlcc2()
+    with pytest.raises(ValidityError, match=r"input 'delta' = 40 deg at t = 5 s"):
+        cs.simulate(ship, x0, np.arange(0.0, 10.0, 1.0),
+                    lambda t, x: ship.inputs(delta=np.radians(40.0) if t >= 5 else 0.0, n=1.5))
+
+
+def test_explicit_opt_in_for_an_out_of_range_study():
+    ship, x0 = _kvlcc2()
+    t = np.arange(0.0, 20.0, 1.0)
+    tr = cs.simulate(ship, x0, t, {"delta": np.radians(45.0), "n": 1.5}, check_limits=False)
+    assert tr["r"][-1] > 0
+
+
+def test_margin_of_one_percent_at_a_bound():
+    ship, x0 = _kvlcc2()
+    t = np.arange(0.0, 5.0, 1.0)
+    cs.simulate(ship, x0, t, {"delta": np.radians(35.1), "n": 1.5})       # a measured angle at the stop
+
+
+def test_state_leaving_its_range_warns_with_the_time():
+    from casship.validity import ValidityWarning
+
+    b = cs.ModelBuilder("drift")
+    pos = b.state("pos", unit="m")
+    b.ode(pos=b.input("vel", unit="m/s"))
+    b.limit("pos", -1.0, 1.0, why="calibrated range")
+    m = b.build()
+    with pytest.warns(ValidityWarning, match=r"state 'pos' of model 'drift' leaves its valid range \[-1, 1\] m "
+                                             r"\(calibrated range\) at t = 1.1 s \(1.1 m\)"):
+        tr = cs.simulate(m, [0.0], np.arange(0.0, 2.0, 0.1), {"vel": 1.0})
+    assert tr["pos"][-1] == pytest.approx(1.9)
+
+
+def test_step_beyond_the_stability_limit_raises_instead_of_exploding():
+    from casship.validity import ValidityError, stable_step
+
+    m = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    # a 1e4 s gap in the time stamps: rk4 with one step per interval would return ~1e29
+    t = np.concatenate([np.arange(0.0, 100.0, 10.0), 1e4 + np.arange(0.0, 100.0, 10.0)])
+    with pytest.raises(ValidityError, match=r"time step 9910 s \(interval 9, 9910 s long\) exceeds the rk4 "
+                                            r"stability limit 55.71 s of model 'nomoto1'"):
+        cs.simulate(m, m.states(), t, {"delta": 0.1})
+    # the ways out give the same, finite answer: sub-steps or the adaptive integrator
+    a = cs.simulate(m, m.states(), t, {"delta": 0.1}, max_step=20.0)
+    b = cs.simulate(m, m.states(), t, {"delta": 0.1}, method="cvodes")
+    np.testing.assert_allclose(a["r"], b["r"], rtol=1e-4, atol=1e-12)
+    np.testing.assert_allclose(a["r"][-1], 0.1 * 0.1, rtol=1e-9)           # steady state K delta
+    # the limit is exact for a real eigenvalue: 2 T (euler), 2.785 T (rk4)
+    x, u, p = m.states(), m.inputs(), m.params()
+    assert stable_step(m, x, u, p, "euler") == pytest.approx(40.0, rel=1e-9)
+    assert stable_step(m, x, u, p, "rk4") == pytest.approx(20.0 * 2.785293563, rel=1e-6)
+    assert stable_step(m, x, u, p, "cvodes") == np.inf
+
+
+def test_step_limit_of_a_lightly_damped_mode_for_euler():
+    from casship.validity import stable_step
+
+    b = cs.ModelBuilder("oscillator")
+    pos, vel = b.state("pos"), b.state("vel")
+    b.ode(pos=vel, vel=-pos - 0.02 * vel)                 # lam = -0.01 +- 1j
+    m = b.build()
+    lam = complex(-0.01, np.sqrt(1 - 0.01**2))
+    h = stable_step(m, m.states(), m.inputs(), m.params(), "euler")
+    assert h == pytest.approx(-2 * lam.real / abs(lam) ** 2, rel=1e-8)      # |1 + h lam| = 1
+    assert abs(1 + (1.01 * h) * lam) > 1 > abs(1 + (0.99 * h) * lam)
+
+
+def test_duplicate_and_nan_time_stamps_are_named():
+    m = cs.models.nomoto_first_order()
+    with pytest.raises(ValueError, match=r"t: time stamps must increase strictly; row 2 \(1.0\) is not after row 1"):
+        cs.simulate(m, m.states(), [0.0, 1.0, 1.0, 2.0], {"delta": 0.0})
+    with pytest.raises(ValueError, match=r"t: non-finite time stamp at row 1"):
+        cs.simulate(m, m.states(), [0.0, np.nan, 2.0], {"delta": 0.0})

@@ -17,6 +17,6 @@ def test_kvlcc2_marin_quick(data_dir, tmp_path, capsys):
     assert (tmp_path / "cross_validation.md").exists() and (tmp_path / "fig_fit_residuals.png").exists()
     held = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_-20_m.dat"
     capsys.readouterr()
-    assert main(["simulate", "kvlcc2", "--params", str(tmp_path / "fit.json"), "--inputs", str(held), "--json"]) == 0
+    assert main(["simulate", "--model", "kvlcc2", "--params", str(tmp_path / "fit.json"), "--inputs", str(held), "--json"]) == 0
     replay = json.loads(capsys.readouterr().out)["replay"]
     assert abs(replay["psi_rmse_deg"] - after["psi_rmse_deg"]) < 1e-6

@@ -1,16 +1,18 @@
-"""``casship identify DATA... --model NAME --free P1,P2``: fit model parameters to records.
+"""``casship identify DATA... --model NAME --free P1,P2``: fit model parameters to one or many records.
 
 Examples::
 
     casship identify run1.csv run2.csv --model nomoto1 --free K,T --R psi=1e-4 --out fit.json
-    casship identify ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --model kvlcc2 \\
-        --free N_r_dash,Y_v_dash --measured u,v,r,psi --decimate 20 --out fit.json --plot fit.png
-    casship simulate kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
+    casship identify A.dat B.dat C.dat --model kvlcc2 --method oe --free N_r_dash,Y_v_dash,bias[n] \\
+        --share bias[n]=record --prior N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
+        --identifiability --out fit.json --plot fit.png
+    casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
 units, radians) or MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
 to the MMG convention). ``--method mle`` (default) maximises the likelihood through an EKF;
-``--method oe`` minimises the simulated output error.
+``--method oe`` minimises the simulated output error. Every option maps onto the Python API
+(:class:`casship.OutputErrorProblem`, :class:`casship.MLEProblem`).
 """
 from __future__ import annotations
 
@@ -22,38 +24,46 @@ import numpy as np
 
 def register(sub) -> None:
     p = sub.add_parser("identify", help="fit model parameters to records (maximum likelihood or output error)",
-                       description="Estimate named parameters of a registered model from one or more records, "
-                                   "with standard errors, correlations and identifiability warnings.")
+                       description="Estimate named parameters of a registered model from one or more records "
+                                   "(one joint fit), with a prior, standard errors, correlations and warnings.")
     p.add_argument("data", nargs="+", help="records: CSV with a header row, or MARIN .dat")
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
-    p.add_argument("--free", required=True, help="comma-separated parameter names to estimate")
+    p.add_argument("--free", required=True,
+                   help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
     p.add_argument("--out", default="fit.json", help="JSON file for the fit (default fit.json)")
     p.add_argument("--method", default="mle", choices=("mle", "oe"),
                    help="mle: likelihood through an EKF (default); oe: output error (simulation)")
-    p.add_argument("--measured", default=None, help="outputs to use a,b,... (default: outputs present in the data)")
+    p.add_argument("--measured", default=None, help="outputs to use a,b,... (default: outputs in every record)")
+    p.add_argument("--share", default=None,
+                   help="per-record or per-group quantities name=record|all|group,... (group: see --group)")
+    p.add_argument("--group", default=None, help="one group label per record A,A,B,... (for --share name=group)")
+    p.add_argument("--prior", default=None,
+                   help="Gaussian prior standard deviations name=std,... centred on the published values (MAP)")
+    p.add_argument("--prior-weight", dest="prior_weight", type=float, default=1.0, help="weight of the prior")
+    p.add_argument("--bounds", default=None, help="bounds name=lower:upper,...")
     p.add_argument("--R", default=None, help="measurement variances name=value,... (mle; default: estimated)")
     p.add_argument("--Q", default=None, help="process-noise variances: scalar or name=value,... (mle; default 1e-8)")
     p.add_argument("--estimate-noise", dest="estimate_noise", default=None,
                    help="noise variances to estimate: Q, R or Q,R (mle; R is estimated when --R is absent)")
-    p.add_argument("--sigma", default=None, help="output standard deviations name=value,... (oe weights)")
+    p.add_argument("--sigma", default=None,
+                   help="output standard deviations name=value,... (oe weights; default: estimated from the records)")
     p.add_argument("--guess", default=None, help="starting values name=value,... (default: model values)")
     p.add_argument("--params", default=None, help='JSON {"params": {...}} with the fixed parameter values')
     p.add_argument("--estimate-x0", dest="estimate_x0", default=None,
                    help="states whose initial values are estimated per record a,b,...")
     p.add_argument("--decimate", type=int, default=1, help="keep every k-th sample (default 1)")
     p.add_argument("--shooting", default="single", choices=("single", "multiple"), help="oe: shooting")
-    p.add_argument("--hessian", default="fisher", choices=("fisher", "exact", "limited-memory"),
-                   help="curvature used by IPOPT (mle; default fisher)")
-    p.add_argument("--plot", default=None, help="PNG of measured vs predicted outputs")
+    p.add_argument("--max-iter", dest="max_iter", type=int, default=100, help="iteration limit (default 100)")
+    p.add_argument("--identifiability", action="store_true",
+                   help="print the Fisher-information analysis of the free set at the guess before fitting")
+    p.add_argument("--plot", default=None, help="PNG of measured outputs vs the fitted free-run simulation")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of a table")
     p.set_defaults(func=run)
 
 
 def _pairs(text: str | None, what: str) -> dict[str, float]:
     out = {}
-    if not text:
-        return out
-    for item in text.split(","):
+    for item in _names(text):
         if "=" not in item:
             raise ValueError(f"{what}: expected name=value, got {item!r}")
         k, v = item.split("=", 1)
@@ -65,7 +75,33 @@ def _pairs(text: str | None, what: str) -> dict[str, float]:
 
 
 def _names(text: str | None) -> list[str]:
-    return [s.strip() for s in text.split(",") if s.strip()] if text else []
+    """Comma-separated items; commas inside brackets (``bias[a,b]``) do not split."""
+    if not text:
+        return []
+    out, depth, cur = [], 0, ""
+    for ch in text:
+        depth += (ch == "[") - (ch == "]")
+        if ch == "," and depth == 0:
+            out.append(cur.strip())
+            cur = ""
+        else:
+            cur += ch
+    out.append(cur.strip())
+    return [s for s in out if s]
+
+
+def _bounds(text: str | None) -> dict:
+    out = {}
+    for item in _names(text):
+        name, _, rng = item.partition("=")
+        lo, sep, hi = rng.partition(":")
+        if not sep:
+            raise ValueError(f"--bounds: expected name=lower:upper, got {item!r}")
+        try:
+            out[name.strip()] = (float(lo) if lo.strip() else -float("inf"), float(hi) if hi.strip() else float("inf"))
+        except ValueError:
+            raise ValueError(f"--bounds: {item!r} is not name=lower:upper with numbers") from None
+    return out
 
 
 def load_record(path):
@@ -87,76 +123,76 @@ def load_record(path):
     return data
 
 
-def _decimate(data, k: int):
-    if k < 1:
-        raise ValueError(f"--decimate must be >= 1, got {k}")
-    if k == 1:
-        return data
-    from ..data import Dataset
+def _problem(args, model, records, free, measured):
+    from ..discretize import discretize
+    from ..estimators import EKF
+    from ..identify import MLEProblem, OutputErrorProblem, Prior, noise_std
+    from ..identify.params_file import read_params
 
-    idx = np.arange(0, len(data), k)
-    return Dataset(data.t[idx], {n: data[n][idx] for n in data.names}, data.units, data.meta)
-
-
-def _noise_start(data, names) -> dict[str, float]:
-    """Starting measurement variances from first differences (half their variance), floored."""
-    out = {}
-    for n in names:
-        y = np.concatenate([d[n] for d in data])
-        dy = np.diff(y[np.isfinite(y)])
-        out[n] = max(0.5 * float(np.var(dy)) if dy.size else 1.0, 1e-10)
-    return out
+    share = {}
+    for item in _names(args.share):
+        name, _, how = item.partition("=")
+        if not how:
+            raise ValueError(f"--share: expected name=record|all|group, got {item!r}")
+        share[name.strip()] = how.strip()
+    labels = _names(args.group)
+    groups = {"group": labels} if labels else None
+    if any(h == "group" for h in share.values()) and not labels:
+        raise ValueError("--share name=group needs --group with one label per record")
+    prior = Prior(_pairs(args.prior, "--prior"), weight=args.prior_weight) if args.prior else None
+    params = read_params(args.params, model)[1] if args.params else None
+    common = dict(share=share or None, groups=groups, prior=prior, params=params, bounds=_bounds(args.bounds) or None,
+                  estimate_x0=_names(args.estimate_x0))
+    if args.method == "oe":
+        sigma = _pairs(args.sigma, "--sigma")
+        return OutputErrorProblem(model, records, free, measured=measured, sigma=sigma or "estimate",
+                                  shooting=args.shooting, **common)
+    R = _pairs(args.R, "--R")
+    unknown = set(R) - set(measured)
+    if unknown:
+        raise ValueError(f"--R names {sorted(unknown)} not among measured outputs {measured}")
+    rest = [n for n in measured if n not in R]
+    angles = [n for n in rest if model.angle_outputs[model.index(n, "output")]]
+    start = {n: s**2 for n, s in noise_std(records, rest, angles).items()}
+    estimate = set(_names(args.estimate_noise))
+    if estimate - {"Q", "R"}:
+        raise ValueError(f"--estimate-noise: unknown {sorted(estimate - {'Q', 'R'})}; use Q, R or Q,R")
+    noise = {}
+    if "R" in estimate:
+        noise["R"] = True
+    elif rest:
+        noise["R"] = rest
+    if "Q" in estimate:
+        noise["Q"] = True
+    try:
+        Q = float(args.Q) if args.Q else 1e-8
+    except ValueError:
+        Q = _pairs(args.Q, "--Q")
+    dt = float(np.median(np.concatenate([np.diff(d.t) for d in records])))
+    ekf = EKF(discretize(model, dt), Q, {**start, **R}, measured=measured)
+    return MLEProblem(ekf, records, free, noise=noise, **common)
 
 
 def run(args) -> int:
-    from ..discretize import discretize
-    from ..estimators import EKF
-    from ..identify import MLEProblem, OutputErrorProblem
+    from ..identify import decimate
     from ..models import get_model
-    from .cmd_simulate import _load_params
 
     model = get_model(args.model)
-    records = [_decimate(load_record(p), args.decimate) for p in args.data]
+    records = [decimate(load_record(p), args.decimate) for p in args.data]
     free = _names(args.free)
     if not free:
-        raise ValueError("--free: give at least one parameter name")
-    params = _load_params(args.params) if args.params else None
-    guess = _pairs(args.guess, "--guess")
+        raise ValueError("--free: give at least one quantity")
     measured = _names(args.measured) or [n for n in model.output_names if all(n in d for d in records)]
     if not measured:
         raise ValueError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
-    x0_states = _names(args.estimate_x0)
-    if args.method == "oe":
-        sigma = _pairs(args.sigma, "--sigma")
-        prob = OutputErrorProblem(model, records, free, measured=measured, sigma=sigma or None, params=params,
-                                  estimate_x0=x0_states, shooting=args.shooting)
-        fit = prob.solve(guess=guess)
-    else:
-        dt = float(np.median(np.diff(records[0].t)))
-        R = _pairs(args.R, "--R")
-        unknown = set(R) - set(measured)
-        if unknown:
-            raise ValueError(f"--R names {sorted(unknown)} not among measured outputs {measured}")
-        start = _noise_start(records, [n for n in measured if n not in R])
-        R_all = {n: R.get(n, start.get(n)) for n in measured}
-        estimate = set(_names(args.estimate_noise))
-        bad = estimate - {"Q", "R"}
-        if bad:
-            raise ValueError(f"--estimate-noise: unknown {sorted(bad)}; use Q, R or Q,R")
-        noise = {}
-        if "R" in estimate:
-            noise["R"] = True
-        elif len(R) < len(measured):
-            noise["R"] = [n for n in measured if n not in R]
-        if "Q" in estimate:
-            noise["Q"] = True
-        try:
-            Q = float(args.Q) if args.Q else 1e-8
-        except ValueError:
-            Q = _pairs(args.Q, "--Q")
-        ekf = EKF(discretize(model, dt), Q, R_all, measured=measured)
-        prob = MLEProblem(ekf, records, free, params=params, noise=noise, estimate_x0=x0_states)
-        fit = prob.solve(guess=guess, hessian=args.hessian)
+    prob = _problem(args, model, records, free, measured)
+    guess = _pairs(args.guess, "--guess")
+    if args.identifiability:
+        idf = prob.identifiability(guess or None)
+        print(idf.summary())
+        print(f"proposed free set (relative std error <= {idf.max_rel_std:g}, |rho| <= {idf.max_corr:g}): "
+              f"{idf.propose()}")
+    fit = prob.solve(guess=guess, max_iter=args.max_iter)
     fit.to_json(args.out)
     if args.plot:
         fit.plot(args.plot)

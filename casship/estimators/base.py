@@ -73,6 +73,7 @@ class Estimator:
     FOLD_CHUNK = 512
     continuous = False       # Q and R enter as spectral densities Q dt, R dt
     stochastic = False       # draws random numbers (reproducible with ``seed``)
+    linear = False           # needs a model linear in states, inputs and noise
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured: Sequence[str] | None = None, options=None):
         if not isinstance(dmodel, DiscreteModel):
@@ -307,7 +308,7 @@ class Estimator:
         _, outs = run_fold(lambda size: self._fold_call(size, outputs), n, self.FOLD_CHUNK, memory=memory,
                            per_sample=per, constants={k: arrays[k] for k in CONSTANT_INPUTS}, pad=pad,
                            keep=DIAGNOSTICS)
-        return self.result(data, arrays, {k: per_sample(v, n) for k, v in outs.items()})
+        return self.result(data, arrays, outs)
 
     def result(self, data: Dataset, arrays: dict, out: dict, estimator: str | None = None) -> FilterResult:
         """Assemble a :class:`FilterResult` from the per-sample diagnostics ``out`` (name -> array
@@ -316,7 +317,7 @@ class Estimator:
         mask = arrays["mask"].T
         e = np.array(out["e"], dtype=float).reshape(n, self.ny)
         e[mask == 0] = np.nan
-        mat = lambda k, r, c: np.asarray(out[k], dtype=float).reshape(n, r, c)  # noqa: E731
+        mat = lambda k, r, c: np.reshape(out[k], (n, r, c))  # noqa: E731
         nx, ny = m.nx, self.ny
         return FilterResult(
             t=data.t, x=np.reshape(out["x"], (n, nx)), P=mat("P", nx, nx), x_pred=np.reshape(out["x_pred"], (n, nx)),

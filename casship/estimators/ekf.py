@@ -184,6 +184,7 @@ class KF(EKF):
     """
 
     name = "KF"
+    linear = True            # needs a model linear in states, inputs and noise
 
     def _check_options(self) -> None:
         super()._check_options()

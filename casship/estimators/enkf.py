@@ -42,23 +42,32 @@ class EnKFOptions(EstimatorOptions):
 
 
 def _wrap_rows(D, angles):
-    """``D`` with the rows flagged in ``angles`` wrapped to [-pi, pi) (matrix operations only)."""
+    """``D`` with its angle rows wrapped to [-pi, pi) (whole-matrix operations, no row slicing)."""
     if not np.any(angles):
         return D
-    a = ca.DM(np.asarray(angles, dtype=float))
-    wrapped = D - 2 * np.pi * ca.floor((D + np.pi) / (2 * np.pi))
-    return D + ca.repmat(a, 1, D.shape[1]) * (wrapped - D)
+    a = ca.repmat(ca.DM(np.asarray(angles, dtype=float)), 1, D.shape[1])
+    return D - a * (2 * np.pi * ca.floor((D + np.pi) / (2 * np.pi)))
 
 
 def _mean(X, angles):
     """Ensemble mean of the columns of ``X``; angle rows averaged on the circle around the first member."""
     N = X.shape[1]
+    if not np.any(angles):
+        return ca.sum2(X) / N
     ref = X[:, 0]
     return ref + ca.sum2(_wrap_rows(X - ca.repmat(ref, 1, N), angles)) / N
 
 
 def _deviations(X, mean, angles):
+    """Columns of ``X`` minus ``mean``, angle rows wrapped to [-pi, pi)."""
     return _wrap_rows(X - ca.repmat(mean, 1, X.shape[1]), angles)
+
+
+def _member(name, inputs: dict, outputs: dict) -> tuple[ca.Function, list]:
+    """A member Function of the non-empty ``inputs`` (name -> SX) and the names it takes (empty
+    inputs, e.g. a model without inputs, are left out: a mapped empty input makes CasADi's C invalid)."""
+    used = [k for k, v in inputs.items() if v.numel()]
+    return ca.Function(name, [inputs[k] for k in used], list(outputs.values()), used, list(outputs)), used
 
 
 class EnKF(Estimator):
@@ -115,48 +124,48 @@ class EnKF(Estimator):
         return prior.sample(self.members, np.random.default_rng(seed)).T.copy()
 
     def _member_functions(self):
-        """The per-member Functions (SX), to be mapped over the ensemble."""
+        """The per-member Functions (SX) with the names of their inputs, to be mapped over the ensemble."""
         m, dm = self.model, self.dmodel
         S = dm.symbolic
         x, u, p, w, dt = S.sym("x", m.nx), S.sym("u", m.nu), S.sym("p", m.np), S.sym("w", m.nw), S.sym("dt")
-        forecast = ca.Function("enkf_member_forecast", [x, u, p, w, dt], [dm.F(x, u, p, w, dt)],
-                               ["x", "u", "p", "w", "dt"], ["xf"])
-        output = ca.Function("enkf_member_output", [x, u, p], [self.h_meas(x, u, p)], ["x", "u", "p"], ["y"])
+        forecast = _member("enkf_member_forecast", {"x": x, "u": u, "p": p, "w": w, "dt": dt},
+                           {"xf": dm.F(x, u, p, w, dt)})
+        output = _member("enkf_member_output", {"x": x, "u": u, "p": p}, {"y": self.h_meas(x, u, p)})
         yf, v, y, mask = S.sym("yf", self.ny), S.sym("v", self.ny), S.sym("y", self.ny), S.sym("mask", self.ny)
         K = S.sym("K", m.nx, self.ny)
-        analysis = ca.Function("enkf_member_analysis", [x, yf, v, y, mask, K],
-                               [x + K @ residual(y + v, yf, mask, self.angle_meas)],
-                               ["xf", "yf", "v", "y", "mask", "K"], ["xa"])
+        analysis = _member("enkf_member_analysis", {"xf": x, "yf": yf, "v": v, "y": y, "mask": mask, "K": K},
+                           {"xa": x + K @ residual(y + v, yf, mask, self.angle_meas)})
         return forecast, output, analysis
 
     def _build(self, s: dict) -> dict:
         m, N = self.model, self.members
-        forecast, output, analysis = self._member_functions()
+        (forecast, f_in), (output, o_in), (analysis, a_in) = self._member_functions()
         ang, angy = m.angle_states, self.angle_meas
         scale = 1.0 / np.sqrt(N - 1)
         X, mask = s["X"], s["mask"]
         # one factor per step for all members (an SX Function of the small Q and R)
         Qs, Rs = ca.SX.sym("Q", m.nw, m.nw), ca.SX.sym("R", self.ny, self.ny)
-        roots = ca.Function("enkf_noise_roots", [Qs, Rs], [psd_sqrt(Qs), psd_sqrt(Rs)])
-        LQ, LR = roots(s["Q"], s["R"])
+        LQ, LR = ca.Function("enkf_noise_roots", [Qs, Rs], [psd_sqrt(Qs), psd_sqrt(Rs)])(s["Q"], s["R"])
+
+        def mapped(fun, names, args):
+            return fun.map(N)(*[args[k] for k in names])
+
         # forecast: every member through the model with its own held noise
-        Xf = forecast.map(N)(X, s["u_prev"], s["p"], LQ @ s["z_w"], s["dt"])
+        Xf = mapped(forecast, f_in, {"x": X, "u": s["u_prev"], "p": s["p"], "w": LQ @ s["z_w"], "dt": s["dt"]})
         x0, xp = _mean(X, ang), _mean(Xf, ang)
         dX0, dXf = scale * _deviations(X, x0, ang), scale * _deviations(Xf, xp, ang)
-        Pp = symmetric(dXf @ dXf.T)
         # analysis with perturbed observations
-        Yf = output.map(N)(Xf, s["u"], s["p"])
+        Yf = mapped(output, o_in, {"x": Xf, "u": s["u"], "p": s["p"]})
         yhat = _mean(Yf, angy)
         dY = ca.diag(mask) @ (scale * _deviations(Yf, yhat, angy))
         Sm = masked_innovation_cov(dY @ dY.T, s["R"], mask)
         e = residual(s["y"], yhat, mask, angy)
-        small = self._gain_function()
-        K, nis, ll, acc = small(Sm, dXf @ dY.T, e, mask, s["gate"])
-        Xa = analysis.map(N)(Xf, Yf, LR @ s["z_v"], s["y"], mask, K)
+        K, nis, ll, acc = self._gain_function()(Sm, dXf @ dY.T, e, mask, s["gate"])
+        Xa = mapped(analysis, a_in, {"xf": Xf, "yf": Yf, "v": LR @ s["z_v"], "y": s["y"], "mask": mask, "K": K})
         xa = _mean(Xa, ang)
         dXa = scale * _deviations(Xa, xa, ang)
-        return {"X": Xa, "x": xa, "P": symmetric(dXa @ dXa.T), "x_pred": xp, "P_pred": Pp, "C": dX0 @ dXf.T,
-                "e": e, "S": Sm, "K": K, "nis": nis, "ll": ll, "accepted": acc}
+        return {"X": Xa, "x": xa, "P": symmetric(dXa @ dXa.T), "x_pred": xp, "P_pred": symmetric(dXf @ dXf.T),
+                "C": dX0 @ dXf.T, "e": e, "S": Sm, "K": K, "nis": nis, "ll": ll, "accepted": acc}
 
     def _gain_function(self) -> ca.Function:
         """Gain (zero when gated out), NIS, log-likelihood and acceptance from ``S`` and ``Pxy`` (SX)."""

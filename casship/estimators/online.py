@@ -122,10 +122,10 @@ class StepEngine:
     def update(self, y, dt, u_prev, u):
         if not dt >= 0:
             raise ValueError(f"dt must be >= 0 and finite, got {dt}")
-        try:
-            self._y[:] = y
-        except (ValueError, TypeError):
-            raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got {np.shape(y)}") from None
+        y = np.asarray(y, dtype=float)
+        if y.shape != self._y.shape:
+            raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got shape {y.shape}")
+        self._y[:] = y
         ok = self._ok
         np.isfinite(self._y, out=ok)
         self._mask[:] = ok

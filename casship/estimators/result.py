@@ -44,6 +44,17 @@ def not_positive_definite(P: np.ndarray) -> np.ndarray:
     return np.flatnonzero(bad)
 
 
+def _frozen(a, dtype) -> bool:
+    """True for a read-only array of ``dtype`` whose memory nobody can write (shared without a copy)."""
+    if not isinstance(a, np.ndarray) or a.dtype != dtype:
+        return False
+    while isinstance(a, np.ndarray):
+        if a.flags.writeable:
+            return False
+        a = a.base
+    return True
+
+
 @dataclass(frozen=True)
 class Health:
     """Divergence and integrity monitor of an estimator run (from :meth:`FilterResult.health`).
@@ -141,13 +152,10 @@ class FilterResult:
     def __post_init__(self):
         n = np.asarray(self.t).size
         for name in _ARRAYS:
-            a = np.array(getattr(self, name))
-            if name in ("rejected", "angle_states"):
-                a = a.astype(bool)
-            elif name == "n_measured":
-                a = a.astype(int)
-            else:
-                a = a.astype(float)
+            dtype = bool if name in ("rejected", "angle_states") else int if name == "n_measured" else float
+            a = getattr(self, name)
+            if not _frozen(a, dtype):
+                a = np.array(a, dtype=dtype)                         # an own, read-only copy
             if name != "angle_states" and a.shape[:1] != (n,):
                 raise ValueError(f"FilterResult: {name} has {a.shape[0] if a.ndim else 0} rows, t has {n}")
             a.setflags(write=False)

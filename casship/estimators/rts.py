@@ -22,7 +22,6 @@ import numpy as np
 
 from .._fast import DUPLICATE_NAMES, BufferedCall, compile_function, run_fold
 from ..angles import wrap_sym
-from .base import per_sample
 from .result import FilterResult
 from .update import spd_solve, symmetric
 
@@ -92,6 +91,6 @@ def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
            "P_pred": cols(result.P_pred[:0:-1]), "C": cols(result.C[:0:-1])}
     _, outs = run_fold(lambda size: _backward_fold(nx, angles, size, bool(jit)), n - 1, FOLD_CHUNK,
                        memory={"x": result.x[-1], "P": result.P[-1]}, per_sample=per, constants={}, keep=("x", "P"))
-    xs = np.vstack([per_sample(outs["x"], n - 1).reshape(n - 1, nx)[::-1], result.x[-1:]])
-    Ps = np.concatenate([per_sample(outs["P"], n - 1).reshape(n - 1, nx, nx)[::-1], result.P[-1:]], axis=0)
+    xs = np.vstack([outs["x"].reshape(n - 1, nx)[::-1], result.x[-1:]])
+    Ps = np.concatenate([outs["P"][::-1], result.P[-1:]], axis=0)
     return result.replace(x=xs, P=Ps, estimator=f"{result.estimator}+RTS")

@@ -189,13 +189,12 @@ class UKF(Estimator):
         nis, ll = gaussian_terms(e, Sm, mask)
         acc = nis <= s["gate"]
         Ka = acc * K
-        # Joseph form with the statistical linearisation Hs = Pxy' Pp^-1 and the effective noise
-        # R + Pyy - Hs Pp Hs' (both terms positive semi-definite): equal to Pp - K S K', but a sum of
-        # positive semi-definite terms, so the covariance cannot lose definiteness to round-off
-        Hs = spd_solve(Pp, Pxy).T
-        Dm = ca.diag(mask)
-        R_eff = Dm @ symmetric(s["R"] + Pyy - Hs @ Pp @ Hs.T) @ Dm
-        IKH = ca.DM.eye(n) - Ka @ Hs
-        P_upd = IKH @ Pp @ IKH.T + Ka @ R_eff @ Ka.T
+        if np.all(wc >= 0):
+            # Joseph form in sigma points: sum_i Wc_i (dX_i - K dY_i)(dX_i - K dY_i)' + K R K' equals
+            # Pp - K S K' but is a sum of positive semi-definite terms (no loss of definiteness)
+            D = dXp - Ka @ dY
+            P_upd = weighted_outer(D, wc) + Ka @ (ca.diag(mask) @ s["R"] @ ca.diag(mask)) @ Ka.T
+        else:            # a negative central weight (scaled form): the plain update
+            P_upd = Pp - Ka @ Sm @ Ka.T
         return {"x": xp + Ka @ e, "P": symmetric(P_upd), "x_pred": xp, "P_pred": Pp, "C": C,
                 "e": e, "S": Sm, "K": Ka, "nis": nis, "ll": ll, "accepted": acc}

@@ -1,12 +1,30 @@
-"""System identification: maximum likelihood through a filter, output error, and the fit result.
+"""System identification over one or many records: output error, maximum likelihood through a
+filter, priors, identifiability and the fit result.
 
-* :class:`MLEProblem` -- prediction-error maximum likelihood through an EKF/UKF, exact derivatives.
 * :class:`OutputErrorProblem` -- weighted least squares of simulated outputs (single or multiple shooting).
-* :class:`FitResult` -- estimates, standard errors, correlation, identifiability warnings, AIC/BIC,
-  residual whiteness, JSON and a plot.
+* :class:`MLEProblem` -- prediction-error maximum likelihood through an EKF/UKF/EnKF.
+* Both take a list of records, each with its own initial state (given or estimated) and, where
+  declared, its own copies of parameters and biases (``share=``); a Gaussian prior (:class:`Prior`,
+  MAP); bounds; exact derivatives compiled to C; bounded Gauss-Newton / Fisher-scoring steps.
+* :class:`FitResult` -- estimates, model-based and robust (sandwich) standard errors, correlations,
+  warnings, channel shares, residual whiteness, the model's identity, JSON and a plot.
+* :class:`Identifiability` -- Fisher-information analysis before fitting, and a proposed free set.
+* :func:`cross_validate` -- leave-one-run-out / leave-one-group-out replays against the published
+  values, as a :class:`CrossValidation` value with a table and overlay figures.
+* :func:`noise_std`, :func:`decimate`, :func:`share_labels`, :func:`initial_states` -- record helpers.
 """
+from .crossval import CrossValidation, cross_validate
+from .identifiability import Identifiability
 from .mle import MLEProblem, default_prior
 from .output_error import OutputErrorProblem
-from .result import FitResult, IdentificationError
+from .params_file import read_params
+from .prior import Prior
+from .problem import IdentificationProblem
+from .records import decimate, initial_states, noise_std, share_labels
+from .inverse_dynamics import inverse_dynamics, linear_in, rates_model, smooth_trial
+from .result import FitResult, IdentificationError, IdentificationWarning
 
-__all__ = ["MLEProblem", "OutputErrorProblem", "FitResult", "IdentificationError", "default_prior"]
+__all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
+           "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std", "decimate",
+           "share_labels", "initial_states", "read_params", "cross_validate", "CrossValidation"]
+__all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]

@@ -1,149 +1,282 @@
-"""Decision variables of an identification problem and the IPOPT call shared by the problems.
+"""The free quantities of an identification problem and how each record sees them.
 
-A free quantity is a model parameter (by name), a process/measurement noise variance (``Q[w]``,
-``R[y]``, optimised through its logarithm so that it stays positive) or an initial state of one
-record (``<state>@<k>``). The optimiser sees scaled variables ``z = value / scale`` (``log(value)``
-for variances), so that all of them are of order one.
+A free quantity is one of
+
+* a model parameter (``"N_r_dash"``);
+* a bias: ``"bias[n]"`` on an input (the model is driven by the measured ``n`` plus the bias) or
+  ``"bias[psi]"`` on a measured output (the sensor reads the model output plus the bias);
+* a noise variance ``"Q[w_r]"`` / ``"R[psi]"`` (likelihood problems; optimised through its logarithm);
+* the initial value of a state in one record (``"psi@3"``).
+
+Parameters and biases are shared by all records unless declared otherwise: a quantity that is per
+record has one copy per record (``"R_0_dash@0"``, ``"R_0_dash@1"``, ...), a quantity shared by
+groups has one copy per group label (``"bias[n]@HSVA"``). Records outside every group keep the fixed
+value (0 for a bias).
+
+Each record sees the free values ``theta`` through an affine map (:class:`RecordMap`): its
+parameter vector, noise variances, biases and initial state are ``fixed + E @ theta[cols]``. The
+matrices ``E`` are numbers, so compiled code that takes them as inputs serves every record, every
+free set of the same size and every cross-validation fold. The optimiser works on scaled variables
+``z = value / scale`` (``log(value)`` for variances), all of order one.
 """
 from __future__ import annotations
 
-import re
-import time
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
-import casadi as ca
 import numpy as np
 
 from ..model import Model
-from .result import IdentificationError
 
-__all__ = ["Entry", "ParamSpace", "ipopt_solve", "hess_lag_function", "HESSIANS"]
+__all__ = ["Quantity", "ParamSpace", "RecordMap", "KINDS", "VAR_FLOOR"]
 
-HESSIANS = ("exact", "limited-memory", "custom")
-_OK = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+KINDS = ("param", "bias_in", "bias_out", "Q", "R", "x0")
 VAR_FLOOR = 1e-10  # lower bound of an estimated variance, relative to its starting value
 
 
 @dataclass(frozen=True)
-class Entry:
-    """One free quantity: its name, kind (``param``, ``Q``, ``R``, ``x0``) and where it goes."""
+class Quantity:
+    """One free quantity.
+
+    Attributes
+    ----------
+    name : str
+        Its name in results (``"K"``, ``"R_0_dash@2"``, ``"bias[n]@HSVA"``, ``"Q[w_r]"``, ``"psi@0"``).
+    kind : str
+        One of ``param, bias_in, bias_out, Q, R, x0``.
+    index : int
+        Position in the parameter / input / measured-output / noise / state vector.
+    records : tuple of int
+        The records it acts on.
+    declared : str
+        The name it was declared under (``"R_0_dash"`` for ``"R_0_dash@2"``).
+    start : float
+        Default starting value (the fixed value it replaces; 0 for a bias).
+    log : bool
+        Optimised through its logarithm (variances).
+    scale, lower, upper : float
+    """
 
     name: str
     kind: str
     index: int
-    record: int = -1
+    records: tuple
+    declared: str
+    start: float
     log: bool = False
     scale: float = 1.0
     lower: float = -np.inf
     upper: float = np.inf
 
 
+@dataclass(frozen=True)
+class RecordMap:
+    """How one record sees the free values: ``value = fixed + E @ theta[cols]`` for each block.
+
+    ``p`` (np), ``u`` (input biases, nu), ``y`` (output biases, n measured), ``Q`` and ``R``
+    (variances on the diagonal), ``x0`` (initial state): ``fixed`` holds the values with the free
+    entries zeroed, ``E`` the 0/1 matrices (rows of the block, columns ``cols``).
+    """
+
+    cols: np.ndarray
+    fixed: dict
+    E: dict
+
+    def values(self, theta: np.ndarray) -> dict:
+        """The record's blocks at the (global) free values ``theta``."""
+        loc = np.asarray(theta, dtype=float)[self.cols]
+        return {k: self.fixed[k] + self.E[k] @ loc for k in self.fixed}
+
+    @property
+    def k(self) -> int:
+        return int(self.cols.size)
+
+
 class ParamSpace:
-    """The free quantities of a problem, their guesses, bounds and scaling.
+    """The free quantities of a problem, their starts, bounds, scales and record maps.
 
     Parameters
     ----------
     model : Model
+    n_records : int
     free : sequence of str
-        Names of free model parameters.
-    base : array (np,)
-        Values of all parameters (the fixed ones keep them).
-    bounds : mapping name -> (lower, upper), optional
-        Bounds added to the model's own parameter bounds (also for ``Q[..]``, ``R[..]``, ``x@k``).
-    scale : mapping name -> float, optional
-        Typical magnitudes; by default the guess, the nominal value, or 1.
-    noise_entries : sequence of (name, kind, index, value)
-        Free variances (kind ``Q`` or ``R``) with their current values.
-    x0_entries : sequence of (name, record, state index, value)
+        Declared free model parameters and biases (``"bias[n]"``, ``"bias[psi]"``).
+    copies : mapping name -> list of labels
+        For each declared name shared otherwise than by all records, one label per record:
+        records with equal labels share a copy named ``name@label``; ``None`` means the record keeps
+        the fixed value.
+    base : (np,) array
+        Fixed parameter values.
+    measured : sequence of str
+        Measured outputs (the rows of output biases and of ``R``).
+    noise : sequence of (kind, channel index, name, start)
+        Free variances (``kind`` ``"Q"`` or ``"R"``).
+    x0 : sequence of (record, state index, start)
+        Free initial states.
+    x0_fixed : list of (nx,) arrays
+        Initial states of the records (free entries are replaced).
+    Q, R : arrays
+        Fixed noise covariances (likelihood problems; zeros otherwise).
+    bounds, scale : mapping name -> (lower, upper) / magnitude, optional
+        For any free quantity; a declared name applies to all its copies.
     """
 
-    def __init__(self, model: Model, free: Sequence[str], base: np.ndarray, *, bounds=None, scale=None,
-                 noise_entries=(), x0_entries=()):
+    def __init__(self, model: Model, n_records: int, free: Sequence[str], *, copies: Mapping | None = None,
+                 base=None, measured: Sequence[str] = (), noise=(), x0=(), x0_fixed=None, Q=None, R=None,
+                 bounds: Mapping | None = None, scale: Mapping | None = None):
         free = list(free)
-        if len(set(free)) != len(free):
-            raise ValueError(f"free parameters listed twice: {sorted({n for n in free if free.count(n) > 1})}")
-        bounds, scale = dict(bounds or {}), dict(scale or {})
-        self.model, self.base = model, np.asarray(base, dtype=float)
-        entries, guess = [], {}
+        twice = sorted({n for n in free if free.count(n) > 1})
+        if twice:
+            raise ValueError(f"free quantities listed twice: {twice}")
+        self.model, self.n_records, self.measured = model, int(n_records), tuple(measured)
+        self.base = np.asarray(model.params() if base is None else base, dtype=float)
+        copies = dict(copies or {})
+        unknown = set(copies) - set(free)
+        if unknown:
+            raise ValueError(f"sharing declared for {sorted(unknown)}, which are not free; free: {free}")
+        self.Q = np.zeros((model.nw, model.nw)) if Q is None else np.asarray(Q, dtype=float)
+        self.R = np.zeros((len(self.measured),) * 2) if R is None else np.asarray(R, dtype=float)
+        self.x0_fixed = [np.zeros(model.nx)] * self.n_records if x0_fixed is None else \
+            [np.asarray(v, dtype=float) for v in x0_fixed]
+        everyone = tuple(range(self.n_records))
+        raw = []
         for n in free:
-            i = model.index(n, "param")
-            entries.append(Entry(n, "param", i, lower=model.param_lower[i], upper=model.param_upper[i]))
-            guess[n] = self.base[i]
-        for n, kind, i, v in noise_entries:
-            entries.append(Entry(n, kind, i, log=True))
-            guess[n] = float(v)
-        for n, k, i, v in x0_entries:
-            entries.append(Entry(n, "x0", i, record=k))
-            guess[n] = float(v)
-        names = [e.name for e in entries]
-        unknown = (set(bounds) | set(scale)) - set(names)
+            kind, index, start = self._declared(n)
+            labels = copies.get(n)
+            if labels is None:
+                raw.append(Quantity(n, kind, index, everyone, n, start))
+                continue
+            if len(labels) != self.n_records:
+                raise ValueError(f"sharing of {n!r}: {len(labels)} labels for {self.n_records} records")
+            for label in dict.fromkeys(lab for lab in labels if lab is not None):
+                recs = tuple(i for i, lab in enumerate(labels) if lab == label)
+                raw.append(Quantity(f"{n}@{label}", kind, index, recs, n, start))
+        for kind, i, name, start in noise:
+            raw.append(Quantity(name, kind, int(i), everyone, name, float(start), log=True))
+        for r, i, start in x0:
+            name = f"{model.state_names[i]}@{r}"
+            raw.append(Quantity(name, "x0", int(i), (int(r),), name, float(start)))
+        self.entries = self._bounded(raw, dict(bounds or {}), dict(scale or {}))
+        self.names = [e.name for e in self.entries]
+        self.default_guess = {e.name: e.start for e in self.entries}
+        self._maps = [self._record_map(r) for r in range(self.n_records)]
+
+    # -- declaration -------------------------------------------------------------------------------
+    def _declared(self, name: str):
+        m = self.model
+        if name.startswith("bias[") and name.endswith("]"):
+            ch = name[5:-1]
+            if ch in m.input_names:
+                return "bias_in", m.index(ch, "input"), 0.0
+            if ch in self.measured:
+                return "bias_out", self.measured.index(ch), 0.0
+            raise ValueError(f"{name!r}: {ch!r} is neither an input {list(m.input_names)} nor a measured "
+                             f"output {list(self.measured)} of {m.name!r}")
+        i = m.index(name, "param")
+        return "param", i, float(self.base[i])
+
+    def _bounded(self, raw, bounds, scale) -> list[Quantity]:
+        m = self.model
+        names = [q.name for q in raw]
+        declared = {q.declared for q in raw}
+        unknown = (set(bounds) | set(scale)) - set(names) - declared
         if unknown:
             raise ValueError(f"bounds/scale given for {sorted(unknown)}, which are not free; free: {names}")
         out = []
-        for e in entries:
-            lo, hi = e.lower, e.upper
-            if e.name in bounds:
-                b = bounds[e.name]
-                if len(b) != 2 or not b[0] < b[1]:
-                    raise ValueError(f"bounds of {e.name!r} must be (lower, upper) with lower < upper, got {b}")
+        for q in raw:
+            lo, hi = (m.param_lower[q.index], m.param_upper[q.index]) if q.kind == "param" else (-np.inf, np.inf)
+            b = bounds.get(q.name, bounds.get(q.declared))
+            if b is not None:
+                if len(b) != 2 or not float(b[0]) < float(b[1]):
+                    raise ValueError(f"bounds of {q.name!r} must be (lower, upper) with lower < upper, got {b}")
                 lo, hi = max(lo, float(b[0])), min(hi, float(b[1]))
-            if e.log:
-                # a variance the data cannot tell from zero stops at this floor (reported as at a bound)
-                lo = max(lo, VAR_FLOOR * guess[e.name])
-            s = float(scale.get(e.name, 0.0))
-            if e.name in scale and not (np.isfinite(s) and s > 0):
-                raise ValueError(f"scale of {e.name!r} must be positive, got {scale[e.name]}")
-            if s == 0.0:
-                nominal = model.params()[e.index] if e.kind == "param" else 0.0
-                s = abs(guess[e.name]) or abs(nominal) or 1.0
-            out.append(Entry(e.name, e.kind, e.index, e.record, e.log, 1.0 if e.log else s, lo, hi))
-        self.entries = out
-        self.names = names
-        self.default_guess = guess
+            if q.log:
+                if not q.start > 0:
+                    raise ValueError(f"starting value of variance {q.name!r} must be positive, got {q.start}")
+                lo = max(lo, VAR_FLOOR * q.start)   # a variance the data cannot tell from 0 stops here
+            s = scale.get(q.name, scale.get(q.declared))
+            if s is not None and not (np.isfinite(float(s)) and float(s) > 0):
+                raise ValueError(f"scale of {q.name!r} must be positive, got {s}")
+            if s is None:
+                nominal = m.params()[q.index] if q.kind == "param" else 0.0
+                s = abs(q.start) or abs(nominal) or 1.0
+            out.append(Quantity(q.name, q.kind, q.index, q.records, q.declared, q.start, q.log,
+                                1.0 if q.log else float(s), lo, hi))
+        return out
 
+    def _record_map(self, r: int) -> RecordMap:
+        m = self.model
+        cols = np.array([j for j, e in enumerate(self.entries) if r in e.records], dtype=int)
+        fixed = {"p": self.base.copy(), "u": np.zeros(m.nu), "y": np.zeros(len(self.measured)),
+                 "Q": np.diag(self.Q).copy(), "R": np.diag(self.R).copy(), "x0": self.x0_fixed[r].copy()}
+        block = {"param": "p", "bias_in": "u", "bias_out": "y", "Q": "Q", "R": "R", "x0": "x0"}
+        E = {k: np.zeros((v.size, cols.size)) for k, v in fixed.items()}
+        for c, j in enumerate(cols):
+            e = self.entries[j]
+            b = block[e.kind]
+            if b != "u" and b != "y":
+                fixed[b][e.index] = 0.0
+            E[b][e.index, c] = 1.0
+        return RecordMap(cols, fixed, E)
+
+    # -- queries ---------------------------------------------------------------------------------
     def __len__(self) -> int:
         return len(self.entries)
 
-    # -- maps between decision variables and values ---------------------------------------------
-    def natural(self, z):
-        """Values (list of expressions or floats) of the entries for decision variables ``z``."""
-        return [ca.exp(z[i]) if e.log else z[i] * e.scale for i, e in enumerate(self.entries)]
+    def record_map(self, r: int) -> RecordMap:
+        return self._maps[r]
 
-    def natural_numeric(self, z: np.ndarray) -> np.ndarray:
+    def kinds(self, *kinds: str) -> list[int]:
+        """Positions of the entries of the given kinds."""
+        return [j for j, e in enumerate(self.entries) if e.kind in kinds]
+
+    def declared_names(self) -> list[str]:
+        return list(dict.fromkeys(e.declared for e in self.entries))
+
+    # -- maps between decision variables and values ----------------------------------------------
+    def natural(self, z) -> np.ndarray:
         z = np.asarray(z, dtype=float).reshape(-1)
         return np.array([np.exp(z[i]) if e.log else z[i] * e.scale for i, e in enumerate(self.entries)])
 
-    def jac_natural(self, z: np.ndarray) -> np.ndarray:
-        """Diagonal of d(value)/dz (for the delta method)."""
+    def jac_natural(self, z) -> np.ndarray:
+        """Diagonal of d(value)/dz (for the chain rule and the delta method)."""
         z = np.asarray(z, dtype=float).reshape(-1)
         return np.array([np.exp(z[i]) if e.log else e.scale for i, e in enumerate(self.entries)])
 
-    def to_z(self, values: Mapping[str, float]) -> np.ndarray:
+    def to_z(self, values) -> np.ndarray:
+        values = np.asarray(values, dtype=float).reshape(-1)
         z = []
-        for e in self.entries:
-            v = float(values[e.name])
+        for e, v in zip(self.entries, values):
             if e.log:
                 if not v > 0:
-                    raise ValueError(f"guess of variance {e.name!r} must be positive, got {v}")
+                    raise ValueError(f"value of variance {e.name!r} must be positive, got {v}")
                 z.append(np.log(v))
             else:
                 z.append(v / e.scale)
         return np.array(z)
 
-    def guess_z(self, guess: Mapping[str, float] | None) -> np.ndarray:
-        guess = dict(guess or {})
-        unknown = set(guess) - set(self.names)
-        if unknown:
-            raise ValueError(f"guess for {sorted(unknown)}, which are not free; free: {self.names}")
-        values = {**self.default_guess, **{k: float(v) for k, v in guess.items()}}
-        for e in self.entries:
-            v = values[e.name]
+    def theta(self, values=None) -> np.ndarray:
+        """Free values as a vector ordered like :attr:`names` from a mapping (missing names keep their
+        default start) or a vector; checked against the bounds."""
+        if values is None or isinstance(values, Mapping):
+            values = dict(values or {})
+            unknown = set(values) - set(self.names)
+            if unknown:
+                raise ValueError(f"values for {sorted(unknown)}, which are not free; free: {self.names}")
+            merged = {**self.default_guess, **{k: float(v) for k, v in values.items()}}
+            theta = np.array([merged[n] for n in self.names])
+        else:
+            theta = np.asarray(values, dtype=float).reshape(-1)
+            if theta.size != len(self):
+                raise ValueError(f"expected {len(self)} values for {self.names}, got {theta.size}")
+        return theta
+
+    def check_bounds(self, theta) -> None:
+        for e, v in zip(self.entries, theta):
             if not np.isfinite(v):
-                raise ValueError(f"guess of {e.name!r} is not finite")
+                raise ValueError(f"value of {e.name!r} is not finite")
             if not e.lower <= v <= e.upper:
-                raise ValueError(f"guess {v:g} of {e.name!r} is outside its bounds [{e.lower:g}, {e.upper:g}]")
-        return self.to_z(values)
+                raise ValueError(f"value {v:g} of {e.name!r} is outside its bounds [{e.lower:g}, {e.upper:g}]")
 
     def z_bounds(self):
         lo, hi = [], []
@@ -156,78 +289,16 @@ class ParamSpace:
                 hi.append(e.upper / e.scale)
         return np.array(lo), np.array(hi)
 
-    def param_vector(self, nat, base=None) -> ca.MX | np.ndarray:
-        """The full parameter vector with free entries replaced by ``nat`` (symbolic or numeric).
-
-        ``base`` (symbolic) replaces the fixed values, for problems whose data are parameters.
-        """
-        if isinstance(nat, np.ndarray):
-            p = self.base.copy()
-            for e, v in zip(self.entries, nat):
-                if e.kind == "param":
-                    p[e.index] = v
-            return p
-        items = [ca.MX(float(v)) for v in self.base] if base is None else [base[i] for i in range(self.base.size)]
-        for e, v in zip(self.entries, nat):
-            if e.kind == "param":
-                items[e.index] = v
-        return ca.vertcat(*items) if items else ca.MX(0, 1)
-
     def scales(self) -> dict[str, float]:
         return {e.name: (0.0 if e.log else e.scale) for e in self.entries}
 
-
-def hess_lag_function(z, par, hess_f) -> ca.Function:
-    """IPOPT's ``nlp_hess_l(x, p, lam_f, lam_g)``: the upper triangle of ``lam_f * hess_f`` (no constraints)."""
-    lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", 0)
-    return ca.Function("nlp_hess_l", [z, par, lam_f, lam_g], [ca.triu(lam_f * hess_f)],
-                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-
-
-def ipopt_solve(f, z, z0, lbz, ubz, *, g=None, lbg=None, ubg=None, hessian: str = "exact",
-                options: Mapping | None = None, name: str = "fit", hess_f=None, par=None, par_value=None,
-                functions: Mapping | None = None):
-    """Minimise ``f(z)`` (subject to ``lbg <= g(z) <= ubg``) with IPOPT.
-
-    ``hessian="custom"`` uses the symmetric matrix expression ``hess_f(z)`` (e.g. a Gauss-Newton or
-    Fisher-scoring approximation of the Hessian of ``f``; unconstrained problems only). ``par`` is a
-    symbolic parameter of ``f`` (and ``hess_f``) with value ``par_value``. ``functions`` may give
-    ready-made (e.g. compiled) ``grad_f: (x, p) -> (f, grad)`` and ``hess_lag: (x, p, lam_f, lam_g) ->
-    triu(H)`` Functions, used by IPOPT instead of CasADi's own.
-    Returns ``(z_opt, stats, seconds)``; raises :class:`IdentificationError` naming IPOPT's status if
-    it does not converge.
-    """
-    if hessian not in HESSIANS:
-        raise ValueError(f"unknown hessian {hessian!r}; use one of {HESSIANS}")
-    par_sym = ca.MX.sym("p", 0) if par is None else par
-    opts = {"print_time": False, "calc_lam_p": False, "ipopt.print_level": 0, "ipopt.sb": "yes", "ipopt.tol": 1e-9,
-            "ipopt.acceptable_tol": 1e-5, "ipopt.acceptable_iter": 5, "ipopt.max_iter": 300,
-            "ipopt.hessian_approximation": "exact" if hessian == "custom" else hessian}
-    functions = dict(functions or {})
-    if hessian == "custom":
-        if g is not None:
-            raise ValueError("a custom Hessian is only supported without constraints")
-        opts["hess_lag"] = functions.pop("hess_lag", None) or hess_lag_function(z, par_sym, hess_f)
-    opts.update(functions)
-    for k, v in (options or {}).items():
-        opts[k if k.startswith(("ipopt.", "print_time")) else f"ipopt.{k}"] = v
-    nlp = {"x": z, "f": f}
-    if par is not None:
-        nlp["p"] = par
-    if g is not None:
-        nlp["g"] = g
-    solver = ca.nlpsol(re.sub(r"[^A-Za-z0-9]+", "_", name).strip("_") or "fit", "ipopt", nlp, opts)
-    args = dict(x0=z0, lbx=lbz, ubx=ubz)
-    if par is not None:
-        args["p"] = par_value
-    if g is not None:
-        args.update(lbg=lbg, ubg=ubg)
-    t0 = time.perf_counter()
-    sol = solver(**args)
-    seconds = time.perf_counter() - t0
-    st = solver.stats()
-    status = st.get("return_status", "unknown")
-    if status not in _OK:
-        raise IdentificationError(f"{name}: IPOPT did not converge (status {status!r} after "
-                                  f"{st.get('iter_count', '?')} iterations)", status)
-    return np.asarray(sol["x"]).reshape(-1), st, seconds
+    def params(self, theta, record: int | None = None) -> np.ndarray:
+        """The parameter vector of ``record`` at ``theta``; without a record, the one for a new run:
+        shared estimates, per-record and per-group parameters at their fixed values."""
+        if record is not None:
+            return self._maps[record].values(theta)["p"]
+        p = self.base.copy()
+        for e, v in zip(self.entries, theta):
+            if e.kind == "param" and e.name == e.declared:
+                p[e.index] = v
+        return p

@@ -1,9 +1,10 @@
 """Output-error identification: weighted least squares of simulated against measured outputs.
 
-The deterministic model is simulated with the measured inputs from each record's initial state
+The deterministic model is simulated with each record's measured inputs from its initial state
 (single shooting), or over segments whose initial states are extra unknowns tied together by
-continuity constraints (multiple shooting, more robust for unstable or long records). The cost is
-``0.5 sum ((y - yhat) / sigma)^2`` over the measured samples; derivatives are exact.
+continuity constraints (multiple shooting, solved by IPOPT; more robust for unstable or long
+records). The cost is ``0.5 sum ((y - yhat) / sigma)^2`` over the measured samples of all records,
+plus the prior's; derivatives are exact.
 """
 from __future__ import annotations
 
@@ -12,294 +13,284 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from ..angles import unwrap, wrap, wrap_sym
-from ..data import Dataset
+from ..angles import unwrap, wrap_sym
 from ..discretize import DiscreteModel, discretize
 from ..model import Model
-from ._space import ParamSpace, ipopt_solve
-from .mle import _as_records
-from .result import FitResult, finish
+from ._engine import OutputErrorEngine
+from ._solver import SolverReport
+from .problem import IdentificationProblem
+from .records import as_records, noise_std
+from .result import FitResult
 
 __all__ = ["OutputErrorProblem"]
 
 
-class OutputErrorProblem:
-    """Output-error (simulation-error) least squares for deterministic models.
+class OutputErrorProblem(IdentificationProblem):
+    """Output-error (simulation-error) identification over one or many records.
 
     Parameters
     ----------
     model : Model or DiscreteModel
-        A continuous model is discretised with ``method`` at the records' sampling period.
+        A continuous model is discretised with ``method`` at the records' median sampling period
+        (each step uses the record's own time stamps).
     datasets : Dataset or sequence of Dataset
+        Records with the model's inputs (finite) and measured outputs (NaN = not measured).
     free : sequence of str
-        Free model parameters.
+        Free model parameters and biases (``"bias[n]"``: an offset added to a measured input;
+        ``"bias[psi]"``: an offset of a measured output's sensor).
     measured : sequence of str, optional
-        Outputs compared (default: all outputs present as columns in the first record).
-    sigma : mapping output -> standard deviation, optional
-        Weights (default 1). Standard errors are scaled by the root mean square weighted residual,
-        so they stay right when ``sigma`` is only known up to a factor.
+        Outputs compared (default: every output that is a column of every record).
+    sigma : mapping output -> standard deviation, or "estimate", optional
+        Measurement noise of each output (the weights are ``1 / sigma``). Default ``"estimate"``:
+        from the records themselves (:func:`~casship.identify.noise_std`, a high-pass); a mapping
+        may give some channels and leave the others estimated. Standard errors are scaled by the
+        root mean square weighted residual, so they stay right when ``sigma`` is only right up to a
+        factor; each channel's share of the cost is reported.
     params : array or mapping, optional
-        Values of the fixed parameters.
+        Values of the fixed parameters (nominal by default).
     x0 : mapping or sequence of (array or mapping), optional
-        Initial state of each record; by default states named like a column start at its first value,
-        the others at 0 (a mapping overrides named states for all records).
+        Initial state of each record; by default states named like a column start at its first
+        value (NaN there is an error naming the record), the others at 0.
     estimate_x0 : sequence of str
-        States whose initial values are estimated per record (``<state>@<k>``).
+        States whose initial values are estimated per record (``<state>@<record>``).
+    share : mapping name -> "record" | "all" | grouping | labels, optional
+        Which free quantities are per record or per group (see
+        :func:`~casship.identify.share_labels`), e.g. ``{"bias[n]": "record", "N_0": "facility"}``.
+    groups : mapping grouping -> labels, optional
+        Group labels per record (else taken from each record's ``meta``).
+    prior : Prior or mapping name -> std, optional
+        Gaussian prior (MAP), centred on the published values by default.
     shooting : {"single", "multiple"}
-        Multiple shooting splits each record into segments of ``segment`` samples.
     segment : int
-        Samples per shooting segment.
+        Samples per shooting segment (multiple shooting).
     method : str
-        Discretisation method for a continuous model (``"rk4"``, ``"euler"``, ``"cvodes"``).
-    bounds, scale : mapping, optional
+        Discretisation of a continuous model (``"rk4"``, ``"euler"``, ``"cvodes"``).
+    bounds, scale : mapping name -> (lower, upper) / magnitude, optional
+        For any free quantity (a declared name applies to all its copies); the model's parameter
+        bounds apply too.
+    jit : bool or None
+        Compile the cost and its derivatives to C (``None``: when a compiler works).
+
+    Examples
+    --------
+    >>> import numpy as np, casship as cs
+    >>> m = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    >>> t = np.arange(0, 300, 1.0)
+    >>> runs = [cs.measure(cs.simulate(m, m.states(), t, {"delta": a * np.sign(np.sin(t / 25))}), m,
+    ...                    {"psi": 0.01}, seed=i) for i, a in enumerate((0.1, -0.15))]
+    >>> prob = cs.OutputErrorProblem(m, runs, free=["K", "T"], sigma={"psi": 0.01}, estimate_x0=["psi"])
+    >>> fit = prob.solve(guess={"K": 0.05, "T": 10.0}, show=False)
+    >>> abs(fit.estimates["K"] - 0.1) < 4 * fit.std_errors["K"]
+    True
     """
 
     method = "output-error"
 
     def __init__(self, model, datasets, free: Sequence[str] = (), *, measured: Sequence[str] | None = None,
-                 sigma: Mapping[str, float] | None = None, params=None, x0=None, estimate_x0: Sequence[str] = (),
-                 shooting: str = "single", segment: int = 50, method: str = "rk4", bounds=None, scale=None):
-        self.records = _as_records(datasets)
+                 sigma: Mapping[str, float] | str | None = "estimate", params=None, x0=None,
+                 estimate_x0: Sequence[str] = (), share: Mapping | None = None, groups: Mapping | None = None,
+                 prior=None, shooting: str = "single", segment: int = 50, method: str = "rk4", bounds=None,
+                 scale=None, jit: bool | None = None):
+        kwargs = dict(model=model, datasets=datasets, free=free, measured=measured, sigma=sigma, params=params, x0=x0,
+                      estimate_x0=estimate_x0, share=share, groups=groups, prior=prior, shooting=shooting,
+                      segment=segment, method=method, bounds=bounds, scale=scale, jit=jit)
+        records = as_records(datasets)
         if isinstance(model, Model):
-            model = discretize(model, float(np.median(np.diff(self.records[0].t))), method=method)
+            model = discretize(model, float(np.median(np.diff(records[0].t))), method=method)
         if not isinstance(model, DiscreteModel):
             raise TypeError(f"OutputErrorProblem needs a Model or DiscreteModel, got {type(model).__name__}")
         if shooting not in ("single", "multiple"):
             raise ValueError(f"shooting must be 'single' or 'multiple', got {shooting!r}")
-        self.dmodel, self.model = model, model.model
-        m = self.model
+        self.dmodel = model
+        m = model.model
         if measured is None:
-            measured = [n for n in m.output_names if n in self.records[0]]
+            measured = [n for n in m.output_names if all(n in d for d in records)]
             if not measured:
-                raise ValueError(f"no output of {m.name!r} {list(m.output_names)} is a column of the data")
-        self.measured = tuple(measured)
-        self.meas_index = m.indices(self.measured, "output")
+                raise ValueError(f"no output of {m.name!r} {list(m.output_names)} is a column of every record")
+        self.meas_index = m.indices(measured, "output")
         self.angle_meas = m.angle_outputs[self.meas_index]
-        sigma = dict(sigma or {})
-        unknown = set(sigma) - set(self.measured)
-        if unknown:
-            raise ValueError(f"sigma given for {sorted(unknown)}, not among measured {list(self.measured)}")
-        self.sigma = np.array([float(sigma.get(n, 1.0)) for n in self.measured])
-        if not np.all(self.sigma > 0):
-            raise ValueError("sigma values must be positive")
+        self.sigma = self._sigma(records, list(measured), sigma)
         self.shooting, self.segment = shooting, int(segment)
         if self.segment < 2:
             raise ValueError(f"segment must be >= 2 samples, got {segment}")
-        self.x0 = self._initial_states(x0)
-        estimate_x0 = list(estimate_x0)
-        m.indices(estimate_x0, "state")
-        x0_entries = [(f"{s}@{k}", k, m.index(s), self.x0[k][m.index(s)])
-                      for k in range(len(self.records)) for s in estimate_x0]
-        base = m.params(params) if params is not None else m.params()
-        self.space = ParamSpace(m, free, base, bounds=bounds, scale=scale, x0_entries=x0_entries)
-        if not len(self.space):
-            raise ValueError("nothing to estimate: give free parameters or estimate_x0")
-        self._prepare()
+        self._setup(m, records, free, kwargs=kwargs, share=share, groups=groups, prior=prior, params=params, x0=x0,
+                    estimate_x0=estimate_x0, bounds=bounds, scale=scale, measured=measured)
+        self._arrays = [self._arrays_of(d) for d in self.records]
+        self.engine = OutputErrorEngine(self.dmodel, self.space, self._arrays, self.meas_index, 1.0 / self.sigma, jit)
 
-    # -- set-up ------------------------------------------------------------------------------------
-    def _initial_states(self, x0) -> list[np.ndarray]:
-        m, recs = self.model, self.records
-        if x0 is None or isinstance(x0, Mapping):
-            out = []
-            for d in recs:
-                v = np.array([d[s][0] if s in d and np.isfinite(d[s][0]) else 0.0 for s in m.state_names])
-                if isinstance(x0, Mapping):
-                    idx = m.indices(x0, "state")
-                    v[idx] = m.states(**x0)[idx]
-                out.append(v)
-            return out
-        x0 = list(x0)
-        if len(x0) != len(recs):
-            raise ValueError(f"x0: {len(x0)} initial states for {len(recs)} records")
-        out = []
-        for v in x0:
-            v = m.states(**v) if isinstance(v, Mapping) else np.asarray(v, dtype=float).reshape(-1)
-            if v.shape != (m.nx,):
-                raise ValueError(f"x0 entry has {v.size} values, model has {m.nx} states")
-            out.append(v)
-        return out
+    def _sigma(self, records, measured, sigma) -> np.ndarray:
+        m = self.dmodel.model
+        given = {} if sigma is None or isinstance(sigma, str) else dict(sigma)
+        if isinstance(sigma, str) and sigma != "estimate":
+            raise ValueError(f"sigma must be a mapping output -> std or 'estimate', got {sigma!r}")
+        unknown = set(given) - set(measured)
+        if unknown:
+            raise ValueError(f"sigma given for {sorted(unknown)}, not among measured {list(measured)}")
+        bad = [n for n, v in given.items() if not (np.isfinite(float(v)) and float(v) > 0)]
+        if bad:
+            raise ValueError(f"sigma values must be positive: {bad}")
+        rest = [n for n in measured if n not in given]
+        angles = [n for n in rest if m.angle_outputs[m.index(n, "output")]]
+        est = noise_std(records, rest, angles) if rest else {}
+        self.sigma_estimated = est
+        return np.array([float(given.get(n, est.get(n))) for n in measured])
 
-    def _prepare(self) -> None:
+    def _arrays_of(self, d) -> dict:
         m = self.model
-        self._arrays = []
-        for d in self.records:
-            missing = [n for n in (*m.input_names, *self.measured) if n not in d]
-            if missing:
-                raise ValueError(f"data has no column(s) {missing}; columns: {list(d.names)}")
-            U = d.matrix(m.input_names, finite=True, what="input")
-            Y = d.matrix(self.measured)
-            mask = np.isfinite(Y)
-            self._arrays.append(dict(U=U, Y=np.nan_to_num(Y), mask=mask.astype(float), dt=np.diff(d.t)))
+        missing = [n for n in (*m.input_names, *self.measured) if n not in d]
+        if missing:
+            raise ValueError(f"data has no column(s) {missing}; columns: {list(d.names)}")
+        U = d.matrix(m.input_names, finite=True, what="input")
+        Y = d.matrix(self.measured)
+        mask = np.isfinite(Y)
+        return {"U": U.T, "Y": np.nan_to_num(Y).T, "mask": mask.T.astype(float),
+                "dt": np.concatenate([np.diff(d.t), [0.0]])[None, :]}
 
-    def _simulate_sym(self, x0, p, arr, rows: slice):
-        """States at the rows of a slice, simulated from ``x0`` at its first row."""
-        dm, m = self.dmodel, self.model
-        start, stop = rows.start, rows.stop
-        steps = stop - start - 1
-        if steps == 0:
-            return x0
-        X = dm.F.mapaccum(steps)(x0, arr["U"][start:stop - 1].T, p, np.zeros((m.nw, 1)),
-                                 arr["dt"][start:stop - 1][None, :])
-        return ca.horzcat(x0, X)
+    # -- problem hooks -----------------------------------------------------------------------------
+    def _n_obs(self) -> int:
+        return int(sum(a["mask"].sum() for a in self._arrays))
 
-    def _residuals_sym(self, X, p, arr, rows: slice):
-        m = self.model
-        n = rows.stop - rows.start
-        Yh = m.h.map(n)(X, arr["U"][rows].T, p)
-        Yh = ca.vertcat(*[Yh[i, :] for i in self.meas_index])
-        E = arr["Y"][rows].T - Yh
-        if self.angle_meas.any():
-            E = ca.vertcat(*[wrap_sym(E[j, :]) if a else E[j, :] for j, a in enumerate(self.angle_meas)])
-        return (arr["mask"][rows].T * E) / self.sigma[:, None]
+    def _residual_scale(self, f_data: float, n_obs: int) -> float:
+        return 2 * f_data / max(n_obs - len(self.space), 1)
 
-    def _x0_sym(self, nat, r):
-        items = [ca.MX(float(v)) for v in self.x0[r]]
-        for e, v in zip(self.space.entries, nat):
-            if e.kind == "x0" and e.record == r:
-                items[e.index] = v
-        return ca.vertcat(*items)
+    def _loglik(self, f_data, s2, n_obs) -> float:
+        sig = np.sqrt(s2) * self.sigma
+        n_per = np.array([sum(a["mask"][j].sum() for a in self._arrays) for j in range(len(self.measured))])
+        return float(-0.5 * n_obs * (1 + np.log(2 * np.pi)) - np.sum(n_per * np.log(sig)))
 
-    def _single(self, nat):
-        p = self.space.param_vector(nat)
-        res = []
-        for r, arr in enumerate(self._arrays):
-            rows = slice(0, arr["U"].shape[0])
-            X = self._simulate_sym(self._x0_sym(nat, r), p, arr, rows)
-            res.append(self._residuals_sym(X, p, arr, rows))
-        return res
+    def _noise_report(self, theta) -> dict:
+        s2 = self._residual_scale(self.engine.cost(theta)[0], self._n_obs())
+        return {"sigma": dict(zip(self.measured, self.sigma.tolist())),
+                "sigma_estimated": dict(self.sigma_estimated), "weight_scale": float(np.sqrt(s2))}
 
-    # -- evaluation --------------------------------------------------------------------------------
-    @property
-    def free(self) -> list[str]:
-        return list(self.space.names)
+    def _first_nonfinite(self, r, theta) -> str:
+        res = self.engine.residuals(r, theta)
+        rows = np.flatnonzero(~np.all(np.isfinite(res), axis=1))
+        return f" (simulation not finite from t = {self.records[r].t[rows[0]]:g} s)" if rows.size else ""
 
     def residuals(self, values=None) -> list[np.ndarray]:
-        """Weighted residuals (N, n_measured) of each record at the free values (single shooting)."""
-        theta = ca.MX.sym("theta", len(self.space))
-        f = ca.Function("oe_res", [theta], self._single([theta[i] for i in range(len(self.space))]))
-        vals = {**self.space.default_guess, **dict(values or {})}
-        out = f(np.array([vals[n] for n in self.space.names]))
-        out = [out] if len(self.records) == 1 else out
-        return [np.asarray(o).T for o in out]
+        """Weighted residuals ``(y - yhat) / sigma`` (N, n_measured) of each record (single shooting).
 
-    def cost(self, values=None) -> float:
-        """Half the weighted sum of squared output errors."""
-        return 0.5 * float(sum(np.sum(r**2) for r in self.residuals(values)))
+        Parameters
+        ----------
+        values : mapping name -> value, optional
+            Free values (missing names keep their start).
 
-    # -- solve -------------------------------------------------------------------------------------
-    def solve(self, guess: Mapping[str, float] | None = None, *, hessian: str | None = None,
-              options: Mapping | None = None) -> FitResult:
-        """Minimise the weighted output error with IPOPT.
+        Returns
+        -------
+        list of arrays
+        """
+        theta = self.space.theta(values)
+        return [self.engine.residuals(r, theta) for r in range(len(self.records))]
+
+    # -- multiple shooting -------------------------------------------------------------------------
+    def solve(self, guess: Mapping[str, float] | None = None, *, max_iter: int = 100, tol: float = 1e-8,
+              show: bool | None = None, options: Mapping | None = None) -> FitResult:
+        """Minimise the weighted output error (plus the prior's cost).
+
+        Single shooting uses bounded Gauss-Newton trust-region steps on the exact residual Jacobian
+        (see :meth:`IdentificationProblem.solve`); multiple shooting uses IPOPT with the exact
+        Hessian of the Lagrangian. Either way a fit that stops early returns its iterate with the
+        status and a warning.
 
         Parameters
         ----------
         guess : mapping, optional
             Starting values of the free quantities.
-        hessian : {"gauss-newton", "exact", "limited-memory"}, optional
-            Curvature IPOPT uses: ``J'J`` of the residuals (single shooting; the default there), the
-            exact Hessian of the Lagrangian (the default for multiple shooting) or L-BFGS.
+        max_iter : int
+            Iteration limit.
+        tol : float
+            Convergence threshold (single shooting; see the base class).
+        show : bool, optional
+            ``False`` hides the progress bar.
         options : mapping, optional
-            IPOPT options.
-        """
-        sp, m = self.space, self.model
-        hessian = hessian or ("gauss-newton" if self.shooting == "single" else "exact")
-        if hessian not in ("gauss-newton", "exact", "limited-memory"):
-            raise ValueError(f"unknown hessian {hessian!r}; use 'gauss-newton', 'exact' or 'limited-memory'")
-        if hessian == "gauss-newton" and self.shooting == "multiple":
-            raise ValueError("hessian='gauss-newton' is for single shooting; use 'exact' with multiple shooting")
-        z = ca.MX.sym("z", len(sp))
-        nat = sp.natural(z)
-        z0 = sp.guess_z(guess)
-        lbz, ubz = sp.z_bounds()
-        if self.shooting == "single":
-            res = ca.vertcat(*[ca.vec(r) for r in self._single(nat)])
-            f = 0.5 * ca.sumsqr(res)
-            hess_f = None
-            if hessian == "gauss-newton":
-                J = ca.jtimes(res, z, ca.MX.eye(len(sp)))
-                hess_f = J.T @ J
-            z_opt, st, seconds = ipopt_solve(f, z, z0, lbz, ubz, hessian="custom" if hess_f is not None else hessian,
-                                             hess_f=hess_f, options=options, name="output_error")
-        else:
-            z_opt, st, seconds = self._solve_multiple(z, nat, z0, lbz, ubz, hessian, options)
-        # information (Gauss-Newton) from the single-shooting residuals at the optimum
-        r_all = ca.vertcat(*[ca.vec(r) for r in self._single(nat)])
-        jac = ca.Function("oe_jac", [z], [r_all, ca.jtimes(r_all, z, ca.MX.eye(len(sp)))])
-        r_opt, J = (np.asarray(a) for a in jac(z_opt))
-        cost = 0.5 * float(np.sum(r_opt**2))
-        n_obs = int(sum(a["mask"].sum() for a in self._arrays))
-        k = len(sp)
-        s2 = 2 * cost / max(n_obs - k, 1)
-        info = J.T @ J / s2
-        values = sp.natural_numeric(z_opt)
-        p = sp.param_vector(values)
-        residuals = [r / np.sqrt(s2) for r in self.residuals(dict(zip(sp.names, values)))]
-        predictions = []
-        x0_out = []
-        for rec, d, r in zip(range(len(self.records)), self.records, residuals):
-            y = d.matrix(self.measured)
-            yhat = y - r * np.sqrt(s2) * self.sigma
-            yhat[:, self.angle_meas] = wrap(yhat[:, self.angle_meas])
-            predictions.append({"t": d.t, "label": d.meta.get("name", d.meta.get("source", f"record {rec}")),
-                                "kind": "simulated", "measured": {n: y[:, j] for j, n in enumerate(self.measured)},
-                                "predicted": {n: yhat[:, j] for j, n in enumerate(self.measured)}})
-            x0 = self.x0[rec].copy()
-            for e, v in zip(sp.entries, values):
-                if e.kind == "x0" and e.record == rec:
-                    x0[e.index] = v
-            x0_out.append(dict(zip(m.state_names, x0.tolist())))
-        sig = np.sqrt(s2) * self.sigma
-        n_per = np.array([sum(a["mask"][:, j].sum() for a in self._arrays) for j in range(len(self.measured))])
-        loglik = -0.5 * n_obs * (1 + np.log(2 * np.pi)) - float(np.sum(n_per * np.log(sig)))
-        noise = {"sigma": dict(zip(self.measured, sig.tolist())), "weight_scale": float(np.sqrt(s2))}
-        return finish(model=m.name, params=m.param_dict(p), names=sp.names, values=values, info=info,
-                      jac_nat=sp.jac_natural(z_opt), scale=sp.scales(), cost=cost, loglik=loglik, n_obs=n_obs,
-                      residuals=residuals, output_names=self.measured,
-                      method=f"output-error-{self.shooting}", status=st.get("return_status", ""),
-                      iterations=st.get("iter_count", 0), solve_time_s=seconds, noise=noise, x0=x0_out,
-                      predictions=predictions)
+            IPOPT options (multiple shooting).
 
-    def _solve_multiple(self, z, nat, z0, lbz, ubz, hessian, options):
-        """Multiple shooting: segment start states are unknowns, continuity is a constraint."""
+        Returns
+        -------
+        FitResult
+        """
+        if self.shooting == "single":
+            return super().solve(guess, max_iter=max_iter, tol=tol, show=show)
+        return self._solve_multiple(guess, max_iter, options)
+
+    def _solve_multiple(self, guess, max_iter, options) -> FitResult:
+        from ._ipopt import ipopt_solve
+
         m, sp = self.model, self.space
-        p = sp.param_vector(nat)
+        theta0 = sp.theta(guess)
+        sp.check_bounds(theta0)
+        self._check_finite(theta0)
+        z = ca.MX.sym("z", len(sp))
+        theta = ca.vertcat(*[ca.exp(z[i]) if e.log else z[i] * e.scale for i, e in enumerate(sp.entries)])
         s_syms, s0, g, cost = [], [], [], 0
-        p0 = sp.param_vector(sp.natural_numeric(z0))
         for r, (arr, d) in enumerate(zip(self._arrays, self.records)):
-            n = arr["U"].shape[0]
+            rm = sp.record_map(r)
+            loc = theta[[int(c) for c in rm.cols]] if rm.k else ca.MX(0, 1)
+            blk = {key: ca.DM(rm.fixed[key]) + (ca.mtimes(ca.DM(rm.E[key]), loc) if rm.k else 0) for key in rm.fixed}
+            n = arr["U"].shape[1]
+            U = arr["U"] + ca.repmat(blk["u"], 1, n)
             starts = list(range(0, n - 1, self.segment))
-            guess_traj = self._initial_guess_states(r, d, p0)
-            x_start = self._x0_sym(nat, r)
+            traj = self._guess_states(r, d, sp.record_map(r).values(theta0))
+            x_start = blk["x0"]
             for j, a in enumerate(starts):
-                b = min(a + self.segment, n - 1) + 1 if j + 1 == len(starts) else starts[j + 1] + 1
-                rows = slice(a, b)
-                X = self._simulate_sym(x_start, p, arr, rows)
+                b = n if j + 1 == len(starts) else starts[j + 1] + 1
+                X = self._simulate_sym(x_start, blk["p"], U[:, a:b], arr["dt"][:, a:b - 1])
                 last = j + 1 == len(starts)
                 use = slice(a, b if last else b - 1)
-                cost += 0.5 * ca.sumsqr(self._residuals_sym(X[:, : use.stop - use.start], p, arr, use))
+                cost += 0.5 * ca.sumsqr(self._residuals_sym(X[:, : use.stop - use.start], blk, U[:, use], arr, use))
                 if not last:
                     s = ca.MX.sym(f"s{r}_{j + 1}", m.nx)
                     s_syms.append(s)
-                    s0.append(guess_traj[b - 1])
+                    s0.append(traj[b - 1])
                     g.append(X[:, -1] - s)
                     x_start = s
+        d_ = theta - self._mu
+        cost += 0.5 * ca.sum1(ca.DM(self._prec) * d_ * d_)
+        lbz, ubz = sp.z_bounds()
         w = ca.vertcat(z, *s_syms)
-        w0 = np.concatenate([z0, *s0]) if s0 else z0
-        lbw = np.concatenate([lbz, np.full(len(s0) * m.nx, -np.inf)])
-        ubw = np.concatenate([ubz, np.full(len(s0) * m.nx, np.inf)])
+        w0 = np.concatenate([sp.to_z(theta0), *s0]) if s0 else sp.to_z(theta0)
+        pad = np.full(len(s0) * m.nx, np.inf)
         gg = ca.vertcat(*g) if g else ca.MX(0, 1)
-        ng = gg.shape[0]
-        w_opt, st, seconds = ipopt_solve(cost, w, w0, lbw, ubw, g=gg, lbg=np.zeros(ng), ubg=np.zeros(ng),
-                                         hessian=hessian, options=options, name="output_error_ms")
-        return w_opt[: len(sp)], st, seconds
+        opts = {"max_iter": max_iter, **dict(options or {})}
+        w_opt, st, seconds = ipopt_solve(cost, w, w0, np.concatenate([lbz, -pad]), np.concatenate([ubz, pad]), g=gg,
+                                         lbg=np.zeros(gg.shape[0]), ubg=np.zeros(gg.shape[0]), options=opts,
+                                         name="output_error_ms")
+        zo = w_opt[: len(sp)]
+        th = sp.natural(zo)
+        f, gr, H, det = self.engine.derivatives(th)
+        status = st.get("return_status", "unknown")
+        ok = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+        rep = SolverReport(zo, f + self._prior_terms(th)[0], gr, H, "converged" if ok else status,
+                           f"IPOPT: {status}", int(st.get("iter_count", 0)), seconds, float("nan"))
+        fit = self._result(rep, {"f": f, "H": H, "det": det}, self._shares(self.engine.derivatives(theta0)[3]))
+        fit.method, fit.status = "output-error-multiple", status
+        return fit
 
-    def _initial_guess_states(self, r, d: Dataset, p) -> np.ndarray:
-        """Segment start guesses: measured states where a column holds them, else a simulation."""
+    def _simulate_sym(self, x0, p, U, dt):
+        steps = U.shape[1] - 1
+        if steps == 0:
+            return x0
+        X = self.dmodel.F.mapaccum(steps)(x0, U[:, :steps], p, np.zeros((self.model.nw, 1)), dt)
+        return ca.horzcat(x0, X)
+
+    def _residuals_sym(self, X, blk, U, arr, rows: slice):
         m = self.model
-        arr = self._arrays[r]
+        n = rows.stop - rows.start
+        Yh = m.h.map(n)(X, U, blk["p"])
+        Yh = ca.vertcat(*[Yh[i, :] for i in self.meas_index])
+        E = arr["Y"][:, rows] - ca.repmat(blk["y"], 1, n) - Yh
+        if self.angle_meas.any():
+            E = ca.vertcat(*[wrap_sym(E[j, :]) if a else E[j, :] for j, a in enumerate(self.angle_meas)])
+        return (arr["mask"][:, rows] * E) / self.sigma[:, None]
+
+    def _guess_states(self, r, d, vals) -> np.ndarray:
+        """Segment start guesses: measured states where a column holds them, else a simulation."""
         from ..simulate import fold_steps
 
-        X = fold_steps(self.dmodel, self.x0[r], arr["U"], p, np.zeros((arr["U"].shape[0], m.nw)), arr["dt"])
+        m, arr = self.model, self._arrays[r]
+        U = (arr["U"] + vals["u"][:, None]).T
+        X = fold_steps(self.dmodel, vals["x0"], U, vals["p"], np.zeros((U.shape[0], m.nw)), arr["dt"][0, :-1])
         for i, s in enumerate(m.state_names):
             if s in d:
                 col = d[s].astype(float)

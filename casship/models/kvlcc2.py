@@ -27,6 +27,7 @@ implementations above do) ignores scale effects on resistance and wake.
 """
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Mapping
 
@@ -34,7 +35,7 @@ import numpy as np
 
 from ..model import Model
 from ..vessel import Vessel
-from .mmg import MMG_PARAMS, mmg_standard
+from .mmg import MMG_ASYMMETRY_PARAMS, MMG_PARAMS, mmg_standard
 
 __all__ = ["kvlcc2", "kvlcc2_l7", "KVLCC2_COMMON", "KVLCC2_FULL", "KVLCC2_L7", "KVLCC2_SOURCES"]
 
@@ -95,38 +96,64 @@ SCALE_L7 = 45.7                          # MLA scale_factor; S2020 45.714
 RUDDER_RATE_FULL = math.radians(2.32)    # rad/s (S2020)
 
 
+def _variant(param_set: str, asymmetry: bool, smooth: bool) -> str:
+    """Parameter-set identity of a model variant (the extended variants carry other parameters)."""
+    return param_set + ("+asymmetry" if asymmetry else "") + ("+smooth" if smooth else "")
+
+
+def _options(factory, given: Mapping) -> dict:
+    """The build options of a preset that differ from its defaults (recorded in ``model.meta``)."""
+    defaults = {k: v.default for k, v in inspect.signature(factory).parameters.items()
+                if v.kind is inspect.Parameter.KEYWORD_ONLY}
+    return {k: v for k, v in given.items() if v != defaults[k]}
+
+
 def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | None, name: str, doc: str,
-           vessel: Vessel, **options) -> Model:
+           vessel: Vessel, *, asymmetry: bool, smooth: bool, options: Mapping, **actuator) -> Model:
     values = dict(KVLCC2_COMMON)
     values.update(particulars)
+    known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {})}
     for key, val in (overrides or {}).items():
-        if key not in MMG_PARAMS:
-            raise ValueError(f"unknown KVLCC2 parameter {key!r}; known: {list(MMG_PARAMS)}")
+        if key not in known:
+            hint = " (an asymmetry term: build with asymmetry=True)" if key in MMG_ASYMMETRY_PARAMS else ""
+            raise ValueError(f"unknown KVLCC2 parameter {key!r}{hint}; known: {list(known)}")
         values[key] = float(val)
-    return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, vessel=vessel, **options)
+    vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth))
+    return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, vessel=vessel, asymmetry=asymmetry,
+                        smooth=smooth, meta={"options": dict(options)}, **actuator)
 
 
 def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
            rudder_time_constant: float = 1.0, rudder_rate_max: float = RUDDER_RATE_FULL,
-           rudder_max: float | None = None) -> Model:
+           rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False) -> Model:
     """KVLCC2 at full scale (L_pp = 320 m), MMG standard method.
 
     Parameters
     ----------
     params : mapping, optional
-        Overrides of the nominal parameter values (names as in :data:`casship.models.mmg.MMG_PARAMS`).
+        Overrides of the nominal parameter values (names as in :data:`casship.models.mmg.MMG_PARAMS`,
+        and :data:`~casship.models.mmg.MMG_ASYMMETRY_PARAMS` with ``asymmetry``).
     rudder_actuator : bool
         Add the rudder angle as a state driven by ``delta_cmd`` (first order with a smooth rate
         limit, 2.32 deg/s by default).
     rudder_time_constant, rudder_rate_max, rudder_max
         Actuator settings [s, rad/s, rad].
+    asymmetry : bool
+        Extended variant with a rudder neutral angle and a propeller-induced side force and yaw
+        moment (``delta_0``, ``Y_0_dash``, ``N_0_dash``, zero by default: the published model).
+    smooth : bool
+        Smooth the sign switches of the wake and flow-straightening terms (for identification; see
+        :func:`casship.models.mmg.mmg_standard`).
 
     Returns
     -------
     Model
         States ``u, v, r, x, y, psi`` (+ ``delta``), inputs ``delta`` (or ``delta_cmd``) and ``n``;
         ``vessel`` holds the particulars, the approach speed ``U0`` (15.5 kn) and rate ``n0``
-        (1.53 rps), the rudder limits and the wind geometry.
+        (1.53 rps), the rudder limits, the wind geometry and the parameter set
+        (``kvlcc2/YY2015-full-scale``, with ``+asymmetry`` / ``+smooth`` for the variants);
+        ``meta["options"]`` records the build options that differ from the defaults (so that
+        ``get_model("kvlcc2", **model.meta["options"])`` rebuilds the variant).
 
     Examples
     --------
@@ -144,12 +171,15 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
                                "from BEMAN; L_OA, H_BR and H_C are estimates (not published)"})
     return _build(KVLCC2_FULL, params, "kvlcc2", "KVLCC2 full scale, MMG standard method (Yasukawa & "
                   "Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
-                  rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max)
+                  rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
+                  asymmetry=asymmetry, smooth=smooth, options=_options(kvlcc2, dict(
+                      rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
+                      rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth)))
 
 
 def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
               rudder_time_constant: float = 0.1, rudder_rate_max: float = RUDDER_RATE_FULL * np.sqrt(SCALE_L7),
-              rudder_max: float | None = None) -> Model:
+              rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False) -> Model:
     """KVLCC2 model L7 (L_pp = 7 m, scale 1/45.7), MMG standard method.
 
     Same options as :func:`kvlcc2`; the default rudder rate is the Froude-scaled 15.68 deg/s.
@@ -163,4 +193,7 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
                     param_set="kvlcc2/YY2015-L7", source="Yasukawa & Yoshimura (2015); SIMMAN 2020 test conditions")
     return _build(KVLCC2_L7, params, "kvlcc2-l7", "KVLCC2 model L7 (1/45.7), MMG standard method "
                   "(Yasukawa & Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
-                  rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max)
+                  rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
+                  asymmetry=asymmetry, smooth=smooth, options=_options(kvlcc2_l7, dict(
+                      rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
+                      rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth)))

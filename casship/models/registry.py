@@ -1,6 +1,7 @@
 """Named model factories, so that the command line and studies can ask for a model by name."""
 from __future__ import annotations
 
+import json
 from typing import Callable
 
 from ..model import Model
@@ -20,7 +21,9 @@ def register(name: str, factory: Callable[..., Model], doc: str) -> None:
 def get_model(name: str, **options) -> Model:
     """Build the registered model ``name`` (keyword options go to its factory).
 
-    The registry key is the model's name: ``get_model(name).name == name``.
+    The registry key is the model's name: ``get_model(name).name == name``. Options that JSON can
+    hold are recorded in ``model.meta["options"]``, so that a fit or parameter file of the model
+    records how to rebuild it (``get_model(name, **model.meta["options"])``).
 
     Examples
     --------
@@ -35,6 +38,14 @@ def get_model(name: str, **options) -> Model:
     if model.name != name:
         raise RuntimeError(f"registered model {name!r} builds a model named {model.name!r}; "
                            "register it under its own name")
+    if options and "options" not in model.meta:
+        try:
+            json.dumps(options)
+        except (TypeError, ValueError):
+            return model
+        b = model.builder()
+        b.meta["options"] = dict(options)
+        model = b.build()
     return model
 
 

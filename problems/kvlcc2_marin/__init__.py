@@ -20,7 +20,7 @@ Cross-validation: fit on two runs (decimated), predict the third by replaying it
 propeller rate at full rate from its measured initial state (:func:`casship.validation.replay`);
 RMS errors of heading, position and speed before (published values) and after the fit. The fold
 that holds out the 20/20 zig-zag is the headline; its fit is written to ``fit.json``, readable by
-``casship simulate kvlcc2 --params fit.json``. All folds are reported, including any where the fit
+``casship simulate --model kvlcc2 --params fit.json``. All folds are reported, including any where the fit
 does not generalise.
 
 Outputs: ``cross_validation.md``, ``fit.json`` (and ``fit_without_<run>.json`` per fold, ``fit_ml_ekf.json``),
@@ -37,7 +37,7 @@ from casship.io import marin_runs, read_marin
 from casship.progress import progress
 from casship.validation import replay
 
-from . import DATA_DIR, Study
+from .. import DATA_DIR, Study
 
 FREE = ["gamma_R_minus", "gamma_R_plus", "R_0_dash", "X_vr_dash"]
 FREE_QUICK = FREE  # quick mode: same parameters, coarser data, one fold

@@ -1,0 +1,45 @@
+"""Course and heading autopilots: from a ship model to python-control designs and a compiled closed loop.
+
+The package, one job per module:
+
+* :mod:`~casship.autopilot.nomoto` -- Nomoto models from the labelled linearisation or fitted to records;
+* :mod:`~casship.autopilot.designs` -- PID pole placement, LQR with integral action, LQG (``control.lqr``,
+  ``control.lqe``);
+* :mod:`~casship.autopilot.reference` -- the third-order reference model;
+* :mod:`~casship.autopilot.law` -- the digital law and the steering gear as CasADi steps;
+* :mod:`~casship.autopilot.plants` -- the ship as a steering plant (trim, two-propeller craft);
+* :mod:`~casship.autopilot.estimation` -- the loop's estimators and the first-order wave model;
+* :mod:`~casship.autopilot.analysis` -- python-control loops (``interconnect``) and margins;
+* :mod:`~casship.autopilot.defaults` -- the defaults, derived from the ship, shared with the CLI;
+* :mod:`~casship.autopilot.ship_design` -- :func:`design_autopilot` and the :class:`Design` value;
+* :mod:`~casship.autopilot.closed_loop` -- the closed loop as one compiled CasADi step;
+* :mod:`~casship.autopilot.performance` -- course-changing and course-keeping checks;
+* :mod:`~casship.autopilot.montecarlo` -- runs over sensor-noise seeds and speeds;
+* :mod:`~casship.autopilot.plots` -- figures.
+
+Conventions: the steering input (rudder angle, or a yaw moment for a craft steered by its
+propellers) turns the craft with the sign of the Nomoto gain ``K``; angles in radians, course and
+heading from North clockwise, errors wrapped to (-pi, pi].
+"""
+from .analysis import closed_loop_tf, course_linearization, loop_systems, loop_transfer, margins
+from .closed_loop import ClosedLoop, ClosedLoopResult, LoopEstimator, Sensors
+from .defaults import RULES, AutopilotSettings, derive_settings
+from .designs import LQG, lqg_design, lqr_design, pid_pole_placement
+from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linear_estimator
+from .law import Actuator, Autopilot, PIDGains
+from .nomoto import Nomoto, fit_nomoto, nomoto_from_linear, nomoto_from_model
+from .performance import (CRITERIA, course_change_metrics, course_keeping_metrics, course_scenario,
+                          performance_report, step_metrics)
+from .plants import SteeringPlant, steering_model, steering_plant, twin_propeller_allocation, twin_propeller_yaw_limit
+from .plots import bode_phase_deg, plot_closed_loop, plot_design
+from .reference import ReferenceModel
+from .ship_design import Design, RateLimitWarning, design_autopilot, simulate_autopilot
+
+__all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "PIDGains", "pid_pole_placement",
+           "lqr_design", "lqg_design", "LQG", "ReferenceModel", "Autopilot", "Actuator", "loop_systems",
+           "loop_transfer", "closed_loop_tf", "margins", "course_linearization", "SteeringPlant", "steering_plant",
+           "steering_model", "twin_propeller_allocation", "twin_propeller_yaw_limit", "ClosedLoop", "ClosedLoopResult",
+           "LoopEstimator", "Sensors", "WaveYaw", "course_ekf", "heading_kf", "heading_observer", "linear_estimator",
+           "step_metrics", "course_change_metrics", "course_keeping_metrics", "performance_report", "CRITERIA",
+           "course_scenario", "plot_design", "plot_closed_loop", "bode_phase_deg", "Design", "design_autopilot",
+           "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings"]

@@ -1,0 +1,527 @@
+"""The closed loop as one compiled system: ship + sensors + estimator + autopilot + steering gear.
+
+:class:`ClosedLoop` composes, on CasADi expressions, one sample of
+
+1. the sensors on the true ship state (GNSS positions, compass, rate gyro; noise from per-sample
+   standard-normal draws, availability from per-sample masks; optional first-order wave yaw),
+2. the estimator's step Function (the SOG/COG EKF in course mode, the heading observer in heading
+   mode), addressed by slot names,
+3. optional guidance (LOS/ILOS through waypoints) giving the course command,
+4. the control law (:class:`~casship.autopilot.law.Autopilot`), and
+5. the steering gear (:class:`~casship.autopilot.law.Actuator`: saturation, servo, rate limit)
+   driving one RK4 step of the nonlinear ship,
+
+into one ``casadi.Function`` :attr:`ClosedLoop.step` with named slots, run over a whole record by
+``mapaccum`` (:meth:`ClosedLoop.run`) and exported to C like the estimator steps
+(:meth:`ClosedLoop.export_c`). :meth:`ClosedLoop.run_stepwise` runs the same parts one by one
+from Python (the estimator through its online runner): the reference the compiled loop is tested
+against.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from ..angles import wrap
+from ..data import Dataset
+from .estimation import WaveYaw
+from .law import Actuator, Autopilot
+from .plants import SteeringPlant
+
+__all__ = ["Sensors", "LoopEstimator", "ClosedLoop", "ClosedLoopResult", "DRAWS"]
+
+#: Names of the per-sample standard-normal draws (one row each in :meth:`ClosedLoop.draws`).
+DRAWS = ("gnss_north", "gnss_east", "compass", "gyro", "wave")
+#: Names of the per-sample availability masks.
+MASKS = ("gnss", "compass")
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """Sensor suite of the loop: GNSS positions, compass and rate gyro (white noise, SI units).
+
+    Parameters
+    ----------
+    gnss_rate, gnss_std : float
+        GNSS fix rate [Hz] and North/East position noise [m].
+    compass_rate, compass_std : float
+        Compass rate [Hz] and heading noise [rad].
+    gyro_std : float
+        Rate-gyro noise [rad/s] (one reading per loop sample).
+    """
+
+    gnss_rate: float = 5.0
+    gnss_std: float = 0.5
+    compass_rate: float = 10.0
+    compass_std: float = float(np.radians(0.5))
+    gyro_std: float = float(np.radians(0.01))
+
+    def __post_init__(self):
+        for name in ("gnss_rate", "compass_rate"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"sensor {name} must be positive, got {getattr(self, name)}")
+        for name in ("gnss_std", "compass_std", "gyro_std"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"sensor {name} must be >= 0, got {v}")
+
+
+@dataclass(frozen=True)
+class LoopEstimator:
+    """An estimator in the loop and how the loop reads it.
+
+    Parameters
+    ----------
+    est : Estimator
+        A casship estimator whose measured outputs are GNSS ``x_n, y_n`` (``kind="course"``) or
+        compass and gyro ``psi_m, r_m`` (``kind="heading"``).
+    prior : Gaussian
+        Its belief at the start of the run (before the first measurement).
+    kind : {"course", "heading"}
+    """
+
+    est: object
+    prior: object
+    kind: str = "course"
+
+    def __post_init__(self):
+        if self.kind not in ("course", "heading"):
+            raise ValueError(f"estimator kind must be 'course' or 'heading', got {self.kind!r}")
+        want = ("x_n", "y_n") if self.kind == "course" else ("psi_m", "r_m")
+        if tuple(self.est.measured) != want:
+            raise ValueError(f"a {self.kind} estimator must measure {list(want)}, this one measures "
+                             f"{list(self.est.measured)}")
+
+    @property
+    def step(self) -> ca.Function:
+        """The estimator's step Function (named slots; memory and ``x, P``)."""
+        return self.est.step
+
+    @property
+    def memory(self) -> tuple[str, ...]:
+        """Names of the step's memory slots (the estimator's memory)."""
+        return tuple(self.est.memory)
+
+    def memory0(self) -> dict:
+        """Initial memory by slot name (:meth:`Estimator.memory_from` of the prior)."""
+        return self.est.memory_from(self.prior)
+
+    def state_index(self, name: str) -> int:
+        return self.est.model.index(name)
+
+
+class _Layout:
+    """Named blocks of a flat vector (the loop state and the log)."""
+
+    def __init__(self, blocks: Sequence[tuple[str, int]]):
+        self.names = [n for n, _ in blocks]
+        self.sizes = dict(blocks)
+        offsets = np.concatenate([[0], np.cumsum([k for _, k in blocks])]).astype(int)
+        self.slices = {n: slice(int(a), int(b)) for n, a, b in zip(self.names, offsets[:-1], offsets[1:])}
+        self.size = int(offsets[-1])
+
+    def split(self, v) -> dict:
+        return {n: v[s] for n, s in self.slices.items()}
+
+    def join(self, parts: Mapping) -> ca.SX:
+        return ca.vertcat(*[ca.reshape(parts[n], -1, 1) for n in self.names])
+
+    def pack(self, parts: Mapping) -> np.ndarray:
+        out = np.zeros(self.size)
+        for n, s in self.slices.items():
+            out[s] = np.asarray(parts[n], float).reshape(-1, order="F")
+        return out
+
+
+@dataclass(frozen=True)
+class ClosedLoopResult:
+    """Record of a closed-loop run: ``data`` columns (SI units, angles in rad) and ``metrics`` per
+    command step (:func:`casship.autopilot.performance.course_change_metrics`)."""
+
+    data: Dataset
+    metrics: list
+    mode: str
+    performance: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """Mode, per-step metrics and the performance report."""
+        return {"mode": self.mode, "steps": self.metrics, "performance": self.performance}
+
+    def __repr__(self) -> str:
+        return (f"ClosedLoopResult(mode={self.mode!r}, samples={len(self.data)}, steps={len(self.metrics)}, "
+                f"rate_limited={self.performance.get('rate_limited_fraction', float('nan')):.3f})")
+
+
+class ClosedLoop:
+    """Ship, sensors, estimator, autopilot and steering gear composed into one CasADi step.
+
+    Parameters
+    ----------
+    plant : SteeringPlant
+        The nonlinear ship (truth) with its other inputs (propeller, wind, current) bound.
+    autopilot : Autopilot
+        The control law (reference model, gains, command limit).
+    actuator : Actuator
+        Steering gear (limits, servo time constant, rate limit).
+    dt : float
+        Loop period [s] (sensors, estimator, autopilot and ship step run at this rate).
+    mode : {"course", "heading"}
+        Controlled angle: course over ground or heading.
+    rate : {"estimator", "gyro"}
+        Rate fed to the autopilot: the estimator's (course rate or yaw rate) or the rate gyro's.
+    estimator : LoopEstimator, "truth" or "raw"
+        The estimator; ``"truth"`` feeds the true angle and rate (no sensors); ``"raw"`` (heading
+        mode) feeds the last compass reading and the gyro.
+    sensors : Sensors
+    wave : WaveYaw, optional
+        First-order wave yaw added to the measured heading and yaw rate.
+    guidance : object, optional
+        Path guidance (:class:`casship.autopilot.guidance.LOSGuidance`) giving the course command
+        from the position (the estimator's in course mode, the true one otherwise).
+    """
+
+    def __init__(self, plant: SteeringPlant, autopilot: Autopilot, actuator: Actuator, *, dt: float,
+                 mode: str = "course", rate: str = "gyro", estimator="truth", sensors: Sensors | None = None,
+                 wave: WaveYaw | None = None, guidance=None):
+        if mode not in ("course", "heading"):
+            raise ValueError(f"mode must be 'course' or 'heading', got {mode!r}")
+        if rate not in ("estimator", "gyro"):
+            raise ValueError(f"rate must be 'estimator' or 'gyro', got {rate!r}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be positive, got {dt}")
+        if isinstance(estimator, str):
+            if estimator not in ("truth", "raw"):
+                raise ValueError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {estimator!r}")
+            if estimator == "raw" and mode != "heading":
+                raise ValueError("estimator 'raw' (compass and gyro as read) is for heading mode")
+        elif not isinstance(estimator, LoopEstimator):
+            raise TypeError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {type(estimator).__name__}")
+        elif (estimator.kind == "course") != (mode == "course") and guidance is None:
+            raise ValueError(f"a {estimator.kind} estimator cannot feed a {mode} autopilot")
+        self.plant, self.autopilot, self.actuator = plant, autopilot, actuator
+        self.dt, self.mode, self.rate = float(dt), mode, rate
+        self.estimator, self.sensors, self.wave, self.guidance = estimator, sensors or Sensors(), wave, guidance
+        est_blocks = []
+        if isinstance(estimator, LoopEstimator):
+            fun = estimator.step
+            est_blocks = [(f"est_{n}", fun.nnz_in(n)) for n in estimator.memory]
+        m = plant.model
+        blocks = [("x", m.nx), ("steer", 1), ("steer_prev", 1), *est_blocks,
+                  ("autopilot", len(Autopilot.MEMORY)), ("compass_hold", 1), ("chi_prev", 1)]
+        if wave is not None:
+            blocks.append(("wave", 2))
+        if guidance is not None:
+            blocks.append(("guidance", guidance.memory_size))
+        self.layout = _Layout(blocks)
+        self._step = None
+        self._log_names = None
+
+    # -- composition ----------------------------------------------------------------------------
+    @property
+    def signals(self) -> tuple[str, ...]:
+        """Names of the logged signals (the rows of the step's ``log`` output)."""
+        if self._log_names is None:
+            self._build()
+        return self._log_names
+
+    @property
+    def step(self) -> ca.Function:
+        """``loop(s, ref, draws, mask, dt_est, p) -> (s_next, log)``: one sample of the closed loop.
+
+        ``s`` is the loop state (:meth:`state0`), ``ref`` the course command [rad], ``draws`` the
+        standard-normal draws named in :data:`DRAWS`, ``mask`` the sensor availability (GNSS,
+        compass), ``dt_est`` the estimator's time since its previous sample (0 on the first), ``p``
+        the ship's parameters; ``log`` holds :attr:`signals`.
+        """
+        if self._step is None:
+            self._build()
+        return self._step
+
+    def _measurements(self, parts, draws, mask, x, motion, wave_out):
+        m, pl, sen = self.plant.model, self.plant, self.sensors
+        psi_w, r_w = wave_out
+        north, east = x[m.index(pl.north)], x[m.index(pl.east)]
+        psi, r = x[m.index(pl.heading)], x[m.index(pl.yaw_rate)]
+        gnss = ca.vertcat(north + sen.gnss_std * draws[0], east + sen.gnss_std * draws[1])
+        compass = psi + psi_w + sen.compass_std * draws[2]
+        compass = ca.atan2(ca.sin(compass), ca.cos(compass))
+        gyro = r + r_w + sen.gyro_std * draws[3]
+        return {"gnss": gnss, "compass": compass, "gyro": gyro, "north": north, "east": east, "psi": psi, "r": r}
+
+    def _estimate(self, parts, meas, mask, dt_est, motion, steer_prev):
+        """Estimated controlled angle and rate, position and speed, and the estimator memory next."""
+        est, mode = self.estimator, self.mode
+        chi_true, U_true, _ = motion
+        if est == "truth":
+            angle = chi_true if mode == "course" else meas["psi"]
+            if mode == "course":          # course rate by a backward difference (yaw rate on the first sample)
+                rate = ca.if_else(dt_est > 0, ca.atan2(ca.sin(chi_true - parts["chi_prev"]),
+                                                       ca.cos(chi_true - parts["chi_prev"])) / self.dt, meas["r"])
+            else:
+                rate = meas["r"]
+            return {"angle": angle, "rate": rate, "north": meas["north"], "east": meas["east"], "U": U_true,
+                    "angle_std": ca.SX(0), "memory": {}, "compass_hold": parts["compass_hold"]}
+        if est == "raw":
+            hold = ca.if_else(mask[1] > 0, meas["compass"], parts["compass_hold"])
+            return {"angle": hold, "rate": meas["gyro"], "north": meas["north"], "east": meas["east"], "U": U_true,
+                    "angle_std": ca.SX(0), "memory": {}, "compass_hold": hold}
+        fun = est.step
+        call = {n: ca.reshape(parts[f"est_{n}"], fun.size_in(n)) for n in est.memory}
+        model = est.est.model
+        if est.kind == "course":
+            y, msk = meas["gnss"], ca.vertcat(mask[0], mask[0])
+            u = ca.SX(0, 1)
+        else:
+            y, msk = ca.vertcat(meas["compass"], meas["gyro"]), ca.vertcat(mask[1], 1)
+            u = steer_prev
+        call.update(u_prev=u, u=u, y=y * msk, mask=msk, dt=dt_est, p=ca.DM(model.params()),
+                    Q=ca.DM(est.est.Q), R=ca.DM(est.est.R), gate=ca.inf)
+        out = fun.call(call)
+        xh = out["x"]
+        P = ca.reshape(out["P"], model.nx, model.nx)
+        memory = {n: out[n] for n in est.memory}
+        ix = est.state_index
+        if est.kind == "course":
+            angle, rate_est = xh[ix("chi")], xh[ix("omega_chi")]
+            north, east, U = xh[ix("x_n")], xh[ix("y_n")], xh[ix("U")]
+            std = ca.sqrt(P[ix("chi"), ix("chi")])
+        else:
+            angle, rate_est = xh[ix("psi")], xh[ix("r")]
+            north, east, U = meas["north"], meas["east"], U_true
+            std = ca.sqrt(P[ix("psi"), ix("psi")])
+        rate = rate_est if self.rate == "estimator" else meas["gyro"]
+        return {"angle": angle, "rate": rate, "north": north, "east": east, "U": U, "angle_std": std,
+                "memory": memory, "compass_hold": parts["compass_hold"]}
+
+    def _build(self):
+        m = self.plant.model
+        s = ca.SX.sym("s", self.layout.size)
+        ref, draws, mask = ca.SX.sym("ref"), ca.SX.sym("draws", len(DRAWS)), ca.SX.sym("mask", len(MASKS))
+        dt_est, p = ca.SX.sym("dt_est"), ca.SX.sym("p", m.np)
+        parts = self.layout.split(s)
+        x, steer = parts["x"], parts["steer"]
+        motion = self.plant.symbolic_motion(x, steer, p)
+        if self.wave is not None:
+            wave_next, psi_w, r_w = self.wave.symbolic_step(parts["wave"], draws[4], self.dt)
+        else:
+            psi_w = r_w = ca.SX(0)
+        meas = self._measurements(parts, draws, mask, x, motion, (psi_w, r_w))
+        est = self._estimate(parts, meas, mask, dt_est, motion, parts["steer_prev"])
+        log = {}
+        command = ref
+        nxt = {}
+        if self.guidance is not None:
+            g = self.guidance.symbolic_step(parts["guidance"], est["north"], est["east"], est["U"],
+                                            meas["psi"] if self.mode == "heading" else est["angle"], self.dt)
+            command = g["chi_ref"]
+            nxt["guidance"] = g["memory"]
+            log.update({k: g[k] for k in self.guidance.LOG})
+        law = self.autopilot.symbolic_step(parts["autopilot"], command, est["angle"], est["rate"], self.dt)
+        act = self.actuator.symbolic_step(steer, law["steer"], self.dt)
+        steer_avg = 0.5 * (steer + act["steer"])          # the servo ramps over the sample
+        x_next = self.plant.symbolic_step(x, steer_avg, p, self.dt)
+        nxt.update({"x": x_next, "steer": act["steer"], "steer_prev": steer_avg, "autopilot": law["memory"],
+                    "compass_hold": est["compass_hold"], "chi_prev": motion[0]})
+        nxt.update({f"est_{n}": v for n, v in est["memory"].items()})
+        if self.wave is not None:
+            nxt["wave"] = wave_next
+        nan = ca.SX(np.nan)
+        log.update({
+            "north": meas["north"], "east": meas["east"], "psi": meas["psi"], "r": meas["r"], "U": motion[1],
+            "chi": motion[0], "chi_hat": est["angle"], "omega_hat": est["rate"], "U_hat": est["U"],
+            "chi_std": est["angle_std"], "steer": steer, "steer_cmd": law["steer"], "chi_d": law["chi_d"],
+            "r_d": law["r_d"], "ref": command, "e": law["e"], "rate_limited": act["rate_limited"],
+            "gnss_north": ca.if_else(mask[0] > 0, meas["gnss"][0], nan),
+            "gnss_east": ca.if_else(mask[0] > 0, meas["gnss"][1], nan),
+            "compass": ca.if_else(mask[1] > 0, meas["compass"], nan), "gyro": meas["gyro"], "psi_wave": psi_w,
+        })
+        self._log_names = tuple(log)
+        self._step = ca.Function("closed_loop", [s, ref, draws, mask, dt_est, p],
+                                 [self.layout.join(nxt), ca.vertcat(*log.values())],
+                                 ["s", "ref", "draws", "mask", "dt_est", "p"], ["s_next", "log"])
+
+    # -- running -----------------------------------------------------------------------------------
+    def state0(self, x0=None, chi0: float | None = None) -> np.ndarray:
+        """Initial loop state: ship at ``x0`` (the plant's trim point by default), steering at rest,
+        estimator at its prior, reference model at the initial course."""
+        pl, m = self.plant, self.plant.model
+        x0 = np.asarray(x0 if x0 is not None else (pl.x0 if pl.x0 is not None else m.states()), float)
+        if chi0 is None:
+            chi0 = self.initial_angle(x0)
+        parts = {"x": x0, "steer": 0.0, "steer_prev": 0.0, "autopilot": self.autopilot.memory0(chi0),
+                 "compass_hold": x0[m.index(pl.heading)], "chi_prev": chi0}
+        if isinstance(self.estimator, LoopEstimator):
+            parts.update({f"est_{n}": v for n, v in self.estimator.memory0().items()})
+        if self.wave is not None:
+            parts["wave"] = np.zeros(2)
+        if self.guidance is not None:
+            parts["guidance"] = self.guidance.memory0()
+        return self.layout.pack(parts)
+
+    def initial_angle(self, x0) -> float:
+        """Course over ground (course mode) or heading at ``x0``."""
+        pl, m = self.plant, self.plant.model
+        if self.mode == "heading":
+            return float(wrap(x0[m.index(pl.heading)]))
+        chi = ca.Function("chi0", [], [pl.symbolic_motion(ca.DM(x0), 0.0, ca.DM(pl.pvec))[0]])
+        return float(chi()["o0"])
+
+    def schedule(self, n: int) -> np.ndarray:
+        """Sensor availability masks ``(2, n)``: GNSS and compass readings at their rates."""
+        every = lambda rate: max(1, int(round(1.0 / (rate * self.dt))))  # noqa: E731
+        k = np.arange(n)
+        return np.vstack([(k % every(self.sensors.gnss_rate)) == 0,
+                          (k % every(self.sensors.compass_rate)) == 0]).astype(float)
+
+    def draws(self, n: int, seed) -> np.ndarray:
+        """Standard-normal draws ``(len(DRAWS), n)`` from ``seed`` (the same for both runners)."""
+        return np.random.default_rng(seed).standard_normal((len(DRAWS), n))
+
+    def _inputs(self, command, t_end, seed):
+        n = int(round(t_end / self.dt)) + 1
+        t = np.arange(n) * self.dt
+        if callable(command):
+            refs = np.array([float(command(tk)) for tk in t])
+        else:
+            refs = np.broadcast_to(np.asarray(command, float), t.shape).copy()
+        if not np.all(np.isfinite(refs)):
+            raise ValueError("the course command must be finite")
+        dt_est = np.full(n, self.dt)
+        dt_est[0] = 0.0
+        return t, refs, self.draws(n, seed), self.schedule(n), dt_est
+
+    def run(self, command, t_end: float, *, seed=0, x0=None, chunk: int = 2048) -> Dataset:
+        """Run the compiled loop (``mapaccum`` of :attr:`step`) for ``t_end`` seconds.
+
+        ``command`` is a function of time or an array on the loop grid. Returns the logged
+        :attr:`signals` as a :class:`~casship.data.Dataset` (``meta`` holds the estimator prior).
+        """
+        t, refs, draws, masks, dt_est = self._inputs(command, t_end, seed)
+        s = self.state0(x0)
+        p = self.plant.pvec
+        logs, start, n = [], 0, t.size
+        folds = {}
+        while start < n:
+            size = min(chunk, n - start)
+            if size not in folds:
+                folds[size] = self.step.mapaccum(size)
+            sl = slice(start, start + size)
+            out = folds[size].call({"s": s, "ref": refs[None, sl], "draws": draws[:, sl], "mask": masks[:, sl],
+                                    "dt_est": dt_est[None, sl], "p": p})
+            S = np.asarray(out["s_next"])
+            logs.append(np.asarray(out["log"]))
+            s = S[:, -1]
+            if not np.all(np.isfinite(s)):
+                bad = start + int(np.argmax(~np.all(np.isfinite(S), axis=0)))
+                raise FloatingPointError(f"closed loop of {self.plant.model.name!r} diverged at t = {t[bad]:g} s")
+            start += size
+        return self._dataset(t, np.hstack(logs))
+
+    def run_stepwise(self, command, t_end: float, *, seed=0, x0=None) -> Dataset:
+        """The same run, one part at a time from Python: the reference for :meth:`run`.
+
+        Sensors are evaluated in numpy, the estimator runs through its online runner
+        (``est.online(prior).update(y, dt, u_prev=...)``), the law, the steering gear and the ship
+        through their own CasADi Functions.
+        """
+        t, refs, draws, masks, dt_est = self._inputs(command, t_end, seed)
+        pl, m, sen = self.plant, self.plant.model, self.sensors
+        s0 = self.layout.split(self.state0(x0))
+        x, steer, steer_prev = s0["x"].copy(), 0.0, 0.0
+        law_mem, hold, chi_prev = s0["autopilot"].copy(), float(s0["compass_hold"][0]), float(s0["chi_prev"][0])
+        wave_x = np.zeros(2)
+        plant_f = pl.step_function()
+        law_f = self.autopilot.function
+        st, cmd, h = ca.SX.sym("steer"), ca.SX.sym("command"), ca.SX.sym("dt")
+        a = self.actuator.symbolic_step(st, cmd, h)
+        act_f = ca.Function("actuator", [st, cmd, h], [a["steer"], a["rate_limited"]], ["steer", "command", "dt"],
+                            ["steer_next", "rate_limited"])
+        online = self.estimator.est.online(self.estimator.prior) if isinstance(self.estimator, LoopEstimator) else None
+        guid_mem = self.guidance.memory0() if self.guidance is not None else None
+        guid_f = self.guidance.function(self.dt) if self.guidance is not None else None
+        if self.wave is not None:
+            Ad, Bd = self.wave.discrete(self.dt)
+        rows = []
+        ix, iy, ipsi, ir = (m.index(k) for k in (pl.north, pl.east, pl.heading, pl.yaw_rate))
+        for k in range(t.size):
+            mot = plant_f.call({"x": x, "steer": steer, "p": pl.pvec, "dt": self.dt})
+            chi, U = float(mot["chi"]), float(mot["U"])
+            psi_w = r_w = 0.0
+            if self.wave is not None:
+                psi_w, r_w = wave_x[1], -self.wave.w0**2 * wave_x[0] - 2 * self.wave.lam * self.wave.w0 * wave_x[1]
+                wave_x = Ad @ wave_x + Bd[:, 0] * draws[4, k]
+            gn, ge = x[ix] + sen.gnss_std * draws[0, k], x[iy] + sen.gnss_std * draws[1, k]
+            compass = float(wrap(x[ipsi] + psi_w + sen.compass_std * draws[2, k]))
+            gyro = x[ir] + r_w + sen.gyro_std * draws[3, k]
+            north, east, U_hat, std = x[ix], x[iy], U, 0.0
+            if online is not None:
+                if self.estimator.kind == "course":
+                    y = np.array([gn, ge]) if masks[0, k] else np.full(2, np.nan)
+                    xh = online.update(y, dt_est[k])
+                else:
+                    y = np.array([compass if masks[1, k] else np.nan, gyro])
+                    xh = online.update(y, dt_est[k], u_prev=np.array([steer_prev]))
+                ixh = self.estimator.state_index
+                P = online.P
+                if self.estimator.kind == "course":
+                    angle, rate = xh[ixh("chi")], xh[ixh("omega_chi")]
+                    north, east, U_hat, std = xh[ixh("x_n")], xh[ixh("y_n")], xh[ixh("U")], np.sqrt(P[ixh("chi"), ixh("chi")])
+                else:
+                    angle, rate, std = xh[ixh("psi")], xh[ixh("r")], np.sqrt(P[ixh("psi"), ixh("psi")])
+                if self.rate == "gyro":
+                    rate = gyro
+            elif self.estimator == "raw":
+                hold = compass if masks[1, k] else hold
+                angle, rate = hold, gyro
+            else:
+                angle = chi if self.mode == "course" else x[ipsi]
+                if self.mode == "course":
+                    rate = float(wrap(chi - chi_prev)) / self.dt if k else x[ir]
+                else:
+                    rate = x[ir]
+            log = {}
+            command = refs[k]
+            if guid_f is not None:
+                own = x[ipsi] if self.mode == "heading" else angle
+                g = guid_f.call({"memory": guid_mem, "north": north, "east": east, "U": U_hat, "angle": own})
+                guid_mem = np.asarray(g["memory_next"]).ravel()
+                command = float(g["chi_ref"])
+                log.update({key: float(g[key]) for key in self.guidance.LOG})
+            lo = law_f.call({"memory": law_mem, "ref": command, "chi": angle, "r": rate, "dt": self.dt})
+            law_mem = np.asarray(lo["memory_next"]).ravel()
+            ao = act_f.call({"steer": steer, "command": float(lo["steer"]), "dt": self.dt})
+            steer_next = float(ao["steer_next"])
+            steer_avg = 0.5 * (steer + steer_next)
+            log.update({"north": x[ix], "east": x[iy], "psi": x[ipsi], "r": x[ir], "U": U, "chi": chi,
+                        "chi_hat": angle, "omega_hat": rate, "U_hat": U_hat, "chi_std": std, "steer": steer,
+                        "steer_cmd": float(lo["steer"]), "chi_d": float(lo["chi_d"]), "r_d": float(lo["r_d"]),
+                        "ref": command, "e": float(lo["e"]), "rate_limited": float(ao["rate_limited"]),
+                        "gnss_north": gn if masks[0, k] else np.nan, "gnss_east": ge if masks[0, k] else np.nan,
+                        "compass": compass if masks[1, k] else np.nan, "gyro": gyro, "psi_wave": psi_w})
+            rows.append([log[name] for name in self.signals])
+            x = np.asarray(plant_f.call({"x": x, "steer": steer_avg, "p": pl.pvec, "dt": self.dt})["x_next"]).ravel()
+            steer, steer_prev, chi_prev = steer_next, steer_avg, chi
+            if not np.all(np.isfinite(x)):
+                raise FloatingPointError(f"closed loop of {m.name!r} diverged at t = {t[k]:g} s")
+        return self._dataset(t, np.array(rows).T)
+
+    def _dataset(self, t, log) -> Dataset:
+        meta = {"mode": self.mode, "model": self.plant.model.name, "dt": self.dt, "rate": self.rate}
+        if isinstance(self.estimator, LoopEstimator):
+            meta["estimator_prior"] = self.estimator.prior
+            meta["estimator"] = self.estimator.est
+        cols = dict(zip(self.signals, log))
+        cols["omega_chi"] = np.gradient(np.unwrap(cols["chi"]), t)      # true course rate
+        return Dataset(t, cols, meta=meta)
+
+    # -- code generation ----------------------------------------------------------------------------
+    def export_c(self, directory, name: str = "closed_loop_step"):
+        """Write the loop step as C (:func:`casship.codegen.generate_c`); returns the ``CFiles``."""
+        from ..codegen import generate_c
+
+        title = (f"{name}: closed loop of '{self.plant.model.name}' ({self.mode} autopilot, dt = {self.dt:g} s); "
+                 f"log rows: {', '.join(self.signals)}")
+        return generate_c(self.step, directory, name, title=title)

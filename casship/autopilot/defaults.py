@@ -1,0 +1,316 @@
+"""The autopilot's defaults, in one place, derived from the ship (used by the Python API and the CLI).
+
+Every setting of :func:`casship.autopilot.design_autopilot` and of its closed loop has a rule in
+:data:`RULES` (shown by ``casship autopilot --help`` and in ``docs/autopilots.md``);
+:func:`derive_settings` applies them to a ship: its :class:`~casship.vessel.Vessel` (speed ``U0``,
+length ``L_pp``, ``rudder_max``, ``rudder_rate``), the time constants of its exact linearisation
+and the sensor noise. A value given by the caller replaces the rule; the resolved values and where
+each came from are in :class:`AutopilotSettings`.
+
+The bandwidth accounts for the steering gear: the closed-loop natural frequency ``wn`` starts at
+the ship's own ``U/L`` and is lowered (in steps of 2^(1/4)) until the loop on the linearised ship,
+with the servo and the sensor delay, has a phase margin of 45 deg and an upper gain margin of
+6 dB; the reference model's ``wn_ref`` starts at ``wn`` and is lowered until the standard course
+change (20 deg) asks the linear loop for at most half the steering limit and half the rate limit,
+so that the rate limit is left for disturbances and noise.
+"""
+from __future__ import annotations
+
+import warnings
+from types import SimpleNamespace
+from dataclasses import asdict, dataclass, field, fields
+from typing import Mapping
+
+import numpy as np
+
+from .analysis import course_change_demand, loop_systems, margins
+from .designs import lqr_design, pid_pole_placement
+from .estimation import linear_estimator, tune_course_q, tune_heading_q
+from .law import Actuator
+from .nomoto import Nomoto
+from .plants import SteeringPlant, twin_propeller_yaw_limit
+from .reference import ReferenceModel
+
+__all__ = ["AutopilotSettings", "RULES", "derive_settings", "STANDARD_CHANGE_DEG"]
+
+#: The standard course change the bandwidth is chosen for [deg] (and back: scenario ``course-20``).
+STANDARD_CHANGE_DEG = 20.0
+_PM_MIN, _GM_MIN, _DEMAND, _OVERSHOOT = 45.0, 6.0, 0.5, 5.0
+_NOISE_RATE, _NOISE_STEER = 0.5, 0.05       # steering-noise budget: rate_max * T / 2 and steer_max / 20
+_SEARCH_STEPS = 17                           # wn and wn_ref searched down to 1/16 of their start
+_SOLAS_RATE = np.radians(35.0 + 30.0) / 28.0      # SOLAS II-1/29.3.2: 35 deg one side to 30 deg other in 28 s
+
+
+@dataclass(frozen=True)
+class AutopilotSettings:
+    """Resolved settings of an autopilot design and its closed loop (SI units, radians).
+
+    ``sources`` maps each name to ``"given"`` or the rule that produced it.
+    """
+
+    speed: float
+    method: str
+    mode: str
+    rate: str
+    wn: float
+    zeta: float
+    integral: str | None
+    wn_ref: float
+    zeta_ref: float
+    r_max: float
+    steer_max: float
+    steer_rate_max: float
+    actuator_T: float
+    filter_T: float
+    dt: float
+    delay: float
+    gnss_rate: float
+    gnss_std: float
+    compass_rate: float
+    compass_std: float
+    gyro_std: float
+    ekf_alpha: tuple
+    ekf_q: tuple
+    observer_q: tuple
+    segment: float
+    lqr_weights: dict = field(default_factory=dict)
+    sources: dict = field(default_factory=dict, compare=False)
+
+    def as_dict(self) -> dict:
+        """Values (tuples as lists), without the sources."""
+        out = asdict(self)
+        out.pop("sources")
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
+
+
+#: name -> (unit, rule). The rule is what ``--help`` and the docs show.
+RULES: dict[str, tuple[str, str]] = {
+    "speed": ("m/s", "the vessel's approach speed vessel.U0"),
+    "method": ("", "'pid' (Fossen's pole placement); 'lqr' (integral LQR, control.lqr)"),
+    "mode": ("", "'heading' (compass and rate gyro into the heading observer: a heading control system, IMO "
+                 "A.342(IX)); 'course' (GNSS into the SOG/COG EKF, Fossen & Fossen 2021)"),
+    "rate": ("", "'estimator' (the estimator's course or yaw rate, Fossen & Fossen 2021); 'gyro' (the rate gyro as "
+                 "read)"),
+    "wn": ("rad/s", "U/L, lowered in steps of 2^(1/4) (down to U/16L) until the loop on the linearised ship with the servo, the "
+                    "sensor delay and the estimator (its steady-state Kalman filter) has PM >= 45 deg and upper GM "
+                    ">= 6 dB within the steering-noise budget (else the best PM found, with a warning)"),
+    "zeta": ("", "1 (critically damped)"),
+    "integral": ("", "'fossen' (Ki = wn/10 Kp); 'exact' places the integrator pole at wn/10; 'none'"),
+    "wn_ref": ("rad/s", "wn, lowered in steps of 2^(1/4) until a 20 deg course change asks the linear loop for at "
+                        "most half the steering limit and half its rate limit"),
+    "zeta_ref": ("", "1"),
+    "r_max": ("rad/s", "0.3 U/L (a preset rate of turn)"),
+    "steer_max": ("rad or N m", "vessel.rudder_max; two-propeller craft: the yaw moment both propellers give at the "
+                                "trim surge force"),
+    "steer_rate_max": ("rad/s or N m/s", "vessel.rudder_rate, else 2.32 deg/s (SOLAS II-1/29.3.2); two-propeller "
+                                         "craft: steer_max per propeller time constant"),
+    "actuator_T": ("s", "1 s steering servo (MSS Mariner); two-propeller craft: the propeller time constant 0.1 s"),
+    "filter_T": ("s", "0 (no command low-pass; the estimator does the filtering)"),
+    "dt": ("s", "the largest of 0.2, 0.1, 0.05, 0.02 s not above L/U / 200 and actuator_T / 5 (at least 0.02 s)"),
+    "delay": ("s", "half the GNSS (course mode) or compass (heading mode) period plus one loop period, in the margins"),
+    "gnss_rate": ("Hz", "5 (Fossen & Fossen 2021)"),
+    "gnss_std": ("m", "0.5"),
+    "compass_rate": ("Hz", "10"),
+    "compass_std": ("rad", "0.5 deg"),
+    "gyro_std": ("rad/s", "0.02 deg/s"),
+    "ekf_alpha": ("1/s", "speed: 1/T_surge of the linearisation; course rate: wn_ref"),
+    "ekf_q": ("(m/s^2)^2, (rad/s^2)^2", "speed: 2 alpha1 (0.05 U)^2 / dt; course rate: the largest value up to "
+                                         "2 alpha2 r_max^2 / dt (in steps of 10^(1/4)) for which the steady-state "
+                                         "filter (control.dlqe) puts at most min(rate_max actuator_T / 2, "
+                                         "steer_max / 20) of sensor noise on the steering command"),
+    "observer_q": ("spectral densities", "yaw acceleration: the largest value up to 2 r_max^2 / |T| meeting the same "
+                                         "noise budget; rudder bias: (0.05 steer_max)^2 / (10 L/U)"),
+    "segment": ("s", "40 / wn_ref per course change (scenario course-20 lasts two segments)"),
+    "lqr_weights": ("", "q_e = 1, q_int = (wn/10)^2, q_r = 1/wn^2, r_delta = (1/(m wn^2))^2 (Bryson's rule at the "
+                        "pole-placement gains)"),
+}
+
+
+def _check_given(given: Mapping) -> dict:
+    names = {f.name for f in fields(AutopilotSettings)} - {"sources"}
+    unknown = sorted(set(given) - names)
+    if unknown:
+        raise ValueError(f"unknown autopilot setting(s) {unknown}; known: {sorted(names)}")
+    return {k: v for k, v in given.items() if v is not None}
+
+
+def _vessel(plant: SteeringPlant, key: str):
+    v = plant.model.vessel
+    return getattr(v, key, None) if v is not None else None
+
+
+def _twin_propeller(plant: SteeringPlant) -> bool:
+    return plant.steer == "tau_N" and "tau_X" in plant.inputs
+
+
+def _gains(method, nom, wn, zeta, integral, weights):
+    if method == "pid":
+        return pid_pole_placement(nom, wn, zeta, integral=integral)
+    return lqr_design(nom, **weights)
+
+
+def default_lqr_weights(nom: Nomoto, wn: float) -> dict:
+    """Bryson-style LQR weights at the pole-placement gains (see :data:`RULES`)."""
+    return {"q_int": (wn / 10) ** 2, "q_e": 1.0, "q_r": 1.0 / wn**2, "r_delta": (1.0 / (abs(nom.m) * wn**2)) ** 2}
+
+
+def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | None = None) -> AutopilotSettings:
+    """Apply :data:`RULES` to a ship (``plant`` at its trim point, its labelled course
+    linearisation ``lin``, its Nomoto model ``nom``); values in ``given`` replace the rules.
+
+    Raises ``ValueError`` naming an unknown setting, or when no bandwidth meets the margins.
+    """
+    g = _check_given(dict(given or {}))
+    src = {k: "given" for k in g}
+    val = dict(g)
+
+    def rule(name, make):
+        if name not in val:
+            val[name] = make()
+            src[name] = RULES[name][1]
+        return val[name]
+
+    twin = _twin_propeller(plant)
+    L = _vessel(plant, "L_pp")
+    m = plant.model
+    x0 = plant.x0 if plant.x0 is not None else m.states()
+    speed = rule("speed", lambda: float(np.hypot(x0[m.index("u")], x0[m.index("v")]) if "u" in m.state_names
+                                        else _vessel(plant, "U0")))
+    if L is None and not ({"wn", "r_max", "dt", "segment"} <= set(val)):
+        raise ValueError(f"model {m.name!r} has no vessel length L_pp: give wn, r_max, dt and segment")
+    LU = float(L) / speed if L is not None else None
+    method = rule("method", lambda: "pid")
+    if method not in ("pid", "lqr"):
+        raise ValueError(f"method must be 'pid' or 'lqr', got {method!r}")
+    mode = rule("mode", lambda: "heading")
+    rule("rate", lambda: "estimator")
+    zeta = rule("zeta", lambda: 1.0)
+    integral = rule("integral", lambda: "fossen")
+    if integral == "none":
+        val["integral"] = integral = None
+    rule("zeta_ref", lambda: 1.0)
+    rule("r_max", lambda: 0.3 / LU)
+    if twin:
+        t_n = float(plant.model.param_dict(plant.pvec).get("T_n", 0.1))
+        steer_max = rule("steer_max", lambda: twin_propeller_yaw_limit(plant.model, plant.inputs["tau_X"], plant.pvec))
+        rule("steer_rate_max", lambda: steer_max / t_n)
+        rule("actuator_T", lambda: t_n)
+    else:
+        rule("steer_max", lambda: float(_vessel(plant, "rudder_max") or np.radians(35.0)))
+        rule("steer_rate_max", lambda: float(_vessel(plant, "rudder_rate") or _SOLAS_RATE))
+        rule("actuator_T", lambda: 1.0)
+    rule("filter_T", lambda: 0.0)
+    rule("dt", lambda: _loop_period(LU, val["actuator_T"]))
+    rule("gnss_rate", lambda: 5.0)
+    rule("gnss_std", lambda: 0.5)
+    rule("compass_rate", lambda: 10.0)
+    rule("compass_std", lambda: float(np.radians(0.5)))
+    rule("gyro_std", lambda: float(np.radians(0.02)))
+    rule("delay", lambda: 0.5 / (val["gnss_rate"] if mode == "course" else val["compass_rate"]) + val["dt"])
+    actuator = Actuator(val["steer_max"], val["steer_rate_max"], val["actuator_T"])
+    controlled = "chi" if mode == "course" else "psi"
+    dt = val["dt"]
+    budget = min(_NOISE_RATE * actuator.rate_max * max(actuator.T, dt), _NOISE_STEER * actuator.steer_max)
+    a1 = float(val["ekf_alpha"][0]) if "ekf_alpha" in val else _surge_pole(plant)
+    q_b = (0.05 * val["steer_max"]) ** 2 / (10 * (LU if LU else 1.0 / val.get("wn", 1.0)))
+
+    def candidate(wn, wn_ref=None):
+        """Gains, estimator tuning and the linear loop (with the estimator) at bandwidth ``wn``."""
+        weights = {**default_lqr_weights(nom, wn), **val.get("lqr_weights", {})}
+        gains = _gains(method, nom, wn, zeta, integral, weights)
+        a2 = float(val["ekf_alpha"][1]) if "ekf_alpha" in val else wn
+        Kd_est = gains.Kd if val["rate"] == "estimator" else 0.0
+        gyro_noise = 0.0 if val["rate"] == "estimator" else abs(gains.Kd) * val["gyro_std"]
+        room = float(np.sqrt(max(budget**2 - gyro_noise**2, (0.1 * budget) ** 2)))
+        tuned = {"_quiet": gyro_noise <= budget}
+        if mode == "course":
+            q_U = 2 * a1 * (0.05 * speed) ** 2 / dt
+            if "ekf_q" in val:
+                q_U, q_chi = val["ekf_q"]
+            else:
+                q_chi, _ = tune_course_q(speed=speed, alpha=(a1, a2), q_U=q_U, q_chi_max=2 * a2 * val["r_max"] ** 2 / dt,
+                                         dt=dt, gnss_every=max(1, int(round(1 / (val["gnss_rate"] * dt)))),
+                                         gnss_std=val["gnss_std"], Kp=gains.Kp, Kd=Kd_est, budget=room)
+            tuned.update(ekf_alpha=(a1, a2), ekf_q=(q_U, q_chi))
+        else:
+            if "observer_q" in val:
+                q_r, qb = val["observer_q"]
+            else:
+                qb = q_b
+                q_r, _ = tune_heading_q(K=nom.K, T=nom.T, q_r_max=2 * val["r_max"] ** 2 / abs(nom.T), q_b=qb, dt=dt,
+                                        compass_every=max(1, int(round(1 / (val["compass_rate"] * dt)))),
+                                        compass_std=val["compass_std"], gyro_std=val["gyro_std"], Kp=gains.Kp,
+                                        Kd=Kd_est, budget=room)
+            tuned.update(observer_q=(q_r, qb))
+        est = linear_estimator(SimpleNamespace(**{**val, **tuned}), nom, plant.steer)
+        ref = ReferenceModel(wn_ref, val["zeta_ref"]) if wn_ref else None
+        L, closed = loop_systems(lin, gains, actuator, delay=val["delay"], reference=ref, controlled=controlled,
+                                 filter_T=val["filter_T"], estimator=est, rate=val["rate"])
+        return L, closed, tuned
+
+    if "wn" not in val:
+        wn, best = 1.0 / LU, None
+        for _ in range(_SEARCH_STEPS):
+            L_, _, tuned = candidate(wn)
+            mg = margins(L_)
+            if mg["closed_loop_stable"] and tuned["_quiet"]:
+                if mg["phase_margin_deg"] >= _PM_MIN and mg["upper_gain_margin_db"] >= _GM_MIN:
+                    best = None
+                    break
+                if best is None or mg["phase_margin_deg"] > best[1]:
+                    best = (wn, mg["phase_margin_deg"], mg["upper_gain_margin_db"])
+            wn /= 2 ** 0.25
+        else:
+            if best is None:
+                raise ValueError(f"no bandwidth below U/L = {1 / LU:.3g} rad/s stabilises {m.name!r} within the "
+                                 "steering-noise budget; give wn")
+        if best is not None:
+            wn = best[0]
+            warnings.warn(f"{m.name}: no bandwidth below U/L gives PM >= {_PM_MIN} deg and GM >= {_GM_MIN} dB with "
+                          f"the {mode} estimator in the loop; using wn = {wn:.3g} rad/s (PM {best[1]:.1f} deg, GM "
+                          f"{best[2]:.1f} dB)", stacklevel=3)
+        val["wn"], src["wn"] = wn, RULES["wn"][1]
+    wn = val["wn"]
+    if "wn_ref" not in val:
+        wr = wn
+        change = np.radians(STANDARD_CHANGE_DEG)
+        for _ in range(_SEARCH_STEPS):
+            dem = course_change_demand(candidate(wn, wr)[1], change, 20.0 / wr, actuator=actuator)
+            if dem["steer_max"] <= _DEMAND * actuator.steer_max and dem["rate_max"] <= _DEMAND * actuator.rate_max \
+                    and dem["overshoot_pct"] <= _OVERSHOOT:
+                break
+            wr /= 2 ** 0.25
+        val["wn_ref"], src["wn_ref"] = wr, RULES["wn_ref"][1]
+    wr = val["wn_ref"]
+    for key, value in candidate(wn)[2].items():
+        if key not in val and not key.startswith("_"):
+            val[key], src[key] = value, RULES[key][1]
+    rule("ekf_alpha", lambda: (a1, wn))
+    rule("ekf_q", lambda: (2 * a1 * (0.05 * speed) ** 2 / dt, 2 * wn * val["r_max"] ** 2 / dt))
+    rule("observer_q", lambda: (2 * val["r_max"] ** 2 / abs(nom.T), q_b))
+    rule("lqr_weights", lambda: default_lqr_weights(nom, wn) if method == "lqr" else {})
+    rule("segment", lambda: 40.0 / wr)
+    for key in ("ekf_alpha", "ekf_q", "observer_q"):
+        val[key] = tuple(float(v) for v in val[key])
+    return AutopilotSettings(**val, sources=src)
+
+
+def _surge_pole(plant: SteeringPlant) -> float:
+    """``1/T_surge``: minus the surge entry of the linearisation's A (1/100 s without a surge state)."""
+    from ..linear import linearize
+
+    m = plant.model
+    if "u" not in m.state_names:
+        return 0.01
+    x0 = plant.x0 if plant.x0 is not None else m.states()
+    A = np.asarray(linearize(m, x0, plant.input_vector(0.0), plant.pvec, outputs=["u"]).A)
+    iu = m.index("u")
+    return float(max(-A[iu, iu], 1e-4))
+
+
+def _loop_period(LU, actuator_T) -> float:
+    limit = min(LU / 200.0 if LU else 0.02, actuator_T / 5 if actuator_T > 0 else np.inf)
+    for dt in (0.2, 0.1, 0.05, 0.02):
+        if dt <= limit:
+            return dt
+    return 0.02

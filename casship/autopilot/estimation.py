@@ -1,0 +1,294 @@
+"""Estimators of the autopilot loop and the first-order wave model.
+
+* Course mode (Fossen & Fossen 2021): GNSS positions into the five-state SOG/COG EKF
+  (:func:`casship.models.sog_cog`); :func:`course_ekf` tunes it from the sensor noise and the ship.
+* Heading mode: compass and rate gyro into a Kalman filter on the Nomoto model with a rudder-bias
+  state (:func:`heading_observer`), optionally with Fossen's wave filter: the first-order
+  (wave-frequency) yaw ``psi_w`` as a second-order resonant process
+  ``psi_w = K_w s / (s^2 + 2 lambda w0 s + w0^2) w`` (Fossen 2021, Sec. 10.2 and 13.4), so that the
+  estimate the autopilot steers on is the low-frequency heading and the rudder does not chase the
+  wave yaw.
+* :class:`WaveYaw` is that resonant process as a python-control system and as a discrete step that
+  the closed loop adds to the measured heading and yaw rate.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import control
+import numpy as np
+
+from ..data import Gaussian
+from ..discretize import discretize
+from ..model import Model, ModelBuilder
+
+__all__ = ["WaveYaw", "course_ekf", "course_prior", "heading_observer", "heading_kf", "heading_prior"]
+
+
+@dataclass(frozen=True)
+class WaveYaw:
+    """First-order wave-induced yaw: ``psi_w = K_w s / (s^2 + 2 lambda w0 s + w0^2) w``, ``w`` white.
+
+    ``K_w = 2 lambda w0 sigma`` makes ``sigma`` [rad] the peak amplitude of the transfer function,
+    the usual parametrisation of the linear wave spectrum approximation (Fossen 2021, Sec. 10.2.4);
+    for unit-intensity white noise the standard deviation of ``psi_w`` is
+    ``sigma sqrt(lambda w0)``.
+
+    Parameters
+    ----------
+    w0 : float
+        Peak (encounter) frequency [rad/s].
+    sigma : float
+        Intensity [rad].
+    lam : float
+        Relative damping of the resonance (0.1 for a narrow sea spectrum).
+    """
+
+    w0: float
+    sigma: float
+    lam: float = 0.1
+
+    def __post_init__(self):
+        for name in ("w0", "lam"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"wave {name} must be positive, got {v}")
+        if not (np.isfinite(self.sigma) and self.sigma >= 0):
+            raise ValueError(f"wave sigma must be >= 0, got {self.sigma}")
+
+    @property
+    def K_w(self) -> float:
+        return 2 * self.lam * self.w0 * self.sigma
+
+    @property
+    def std(self) -> float:
+        """Standard deviation of ``psi_w`` [rad] for unit-intensity white noise."""
+        return float(self.sigma * np.sqrt(self.lam * self.w0))
+
+    def system(self) -> control.StateSpace:
+        """Labelled state space: input ``w``, states ``xi_w, psi_w``, outputs ``psi_w, r_w``."""
+        w0, lam = self.w0, self.lam
+        A = np.array([[0.0, 1.0], [-w0**2, -2 * lam * w0]])
+        B = np.array([[0.0], [self.K_w]])
+        C = np.array([[0.0, 1.0], [-w0**2, -2 * lam * w0]])
+        return control.ss(A, B, C, np.array([[0.0], [self.K_w]]), states=["xi_w", "psi_w"], inputs=["w"],
+                          outputs=["psi_w", "r_w"], name="wave_yaw")
+
+    def discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Exact zero-order-hold discretisation ``(Ad, Bd)`` of the states ``xi_w, psi_w`` for a
+        white-noise draw per step scaled to the continuous intensity (``w = v / sqrt(dt)``, ``v``
+        standard normal)."""
+        from scipy.linalg import expm
+
+        A = np.array([[0.0, 1.0], [-self.w0**2, -2 * self.lam * self.w0]])
+        G = np.array([[0.0], [self.K_w]])
+        M = expm(np.block([[A, G], [np.zeros((1, 3))]]) * dt)
+        return M[:2, :2], M[:2, 2:] / np.sqrt(dt)
+
+    def symbolic_step(self, xw, draw, dt: float):
+        """Next ``[xi_w, psi_w]`` and the present ``(psi_w, r_w)`` (CasADi expressions)."""
+        Ad, Bd = self.discrete(dt)
+        r_w = -self.w0**2 * xw[0] - 2 * self.lam * self.w0 * xw[1]
+        return ca.mtimes(ca.DM(Ad), xw) + ca.DM(Bd) * draw, xw[1], r_w
+
+
+def course_ekf(dt: float, *, gnss_std: float, alpha=(0.01, 0.1), q=(0.1, 0.01), options=None):
+    """The SOG/COG EKF (Euler, as MSS ``EKF_5states.m``) on GNSS North/East positions.
+
+    Parameters
+    ----------
+    dt : float
+        Filter period [s].
+    gnss_std : float
+        Position noise [m] (``R = gnss_std^2 I``).
+    alpha : (float, float)
+        Singer constants of speed and course rate [1/s].
+    q : (float, float)
+        Variances of ``w_U`` and ``w_chi`` held over a sample (the estimator's ``Q``).
+    """
+    from ..estimators import EKF
+    from ..models import sog_cog
+
+    return EKF(discretize(sog_cog(*alpha), dt, "euler"), Q=np.diag(np.asarray(q, float)), R=np.eye(2) * gnss_std**2,
+               options=options)
+
+
+def course_prior(north: float, east: float, speed: float, chi: float, gnss_std: float) -> Gaussian:
+    """Prior of the SOG/COG EKF at the start of a run (course known to about 5 deg)."""
+    return Gaussian(np.array([north, east, speed, chi, 0.0]),
+                    np.diag([gnss_std**2, gnss_std**2, 1.0, np.radians(5.0) ** 2, 0.01]))
+
+
+def heading_observer(K: float, T: float, wave: WaveYaw | None = None, *, steer: str = "delta") -> Model:
+    """Nomoto heading model with a rudder bias and optionally Fossen's wave filter (a casship Model).
+
+    States ``psi, r, b`` (``T r' + r = K (delta + b)``, ``b`` a slowly varying rudder bias that a
+    steady wind or current moment looks like), and with ``wave`` the wave states ``xi_w, psi_w``.
+    Outputs ``psi_m = psi + psi_w`` (compass) and ``r_m = r + r_w`` (rate gyro; ``r_w = psi_w'``).
+    Noises ``w_r`` (yaw acceleration), ``w_b`` (bias drift), ``w_w`` (wave intensity).
+    """
+    name = "heading-observer" + ("+wave" if wave is not None else "")
+    b = ModelBuilder(name, "Nomoto heading model with rudder bias" + (" and wave filter" if wave else ""))
+    psi = b.state("psi", unit="rad", angle=True)
+    r = b.state("r", unit="rad/s")
+    bias = b.state("b", unit="rad", doc="rudder bias")
+    delta = b.input(steer)
+    Kp, Tp = b.param("K", K, unit="1/s"), b.param("T", T, unit="s")
+    b.ode(psi=r, r=(Kp * (delta + bias) - r) / Tp + b.noise("w_r"), b=b.noise("w_b"))
+    psi_w = r_w = 0
+    if wave is not None:
+        xi = b.state("xi_w", unit="rad s")
+        psi_w = b.state("psi_w", unit="rad")
+        w0, lam = b.param("w0", wave.w0, unit="rad/s"), b.param("lam", wave.lam)
+        r_w = -w0**2 * xi - 2 * lam * w0 * psi_w
+        b.ode(xi_w=psi_w, psi_w=r_w + wave.K_w * b.noise("w_w"))
+    b.output("psi_m", psi + psi_w, angle=True)
+    b.output("r_m", r + r_w)
+    return b.build()
+
+
+def heading_kf(observer: Model, dt: float, *, compass_std: float, gyro_std: float, q_r: float, q_b: float,
+               q_w: float = 1.0, options=None):
+    """Kalman filter (casship's EKF, linear model) of :func:`heading_observer` at period ``dt``.
+
+    ``q_r``, ``q_b``, ``q_w`` are spectral densities of ``w_r, w_b, w_w``; the filter's ``Q`` is
+    ``q / dt`` (the variance of the noise held over a sample, RK4 step).
+    """
+    from ..estimators import EKF
+
+    q = {"w_r": q_r / dt, "w_b": q_b / dt, "w_w": q_w / dt}
+    Q = np.diag([q[n] for n in observer.noise_names])
+    return EKF(discretize(observer, dt, "rk4"), Q=Q, R=np.diag([compass_std**2, gyro_std**2]), options=options)
+
+
+def heading_prior(observer: Model, psi: float, r: float, compass_std: float) -> Gaussian:
+    """Prior of the heading observer at the start of a run."""
+    mean = observer.states(psi=psi, r=r)
+    var = {"psi": compass_std**2, "r": 1e-6, "b": np.radians(2.0) ** 2, "xi_w": 1e-2, "psi_w": np.radians(2.0) ** 2}
+    return Gaussian(mean, np.diag([var[n] for n in observer.state_names]))
+
+
+def command_noise(Ad, G, C, Q, R, angle: int, rate: int, Kp: float, Kd: float) -> float:
+    """Standard deviation of the steering command that estimation errors cause: ``Kp`` times the
+    angle error plus ``Kd`` times the rate error, from the steady-state (predicted) covariance of the
+    Kalman filter ``x+ = Ad x + G w``, ``y = C x + v`` (``control.dlqe``)."""
+    _, P, _ = control.dlqe(Ad, G, C, Q, R)
+    k = np.zeros(np.shape(Ad)[0])
+    k[angle], k[rate] = Kp, Kd
+    return float(np.sqrt(max(k @ np.asarray(P) @ k, 0.0)))
+
+
+def _largest_within(q_max: float, noise, budget: float, steps: int = 40) -> tuple[float, float]:
+    """The largest ``q = q_max 10^(-k/4)``, ``k = 0 .. steps``, with ``noise(q) <= budget`` (the noise
+    grows with ``q``: bisection over ``k``); ``k = steps`` if none meets it. Returns ``(q, noise(q))``."""
+    sigma = noise(q_max)
+    if sigma <= budget:
+        return q_max, sigma
+    lo, hi = 0, steps            # noise(lo) > budget; find the smallest k in (lo, hi] that meets it
+    found = None
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        s_mid = noise(q_max / 10 ** (mid / 4))
+        if s_mid <= budget:
+            hi, found = mid, s_mid
+        else:
+            lo = mid
+    q = q_max / 10 ** (hi / 4)
+    return q, found if found is not None else noise(q)
+
+
+def _multirate(Ad, G, Q, every: int):
+    """Transition and noise covariance over ``every`` steps (measurements once per ``every`` steps)."""
+    A_k, N = np.eye(Ad.shape[0]), np.zeros_like(Ad)
+    for _ in range(every):
+        N = Ad @ N @ Ad.T + G @ Q @ G.T
+        A_k = Ad @ A_k
+    return A_k, N
+
+
+def tune_course_q(*, speed: float, alpha, q_U: float, q_chi_max: float, dt: float, gnss_every: int,
+                  gnss_std: float, Kp: float, Kd: float, budget: float) -> tuple[float, float]:
+    """Largest course-rate process noise (from ``q_chi_max`` down in steps of 10^(1/4)) for which
+    the SOG/COG filter, linearised on a straight course, makes a steering-command noise of at most
+    ``budget``. Returns ``(q_chi, command noise std)``."""
+    a1, a2 = alpha
+    A = np.zeros((5, 5))
+    A[0, 2], A[1, 3], A[2, 2], A[3, 4], A[4, 4] = 1.0, speed, -a1, 1.0, -a2
+    Ad = np.eye(5) + dt * A
+    G = np.zeros((5, 2))
+    G[2, 0] = G[4, 1] = dt
+    C = np.zeros((2, 5))
+    C[0, 0] = C[1, 1] = 1.0
+    R = np.eye(2) * gnss_std**2
+
+    def noise(q):
+        A_k, N = _multirate(Ad, G, np.diag([q_U, q]), gnss_every)
+        return command_noise(A_k, np.eye(5), C, N + 1e-30 * np.eye(5), R, 3, 4, Kp, Kd)
+
+    return _largest_within(q_chi_max, noise, budget)
+
+
+def tune_heading_q(*, K: float, T: float, q_r_max: float, q_b: float, dt: float, compass_every: int,
+                   compass_std: float, gyro_std: float, Kp: float, Kd: float, budget: float) -> tuple[float, float]:
+    """Like :func:`tune_course_q` for the heading observer (compass readings once per
+    ``compass_every`` samples taken as one reading per sample with ``compass_every`` times the
+    variance). Returns ``(q_r, command noise std)``."""
+    A = np.array([[0.0, 1.0, 0.0], [0.0, -1.0 / T, K / T], [0.0, 0.0, 0.0]])
+    Ad = np.eye(3) + dt * A
+    G = dt * np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    R = np.diag([compass_std**2 * compass_every, gyro_std**2])
+
+    def noise(q):
+        return command_noise(Ad, G, C, np.diag([q / dt, max(q_b, 1e-30) / dt]), R, 0, 1, Kp, Kd)
+
+    return _largest_within(q_r_max, noise, budget)
+
+
+def course_filter_system(speed: float, alpha2: float, q_chi: float, r_pos: float) -> control.StateSpace:
+    """The SOG/COG filter's cross-track part on a straight course as a steady-state Kalman-Bucy
+    filter (``control.lqe``), a labelled system for the linear loop.
+
+    States ``y_n, chi, omega_chi`` (``y_n' = U chi``, ``chi' = omega_chi``,
+    ``omega_chi' = -alpha2 omega_chi + w_chi``); input the measured cross position ``y_n``;
+    outputs ``chi_hat, rate_hat``. ``q_chi`` and ``r_pos`` are the spectral densities of the course
+    acceleration noise and of the position noise (variance times sampling period).
+    """
+    A = np.array([[0.0, speed, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -alpha2]])
+    G = np.array([[0.0], [0.0], [1.0]])
+    C = np.array([[1.0, 0.0, 0.0]])
+    L, _, _ = control.lqe(A, G, C, np.array([[q_chi]]), np.array([[r_pos]]))
+    L = np.asarray(L)
+    Co = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    return control.ss(A - L @ C, L, Co, np.zeros((2, 1)), states=["y_h", "chi_h", "omega_h"], inputs=["y_n"],
+                      outputs=["chi_hat", "rate_hat"], name="estimator")
+
+
+def heading_filter_system(K: float, T: float, q_r: float, q_b: float, r_psi: float, r_r: float, *,
+                          steer: str = "delta") -> control.StateSpace:
+    """The heading observer (without waves) as a steady-state Kalman-Bucy filter (``control.lqe``),
+    a labelled system for the linear loop: inputs ``<steer>, psi, r`` (measured), outputs
+    ``chi_hat, rate_hat`` (heading and yaw-rate estimates). Densities as in :func:`course_filter_system`."""
+    A = np.array([[0.0, 1.0, 0.0], [0.0, -1.0 / T, K / T], [0.0, 0.0, 0.0]])
+    B = np.array([[0.0], [K / T], [0.0]])
+    G = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    L, _, _ = control.lqe(A, G, C, np.diag([q_r, max(q_b, 1e-30)]), np.diag([r_psi, r_r]))
+    L = np.asarray(L)
+    return control.ss(A - L @ C, np.hstack([B, L]), C, np.zeros((2, 3)), states=["psi_h", "r_h", "b_h"],
+                      inputs=[steer, "psi", "r"], outputs=["chi_hat", "rate_hat"], name="estimator")
+
+
+def linear_estimator(settings, nomoto, steer: str = "delta") -> control.StateSpace:
+    """The loop's estimator as a steady-state Kalman-Bucy filter for the linear analysis, from
+    autopilot settings (:class:`~casship.autopilot.defaults.AutopilotSettings` or any object with
+    the same fields): :func:`course_filter_system` in course mode, :func:`heading_filter_system` in
+    heading mode. The discrete filter's ``Q`` (held over ``dt``) and ``R`` (one reading per sensor
+    period) become spectral densities ``Q dt`` and ``R / rate``."""
+    s = settings
+    if s.mode == "course":
+        return course_filter_system(s.speed, s.ekf_alpha[1], s.ekf_q[1] * s.dt, s.gnss_std**2 / s.gnss_rate)
+    q_r, q_b = s.observer_q
+    return heading_filter_system(nomoto.K, nomoto.T, q_r, q_b, s.compass_std**2 / s.compass_rate,
+                                 s.gyro_std**2 * s.dt, steer=steer)

@@ -1,0 +1,193 @@
+"""The digital course autopilot and the steering actuator as CasADi steps with named slots.
+
+Control law (course ``chi`` or heading ``psi``, the same form; Fossen 2021, Sec. 15.3)::
+
+    delta_c = sat( m a_d + d r_d - (Kp e + Kd (r - r_d) + Ki z) ),    e = wrap(chi - chi_d),    z' = e
+
+with ``chi_d, r_d, a_d`` from the third-order :class:`~casship.autopilot.reference.ReferenceModel`,
+the command saturated at the steering limit and the integrator held while the command saturates
+(anti-windup). The steering gear (:class:`Actuator`) is a first-order servo with the rate limit of
+the ship's steering gear; the closed loop reports how often that rate limit is active.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..angles import wrap_sym
+from .reference import ReferenceModel
+
+__all__ = ["PIDGains", "Autopilot", "Actuator"]
+
+
+@dataclass(frozen=True)
+class PIDGains:
+    """Gains of the control law plus the feed-forward model ``m, d`` and the placed poles.
+
+    The linear controller they define is :meth:`controller` (a labelled python-control system).
+    """
+
+    Kp: float
+    Kd: float
+    Ki: float
+    m: float
+    d: float
+    method: str = ""
+    poles: tuple = ()
+
+    def __post_init__(self):
+        for name in ("Kp", "Kd", "Ki", "m", "d"):
+            v = getattr(self, name)
+            if not np.isfinite(v):
+                raise ValueError(f"gain {name} must be finite, got {v}")
+
+    def controller(self, *, steer: str = "delta", feedforward: bool = True, name: str = "autopilot"):
+        """The linear control law as a labelled :class:`control.StateSpace`.
+
+        Inputs ``chi_d, r_d, a_d`` (reference model) and ``chi, r`` (measured course and rate),
+        output ``<steer>_c`` (the steering command), state ``z`` (integral of the course error).
+        The angle wrap and the limits are the nonlinear parts left to :class:`Autopilot`.
+        """
+        import control
+
+        ff = 1.0 if feedforward else 0.0
+        # z' = chi - chi_d;  delta_c = ff (m a_d + d r_d) - Kp (chi - chi_d) - Kd (r - r_d) - Ki z
+        B = np.array([[-1.0, 0.0, 0.0, 1.0, 0.0]])
+        C = np.array([[-self.Ki]])
+        D = np.array([[self.Kp, ff * self.d + self.Kd, ff * self.m, -self.Kp, -self.Kd]])
+        return control.ss(np.zeros((1, 1)), B, C, D, states=["z"], inputs=["chi_d", "r_d", "a_d", "chi", "r"],
+                          outputs=[f"{steer}_c"], name=name)
+
+    def as_dict(self) -> dict:
+        """The gains as a plain dict (poles as ``[re, im]`` when complex)."""
+        return {"Kp": self.Kp, "Kd": self.Kd, "Ki": self.Ki, "m": self.m, "d": self.d, "method": self.method,
+                "poles": [[float(np.real(p)), float(np.imag(p))] if np.iscomplex(p) else float(np.real(p))
+                          for p in self.poles]}
+
+
+@dataclass(frozen=True)
+class Autopilot:
+    """PID/LQR course (or heading) autopilot with reference model, command limit and anti-windup.
+
+    Parameters
+    ----------
+    gains : PIDGains
+    reference : ReferenceModel
+    steer_max : float
+        Saturation of the steering command (rudder angle [rad] or yaw moment [N m]).
+    anti_windup : bool
+        Stop integrating while the command saturates in the direction the integrator pushes.
+    feedforward : bool
+        Use ``m a_d + d r_d`` from the reference model.
+    filter_T : float
+        Time constant [s] of a first-order low-pass on the command (0 = none).
+    """
+
+    gains: PIDGains
+    reference: ReferenceModel
+    steer_max: float = float("inf")
+    anti_windup: bool = True
+    feedforward: bool = True
+    filter_T: float = 0.0
+
+    #: Names of the memory entries of :attr:`function`.
+    MEMORY = ("chi_d", "r_d", "a_d", "z", "filtered")
+
+    def __post_init__(self):
+        if not self.steer_max > 0:
+            raise ValueError(f"steer_max must be positive, got {self.steer_max}")
+        if not (np.isfinite(self.filter_T) and self.filter_T >= 0):
+            raise ValueError(f"filter_T must be >= 0, got {self.filter_T}")
+
+    def memory0(self, chi0: float = 0.0) -> np.ndarray:
+        """Initial memory: reference model at rest at ``chi0``, no integral, no command."""
+        return np.array([chi0, 0.0, 0.0, 0.0, 0.0])
+
+    def symbolic_step(self, mem, ref, chi, r, dt) -> dict:
+        """One sample of the law on CasADi expressions; returns a dict of named expressions
+        (``memory, steer, chi_d, r_d, a_d, e``)."""
+        g = self.gains
+        chi_d, r_d, a_d, integ, filt = (mem[i] for i in range(5))
+        e = wrap_sym(chi - chi_d)
+        ff = (g.m * a_d + g.d * r_d) if self.feedforward else 0
+        raw = ff - (g.Kp * e + g.Kd * (r - r_d) + g.Ki * integ)
+        if self.filter_T > 0:
+            filt_next = filt + dt / (self.filter_T + dt) * (raw - filt)      # backward-Euler low-pass
+        else:
+            filt_next = raw
+        sat = filt_next
+        if np.isfinite(self.steer_max):
+            sat = ca.fmin(ca.fmax(filt_next, -self.steer_max), self.steer_max)
+        if self.anti_windup and np.isfinite(self.steer_max):
+            grow = g.Ki * e          # d(raw)/dt from the integrator is -Ki e
+            hold = ca.logic_or(ca.logic_and(filt_next > self.steer_max, grow < 0),
+                               ca.logic_and(filt_next < -self.steer_max, grow > 0))
+            integ_next = ca.if_else(hold, integ, integ + dt * e)
+        else:
+            integ_next = integ + dt * e
+        xd_next = self.reference.symbolic_step(mem[:3], ref, dt)
+        return {"memory": ca.vertcat(xd_next, integ_next, filt_next), "steer": sat, "chi_d": chi_d,
+                "r_d": r_d, "a_d": a_d, "e": e}
+
+    @property
+    def function(self) -> ca.Function:
+        """``autopilot(memory, ref, chi, r, dt) -> (memory_next, steer, chi_d, r_d, a_d, e)`` with
+        ``memory`` as in :attr:`MEMORY`."""
+        mem, ref, chi, r, dt = (ca.SX.sym(n, k) for n, k in (("memory", 5), ("ref", 1), ("chi", 1), ("r", 1),
+                                                              ("dt", 1)))
+        out = self.symbolic_step(mem, ref, chi, r, dt)
+        names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
+        return ca.Function("autopilot", [mem, ref, chi, r, dt], [out[k] for k in names],
+                           ["memory", "ref", "chi", "r", "dt"], ["memory_next"] + names[1:])
+
+
+@dataclass(frozen=True)
+class Actuator:
+    """Steering gear: first-order servo with angle and rate limits.
+
+    Over a sample ``dt`` the steering follows the command with time constant ``T``
+    (``delta + (delta_c - delta)(1 - exp(-dt/T))``; ``T = 0``: at once), its change limited to
+    ``rate_max dt`` and its value to ``+-steer_max``. The rate limit is *active* in a sample when
+    the servo asks for a faster change than ``rate_max``.
+
+    Parameters
+    ----------
+    steer_max : float
+        Angle (or moment) limit.
+    rate_max : float
+        Rate limit [unit/s] (``inf`` for none).
+    T : float
+        Servo time constant [s].
+    """
+
+    steer_max: float = float("inf")
+    rate_max: float = float("inf")
+    T: float = 0.0
+
+    def __post_init__(self):
+        if not self.steer_max > 0 or not self.rate_max > 0:
+            raise ValueError(f"steer_max and rate_max must be positive, got {self.steer_max}, {self.rate_max}")
+        if not (np.isfinite(self.T) and self.T >= 0):
+            raise ValueError(f"actuator time constant T must be >= 0, got {self.T}")
+
+    def symbolic_step(self, steer, command, dt) -> dict:
+        """``{"steer": next steering, "rate_limited": 1 where the rate limit is active}``."""
+        cmd = command
+        if np.isfinite(self.steer_max):
+            cmd = ca.fmin(ca.fmax(cmd, -self.steer_max), self.steer_max)
+        change = (cmd - steer) * (1 - ca.exp(-dt / self.T)) if self.T > 0 else cmd - steer
+        if np.isfinite(self.rate_max):
+            step = self.rate_max * dt
+            limited = ca.fabs(change) > step
+            change = ca.fmin(ca.fmax(change, -step), step)
+        else:
+            limited = ca.SX(0)
+        return {"steer": steer + change, "rate_limited": limited}
+
+    def tf(self):
+        """Linear servo ``1/(1 + T s)`` (no limits) as a python-control transfer function."""
+        import control
+
+        return control.tf([1.0], [self.T, 1.0]) if self.T > 0 else control.tf([1.0], [1.0])

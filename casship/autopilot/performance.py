@@ -1,0 +1,197 @@
+"""Performance checks of a closed-loop run: course changing and course keeping, reported against the
+autopilot performance standards where they state a criterion.
+
+IMO Resolution A.342(IX), as amended by MSC.64(67) Annex 3 ("Recommendation on performance
+standards for heading control systems"), asks (sections as numbered in the resolution):
+
+* 2.1 keep a preset heading "with minimum operation of the ship's steering gear" -> rudder activity
+  (mean and RMS steering, RMS steering rate, steering work) while course keeping;
+* 3.2 turns "based either on a preset turning radius or a preset rate of turn" -> the reference
+  model's turn-rate limit and the peak rate reached;
+* 3.3 rudder angle limitation, with an indication "when the angle of limitation has been commanded
+  or reached" -> the fraction of time the command sits on the limit;
+* 3.4 means "to prevent unnecessary activation of the rudder due to normal yaw motion" -> the wave
+  filter and the rudder activity in waves;
+* 3.6 "change to a preset heading without significant overshoot" -> overshoot of each course change.
+
+The resolution gives no numbers. ISO 11674:2019 (the test standard for MSC.64(67) Annex 3) states
+its test methods and acceptance values with ship simulators; its numbers are not public and are not
+used here. The thresholds casship reports against are therefore its own readings, stated with each
+check (:data:`CRITERIA`): overshoot at most 10 % of the change, steady error at most 0.5 deg (or
+2 % of the change), steering-gear rate limit active at most 10 % of the time.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..angles import wrap
+from ..data import Dataset
+
+__all__ = ["step_metrics", "course_change_metrics", "course_keeping_metrics", "performance_report", "CRITERIA",
+           "course_scenario"]
+
+#: Checks and the thresholds casship applies (name -> (threshold, unit, source and reading)).
+CRITERIA = {
+    "overshoot_pct": (10.0, "% of the change",
+                      "MSC.64(67) Annex 3, 3.6 'without significant overshoot' (casship reads: <= 10 %)"),
+    "steady_state_error_deg": (0.5, "deg (or 2 % of the change, the larger)",
+                               "course kept after the change (casship's reading of A.342(IX) 2.1)"),
+    "rate_limited_fraction": (0.10, "of the time",
+                              "steering gear not driven at its rate limit (casship's reading of 2.1 'minimum "
+                              "operation of the steering gear')"),
+    "at_limit_fraction": (0.0, "of the time (reported)", "MSC.64(67) Annex 3, 3.3 rudder angle limitation "
+                          "commanded or reached (indication; no threshold)"),
+}
+
+
+def step_metrics(t, y, target: float, steer=None, *, band: float = 0.02, abs_band: float = 0.0,
+                 ss_window: float = 0.1) -> dict:
+    """Step-response metrics of ``y`` (angles, rad) moving from ``y[0]`` to ``target``.
+
+    Returns rise time (10 % -> 90 % of the change) [s], overshoot [% of the change and deg],
+    settling time (last entry into the band ``max(band * |change|, abs_band)``) [s], steady-state
+    error (mean over the last ``ss_window`` fraction) [deg], IAE [deg s], and with ``steer`` the
+    mean and maximum absolute steering and the RMS and maximum steering rate (per second). Times
+    are measured from ``t[0]``; ``nan`` where not reached.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.linspace(0.0, 100.0, 1001)
+    >>> round(step_metrics(t, 0.5 * (1 - np.exp(-t / 10)), 0.5)["rise_time_s"], 1)
+    22.0
+    """
+    t = np.asarray(t, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if t.size < 3:
+        raise ValueError("step_metrics needs at least 3 samples")
+    y = y[0] + np.unwrap(wrap(y - y[0]))          # continuous around the start value
+    change = float(wrap(target - y[0]))
+    goal = y[0] + change
+    err = y - goal
+    out = {"target_deg": float(np.degrees(target)), "change_deg": float(np.degrees(change))}
+    if abs(change) > 0:
+        frac = (y - y[0]) / change
+        i10 = np.flatnonzero(frac >= 0.1)
+        i90 = np.flatnonzero(frac >= 0.9)
+        out["rise_time_s"] = float(t[i90[0]] - t[i10[0]]) if i10.size and i90.size else float("nan")
+        over = max(0.0, float(np.max(frac) - 1.0))
+        out["overshoot_pct"] = 100 * over
+        out["overshoot_deg"] = float(np.degrees(over * abs(change)))
+        tol = max(band * abs(change), abs_band)
+        outside = np.flatnonzero(np.abs(err) > tol)
+        if outside.size == 0:
+            out["settling_time_s"] = 0.0
+        elif outside[-1] == t.size - 1:
+            out["settling_time_s"] = float("nan")
+        else:
+            out["settling_time_s"] = float(t[outside[-1] + 1] - t[0])
+    tail = t >= t[0] + (1 - ss_window) * (t[-1] - t[0])
+    out["steady_state_error_deg"] = float(np.degrees(np.mean(err[tail])))
+    out["iae_deg_s"] = float(np.degrees(np.trapezoid(np.abs(err), t)))
+    if steer is not None:
+        s = np.asarray(steer, dtype=float)
+        rate = np.diff(s) / np.diff(t)
+        out.update({"steer_mean_abs": float(np.mean(np.abs(s))), "steer_max_abs": float(np.max(np.abs(s))),
+                    "steer_rate_rms": float(np.sqrt(np.mean(rate**2))),
+                    "steer_rate_max": float(np.max(np.abs(rate)))})
+    return out
+
+
+def course_change_metrics(data: Dataset, step_times: Sequence[float], *, controlled: str = "chi",
+                          settle_band: float = np.radians(1.0)) -> list[dict]:
+    """:func:`step_metrics` for each command segment of a closed-loop record (command in ``ref``),
+    plus the fraction of the segment with the steering-gear rate limit active."""
+    t = data.t
+    y = data[controlled]
+    bounds = list(step_times) + [t[-1] + 1.0]
+    out = []
+    for t0, t1 in zip(bounds[:-1], bounds[1:]):
+        sel = (t >= t0) & (t < t1)
+        if sel.sum() < 3:
+            raise ValueError(f"command segment [{t0:g}, {t1:g}) s has fewer than 3 samples")
+        target = float(data["ref"][sel][-1])
+        mt = step_metrics(t[sel], y[sel], target, data["steer"][sel], abs_band=settle_band)
+        if "rate_limited" in data:
+            mt["rate_limited_fraction"] = float(np.mean(data["rate_limited"][sel] > 0.5))
+        out.append(mt)
+    return out
+
+
+def course_keeping_metrics(data: Dataset, *, controlled: str = "chi", start: float = 0.0) -> dict:
+    """Course-keeping measures from ``start`` on: error RMS and maximum [deg] against the command,
+    mean and RMS steering, RMS steering rate [unit/s], steering work ``int |d steer|`` [unit], and
+    the fraction of time with the steering-gear rate limit active."""
+    t = data.t
+    sel = t >= start
+    if sel.sum() < 3:
+        raise ValueError(f"fewer than 3 samples after t = {start:g} s")
+    err = wrap(data[controlled][sel] - data["ref"][sel])
+    s = data["steer"][sel]
+    rate = np.diff(s) / np.diff(t[sel])
+    out = {"error_rms_deg": float(np.degrees(np.sqrt(np.mean(err**2)))),
+           "error_max_deg": float(np.degrees(np.max(np.abs(err)))),
+           "steer_mean": float(np.mean(s)), "steer_rms": float(np.sqrt(np.mean(s**2))),
+           "steer_rate_rms": float(np.sqrt(np.mean(rate**2))), "steer_travel": float(np.sum(np.abs(np.diff(s))))}
+    if "rate_limited" in data:
+        out["rate_limited_fraction"] = float(np.mean(data["rate_limited"][sel] > 0.5))
+    return out
+
+
+def performance_report(data: Dataset, steps: list[dict], *, steer_max: float, controlled: str = "chi") -> dict:
+    """The checks of :data:`CRITERIA` on a run: per course change (overshoot, steady error) and over
+    the whole run (rate limit active, command at its limit), each with its threshold and a pass flag."""
+    checks = []
+    for k, mt in enumerate(steps):
+        if "overshoot_pct" in mt:
+            checks.append({"check": f"overshoot, change {k + 1}", "value": mt["overshoot_pct"],
+                           "threshold": CRITERIA["overshoot_pct"][0], "unit": "%",
+                           "ok": bool(mt["overshoot_pct"] <= CRITERIA["overshoot_pct"][0])})
+        lim = max(CRITERIA["steady_state_error_deg"][0], 0.02 * abs(mt.get("change_deg", 0.0)))
+        checks.append({"check": f"steady error, change {k + 1}", "value": mt["steady_state_error_deg"],
+                       "threshold": lim, "unit": "deg", "ok": bool(abs(mt["steady_state_error_deg"]) <= lim)})
+    frac = float(np.mean(data["rate_limited"] > 0.5)) if "rate_limited" in data else float("nan")
+    at_limit = float(np.mean(np.abs(data["steer_cmd"]) >= steer_max * (1 - 1e-9))) if "steer_cmd" in data \
+        else float("nan")
+    checks.append({"check": "steering-gear rate limit active", "value": frac,
+                   "threshold": CRITERIA["rate_limited_fraction"][0], "unit": "fraction of time",
+                   "ok": bool(frac < CRITERIA["rate_limited_fraction"][0])})
+    checks.append({"check": "steering command at its limit", "value": at_limit, "threshold": None,
+                   "unit": "fraction of time", "ok": None})
+    return {"rate_limited_fraction": frac, "at_limit_fraction": at_limit, "checks": checks,
+            "all_ok": all(c["ok"] for c in checks if c["ok"] is not None)}
+
+
+def course_scenario(name: str, t_end: float | None = None, *, segment: float | None = None):
+    """A named course-change scenario.
+
+    ``course-A``: A deg at t = 0, back to 0 at half the run (the two standard course changes;
+    ``course-20`` is Fossen & Fossen 2021's); ``step-A``: A deg at t = 0, held. The run lasts
+    ``t_end`` seconds, or two (one) ``segment`` lengths, or 40 s.
+
+    Returns ``(command(t) -> rad, t_end, step_times)``.
+
+    Examples
+    --------
+    >>> command, t_end, steps = course_scenario("course-20", 40.0)
+    >>> round(float(command(5.0)), 4), t_end, steps
+    (0.3491, 40.0, [0.0, 20.0])
+    """
+    try:
+        kind, angle = name.rsplit("-", 1)
+        a = float(np.radians(float(angle)))
+    except ValueError:
+        raise ValueError(f"unknown scenario {name!r}; use course-A or step-A (A in degrees)") from None
+    if kind not in ("course", "step"):
+        raise ValueError(f"unknown scenario {name!r}; use course-A or step-A (A in degrees)")
+    if t_end is None:
+        t_end = (2 * segment if kind == "course" else segment) if segment is not None else 40.0
+    t_end = float(t_end)
+    if not t_end > 0:
+        raise ValueError(f"t_end must be positive, got {t_end}")
+    if kind == "course":
+        back = t_end / 2
+        return (lambda t: a if t < back else 0.0), t_end, [0.0, back]
+    return (lambda t: a), t_end, [0.0]

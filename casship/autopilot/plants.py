@@ -1,0 +1,253 @@
+"""Ships as an autopilot sees them: which input steers, the straight-run operating point, and the
+steering of a craft without a rudder (two propellers, e.g. the Otter) by a yaw moment.
+
+:func:`steering_plant` reads ``model.vessel`` (rudders, propellers, ``U0``) and returns a
+:class:`SteeringPlant` at the trim point that holds the speed: the propeller rate of a rudder ship,
+or the surge force of a twin-propeller craft, whose propellers are then driven through
+:func:`twin_propeller_allocation` from a surge force ``tau_X`` and a yaw moment ``tau_N`` (the
+steering input).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Callable, Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from ..discretize import discretize
+from ..linear import trim
+from ..model import Model, ModelBuilder
+
+__all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation",
+           "twin_propeller_yaw_limit"]
+
+
+@dataclass(frozen=True)
+class SteeringPlant:
+    """A ship model seen by an autopilot: which input steers, which states are position and heading.
+
+    Parameters
+    ----------
+    model : Model
+        States must include the North/East position and the heading (names below).
+    steer : str
+        Input name of the steering command (rudder angle [rad] or yaw moment [N m]).
+    inputs : mapping
+        Values of the other inputs (e.g. the propeller rate from :func:`casship.trim`, wind and current).
+    p : array or mapping, optional
+        Parameters of the ship (the truth in a simulation; nominal by default).
+    north, east, heading, yaw_rate : str
+        State names.
+    x0 : array, optional
+        The straight-run operating point (set by :func:`steering_plant`).
+    """
+
+    model: Model
+    steer: str = "delta"
+    inputs: Mapping[str, float] = field(default_factory=dict)
+    p: object = None
+    north: str = "x"
+    east: str = "y"
+    heading: str = "psi"
+    yaw_rate: str = "r"
+    x0: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self):
+        m = self.model
+        m.index(self.steer, "input")
+        for n in (self.north, self.east, self.heading, self.yaw_rate):
+            m.index(n)
+        unknown = set(self.inputs) - set(m.input_names)
+        if unknown:
+            raise ValueError(f"unknown input(s) {sorted(unknown)} of {m.name!r}; inputs: {list(m.input_names)}")
+        missing = [n for n in m.input_names if n != self.steer and n not in self.inputs]
+        if missing:
+            raise ValueError(f"give values for the input(s) {missing} of {m.name!r}")
+        object.__setattr__(self, "inputs", {k: float(v) for k, v in self.inputs.items()})
+        object.__setattr__(self, "pvec", m.params(self.p) if self.p is not None else m.params())
+        if self.x0 is not None:
+            object.__setattr__(self, "x0", np.asarray(self.x0, dtype=float).reshape(m.nx))
+
+    def replace(self, **changes) -> "SteeringPlant":
+        """A copy with fields changed (``inputs`` are merged into the present ones)."""
+        if "inputs" in changes:
+            changes["inputs"] = {**self.inputs, **changes["inputs"]}
+        return replace(self, **changes)
+
+    def input_vector(self, steer: float = 0.0) -> np.ndarray:
+        """All inputs of the model with the steering input set to ``steer``."""
+        return self.model.inputs(**{**self.inputs, self.steer: steer})
+
+    def symbolic_step(self, x, steer, p, dt):
+        """One RK4 step of the ship with the other inputs bound (CasADi expressions)."""
+        m = self.model
+        dm = discretize(m, 1.0, "rk4")
+        u = ca.SX(ca.DM(self.input_vector(0.0)))
+        u[m.index(self.steer, "input")] = steer
+        return dm.F(x, u, p, ca.SX.zeros(m.nw), dt)
+
+    def symbolic_motion(self, x, steer, p):
+        """Course over ground, speed over ground and yaw rate at ``x`` (CasADi expressions)."""
+        m = self.model
+        u = ca.SX(ca.DM(self.input_vector(0.0)))
+        u[m.index(self.steer, "input")] = steer
+        xdot = m.f(x, u, p, ca.SX.zeros(m.nw))
+        vn, ve = xdot[m.index(self.north)], xdot[m.index(self.east)]
+        return ca.atan2(ve, vn), ca.sqrt(vn**2 + ve**2), x[m.index(self.yaw_rate)]
+
+    def step_function(self) -> ca.Function:
+        """``plant(x, steer, p, dt) -> (x_next, chi, U)``: one RK4 step with the other inputs bound,
+        and the course and speed over ground at ``x`` (the position rates)."""
+        m = self.model
+        x, s, p, h = ca.SX.sym("x", m.nx), ca.SX.sym("steer"), ca.SX.sym("p", m.np), ca.SX.sym("dt")
+        chi, U, _ = self.symbolic_motion(x, s, p)
+        return ca.Function("plant", [x, s, p, h], [self.symbolic_step(x, s, p, h), chi, U],
+                           ["x", "steer", "p", "dt"], ["x_next", "chi", "U"])
+
+
+def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable, name: str | None = None) -> Model:
+    """A copy of ``model`` whose inputs are replaced by ``new_inputs`` through an allocation.
+
+    ``allocation(new, p)`` receives dicts of the new input symbols and the model's parameter
+    symbols by name and returns a dict old input name -> expression. Use it to steer a
+    thruster-driven craft by a yaw moment: ``{"n1": ..., "n2": ...}`` from ``tau_X, tau_N``.
+    """
+    b = ModelBuilder(name or f"{model.name}+allocation", model.doc)
+    xs = [b.state(v.name, unit=v.unit, angle=v.angle, doc=v.doc) for v in model.state_vars]
+    ps = [b.param(v.name, v.value, bounds=(v.lower, v.upper), unit=v.unit, doc=v.doc, source=v.source)
+          for v in model.param_vars]
+    ws = [b.noise(v.name, unit=v.unit, doc=v.doc) for v in model.noise_vars]
+    us = {n: b.input(n) for n in new_inputs}
+    pd = dict(zip(model.param_names, ps))
+    mapping = allocation(us, pd)
+    missing = [n for n in model.input_names if n not in mapping]
+    if missing:
+        raise ValueError(f"allocation gives no expression for input(s) {missing} of {model.name!r}")
+    old = ca.vertcat(model.x, model.p, model.w, model.u)
+    new = ca.vertcat(*xs, *ps, *ws, *[ca.SX(mapping[n]) for n in model.input_names])
+    xdot, y = ca.substitute([model.xdot, model.y], [old], [new])
+    b.ode(**{n: xdot[i] for i, n in enumerate(model.state_names)})
+    for i, v in enumerate(model.output_vars):
+        b.output(v.name, y[i], unit=v.unit, angle=v.angle, doc=v.doc)
+    b.meta.update(dict(model.meta))
+    if model.vessel is not None:      # the new inputs are generalised forces, not rudders or propellers
+        b.vessel = model.vessel.replace(rudders=(), propellers=())
+    return b.build()
+
+
+def twin_propeller_allocation(model: Model, names: tuple[str, str] = ("n1", "n2")):
+    """Allocation ``tau_X, tau_N -> n1, n2`` for a craft steered by two propellers (e.g. the Otter).
+
+    Thrust ``T = k n |n|`` (``k_pos`` ahead, ``k_neg`` astern) on lever arms ``-+ y_pont`` (port
+    propeller ``n1``): ``tau_X = T1 + T2``, ``tau_N = y_pont (T1 - T2)``, inverted exactly. Reads
+    ``k_pos``, ``k_neg`` and ``y_pont`` from the model's parameters. Use with :func:`steering_model`.
+    """
+    missing = [n for n in names if n not in model.input_names]
+    missing += [k for k in ("k_pos", "k_neg", "y_pont") if k not in model.param_names]
+    if missing:
+        raise ValueError(f"twin-propeller allocation needs inputs {list(names)} and parameters k_pos, k_neg, "
+                         f"y_pont; model {model.name!r} lacks {missing}")
+
+    def alloc(new, p):
+        out = {}
+        for name, sign in zip(names, (1, -1)):
+            T = new["tau_X"] / 2 + sign * new["tau_N"] / (2 * p["y_pont"])
+            k = ca.if_else(T >= 0, p["k_pos"], p["k_neg"])
+            out[name] = ca.sign(T) * ca.sqrt(ca.fabs(T) / k)
+        return out
+    return alloc
+
+
+def twin_propeller_yaw_limit(model: Model, tau_X: float, p=None) -> float:
+    """Largest yaw moment [N m] that keeps both propellers inside ``model.vessel.propeller_range``
+    at surge force ``tau_X``."""
+    pd = model.param_dict(model.params(p) if p is not None else None)
+    if model.vessel is None or model.vessel.propeller_range is None:
+        raise ValueError(f"model {model.name!r} has no vessel propeller_range")
+    n_min, n_max = model.vessel.propeller_range
+    lever = pd["y_pont"]
+    ahead = pd["k_pos"] * n_max**2
+    astern = pd["k_neg"] * n_min**2
+    limit = 2 * lever * min(ahead - tau_X / 2, tau_X / 2 + astern)
+    if limit <= 0:
+        raise ValueError(f"surge force {tau_X} N leaves no yaw moment within the propeller limits")
+    return float(limit)
+
+
+def _is_twin_propeller(model: Model) -> bool:
+    v = model.vessel
+    return v is not None and not v.rudders and len(v.propellers) == 2
+
+
+def steering_plant(model: Model, speed: float | None = None, *, p=None, steer: str | None = None,
+                   inputs: Mapping[str, float] | None = None, surge: str = "u") -> SteeringPlant:
+    """The ship at its straight-run operating point, as a :class:`SteeringPlant`.
+
+    * A ship with a rudder (``model.vessel.rudders``) steers by its first rudder; with one propeller
+      the propeller rate that holds ``speed`` is solved by :func:`casship.trim`.
+    * A craft with two propellers and no rudder (the Otter) is steered by a yaw moment: the model's
+      propeller inputs are replaced by ``tau_X, tau_N`` (:func:`steering_model`,
+      :func:`twin_propeller_allocation`), ``tau_X`` trimmed for ``speed``, ``tau_N`` steers.
+    * Any other model needs ``steer`` and values of its other ``inputs``.
+
+    Parameters
+    ----------
+    model : Model
+    speed : float, optional
+        Straight-run speed [m/s] (default ``model.vessel.U0``).
+    p : array or mapping, optional
+        Parameters (nominal by default).
+    steer : str, optional
+        Steering input (default from the vessel).
+    inputs : mapping, optional
+        Fixed values of other inputs (a given propeller rate is not trimmed).
+    surge : str
+        Name of the surge-speed state.
+
+    Returns
+    -------
+    SteeringPlant
+        With ``x0`` the trimmed state.
+
+    Examples
+    --------
+    >>> from casship.models import get_model
+    >>> plant = steering_plant(get_model("otter"))
+    >>> plant.steer, sorted(plant.inputs)
+    ('tau_N', ['tau_X'])
+    """
+    vessel = model.vessel
+    inputs = dict(inputs or {})
+    if speed is None:
+        if vessel is None or vessel.U0 is None:
+            raise ValueError(f"model {model.name!r} has no vessel speed U0; give speed")
+        speed = vessel.U0
+    speed = float(speed)
+    if not (np.isfinite(speed) and speed > 0):
+        raise ValueError(f"speed must be positive, got {speed}")
+    free = None
+    if steer is None and _is_twin_propeller(model):
+        model = steering_model(model, ["tau_X", "tau_N"], twin_propeller_allocation(model, vessel.propellers),
+                               name=f"{model.name}_tau")
+        steer = "tau_N"
+        if "tau_X" not in inputs:
+            free, inputs["tau_X"] = "tau_X", 10.0
+    elif steer is None:
+        if vessel is None or not vessel.rudders:
+            raise ValueError(f"model {model.name!r} names no rudder (vessel.rudders); give steer")
+        steer = vessel.rudders[0]
+        props = vessel.propellers
+        if len(props) == 1 and props[0] not in inputs:
+            free, inputs[props[0]] = props[0], float(vessel.n0 or 1.0)
+    if surge not in model.state_names:
+        raise ValueError(f"model {model.name!r} has no surge state {surge!r}; states: {list(model.state_names)}")
+    pv = model.params(p) if p is not None else model.params()
+    x = model.states(**{surge: speed})
+    u = model.inputs(**{k: v for k, v in inputs.items() if k != steer})
+    if free is not None:
+        tr = trim(model, x, u, pv, free=[free], zero=[surge])
+        x, u = tr.x, tr.u
+        inputs[free] = tr.values[free]
+    others = {n: float(u[model.index(n, "input")]) for n in model.input_names if n != steer}
+    return SteeringPlant(model, steer, others, p, x0=x)

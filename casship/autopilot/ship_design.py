@@ -1,0 +1,267 @@
+"""One call from a ship model to an autopilot and its closed loop: :func:`design_autopilot` and the
+:class:`Design` value it returns (python-control systems, margins, the nonlinear law, the steering
+gear, the settings and where each came from).
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Mapping
+
+import control
+import numpy as np
+
+from ..model import Model
+from .analysis import course_linearization, loop_systems, margins
+from .closed_loop import ClosedLoop, ClosedLoopResult, LoopEstimator, Sensors
+from .defaults import AutopilotSettings, derive_settings
+from .designs import lqr_design, pid_pole_placement
+from .estimation import WaveYaw, linear_estimator, course_ekf, course_prior, heading_kf, heading_observer, heading_prior
+from .law import Actuator, Autopilot, PIDGains
+from .nomoto import Nomoto, nomoto_from_linear
+from .performance import CRITERIA, course_change_metrics, course_scenario, performance_report
+from .plants import SteeringPlant, steering_plant
+from .reference import ReferenceModel
+
+__all__ = ["Design", "design_autopilot", "simulate_autopilot", "RateLimitWarning"]
+
+
+class RateLimitWarning(UserWarning):
+    """The steering gear ran at its rate limit for longer than the criterion allows."""
+
+
+@dataclass(frozen=True)
+class Design:
+    """An autopilot designed for a ship at an operating point (see :func:`design_autopilot`).
+
+    Attributes
+    ----------
+    plant : SteeringPlant
+        The ship at its trim point (``plant.x0``) with the other inputs bound.
+    linearization : control.StateSpace
+        Exact linearisation from the steering to ``chi, psi, r`` (labelled).
+    nomoto : Nomoto
+        The design model.
+    gains : PIDGains
+    controller : control.StateSpace
+        The linear law: inputs ``chi_d, r_d, a_d, chi, r``, output ``<steer>_c``.
+    loop : control.StateSpace
+        Open loop cut at the steering command (``control.margin`` convention).
+    closed_loop : control.StateSpace
+        Reference model, law, steering gear and ship (input ``chi_ref``; outputs ``chi, r,
+        <steer>_c, <steer>``).
+    margins : dict
+        :func:`~casship.autopilot.analysis.margins` of ``loop``.
+    autopilot : Autopilot
+        The digital law with reference model, limit and anti-windup.
+    actuator : Actuator
+        The steering gear.
+    settings : AutopilotSettings
+    """
+
+    plant: SteeringPlant
+    linearization: control.StateSpace
+    nomoto: Nomoto
+    gains: PIDGains
+    controller: control.StateSpace
+    loop: control.StateSpace
+    closed_loop: control.StateSpace
+    margins: dict
+    autopilot: Autopilot
+    actuator: Actuator
+    settings: AutopilotSettings
+
+    @property
+    def x0(self) -> np.ndarray:
+        """The trim state."""
+        return self.plant.x0
+
+    def summary(self) -> dict:
+        """Nomoto model, gains, margins, settings (with sources), operating point and inputs."""
+        m = self.plant.model
+        return {"nomoto": self.nomoto.as_dict(), "gains": self.gains.as_dict(), "margins": self.margins,
+                "settings": self.settings.as_dict(), "sources": dict(self.settings.sources),
+                "operating_point": dict(zip(m.state_names, map(float, self.x0))),
+                "inputs": {k: float(v) for k, v in self.plant.inputs.items()}, "steer": self.plant.steer}
+
+    def __repr__(self) -> str:
+        mg = self.margins
+        return (f"Design({self.plant.model.name!r}, {self.gains.method}, wn={self.settings.wn:.4g} rad/s, "
+                f"PM={mg['phase_margin_deg']:.1f} deg, GM={mg['upper_gain_margin_db']:.1f}/"
+                f"{mg['lower_gain_margin_db']:.1f} dB)")
+
+    # -- the nonlinear closed loop ----------------------------------------------------------------
+    def sensors(self) -> Sensors:
+        """The sensor suite of the settings."""
+        s = self.settings
+        return Sensors(s.gnss_rate, s.gnss_std, s.compass_rate, s.compass_std, s.gyro_std)
+
+    def estimator(self, kind: str | None = None, *, wave: WaveYaw | None = None, x0=None) -> LoopEstimator:
+        """The loop's estimator (tuned by the settings) started at ``x0`` (the trim point).
+
+        ``kind="course"``: the SOG/COG EKF on GNSS; ``"heading"``: the heading observer on compass and
+        gyro, with the wave filter when ``wave`` is given.
+        """
+        s, pl = self.settings, self.plant
+        kind = kind or s.mode
+        m = pl.model
+        x0 = np.asarray(x0 if x0 is not None else pl.x0, float)
+        if kind == "course":
+            est = course_ekf(s.dt, gnss_std=s.gnss_std, alpha=s.ekf_alpha, q=s.ekf_q)
+            loop = ClosedLoop(pl, self.autopilot, self.actuator, dt=s.dt, mode="course")
+            chi0 = loop.initial_angle(x0)
+            speed = float(np.hypot(x0[m.index("u")], x0[m.index("v")])) if "u" in m.state_names else s.speed
+            prior = course_prior(x0[m.index(pl.north)], x0[m.index(pl.east)], speed, chi0, s.gnss_std)
+            return LoopEstimator(est, prior, "course")
+        obs = heading_observer(self.nomoto.K, self.nomoto.T, wave, steer=pl.steer)
+        q_r, q_b = s.observer_q
+        est = heading_kf(obs, s.dt, compass_std=s.compass_std, gyro_std=s.gyro_std, q_r=q_r, q_b=q_b)
+        prior = heading_prior(obs, x0[m.index(pl.heading)], x0[m.index(pl.yaw_rate)], s.compass_std)
+        return LoopEstimator(est, prior, "heading")
+
+    def closed_loop_system(self, *, plant: SteeringPlant | None = None, environment: Mapping | None = None,
+                           estimator="ekf", sensors: Sensors | None = None, wave: WaveYaw | None = None,
+                           wave_filter: bool = False, guidance=None, mode: str | None = None,
+                           rate: str | None = None) -> ClosedLoop:
+        """The :class:`ClosedLoop` of this design.
+
+        Parameters
+        ----------
+        plant : SteeringPlant, optional
+            The truth (default: the design's plant, calm water).
+        environment : mapping, optional
+            Values of environment inputs of the plant (``wind_speed``, ``current_dir``, ...).
+        estimator : {"ekf", "truth", "raw"} or LoopEstimator
+            ``"ekf"``: the estimator of :meth:`estimator` for the mode.
+        wave : WaveYaw, optional
+            First-order wave yaw on the measured heading and rate.
+        wave_filter : bool
+            Put the wave model into the heading observer (Fossen's wave filter).
+        """
+        s = self.settings
+        mode, rate = mode or s.mode, rate or s.rate
+        pl = plant or self.plant
+        if environment:
+            pl = pl.replace(inputs=dict(environment))
+        if estimator == "ekf":
+            estimator = self.estimator("course" if mode == "course" else "heading",
+                                       wave=wave if wave_filter else None, x0=pl.x0)
+        return ClosedLoop(pl, self.autopilot, self.actuator, dt=s.dt, mode=mode, rate=rate, estimator=estimator,
+                          sensors=sensors or self.sensors(), wave=wave, guidance=guidance)
+
+    def simulate(self, scenario: str = "course-20", t_end: float | None = None, *, seed=0, stepwise: bool = False,
+                 warn: bool = True, **loop_options) -> ClosedLoopResult:
+        """Run a course-change scenario on the nonlinear closed loop (one compiled fold).
+
+        Parameters
+        ----------
+        scenario : str
+            ``course-A`` or ``step-A`` (:func:`~casship.autopilot.performance.course_scenario`); the
+            segment length is ``settings.segment`` unless ``t_end`` is given.
+        seed : int
+            Sensor-noise seed.
+        stepwise : bool
+            Run the step-by-step reference instead of the compiled fold (same numbers, slower).
+        warn : bool
+            Warn (:class:`RateLimitWarning`) when the steering gear is at its rate limit for
+            longer than the criterion (10 % of the time), with the fraction.
+        **loop_options
+            Passed to :meth:`closed_loop_system` (``plant``, ``environment``, ``estimator``, ``wave``,
+            ``wave_filter``, ``mode``, ``rate``, ``sensors``).
+        """
+        command, t_end, steps = course_scenario(scenario, t_end, segment=self.settings.segment)
+        return simulate_autopilot(self, command, t_end, step_times=steps, seed=seed, stepwise=stepwise, warn=warn,
+                                  **loop_options)
+
+    def evaluate(self, loop: ClosedLoop, data, steps, *, warn: bool = True) -> ClosedLoopResult:
+        """Metrics and the performance report of a closed-loop record."""
+        controlled = "chi" if loop.mode == "course" else "psi"
+        metrics = course_change_metrics(data, steps, controlled=controlled)
+        report = performance_report(data, metrics, steer_max=self.actuator.steer_max, controlled=controlled)
+        limit = CRITERIA["rate_limited_fraction"][0]
+        if warn and report["rate_limited_fraction"] >= limit:
+            warnings.warn(f"{self.plant.model.name}: the steering gear ran at its rate limit "
+                          f"({self.actuator.rate_max:.4g}/s) {100 * report['rate_limited_fraction']:.1f} % of the "
+                          f"time (criterion < {100 * limit:.0f} %); lower wn_ref or wn, or filter the feedback",
+                          RateLimitWarning, stacklevel=3)
+        return ClosedLoopResult(data=data, metrics=metrics, mode=loop.mode, performance=report)
+
+
+def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer: str | None = None,
+                     inputs: Mapping[str, float] | None = None, nomoto: Nomoto | None = None,
+                     **settings) -> Design:
+    """Design a course autopilot for ``model`` at a straight-run ``speed``.
+
+    Steps: the operating point (:func:`~casship.autopilot.plants.steering_plant`: trim of the
+    propeller rate, or the surge force of a two-propeller craft steered by a yaw moment), the exact
+    labelled linearisation (:func:`~casship.autopilot.analysis.course_linearization`), its Nomoto
+    reduction (unless ``nomoto`` is given, e.g. one fitted to zig-zags), the settings from the
+    ship (:func:`~casship.autopilot.defaults.derive_settings`; any of them may be given here),
+    PID pole placement or LQR, the reference model, the steering gear, and the loop, closed loop
+    and margins by python-control on the linearised ship.
+
+    Parameters
+    ----------
+    model : Model
+    speed : float, optional
+        Straight-run speed [m/s] (default ``model.vessel.U0``).
+    p : array or mapping, optional
+        Parameters of the design model (e.g. a fit's); the plant's truth by default too.
+    steer : str, optional
+        Steering input (default from ``model.vessel``).
+    inputs : mapping, optional
+        Values of other inputs held fixed (a propeller rate given here is not trimmed).
+    nomoto : Nomoto, optional
+        Design on this model instead of the linearisation's.
+    **settings
+        Any name of :data:`~casship.autopilot.defaults.RULES` (``wn``, ``wn_ref``, ``method``,
+        ``mode``, ``dt``, ``gnss_std``, ...); an unknown name raises ``ValueError``.
+
+    Examples
+    --------
+    >>> from casship.models import get_model
+    >>> d = design_autopilot(get_model("kvlcc2"))       # doctest: +SKIP
+    >>> control.margin(d.loop)                          # doctest: +SKIP
+    """
+    plant = steering_plant(model, speed, p=p, steer=steer, inputs=inputs)
+    lin = course_linearization(plant)
+    nom = nomoto if nomoto is not None else nomoto_from_linear(lin, steer=plant.steer)
+    s = derive_settings(plant, lin, nom, settings)
+    if s.method == "pid":
+        gains = pid_pole_placement(nom, s.wn, s.zeta, integral=s.integral)
+    else:
+        gains = lqr_design(nom, **s.lqr_weights)
+    reference = ReferenceModel(s.wn_ref, s.zeta_ref, s.r_max)
+    actuator = Actuator(s.steer_max, s.steer_rate_max, s.actuator_T)
+    autopilot = Autopilot(gains, reference, s.steer_max, filter_T=s.filter_T)
+    controlled = "chi" if s.mode == "course" else "psi"
+    L, closed = loop_systems(lin, gains, actuator, delay=s.delay, reference=reference, controlled=controlled,
+                             filter_T=s.filter_T, estimator=linear_estimator(s, nom, plant.steer), rate=s.rate)
+    controller = gains.controller(steer=plant.steer)
+    return Design(plant, lin, nom, gains, controller, L, closed, margins(L), autopilot, actuator, s)
+
+
+def simulate_autopilot(design: Design, command, t_end: float, *, step_times=(0.0,), seed=0, stepwise: bool = False,
+                       warn: bool = True, **loop_options) -> ClosedLoopResult:
+    """Run a design's nonlinear closed loop for ``t_end`` seconds on the course ``command``.
+
+    Parameters
+    ----------
+    design : Design
+    command : callable t -> rad, or array on the loop grid
+    t_end : float
+    step_times : sequence of float
+        Times of command changes; metrics are computed per segment.
+    seed : int
+        Sensor-noise seed.
+    stepwise : bool
+        Run the step-by-step reference instead of the compiled fold.
+    warn : bool
+        Warn when the steering gear sits at its rate limit too long (:class:`RateLimitWarning`).
+    **loop_options
+        See :meth:`Design.closed_loop_system` (``plant``, ``environment``, ``estimator``, ``mode``,
+        ``rate``, ``sensors``, ``wave``, ``wave_filter``, ``guidance``).
+    """
+    loop = design.closed_loop_system(**loop_options)
+    data = (loop.run_stepwise if stepwise else loop.run)(command, t_end, seed=seed, x0=loop.plant.x0)
+    return design.evaluate(loop, data, step_times, warn=warn)

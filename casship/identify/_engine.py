@@ -1,0 +1,303 @@
+"""Cost, exact gradient and Gauss-Newton / Fisher matrix of an identification problem, compiled.
+
+One per-sample CasADi Function carries the state (or the filter's memory) together with its
+forward sensitivities to the free values and is folded (``mapaccum``) over chunks of
+:data:`CHUNK` samples. Its inputs are the record's samples and the record's affine map of the free
+values (:class:`~casship.identify._space.RecordMap`: parameter vector, biases, noise and initial
+state with their derivative matrices), so the compiled code depends only on the model, the
+estimator, the number of free values a record sees and which inputs they enter through, never on
+the data or on which quantities are free. A record's last chunk is padded with samples that
+neither predict (``dt = 0``) nor measure (``mask = 0``), which leave the memory unchanged.
+
+Records run chunk by chunk in step: the records at the same chunk position that use the same
+Function are evaluated in one call of its ``map`` over records (threads), so a many-record fit uses
+the cores the machine has.
+
+* Output error (:class:`OutputErrorEngine`): per sample the weighted residual ``r_k`` and its
+  Jacobian ``J_k``; cost ``0.5 sum r'r``, gradient ``J'r``, Gauss-Newton matrix ``J'J``.
+* Likelihood (:class:`~casship.identify._likelihood.LikelihoodEngine`): per sample the
+  log-likelihood term and its gradient; the Fisher information accumulated in the fold.
+
+Trial points of the optimiser need the cost only (a lean fold without sensitivities); the gradient
+alone comes from a backward sweep of the lean fold's reverse mode (cost independent of the number
+of free values).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..angles import wrap_sym
+from ._compile import compiled
+
+__all__ = ["CHUNK", "OutputErrorEngine", "Job", "run_jobs"]
+
+CHUNK = 256
+THREADS = max(1, min(os.cpu_count() or 1, 8))
+_MAPS: dict = {}
+
+
+def fold(fun: ca.Function, accumulate: dict, constants) -> ca.Function:
+    """``fun`` folded over :data:`CHUNK` samples: inputs ``accumulate`` (name -> output name) carried
+    from sample to sample (only their final values are returned), ``constants`` the same for every
+    sample, all other inputs and outputs side by side per sample."""
+    acc = fun.mapaccum(f"{fun.name()}_fold", CHUNK, list(accumulate), list(accumulate.values()), {})
+    ins = {n: ca.MX.sym(n, fun.size1_in(n), fun.size2_in(n) * (1 if n in accumulate or n in constants else CHUNK))
+           for n in fun.name_in()}
+    outs = acc.call({n: ca.repmat(v, 1, CHUNK) if n in constants else v for n, v in ins.items()})
+    res = {n: (outs[n][:, -fun.size2_out(n):] if n in accumulate.values() else outs[n]) for n in fun.name_out()}
+    return ca.Function(f"{fun.name()}_fold{CHUNK}", list(ins.values()), list(res.values()), list(ins), list(res))
+
+
+def _pieces(n: int):
+    """(start, stop) of the chunks of a record of ``n`` samples."""
+    return [(s, min(s + CHUNK, n)) for s in range(0, n, CHUNK)]
+
+
+def _chunk(a: np.ndarray, start: int, stop: int, zero: bool = False) -> np.ndarray:
+    """Columns ``start:stop`` of ``a`` padded to :data:`CHUNK` (last column repeated, or zeros)."""
+    part = a[:, start:stop]
+    if stop - start == CHUNK:
+        return part
+    pad = np.zeros((a.shape[0], CHUNK - (stop - start))) if zero else np.repeat(part[:, -1:], CHUNK - (stop - start), 1)
+    return np.hstack([part, pad])
+
+
+def per_sample(a, n_rows: int, cols: int, take: int) -> np.ndarray:
+    """A stacked fold output (``rows x cols*CHUNK``) as ``(take, rows, cols)``."""
+    a = np.asarray(a, dtype=float).reshape(n_rows, CHUNK, cols)
+    return a.transpose(1, 0, 2)[:take]
+
+
+@dataclass
+class Job:
+    """One record through one fold: accumulated ``state`` (inputs continued by ``<name>_next``
+    outputs), ``consts`` and ``per``-sample inputs (rows x N); ``zero``: inputs padded with zeros."""
+
+    fold: ca.Function
+    state: dict
+    consts: dict
+    per: dict
+    n: int
+    zero: tuple = ("mask", "dt")
+
+
+def _call(fun: ca.Function, args: list[dict]) -> list[dict]:
+    """Evaluate ``fun`` on each argument set: one mapped call (threads) for several."""
+    if len(args) == 1:
+        return [{k: np.asarray(v) for k, v in fun.call(args[0]).items()}]
+    key = (id(fun), len(args))
+    if key not in _MAPS:
+        _MAPS[key] = (fun, fun.map(len(args), "thread" if THREADS > 1 else "serial", min(THREADS, len(args))))
+    mapped = _MAPS[key][1]
+    stacked = {n: np.hstack([np.asarray(a[n], dtype=float).reshape(fun.size_in(n), order="F") for a in args])
+               for n in fun.name_in()}
+    out = {k: np.asarray(v) for k, v in mapped.call(stacked).items()}
+    return [{k: v[:, i * fun.size2_out(k):(i + 1) * fun.size2_out(k)] for k, v in out.items()} for i in range(len(args))]
+
+
+def run_jobs(jobs: list[Job]) -> list[list[tuple[dict, dict, int]]]:
+    """Run each job chunk by chunk; returns per job the ``(args, outputs, samples)`` of each chunk.
+
+    Jobs with the same fold at the same chunk position run in one mapped call."""
+    states = [dict(j.state) for j in jobs]
+    counts = [len(_pieces(j.n)) for j in jobs]
+    results: list[list] = [[] for _ in jobs]
+    for c in range(max(counts, default=0)):
+        groups: dict = {}
+        for i, j in enumerate(jobs):
+            if c < counts[i]:
+                groups.setdefault(id(j.fold), []).append(i)
+        for idx in groups.values():
+            batch = []
+            for i in idx:
+                j = jobs[i]
+                start, stop = c * CHUNK, min((c + 1) * CHUNK, j.n)
+                args = {**states[i], **j.consts, **{k: _chunk(v, start, stop, k in j.zero) for k, v in j.per.items()}}
+                batch.append((args, stop - start))
+            for i, (args, take), out in zip(idx, batch, _call(jobs[i].fold, [a for a, _ in batch])):
+                results[i].append((args, out, take))
+                states[i] = {k: out[f"{k}_next"] for k in states[i]}
+    return results
+
+
+class Engine:
+    """Shared evaluation of a problem's records: cost, gradient (reverse mode), curvature."""
+
+    def __init__(self, space, jit):
+        self.space, self.jit = space, jit
+        self._funs: dict = {}
+
+    def _fun(self, key, make):
+        """The Function ``make()``, built once per key."""
+        if key not in self._funs:
+            self._funs[key] = make()
+        return self._funs[key]
+
+    def _value_fold(self):
+        return self._fun("value_c", lambda: compiled(self._value_raw(), jit=self.jit))
+
+    def _reverse_fold(self):
+        return self._fun("reverse_c", lambda: compiled(self._value_raw().reverse(1), jit=self.jit))
+
+    def _records(self, records=None):
+        return range(self.space.n_records) if records is None else records
+
+    def cost(self, theta) -> tuple[float, np.ndarray]:
+        """Total cost and the cost of each record at the free values ``theta``."""
+        runs = run_jobs([self._job(r, theta, "value")[0] for r in self._records()])
+        per = np.array([sum(self._chunk_cost(out, take) for _, out, take in run) for run in runs])
+        return float(per.sum()), per
+
+    def derivatives(self, theta):
+        """Cost, gradient, curvature (Gauss-Newton or Fisher) and per-record details at ``theta``.
+
+        Returns ``(f, g, H, details)``; ``details[r]`` holds ``f``, ``cols`` (the free values the
+        record sees), per-sample ``scores`` (gradient contributions, ``(N, k_r)``) and normalised
+        ``residuals`` (``(N, ny)``, NaN where not measured).
+        """
+        k = len(self.space)
+        jobs = [self._job(r, theta, "sens") for r in self._records()]
+        runs = run_jobs([j for j, _ in jobs])
+        f, g, H, details = 0.0, np.zeros(k), np.zeros((k, k)), []
+        for r, ((_, ctx), run) in enumerate(zip(jobs, runs)):
+            d = self._details(r, ctx, run)
+            c = d["cols"]
+            f += d["f"]
+            g[c] += d["g"]
+            H[np.ix_(c, c)] += d["H"]
+            details.append(d)
+        return f, g, 0.5 * (H + H.T), details
+
+    def gradient(self, theta) -> np.ndarray:
+        """Exact gradient of the cost by reverse mode: one backward sweep through the chunks of each
+        record, whatever the number of free values."""
+        g = np.zeros(len(self.space))
+        jobs = [self._job(r, theta, "value") for r in self._records()]
+        for r, ((_, ctx), run) in enumerate(zip(jobs, run_jobs([j for j, _ in jobs]))):
+            rm = self.space.record_map(r)
+            g[rm.cols] += self._record_gradient(rm, ctx, run)
+        return g
+
+    def _sweep(self, run, seeds, memory):
+        """Backward sweep of the reverse fold over a record's chunks ``run``; ``seeds(outs, take)``
+        gives the adjoints of the per-sample outputs, ``memory`` the accumulated inputs. Returns the
+        adjoints of the first chunk's memory and the sums of the adjoints of the other inputs."""
+        rev = self._reverse_fold()
+        adj_mem = {m: np.zeros(np.asarray(run[0][0][m]).size) for m in memory}
+        sums: dict = {}
+        for args, outs, take in reversed(run):
+            kw = {**args, **{f"out_{o}": v for o, v in outs.items()}, **seeds(outs, take)}
+            kw.update({f"adj_{m}_next": adj_mem[m] for m in memory})
+            res = rev(**kw)
+            adj_mem = {m: np.asarray(res[f"adj_{m}"]).reshape(-1) for m in memory}
+            for n in args:
+                if n not in memory:
+                    a = np.asarray(res[f"adj_{n}"])
+                    part = a[:, :take].sum(axis=1) if a.shape[1] == CHUNK else a.reshape(-1)
+                    sums[n] = sums.get(n, 0.0) + part
+        return adj_mem, sums
+
+
+class OutputErrorEngine(Engine):
+    """Weighted simulated-output residuals of a discrete model (single shooting).
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    space : ParamSpace
+    arrays : list of dict
+        Per record ``U`` (nu, N), ``Y`` (ny, N, 0 where not measured), ``mask`` (ny, N), ``dt`` (1, N:
+        time to the next sample, 0 on the last).
+    meas_index : list of int
+        Rows of the model outputs that are measured.
+    weights : (ny,) array
+        ``1 / sigma`` per measured output.
+    jit : bool or None
+    """
+
+    def __init__(self, dmodel, space, arrays, meas_index, weights, jit=None):
+        super().__init__(space, jit)
+        self.dmodel, self.model, self.arrays = dmodel, dmodel.model, arrays
+        self.meas_index = list(meas_index)
+        self.angle = self.model.angle_outputs[self.meas_index]
+        self.weights = np.asarray(weights, dtype=float)
+
+    def _symbols(self):
+        m, ny = self.model, len(self.meas_index)
+        sym = self.dmodel.symbolic
+        s = {"x": sym.sym("x", m.nx), "u": sym.sym("u", m.nu), "y": sym.sym("y", ny), "mask": sym.sym("mask", ny),
+             "dt": sym.sym("dt"), "p": sym.sym("p", m.np), "w": sym.sym("w", ny)}
+        yhat = m.h(s["x"], s["u"], s["p"])[self.meas_index]
+        e = s["y"] - yhat
+        e = ca.vertcat(*[wrap_sym(e[i]) if a else e[i] for i, a in enumerate(self.angle)]) if self.angle.any() else e
+        s["r"] = s["w"] * s["mask"] * e
+        s["x_next"] = self.dmodel.F(s["x"], s["u"], s["p"], sym.zeros(m.nw), s["dt"])
+        return s
+
+    def _value_raw(self):
+        def make():
+            s = self._symbols()
+            names = ["x", "u", "y", "mask", "dt", "p", "w"]
+            fun = ca.Function("oe_value", [s[n] for n in names], [s["x_next"], s["r"]], names, ["x_next", "r"])
+            return fold(fun, {"x": "x_next"}, ("p", "w"))
+        return self._fun("value", make)
+
+    def _sens_fold(self, k: int, seeds: tuple):
+        """The sensitivity fold for ``k`` free values entering through the inputs ``seeds`` (a subset of
+        ``p, u, y``; the state always)."""
+        def make():
+            m, sym = self.model, self.dmodel.symbolic
+            s = self._symbols()
+            d = {"dx": sym.sym("dx", m.nx, k)}
+            d.update({f"d{n}": sym.sym(f"d{n}", s[n].numel(), k) for n in seeds})
+            wrt = ca.vertcat(s["x"], *(s[n] for n in seeds))
+            seed = ca.vertcat(d["dx"], *(d[f"d{n}"] for n in seeds))
+            Jx = ca.jtimes(s["x_next"], wrt, seed)
+            Jr = ca.jtimes(s["r"], wrt, seed)
+            names = ["x", "dx", "u", "y", "mask", "dt", "p", "w", *(f"d{n}" for n in seeds)]
+            fun = ca.Function(f"oe_sens{k}_{''.join(seeds)}", [s.get(n, d.get(n)) for n in names],
+                              [s["x_next"], Jx, s["r"], Jr], names, ["x_next", "dx_next", "r", "J"])
+            consts = ("p", "w", *(f"d{n}" for n in seeds))
+            return compiled(fold(fun, {"x": "x_next", "dx": "dx_next"}, consts), jit=self.jit)
+        return self._fun(("sens", k, seeds), make)
+
+    def _job(self, r, theta, kind):
+        rm = self.space.record_map(r)
+        v = rm.values(theta)
+        a = self.arrays[r]
+        per = {"u": a["U"] + v["u"][:, None], "y": a["Y"] - v["y"][:, None], "mask": a["mask"], "dt": a["dt"]}
+        consts = {"p": v["p"], "w": self.weights}
+        if kind == "value":
+            return Job(self._value_fold(), {"x": v["x0"]}, consts, per, a["U"].shape[1]), {"rm": rm}
+        blocks = {"p": rm.E["p"], "u": rm.E["u"], "y": -rm.E["y"]}
+        seeds = tuple(n for n, E in blocks.items() if E.any())
+        consts.update({f"d{n}": blocks[n] for n in seeds})
+        state = {"x": v["x0"], "dx": rm.E["x0"]}
+        return Job(self._sens_fold(rm.k, seeds), state, consts, per, a["U"].shape[1]), {"rm": rm, "mask": a["mask"]}
+
+    @staticmethod
+    def _chunk_cost(out, take) -> float:
+        return 0.5 * float(np.sum(out["r"][:, :take] ** 2))
+
+    def residuals(self, r, theta) -> np.ndarray:
+        """Weighted residuals (N, ny) of record ``r`` at ``theta`` (0 where not measured)."""
+        run = run_jobs([self._job(r, theta, "value")[0]])[0]
+        return np.hstack([out["r"][:, :take] for _, out, take in run]).T
+
+    def _details(self, r, ctx, run) -> dict:
+        rm, k = ctx["rm"], ctx["rm"].k
+        R = np.vstack([out["r"][:, :take].T for _, out, take in run])                    # (N, ny)
+        J = np.concatenate([per_sample(out["J"], R.shape[1], k, take) for _, out, take in run])  # (N, ny, k)
+        scores = np.einsum("nyk,ny->nk", J, R)
+        Jf = J.reshape(-1, k)
+        return {"f": 0.5 * float(np.sum(R**2)), "g": scores.sum(axis=0), "H": Jf.T @ Jf, "cols": rm.cols,
+                "scores": scores, "residuals": np.where(ctx["mask"].T > 0, R, np.nan), "J": J}
+
+    def _record_gradient(self, rm, ctx, run) -> np.ndarray:
+        adj_x, sums = self._sweep(run, lambda out, take: {"adj_r": out["r"]}, ("x",))
+        E = rm.E
+        return E["p"].T @ sums["p"] + E["u"].T @ sums["u"] - E["y"].T @ sums["y"] + E["x0"].T @ adj_x["x"]

@@ -1,0 +1,279 @@
+"""Which parameters the records can determine, before fitting: Fisher information analysis.
+
+:meth:`~casship.identify.OutputErrorProblem.identifiability` (and the same method of
+:class:`~casship.identify.MLEProblem`) evaluates the Fisher information of the free quantities at a
+point (exact sensitivities of the outputs or innovations) and returns an :class:`Identifiability`
+value. Model parameters are analysed in *relative* units: the information is scaled by each
+parameter's magnitude (its value, or its typical scale when the value is 0), so an eigenvalue
+``lam`` says that the data determine the direction to a relative standard error ``1 / sqrt(lam)``.
+Initial states, biases and noise variances, whose values may sit near zero, are analysed in their
+own units (magnitude 1).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .uncertainty import covariance_from_information
+
+__all__ = ["Identifiability", "MAX_REL_STD", "MAX_CORR"]
+
+MAX_REL_STD = 0.5   # default: a parameter the data see has a relative standard error below this
+MAX_CORR = 0.95     # pairs correlated beyond this are flagged
+
+
+def _marginals(S: np.ndarray, names):
+    cov, _ = covariance_from_information(S, names)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        std = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(std, std)
+    return std, corr
+
+
+@dataclass
+class Identifiability:
+    """Fisher-information analysis of a problem's free quantities at a point.
+
+    Made by :meth:`~casship.identify.IdentificationProblem.identifiability`.
+
+    Parameters
+    ----------
+    names : list of str
+        The free quantities.
+    at : dict
+        The point (name -> value) the information was evaluated at.
+    magnitudes : (k,) array
+        The magnitudes that make the analysis relative (``|value|``, or the scale when it is 0).
+    information : (k, k) array
+        Fisher information of the data in natural units (without the prior).
+    prior_precision : (k,) array
+        Precision of the prior on each quantity (0 without a prior); not in the analysis unless
+        asked (``with_prior=True`` in :meth:`propose`).
+    max_rel_std, max_corr : float
+        Thresholds of the report: quantities with ``rel_std`` above ``max_rel_std`` are reported as
+        not seen by the data, pairs with ``|correlation|`` above ``max_corr`` as correlated.
+    kinds : list of str, optional
+        Kind of each quantity (``param``, ``x0``, ``bias_in``, ``bias_out``, ``Q``, ``R``): by
+        default :meth:`propose` chooses among the parameters and keeps the others.
+
+    Attributes
+    ----------
+    eigenvalues : (k,) array
+        Eigenvalues of the relative information, largest first.
+    eigenvectors : (k, k) array
+        The directions (columns, unit length, in relative units).
+    sensitivity : (k,) array
+        ``sqrt`` of the relative information's diagonal: ``1 / sensitivity`` is the relative standard
+        error a quantity would have if it were the only one free.
+    rel_std : (k,) array
+        Relative standard error of each quantity with all of them free (``inf``: not seen).
+    correlation : (k, k) array
+        Correlation of the estimates with all of them free.
+    """
+
+    names: list
+    at: dict
+    magnitudes: np.ndarray
+    information: np.ndarray
+    prior_precision: np.ndarray
+    eigenvalues: np.ndarray = field(init=False)
+    eigenvectors: np.ndarray = field(init=False)
+    sensitivity: np.ndarray = field(init=False)
+    rel_std: np.ndarray = field(init=False)
+    correlation: np.ndarray = field(init=False)
+    max_rel_std: float = MAX_REL_STD
+    max_corr: float = MAX_CORR
+    kinds: list = None
+
+    def __post_init__(self):
+        self.names = list(self.names)
+        self.kinds = list(self.kinds) if self.kinds is not None else ["param"] * len(self.names)
+        S = self._relative(with_prior=False)
+        lam, vec = np.linalg.eigh(S)
+        order = np.argsort(-lam)
+        self.eigenvalues, self.eigenvectors = lam[order], vec[:, order]
+        for j in range(vec.shape[1]):            # sign convention: largest loading positive
+            i = np.argmax(np.abs(self.eigenvectors[:, j]))
+            self.eigenvectors[:, j] *= np.sign(self.eigenvectors[i, j]) or 1.0
+        self.sensitivity = np.sqrt(np.clip(np.diag(S), 0, None))
+        self.rel_std, self.correlation = _marginals(S, self.names)
+
+    def _relative(self, with_prior: bool, idx=None) -> np.ndarray:
+        M = self.magnitudes if idx is None else self.magnitudes[idx]
+        info = self.information if idx is None else self.information[np.ix_(idx, idx)]
+        S = info * np.outer(M, M)
+        if with_prior:
+            S = S + np.diag((self.prior_precision if idx is None else self.prior_precision[idx]) * M**2)
+        return 0.5 * (S + S.T)
+
+    # -- findings --------------------------------------------------------------------------------
+    @property
+    def correlated(self) -> list[tuple[str, str, float]]:
+        """Pairs ``(a, b, rho)`` with ``|rho|`` above :attr:`max_corr`."""
+        out = []
+        k = len(self.names)
+        for i in range(k):
+            for j in range(i + 1, k):
+                rho = self.correlation[i, j]
+                if np.isfinite(rho) and abs(rho) > self.max_corr:
+                    out.append((self.names[i], self.names[j], float(rho)))
+        return out
+
+    @property
+    def not_seen(self) -> list[str]:
+        """Quantities whose relative standard error (all free) exceeds :attr:`max_rel_std` (own units for
+        initial states, biases and noise)."""
+        return [n for n, s in zip(self.names, self.rel_std) if not (np.isfinite(s) and s <= self.max_rel_std)]
+
+    def direction(self, j: int, top: int = 4) -> str:
+        """Eigen-direction ``j`` as text, e.g. ``"+0.71*N_r_dash -0.70*Y_r_dash"``.
+
+        Parameters
+        ----------
+        j : int
+            Index of the direction (0: best determined).
+        top : int
+            Number of loadings shown.
+        """
+        v = self.eigenvectors[:, j]
+        order = np.argsort(-np.abs(v))[:top]
+        return " ".join(f"{v[i]:+.2f}*{self.names[i]}" for i in order if abs(v[i]) > 0.05)
+
+    def propose(self, *, max_rel_std: float | None = None, max_corr: float | None = None,
+                candidates: Sequence[str] | None = None, keep: Sequence[str] | None = None,
+                with_prior: bool = False) -> list[str]:
+        """A free set chosen by a stated criterion: greedy D-optimal forward selection.
+
+        Starting from ``keep``, add one at a time the candidate that most increases the determinant of
+        the relative information of the set, among those that leave every candidate in the set with
+        a relative standard error at most ``max_rel_std`` and no pair of candidates correlated beyond
+        ``max_corr``; stop when no candidate qualifies.
+
+        Parameters
+        ----------
+        max_rel_std, max_corr : float, optional
+            Thresholds (default: the value's own).
+        candidates : sequence of str, optional
+            Quantities to choose from (default: the model parameters not in ``keep``).
+        keep : sequence of str, optional
+            Quantities always free; they enter the information of the set but not the criteria
+            (default: the quantities that are not model parameters: initial states, biases, noise).
+        with_prior : bool
+            Count the prior's precision as information.
+
+        Returns
+        -------
+        list of str
+            ``keep`` followed by the chosen candidates in the order they were added.
+
+        Examples
+        --------
+        >>> idf = problem.identifiability()          # doctest: +SKIP
+        >>> free = idf.propose(max_rel_std=0.2)      # doctest: +SKIP
+        """
+        tol_s = self.max_rel_std if max_rel_std is None else float(max_rel_std)
+        tol_c = self.max_corr if max_corr is None else float(max_corr)
+        index = {n: i for i, n in enumerate(self.names)}
+        if keep is None:
+            keep = [n for n, k in zip(self.names, self.kinds) if k != "param"]
+        if candidates is None:
+            candidates = [n for n, k in zip(self.names, self.kinds) if k == "param"]
+        unknown = [n for n in (*keep, *candidates) if n not in index]
+        if unknown:
+            raise ValueError(f"unknown quantities {unknown}; free: {self.names}")
+        chosen = [index[n] for n in keep]
+        pool = [index[n] for n in candidates if n not in keep]
+        while pool:
+            best, best_val = None, -np.inf
+            for c in pool:
+                idx = chosen + [c]
+                S = self._relative(with_prior, idx)
+                sign, logdet = np.linalg.slogdet(S)
+                if sign <= 0:
+                    continue
+                std, corr = _marginals(S, [self.names[i] for i in idx])
+                cand = [j for j, i in enumerate(idx) if i not in [index[n] for n in keep]]
+                if not np.all(np.isfinite(std[cand])) or np.max(std[cand]) > tol_s:
+                    continue
+                sub = np.abs(corr[np.ix_(cand, cand)]) - np.eye(len(cand))
+                if sub.size and np.nanmax(sub) > tol_c:
+                    continue
+                if logdet > best_val:
+                    best, best_val = c, logdet
+            if best is None:
+                break
+            chosen.append(best)
+            pool.remove(best)
+        return [self.names[i] for i in chosen]
+
+    # -- presentation ----------------------------------------------------------------------------
+    def summary(self) -> str:
+        """A plain-text report: directions, per-quantity sensitivities, flagged pairs, unseen quantities."""
+        lines = [f"identifiability of {len(self.names)} free quantities (relative units)",
+                 f"{'direction':>9s} {'eigenvalue':>11s} {'rel. std':>9s}  loadings"]
+        for j, lam in enumerate(self.eigenvalues):
+            s = 1 / np.sqrt(lam) if lam > 0 else np.inf
+            lines.append(f"{j:>9d} {lam:>11.3g} {s:>9.3g}  {self.direction(j)}")
+        lines.append(f"{'name':>16s} {'value':>11s} {'alone':>9s} {'all free':>9s}")
+        for i, n in enumerate(self.names):
+            alone = 1 / self.sensitivity[i] if self.sensitivity[i] > 0 else np.inf
+            lines.append(f"{n:>16s} {self.at[n]:>11.4g} {alone:>9.3g} {self.rel_std[i]:>9.3g}")
+        for a, b, rho in self.correlated:
+            lines.append(f"correlated: {a} and {b} (rho = {rho:+.3f})")
+        if self.not_seen:
+            lines.append(f"not seen by the data (relative std error > {self.max_rel_std:g}): {', '.join(self.not_seen)}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return (f"Identifiability({len(self.names)} quantities, {len(self.correlated)} correlated pair(s), "
+                f"not seen: {self.not_seen})")
+
+    def plot(self, path) -> Path:
+        """Relative standard errors of the eigen-directions and of each quantity, and the loadings (PNG).
+
+        Parameters
+        ----------
+        path : str or Path
+            Output file.
+
+        Returns
+        -------
+        Path
+        """
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        k = len(self.names)
+        fig, axes = plt.subplots(1, 3, figsize=(13, 0.35 * k + 2.5), gridspec_kw={"width_ratios": [1, 1, 1.4]})
+        lam = np.where(self.eigenvalues > 0, self.eigenvalues, np.nan)
+        axes[0].barh(np.arange(k), 1 / np.sqrt(lam), color="C0")
+        axes[0].set_xscale("log")
+        axes[0].axvline(self.max_rel_std, color="C3", lw=1, ls="--")
+        axes[0].set_yticks(np.arange(k), [f"dir {j}" for j in range(k)])
+        axes[0].invert_yaxis()
+        axes[0].set_xlabel("relative std error of direction [-]")
+        rel = np.where(np.isfinite(self.rel_std), self.rel_std, np.nan)
+        axes[1].barh(np.arange(k), rel, color="C1", label="all free")
+        with np.errstate(divide="ignore"):
+            axes[1].plot(1 / self.sensitivity, np.arange(k), "k|", ms=10, label="alone")
+        axes[1].set_xscale("log")
+        axes[1].axvline(self.max_rel_std, color="C3", lw=1, ls="--")
+        axes[1].set_yticks(np.arange(k), self.names)
+        axes[1].invert_yaxis()
+        axes[1].set_xlabel("relative std error [-]")
+        axes[1].legend(fontsize=7)
+        im = axes[2].imshow(self.eigenvectors, cmap="RdBu_r", vmin=-1, vmax=1, aspect="auto")
+        axes[2].set_xticks(np.arange(k), [str(j) for j in range(k)])
+        axes[2].set_yticks(np.arange(k), self.names)
+        axes[2].set_xlabel("direction (best determined first)")
+        fig.colorbar(im, ax=axes[2], label="loading [-]")
+        fig.tight_layout()
+        path = Path(path)
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        return path

@@ -1,0 +1,287 @@
+"""Validity checks: inputs and states against a model's declared ranges, fixed steps against its time constants.
+
+A model declares the ranges its states and inputs are valid for (:meth:`casship.ModelBuilder.limit`,
+``model.limits``). The simulator, the manoeuvre runners, :func:`casship.trim` and the command line
+check what they are given against them with the functions here and raise a :class:`ValidityError`
+(a ``ValueError``) naming the variable, the value and the range. A deliberate out-of-range study
+opts in with ``check_limits=False`` (command line: ``--allow-out-of-range``). A value beyond a
+bound by less than :data:`MARGIN` (1 %) of the bound's size passes: a measured rudder angle of
+35.1 deg at a 35 deg stop is the stop.
+
+A fixed-step integrator (``euler``, ``rk4``) turns a decaying mode into a growing one when its
+step exceeds the stability limit of that mode; :func:`stable_step` computes the largest stable
+step from the eigenvalues of the exact linearisation at the starting point and :func:`check_step`
+raises for a longer step (a time gap in a record, a ``dt`` of 1000 s) instead of returning 1e29.
+
+Examples
+--------
+>>> import numpy as np, casship as cs
+>>> from casship.validity import check_inputs, stable_step
+>>> ship = cs.models.get_model("kvlcc2")
+>>> check_inputs(ship, {"delta": np.radians(200.0)})
+Traceback (most recent call last):
+...
+casship.validity.ValidityError: input 'delta' = 200 deg is outside its valid range [-35, 35] deg (rudder stop) of model 'kvlcc2'; pass check_limits=False (command line: --allow-out-of-range) for a deliberate out-of-range study
+>>> m = cs.models.nomoto_first_order(K=0.1, T=20.0)
+>>> round(stable_step(m, m.states(), m.inputs(), m.params(), "rk4"), 1)   # 2.785 T
+55.7
+"""
+from __future__ import annotations
+
+import warnings
+from typing import Mapping
+
+import numpy as np
+
+from .model import Model
+
+__all__ = ["ValidityError", "ValidityWarning", "OPT_IN", "MARGIN", "check_inputs", "check_states", "warn_states",
+           "stable_step", "check_step", "describe_limit"]
+
+#: How a caller opts in to out-of-range use (appended to every validity message).
+OPT_IN = "pass check_limits=False (command line: --allow-out-of-range) for a deliberate out-of-range study"
+
+
+class ValidityError(ValueError):
+    """A value outside the range a model is valid for, or a step beyond an integrator's stability limit."""
+
+
+class ValidityWarning(UserWarning):
+    """A simulated state left the range its model is valid for."""
+
+
+def _variable(model: Model, name: str):
+    for var in (*model.state_vars, *model.input_vars):
+        if var.name == name:
+            return var
+    raise ValueError(f"unknown state or input {name!r} of model {model.name!r}")
+
+
+def describe_limit(model: Model, name: str) -> str:
+    """The declared range of a state or input as text (angles in degrees), e.g. ``"[-35, 35] deg (rudder stop)"``.
+
+    Parameters
+    ----------
+    model : Model
+        A model with a limit on ``name``.
+    name : str
+        State or input name.
+
+    Returns
+    -------
+    str
+    """
+    var = _variable(model, name)
+    return model.limits[name].describe(var.unit, _is_angle(var))
+
+
+def _is_angle(var) -> bool:
+    return bool(var.angle or var.unit == "rad")
+
+
+def _show(var, value: float) -> str:
+    if _is_angle(var):
+        return f"{np.degrees(value):.4g} deg"
+    return f"{value:.4g}" + (f" {var.unit}" if var.unit else "")
+
+
+#: Relative margin of the checks: a value beyond a bound by less than this fraction of the bound's size
+#: passes (a measured rudder angle of 35.1 deg at a 35 deg stop is the stop, not a misuse).
+MARGIN = 0.01
+
+
+def _outside(limit, values: np.ndarray) -> np.ndarray:
+    bounds = [abs(b) for b in (limit.lower, limit.upper) if np.isfinite(b)]
+    tol = MARGIN * max(bounds, default=0.0)
+    return ((values < limit.lower - tol) | (values > limit.upper + tol)) & np.isfinite(values)
+
+
+def _check(model: Model, kind: str, name: str, values, t) -> None:
+    limit = model.limits.get(name)
+    if limit is None:
+        return
+    values = np.asarray(values, dtype=float).reshape(-1)
+    bad = np.flatnonzero(_outside(limit, values))
+    if bad.size:
+        k = int(bad[0])
+        var = _variable(model, name)
+        when = f" at t = {np.asarray(t).reshape(-1)[k]:g} s" if t is not None and np.size(t) > k and values.size > 1 \
+            else ""
+        raise ValidityError(f"{kind} {name!r} = {_show(var, values[k])}{when} is outside its valid range "
+                            f"{describe_limit(model, name)} of model {model.name!r}; {OPT_IN}")
+
+
+def check_inputs(model: Model, inputs, t=None) -> None:
+    """Raise :class:`ValidityError` if an input leaves its declared range.
+
+    Parameters
+    ----------
+    model : Model
+        The model whose ``limits`` apply.
+    inputs : mapping name -> value(s), or array (N, nu) / (nu,)
+        Input values (constants or time series).
+    t : array_like, optional
+        Time stamps of the rows, to say when the first violation happens.
+
+    Raises
+    ------
+    ValidityError
+        Naming the input, its value (degrees for angles), the range and the reason for it.
+    """
+    if isinstance(inputs, Mapping):
+        items = inputs.items()
+    else:
+        U = np.asarray(inputs, dtype=float)
+        U = U.reshape(1, -1) if U.ndim == 1 else U
+        items = ((name, U[:, j]) for j, name in enumerate(model.input_names))
+    for name, values in items:
+        _check(model, "input", name, values, t)
+
+
+def check_states(model: Model, x, what: str = "state") -> None:
+    """Raise :class:`ValidityError` if a state of ``x`` lies outside its declared range.
+
+    Parameters
+    ----------
+    model : Model
+        The model whose ``limits`` apply.
+    x : array_like (nx,) or mapping name -> value
+        A state (e.g. the initial state of a simulation).
+    what : str
+        How to call it in the message (e.g. ``"initial state"``).
+
+    Raises
+    ------
+    ValidityError
+    """
+    if isinstance(x, Mapping):
+        items = x.items()
+    else:
+        x = np.asarray(x, dtype=float).reshape(-1)
+        items = zip(model.state_names, x)
+    for name, value in items:
+        _check(model, what, name, value, None)
+
+
+def warn_states(model: Model, X: np.ndarray, t: np.ndarray) -> list[str]:
+    """Warn (:class:`ValidityWarning`) for every state of a trajectory that leaves its declared range.
+
+    Parameters
+    ----------
+    model : Model
+        The model whose ``limits`` apply.
+    X : array (N, nx)
+        Simulated states.
+    t : array (N,)
+        Time stamps [s].
+
+    Returns
+    -------
+    list of str
+        The warning messages (empty if the trajectory stays valid).
+    """
+    found = []
+    for j, name in enumerate(model.state_names):
+        limit = model.limits.get(name)
+        if limit is None:
+            continue
+        bad = np.flatnonzero(_outside(limit, X[:, j]))
+        if bad.size:
+            k = int(bad[0])
+            var = model.state_vars[j]
+            found.append(f"state {name!r} of model {model.name!r} leaves its valid range {describe_limit(model, name)} "
+                         f"at t = {t[k]:g} s ({_show(var, X[k, j])}); the results after that are outside the "
+                         "model's validity")
+    for message in found:
+        warnings.warn(message, ValidityWarning, stacklevel=3)
+    return found
+
+
+_STABILITY = {"euler": (1.0, 1.0), "rk4": (1.0, 1.0, 1 / 2, 1 / 6, 1 / 24)}
+
+
+def _amplification(method: str, z: np.ndarray) -> np.ndarray:
+    coeffs = _STABILITY[method]
+    return np.abs(sum(c * z**k for k, c in enumerate(coeffs)))
+
+
+def _critical_step(method: str, lam: complex) -> float:
+    """Largest ``h`` with ``|R(h lam)| <= 1`` for a decaying mode ``lam`` (bisection along the ray)."""
+    scale = 1.0 / abs(lam)
+    lo, hi = 0.0, 8.0 * scale             # the stability regions of euler and rk4 lie within |z| < 3
+    if _amplification(method, np.array(hi * lam)) <= 1.0:
+        return np.inf
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if _amplification(method, np.array(mid * lam)) <= 1.0 + 1e-12:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def stable_step(model: Model, x, u, p, method: str) -> float:
+    """Largest stable step [s] of a fixed-step ``method`` for ``model`` linearised at ``(x, u, p)``.
+
+    Every decaying mode ``lam`` (eigenvalue of ``A = df/dx`` with negative real part) must keep
+    ``|R(h lam)| <= 1``, with ``R`` the method's stability polynomial (``1 + z`` for ``euler``,
+    the quartic Taylor polynomial for ``rk4``). For a real eigenvalue that is ``h <= 2 T`` (euler)
+    and ``h <= 2.785 T`` (rk4), ``T = -1/lam`` the mode's time constant.
+
+    Parameters
+    ----------
+    model : Model
+        Continuous-time model.
+    x, u, p : array_like
+        State, input and parameter vectors of the linearisation point.
+    method : {"euler", "rk4"}
+        Fixed-step method (any other method has no step limit: ``inf``).
+
+    Returns
+    -------
+    float
+        The step limit [s] (``inf`` when no decaying mode constrains it).
+    """
+    if method not in _STABILITY:
+        return np.inf
+    A = np.array(model.f_jac(x, u, p, np.zeros(model.nw))[0], dtype=float).reshape(model.nx, model.nx)
+    if not np.all(np.isfinite(A)):
+        return np.inf
+    lam = np.linalg.eigvals(A)
+    scale = max(1e-300, float(np.abs(lam).max(initial=0.0)))
+    decaying = lam[lam.real < -1e-9 * scale]
+    return float(min((_critical_step(method, complex(v)) for v in decaying), default=np.inf))
+
+
+def check_step(model: Model, h: float, x, u, p, method: str, *, where: str = "") -> float:
+    """Raise :class:`ValidityError` if the fixed step ``h`` exceeds the stability limit of ``method``.
+
+    Parameters
+    ----------
+    model : Model
+        Continuous-time model.
+    h : float
+        The (sub-)step the integrator will take [s].
+    x, u, p : array_like
+        Linearisation point (e.g. the initial state and inputs of a simulation).
+    method : str
+        Integration method (only ``euler`` and ``rk4`` have a step limit).
+    where : str
+        Where the step occurs, for the message (e.g. ``" between t = 10 and 1e4 s"``).
+
+    Returns
+    -------
+    float
+        The step limit [s].
+
+    Raises
+    ------
+    ValidityError
+        Naming the step, the limit and the fastest time constant, with the ways out.
+    """
+    limit = stable_step(model, x, u, p, method)
+    if h > limit:
+        raise ValidityError(f"time step {h:.4g} s{where} exceeds the {method} stability limit {limit:.4g} s of model "
+                            f"{model.name!r} (eigenvalues of its linearisation at the start); use a shorter step, "
+                            "max_step= (sub-steps) or method='cvodes' (adaptive), or " + OPT_IN)
+    return limit
