@@ -16,7 +16,9 @@ from __future__ import annotations
 import time
 from typing import Callable
 
-__all__ = ["median_time", "row", "skipped_row", "format_table"]
+import numpy as np
+
+__all__ = ["median_time", "compare", "compared_row", "row", "skipped_row", "format_table"]
 
 
 def median_time(func: Callable[[], object], repeat: int = 5, warmup: int = 1,
@@ -39,6 +41,50 @@ def median_time(func: Callable[[], object], repeat: int = 5, warmup: int = 1,
     times.sort()
     mid = len(times) // 2
     return times[mid] if len(times) % 2 else 0.5 * (times[mid - 1] + times[mid])
+
+
+def compare(casship: Callable[[], object], peer: Callable[[], object], repeat: int = 7, warmup: int = 1,
+            clock: Callable[[], float] = time.process_time) -> dict:
+    """Time ``casship()`` and ``peer()`` interleaved (peer, casship, peer, casship, ...) and give the
+    medians and the spread of the ratio.
+
+    Interleaving puts both under the same load at the same moments, so the ratio of each pair is
+    fair on a shared machine even when the absolute times drift. Each timed call is preceded by
+    ``warmup`` untimed calls of both.
+
+    Returns
+    -------
+    dict
+        ``casship_s``, ``peer_s`` (medians), ``ratio`` (median of the per-pair ratios
+        ``peer / casship``), ``ratio_min``, ``ratio_max`` and ``repeats``.
+    """
+    if repeat < 1:
+        raise ValueError(f"repeat must be >= 1, got {repeat}")
+    for _ in range(warmup):
+        peer()
+        casship()
+    tc, tp = [], []
+    for _ in range(repeat):
+        t0 = clock()
+        peer()
+        t1 = clock()
+        casship()
+        t2 = clock()
+        tp.append(t1 - t0)
+        tc.append(t2 - t1)
+    ratios = sorted(p / c for p, c in zip(tp, tc) if c > 0)
+    med = lambda v: float(np.median(v)) if len(v) else None  # noqa: E731
+    return {"casship_s": med(tc), "peer_s": med(tp), "ratio": med(ratios),
+            "ratio_min": ratios[0] if ratios else None, "ratio_max": ratios[-1] if ratios else None,
+            "repeats": repeat}
+
+
+def compared_row(benchmark: str, timing: dict, peer: str, accuracy_check: str, **extra) -> dict:
+    """A result row from :func:`compare` (ratio = median of the interleaved pairs, with its spread)."""
+    r = row(benchmark, timing["casship_s"], peer, timing["peer_s"], accuracy_check, **extra)
+    r.update(ratio=timing["ratio"], ratio_min=timing["ratio_min"], ratio_max=timing["ratio_max"],
+             repeats=timing["repeats"])
+    return r
 
 
 def solve_ivp_held(rhs_at: Callable[[int], Callable], t, x0, rtol: float = 1e-9, atol: float = 1e-9):
