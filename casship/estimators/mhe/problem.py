@@ -57,7 +57,7 @@ class Window:
     ok_status: tuple
     unbounded: bool                       # no finite bound on any variable
     ng: int                               # dynamics constraints (nx per stage)
-    make_gn: object                       # multipliers -> BufferedCall of the Gauss-Newton step
+    make_gn: object                       # (multipliers, method) -> BufferedCall of the Gauss-Newton step
     make_qp: object                       # () -> (QP data Function, QP solver): the step with bounds
     gn_step: BufferedCall | None = None
     gn_warm: BufferedCall | None = None
@@ -198,13 +198,13 @@ def build_window(mhe, N: int, solver: str) -> Window:
     pieces = {"X": X, "V": V, "xN": xN, "Xn": Xn, "xbar": xbar, "W": W, "Uh": Uh, "Up": Up, "Y": Y, "M": M,
               "dt": dt, "p": p}
 
-    def gauss_newton(multipliers: bool):
+    def gauss_newton(multipliers: bool, method: str | None = None):
         # chosen by measurement (docs/benchmarks.md): compiled, the Riccati recursion is the fastest
         # (about 0.6 us per stage); under the virtual machine the sparse QR of the KKT system is
-        if o.jit:
-            return BufferedCall(compile_function(riccati_step(stage, term, arrival, nx, nv, N, z, par, pieces,
-                                                              multipliers)), cannot_fail=True)
-        return BufferedCall(_kkt_step(z, par, res, nlp["g"], N, multipliers))
+        method = method or ("riccati" if o.jit else "kkt")
+        fun = (riccati_step(stage, term, arrival, nx, nv, N, z, par, pieces, multipliers) if method == "riccati"
+               else _kkt_step(z, par, res, nlp["g"], N, multipliers))
+        return BufferedCall(compile_function(fun) if o.jit else fun, cannot_fail=o.jit)
 
     idx = np.arange(nz)
     blk_idx = idx[: N * (nx + nv)].reshape(N, nx + nv)
