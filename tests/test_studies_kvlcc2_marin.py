@@ -2,7 +2,7 @@
 
 The quick study runs the whole workflow (propulsion trim, smoothing, inverse dynamics, free set from
 the Fisher information, MAP refinement) without the held-out run and replays it; its fit.json
-replays with ``casship simulate kvlcc2 --params`` on the fitted model variant.
+replays with ``casship simulate --model kvlcc2 --params`` on the fitted model variant.
 """
 import json
 import re
@@ -50,7 +50,7 @@ def test_fit_file_replays_the_fitted_variant_from_the_command_line(quick, data_d
     assert fit["model"] == "kvlcc2" and fit["model_options"] == {"asymmetry": True, "smooth": True}
     held = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_-20_m.dat"
     capsys.readouterr()
-    assert main(["simulate", "kvlcc2", "--params", str(out / "fit.json"), "--inputs", str(held), "--json"]) == 0
+    assert main(["simulate", "--model", "kvlcc2", "--params", str(out / "fit.json"), "--inputs", str(held), "--json"]) == 0
     cli = json.loads(capsys.readouterr().out)["replay"]
     model = get_model("kvlcc2", **fit["model_options"])
     direct = replay(model, read_marin(held), model.params(fit["params"]))
