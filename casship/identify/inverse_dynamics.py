@@ -324,9 +324,9 @@ def _regression(model: Model, records, free, states, base):
     for k, d in enumerate(records):
         X, U, Y = _record_arrays(model, d, states, k)
         n = X.shape[0]
-        out = reg.map(n)(X.T, U.T)
-        A = np.asarray(out[0]).reshape(len(states), len(idx), n, order="F")     # (eq, param, sample)
-        b = np.asarray(out[1]).reshape(len(states), n, order="F")
+        rows_n = reg.map(n)(x=X.T, u=U.T)
+        A = np.asarray(rows_n["A"]).reshape(len(states), len(idx), n, order="F")     # (eq, param, sample)
+        b = np.asarray(rows_n["b"]).reshape(len(states), n, order="F")
         blocks_A.append(np.transpose(A, (2, 0, 1)).reshape(n * len(states), len(idx)))
         blocks_y.append((Y - b.T).reshape(-1))
         sizes.append(n)
