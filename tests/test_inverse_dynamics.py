@@ -53,6 +53,9 @@ def test_nonlinear_parameters_are_refused_by_name():
     flags = linear_in(ship, ["N_r_dash", "f_alpha", "a_H", "m_y_dash"])
     assert not flags["a_H"] and not flags["m_y_dash"]          # a_H multiplies f_alpha; m_y is in the mass matrix
     assert linear_in(ship, ["N_r_dash", "f_alpha"]) == {"N_r_dash": True, "f_alpha": True}
+    # each alone is linear; together a_H * f_alpha is a product: both refused
+    assert linear_in(ship, ["a_H"]) == {"a_H": True}
+    assert linear_in(ship, ["f_alpha", "a_H"]) == {"f_alpha": False, "a_H": False}
     assert linear_in(ship, ["gamma_R_plus"]) == {"gamma_R_plus": False}
     data, _ = _trial({})
     with pytest.raises(ValueError, match="gamma_R_plus"):

@@ -166,7 +166,18 @@ def read_hsva(path, *, full_scale: bool = False, flip_rudder: bool = True, scale
 
 
 def hsva_runs(folder) -> dict[str, Path]:
-    """The HSVA files in ``folder`` by short name (``Z_05_01``, ..., ``Z_10_10_P``)."""
+    """The HSVA files in a folder by short name.
+
+    Parameters
+    ----------
+    folder : str or Path
+        A folder holding ``HSVA_CPMC_KVLCC2_Z_*.dat`` files.
+
+    Returns
+    -------
+    dict
+        Short name (``Z_05_01``, ..., ``Z_10_10_P``) -> path, sorted by name.
+    """
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"folder {folder} does not exist")

@@ -182,9 +182,23 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
               rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False) -> Model:
     """KVLCC2 model L7 (L_pp = 7 m, scale 1/45.7), MMG standard method.
 
-    Same options as :func:`kvlcc2`; the default rudder rate is the Froude-scaled 15.68 deg/s.
     ``vessel.U0`` is 1.18 m/s (Fn 0.142, S2020); ``vessel.n0`` is not given (sources disagree); the
     valid propeller range is the Froude-scaled full-scale one.
+
+    Parameters
+    ----------
+    params : mapping, optional
+        Overrides of the nominal parameter values (as in :func:`kvlcc2`).
+    rudder_actuator : bool
+        Add the rudder angle as a state driven by ``delta_cmd``.
+    rudder_time_constant, rudder_rate_max, rudder_max : float
+        Actuator settings [s, rad/s, rad]; the default rate is the Froude-scaled 15.68 deg/s.
+    asymmetry, smooth : bool
+        The extended variant and the smooth sign switches (as in :func:`kvlcc2`).
+
+    Returns
+    -------
+    Model
     """
     n_full_scaled = N0_FULL * np.sqrt(SCALE_L7)
     vessel = Vessel("KVLCC2 model L7", L_pp=7.0, B=1.27, draught=0.46, mass=1025.0 * KVLCC2_L7["nabla"],

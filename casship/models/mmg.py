@@ -105,12 +105,36 @@ SMOOTH_WIDTH = 0.01
 
 
 def smooth_abs(x, width: float):
-    """``sqrt(x^2 + width^2) - width``: a smooth ``|x|`` (zero at zero, within ``width`` of ``|x|``)."""
+    """``sqrt(x^2 + width^2) - width``: a smooth ``|x|`` (zero at zero, within ``width`` of ``|x|``).
+
+    Parameters
+    ----------
+    x : SX, MX or float
+        Argument.
+    width : float
+        Width of the rounded corner [unit of ``x``].
+
+    Returns
+    -------
+    SX, MX or float
+    """
     return ca.sqrt(x**2 + width**2) - width
 
 
 def smooth_step(x, width: float):
-    """``(1 + tanh(x / width)) / 2``: a smooth switch from 0 (``x << -width``) to 1 (``x >> width``)."""
+    """``(1 + tanh(x / width)) / 2``: a smooth switch from 0 (``x << -width``) to 1 (``x >> width``).
+
+    Parameters
+    ----------
+    x : SX, MX or float
+        Argument.
+    width : float
+        Width of the switch [unit of ``x``].
+
+    Returns
+    -------
+    SX, MX or float
+    """
     return 0.5 * (1 + ca.tanh(x / width))
 
 
@@ -119,12 +143,34 @@ def smooth_saturation(x, limit):
 
     Used for the rudder rate limit so that Jacobians exist everywhere; it equals ``x`` to first
     order for ``|x| << limit`` and approaches ``+-limit`` for large ``|x|``.
+
+    Parameters
+    ----------
+    x : SX, MX or float
+        Argument.
+    limit : float or SX
+        Saturation level (positive).
+
+    Returns
+    -------
+    SX, MX or float
     """
     return limit * ca.tanh(x / limit)
 
 
 def declare_ship_states(b: ModelBuilder):
-    """Declare the shared 3-DOF ship states ``u, v, r, x, y, psi`` and return their symbols."""
+    """Declare the shared 3-DOF ship states ``u, v, r, x, y, psi`` and return their symbols.
+
+    Parameters
+    ----------
+    b : ModelBuilder
+        The builder to declare them in.
+
+    Returns
+    -------
+    tuple of SX
+        ``(u, v, r, x, y, psi)``.
+    """
     u = b.state("u", unit="m/s", doc="surge velocity")
     v = b.state("v", unit="m/s", doc="sway velocity at midship (v_m)")
     r = b.state("r", unit="rad/s", doc="yaw rate")
@@ -142,6 +188,24 @@ def add_rudder_actuator(b: ModelBuilder, names: tuple[str, ...], time_constant: 
     [rad] with ``d(name)/dt = S((cmd - name) / T_rud)``, where ``S`` is :func:`smooth_saturation`
     at ``rudder_rate_max`` (parameters ``T_rud`` [s] and ``rudder_rate_max`` [rad/s]). The command is
     not clipped; clip it with ``max_angle`` if given (hard ``fmin``/``fmax``, documented limit).
+
+    Parameters
+    ----------
+    b : ModelBuilder
+        The builder.
+    names : tuple of str
+        Rudder state names (each gets an input ``name + "_cmd"``).
+    time_constant : float
+        Nominal ``T_rud`` [s].
+    rate_limit : float
+        Nominal ``rudder_rate_max`` [rad/s].
+    max_angle : float, optional
+        Clip of the commanded angle [rad].
+
+    Returns
+    -------
+    dict
+        Rudder name -> state symbol.
     """
     T = b.param("T_rud", time_constant, bounds=(1e-6, np.inf), unit="s", doc="rudder actuator time constant")
     rmax = b.param("rudder_rate_max", rate_limit, bounds=(1e-9, np.inf), unit="rad/s",
@@ -306,7 +370,15 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
 
 def declare_ship_limits(b: ModelBuilder, vessel: Vessel) -> None:
     """Validity ranges of a conventional ship model from its vessel: rudder stop on every rudder
-    input, propeller rates in ``vessel.propeller_range`` and ahead motion ``0 <= u <= 2 U0``."""
+    input, propeller rates in ``vessel.propeller_range`` and ahead motion ``0 <= u <= 2 U0``.
+
+    Parameters
+    ----------
+    b : ModelBuilder
+        The builder (its declared inputs and states get the limits).
+    vessel : Vessel
+        The ship, with its rudder and propeller inputs.
+    """
     if vessel.rudder_max is not None:
         for name in vessel.rudders:
             b.limit(name, -vessel.rudder_max, vessel.rudder_max, why="rudder stop")
