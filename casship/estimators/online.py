@@ -179,9 +179,9 @@ class StepEngine:
 
     def _update(self, y, dt, u_prev, u):
         y = np.asarray(y, dtype=float)
-        if y.shape != self._y.shape:
+        if y.size != self._ny:              # a scalar is fine for one channel, never broadcast to several
             raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got shape {y.shape}")
-        self._y[:] = y
+        self._y[:] = y.reshape(-1)
         ok = self._ok
         np.isfinite(self._y, out=ok)
         self._mask[:] = ok
