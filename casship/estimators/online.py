@@ -179,9 +179,11 @@ class StepEngine:
 
     def _update(self, y, dt, u_prev, u):
         y = np.asarray(y, dtype=float)
-        if y.size != self._ny:              # a scalar is fine for one channel, never broadcast to several
+        if y.ndim == 0 and self._ny == 1:         # one measured output: a scalar is its value
+            y = y.reshape(1)
+        if y.shape != self._y.shape:
             raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got shape {y.shape}")
-        self._y[:] = y.reshape(-1)
+        self._y[:] = y
         ok = self._ok
         np.isfinite(self._y, out=ok)
         self._mask[:] = ok
