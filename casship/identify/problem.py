@@ -64,6 +64,11 @@ class IdentificationProblem:
             raise ValueError("nothing to estimate: give free parameters, biases, noise or estimate_x0")
         self.prior = _as_prior(prior)
         self._mu, self._prec = self.prior.vectors(self.space, model)
+        left_out = [n for n, a in zip(model.output_names, model.angle_outputs)
+                    if a and n not in self.measured and all(n in d for d in self.records)]
+        if left_out:
+            warnings.warn(f"{self.method}: heading {left_out} is measured in every record but not in the cost "
+                          f"(measured = {list(self.measured)})", IdentificationWarning, stacklevel=3)
 
     # -- what the subclasses provide ---------------------------------------------------------------
     def _residual_scale(self, f_data: float, n_obs: int) -> float:
