@@ -179,7 +179,8 @@ def ml_rows(n: int, k: int) -> list[dict]:
                     check, dev = _check(fit, res, scale, free, p_all, data)
                     rows.append(row(f"ML fit, {k} params, Shi model 6 states, {n} samples, {label}", t_cas, peer,
                                     t_peer, check, nll_casship=fit.cost, nll_peer=float(res.fun),
-                                    max_param_diff_std=dev, peer_nfev=int(res.nfev), iterations=fit.iterations))
+                                    max_param_diff_std=dev, peer_nfev=int(res.nfev), iterations=fit.iterations,
+                                    **({"target": f"ml_fit_{k}"} if seed else {})))
         finally:
             os.environ.pop(ENV_CACHE)
     return rows

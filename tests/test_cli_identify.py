@@ -33,7 +33,7 @@ def test_identify_csv_recovers_and_simulate_reads_fit(nomoto_csv, tmp_path, caps
         assert abs(fit["params"][name] - truth) < 4 * fit["std_errors"][name]
     assert (tmp_path / "fit.png").stat().st_size > 0
     assert "fit written" in capsys.readouterr().out
-    assert main(["simulate", "nomoto1", "--params", str(out), "--inputs", str(nomoto_csv), "--json"]) == 0
+    assert main(["simulate", "--model", "nomoto1", "--params", str(out), "--inputs", str(nomoto_csv), "--json"]) == 0
     replay = json.loads(capsys.readouterr().out)["replay"]
     assert replay["psi_rmse_deg"] < 2.0
 

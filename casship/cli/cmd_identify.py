@@ -6,7 +6,7 @@ Examples::
     casship identify A.dat B.dat C.dat --model kvlcc2 --method oe --free N_r_dash,Y_v_dash,bias[n] \\
         --share bias[n]=record --prior N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
         --identifiability --out fit.json --plot fit.png
-    casship simulate kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
+    casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
 units, radians) or MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
@@ -30,7 +30,8 @@ def register(sub) -> None:
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
     p.add_argument("--free", required=True,
                    help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
-    p.add_argument("--out", default="fit.json", help="JSON file for the fit (default fit.json)")
+    p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out / --plot file")
     p.add_argument("--method", default="mle", choices=("mle", "oe"),
                    help="mle: likelihood through an EKF (default); oe: output error (simulation)")
     p.add_argument("--measured", default=None, help="outputs to use a,b,... (default: outputs in every record)")
@@ -177,6 +178,11 @@ def run(args) -> int:
     from ..identify import decimate
     from ..models import get_model
 
+    from ..outdir import check_output_file
+
+    check_output_file(args.out, overwrite=args.overwrite, what="--out")       # before minutes of fitting
+    if args.plot:
+        check_output_file(args.plot, overwrite=args.overwrite, what="--plot")
     model = get_model(args.model)
     records = [decimate(load_record(p), args.decimate) for p in args.data]
     free = _names(args.free)
