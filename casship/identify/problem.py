@@ -247,7 +247,7 @@ class IdentificationProblem:
         s2 = self._residual_scale(f_data, n_obs)
         info = H / s2 + np.diag(self._prec)
         cov, warn = covariance_from_information(info, names)
-        robust, lags = sandwich_covariance(H / s2, self._prec, [(d["scores"] / s2, d["cols"]) for d in det], k, names)
+        robust, _ = sandwich_covariance(H / s2, self._prec, [(d["scores"] / s2, d["cols"]) for d in det], k, names)
         with np.errstate(invalid="ignore"):
             std = np.sqrt(np.diag(cov))
             corr = cov / np.outer(std, std)
