@@ -11,7 +11,7 @@ from .model import Model, ModelBuilder
 from .vessel import Limit, Vessel
 from .simulate import measure, simulate
 from .estimators import EKF, KF, FilterResult, persistence_model
-from .estimators import UKF, rts_smooth, EnKF, KalmanBucy, augment
+from .estimators import UKF, EnKF, KalmanBucy, augment
 from .estimators import MHE
 from .linear import linearize, to_iosys, trim
 from .identify import FitResult, MLEProblem, OutputErrorProblem
@@ -21,5 +21,5 @@ from . import io  # data import: read_csv (units), read_nmea (NMEA 0183), read_m
 __version__ = "0.1.0"
 
 __all__ = ["ModelBuilder", "Model", "Vessel", "Limit", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
-           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "rts_smooth", "EnKF", "KalmanBucy", "augment", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
+           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "EnKF", "KalmanBucy", "augment", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
            "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE"]

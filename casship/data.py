@@ -36,7 +36,21 @@ def check_time(t, name: str = "time") -> np.ndarray:
 
 def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_zero: bool = True) -> np.ndarray:
     """Turn a covariance given as scalar, vector (diagonal), matrix or name->variance mapping into
-    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``."""
+    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``.
+
+    Parameters
+    ----------
+    value : float, array or mapping
+        Scalar (times the identity), variances, matrix, or channel name -> variance.
+    n : int
+        Size.
+    name : str
+        What the covariance is (for messages).
+    names : sequence of str, optional
+        Channel names of a mapping.
+    allow_zero : bool
+        Accept a singular (positive semi-definite) matrix.
+    """
     if isinstance(value, Mapping):
         if names is None:
             raise TypeError(f"{name}: a mapping needs channel names")
@@ -94,10 +108,17 @@ class Gaussian:
 
     @property
     def std(self) -> np.ndarray:
+        """Standard deviations (square roots of the variances)."""
         return np.sqrt(np.diag(self.cov))
 
     def sample(self, n: int, seed=None) -> np.ndarray:
-        """``n`` samples as rows, from a seed or ``numpy.random.Generator``."""
+        """``n`` samples as rows, from a seed or ``numpy.random.Generator``.
+
+        Parameters
+        ----------
+        n : int
+        seed : int or numpy.random.Generator, optional
+        """
         rng = np.random.default_rng(seed)
         return rng.multivariate_normal(self.mean, self.cov, size=n, method="eigh")
 
@@ -184,6 +205,104 @@ class Dataset:
         merged.update(columns)
         return Dataset(self.t, merged, self.units, self.meta)
 
+    def _like(self, data: "Dataset") -> "Dataset":
+        """``data`` as this dataset's type (a Trajectory keeps its names)."""
+        return data
+
+    def decimate(self, k: int) -> "Dataset":
+        """Every ``k``-th row, starting with the first (a Trajectory stays a Trajectory).
+
+        Parameters
+        ----------
+        k : int
+            Decimation factor (``1`` returns the record unchanged).
+
+        Returns
+        -------
+        Dataset
+            ``meta["decimated"]`` records the overall factor.
+
+        Raises
+        ------
+        ValueError
+            ``k`` is not an integer >= 1, or leaves fewer than two rows.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> d = Dataset(np.arange(10.0), {"psi": np.arange(10.0)})
+        >>> d.decimate(3).t
+        array([0., 3., 6., 9.])
+        """
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+            raise ValueError(f"decimate: k must be an integer >= 1, got {k!r}")
+        if k == 1:
+            return self
+        idx = np.arange(0, len(self), int(k))
+        if idx.size < 2:
+            raise ValueError(f"decimate: k = {k} leaves {idx.size} row(s) of {len(self)}")
+        meta = {**self.meta, "decimated": int(k) * int(self.meta.get("decimated", 1))}
+        data = Dataset(self.t[idx], {n: v[idx] for n, v in self._columns.items()}, self.units, meta)
+        return self._like(data)
+
+    def resample(self, rate: float, *, hold: Sequence[str] = ()) -> "Dataset":
+        """Insert rows so that the record has a row at least every ``1 / rate`` seconds.
+
+        The new rows lie on the grid ``t[0] + k / rate``; every original row is kept at its own time
+        stamp. Columns named in ``hold`` (inputs) keep their last value on the new rows (zero-order
+        hold); every other column is NaN there ("not measured"), so a filter predicts through them.
+        Use it to run an estimator faster than the sensors; use :meth:`decimate` to thin a record.
+
+        Parameters
+        ----------
+        rate : float
+            Rate of the grid [Hz]; not below the record's own rate (``1 / median(dt)``).
+        hold : sequence of str
+            Columns held between samples (e.g. the model's inputs).
+
+        Returns
+        -------
+        Dataset
+
+        Raises
+        ------
+        ValueError
+            Non-positive or non-finite rate, a rate below the record's rate (that would drop
+            samples), or an unknown column in ``hold``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> d = Dataset([0.0, 1.0], {"delta": [0.1, 0.2], "psi": [0.0, 0.5]})
+        >>> r = d.resample(2.0, hold=["delta"])
+        >>> r.t, r["delta"], r["psi"]
+        (array([0. , 0.5, 1. ]), array([0.1, 0.1, 0.2]), array([0. , nan, 0.5]))
+        """
+        try:
+            rate = float(rate)
+        except (TypeError, ValueError):
+            raise TypeError(f"resample: rate must be a number [Hz], got {rate!r}") from None
+        if not np.isfinite(rate) or rate <= 0:
+            raise ValueError(f"resample: rate must be a positive finite number [Hz], got {rate}")
+        unknown = [n for n in hold if n not in self._columns]
+        if unknown:
+            raise ValueError(f"resample: unknown column(s) {unknown} in hold; columns: {list(self._columns)}")
+        if len(self) > 1:
+            own = 1.0 / float(np.median(self.dt))
+            if rate < own * (1 - 1e-9):
+                raise ValueError(f"resample: rate {rate:g} Hz is below the record's rate {own:g} Hz (median step "
+                                 f"{1 / own:g} s); that would drop samples: use decimate() to thin a record")
+        tol = 1e-9 * max(1.0, float(np.abs(self.t).max()))
+        fine = self.t[0] + np.arange(0, int(np.floor((self.t[-1] - self.t[0]) * rate + 1e-9)) + 1) / rate
+        t = np.union1d(fine, self.t)
+        t = t[np.concatenate([[True], np.diff(t) > tol])]
+        idx = np.searchsorted(self.t, t + tol, side="right") - 1
+        exact = np.abs(self.t[idx] - t) <= tol
+        t = np.where(exact, self.t[idx], t)                       # original stamps kept exactly
+        cols = {name: (v[idx] if name in hold else np.where(exact, v[idx], np.nan))
+                for name, v in self._columns.items()}
+        return Dataset(t, cols, self.units, {**self.meta, "resampled_hz": rate})
+
     def select(self, names: Sequence[str]) -> "Dataset":
         return Dataset(self.t, {n: self[n] for n in names}, {n: self.units.get(n, "") for n in names}, self.meta)
 
@@ -240,9 +359,9 @@ class Dataset:
         scale : mapping, optional
             New name -> factor applied after renaming (e.g. ``{"psi": np.pi / 180}``).
         """
-        import pandas as pd
+        from .io.csv import read_frame
 
-        frame = pd.read_csv(path)
+        frame = read_frame(path)
         if time is None:
             time = next((c for c in ("t", "time") if c in frame.columns), None)
             if time is None:
@@ -289,6 +408,9 @@ class Trajectory(Dataset):
     def slice(self, start: int | None = None, stop: int | None = None) -> "Trajectory":
         """Rows ``start:stop`` as a Trajectory (names kept)."""
         return Trajectory.from_dataset(super().slice(start, stop), self._names())
+
+    def _like(self, data: Dataset) -> "Trajectory":
+        return Trajectory.from_dataset(data, self._names())
 
     # -- I/O with the names kept -----------------------------------------------------------------
     def to_pandas(self):

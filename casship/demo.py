@@ -20,7 +20,7 @@ import numpy as np
 from . import models
 from .data import Gaussian
 from .discretize import discretize
-from .estimators import EKF, UKF, rts_smooth
+from .estimators import EKF, UKF
 from .progress import progress
 from .simulate import measure, simulate
 
@@ -32,10 +32,28 @@ SENSORS = {"x": 2.0, "y": 2.0, "psi": np.radians(0.2), "r": np.radians(0.02)}
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """Sizes of the demonstration (``quick`` shrinks records and the fit)."""
+    """Sizes of the demonstration (``quick`` shrinks records and the fit).
 
-    dt: float = 1.0
-    trial_s: float = 1200.0
+    Parameters
+    ----------
+    dt : float
+        Sample time of the records and the filters [s].
+    trial_s : float
+        Length of each identification record [s].
+    free : tuple of str
+        Hull and resistance derivatives the fit estimates.
+    random_record : bool
+        Add a random-rudder record (+-20 deg, moved at the ship's rudder rate) to the zig-zag.
+    guess_factor : float
+        The fit starts at ``guess_factor`` times the true values.
+    validation_s : float
+        Length of the validation manoeuvres [s].
+    seed : int
+        Seed of the random rudder and the sensor noise.
+    """
+
+    dt: float = 2.0
+    trial_s: float = 800.0
     free: tuple = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash", "R_0_dash", "X_vv_dash")
     random_record: bool = True         # a second identification record: random rudder (+-20 deg)
     guess_factor: float = 1.25
@@ -44,8 +62,19 @@ class DemoConfig:
 
     @classmethod
     def make(cls, quick: bool) -> "DemoConfig":
+        """The full or the quick configuration.
+
+        Parameters
+        ----------
+        quick : bool
+            Shorter records and a two-parameter fit.
+
+        Returns
+        -------
+        DemoConfig
+        """
         if quick:
-            return cls(trial_s=700.0, free=("N_r_dash", "N_v_dash"), random_record=False, validation_s=500.0)
+            return cls(trial_s=600.0, free=("N_r_dash", "N_v_dash"), random_record=False, validation_s=500.0)
         return cls()
 
 
@@ -65,9 +94,18 @@ def _trials(ship, cfg: DemoConfig) -> list:
     runs = [("20/20 zig-zag", simulate(ship, x0, t, ZigZag(ship, np.radians(20.0), np.radians(20.0), n,
                                                                t_exec=10.0)))]
     if cfg.random_record:
-        inputs = random_rudder_inputs(ship, t, n, hold=100.0, seed=cfg.seed, ranges_deg={"delta": (-20.0, 20.0)})
+        inputs = random_rudder_inputs(ship, t, n, hold=100.0, seed=cfg.seed, ranges_deg={"delta": (-20.0, 20.0)},
+                                      rate="model")
         runs.append(("random rudder", simulate(ship, x0, t, inputs)))
     return [(name, truth, measure(truth, ship, SENSORS, seed=cfg.seed + i)) for i, (name, truth) in enumerate(runs)]
+
+
+def _rudder_motion(truth) -> dict:
+    """Largest rudder angle [deg] and rudder rate [deg/s] (largest and RMS) of a record."""
+    delta = np.degrees(np.asarray(truth["delta"], dtype=float))
+    rate = np.diff(delta) / np.diff(truth.t)
+    return {"max_rudder_deg": float(np.max(np.abs(delta))), "max_rudder_rate_deg_s": float(np.max(np.abs(rate))),
+            "rms_rudder_rate_deg_s": float(np.sqrt(np.mean(rate**2)))}
 
 
 def _prior(ship, data) -> Gaussian:
@@ -93,7 +131,7 @@ def _filters(ship, data, truth, cfg: DemoConfig):
         out[name] = est.filter(data, prior)
         out[name + "_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    out["EKF+RTS"] = rts_smooth(out["EKF"])
+    out["EKF+RTS"] = ekf.smooth(data, prior)          # filter and backward pass
     out["EKF+RTS_s"] = time.perf_counter() - t0
     rmse = {name: {s: _rmse(out[name][s], truth[s]) for s in ("u", "v", "r")} for name in ("EKF", "UKF", "EKF+RTS")}
     health = {name: bool(out[name].health().ok) for name in ("EKF", "UKF")}
@@ -125,7 +163,7 @@ def _validate(ship, fit, guess, cfg: DemoConfig):
     variants = {"true": ship.params(), "fitted": ship.params(fit.params), "initial guess": ship.params(guess)}
     runs, table = {}, {}
     for man, (kind, rudder) in (("zigzag 10/10", ("zigzag", 10.0)), ("turning 35 deg", ("turning", 35.0))):
-        res = {name: run_maneuver(ship, kind, rudder_deg=rudder, p=p, dt=cfg.dt, duration=cfg.validation_s)
+        res = {name: run_maneuver(ship, kind, rudder_deg=rudder, p=p, dt=1.0, duration=cfg.validation_s)
                for name, p in variants.items()}
         runs[man] = {name: r.trajectory for name, r in res.items()}
         ref = res["true"].trajectory
@@ -165,19 +203,21 @@ def _plt():
 
 def _plot_filters(path: Path, truth, data, est) -> None:
     plt = _plt()
-    fig, axes = plt.subplots(4, 1, figsize=(8, 9), sharex=True)
+    fig, axes = plt.subplots(5, 1, figsize=(8, 10.5), sharex=True)
     t = truth.t
     axes[0].plot(t, np.degrees(truth["delta"]), "k", lw=1)
-    axes[0].set_ylabel("rudder [deg]")
-    for ax, name, scale, unit in ((axes[1], "u", 1.0, "m/s"), (axes[2], "v", 1.0, "m/s"),
-                                  (axes[3], "r", np.degrees(1.0), "deg/s")):
+    axes[0].set_ylabel("rudder angle [deg]")
+    axes[1].plot(0.5 * (t[1:] + t[:-1]), np.diff(np.degrees(truth["delta"])) / np.diff(t), "k", lw=1)
+    axes[1].set_ylabel("rudder rate [deg/s]")
+    for ax, name, scale, unit in ((axes[2], "u", 1.0, "m/s"), (axes[3], "v", 1.0, "m/s"),
+                                  (axes[4], "r", np.degrees(1.0), "deg/s")):
         if name in data:
             ax.plot(t, data[name] * scale, ".", ms=2, color="0.75", label="measured")
         ax.plot(t, truth[name] * scale, "k", lw=1.2, label="true")
         for key, style in (("EKF", "C0-"), ("UKF", "C1--"), ("EKF+RTS", "C2-")):
             ax.plot(t, est[key][name] * scale, style, lw=0.9, label=key)
         ax.set_ylabel(f"{name} [{unit}]")
-    axes[1].legend(loc="upper right", ncol=5, fontsize=8)
+    axes[2].legend(loc="upper right", ncol=5, fontsize=8)
     axes[-1].set_xlabel("t [s]")
     fig.suptitle("20/20 zig-zag: u and v are not measured")
     fig.tight_layout()
@@ -192,8 +232,8 @@ def _plot_validation(path: Path, runs, L: float) -> None:
         for (name, tr), style in zip(variants.items(), ("k-", "C0--", "C3:")):
             ax.plot(tr["y"] / L, tr["x"] / L, style, label=name)
         ax.set_title(man)
-        ax.set_xlabel("y / L (East)")
-        ax.set_ylabel("x / L (North)")
+        ax.set_xlabel("East y / L [-]")
+        ax.set_ylabel("North x / L [-]")
         ax.set_aspect("equal", adjustable="datalim")
         ax.legend(fontsize=8)
     fig.tight_layout()
@@ -202,23 +242,36 @@ def _plot_validation(path: Path, runs, L: float) -> None:
 
 
 # -- the run -----------------------------------------------------------------------------------------------
-def run_demo(out: Path, quick: bool = False) -> dict:
+def run_demo(out: Path, quick: bool = False, *, overwrite: bool = False) -> dict:
     """Run the demonstration and write ``report.md``, ``summary.json`` and PNG figures into ``out``.
 
     Parameters
     ----------
     out : Path
-        Report folder (created if needed).
+        Report folder. It is written only when the run succeeds (see :func:`casship.outdir.output_folder`).
     quick : bool
-        Shorter records and a two-parameter fit (under a minute); the full run takes a few minutes.
+        Shorter records and a two-parameter fit.
+    overwrite : bool
+        Replace an existing non-empty report folder (its old files are removed).
 
     Returns
     -------
     dict
         The summary also written to ``summary.json``; ``summary["headline"]`` holds the key numbers.
+
+    Raises
+    ------
+    FileExistsError
+        ``out`` is a file, or a non-empty folder and ``overwrite`` is false.
     """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    from .outdir import output_folder
+
+    with output_folder(out, overwrite=overwrite) as folder:
+        summary = _run(folder, quick)
+    return summary
+
+
+def _run(out: Path, quick: bool) -> dict:
     cfg = DemoConfig.make(quick)
     stages = ["simulate and measure sea trials", "EKF, UKF and RTS smoother", "maximum-likelihood fit",
               "validation manoeuvres", "autopilot design and closed loop", "report"]
@@ -250,6 +303,8 @@ def run_demo(out: Path, quick: bool = False) -> dict:
     summary = {
         "ship": ship.vessel.name, "quick": quick, "dt_s": cfg.dt, "trial_s": cfg.trial_s,
         "identification_records": [name for name, _, _ in records],
+        "rudder": {name: _rudder_motion(truth) for name, truth, _ in records},
+        "rudder_rate_limit_deg_s": float(np.degrees(ship.vessel.rudder_rate)),
         "sensors_std": {k: float(v) for k, v in SENSORS.items()},
         "rmse": rmse, "filter_health_ok": health,
         "filter_seconds": {k: est[k + "_s"] for k in ("EKF", "UKF", "EKF+RTS")},
@@ -277,10 +332,16 @@ def run_demo(out: Path, quick: bool = False) -> dict:
 
 def _report(s: dict, ship) -> str:
     lines = [
-        "# casship demo: KVLCC2 from noisy trials to an identified model", "",
+        f"# casship demo ({'quick' if s['quick'] else 'full'} run): KVLCC2 from noisy trials to an identified model",
+        "",
         f"Ship: {s['ship']} (MMG standard method, L_pp = {ship.vessel.L_pp:g} m), approach speed "
         f"{ship.vessel.U0:.2f} m/s. Identification records: {' and '.join(s['identification_records'])}, "
         f"{s['trial_s']:g} s each at dt = {s['dt_s']:g} s" + (" (quick mode)." if s["quick"] else "."), "",
+        "| record | max rudder angle [deg] | max rudder rate [deg/s] | RMS rudder rate [deg/s] |",
+        "|---|---|---|---|",
+        *(f"| {name} | {r['max_rudder_deg']:.1f} | {r['max_rudder_rate_deg_s']:.2f} | {r['rms_rudder_rate_deg_s']:.2f} |"
+          for name, r in s["rudder"].items()),
+        "", f"The rudder moves at most at the ship's rudder rate ({s['rudder_rate_limit_deg_s']:.2f} deg/s).", "",
         "## 1. Sensors and state estimation", "",
         "Measured: GNSS position (std 2 m), heading (0.2 deg), rate of turn (0.02 deg/s). Surge u and sway v "
         "are not measured; the filters reconstruct them from the model.", "",
@@ -326,11 +387,13 @@ def _report(s: dict, ship) -> str:
               "the heading observer, rudder limited to 35 deg and 2.32 deg/s (rate limit active "
               f"{100 * s['autopilot']['performance']['rate_limited_fraction']:.1f} % of the time):", "",
               "| step | change [deg] | rise time [s] | overshoot [deg] | settling time [s] | steady error [deg] | "
-              "max rudder [deg] |", "|---|---|---|---|---|---|---|"]
+              "max rudder angle [deg] | max rudder rate [deg/s] | RMS rudder rate [deg/s] |",
+              "|---|---|---|---|---|---|---|---|---|"]
     for i, m in enumerate(s["autopilot"]["closed_loop"]):
         lines.append(f"| {i + 1} | {m['change_deg']:.1f} | {m['rise_time_s']:.0f} | {m['overshoot_deg']:.2f} | "
                      f"{m['settling_time_s']:.0f} | {m['steady_state_error_deg']:.2f} | "
-                     f"{np.degrees(m['steer_max_abs']):.1f} |")
+                     f"{np.degrees(m['steer_max_abs']):.1f} | {np.degrees(m['steer_rate_max']):.2f} | "
+                     f"{np.degrees(m['steer_rate_rms']):.2f} |")
     lines += ["", "![design](autopilot_design.png)", "", "![closed loop](autopilot_closed_loop.png)", "",
               f"Total run time: {s['seconds']:.1f} s.", ""]
     return "\n".join(lines)

@@ -21,8 +21,17 @@ METHODS = ("euler", "rk4", "cvodes")
 def rk4(rhs, z: tuple, h) -> tuple:
     """One classical Runge-Kutta step of ``dz/dt = rhs(*z)`` for a tuple of (symbolic) arrays ``z``.
 
-    ``rhs`` returns a tuple shaped like ``z``; the one RK4 of casship (the explicit discretisation,
-    the continuous-discrete EKF covariance, the Kalman-Bucy filter).
+    The one RK4 of casship (the explicit discretisation, the continuous-discrete EKF covariance,
+    the Kalman-Bucy filter).
+
+    Parameters
+    ----------
+    rhs : callable
+        ``rhs(*z)`` returns a tuple shaped like ``z``.
+    z : tuple
+        The state at the start of the step.
+    h : float or symbolic
+        Step length.
     """
     k1 = rhs(*z)
     k2 = rhs(*(a + h / 2 * k for a, k in zip(z, k1)))
@@ -32,7 +41,19 @@ def rk4(rhs, z: tuple, h) -> tuple:
 
 
 class DiscreteModel:
-    """A discrete-time view of a model.
+    """A discrete-time view of a model (build it with :func:`discretize`).
+
+    Parameters
+    ----------
+    model : Model
+    dt : float, optional
+        Nominal step [s] (a discrete-time model's own by default).
+    method : {"rk4", "euler", "cvodes"}, optional
+        Integration method of a continuous model (default ``"rk4"``).
+    substeps : int
+        Sub-steps of the explicit methods.
+    options : dict, optional
+        CVODES options.
 
     Attributes
     ----------
@@ -50,10 +71,21 @@ class DiscreteModel:
         ``F_nominal(x, u, p, w) -> xf`` with ``dt`` bound to the nominal step.
     """
 
-    def __init__(self, model: Model, dt: float, method: str = "rk4", substeps: int = 1,
+    def __init__(self, model: Model, dt: float | None = None, method: str | None = None, substeps: int = 1,
                  options: dict | None = None):
-        if method not in METHODS:
-            raise ValueError(f"unknown discretisation method {method!r}; use one of {METHODS}")
+        if model.dt is not None:                      # a discrete-time model: its own step, exactly
+            if dt is not None and not np.isclose(float(dt), model.dt, rtol=1e-12, atol=0.0):
+                raise ValueError(f"model {model.name!r} is discrete-time with dt = {model.dt:g} s; got dt = {dt}")
+            if method not in (None, "discrete") or substeps != 1 or options:
+                raise ValueError(f"model {model.name!r} is discrete-time: it has its own step (no method, "
+                                 f"substeps or integrator options), got method={method!r}")
+            dt, method = model.dt, "discrete"
+        else:
+            method = "rk4" if method is None else method
+            if method not in METHODS:
+                raise ValueError(f"unknown discretisation method {method!r}; use one of {METHODS}")
+            if dt is None:
+                raise ValueError(f"model {model.name!r} is continuous-time: give the step dt")
         dt = float(dt)
         if not np.isfinite(dt) or dt <= 0:
             raise ValueError(f"dt must be a positive finite number, got {dt}")
@@ -71,6 +103,9 @@ class DiscreteModel:
         h = sym.sym("dt")
         if method == "cvodes":
             xf = self._cvodes(x, u, p, w, h, options or {})
+        elif method == "discrete":
+            # x[k+1] = x + dt f (f is the model's rate over its step); a step of length 0 is no step
+            xf = ca.if_else(h > 0, x + dt * model.f(x, u, p, w), x)
         else:
             xf = x
             hs = h / substeps
@@ -108,16 +143,48 @@ class DiscreteModel:
         """Pickle as the recipe (model, dt, method, substeps, options); rebuilt on loading."""
         return DiscreteModel, (self.model, self.dt, self.method, self.substeps, self._options or None)
 
-    def require_continuous(self, what: str) -> None:
-        """Raise ``ValueError`` if ``what`` needs the continuous model and this one has none."""
+    @property
+    def discrete(self) -> bool:
+        """True for a model written in discrete time (:class:`~casship.ModelBuilder` with ``dt``)."""
+        return self.method == "discrete"
 
-    def check_steps(self, dt: np.ndarray, t: np.ndarray | None = None) -> None:
-        """Check the time steps of a record against this discretisation (any positive step works
-        for a discretised continuous model)."""
+    def require_continuous(self, what: str) -> None:
+        """Raise ``ValueError`` if ``what`` needs a continuous-time model and this one is discrete-time.
+
+        Parameters
+        ----------
+        what : str
+            The feature that needs it, for the message.
+        """
+        if self.discrete:
+            raise ValueError(f"{what} needs a continuous-time model; {self.model.name!r} is discrete-time "
+                             f"(dt = {self.dt:g} s)")
+
+    def check_steps(self, dt, t=None) -> None:
+        """Check the time steps of a record: any positive step for a discretised continuous model,
+        the model's own step for a discrete-time one (``ValueError`` naming the row otherwise).
+
+        Parameters
+        ----------
+        dt : array
+            The steps between consecutive samples.
+        t : array, optional
+            The time stamps (for the message).
+        """
+        if not self.discrete:
+            return
+        dt = np.asarray(dt, dtype=float)
+        bad = np.flatnonzero(~np.isclose(dt, self.dt, rtol=1e-6, atol=0.0))
+        if bad.size:
+            k = int(bad[0]) + 1
+            when = f" (t = {t[k]:g} s)" if t is not None else ""
+            raise ValueError(f"discrete-time model {self.model.name!r} steps dt = {self.dt:g} s; row {k}{when} "
+                             f"comes {dt[k - 1]:g} s after the previous one")
 
     # -- convenience ----------------------------------------------------------------------------------
     @property
     def name(self) -> str:
+        """The model's name."""
         return self.model.name
 
     def __repr__(self) -> str:
@@ -125,6 +192,10 @@ class DiscreteModel:
 
     def fold(self, n: int) -> ca.Function:
         """``F`` folded over ``n`` steps (``mapaccum``), cached per length.
+
+        Parameters
+        ----------
+        n : int
 
         ``fold(x0, U, p, W, dt) -> X`` with ``U`` (nu, n), ``W`` (nw, n), ``dt`` (1, n) and ``X`` the
         (nx, n) states after each step; see :func:`casship.simulate.fold_steps` for records of any length.
@@ -137,14 +208,33 @@ class DiscreteModel:
         return self._folds[n]
 
     def step(self, x, u, p=None, w=None, dt=None) -> np.ndarray:
-        """One step numerically (convenience; batch work should use :func:`casship.simulate`)."""
+        """One step numerically (convenience; batch work should use :func:`casship.simulate`).
+
+        Parameters
+        ----------
+        x, u : array
+            State and input held over the step.
+        p, w : array, optional
+            Parameters (nominal) and noise held over the step (zero).
+        dt : float, optional
+            Step length (the nominal one by default).
+        """
         m = self.model
         p = m.params() if p is None else p
         w = np.zeros(m.nw) if w is None else w
         return np.asarray(self.F(x, u, p, w, self.dt if dt is None else dt)).reshape(-1)
 
     def linearize(self, x, u, p=None, dt=None):
-        """Exact discrete Jacobians ``(A, B, G)`` at ``(x, u, p, w=0)``."""
+        """Exact discrete Jacobians ``(A, B, G)`` at ``(x, u, p, w=0)``.
+
+        Parameters
+        ----------
+        x, u : array
+        p : array, optional
+            Parameters (nominal by default).
+        dt : float, optional
+            Step length (the nominal one by default).
+        """
         m = self.model
         p = m.params() if p is None else p
         A, B, _, G = self.F_jac(x, u, p, np.zeros(m.nw), self.dt if dt is None else dt)
@@ -155,27 +245,41 @@ class DiscreteModel:
 
         Uses Van Loan's method on the exact linearisation at ``(x, u, p)``; compare with the
         zero-order-hold convention ``G Qd G'`` that the filters use when ``w`` is held over a step.
+
+        Parameters
+        ----------
+        Qc : array
+            Power spectral density of ``w``.
+        x, u : array
+            Operating point.
+        p : array, optional
+        dt : float, optional
         """
+        self.require_continuous("process_noise (continuous white noise)")
         m = self.model
         p = m.params() if p is None else p
         A, _, _, G = m.f_jac(x, u, p, np.zeros(m.nw))
         return van_loan(np.array(A), np.array(G), np.atleast_2d(Qc), self.dt if dt is None else dt)[1]
 
 
-def discretize(model: Model, dt: float, method: str = "rk4", substeps: int = 1,
+def discretize(model: Model, dt: float | None = None, method: str | None = None, substeps: int = 1,
                options: dict | None = None) -> DiscreteModel:
-    """Discretise ``model`` with step ``dt``.
+    """Discretise ``model`` with step ``dt`` (a discrete-time model: its own step).
 
     Parameters
     ----------
     model : Model
     dt : float
-        Nominal step [s]. The step Function also accepts other ``dt`` values.
-    method : {"euler", "rk4", "cvodes"}
-        Explicit Euler (as in the seed papers), classical RK4 with ``substeps`` sub-steps, or
-        CasADi's adaptive CVODES integrator (tolerances 1e-10 unless ``options`` say otherwise).
+        Nominal step [s]. The step Function also accepts other ``dt`` values. For a discrete-time
+        model (``ModelBuilder(name, dt=...)``) it may be left out and must equal the model's.
+    method : {"rk4", "euler", "cvodes"}
+        Classical RK4 with ``substeps`` sub-steps (default), explicit Euler (as in the seed papers),
+        or CasADi's adaptive CVODES integrator (tolerances 1e-10 unless ``options`` say otherwise).
+        A discrete-time model takes none (its method is ``"discrete"``).
     substeps : int
         Number of equal sub-steps for the explicit methods.
+    options : dict, optional
+        Integrator options for ``"cvodes"``.
 
     Examples
     --------

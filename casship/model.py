@@ -77,6 +77,10 @@ class ModelBuilder:
         Name of the model (used for Function names and reports).
     doc : str, optional
         One-line description with the source of the model.
+    dt : float, optional
+        Sampling period [s] of a discrete-time model: its states are then given as
+        ``x[k+1] = F(x, u, p, w)`` with :meth:`next` instead of :meth:`ode`, and the noise ``w``
+        is the discrete noise of one step (its covariance ``Q`` is the discrete ``Qd``).
 
     Examples
     --------
@@ -92,9 +96,12 @@ class ModelBuilder:
     ('psi', 'r')
     """
 
-    def __init__(self, name: str, doc: str = ""):
+    def __init__(self, name: str, doc: str = "", *, dt: float | None = None):
         self.name = name
         self.doc = doc
+        if dt is not None and not (np.isfinite(float(dt)) and float(dt) > 0):
+            raise ValueError(f"model {name!r}: dt must be a positive sampling period, got {dt!r}")
+        self.dt = None if dt is None else float(dt)
         self._kinds: dict[str, str] = {}
         self._symbols: dict[str, ca.SX] = {}
         self._states: list[Variable] = []
@@ -185,10 +192,31 @@ class ModelBuilder:
     # -- equations ----------------------------------------------------------------------------
     def ode(self, **rhs) -> None:
         """Set the time derivative of states by name, e.g. ``b.ode(psi=r, r=...)``."""
+        if self.dt is not None:
+            raise ValueError(f"model {self.name!r} is discrete-time (dt = {self.dt:g} s): give x[k+1] with next(...)")
         for name, expr in rhs.items():
             if self._kinds.get(name) != "state":
                 raise ValueError(f"ode: {name!r} is not a declared state")
             self._ode[name] = _as_sx(expr, f"ode for {name!r}")
+
+    def next(self, **rhs) -> None:
+        """Set the next state ``x[k+1]`` of a discrete-time model by name, e.g. ``b.next(x=x + dt * v)``.
+
+        The model keeps ``(x[k+1] - x[k]) / dt`` as its rate ``f``, so that composition
+        (:meth:`add_to_ode`, :func:`~casship.augment`) adds ``dt`` times a rate to the step.
+
+        Parameters
+        ----------
+        **rhs
+            State name -> expression of ``x[k+1]`` in the declared symbols.
+        """
+        if self.dt is None:
+            raise ValueError(f"model {self.name!r} is continuous-time: give derivatives with ode(...), or "
+                             "build a discrete-time model with ModelBuilder(name, dt=...)")
+        for name, expr in rhs.items():
+            if self._kinds.get(name) != "state":
+                raise ValueError(f"next: {name!r} is not a declared state")
+            self._ode[name] = (_as_sx(expr, f"next for {name!r}") - self._symbols[name]) / self.dt
 
     def add_to_ode(self, **rhs) -> None:
         """Add terms to existing state derivatives (for composing models)."""
@@ -245,7 +273,7 @@ class ModelBuilder:
         return Model(self)
 
     def copy(self, name: str | None = None) -> "ModelBuilder":
-        new = ModelBuilder(name or self.name, self.doc)
+        new = ModelBuilder(name or self.name, self.doc, dt=self.dt)
         new._kinds = dict(self._kinds)
         new._symbols = dict(self._symbols)
         new._states, new._inputs = list(self._states), list(self._inputs)
@@ -286,7 +314,7 @@ def _vec(symbols: Iterable[ca.SX]) -> ca.SX:
 
 
 class Model:
-    """An immutable continuous-time model built by :class:`ModelBuilder`.
+    """An immutable model built by :class:`ModelBuilder` (continuous-time, or discrete-time with ``dt``).
 
     Attributes
     ----------
@@ -303,6 +331,9 @@ class Model:
     f_jac, h_jac : casadi.Function
         Exact Jacobians ``(A, B, Fp, G)`` of ``f`` and ``(C, D, Hp)`` of ``h``.
     state_names, input_names, param_names, noise_names, output_names : tuple of str
+    dt : float or None
+        Sampling period of a discrete-time model (``None``: continuous-time); its ``f`` is the
+        rate over a step ``(x[k+1] - x[k]) / dt`` and :func:`~casship.discretize` gives its exact step.
     """
 
     def __init__(self, builder: ModelBuilder):
@@ -310,6 +341,7 @@ class Model:
         b = self._builder
         self.name = b.name
         self.c_name = _c_name(b.name)
+        self.dt = getattr(b, "dt", None)
         self.doc = b.doc
         self.vessel = b.vessel
         self.limits = MappingProxyType({n: b._limits[n] for n in (*(v.name for v in b._states),

@@ -17,7 +17,16 @@ __all__ = ["simulate", "measure", "input_matrix", "fold_steps", "IntegrationErro
 
 class IntegrationError(RuntimeError):
     """An integrator (CVODES) failed; ``status`` is its return flag, ``step`` the first step of the
-    block of steps in which it failed."""
+    block of steps in which it failed.
+
+    Parameters
+    ----------
+    message : str
+    status : str
+        The integrator's return flag.
+    step : int
+        First step of the block in which it failed.
+    """
 
     def __init__(self, message: str, status: str, step: int):
         super().__init__(message)
@@ -33,6 +42,15 @@ def _status(exc: Exception) -> str:
 
 def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | None:
     """Inputs as an (N, nu) array from an array, a mapping name -> array/constant or a Dataset.
+
+    Parameters
+    ----------
+    model : Model
+    t : array
+        The time grid.
+    inputs : array, mapping, Dataset, callable or None
+    x0 : array, optional
+        Unused (kept for callers that pass it).
 
     Returns ``None`` for a callable (evaluated during the simulation).
     """
@@ -117,6 +135,16 @@ def _padded(a: np.ndarray, total: int) -> np.ndarray:
 def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
     """Run ``x[k+1] = F(x[k], U[k], p, W[k], dt[k])`` over all steps through a compiled fold.
 
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    x0 : array
+    U, W : arrays (steps, nu) and (steps, nw)
+        Inputs and noise held over each step.
+    p : array
+    dt : array
+        Step lengths.
+
     The record is processed in blocks by one cached ``mapaccum`` of the step Function (building a
     fold of the full length would cost more than evaluating it); the state is carried from block
     to block, so the result is identical to a single fold. Returns the (len(dt) + 1, nx) array of
@@ -164,7 +192,7 @@ def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
     return Y[:, :n].T.reshape(n, model.ny)
 
 
-def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", max_step: float | None = None,
+def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = None, max_step: float | None = None,
              w=None, options: dict | None = None, check_limits: bool = True) -> Trajectory:
     """Simulate ``model`` from ``x0`` on the time grid ``t``.
 
@@ -181,9 +209,11 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     p : array_like or mapping, optional
         Parameters (nominal by default).
     method : {"rk4", "euler", "cvodes"}
-        Integration method per interval (see :func:`casship.discretize`). With ``"cvodes"`` and
-        inputs (and noise) constant over the record, one adaptive integration with outputs on the
-        grid replaces the restart at every sample.
+        Integration method per interval (see :func:`casship.discretize`; default ``"rk4"``). With
+        ``"cvodes"`` and inputs (and noise) constant over the record, one adaptive integration with
+        outputs on the grid replaces the restart at every sample. A discrete-time model
+        (``ModelBuilder(name, dt=...)``) takes no method: it steps ``x[k+1] = F(x, u, p, w)`` on a
+        grid of its own ``dt``.
     max_step : float, optional
         Largest explicit sub-step [s]; by default one sub-step per interval.
     w : array (N, nw), optional
@@ -230,10 +260,19 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str = "rk4", m
     dt = np.diff(t)
     if max_step is not None and not (np.isfinite(max_step) and max_step > 0):
         raise ValueError(f"max_step must be a positive finite number, got {max_step}")
-    substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
-    key = ("discretize", method, substeps, tuple(sorted((options or {}).items())))
-    dmodel = model._cached(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
-                                                   substeps=substeps, options=options))
+    if model.dt is not None:
+        if method is not None or max_step is not None or options:
+            raise ValueError(f"model {model.name!r} is discrete-time: it steps x[k+1] = F(x, u, p, w) itself "
+                             "(no method, max_step or integrator options)")
+        dmodel = model._cached(("discretize", "discrete"), lambda: discretize(model))
+        dmodel.check_steps(dt, t)
+        method, substeps = "discrete", 1      # it steps itself: no integrator stability limit to check
+    else:
+        method = "rk4" if method is None else method
+        substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
+        key = ("discretize", method, substeps, tuple(sorted((options or {}).items())))
+        dmodel = model._cached(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
+                                                       substeps=substeps, options=options))
     W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
     if check_limits:

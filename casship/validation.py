@@ -8,6 +8,7 @@ replayed run and of the measurement, computed by the same functions of :mod:`cas
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -24,7 +25,7 @@ __all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics"]
 class ReplayResult:
     """Result of :func:`replay`.
 
-    Attributes
+    Parameters
     ----------
     trajectory : Trajectory
         The replayed simulation on the record's time stamps.
@@ -35,6 +36,8 @@ class ReplayResult:
         Manoeuvre metrics of the replayed run and of the record (same functions, same execute).
     kind : str
         ``"turning"``, ``"zigzag"`` or ``"other"`` (from :func:`classify_maneuver`).
+    measured : Dataset, optional
+        The record replayed (for :meth:`plot`).
     """
 
     trajectory: Trajectory
@@ -42,6 +45,77 @@ class ReplayResult:
     metrics: dict = field(default_factory=dict)
     measured_metrics: dict = field(default_factory=dict)
     kind: str = "other"
+    measured: Dataset | None = field(default=None, repr=False)
+
+    def __repr__(self) -> str:
+        errors = ", ".join(f"{k}={v:.3g}" for k, v in self.errors.items())
+        return (f"ReplayResult({self.trajectory.model_name!r}, {self.kind}, N={len(self.trajectory)}, "
+                f"{errors})")
+
+    def summary(self) -> str:
+        """The replay errors and the metrics of replay and record side by side, as text.
+
+        Returns
+        -------
+        str
+        """
+        tr = self.trajectory
+        lines = [f"replay of {self.measured.meta.get('source', 'a record') if self.measured is not None else 'a record'}"
+                 f" with {tr.model_name!r}: {self.kind}, {len(tr)} samples over {tr.t[-1] - tr.t[0]:.4g} s"]
+        lines += [f"  {k:28s} {v:12.4f}" for k, v in self.errors.items()]
+        keys = [k for k in self.metrics if k in self.measured_metrics and isinstance(self.metrics[k], float)]
+        if keys:
+            lines.append(f"  {'metric':28s} {'replayed':>12s} {'measured':>12s}")
+            lines += [f"  {k:28s} {self.metrics[k]:12.2f} {self.measured_metrics[k]:12.2f}" for k in keys]
+        return "\n".join(lines)
+
+    def plot(self, path=None):
+        """Track, heading, surge speed and rudder of the replay against the record.
+
+        Parameters
+        ----------
+        path : str or Path, optional
+            Save the figure as PNG there (and close it); otherwise return it open.
+
+        Returns
+        -------
+        matplotlib.figure.Figure or Path
+        """
+        import matplotlib.pyplot as plt
+
+        tr, data = self.trajectory, self.measured
+        fig, axes = plt.subplots(2, 2, figsize=(11, 7))
+        track, heading, speed, rudder = axes.ravel()
+        track.plot(tr["y"], tr["x"], label="replayed")
+        heading.plot(tr.t, np.degrees(np.unwrap(tr["psi"])), label="replayed")
+        if "u" in tr:
+            speed.plot(tr.t, tr["u"], label="replayed")
+        if data is not None:
+            if "x" in data and "y" in data:
+                track.plot(data["y"], data["x"], "--", label="measured")
+            if "psi" in data:
+                heading.plot(data.t, np.degrees(np.unwrap(data["psi"])), "--", label="measured")
+            if "u" in data:
+                speed.plot(data.t, data["u"], "--", label="measured")
+        for name in tr.input_names:
+            if name.startswith("delta"):
+                rudder.plot(tr.t, np.degrees(tr[name]), label=f"{name}")
+        track.set(xlabel="East y [m]", ylabel="North x [m]", title="track")
+        track.set_aspect("equal", adjustable="datalim")
+        heading.set(xlabel="time [s]", ylabel="heading psi [deg]")
+        speed.set(xlabel="time [s]", ylabel="surge speed u [m/s]")
+        rudder.set(xlabel="time [s]", ylabel="rudder angle [deg]")
+        for ax in axes.ravel():
+            ax.grid(alpha=0.3)
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=8)
+        fig.suptitle(f"replay of the measured inputs with {tr.model_name!r} ({self.kind})")
+        fig.tight_layout()
+        if path is None:
+            return fig
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        return Path(path)
 
 
 def classify_maneuver(data: Dataset, rudder: str = "delta") -> tuple[str, dict]:
@@ -96,7 +170,7 @@ def maneuver_metrics(data: Dataset, kind: str, options: dict, *, t_exec: float, 
 
 
 def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step: float | None = None,
-           x0=None) -> ReplayResult:
+           x0=None, check_limits: bool = True) -> ReplayResult:
     """Simulate ``model`` with the measured inputs of ``data`` from its measured initial state.
 
     Parameters
@@ -112,6 +186,9 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     x0 : array_like or mapping, optional
         Initial state; by default the first row of the record's columns named like the states
         (states without a column start at zero).
+    check_limits : bool
+        Check the measured inputs, the initial state and the time steps against the model's
+        validity ranges (see :func:`casship.simulate`).
 
     Returns
     -------
@@ -126,7 +203,7 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
                     raise ValueError(f"initial value of state {name!r} is missing (NaN) in the first row")
                 values[name] = v
         x0 = model.states(**values)
-    traj = simulate(model, x0, data.t, data, p, method=method, max_step=max_step)
+    traj = simulate(model, x0, data.t, data, p, method=method, max_step=max_step, check_limits=check_limits)
     errors = {}
     if "psi" in data:
         e = wrap(traj["psi"] - data["psi"])
@@ -147,4 +224,4 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
         t_exec = execute_time(data)
         metrics = maneuver_metrics(traj, kind, options, t_exec=t_exec, L=L)
         measured = maneuver_metrics(data, kind, options, t_exec=t_exec, L=L)
-    return ReplayResult(traj, errors, metrics, measured, kind)
+    return ReplayResult(traj, errors, metrics, measured, kind, data)

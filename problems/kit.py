@@ -165,9 +165,10 @@ class Departure:
     effect: str
 
 
-def effect(main: Mapping[str, float], alt: Mapping[str, float], *, alt_name: str = "other reading",
-           spec: str = ".3g", units: Mapping[str, str] | None = None) -> str:
-    """``"key: 1.23 -> 1.45 (+18 %); ..."`` -- headline numbers of this study vs the other reading."""
+def effect(main: Mapping[str, float], alt: Mapping[str, float], *, alt_name: str = "the other reading",
+           spec: str = ".3g", units: Mapping[str, str] | None = None, relative: bool = True) -> str:
+    """``"key: 1.23 -> 1.45 (+18 %); ..."`` -- headline numbers of this study vs the other reading
+    (``relative=False`` leaves out the relative change, e.g. for numbers that are already errors in %)."""
     units = units or {}
     parts = []
     for key, a in main.items():
@@ -175,12 +176,12 @@ def effect(main: Mapping[str, float], alt: Mapping[str, float], *, alt_name: str
         unit = f" {units[key]}" if key in units else ""
         rel = ""
         try:
-            if float(a) != 0 and math.isfinite(float(a)) and math.isfinite(float(b)):
+            if relative and float(a) != 0 and math.isfinite(float(a)) and math.isfinite(float(b)):
                 rel = f" ({100.0 * (float(b) - float(a)) / abs(float(a)):+.0f} %)"
         except (TypeError, ValueError):
             pass
         parts.append(f"{key}: {fmt(a, spec)} -> {fmt(b, spec)}{unit}{rel}")
-    return f"with the {alt_name}: " + "; ".join(parts)
+    return f"with {alt_name}: " + "; ".join(parts)
 
 
 class Report:

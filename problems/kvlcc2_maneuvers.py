@@ -14,7 +14,8 @@ zig-zags. For each, three records are compared with the same metric functions
 
 Outputs: ``metrics.md`` (table + IMO MSC.137(76) checks), ``report.md``, ``fig_<run>.png``
 (trajectories and headings), ``summary.json``. Without the data folder the study simulates only
-and says so.
+and says so. The report's departures table measures what the model's choices (propeller rate,
+rudder rate, wake fraction) do to the turning circle.
 """
 from __future__ import annotations
 
@@ -29,7 +30,8 @@ from casship.models import kvlcc2
 from casship.progress import progress
 from casship.validation import replay
 
-from . import DATA_DIR, Study
+from . import Study
+from .kit import Departure, Report, data_folder, effect, write_json
 
 L = 320.0
 RUNS = {  # short name -> (kind, rudder deg, switch heading deg, MARIN file key)
@@ -102,22 +104,55 @@ def _differences(name, kind, table):
     return lines
 
 
-def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
+def _turning_headline(ship, speed: float, t_exec: float, dt: float, duration: float, **kwargs) -> dict:
+    """Advance and tactical diameter (in ship lengths) of a 35 deg starboard turning circle."""
+    res = run_maneuver(ship, "turning", rudder_deg=35.0, speed=speed, duration=duration, dt=dt,
+                       t_exec=round(t_exec / dt) * dt, **kwargs)
+    m = turning_metrics(res.trajectory, t_exec=res.settings["t_exec_s"], L=L)
+    return {"advance/L": m["advance_m"] / L, "tactical diameter/L": m["tactical_diameter_m"] / L}
+
+
+def departures(speed: float, t_exec: float, dt: float, n_eq: float, n_meas: float | None) -> list[Departure]:
+    """What the model's open choices do to the simulated turning circle (35 deg, starboard)."""
+    ship = kvlcc2()
+    duration = 900.0
+    main = _turning_headline(ship, speed, t_exec, dt, duration)
+    rows = [
+        Departure("propeller rate", "the MARIN runs hold the approach speed at 1.53 rps (measured)",
+                  f"solved for equilibrium at the measured approach speed ({n_eq:.3f} rps)",
+                  effect(main, _turning_headline(ship, speed, t_exec, dt, duration, n=n_meas),
+                         alt_name=f"the measured {n_meas:.3f} rps (the ship slows down)") if n_meas else
+                  "not measured (no MARIN data)"),
+        Departure("rudder rate", "2.32 deg/s full scale (SIMMAN 2020 conditions); 1.76 deg/s is also quoted",
+                  "2.32 deg/s", effect(main, _turning_headline(ship, speed, t_exec, dt, duration,
+                                                               rate=np.radians(1.76)), alt_name="a rudder rate of 1.76 deg/s")),
+        Departure("wake fraction w_P0", "0.40 at model scale, 0.35 at full scale in the sources", "0.35 (full scale)",
+                  effect(main, _turning_headline(kvlcc2({"w_P0": 0.40}), speed, t_exec, dt, duration),
+                         alt_name="the model-scale w_P0 = 0.40")),
+        Departure("scale of the hull coefficients", "Yasukawa & Yoshimura (2015) give model-scale coefficients",
+                  "applied at full scale, as every implementation does (no scale-effect correction)", "not measured"),
+    ]
+    return rows
+
+
+def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=None) -> dict:
     """Run the study; ``quick`` uses a 0.5 s step, shorter runs and every 4th measured sample."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    folder = DATA_DIR / "kvlcc2_marin_free"
-    files = marin_runs(folder) if folder.is_dir() else {}
+    folder = data_folder(data_dir, "kvlcc2_marin_free", study="kvlcc2-maneuvers",
+                         part="the comparison with the MARIN free-running runs")
+    files = marin_runs(folder) if folder is not None else {}
     have_data = bool(files)
     ship = kvlcc2()
     dt = 0.5 if quick else 0.1
     summary = {"quick": quick, "data": have_data, "L_pp_m": L, "runs": {}}
-    report = ["# KVLCC2 manoeuvres: MMG standard method vs MARIN free-running tests", ""]
+    rep = Report("KVLCC2 manoeuvres: MMG standard method vs MARIN free-running tests", quick=quick)
     if not have_data:
-        report += [f"**The MARIN data folder `{folder}` is absent: simulated manoeuvres only, no comparison.**", ""]
+        rep.add("**The MARIN data folder is absent (give `--data DIR` or set `CASSHIP_DATA`): simulated "
+                "manoeuvres only, no comparison.**")
     tables = {}
     imo_rows = {}
-    stages = progress(list(RUNS), "kvlcc2-maneuvers")
+    stages = progress(list(RUNS) + ["departures"], "kvlcc2-maneuvers")
     for name, (kind, rudder, heading, key) in RUNS.items():
         next(stages)
         measured = read_marin(files[key]) if have_data and key in files else None
@@ -136,23 +171,20 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
                            duration=duration, dt=dt, t_exec=round(t_exec / dt) * dt)
         records = {"simulated": sim.trajectory}
         table = {"simulated": _metrics(sim.trajectory, kind, heading, sim.settings["t_exec_s"])}
-        entry = {"speed_mps": speed, "rps_equilibrium": sim.settings["n"], "first_side": int(first_side)}
+        entry = {"speed_mps": speed, "rps_equilibrium": sim.settings["n"], "first_side": int(first_side),
+                 "t_exec_s": t_exec}
         if measured is not None:
-            rep = replay(ship, measured)
-            records["measured"], records["replayed"] = measured, rep.trajectory
+            rp = replay(ship, measured)
+            records["measured"], records["replayed"] = measured, rp.trajectory
             table["measured"] = _metrics(measured, kind, heading, t_exec)
-            table["replayed"] = _metrics(rep.trajectory, kind, heading, t_exec)
-            entry.update({"rps_measured": float(np.mean(measured["n"])), "replay_errors": rep.errors})
+            table["replayed"] = _metrics(rp.trajectory, kind, heading, t_exec)
+            entry.update({"rps_measured": float(np.mean(measured["n"])), "replay_errors": rp.errors})
         entry["metrics"] = table
         tables[name] = table
         summary["runs"][name] = entry
         _plot(out / f"fig_{name}.png", name, records)
-        if kind == "turning":
-            imo_rows.setdefault("turning", {}).update({k: v for k, v in table.items()})
-        else:
-            imo_rows.setdefault(f"zz{int(rudder)}", {}).update({k: v for k, v in table.items()})
-
-    # metrics table
+        imo_rows.setdefault("turning" if kind == "turning" else f"zz{int(rudder)}", {}).update(table)
+    next(stages)
     lines = ["| run | metric | measured | simulated | replayed |", "|---|---|---:|---:|---:|"]
     for name, (kind, *_rest) in RUNS.items():
         t = tables[name]
@@ -173,51 +205,50 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
         summary["imo"][src] = rows
         imo_md += [f"### IMO MSC.137(76) criteria, {src}", "", imo_table(rows), ""]
     (out / "metrics.md").write_text(metric_table + "\n\n" + "\n".join(imo_md))
-
     diffs = []
     for name, (kind, *_rest) in RUNS.items():
         diffs += _differences(name, kind, tables[name])
-    n_eq = summary["runs"]["turning_35"]["rps_equilibrium"]
-    report += [
-        "Model: `casship.models.kvlcc2()` (MMG standard method, Yasukawa & Yoshimura 2015, model-scale",
-        "coefficients applied at full scale). Simulated runs start from a straight run at the measured approach",
-        f"speed with the propeller rate solved for equilibrium ({n_eq:.3f} rps); replayed runs use the measured",
-        "rudder angle and propeller rate from the measured initial state.", "",
-        "## Metrics", "", metric_table, "", *imo_md,
-    ]
+    turn = summary["runs"]["turning_35"]
+    n_eq, n_meas = turn["rps_equilibrium"], turn.get("rps_measured")
+    deps = departures(turn["speed_mps"], turn["t_exec_s"], dt, n_eq, n_meas)
+    rep.add("Model: `casship.models.kvlcc2()` (MMG standard method, Yasukawa & Yoshimura 2015, model-scale "
+            "coefficients applied at full scale). Simulated runs start from a straight run at the measured approach "
+            f"speed with the propeller rate solved for equilibrium ({n_eq:.3f} rps); replayed runs use the measured "
+            "rudder angle and propeller rate from the measured initial state.")
+    rep.section("Metrics")
+    rep.add(metric_table, *imo_md)
     if have_data:
-        n_meas = summary["runs"]["turning_35"].get("rps_measured", float("nan"))
-        report += [
-            "## Differences (|relative difference| >= 10 %, simulated vs measured)", "",
-            *(diffs or ["- none above 10 %."]), "",
-            "## Notes", "",
-            f"- The model needs {n_eq:.2f} rps to hold the approach speed while the ship ran at {n_meas:.2f} rps:",
-            "  the straight-run resistance R'_0 = 0.022 is a model-scale value (friction is relatively larger at",
-            "  model scale), so replays with the measured rate lose speed (see `replay_errors.u_rmse_mps`).",
-            "- Free-running data: positions are printed with three significant digits (about +-5 m late in the",
-            "  turn); the reference point of positions and velocities is not stated in the files.",
+        rep.section("Differences (|relative difference| >= 10 %, simulated vs measured)")
+        rep.add("\n".join(diffs or ["- none above 10 %."]))
+        notes = [
+            f"- The model needs {n_eq:.2f} rps to hold the approach speed while the ship ran at {n_meas:.2f} rps: "
+            "the straight-run resistance R'_0 = 0.022 is a model-scale value (friction is relatively larger at "
+            "model scale), so replays with the measured rate lose speed (see `replay_errors.u_rmse_mps`).",
+            "- Free-running data: positions are printed with three significant digits (about +-5 m late in the "
+            "turn); the reference point of positions and velocities is not stated in the files.",
             "- The model is 3-DOF: the roll recorded in the files (phi, p) is not modelled.",
-            "- Metric definitions (casship.maneuvers): execute = first rudder change > 1 deg; advance/transfer at",
-            "  90 deg and tactical diameter at 180 deg heading change from the execute; steady diameter = least-",
-            "  squares circle from 360 deg heading change until the rudder is returned (pull-out at the end of the",
-            "  MARIN turning run); zig-zag overshoots from the heading change at the execute.",
-            "- The measured 10/10 record ends before its third rudder reversal, so it has no period.",
-        ]
+            "- Metric definitions (casship.maneuvers): execute = first rudder change > 1 deg; advance/transfer at "
+            "90 deg and tactical diameter at 180 deg heading change from the execute; steady diameter = least-"
+            "squares circle from 360 deg heading change until the rudder is returned (pull-out at the end of the "
+            "MARIN turning run); zig-zag overshoots from the heading change at the execute.",
+            "- The measured 10/10 record ends before its third rudder reversal, so it has no period."]
         for name in RUNS:
             e = summary["runs"][name].get("replay_errors", {})
             if e:
-                report.append(f"- replay {name}: psi RMSE {e['psi_rmse_deg']:.1f} deg, position RMSE "
-                              f"{e['position_rmse_m']:.0f} m, u RMSE {e['u_rmse_mps']:.2f} m/s.")
-    if quick:
-        report += ["", "_Quick mode: 0.5 s step, shortened runs, every 4th measured sample._"]
-    (out / "report.md").write_text("\n".join(report) + "\n")
-    try:
-        next(stages)
-    except StopIteration:
-        pass
+                notes.append(f"- replay {name}: psi RMSE {e['psi_rmse_deg']:.1f} deg, position RMSE "
+                             f"{e['position_rmse_m']:.0f} m, u RMSE {e['u_rmse_mps']:.2f} m/s.")
+        rep.section("Notes")
+        rep.add("\n".join(notes))
+    rep.add(*[f"![{name}](fig_{name}.png)" for name in RUNS])
+    rep.departures(deps, "Headline numbers: the simulated 35 deg turning circle's advance and tactical diameter "
+                         "(in ship lengths). Reference: Yasukawa & Yoshimura (2015) and the SIMMAN 2020 test "
+                         "conditions.")
+    rep.write(out)
     summary["differences"] = diffs
-    return summary
+    summary["departures"] = [d.__dict__ for d in deps]
+    next(stages, None)
+    return write_json(out / "summary.json", summary)
 
 
 STUDY = Study("kvlcc2-maneuvers", "KVLCC2 turning circle and zig-zags: MMG standard method vs MARIN free-running",
-              run, needs_data=True)
+              run)

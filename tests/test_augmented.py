@@ -10,7 +10,9 @@ def test_augment_structure():
     m = cs.models.nomoto_first_order()
     aug = cs.augment(m, ["K", "T"])
     assert aug.state_names == ("psi", "r", "K", "T")
-    assert aug.param_names == ("delta_0",) or aug.param_names == ()
+    assert aug.param_names == ()
+    biased = cs.augment(cs.models.nomoto_first_order(rudder_bias=True), ["K", "T"])
+    assert biased.param_names == ("delta_0",) and biased.state_names == ("psi", "r", "K", "T")
     assert aug.noise_names == ("w_r", "w_K", "w_T")
     x = np.array([0.1, 0.01, 0.2, 50.0])
     xdot = np.array(aug.f(x, [0.05], aug.params(), np.zeros(3))).ravel()
@@ -20,6 +22,10 @@ def test_augment_structure():
     assert aug.meta["augmented_params"] == ("K", "T")
     with pytest.raises(ValueError, match="Kx"):
         cs.augment(m, ["Kx"])
+    with pytest.raises(ValueError, match="'u'"):
+        cs.augment(m, disturbances=["u"])
+    with pytest.raises(ValueError, match="at least one"):
+        cs.augment(m, [])
 
 
 def test_recovers_nomoto_parameters():

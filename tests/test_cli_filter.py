@@ -63,7 +63,7 @@ def test_errors_name_the_item(nomoto_csv, capsys):
     assert "ekff" in capsys.readouterr().err
     assert main(base + ["--x0", "phi=1"]) == 2
     assert "phi" in capsys.readouterr().err
-    assert main(["filter", str(path), "--model", "nomoto1", "--R", "1e-4"]) == 2
+    assert main(["filter", str(path), "--model", "nomoto1", "--R", "1e-4", "--Q", "1e-9"]) == 2
     err = capsys.readouterr().err
     assert "['psi']" in err and "heading" in err
 

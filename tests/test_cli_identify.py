@@ -33,7 +33,7 @@ def test_identify_csv_recovers_and_simulate_reads_fit(nomoto_csv, tmp_path, caps
         assert abs(fit["params"][name] - truth) < 4 * fit["std_errors"][name]
     assert (tmp_path / "fit.png").stat().st_size > 0
     assert "fit written" in capsys.readouterr().out
-    assert main(["simulate", "nomoto1", "--params", str(out), "--inputs", str(nomoto_csv), "--json"]) == 0
+    assert main(["simulate", "--model", "nomoto1", "--params", str(out), "--inputs", str(nomoto_csv), "--json"]) == 0
     replay = json.loads(capsys.readouterr().out)["replay"]
     assert replay["psi_rmse_deg"] < 2.0
 
@@ -61,3 +61,27 @@ def test_identify_marin_record(data_dir, tmp_path, capsys):
                  "--decimate", "40", "--out", str(out)]) == 0
     fit = json.loads(out.read_text())
     assert np.isfinite(fit["std_errors"]["N_r_dash"]) and fit["std_errors"]["N_r_dash"] > 0
+
+
+def test_identify_several_records_with_sharing_prior_and_identifiability(tmp_path, capsys):
+    m = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    t = np.arange(0, 300.0, 1.0)
+    paths = []
+    for i, bias in enumerate((0.01, -0.005, 0.0)):
+        delta = 0.12 * np.sign(np.sin(2 * np.pi * t / (100 + 20 * i)))
+        tr = cs.simulate(m, m.states(), t, {"delta": delta + bias})
+        data = cs.measure(tr, m, {"psi": 0.005}, seed=10 + i).with_columns(delta=delta)
+        paths.append(str(data.to_csv(tmp_path / f"run{i}.csv")))
+    out = tmp_path / "fit.json"
+    assert main(["identify", *paths, "--model", "nomoto1", "--method", "oe", "--free", "K,T,bias[delta]",
+                 "--share", "bias[delta]=record", "--prior", "K=0.05,T=50", "--sigma", "psi=0.005",
+                 "--estimate-x0", "psi", "--bounds", "T=1:200", "--identifiability", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "identifiability of" in text and "proposed free set" in text and "N(" in text
+    fit = json.loads(out.read_text())
+    assert fit["free"][:5] == ["K", "T", "bias[delta]@0", "bias[delta]@1", "bias[delta]@2"]
+    assert fit["prior"]["quantities"]["T"]["std"] == 50.0 and len(fit["records"]) == 3
+    for name, truth in {"K": 0.1, "T": 20.0, "bias[delta]@0": 0.01, "bias[delta]@1": -0.005}.items():
+        assert abs(fit["estimates"][name] - truth) < 4 * fit["std_errors"][name], name
+    assert main(["identify", *paths, "--model", "nomoto1", "--free", "K", "--share", "K=group"]) == 2
+    assert "--group" in capsys.readouterr().err

@@ -14,7 +14,7 @@ def _json(capsys, argv):
 
 
 def test_turning_json_form(capsys):
-    out = _json(capsys, ["simulate", "kvlcc2", "--maneuver", "turning", "--rudder-deg", "35", "--speed", "7.97",
+    out = _json(capsys, ["simulate", "--model", "kvlcc2", "--maneuver", "turning", "--rudder-deg", "35", "--speed", "7.97",
                          "--duration", "800", "--json"])
     assert out["L_pp_m"] == 320.0
     m = out["metrics"]
@@ -26,7 +26,7 @@ def test_turning_json_form(capsys):
 
 def test_zigzag_port_first_and_rps(capsys, tmp_path):
     csv, png = tmp_path / "zz.csv", tmp_path / "zz.png"
-    out = _json(capsys, ["simulate", "kvlcc2-l7", "--maneuver", "zigzag", "--rudder-deg", "20", "--heading-deg", "-20",
+    out = _json(capsys, ["simulate", "--model", "kvlcc2-l7", "--maneuver", "zigzag", "--rudder-deg", "20", "--heading-deg", "-20",
                          "--rps", "11.0", "--speed", "1.18", "--json", "--csv", str(csv), "--plot", str(png)])
     assert out["rps"] == 11.0 and out["L_pp_m"] == 7.0
     assert out["metrics"]["first_side"] == -1
@@ -47,19 +47,19 @@ def test_params_and_replay_of_a_csv_record(capsys, tmp_path):
     path = tmp_path / "rec.csv"
     res.trajectory.to_csv(path)
     (tmp_path / "fit.json").write_text(json.dumps({"params": {"R_0_dash": 0.03}}))
-    out = _json(capsys, ["simulate", "kvlcc2", "--params", str(tmp_path / "fit.json"), "--inputs", str(path), "--json"])
+    out = _json(capsys, ["simulate", "--model", "kvlcc2", "--params", str(tmp_path / "fit.json"), "--inputs", str(path), "--json"])
     assert out["replay"]["psi_rmse_deg"] < 1e-8
     assert out["replay"]["position_rmse_m"] < 1e-6
     assert out["replay"]["u_rmse_mps"] < 1e-9
     assert out["metrics"]["overshoot_1_deg"] == pytest.approx(res.metrics["overshoot_1_deg"], abs=1e-6)
     # with the nominal parameters the replay differs
-    out = _json(capsys, ["simulate", "kvlcc2", "--inputs", str(path), "--json"])
+    out = _json(capsys, ["simulate", "--model", "kvlcc2", "--inputs", str(path), "--json"])
     assert out["replay"]["u_rmse_mps"] > 1e-3
 
 
 def test_bad_params_file_names_the_problem(tmp_path, capsys):
     (tmp_path / "bad.json").write_text(json.dumps({"params": {"no_such": 1.0}}))
-    assert main(["simulate", "kvlcc2", "--params", str(tmp_path / "bad.json")]) == 2
+    assert main(["simulate", "--model", "kvlcc2", "--params", str(tmp_path / "bad.json")]) == 2
     assert "no_such" in capsys.readouterr().err
 
 
@@ -73,7 +73,7 @@ def test_replay_marin(capsys, data_dir):
     f = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_10_m.dat"
     if not f.is_file():
         pytest.skip(f"{f} is absent")
-    out = _json(capsys, ["simulate", "kvlcc2", "--inputs", str(f), "--json"])
+    out = _json(capsys, ["simulate", "--model", "kvlcc2", "--inputs", str(f), "--json"])
     assert set(out["replay"]) == {"psi_rmse_deg", "position_rmse_m", "u_rmse_mps"}
     assert out["measured_metrics"]["overshoot_1_deg"] == pytest.approx(9.33, abs=0.05)
     assert 0 < out["replay"]["psi_rmse_deg"] < 30

@@ -137,3 +137,40 @@ def test_gaussian_sampling_is_seeded():
     np.testing.assert_allclose(g.std, np.sqrt([2.0, 1.0]))
     with pytest.raises(ValueError, match="mean contains non-finite"):
         cs.Gaussian([np.nan], 1.0)
+
+
+# -- decimate and resample -----------------------------------------------------------------------------
+def test_decimate_keeps_every_kth_row_and_the_type():
+    m = cs.models.nomoto_first_order()
+    tr = cs.simulate(m, m.states(), np.arange(0.0, 10.0, 0.5), {"delta": 0.1})
+    d = tr.decimate(4)
+    assert isinstance(d, cs.Trajectory) and d.state_names == tr.state_names
+    np.testing.assert_array_equal(d.t, [0.0, 2.0, 4.0, 6.0, 8.0])
+    np.testing.assert_array_equal(d["r"], tr["r"][::4])
+    assert d.decimate(2).meta["decimated"] == 8
+    assert tr.decimate(1) is tr
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(ValueError, match="decimate: k must be an integer >= 1"):
+            tr.decimate(bad)
+    with pytest.raises(ValueError, match="leaves 1 row"):
+        tr.decimate(100)
+
+
+def test_resample_inserts_unmeasured_rows_and_holds_inputs():
+    d = cs.Dataset([0.0, 1.0, 2.5], {"delta": [0.1, 0.2, 0.3], "psi": [0.0, 0.5, 1.0]})
+    r = d.resample(2.0, hold=["delta"])
+    np.testing.assert_array_equal(r.t, [0.0, 0.5, 1.0, 1.5, 2.0, 2.5])
+    np.testing.assert_array_equal(r["delta"], [0.1, 0.1, 0.2, 0.2, 0.2, 0.3])
+    np.testing.assert_array_equal(np.isnan(r["psi"]), [False, True, False, True, True, False])
+    np.testing.assert_array_equal(r["psi"][~np.isnan(r["psi"])], d["psi"])       # every sample kept
+
+
+def test_resample_refuses_what_would_drop_samples_or_is_not_a_rate():
+    d = cs.Dataset(np.arange(0.0, 10.0, 0.1), {"psi": np.zeros(100)})
+    with pytest.raises(ValueError, match=r"rate 2 Hz is below the record's rate 10 Hz .* use decimate"):
+        d.resample(2.0)
+    for bad in (0.0, -1.0, np.nan, np.inf):
+        with pytest.raises(ValueError, match="rate must be a positive finite number"):
+            d.resample(bad)
+    with pytest.raises(ValueError, match=r"unknown column\(s\) \['delta'\] in hold"):
+        d.resample(20.0, hold=["delta"])

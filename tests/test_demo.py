@@ -13,6 +13,15 @@ def test_demo_quick_writes_report_and_recovers_the_ship(tmp_path, capsys):
     assert "report written" in capsys.readouterr().out
     summary = json.loads((tmp_path / "summary.json").read_text())
     report = (tmp_path / "report.md").read_text()
+    assert report.splitlines()[0].startswith("# casship demo (quick run)")
+    # rudder rate next to rudder angle, for the records and the closed loop; never above the ship's limit
+    assert "| max rudder angle [deg] | max rudder rate [deg/s] |" in report
+    for motion in summary["rudder"].values():
+        assert 0 < motion["max_rudder_rate_deg_s"] <= summary["rudder_rate_limit_deg_s"] * (1 + 1e-9)
+    # a second run into the same folder is refused before any work, naming the way out
+    assert main(["demo", "--quick", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "folder exists and is not empty; pass --overwrite" in err and "Traceback" not in err
     for fig in summary["figures"]:
         assert (tmp_path / fig).stat().st_size > 10_000
         assert f"]({fig})" in report
@@ -36,3 +45,12 @@ def test_demo_quick_writes_report_and_recovers_the_ship(tmp_path, capsys):
         assert step["overshoot_deg"] < 0.25 * abs(step["change_deg"])
     assert summary["autopilot"]["design"]["margins"]["closed_loop_stable"]
     assert np.isfinite(summary["seconds"])
+
+
+def test_demo_out_is_a_file(tmp_path, capsys):
+    target = tmp_path / "report.txt"
+    target.write_text("mine")
+    assert main(["demo", "--out", str(target)]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().endswith("is a file, not a folder; choose a folder name") and "Traceback" not in err
+    assert target.read_text() == "mine"

@@ -179,3 +179,87 @@ def test_cvodes_step_drives_the_ekf():
     np.testing.assert_allclose(adaptive.x, fine.x, atol=1e-7)
     np.testing.assert_allclose(adaptive.P, fine.P, rtol=1e-6, atol=1e-12)
     assert adaptive.loglik == pytest.approx(fine.loglik, rel=1e-7)
+
+
+# -- discrete-time authoring ----------------------------------------------------------------------------
+
+def constant_velocity(dt=0.5):
+    """x[k+1] = F x[k] + w with the discrete noise w of one step (covariance Qd given directly)."""
+    b = cs.ModelBuilder("cv", "constant velocity, written in discrete time", dt=dt)
+    x, v = b.state("x", unit="m"), b.state("v", unit="m/s")
+    b.next(x=x + dt * v + b.noise("w_x"), v=v + b.noise("w_v"))
+    b.output("x_m", x)
+    return b.build()
+
+
+def test_discrete_model_steps_exactly_and_only_on_its_grid():
+    m = constant_velocity()
+    assert m.dt == 0.5
+    dm = cs.discretize(m)
+    assert dm.discrete and dm.method == "discrete" and cs.discretize(m, 0.5).discrete
+    xf = dm.step([1.0, 2.0], [], w=[0.1, -0.2])
+    np.testing.assert_allclose(xf, [1.0 + 0.5 * 2.0 + 0.1, 2.0 - 0.2], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(dm.step([1.0, 2.0], [], dt=0.0), [1.0, 2.0])     # a zero step is no step
+    tr = cs.simulate(m, m.states(v=1.0), np.arange(0.0, 5.0, 0.5))
+    np.testing.assert_allclose(tr["x"], np.arange(10) * 0.5, atol=1e-13)
+    with pytest.raises(ValueError, match="steps dt = 0.5 s; row 1"):
+        cs.simulate(m, m.states(), np.arange(0.0, 3.0, 0.3))
+    with pytest.raises(ValueError, match="discrete-time with dt = 0.5"):
+        cs.discretize(m, 0.1)
+    with pytest.raises(ValueError, match="no method"):
+        cs.discretize(m, method="rk4")
+    with pytest.raises(ValueError, match="discrete-time"):
+        cs.simulate(m, m.states(), np.arange(0.0, 3.0, 0.5), method="euler")
+
+
+def test_discrete_and_continuous_builders_refuse_the_other_kind():
+    b = cs.ModelBuilder("d", dt=0.1)
+    x = b.state("x")
+    with pytest.raises(ValueError, match="next"):
+        b.ode(x=-x)
+    c = cs.ModelBuilder("c")
+    y = c.state("y")
+    with pytest.raises(ValueError, match="continuous-time"):
+        c.next(y=y)
+    with pytest.raises(ValueError, match="positive sampling period"):
+        cs.ModelBuilder("bad", dt=0.0)
+    with pytest.raises(ValueError, match="not a declared state"):
+        b.next(z=x)
+
+
+def test_discrete_model_filters_like_the_textbook_kf_and_dlqe():
+    """KF on a model written in discrete time with Qd given directly: equal to a plain numpy KF and,
+    at the end, to control.dlqe; every estimator that runs in discrete time accepts the model."""
+    import control
+
+    m = constant_velocity()
+    dm = cs.discretize(m)
+    Qd = 0.01 * np.array([[0.5**4 / 4, 0.5**3 / 2], [0.5**3 / 2, 0.5**2]])
+    t = np.arange(0.0, 100.0, 0.5)
+    rng = np.random.default_rng(1)
+    tr = cs.simulate(m, m.states(v=1.0), t, w=rng.multivariate_normal([0.0, 0.0], Qd, t.size))
+    data = cs.measure(tr, m, {"x_m": 0.5}, seed=2)
+    prior = cs.Gaussian([0.0, 0.0], [1.0, 1.0])
+    kf = cs.KF(dm, Qd, 0.25).filter(data, prior)
+    F, H = np.array([[1.0, 0.5], [0.0, 1.0]]), np.array([[1.0, 0.0]])
+    x, P = prior.mean.copy(), prior.cov.copy()
+    for k, y in enumerate(data["x_m"]):
+        if k:
+            x, P = F @ x, F @ P @ F.T + Qd
+        K = P @ H.T / (H @ P @ H.T + 0.25)
+        x, P = x + (K * (y - H @ x)).ravel(), (np.eye(2) - K @ H) @ P @ (np.eye(2) - K @ H).T + 0.25 * K @ K.T
+        np.testing.assert_allclose(kf.x[k], x, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(kf.P[k], P, rtol=1e-10, atol=1e-14)
+    L, Pss, _ = control.dlqe(F, np.eye(2), H, Qd, np.array([[0.25]]))
+    np.testing.assert_allclose(kf.P_pred[-1], Pss, rtol=1e-9)
+    L2, P2 = cs.KF(dm, Qd, 0.25).steady_state()
+    np.testing.assert_allclose(L2, L, rtol=1e-10)
+    for est in (cs.EKF(dm, Qd, 0.25), cs.UKF(dm, Qd, 0.25),
+                cs.MHE(dm, Qd, 0.25, options={"horizon": 4, "solver": "rti"})):
+        np.testing.assert_allclose(est.filter(data, prior).x, kf.x, rtol=1e-8, atol=1e-8)
+    with pytest.raises(ValueError, match="KalmanBucy needs a continuous-time model"):
+        cs.KalmanBucy(dm, Qd, 0.25)
+    with pytest.raises(ValueError, match="covariance='continuous' needs a continuous-time model"):
+        cs.EKF(dm, Qd, 0.25, options={"covariance": "continuous"})
+    with pytest.raises(ValueError, match="row 3"):
+        cs.KF(dm, Qd, 0.25).filter(cs.Dataset([0.0, 0.5, 1.0, 1.7], {"x_m": [0.0, 0.5, 1.0, 1.7]}), prior)

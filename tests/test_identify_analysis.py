@@ -76,7 +76,7 @@ def test_fit_file_records_identity_and_replays_only_on_its_model(tmp_path, capsy
     assert "delta_0" in model.param_names and p[model.index("delta_0", "param")] == pytest.approx(
         fit.estimates["delta_0"])
     csv = data.to_csv(tmp_path / "run.csv")
-    assert main(["simulate", "nomoto1", "--params", str(path), "--inputs", str(csv), "--json"]) == 0
+    assert main(["simulate", "--model", "nomoto1", "--params", str(path), "--inputs", str(csv), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["replay"]["psi_rmse_deg"] < 2.0
     with pytest.raises(ValueError, match=r"'nomoto1'.*'nomoto2'"):
         read_params(path, "nomoto2")

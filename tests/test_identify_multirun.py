@@ -175,3 +175,14 @@ def test_noise_estimate_from_the_records():
     assert set(fit.channel_share["optimum"]) == {"psi"}
     with pytest.raises(ValueError, match="noise estimate is zero"):
         cs.identify.noise_std([runs[0].with_columns(psi=np.zeros(600))], ["psi"])
+
+
+def test_bounds_are_honoured_and_reported():
+    runs = [_run(60, 200, q=0.0), _run(61, 200, q=0.0)]
+    m = cs.models.nomoto_first_order(K=K_TRUE, T=T_TRUE)
+    fit = OutputErrorProblem(m, runs, free=["K", "T"], sigma={"psi": 0.01}, bounds={"K": (0.02, 0.08)}).solve(
+        guess={"K": 0.05, "T": 10.0})
+    assert fit.estimates["K"] == pytest.approx(0.08) and fit.converged
+    assert any("K ended at a bound" in w for w in fit.warnings)
+    with pytest.raises(ValueError, match="outside its bounds"):
+        OutputErrorProblem(m, runs, free=["K"], sigma={"psi": 0.01}, bounds={"K": (0.02, 0.08)}).solve(guess={"K": 0.1})

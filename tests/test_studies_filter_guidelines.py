@@ -21,9 +21,11 @@ def test_quick_study_writes_figures_tables_and_comparison(quick):
                 "fig06_rmse_noise.png", "fig07_08_maneuvers.png", "fig09_rmse_maneuver.png", "fig10_time.png"):
         assert (out / fig).stat().st_size > 5_000, fig
     report = (out / "report.md").read_text()
-    assert "Comparison with the paper's conclusions" in report
+    assert report.splitlines()[0].endswith("(quick run)")
+    assert "Comparison with the paper's conclusions" in report and "## Departures from the paper" in report
     assert report.count("| UKF Q=0 |") >= 3 + 3 + 2          # one row per condition of each experiment
-    assert set(summary["rmse"]) == {"wind", "noise", "maneuver"}
+    assert set(summary["rmse"]) == {"wind", "noise", "maneuver", "wind (Fujiwara 2005)",
+                                    f"wind (data std {fg.DATA_STD_ALT})"}
     assert set(summary["time_per_step"]) == {"UKF", "EnKF", "KF", "EKF"}
     # the MHE column ran, and on the same records it is as accurate as the tuned UKF (within 20 %)
     for row in summary["mhe"].values():
@@ -39,6 +41,18 @@ def test_model_based_filters_beat_the_measurements_without_modelling_error(quick
         for s in fg.STATES:
             assert cell[name][s]["mean"] < fg.DATA_STD, (name, s)
             assert cell[name][s]["failed"] == 0
+
+
+def test_departures_carry_the_measured_effect_of_both_other_readings(quick):
+    _, summary = quick
+    deps = {d["topic"]: d for d in summary["departures"]}
+    for topic in ("wind loads in the data", "data noise of experiments 1 and 3"):
+        text = deps[topic]["effect"]
+        assert "wind growth UKF" in text and "EnKF-UKF gap x [m]" in text and "->" in text, text
+    # the paper's data noise, w ~ N(0, R) with R = diag(5e-2), is the reading taken
+    assert fg.DATA_STD == pytest.approx(0.05 ** 0.5)
+    head = summary["headline"]
+    assert set(head) == {"wind growth UKF", "wind growth EnKF", "EnKF-UKF gap x [m]", "EnKF-UKF gap u [m/s]"}
 
 
 def test_wind_modelling_error_costs_accuracy_of_the_q0_filters(quick):

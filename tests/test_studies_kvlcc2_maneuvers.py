@@ -11,7 +11,7 @@ from problems import kvlcc2_maneuvers as study
 def test_quick_study_with_data(tmp_path, data_dir):
     if not (data_dir / "kvlcc2_marin_free").is_dir():
         pytest.skip("MARIN data absent")
-    summary = problems.get_study("kvlcc2-maneuvers").run(tmp_path, quick=True)
+    summary = problems.get_study("kvlcc2-maneuvers").run(tmp_path, quick=True, data_dir=data_dir)
     assert summary["data"] is True
     for name in ("turning_35", "zigzag_10", "zigzag_20"):
         assert (tmp_path / f"fig_{name}.png").stat().st_size > 10_000
@@ -29,13 +29,16 @@ def test_quick_study_with_data(tmp_path, data_dir):
     assert zz10["first_side"] == -1 and zz10["metrics"]["measured"]["overshoot_1_deg"] == pytest.approx(9.33, abs=0.1)
     assert summary["runs"]["zigzag_20"]["first_side"] == 1
     report = (tmp_path / "report.md").read_text()
-    assert "IMO MSC.137(76)" in report and "Differences" in report
+    assert "IMO MSC.137(76)" in report and "Differences" in report and "## Departures from the paper" in report
+    deps = {d["topic"]: d["effect"] for d in summary["departures"]}
+    assert "advance/L" in deps["propeller rate"] and "->" in deps["rudder rate"]
     assert json.dumps(summary, default=float)
 
 
-def test_quick_study_without_data(tmp_path, monkeypatch):
-    monkeypatch.setattr(study, "DATA_DIR", tmp_path / "nowhere")
-    summary = study.run(tmp_path / "out", quick=True)
+def test_quick_study_without_data(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    summary = study.run(tmp_path / "out", quick=True, data_dir=tmp_path / "empty")
+    assert "skipped the comparison with the MARIN free-running runs" in capsys.readouterr().err
     assert summary["data"] is False
     assert "absent" in (tmp_path / "out" / "report.md").read_text()
     m = summary["runs"]["turning_35"]["metrics"]["simulated"]

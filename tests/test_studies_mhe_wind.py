@@ -13,7 +13,7 @@ from problems.mhe_wind import D_GRID, FILTERS, Q_GRID, STATES
 def test_mhe_wind_quick(tmp_path):
     study = get_study("mhe-wind")
     summary = study.run(tmp_path, quick=True, workers=1)
-    for name in ("rmse.md", "rmse.png", "disturbance.png", "summary.json"):
+    for name in ("rmse.md", "rmse.png", "disturbance.png", "summary.json", "report.md"):
         assert (tmp_path / name).is_file(), name
     assert json.loads((tmp_path / "summary.json").read_text())["study"] == "mhe-wind"
     assert summary["tuning"]["q_ekf"] in Q_GRID and summary["tuning"]["q_dist"] in D_GRID
@@ -24,7 +24,10 @@ def test_mhe_wind_quick(tmp_path):
             # every filter tracks the measured states better than the measurement noise (0.05)
             assert all(np.isfinite(v) and 0 < v < 0.05 for v in row.values()), (f, w, row)
     table = (tmp_path / "rmse.md").read_text()
-    assert table.count("| MHE |") == 2
+    assert table.count(", MHE |") == 2                       # one row per wind speed
+    report = (tmp_path / "report.md").read_text()
+    assert report.splitlines()[0].endswith("(quick run)") and "## Departures from the paper" in report
+    assert set(summary["rmse_fujiwara2005"]) == {f"1.64/{f}" for f in FILTERS}
 
 
 @pytest.mark.slow

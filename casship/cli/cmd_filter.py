@@ -12,11 +12,13 @@ Estimators are looked up by name in :data:`casship.estimators.ESTIMATORS` (``kf`
 """
 from __future__ import annotations
 
-import inspect
+import argparse
 import json
 from pathlib import Path
 
 import numpy as np
+
+from ._common import add_limits_option, add_model_option, add_overwrite_option, load_model, require
 
 PRESETS = {
     "usv-gnss": {
@@ -34,41 +36,61 @@ PRESETS = {
 }
 
 
+def _positive(text: str) -> float:
+    """argparse type: a positive finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not np.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
 def register(sub) -> None:
     p = sub.add_parser("filter", help="run a state estimator (and smoother) over a record",
-                       description="Estimate the states of a registered model from a CSV record with a "
-                                   "KF, EKF, UKF, EnKF or Kalman-Bucy filter; write estimates and standard "
-                                   "deviations (CSV) and a plot.")
-    p.add_argument("data", help="CSV file with a header row")
-    p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
-    p.add_argument("--estimator", default="ekf", help="estimator name (default ekf); see --list")
+                       description="Estimate the states of a registered model from a record (CSV, MARIN .dat, "
+                                   "NMEA log) with a KF, EKF, UKF, EnKF, Kalman-Bucy filter or MHE; write "
+                                   "estimates and standard deviations (CSV) and a plot.\n\n"
+                                   + __doc__.split("\n\n", 1)[1].split("\n\nEstimators")[0])
+    p.add_argument("data", nargs="?", default=None,
+                   help="record: CSV with a header row, MARIN .dat, NMEA log (see casship.io.read_record)")
+    add_model_option(p)
+    p.add_argument("--estimator", default="ekf", help="estimator name (see --list)")
     p.add_argument("--list", action="store_true", help="list the estimators and presets and exit")
-    p.add_argument("--smooth", action="store_true", help="RTS fixed-interval smoothing after filtering")
-    p.add_argument("--preset", default=None, help=f"column/noise preset: {', '.join(PRESETS)}")
+    p.add_argument("--smooth", action="store_true",
+                   help="smooth instead of filter (est.smooth: RTS for the Kalman filters, full information for mhe)")
+    p.add_argument("--preset", default=None, choices=sorted(PRESETS), help="column/noise preset")
     p.add_argument("--columns", default=None,
-                   help="NEW=SOURCE[:UNIT],... columns to read and convert to SI (e.g. psi=heading:deg); "
+                   help="NEW=SOURCE[:UNIT],... CSV columns to read and convert to SI (e.g. psi=heading:deg); "
                         "default: all columns as they are")
-    p.add_argument("--time", default=None, help="time column and unit (default t:s, or the preset's)")
+    p.add_argument("--time", default=None, help="CSV time column and unit (default t:s, or the preset's)")
     p.add_argument("--latlon", default=None, help="LAT,LON: geodetic columns (rad after conversion) that "
                                                   "also give local x_n, y_n [m]")
     p.add_argument("--measured", default=None, help="measured outputs a,b (default: outputs present in the data)")
-    p.add_argument("--R", default=None, help="measurement variances: scalar or name=value,... (SI units)")
+    p.add_argument("--R", default=None, help="measurement variances: scalar or name=value,... (SI units); "
+                                             "required unless --R-std or a preset gives them")
     p.add_argument("--R-std", dest="R_std", default=None, help="measurement standard deviations, as --R")
-    p.add_argument("--Q", default=None, help="process-noise variances: scalar or name=value,...")
+    p.add_argument("--Q", default=None, help="process-noise variances: scalar or name=value,...; required "
+                                             "unless a preset gives them or the model has no noise channels")
     p.add_argument("--x0", default=None, help="initial state name=value,... (default: first measurement of "
                                               "directly measured states, else 0)")
     p.add_argument("--P0", default=None, help="initial variances: scalar or name=value,... (default 1, R for "
                                               "measured states)")
-    p.add_argument("--dt", type=float, default=None, help="nominal filter step [s] (default: median data step)")
-    p.add_argument("--rate", type=float, default=None,
-                   help="run the filter at RATE Hz, inserting prediction-only rows between the samples")
-    p.add_argument("--method", default="euler", choices=("euler", "rk4"), help="discretisation (default euler)")
+    p.add_argument("--dt", type=_positive, default=None,
+                   help="nominal filter step [s] (default: median data step)")
+    p.add_argument("--rate", type=_positive, default=None,
+                   help="run the filter at RATE Hz (not below the data rate), inserting prediction-only rows "
+                        "between the samples (Dataset.resample)")
+    p.add_argument("--method", default="euler", choices=("euler", "rk4"), help="discretisation")
     p.add_argument("--options", default=None, help="estimator options key=value,... (e.g. gate=0.999,members=100)")
     p.add_argument("--seed", type=int, default=0, help="seed of stochastic estimators (EnKF)")
     p.add_argument("--out", default=None, help="CSV of estimates and standard deviations")
     p.add_argument("--plot", default=None, help="PNG plot of the estimates with 2-sigma bands")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
-    p.set_defaults(func=run)
+    add_overwrite_option(p)
+    add_limits_option(p)
+    p.set_defaults(func=run, parser=p)
 
 
 # -- argument parsing helpers --------------------------------------------------------------------
@@ -122,6 +144,7 @@ def _option_value(text: str):
 # -- the command ----------------------------------------------------------------------------------
 def run(args) -> int:
     from ..estimators import ESTIMATORS
+    from ..outdir import check_output_file
 
     if args.list:
         for name, cls in ESTIMATORS.items():
@@ -129,9 +152,21 @@ def run(args) -> int:
         for name, preset in PRESETS.items():
             print(f"preset {name:8s} {preset['doc']}")
         return 0
+    require(args.parser, args, {"DATA": args.data, "--model": args.model})
+    model = load_model(args.model)
+    preset = PRESETS.get(args.preset, {})
+    missing = []
+    if args.R is None and args.R_std is None and "gnss_std_m" not in preset:
+        missing.append("--R (or --R-std)")
+    if args.Q is None and model.nw and not set(preset.get("Q", {})) & set(model.noise_names):
+        missing.append(f"--Q (for {', '.join(model.noise_names)})")
+    require(args.parser, args, {name: None for name in missing})
     if args.estimator not in ESTIMATORS:
-        raise ValueError(f"unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
-    summary, result, data, meas = filter_file(args)
+        raise ValueError(f"--estimator: unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
+    for option, path in (("--out", args.out), ("--plot", args.plot)):
+        if path:
+            check_output_file(path, overwrite=args.overwrite, what=option)
+    summary, result, data, meas = filter_file(args, model)
     if args.out:
         result.to_dataset().to_csv(args.out)
         summary["out"] = str(args.out)
@@ -147,13 +182,11 @@ def run(args) -> int:
 
 
 def load_data(args):
-    """The record as a Dataset in SI units (preset, --columns, --time, --latlon)."""
-    from ..data import Dataset
-    from ..io import read_csv
+    """The record as a Dataset in SI units (any format of :func:`casship.io.read_record`; for CSV also
+    the preset, ``--columns``, ``--time``, ``--latlon``)."""
+    from ..io import read_csv, read_record
 
     path = Path(args.data)
-    if not path.is_file():
-        raise FileNotFoundError(f"data file {path} does not exist")
     preset = {}
     if args.preset:
         if args.preset not in PRESETS:
@@ -166,26 +199,10 @@ def load_data(args):
         raise ValueError(f"--latlon: expected LAT,LON, got {args.latlon!r}")
     time = args.time or preset.get("time")
     if not columns and time is None and latlon is None:
-        return Dataset.from_csv(path), preset
+        return read_record(path), preset
+    if not path.is_file():
+        raise FileNotFoundError(f"data file {path}: no such file")
     return read_csv(path, columns or None, time=time or "t:s", latlon=latlon), preset
-
-
-def _resample(data, rate: float, input_names):
-    """Insert prediction-only rows so that the filter runs at ``rate`` Hz (inputs held)."""
-    from ..data import Dataset
-
-    if not rate > 0:
-        raise ValueError(f"--rate must be positive, got {rate}")
-    fine = np.arange(data.t[0], data.t[-1] + 0.5 / rate, 1.0 / rate)
-    t = np.union1d(np.round(fine, 9), data.t)
-    t = t[np.concatenate([[True], np.diff(t) > 1e-9])]
-    idx = np.searchsorted(data.t, t, side="right") - 1
-    exact = np.isclose(data.t[idx], t, rtol=0, atol=1e-9)
-    cols = {}
-    for name in data.names:
-        col = data[name][idx]
-        cols[name] = col if name in input_names else np.where(exact, col, np.nan)
-    return Dataset(t, cols, data.units, data.meta)
 
 
 def _initial_velocity(data, names):
@@ -200,16 +217,16 @@ def _initial_velocity(data, names):
     return float(np.hypot(vx, vy)), float(np.arctan2(vy, vx))
 
 
-def filter_file(args):
+def filter_file(args, model=None):
     """Run the command's estimation; returns ``(summary, result, data, measured)``."""
     from ..data import Gaussian
     from ..discretize import discretize
-    from ..estimators import ESTIMATORS, rts_smooth
+    from ..estimators import ESTIMATORS
     from ..frames import wgs84_radii
-    from ..models import get_model
+    from ..validity import check_inputs, check_step
 
     data, preset = load_data(args)
-    model = get_model(args.model)
+    model = model if model is not None else load_model(args.model)
     if args.measured:
         meas = tuple(s.strip() for s in args.measured.split(","))
     else:
@@ -222,7 +239,12 @@ def filter_file(args):
         raise ValueError(f"the data have no column(s) {missing} needed by model {args.model!r}; "
                          f"columns: {list(data.names)} (use --columns)")
     if args.rate:
-        data = _resample(data, args.rate, model.input_names)
+        try:
+            data = data.resample(args.rate, hold=model.input_names)
+        except ValueError as exc:
+            raise ValueError(f"--rate: {exc}") from None
+    if len(data) < 2:
+        raise ValueError(f"data {args.data}: {len(data)} row(s); a filter run needs at least two")
     dt = args.dt or float(np.median(np.diff(data.t)))
     dm = discretize(model, dt, method=args.method)
 
@@ -280,10 +302,13 @@ def filter_file(args):
     elif P0v is not None:
         P0[:] = P0v
     prior = Gaussian(x0, P0)
-    kwargs = {"seed": args.seed} if "seed" in inspect.signature(est.filter).parameters else {}
-    result = est.filter(data, prior, **kwargs)
-    if args.smooth:
-        result = rts_smooth(result)
+    if not args.allow_out_of_range:
+        U = data.matrix(model.input_names, finite=True, what="input")
+        check_inputs(model, U, data.t)
+        k = int(np.argmax(data.dt))
+        check_step(model, float(data.dt[k]), x0, U[0] if model.nu else np.zeros(0), model.params(),
+                   args.method, where=f" (the data step from t = {data.t[k]:g} to {data.t[k + 1]:g} s)")
+    result = (est.smooth if args.smooth else est.filter)(data, prior, seed=args.seed)
     health = result.health()
     summary = {"model": args.model, "estimator": result.estimator, "rows": len(data), "dt_s": dt,
                "measured": list(meas), "updates": int((result.n_measured > 0).sum()),

@@ -6,7 +6,7 @@ Examples::
     casship identify A.dat B.dat C.dat --model kvlcc2 --method oe --free N_r_dash,Y_v_dash,bias[n] \\
         --share bias[n]=record --prior N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
         --identifiability --out fit.json --plot fit.png
-    casship simulate kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
+    casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
 units, radians) or MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped

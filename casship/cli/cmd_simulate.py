@@ -1,16 +1,17 @@
-"""``casship simulate MODEL``: run a standard manoeuvre (or replay measured inputs) and print metrics.
+"""``casship simulate --model NAME``: run a standard manoeuvre (or replay measured inputs) and print metrics.
 
 Examples::
 
-    casship simulate kvlcc2 --maneuver turning --rudder-deg 35 --speed 7.97 --json
-    casship simulate kvlcc2-l7 --maneuver zigzag --rudder-deg 20 --heading-deg -20 --csv zz.csv --plot zz.png
-    casship simulate kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --json
+    casship simulate --model kvlcc2 --maneuver turning --rudder-deg 35 --speed 7.97 --json
+    casship simulate --model kvlcc2-l7 --maneuver zigzag --rudder-deg 20 --heading-deg -20 --csv zz.csv --plot zz.png
+    casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --json
 """
 from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
+
+from ._common import add_limits_option, add_model_option, add_overwrite_option, load_model, require
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_2_deg", "overshoot_3_deg",
@@ -20,11 +21,13 @@ _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diame
 def register(sub) -> None:
     p = sub.add_parser("simulate", help="simulate a manoeuvre of a named model and print its metrics",
                        description="Simulate a standard manoeuvre of a registered model from a straight run "
-                                   "(or replay the measured inputs of a record) and print the metrics.")
-    p.add_argument("model", nargs="?", help="registered model name (kvlcc2, kvlcc2-l7, ...); see --list")
+                                   "(or replay the measured inputs of a record) and print the metrics. Inputs, "
+                                   "speed and time step are checked against the model's validity ranges.\n\n"
+                                   + __doc__.split("\n\n", 1)[1])
+    add_model_option(p, legacy_positional=True)
     p.add_argument("--list", action="store_true", help="list the registered models")
     p.add_argument("--maneuver", default="turning", choices=("turning", "zigzag", "pullout", "spiral", "random"),
-                   help="manoeuvre (default turning)")
+                   help="manoeuvre")
     p.add_argument("--rudder-deg", type=float, default=35.0,
                    help="rudder angle [deg]; positive turns to starboard; negative zig-zag = port first")
     p.add_argument("--heading-deg", type=float, default=None,
@@ -32,8 +35,8 @@ def register(sub) -> None:
     p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: the preset's U0)")
     p.add_argument("--rps", type=float, default=None,
                    help="propeller rate [1/s]; by default solved for equilibrium at --speed")
-    p.add_argument("--duration", type=float, default=None, help="simulated time [s]")
-    p.add_argument("--dt", type=float, default=None, help="time step [s]")
+    p.add_argument("--duration", type=float, default=None, help="simulated time [s] (default: scaled with L/U)")
+    p.add_argument("--dt", type=float, default=None, help="time step [s] (default: L/U/400, rounded)")
     p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
     p.add_argument("--seed", type=int, default=0, help="seed of the random rudder sequence")
     p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
@@ -41,24 +44,20 @@ def register(sub) -> None:
                    help='JSON file {"params": {name: value}} overriding parameters (a fit file rebuilds the '
                         'model variant it was fitted on)')
     p.add_argument("--inputs", default=None,
-                   help="replay the measured inputs of a record (CSV with header, or MARIN .dat) from "
-                        "its measured initial state")
+                   help="replay the measured inputs of a record (CSV, MARIN .dat, NMEA; see casship.io.read_record) "
+                        "from its measured initial state")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--csv", default=None, help="save the trajectory as CSV")
     p.add_argument("--plot", default=None, help="save a plot (PNG)")
-    p.set_defaults(func=run)
+    add_overwrite_option(p)
+    add_limits_option(p)
+    p.set_defaults(func=run, parser=p)
 
 
 def _load_record(path):
-    from ..data import Dataset
-    from ..io.marin import read_marin
+    from ..io import read_record
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"input record {path} does not exist")
-    if path.suffix.lower() == ".dat":
-        return read_marin(path)
-    return Dataset.from_csv(path)
+    return read_record(path)
 
 
 def _clean(obj):
@@ -74,27 +73,33 @@ def _clean(obj):
 
 
 def run(args) -> int:
-    from ..models import get_model, model_names
+    from ..models import model_names
+    from ..outdir import check_output_file
 
-    if args.list or not args.model:
+    if args.list:
         for name, doc in model_names().items():
             print(f"{name:18s} {doc}")
         return 0
+    require(args.parser, args, {"--model": args.model})
+    for option, path in (("--csv", args.csv), ("--plot", args.plot)):
+        if path:
+            check_output_file(path, overwrite=args.overwrite, what=option)
     if args.params:
         from ..identify import read_params
 
         model, p = read_params(args.params, args.model)     # the fitted variant, checked against the file
     else:
-        model = get_model(args.model)
+        model = load_model(args.model)
         p = model.params()
     L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
     measured = None
+    check = not args.allow_out_of_range
     if args.inputs:
         from ..validation import replay
 
         measured = _load_record(args.inputs)
-        res = replay(model, measured, p, method=args.method)
+        res = replay(model, measured, p, method=args.method, check_limits=check)
         traj = res.trajectory
         out.update({"maneuver": f"replay ({res.kind})", "inputs": str(args.inputs), "replay": res.errors,
                     "metrics": res.metrics, "measured_metrics": res.measured_metrics})
@@ -103,7 +108,7 @@ def run(args) -> int:
 
         res = run_maneuver(model, args.maneuver, rudder_deg=args.rudder_deg, heading_deg=args.heading_deg,
                            speed=args.speed, n=args.rps, duration=args.duration, dt=args.dt, p=p,
-                           hold=args.hold, seed=args.seed, method=args.method)
+                           hold=args.hold, seed=args.seed, method=args.method, check_limits=check)
         traj = res.trajectory
         s = res.settings
         out.update({"maneuver": args.maneuver, "speed_mps": s["speed_mps"], "rps": s["n"],

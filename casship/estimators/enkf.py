@@ -30,6 +30,8 @@ class EnKFOptions(EstimatorOptions):
 
     Parameters
     ----------
+    gate, jit, outputs
+        The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     members : int
         Ensemble size ``N`` (seed 002: 100).
     """
@@ -41,37 +43,26 @@ class EnKFOptions(EstimatorOptions):
         object.__setattr__(self, "members", check_int(self.members, "members", 2))
 
 
-def _rows(X, angles, angle_op, other_op):
-    """``X`` with ``angle_op`` applied to its angle rows and ``other_op`` to the others (matrix operations)."""
-    angles = np.asarray(angles, dtype=bool)
-    if not angles.any():
-        return other_op(X)
-    if angles.all():
-        return angle_op(X)
-    ia, io = np.flatnonzero(angles).tolist(), np.flatnonzero(~angles).tolist()
-    A, O = angle_op(X[ia, :]), other_op(X[io, :])
-    rows = {i: A[j, :] for j, i in enumerate(ia)} | {i: O[j, :] for j, i in enumerate(io)}
-    return ca.vertcat(*[rows[i] for i in range(X.shape[0])])
-
-
-def _wrap(D):
-    return D - 2 * np.pi * ca.floor((D + np.pi) / (2 * np.pi))
+def _wrap_rows(D, angles):
+    """``D`` with its angle rows wrapped to [-pi, pi) (whole-matrix operations, no row slicing)."""
+    if not np.any(angles):
+        return D
+    a = ca.repmat(ca.DM(np.asarray(angles, dtype=float)), 1, D.shape[1])
+    return D - a * (2 * np.pi * ca.floor((D + np.pi) / (2 * np.pi)))
 
 
 def _mean(X, angles):
     """Ensemble mean of the columns of ``X``; angle rows averaged on the circle around the first member."""
     N = X.shape[1]
-
-    def circular(Xa):
-        ref = Xa[:, 0]
-        return ref + ca.sum2(_wrap(Xa - ca.repmat(ref, 1, N))) / N
-
-    return _rows(X, angles, circular, lambda Xo: ca.sum2(Xo) / N)
+    if not np.any(angles):
+        return ca.sum2(X) / N
+    ref = X[:, 0]
+    return ref + ca.sum2(_wrap_rows(X - ca.repmat(ref, 1, N), angles)) / N
 
 
 def _deviations(X, mean, angles):
     """Columns of ``X`` minus ``mean``, angle rows wrapped to [-pi, pi)."""
-    return _rows(X - ca.repmat(mean, 1, X.shape[1]), angles, _wrap, lambda D: D)
+    return _wrap_rows(X - ca.repmat(mean, 1, X.shape[1]), angles)
 
 
 def _member(name, inputs: dict, outputs: dict) -> tuple[ca.Function, list]:
@@ -130,7 +121,13 @@ class EnKF(Estimator):
         return {"X": self.ensemble(prior, rng)}
 
     def ensemble(self, prior: Gaussian, seed=None) -> np.ndarray:
-        """Initial ensemble (nx, N) drawn from ``prior``."""
+        """Initial ensemble (nx, N) drawn from ``prior``.
+
+        Parameters
+        ----------
+        prior : Gaussian
+        seed : int or numpy.random.Generator, optional
+        """
         self._check_prior(prior)
         return prior.sample(self.members, np.random.default_rng(seed)).T.copy()
 

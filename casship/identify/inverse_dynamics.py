@@ -31,7 +31,8 @@ from ..discretize import discretize
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder
 from .result import FitResult
-from .uncertainty import covariance_from_information, whiteness
+from .records import record_label
+from .uncertainty import covariance_from_information, effective_samples, whiteness
 
 __all__ = ["rates_model", "smooth_trial", "inverse_dynamics", "linear_in"]
 
@@ -256,7 +257,8 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
     est, res = _solve(A, y, 1.0 / sig[eq], w_prior, p0, scale)
     if autocorrelation:
         per_record = _split(res, sizes, len(states))
-        tau = np.array([_tau([r[:, j] for r in per_record]) for j in range(len(states))])
+        neff = effective_samples(per_record, list(states))
+        tau = np.array([neff[st]["tau"] for st in states])
         rms = np.sqrt([np.mean(res[eq == j] ** 2) for j in range(len(states))])
         sig = rms * np.sqrt(tau)
         est, res = _solve(A, y, 1.0 / sig[eq], w_prior, p0, scale)
@@ -277,11 +279,12 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
                   status="least-squares", iterations=0, solve_time_s=time.perf_counter() - t0,
                   noise={"sigma": {f"{s}_dot": float(v * np.sqrt(s2)) for s, v in zip(states, sig)},
                          "weight_scale": float(np.sqrt(s2)), "prior": dict(prior)},
-                  x0=[], predictions=[])
+                  x0=[], predictions=[], records=[record_label(d, k) for k, d in enumerate(records)])
 
 
 def _fit_result(*, model: Model, params: dict, names, values, info, jac_nat, scale, cost, loglik, n_obs,
-                residuals, output_names, method, status, iterations, solve_time_s, noise, x0, predictions):
+                residuals, output_names, method, status, iterations, solve_time_s, noise, x0, predictions,
+                records):
     """The regression's :class:`FitResult`: covariance from the information matrix (delta method to
     natural units through ``jac_nat``), residual whiteness, and the model's identity."""
     del scale                                   # the covariance is already in natural units below
@@ -300,7 +303,7 @@ def _fit_result(*, model: Model, params: dict, names, values, info, jac_nat, sca
                      bic=float(k * np.log(max(n_obs, 1)) - 2 * loglik),
                      whiteness=whiteness(residuals, output_names), warnings=warn, method=method, status=status,
                      iterations=int(iterations), solve_time_s=float(solve_time_s), noise=noise, x0=x0,
-                     predictions=predictions, model_options=dict(model.meta.get("options", {})),
+                     predictions=predictions, records=list(records), model_options=dict(model.meta.get("options", {})),
                      param_set=vessel.param_set if vessel is not None else "", param_names=list(model.param_names))
 
 
@@ -345,27 +348,6 @@ def _split(res, sizes, n_eq):
         out.append(res[start:start + n * n_eq].reshape(n, n_eq))
         start += n * n_eq
     return out
-
-
-def _tau(series) -> float:
-    """Integrated autocorrelation time pooled over records: ``sum N / sum (N / tau_r)``, each
-    ``tau_r = 1 + 2 sum rho`` over the initial positive sequence of pair sums (Geyer 1992)."""
-    n_tot, n_eff = 0, 0.0
-    for x in series:
-        x = np.asarray(x, dtype=float) - np.mean(x)
-        n = x.size
-        spec = np.fft.rfft(x, 2 * n)
-        acov = np.fft.irfft(spec * np.conj(spec))[:n]
-        rho = acov / acov[0] if acov[0] > 0 else np.zeros(n)
-        tau = 1.0
-        for lag in range(1, n - 1, 2):
-            pair = rho[lag] + rho[lag + 1]
-            if pair <= 0:
-                break
-            tau += 2 * pair
-        n_tot += n
-        n_eff += n / tau
-    return n_tot / n_eff
 
 
 def _equation_sigma(records, states, sigma) -> np.ndarray:

@@ -18,7 +18,8 @@ import numpy as np
 from ..data import Dataset, Gaussian
 from ..discretize import DiscreteModel
 from ..estimators.base import Estimator
-from ._engine import CHUNK, LikelihoodEngine, StepSlots, _chunk, _pieces
+from ._engine import CHUNK, _chunk, _pieces
+from ._likelihood import LikelihoodEngine, StepSlots
 from ._solver import SolverReport
 from .problem import IdentificationProblem
 from .records import as_records, initial_states

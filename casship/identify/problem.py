@@ -314,7 +314,7 @@ class IdentificationProblem:
         try:
             tr = simulate(m, vals["x0"], d.t, inputs, vals["p"], method="rk4")
             sim = {n: tr[n] + vals["y"][j] for j, n in enumerate(self.measured)}
-        except (IntegrationError, ValueError):
+        except (IntegrationError, ValueError, FloatingPointError):    # a diverging replay is shown as missing
             sim = {n: np.full(len(d), np.nan) for n in self.measured}
         units = {v.name: v.unit for v in m.output_vars}
         return {"t": d.t, "label": self.labels[r], "kind": "free-run simulation",

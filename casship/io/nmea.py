@@ -236,9 +236,15 @@ def _first_text(exc: Exception) -> str:
 
 
 def _lines(source) -> tuple[str, Iterable[tuple[int, str]]]:
+    if isinstance(source, str) and not source.strip():
+        raise ValueError("read_nmea: the source is an empty string; give a file name or the log text")
     is_text = isinstance(source, str) and ("\n" in source or source.lstrip().startswith(("$", "!")))
     if isinstance(source, (str, Path)) and not is_text:
         path = Path(source)
+        if path.is_dir():
+            raise IsADirectoryError(f"read_nmea: {path} is a folder, not an NMEA log file")
+        if not path.is_file():
+            raise FileNotFoundError(f"read_nmea: no such file {path}")
         raw = path.read_bytes()
         return str(path), enumerate(raw.decode("ascii", errors="surrogateescape").splitlines(), 1)
     if isinstance(source, str):

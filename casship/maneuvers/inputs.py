@@ -249,7 +249,7 @@ def spiral_inputs(model: Model, t, rudders: Sequence[float], n: float | None = N
 
 def random_rudder_inputs(model: Model, t, n: float | None = None, *, hold: float = 10.0, seed=None,
                          ranges_deg: Mapping[str, tuple[float, float]] | None = None,
-                         **extra) -> dict[str, np.ndarray]:
+                         rate: float | None | str = None, **extra) -> dict[str, np.ndarray]:
     """Random rudder sequence: each rudder uniform in its range, held ``hold`` [s] (seed 002 Fig. 8).
 
     Default ranges: ``delta_s`` in [-35, 105] deg and ``delta_p`` in [-105, 35] deg for twin rudders
@@ -270,6 +270,9 @@ def random_rudder_inputs(model: Model, t, n: float | None = None, *, hold: float
         Random source.
     ranges_deg : mapping rudder name -> (low, high), optional
         Ranges [deg] replacing the defaults.
+    rate : float, None or "model"
+        Rudder rate [rad/s] at which each rudder moves to its next value (see
+        :func:`turning_inputs`); ``None`` (default) steps at once.
     **extra
         Other inputs by name.
 
@@ -297,9 +300,23 @@ def random_rudder_inputs(model: Model, t, n: float | None = None, *, hold: float
         lo, hi = np.radians(ranges[name][0]), np.radians(ranges[name][1])
         if not lo < hi:
             raise ValueError(f"range of {name!r} must have low < high, got {ranges[name]}")
-        values[name] = rng.uniform(lo, hi, count)[segment]
+        values[name] = _rate_limited(t, rng.uniform(lo, hi, count)[segment], _rate(model, rate))
     out = _open_loop(model, t, None, n, extra)
     out.update(values)
+    return out
+
+
+def _rate_limited(t: np.ndarray, target: np.ndarray, rate: float | None) -> np.ndarray:
+    """``target`` followed at most at ``rate`` per second (``None``: exactly)."""
+    if rate is None or not np.isfinite(rate):
+        return target
+    if rate <= 0:
+        raise ValueError(f"rudder rate must be positive, got {rate}")
+    out = np.empty_like(target)
+    out[0] = target[0]
+    steps = rate * np.diff(t)
+    for k in range(1, t.size):
+        out[k] = out[k - 1] + np.clip(target[k] - out[k - 1], -steps[k - 1], steps[k - 1])
     return out
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["inv_sqrt", "arrival_prior"]
+__all__: list[str] = []          # the package's own building blocks
 
 
 def inv_sqrt(P: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ import numpy as np
 from ..._fast import BufferedCall
 from ...angles import wrap_sym
 
-__all__ = ["Window", "build_window", "params_vector", "sqrt_factor"]
+__all__: list[str] = []          # the package's own building blocks
 
 
 def sqrt_factor(Q: np.ndarray, tol: float = 1e-12):

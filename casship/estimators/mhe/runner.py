@@ -15,7 +15,7 @@ from .arrival import arrival_prior
 from .problem import params_vector
 from .solvers import solve_window
 
-__all__ = ["WindowEngine"]
+__all__: list[str] = []          # the package's own building blocks
 
 
 def _push(buffer: np.ndarray, value) -> None:
