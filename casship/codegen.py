@@ -231,8 +231,9 @@ def export_mhe_rti(mhe, directory, name: str | None = None) -> CFiles:
 
     The exported function is ``NAME(z, p) -> z_next``: one Gauss-Newton step of the window problem
     of :class:`casship.MHE` (horizon ``N`` = the estimator's ``horizon`` option), solving the
-    equality-constrained KKT system with a sparse QR factorisation (what ``solver="rti"`` does
-    when no bound is active). The layouts (column-major throughout):
+    equality-constrained Gauss-Newton problem (what ``solver="rti"`` does when no bound is active:
+    with option ``jit`` by a Riccati recursion over the stages, else through a sparse QR
+    factorisation of the KKT system). The layouts (column-major throughout):
 
     * ``z``: for each stage ``j = 0 .. N-1`` the state ``x_j`` (nx) and whitened process noise
       ``v_j`` (nv), then ``x_N``;
@@ -248,15 +249,13 @@ def export_mhe_rti(mhe, directory, name: str | None = None) -> CFiles:
         raise TypeError(f"export_mhe_rti needs a casship.MHE, got {type(mhe).__name__}")
     N = mhe.horizon
     window = mhe.window(N, "rti")
-    if window.gn_step is None:
-        raise ValueError("this MHE window has no Gauss-Newton step to export")
     name = _check_name(name or f"mhe_rti_step_{N}")
     m = mhe.model
     title = (f"{name}: MHE real-time-iteration step, model '{m.name}', horizon N = {N} "
              f"(nx = {m.nx}, nv = {mhe.nv}, nu = {m.nu}, ny = {mhe.ny}, np = {m.np}; "
              f"measured {', '.join(mhe.measured)}). z = [x_0 v_0 ... x_N-1 v_N-1 x_N]; "
              "p = [xbar, W, U, U_prev, Y, M, dt, params]")
-    return generate_c(window.gn_step.fun, directory, name, title=title)
+    return generate_c(window.gn().fun, directory, name, title=title)
 
 
 HARNESS = r"""/* Test harness for {name}: reads input sets from stdin, prints the outputs.

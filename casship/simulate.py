@@ -22,10 +22,11 @@ class IntegrationError(RuntimeError):
     Parameters
     ----------
     message : str
+        What failed, where.
     status : str
-        The integrator's return flag.
+        The integrator's return flag (e.g. ``CV_TOO_MUCH_WORK``).
     step : int
-        First step of the block in which it failed.
+        First step of the failing block.
     """
 
     def __init__(self, message: str, status: str, step: int):
@@ -43,16 +44,22 @@ def _status(exc: Exception) -> str:
 def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | None:
     """Inputs as an (N, nu) array from an array, a mapping name -> array/constant or a Dataset.
 
+    Returns ``None`` for a callable (evaluated during the simulation).
+
     Parameters
     ----------
     model : Model
-    t : array
-        The time grid.
-    inputs : array, mapping, Dataset, callable or None
-    x0 : array, optional
-        Unused (kept for callers that pass it).
+        The model.
+    t : numpy.ndarray
+        Time grid [s].
+    inputs : array, mapping, Dataset or callable
+        See :func:`simulate`.
+    x0 : array_like, optional
+        Unused (kept for callers).
 
-    Returns ``None`` for a callable (evaluated during the simulation).
+    Returns
+    -------
+    numpy.ndarray or None
     """
     n = t.size
     if callable(inputs) and not isinstance(inputs, Dataset):
@@ -135,20 +142,29 @@ def _padded(a: np.ndarray, total: int) -> np.ndarray:
 def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
     """Run ``x[k+1] = F(x[k], U[k], p, W[k], dt[k])`` over all steps through a compiled fold.
 
+    The record is processed in blocks by one cached ``mapaccum`` of the step Function (building a
+    fold of the full length would cost more than evaluating it); the state is carried from block
+    to block, so the result is identical to a single fold.
+
     Parameters
     ----------
     dmodel : DiscreteModel
-    x0 : array
-    U, W : arrays (steps, nu) and (steps, nw)
-        Inputs and noise held over each step.
-    p : array
-    dt : array
-        Step lengths.
+        The discretisation.
+    x0 : array_like (nx,)
+        Initial state.
+    U : array (n, nu)
+        Inputs per step.
+    p : array_like (np,)
+        Parameters.
+    W : array (n, nw)
+        Process noise per step.
+    dt : array_like (n,)
+        Step lengths [s].
 
-    The record is processed in blocks by one cached ``mapaccum`` of the step Function (building a
-    fold of the full length would cost more than evaluating it); the state is carried from block
-    to block, so the result is identical to a single fold. Returns the (len(dt) + 1, nx) array of
-    states, the first row being ``x0``.
+    Returns
+    -------
+    numpy.ndarray
+        The (len(dt) + 1, nx) states, the first row being ``x0``.
     """
     x0 = np.asarray(x0, dtype=float).reshape(-1)
     dt = np.asarray(dt, dtype=float).reshape(-1)

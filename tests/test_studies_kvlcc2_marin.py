@@ -2,7 +2,7 @@
 
 The quick study runs the whole workflow (propulsion trim, smoothing, inverse dynamics, free set from
 the Fisher information, MAP refinement) without the held-out run and replays it; its fit.json
-replays with ``casship simulate kvlcc2 --params`` on the fitted model variant.
+replays with ``casship simulate --model kvlcc2 --params`` on the fitted model variant.
 """
 import json
 import re

@@ -26,6 +26,7 @@ from scipy import stats
 from .._fast import DUPLICATE_NAMES, BufferedCall, compile_function, run_fold
 from ..data import Dataset, Gaussian, as_cov
 from ..discretize import DiscreteModel
+from .gaps import bridge_gaps
 from .options import DIAGNOSTICS, EstimatorOptions
 from .result import FilterResult
 from .update import residual
@@ -348,6 +349,7 @@ class Estimator:
         FilterResult
         """
         self._check_prior(prior)
+        data = bridge_gaps(self, data, prior.mean, p)      # a gap too long for one prediction: raise or bridge
         arrays = self.prepare(data, p)
         n = len(data)
         rng = np.random.default_rng(seed)

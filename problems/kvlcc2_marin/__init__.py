@@ -14,7 +14,7 @@ propulsion trim and free-set choice included, runs on the other fifteen) and lea
 constants and with the fit that did not see it.
 
 Outputs (:mod:`.report`): ``report.md``, ``fit.json`` (the fit on all runs for the full-scale model,
-with the MARIN facility's asymmetry terms; replays with ``casship simulate kvlcc2 --params
+with the MARIN facility's asymmetry terms; replays with ``casship simulate --model kvlcc2 --params
 fit.json``), ``fit_all_runs.json`` (with all per-facility copies), ``fit_without_<run>.json``,
 ``cross_validation.csv``, ``fig_heldout_<run>.png``, ``fig_facility_<name>.png``, ``summary.json``.
 """

@@ -284,7 +284,7 @@ class MHE(Estimator):
         z0 = np.clip(z0, win.lbx, win.ubx)
         par = params_vector(prior.mean, inv_sqrt(prior.cov), arrays["u"], arrays["u_prev"][:, 1:], arrays["y"],
                             arrays["mask"], arrays["dt"][:, 1:], arrays["p"])
-        z = solve_window(win, z0, par, f"the full record ({n} samples)")
+        z, _ = solve_window(win, z0, par, f"the full record ({n} samples)")
         return self._covariances(data, z[win.ix], z[win.iv], arrays, prior)
 
     # -- covariances of the MAP trajectory ------------------------------------------------------------
