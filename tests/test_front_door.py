@@ -316,16 +316,16 @@ def test_online_update_refuses_bad_dt_and_long_gaps():
     m, truth, data = _gap_record()
     prior = cs.Gaussian(m.states(), np.diag([1e-2, 1e-4]))
     run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4).online(prior, u=[0.1])
-    run.update(data["psi"][0], 0.0)
+    run.update(data["psi"][:1], 0.0)
     for bad in (np.nan, -1.0, np.inf):
         with pytest.raises(ValueError, match="dt must be >= 0 and finite"):
-            run.update(data["psi"][1], bad)
+            run.update(data["psi"][1:2], bad)
     with pytest.raises(ValueError, match="time gap of 1e\\+04 s before update 2"):
-        run.update(data["psi"][1], 1e4)
+        run.update(data["psi"][1:2], 1e4)
     bridged = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"on_gap": "bridge"}).online(prior, u=[0.1])
-    bridged.update(data["psi"][0], 0.0)
+    bridged.update(data["psi"][:1], 0.0)
     with pytest.warns(UserWarning, match="bridged by"):
-        x = bridged.update(data["psi"][-1], 1e4)
+        x = bridged.update(data["psi"][-1:], 1e4)
     assert np.all(np.isfinite(x))
     assert abs(x[1] - truth["r"][-1]) < 3 * np.sqrt(bridged.P[1, 1])
 
