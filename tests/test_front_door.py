@@ -404,3 +404,13 @@ def test_identify_refuses_to_overwrite_a_fit(capsys, nomoto_record, tmp_path):
     _fails(capsys, ["identify", str(path), "--model", "nomoto1", "--free", "K", "--out", str(out)],
            "--out", "fit.json: file exists; pass --overwrite")
     assert out.read_text() == "{}"
+
+
+def test_health_reads_short():
+    m = cs.models.nomoto_first_order()
+    t = np.arange(0.0, 50.0, 0.5)
+    data = cs.measure(cs.simulate(m, m.states(), t, {"delta": 0.1}), m, {"psi": 0.01}, seed=1)
+    health = cs.EKF(cs.discretize(m, 0.5), Q=1e-8, R=1e-4).filter(data, cs.Gaussian(m.states(), 1e-2)).health()
+    text = repr(health)
+    assert "\n" not in text and "array(" not in text and len(text) < 120
+    assert text.startswith("Health(ok: 0 of 2 NIS window(s) of 50 flagged")
