@@ -16,7 +16,27 @@ from __future__ import annotations
 import time
 from typing import Callable
 
-__all__ = ["median_time", "row", "skipped_row", "format_table"]
+import numpy as np
+
+__all__ = ["median_time", "compare", "compared_row", "row", "skipped_row", "format_table", "TARGETS",
+           "format_targets"]
+
+# The speed targets of issue 15 (peer / casship ratios measured in one run): key -> (what, target,
+# the ratio measured before the work on them, on an independent harness). A row carries its key
+# as ``target``; the EnKF row also carries ``first_call_s`` (target <= 5 s).
+TARGETS = {
+    "ekf_batch": ("EKF batch, compiled, vs filterpy EKF", 50, "31"),
+    "ekf_online": ("EKF online update, compiled, vs filterpy", 25, "14"),
+    "ukf_batch": ("UKF batch, compiled, vs filterpy UKF", 150, "143"),
+    "enkf_batch": ("EnKF (100 members) batch, compiled, vs filterpy EnKF", 40, "29"),
+    "rts_cv": ("RTS (CV model) vs pykalman smooth", 150, "165"),
+    "ship_rts": ("ship EKF-RTS vs a NumPy loop", 30, "15"),
+    "mhe_ipopt": ("MHE N=20, IPOPT, vs do-mpc", 10, "3.6"),
+    "mhe_rti": ("MHE N=20, RTI, vs do-mpc", 50, "32"),
+    "ml_fit_3": ("ML fit, 3 free parameters, vs scipy L-BFGS-B + finite differences", 10, "1.5"),
+    "ml_fit_7": ("ML fit, 7 free parameters, vs scipy L-BFGS-B + finite differences", 10, "1.1"),
+}
+ENKF_FIRST_CALL_S = 5.0
 
 
 def median_time(func: Callable[[], object], repeat: int = 5, warmup: int = 1,
@@ -39,6 +59,50 @@ def median_time(func: Callable[[], object], repeat: int = 5, warmup: int = 1,
     times.sort()
     mid = len(times) // 2
     return times[mid] if len(times) % 2 else 0.5 * (times[mid - 1] + times[mid])
+
+
+def compare(casship: Callable[[], object], peer: Callable[[], object], repeat: int = 7, warmup: int = 1,
+            clock: Callable[[], float] = time.process_time) -> dict:
+    """Time ``casship()`` and ``peer()`` interleaved (peer, casship, peer, casship, ...) and give the
+    medians and the spread of the ratio.
+
+    Interleaving puts both under the same load at the same moments, so the ratio of each pair is
+    fair on a shared machine even when the absolute times drift. Each timed call is preceded by
+    ``warmup`` untimed calls of both.
+
+    Returns
+    -------
+    dict
+        ``casship_s``, ``peer_s`` (medians), ``ratio`` (median of the per-pair ratios
+        ``peer / casship``), ``ratio_min``, ``ratio_max`` and ``repeats``.
+    """
+    if repeat < 1:
+        raise ValueError(f"repeat must be >= 1, got {repeat}")
+    for _ in range(warmup):
+        peer()
+        casship()
+    tc, tp = [], []
+    for _ in range(repeat):
+        t0 = clock()
+        peer()
+        t1 = clock()
+        casship()
+        t2 = clock()
+        tp.append(t1 - t0)
+        tc.append(t2 - t1)
+    ratios = sorted(p / c for p, c in zip(tp, tc) if c > 0)
+    med = lambda v: float(np.median(v)) if len(v) else None  # noqa: E731
+    return {"casship_s": med(tc), "peer_s": med(tp), "ratio": med(ratios),
+            "ratio_min": ratios[0] if ratios else None, "ratio_max": ratios[-1] if ratios else None,
+            "repeats": repeat}
+
+
+def compared_row(benchmark: str, timing: dict, peer: str, accuracy_check: str, **extra) -> dict:
+    """A result row from :func:`compare` (ratio = median of the interleaved pairs, with its spread)."""
+    r = row(benchmark, timing["casship_s"], peer, timing["peer_s"], accuracy_check, **extra)
+    r.update(ratio=timing["ratio"], ratio_min=timing["ratio_min"], ratio_max=timing["ratio_max"],
+             repeats=timing["repeats"])
+    return r
 
 
 def solve_ivp_held(rhs_at: Callable[[int], Callable], t, x0, rtol: float = 1e-9, atol: float = 1e-9):
@@ -78,6 +142,36 @@ def _cell(text) -> str:
     return str(text).replace("|", "\\|")
 
 
+def _ratio(r: dict) -> str:
+    """The ratio, with its range over interleaved repeats when there is one."""
+    text = _fmt(r.get("ratio"), ".3g")
+    if r.get("ratio_min") is not None and r.get("ratio_max") is not None:
+        text += f" [{r['ratio_min']:.3g}-{r['ratio_max']:.3g}]"
+    return text
+
+
+def format_targets(rows: list[dict]) -> str:
+    """Markdown table of the rows that carry a ``target`` key: ratio (median and range over the
+    interleaved repeats), the target and whether it is met."""
+    lines = ["| what | measured on | before | now: ratio [range] | target | met |", "|---|---|---:|---:|---:|---|"]
+    by_key = {r["target"]: r for r in rows if r.get("target")}
+    for key, (what, goal, before) in TARGETS.items():
+        r = by_key.get(key)
+        if r is None or r.get("ratio") is None:
+            lines.append(f"| {what} | not measured in this run | {before}x | - | >= {goal}x | - |")
+            continue
+        spread = (f" [{r['ratio_min']:.3g}-{r['ratio_max']:.3g}]" if r.get("ratio_min") is not None else "")
+        met = r["ratio"] >= goal
+        extra = ""
+        if key == "enkf_batch" and r.get("first_call_s") is not None:
+            first_ok = r["first_call_s"] <= ENKF_FIRST_CALL_S
+            extra = f"; first call {r['first_call_s']:.1f} s (target <= {ENKF_FIRST_CALL_S:g} s)"
+            met = met and first_ok
+        lines.append(f"| {what} | {_cell(r['benchmark'])} | {before}x | {r['ratio']:.3g}x{spread}{extra} | "
+                     f">= {goal}x | {'yes' if met else 'NO'} |")
+    return "\n".join(lines)
+
+
 def format_table(rows: list[dict]) -> str:
     """Markdown table of result rows (medians in seconds, ratio = peer / casship)."""
     lines = ["| benchmark | casship [s] | peer | peer [s] | ratio | accuracy check |",
@@ -87,5 +181,5 @@ def format_table(rows: list[dict]) -> str:
         check = f"skipped: {note}" if r.get("skipped") else (f"error: {note}" if r.get("error")
                                                                else r.get("accuracy_check", ""))
         lines.append(f"| {_cell(r.get('benchmark', '?'))} | {_fmt(r.get('casship_s'), '.4g')} | {_cell(r.get('peer', ''))} | "
-                     f"{_fmt(r.get('peer_s'), '.4g')} | {_fmt(r.get('ratio'), '.3g')} | {_cell(check)} |")
+                     f"{_fmt(r.get('peer_s'), '.4g')} | {_ratio(r)} | {_cell(check)} |")
     return "\n".join(lines)

@@ -18,7 +18,7 @@ import time
 import traceback
 from pathlib import Path
 
-from . import format_table, skipped_row
+from . import format_table, format_targets, skipped_row
 
 __all__ = ["discover", "run_all", "machine_info", "main"]
 
@@ -97,7 +97,8 @@ def results_markdown(rows: list[dict], info: dict, quick: bool, command: str) ->
             + (" (quick sizes)" if quick else "") + " on:\n\n"
             f"- CPU: {info['cpu']}, {info['cpu_count']} logical CPUs ({info['platform']})\n"
             f"- Python {info['python']}, CasADi {info['casadi']}, NumPy {info['numpy']}, SciPy {info['scipy']}\n\n"
-            + format_table(rows) + f"\n\n{END}")
+            + format_table(rows) + "\n\nThe targets of issue 15 (ratio = median of the interleaved repeats, "
+            "range in brackets):\n\n" + format_targets(rows) + f"\n\n{END}")
 
 
 def write_markdown(path: Path, section: str) -> None:
@@ -126,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = run_all(quick=args.quick, only=[n for n in names] if args.only else None)
     info = machine_info()
     print(format_table(rows))
+    print("\n" + format_targets(rows))
     print(f"\nmedians in seconds; ratio = peer / casship (> 1: casship faster). "
           f"{info['cpu']} ({info['cpu_count']} CPUs), Python {info['python']}, CasADi {info['casadi']}"
           + (" [quick]" if args.quick else ""))

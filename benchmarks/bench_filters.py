@@ -34,7 +34,7 @@ import numpy as np
 
 import casship as cs
 from casship.estimators.rts import rts_smooth
-from benchmarks import format_table, median_time, row, skipped_row
+from benchmarks import compare, compared_row, format_table, median_time, row, skipped_row
 
 DT, GNSS_HZ = 0.02, 5.0
 
@@ -247,6 +247,13 @@ def _linear_rows(quick: bool) -> list[dict]:
     t_cs = median_time(lambda: kf.smooth(data, prior), repeat=rep)
     t_pk = median_time(lambda: pk.smooth(Y), repeat=rep)
     rows.append(_per_step(row(f"KF + RTS smoother, {label}", t_cs, "pykalman KalmanFilter.smooth", t_pk, check), n))
+    kfj = cs.KF(dm, Qc, R, options={"jit": True})
+    smj = kfj.smooth(data, prior)
+    t = compare(lambda: kfj.smooth(data, prior), lambda: pk.smooth(Y), rep)
+    rows.append(_per_step(compared_row(
+        f"KF + RTS smoother, compiled (jit), {label}", t, "pykalman KalmanFilter.smooth",
+        f"max |xs - xs_pykalman| = {np.abs(smj.x - xs).max():.1e}, |Ps - Ps_pk| = {np.abs(smj.P - Ps).max():.1e}",
+        target="rts_cv"), n))
     t_rts = median_time(lambda: rts_smooth(res), repeat=rep)
     t_pk_backward = max(t_pk - median_time(lambda: pk.filter(Y), repeat=rep), 0.0)
     rows.append(_per_step(row(f"RTS backward pass only, interpreted, {label}", t_rts,

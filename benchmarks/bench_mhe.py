@@ -6,12 +6,17 @@ dt = 0.1 s, so that the process noise on the ``u, v, r`` accelerations is exactl
 discrete step (``x+ = F(x, u) + dt w``; do-mpc's MHE only knows additive noise). A 20/20-like
 rudder sequence, truth simulated with that process noise; position (1 m) and heading (1 deg)
 measured at 10 Hz. Horizon N = 20 and N = 50. Estimates are compared from sample N on (when the
-first full window exists); the time per sample is the median wall-clock time of one estimator
-step over those samples (casship: ``MHE.step``, including its EKF update and data shift).
+first full window exists); the time per sample is the median CPU time (``time.process_time``) of
+one estimator update over those samples (casship: ``run.update`` of ``MHE.online``, including its
+EKF arrival-cost step and the data shift). All estimators run in turn, five rounds; a ratio is
+formed per round and reported as the median and range over the rounds.
 
-* casship: ``MHE`` with the EKF-updated arrival cost, IPOPT (``solver="ipopt"``) and real-time
-  iteration (``solver="rti"``: one Gauss-Newton SQP step per sample with CasADi ``sqpmethod`` and the
-  sparse ``qrqp`` QP solver), NLP built once, shifted warm start.
+* casship: ``MHE`` with the EKF-updated arrival cost, NLP built once per horizon, data as its
+  parameters. ``solver="ipopt"``: IPOPT warm-started from the previous solution shifted by one stage
+  and improved by one Gauss-Newton step, with that step's multipliers. ``solver="rti"``: real-time
+  iteration, one Gauss-Newton step per sample. Interpreted (CasADi's virtual machine; the step
+  solves the KKT system by sparse QR) and compiled (``jit``: the step is a Riccati recursion over
+  the stages, compiled to C through the on-disk cache).
 * plain: the textbook multiple-shooting MHE written directly in CasADi: MX decision variables per
   stage in a Python loop, ``nlpsol("ipopt")`` with default options (exact Hessian), data as NLP
   parameters, warm start from the previous solution, arrival cost from an EKF lagging N samples
@@ -71,17 +76,20 @@ def _rmse(X, data, model, start):
 
 
 # -- casship ---------------------------------------------------------------------------------------------
-def run_casship(dm, data, prior, Q, R, N, solver):
-    mhe = cs.MHE(dm, Q, R, options={"horizon": N, "solver": solver})
+CLOCK = time.process_time      # CPU time of the process: not inflated by other jobs on a shared machine
+
+
+def run_casship(dm, data, prior, Q, R, N, solver, jit=False, mhe=None):
+    mhe = mhe or cs.MHE(dm, Q, R, options={"horizon": N, "solver": solver, "jit": jit})
     model = dm.model
     U = data.matrix(model.input_names)
     Y = data.matrix(mhe.measured)
     run = mhe.online(prior, u=U[0])
     X, times = np.empty((len(data), model.nx)), []
     for k in range(len(data)):
-        t0 = time.perf_counter()
+        t0 = CLOCK()
         X[k] = run.update(Y[k], DT if k else 0.0, u_prev=U[max(k - 1, 0)], u=U[k])
-        times.append(time.perf_counter() - t0)
+        times.append(CLOCK() - t0)
     return X, np.median(times[N:])
 
 
@@ -123,9 +131,9 @@ def run_plain(dm, data, prior, Q, R, N):
             zk = np.concatenate([np.concatenate([ekf.x[s + j], np.zeros(nw)]) for j in range(N)] + [ekf.x[k]])
         else:
             zk = np.concatenate([zk[nx + nw:], np.zeros(nw), zk[-nx:]])     # shift, repeat last state
-        t0 = time.perf_counter()
+        t0 = CLOCK()
         sol = solver(x0=zk, p=par, lbg=0, ubg=0)
-        times.append(time.perf_counter() - t0)
+        times.append(CLOCK() - t0)
         if not solver.stats()["success"]:
             raise RuntimeError(f"plain MHE failed at row {k}: {solver.stats()['return_status']}")
         zk = np.asarray(sol["x"]).ravel()
@@ -167,9 +175,9 @@ def run_dompc(dm, data, prior, Q, R, N):
     times = []
     for k in range(len(data)):
         y0 = np.concatenate([Y[k], U[k]]).reshape(-1, 1)
-        t0 = time.perf_counter()
+        t0 = CLOCK()
         out[k] = np.asarray(mhe.make_step(y0)).ravel()
-        times.append(time.perf_counter() - t0)
+        times.append(CLOCK() - t0)
     return out, np.median(times[N:])
 
 
@@ -180,37 +188,64 @@ def _check(name, rm_c, rm_p):
             f"{'pass' if ok else 'FAIL'} (casship <= 1.05 peer)")
 
 
+CASSHIP = (("ipopt", False), ("rti", False), ("ipopt", True), ("rti", True))
+
+
+def _tag(solver, jit):
+    return f"{solver}, {'compiled (jit)' if jit else 'interpreted'}"
+
+
+def _dompc_quiet(*args):
+    with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
+        warnings.simplefilter("ignore")
+        return run_dompc(*args)
+
+
 def main(quick: bool = False) -> list[dict]:
+    """Per-sample times, median over the samples of a record, for casship (IPOPT and RTI, interpreted
+    and compiled), do-mpc and the plain CasADi MHE, run in turn ``repeats`` times (so that all see
+    the same machine load); ratios are formed per round and reported as median and range."""
     rows = []
     model, dm, data, prior, Q, R = problem(20.0 if quick else 60.0)
-    horizons = (20, 50)
-    for N in horizons:
-        X_ipopt, t_ipopt = run_casship(dm, data, prior, Q, R, N, "ipopt")
-        X_rti, t_rti = run_casship(dm, data, prior, Q, R, N, "rti")
-        rm_ipopt, rm_rti = _rmse(X_ipopt, data, model, N), _rmse(X_rti, data, model, N)
-        X_plain, t_plain = run_plain(dm, data, prior, Q, R, N)
-        rm_plain = _rmse(X_plain, data, model, N)
-        for tag, tc, rc in (("ipopt", t_ipopt, rm_ipopt), ("rti", t_rti, rm_rti)):
-            rows.append(row(f"MHE N={N} per sample, casship {tag}", tc, "plain CasADi+IPOPT", t_plain,
-                            _check("plain", rc, rm_plain), below_dt_over_10=bool(tc < DT / 10)))
-        try:
-            with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
-                warnings.simplefilter("ignore")
-                X_d, t_d = run_dompc(dm, data, prior, Q, R, N)
-        except ImportError:
-            for tag, tc in (("ipopt", t_ipopt), ("rti", t_rti)):
-                rows.append(skipped_row(f"MHE N={N} per sample, casship {tag}", "do-mpc MHE",
-                                        "do-mpc not installed (pip install do-mpc)", tc))
-            continue
-        rm_d = _rmse(X_d, data, model, N)
-        # the same problem with do-mpc's arrival cost (fixed weight on the previous window's estimate)
+    repeats = 2 if quick else 5
+    try:
+        import do_mpc  # noqa: F401
+        have_dompc = True
+    except ImportError:
+        have_dompc = False
+    for N in (20, 50):
+        ests = {c: cs.MHE(dm, Q, R, options={"horizon": N, "solver": c[0], "jit": c[1]}) for c in CASSHIP}
+        times = {k: [] for k in (*CASSHIP, "plain", "do-mpc")}
+        X = {}
+        for _ in range(repeats):
+            if have_dompc:
+                X["do-mpc"], t = _dompc_quiet(dm, data, prior, Q, R, N)
+                times["do-mpc"].append(t)
+            X["plain"], t = run_plain(dm, data, prior, Q, R, N)
+            times["plain"].append(t)
+            for c in CASSHIP:
+                X[c], t = run_casship(dm, data, prior, Q, R, N, *c, mhe=ests[c])
+                times[c].append(t)
+        rm = {k: _rmse(v, data, model, N) for k, v in X.items()}
         fixed = cs.MHE(dm, Q, R, options={"horizon": N, "arrival": "fixed"}).filter(data, prior)
         rm_f = _rmse(fixed.x, data, model, N)
         same = ("; casship with do-mpc's fixed-weight arrival cost: [" + ", ".join(f"{v:.3g}" for v in rm_f[[0, 1, 3, 5]])
                 + "] (the accuracy gap is the arrival cost)")
-        for tag, tc, rc in (("ipopt", t_ipopt, rm_ipopt), ("rti", t_rti, rm_rti)):
-            rows.append(row(f"MHE N={N} per sample, casship {tag}", tc, "do-mpc MHE", t_d,
-                            _check("do-mpc", rc, rm_d) + same, below_dt_over_10=bool(tc < DT / 10)))
+        for peer, label in (("do-mpc", "do-mpc MHE"), ("plain", "plain CasADi+IPOPT")):
+            for c in CASSHIP:
+                name = f"MHE N={N} per sample, casship {_tag(*c)}"
+                if peer == "do-mpc" and not have_dompc:
+                    rows.append(skipped_row(name, label, "do-mpc not installed (pip install do-mpc)",
+                                            float(np.median(times[c]))))
+                    continue
+                ratios = sorted(p / t for p, t in zip(times[peer], times[c]))
+                check = _check(peer, rm[c], rm[peer]) + (same if peer == "do-mpc" else "")
+                target = {("ipopt", True): "mhe_ipopt", ("rti", True): "mhe_rti"}.get(c) if N == 20 and peer == "do-mpc" else None
+                r = row(name, float(np.median(times[c])), label, float(np.median(times[peer])), check,
+                        below_dt_over_10=bool(np.median(times[c]) < DT / 10), repeats=repeats,
+                        **({"target": target} if target else {}))
+                r.update(ratio=float(np.median(ratios)), ratio_min=ratios[0], ratio_max=ratios[-1])
+                rows.append(r)
     return rows
 
 

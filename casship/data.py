@@ -48,7 +48,21 @@ def check_time(t, name: str = "time") -> np.ndarray:
 
 def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_zero: bool = True) -> np.ndarray:
     """Turn a covariance given as scalar, vector (diagonal), matrix or name->variance mapping into
-    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``."""
+    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``.
+
+    Parameters
+    ----------
+    value : float, array or mapping
+        Scalar (times the identity), variances, matrix, or channel name -> variance.
+    n : int
+        Size.
+    name : str
+        What the covariance is (for messages).
+    names : sequence of str, optional
+        Channel names of a mapping.
+    allow_zero : bool
+        Accept a singular (positive semi-definite) matrix.
+    """
     if isinstance(value, Mapping):
         if names is None:
             raise TypeError(f"{name}: a mapping needs channel names")
@@ -106,10 +120,17 @@ class Gaussian:
 
     @property
     def std(self) -> np.ndarray:
+        """Standard deviations (square roots of the variances)."""
         return np.sqrt(np.diag(self.cov))
 
     def sample(self, n: int, seed=None) -> np.ndarray:
-        """``n`` samples as rows, from a seed or ``numpy.random.Generator``."""
+        """``n`` samples as rows, from a seed or ``numpy.random.Generator``.
+
+        Parameters
+        ----------
+        n : int
+        seed : int or numpy.random.Generator, optional
+        """
         rng = np.random.default_rng(seed)
         return rng.multivariate_normal(self.mean, self.cov, size=n, method="eigh")
 

@@ -347,6 +347,11 @@ class ModelBuilder:
 
         The model keeps ``(x[k+1] - x[k]) / dt`` as its rate ``f``, so that composition
         (:meth:`add_to_ode`, :func:`~casship.augment`) adds ``dt`` times a rate to the step.
+
+        Parameters
+        ----------
+        **rhs
+            State name -> expression of ``x[k+1]`` in the declared symbols.
         """
         if self.dt is None:
             raise ValueError(f"model {self.name!r} is continuous-time: give derivatives with ode(...), or "

@@ -80,3 +80,39 @@ def test_markdown_results_section_is_replaced_in_place(tmp_path):
     assert "old table" not in text and "| x | 1 | p | 2 | 2 | ok |" in text
     assert text.startswith("# B\n\nintro") and text.rstrip().endswith("notes stay")
     assert info["cpu"] in text and f"CasADi {info['casadi']}" in text
+
+
+def test_compare_interleaves_and_reports_the_ratio_spread():
+    order = []
+    clock = iter(range(100)).__next__                # each reading one tick later
+
+    def peer():
+        order.append("peer")
+        for _ in range(2):                            # the peer reads the clock twice more: 3 ticks
+            clock()
+
+    def fast():
+        order.append("casship")
+
+    t = benchmarks.compare(fast, peer, repeat=3, warmup=1, clock=lambda: float(clock()))
+    assert order == ["peer", "casship"] * 4
+    assert t["peer_s"] == 3.0 and t["casship_s"] == 1.0
+    assert t["ratio"] == t["ratio_min"] == t["ratio_max"] == 3.0 and t["repeats"] == 3
+    r = benchmarks.compared_row("b", t, "p", "same", target="ekf_batch")
+    assert r["ratio"] == 3.0 and r["ratio_min"] == 3.0 and r["target"] == "ekf_batch"
+    assert "| b | 1 | p | 3 | 3 [3-3] | same |" in benchmarks.format_table([r])
+
+
+def test_targets_table_says_met_missed_and_not_measured():
+    rows = [dict(benchmarks.row("EKF thing", 1.0, "filterpy", 60.0, "ok", target="ekf_batch"), ratio_min=55.0,
+                 ratio_max=65.0),
+            benchmarks.row("UKF thing", 1.0, "filterpy", 100.0, "ok", target="ukf_batch"),
+            dict(benchmarks.row("EnKF thing", 1.0, "filterpy", 50.0, "ok", target="enkf_batch"), first_call_s=9.0)]
+    table = benchmarks.format_targets(rows)
+    lines = {line.split(" | ")[0].lstrip("| "): line for line in table.splitlines()[2:]}
+    assert len(lines) == len(benchmarks.TARGETS)
+    assert "60x [55-65]" in lines["EKF batch, compiled, vs filterpy EKF"] and lines["EKF batch, compiled, vs filterpy EKF"].endswith("| yes |")
+    assert lines["UKF batch, compiled, vs filterpy UKF"].endswith("| NO |")
+    enkf = lines["EnKF (100 members) batch, compiled, vs filterpy EnKF"]
+    assert "first call 9.0 s" in enkf and enkf.endswith("| NO |")      # ratio met, first call not
+    assert "not measured in this run" in lines["MHE N=20, RTI, vs do-mpc"]

@@ -182,7 +182,9 @@ def test_solver_failure_raises_with_status(solver):
     assert info.value.status not in ("Solve_Succeeded", "")
     if solver != "ipopt":
         return
-    short = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 3, "max_iter": 0})
+    # a Huber cost, so that the Gauss-Newton warm start is not already the optimum, as it is for a
+    # linear model with a quadratic cost
+    short = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 3, "max_iter": 0, "huber": 0.5})
     with pytest.raises(RuntimeError, match="Maximum_Iterations_Exceeded"):
         short.filter(data, prior)
 

@@ -13,13 +13,19 @@ import numpy as np
 from ..data import Gaussian
 from .options import DIAGNOSTICS
 
-__all__ = ["OnlineRun", "StepEngine"]
+__all__ = ["OnlineRun"]
 
 
 class OnlineRun:
     """An estimator running on a stream, one sample per :meth:`update`, its memory kept inside.
 
     Numbers equal :meth:`Estimator.filter` on the same record (tested for every estimator).
+    Built by ``est.online(prior, p, u=..., seed=...)``.
+
+    Parameters
+    ----------
+    engine : object
+        Does the work per sample (the step of a recursive estimator, the window of the MHE).
 
     Examples
     --------
@@ -35,7 +41,22 @@ class OnlineRun:
     def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
         """Predict over ``dt`` (0: no prediction, e.g. the first sample) with the input ``u_prev`` held
         (default: the ``u`` of the previous update), then update with ``y`` (NaN = not measured now)
-        using the outputs at input ``u`` (default: ``u_prev``). Returns a copy of the new mean."""
+        using the outputs at input ``u`` (default: ``u_prev``).
+
+        Parameters
+        ----------
+        y : array (ny,)
+            The measured outputs now, NaN where not measured.
+        dt : float
+            Time since the previous sample [s].
+        u_prev, u : array (nu,), optional
+            Inputs held since the previous sample, and now.
+
+        Returns
+        -------
+        array
+            A copy of the new mean.
+        """
         return self._engine.update(y, dt, u_prev, u)
 
     @property

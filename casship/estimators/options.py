@@ -16,7 +16,16 @@ DIAGNOSTICS = ("x", "P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll", "a
 
 
 def check_int(value, name: str, low: int) -> int:
-    """``value`` as an int ``>= low``, or ``ValueError`` naming the option."""
+    """``value`` as an int ``>= low``, or ``ValueError`` naming the option.
+
+    Parameters
+    ----------
+    value : number
+    name : str
+        The option (for the message).
+    low : int
+        Smallest value allowed.
+    """
     if isinstance(value, bool) or not float(value).is_integer() or int(value) < low:
         raise ValueError(f"option {name!r} must be an integer >= {low}, got {value!r}")
     return int(value)
@@ -86,7 +95,14 @@ class EstimatorOptions:
 
     @classmethod
     def from_value(cls, value, owner: str) -> "EstimatorOptions":
-        """Options from ``None`` (defaults), an instance of this class or a mapping of names to values."""
+        """Options from ``None`` (defaults), an instance of this class or a mapping of names to values.
+
+        Parameters
+        ----------
+        value : None, EstimatorOptions or mapping
+        owner : str
+            The estimator (for messages).
+        """
         if value is None:
             return cls()
         if isinstance(value, cls):
@@ -101,7 +117,13 @@ class EstimatorOptions:
         return cls(**dict(value))
 
     def replace(self, **changes) -> "EstimatorOptions":
-        """A copy with some options changed (checked like the constructor)."""
+        """A copy with some options changed (checked like the constructor).
+
+        Parameters
+        ----------
+        **changes
+            Option name -> new value.
+        """
         unknown = sorted(set(changes) - set(self.known()))
         if unknown:
             raise ValueError(f"unknown option(s) {unknown}; known: {sorted(self.known())}")

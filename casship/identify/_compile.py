@@ -2,16 +2,18 @@
 
 Compiled Functions are kept in memory per key (the serialised symbolic Function and the compile
 flags), so every problem of the same structure in a process reuses them: cross-validation folds,
-Monte Carlo repetitions, other records and other free sets of the same size. An on-disk cache
-plugs in here, behind :func:`compiled`.
+Monte Carlo repetitions, other records and other free sets of the same size. They are compiled
+through :func:`casship.compile.compile_function`, whose on-disk cache keeps them for the next
+process too.
 """
 from __future__ import annotations
 
 import hashlib
-import tempfile
 import warnings
 
 import casadi as ca
+
+from ..compile import compile_function
 
 __all__ = ["compiled", "FLAGS", "clear"]
 
@@ -47,11 +49,8 @@ def compiled(fun: ca.Function, *, jit=None, flags=FLAGS) -> ca.Function:
         return fun
     key = _key(fun, flags)
     if key not in _MEMORY:
-        ins = fun.sx_in() if fun.is_a("SXFunction") else fun.mx_in()
-        opts = {"jit": True, "compiler": "shell", "jit_cleanup": True,
-                "jit_options": {"flags": list(flags), "directory": tempfile.gettempdir()}}
         try:
-            _MEMORY[key] = ca.Function(f"{fun.name()}_jit", ins, fun.call(ins), fun.name_in(), fun.name_out(), opts)
+            _MEMORY[key] = compile_function(fun, flags=flags)
         except RuntimeError as exc:
             reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
             if jit:

@@ -10,20 +10,20 @@ kept for comparison only.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf as _potrf, dtrtri as _trtri
 
-__all__ = ["inv_sqrt", "arrival_prior"]
+__all__: list[str] = []          # the package's own building blocks
 
 
 def inv_sqrt(P: np.ndarray) -> np.ndarray:
     """``W`` with ``W' W = P^-1`` (Cholesky; for a near-singular ``P`` eigenvalues floored at 1e-14
     of the largest)."""
     P = 0.5 * (P + P.T)
-    try:
-        L = np.linalg.cholesky(P)
-        if np.all(np.diag(L) > 1e-7 * np.sqrt(np.abs(np.diag(P)).max())):
-            return np.linalg.inv(L)
-    except np.linalg.LinAlgError:
-        pass
+    L, info = _potrf(P, lower=1, clean=1)
+    if info == 0 and np.all(np.diag(L) > 1e-7 * np.sqrt(np.abs(np.diag(P)).max())):
+        Linv, info = _trtri(L, lower=1)
+        if info == 0:
+            return Linv
     lam, V = np.linalg.eigh(P)
     lam = np.maximum(lam, 1e-14 * max(lam.max(), 1e-300))
     return (V / np.sqrt(lam)).T

@@ -19,8 +19,10 @@ import numpy as np
 
 from ..._fast import BufferedCall
 from ...angles import wrap_sym
+from ...compile import compile_function
+from .riccati import riccati_step
 
-__all__ = ["Window", "build_window", "params_vector", "sqrt_factor"]
+__all__: list[str] = []          # the package's own building blocks
 
 
 def sqrt_factor(Q: np.ndarray, tol: float = 1e-12):
@@ -53,8 +55,49 @@ class Window:
     lbx: np.ndarray
     ubx: np.ndarray
     ok_status: tuple
-    gn_step: BufferedCall | None = None   # the Gauss-Newton step (solver "rti")
-    gn_parts: ca.Function | None = None   # its QP data, for the bounded QP step
+    unbounded: bool                       # no finite bound on any variable
+    ng: int                               # dynamics constraints (nx per stage)
+    make_gn: object                       # (multipliers, method) -> BufferedCall of the Gauss-Newton step
+    make_qp: object                       # () -> (QP data Function, QP solver): the step with bounds
+    gn_step: BufferedCall | None = None
+    gn_warm: BufferedCall | None = None
+    _qp: tuple | None = None
+    _nlp_call: BufferedCall | None = None
+
+    def nlp_call(self) -> BufferedCall:
+        """The NLP solver through bound buffers (bounds written once), for solvers that raise on failure."""
+        if self._nlp_call is None:
+            call = BufferedCall(self.solver)
+            call["lbx"], call["ubx"], call["lbg"], call["ubg"] = self.lbx, self.ubx, 0.0, 0.0
+            self._nlp_call = call
+        return self._nlp_call
+
+    def gn(self, multipliers: bool = False) -> BufferedCall:
+        """The Gauss-Newton step of the window, built on first use.
+
+        Parameters
+        ----------
+        multipliers : bool
+            ``False``: ``(z, p) -> z_next`` (solver ``"rti"``); ``True``: ``(z, p) -> (z_next, lam_g)``
+            with the multipliers of the dynamics (the warm start of the NLP solvers).
+
+        Returns
+        -------
+        BufferedCall
+        """
+        if multipliers:
+            if self.gn_warm is None:
+                self.gn_warm = self.make_gn(True)
+            return self.gn_warm
+        if self.gn_step is None:
+            self.gn_step = self.make_gn(False)
+        return self.gn_step
+
+    def qp(self) -> tuple:
+        """The Gauss-Newton QP data Function and the bounded QP solver (built on first use)."""
+        if self._qp is None:
+            self._qp = self.make_qp()
+        return self._qp
 
 
 def params_vector(xbar, W, Uh, Up, Y, M, dt, p) -> np.ndarray:
@@ -130,11 +173,14 @@ def build_window(mhe, N: int, solver: str) -> Window:
     nlp = {"x": z, "p": par, "f": 0.5 * ca.sumsqr(res), "g": ca.vec(G)}
     expand = o.expand if o.expand is not None else N <= 200
     common = {"expand": bool(expand), "print_time": False, "error_on_fail": False}
-    gn = None
     if solver == "ipopt":
+        # warm start (the moving window passes the previous multipliers, shifted): primal and dual
+        # start values are used as given, not pushed away from the bounds
         iopts = {"print_level": 0, "sb": "yes", "tol": o.tol, "max_iter": 100 if o.max_iter is None else o.max_iter,
-                 "mu_strategy": "adaptive", "warm_start_init_point": "no", "bound_relax_factor": 0.0}
-        S = ca.nlpsol(f"mhe_ipopt_{N}", "ipopt", nlp, {**common, "ipopt": iopts})
+                 "mu_strategy": "adaptive", "warm_start_init_point": "yes", "warm_start_bound_push": 1e-9,
+                 "warm_start_mult_bound_push": 1e-9, "bound_relax_factor": 0.0}
+        # error_on_fail: a failed solve raises from the buffered call (the status is then read by a plain call)
+        S = ca.nlpsol(f"mhe_ipopt_{N}", "ipopt", nlp, {**common, "error_on_fail": True, "ipopt": iopts})
         ok = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     elif solver == "sqp":
         J = ca.jacobian(res, z)
@@ -148,10 +194,18 @@ def build_window(mhe, N: int, solver: str) -> Window:
         # a vanishing search direction means the start point is already optimal
         ok = ("Solve_Succeeded", "Search_Direction_Becomes_Too_Small")
     else:
-        gn = _gauss_newton(z, par, res, nlp["g"], N)
-        sp = gn[0].sparsity_out
-        S = ca.conic(f"mhe_rti_qp_{N}", o.qpsol, {"h": sp(0), "a": sp(2)}, _qp_options(o.qpsol))
-        ok = ()
+        S, ok = None, ()
+    pieces = {"X": X, "V": V, "xN": xN, "Xn": Xn, "xbar": xbar, "W": W, "Uh": Uh, "Up": Up, "Y": Y, "M": M,
+              "dt": dt, "p": p}
+
+    def gauss_newton(multipliers: bool, method: str | None = None):
+        # chosen by measurement (docs/benchmarks.md): compiled, the Riccati recursion is the fastest
+        # (about 0.6 us per stage); under the virtual machine the sparse QR of the KKT system is
+        method = method or ("riccati" if o.jit else "kkt")
+        fun = (riccati_step(stage, term, arrival, nx, nv, N, z, par, pieces, multipliers) if method == "riccati"
+               else _kkt_step(z, par, res, nlp["g"], N, multipliers))
+        return BufferedCall(compile_function(fun) if o.jit else fun, cannot_fail=o.jit)
+
     idx = np.arange(nz)
     blk_idx = idx[: N * (nx + nv)].reshape(N, nx + nv)
     ix = np.vstack([blk_idx[:, :nx], idx[N * (nx + nv):][None, :]])
@@ -159,25 +213,36 @@ def build_window(mhe, N: int, solver: str) -> Window:
     lbx, ubx = np.empty(nz), np.empty(nz)
     lbx[ix], ubx[ix] = mhe.x_bounds
     lbx[iv], ubx[iv] = mhe.v_bounds
-    win = Window(N, S, ix, iv, nz, lbx, ubx, ok)
-    if gn is not None:
-        win.gn_parts, win.gn_step = gn[0], BufferedCall(gn[1])
+    win = Window(N, S, ix, iv, nz, lbx, ubx, ok, not (np.isfinite(lbx).any() or np.isfinite(ubx).any()),
+                 nlp["g"].numel(), gauss_newton,
+                 lambda: _bounded_qp(z, par, res, nlp["g"], N, o.qpsol))
+    if solver == "rti":
+        win.gn()
     return win
 
 
-def _gauss_newton(z, par, res, g, N):
-    """The Gauss-Newton QP data ``(J'J, J'r, G, g)`` of the window and its equality-constrained step.
-
-    The step solves the KKT system ``[J'J  G'; G  0] [dz; lam] = -[J'r; g]``, which is block-banded
-    (stages are interleaved in ``z``), with CasADi's sparse QR, in one Function.
-    """
+def _kkt_step(z, par, res, g, N, multipliers: bool = False) -> ca.Function:
+    """The Gauss-Newton step solving the KKT system ``[J'J  G'; G  0] [dz; lam] = -[J'r; g]`` with
+    CasADi's sparse QR (block-banded: the stages are interleaved in ``z``), in one Function."""
     Jr, Jg = ca.jacobian(res, z), ca.jacobian(g, z)
-    parts = ca.Function(f"mhe_gn_parts_{N}", [z, par], [Jr.T @ Jr, Jr.T @ res, Jg, g],
-                        ["z", "p"], ["H", "grad", "G", "g"]).expand()
+    parts = ca.Function(f"mhe_gn_kkt_{N}", [z, par], [Jr.T @ Jr, Jr.T @ res, Jg, g]).expand()
     zs, ps = ca.MX.sym("z", z.sparsity()), ca.MX.sym("p", par.sparsity())
     H, grad, G, gv = parts(zs, ps)
     ng = g.numel()
     K = ca.blockcat([[H, G.T], [G, ca.MX(ng, ng)]])
-    dz = ca.solve(K, -ca.vertcat(grad, gv), "qr")[: z.numel()]
-    step = ca.Function(f"mhe_gn_step_{N}", [zs, ps], [zs + dz], ["z", "p"], ["z_next"])
-    return parts, step
+    sol = ca.solve(K, -ca.vertcat(grad, gv), "qr")
+    dz = sol[: z.numel()]
+    if not multipliers:
+        return ca.Function(f"mhe_gn_step_{N}", [zs, ps], [zs + dz], ["z", "p"], ["z_next"])
+    return ca.Function(f"mhe_gn_step_{N}", [zs, ps], [zs + dz, sol[z.numel():]], ["z", "p"], ["z_next", "lam_g"])
+
+
+def _bounded_qp(z, par, res, g, N, qpsol: str):
+    """The Gauss-Newton QP data ``(J'J, J'r, G, g)`` of the window and a QP solver for it with bounds
+    (built when a real-time iteration first leaves the bounds)."""
+    Jr, Jg = ca.jacobian(res, z), ca.jacobian(g, z)
+    parts = ca.Function(f"mhe_gn_parts_{N}", [z, par], [Jr.T @ Jr, Jr.T @ res, Jg, g],
+                        ["z", "p"], ["H", "grad", "G", "g"]).expand()
+    sp = parts.sparsity_out
+    solver = ca.conic(f"mhe_rti_qp_{N}", qpsol, {"h": sp(0), "a": sp(2)}, _qp_options(qpsol))
+    return parts, solver
