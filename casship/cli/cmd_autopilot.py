@@ -49,6 +49,7 @@ def register(sub) -> None:
             continue
         kw = {"default": None, "dest": name}
         unit_txt = {"deg": "deg", "deg_s": "deg/s"}.get(_DEGREES.get(name), unit)
+        rule = rule.replace("%", "%%")          # argparse formats help strings with %
         kw["help"] = f"[{unit_txt}] default: {rule}" if unit_txt else f"default: {rule}"
         if name in _CHOICES:
             kw["choices"] = _CHOICES[name]

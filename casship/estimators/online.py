@@ -179,6 +179,8 @@ class StepEngine:
 
     def _update(self, y, dt, u_prev, u):
         y = np.asarray(y, dtype=float)
+        if y.ndim == 0 and self._ny == 1:         # one measured output: a scalar is its value
+            y = y.reshape(1)
         if y.shape != self._y.shape:
             raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got shape {y.shape}")
         self._y[:] = y
