@@ -43,7 +43,19 @@ __all__ = ["CFiles", "generate_c", "export_estimator", "export_mhe_rti", "write_
 
 @dataclass(frozen=True)
 class CFiles:
-    """The files of one exported Function and its argument layout."""
+    """The files of one exported Function and its argument layout.
+
+    Parameters
+    ----------
+    name : str
+        C name of the function.
+    source, header : Path
+        The generated ``NAME.c`` and ``NAME.h``.
+    inputs, outputs : tuple of (name, (rows, cols))
+        The Function's slots in call order.
+    data_header : Path or None
+        ``NAME_data.h`` of an exported estimator (its numbers and names).
+    """
 
     name: str
     source: Path
@@ -54,10 +66,12 @@ class CFiles:
 
     @property
     def sizes_in(self) -> list[int]:
+        """Number of entries of each input."""
         return [r * c for _, (r, c) in self.inputs]
 
     @property
     def sizes_out(self) -> list[int]:
+        """Number of entries of each output."""
         return [r * c for _, (r, c) in self.outputs]
 
 
@@ -206,6 +220,15 @@ def export_estimator(estimator, directory, name: str | None = None, p=None, outp
 def export_mhe_rti(mhe, directory, name: str | None = None) -> CFiles:
     """Export the real-time-iteration step of a moving-horizon estimator's window as C.
 
+    Parameters
+    ----------
+    mhe : MHE
+        A moving-horizon estimator (its ``horizon`` sets ``N``).
+    directory : path
+        Created if missing.
+    name : str, optional
+        C name (default ``mhe_rti_step_<N>``).
+
     The exported function is ``NAME(z, p) -> z_next``: one Gauss-Newton step of the window problem
     of :class:`casship.MHE` (horizon ``N`` = the estimator's ``horizon`` option), solving the
     equality-constrained Gauss-Newton problem (what ``solver="rti"`` does when no bound is active:
@@ -279,6 +302,13 @@ int main(void) {{
 def write_harness(files: CFiles, path=None) -> Path:
     """Write a small C program (``main``) that evaluates the exported function on stdin input sets.
 
+    Parameters
+    ----------
+    files : CFiles
+        The exported function.
+    path : path, optional
+        Where to write the program (default ``NAME_harness.c`` beside the source).
+
     Input: whitespace-separated numbers, one set = all inputs in call order (column-major). Output:
     for every set, one line per output. Used by the test suite to compare C with Python.
     """
@@ -294,6 +324,16 @@ def write_harness(files: CFiles, path=None) -> Path:
 def compile_c(sources: Sequence, output, compiler: str | None = None,
               flags: Sequence[str] = ("-O2", "-ffp-contract=off", "-std=c99")) -> Path:
     """Compile C ``sources`` into the executable ``output`` (``gcc`` by default), linking ``libm``.
+
+    Parameters
+    ----------
+    sources : sequence of path
+    output : path
+        The executable to write.
+    compiler : str, optional
+        Compiler command (default ``gcc``, else ``cc``).
+    flags : sequence of str
+        Compiler flags.
 
     ``-ffp-contract=off`` keeps the compiler from fusing multiply-adds, so results match CasADi's
     own evaluation to the last bits. Raises ``FileNotFoundError`` without a compiler and
@@ -311,7 +351,15 @@ def compile_c(sources: Sequence, output, compiler: str | None = None,
 
 
 def read_harness_output(text: str, files: CFiles) -> list[list[np.ndarray]]:
-    """Parse the harness output into one list of arrays (shaped like the outputs) per input set."""
+    """Parse the harness output into one list of arrays (shaped like the outputs) per input set.
+
+    Parameters
+    ----------
+    text : str
+        What the harness printed.
+    files : CFiles
+        The exported function (its output shapes).
+    """
     lines = text.splitlines()          # an output without entries prints an empty line
     n_out = len(files.outputs)
     if len(lines) % n_out:

@@ -16,7 +16,19 @@ __all__ = ["Gaussian", "Dataset", "Trajectory", "check_time", "as_cov"]
 
 
 def check_time(t, name: str = "time") -> np.ndarray:
-    """Validate a time vector: 1-D, finite, strictly increasing. Returns it as float array."""
+    """Validate a time vector: 1-D, finite, strictly increasing. Returns it as float array.
+
+    Parameters
+    ----------
+    t : array_like
+        Time stamps [s].
+    name : str
+        Name used in error messages.
+
+    Returns
+    -------
+    numpy.ndarray
+    """
     t = np.asarray(t, dtype=float)
     if t.ndim != 1:
         raise ValueError(f"{name}: expected a 1-D array of time stamps, got shape {t.shape}")
@@ -36,7 +48,21 @@ def check_time(t, name: str = "time") -> np.ndarray:
 
 def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_zero: bool = True) -> np.ndarray:
     """Turn a covariance given as scalar, vector (diagonal), matrix or name->variance mapping into
-    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``."""
+    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``.
+
+    Parameters
+    ----------
+    value : float, array or mapping
+        Scalar (times the identity), variances, matrix, or channel name -> variance.
+    n : int
+        Size.
+    name : str
+        What the covariance is (for messages).
+    names : sequence of str, optional
+        Channel names of a mapping.
+    allow_zero : bool
+        Accept a singular (positive semi-definite) matrix.
+    """
     if isinstance(value, Mapping):
         if names is None:
             raise TypeError(f"{name}: a mapping needs channel names")
@@ -94,10 +120,17 @@ class Gaussian:
 
     @property
     def std(self) -> np.ndarray:
+        """Standard deviations (square roots of the variances)."""
         return np.sqrt(np.diag(self.cov))
 
     def sample(self, n: int, seed=None) -> np.ndarray:
-        """``n`` samples as rows, from a seed or ``numpy.random.Generator``."""
+        """``n`` samples as rows, from a seed or ``numpy.random.Generator``.
+
+        Parameters
+        ----------
+        n : int
+        seed : int or numpy.random.Generator, optional
+        """
         rng = np.random.default_rng(seed)
         return rng.multivariate_normal(self.mean, self.cov, size=n, method="eigh")
 
@@ -140,6 +173,12 @@ class Dataset:
     # -- access -----------------------------------------------------------------------------------
     @property
     def names(self) -> tuple[str, ...]:
+        """Column names (the time column aside).
+
+        Returns
+        -------
+        tuple of str
+        """
         return tuple(self._columns)
 
     def __len__(self) -> int:
@@ -157,7 +196,21 @@ class Dataset:
             raise ValueError(f"unknown column {name!r}; columns: {list(self._columns)}") from None
 
     def matrix(self, names: Sequence[str], *, finite: bool = False, what: str = "column") -> np.ndarray:
-        """Stack named columns into an (N, len(names)) array; ``finite=True`` rejects NaN/inf."""
+        """Stack named columns into an (N, len(names)) array; ``finite=True`` rejects NaN/inf.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Columns.
+        finite : bool
+            Reject NaN and inf (naming column and row).
+        what : str
+            What the columns are, for the message (e.g. ``"input"``).
+
+        Returns
+        -------
+        numpy.ndarray
+        """
         if not names:
             return np.zeros((len(self), 0))
         out = np.column_stack([self[n] for n in names])
@@ -171,6 +224,12 @@ class Dataset:
 
     @property
     def dt(self) -> np.ndarray:
+        """Time steps ``diff(t)`` [s].
+
+        Returns
+        -------
+        numpy.ndarray
+        """
         return np.diff(self.t)
 
     def __repr__(self) -> str:
@@ -179,7 +238,17 @@ class Dataset:
 
     # -- derived datasets -------------------------------------------------------------------------
     def with_columns(self, **columns) -> "Dataset":
-        """A new dataset with columns added or replaced."""
+        """A new dataset with columns added or replaced.
+
+        Parameters
+        ----------
+        **columns
+            Column name -> values (one per row).
+
+        Returns
+        -------
+        Dataset
+        """
         merged = dict(self._columns)
         merged.update(columns)
         return Dataset(self.t, merged, self.units, self.meta)
@@ -283,14 +352,46 @@ class Dataset:
         return Dataset(t, cols, self.units, {**self.meta, "resampled_hz": rate})
 
     def select(self, names: Sequence[str]) -> "Dataset":
+        """A dataset with only the named columns.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Columns to keep.
+
+        Returns
+        -------
+        Dataset
+        """
         return Dataset(self.t, {n: self[n] for n in names}, {n: self.units.get(n, "") for n in names}, self.meta)
 
     def slice(self, start: int | None = None, stop: int | None = None) -> "Dataset":
+        """Rows ``start:stop``.
+
+        Parameters
+        ----------
+        start, stop : int, optional
+            Row indices as in ``rows[start:stop]``.
+
+        Returns
+        -------
+        Dataset
+        """
         sl = slice(start, stop)
         return Dataset(self.t[sl], {n: v[sl] for n, v in self._columns.items()}, self.units, self.meta)
 
     def between(self, t0: float, t1: float) -> "Dataset":
-        """Rows with ``t0 <= t <= t1``."""
+        """Rows with ``t0 <= t <= t1``.
+
+        Parameters
+        ----------
+        t0, t1 : float
+            Time window [s].
+
+        Returns
+        -------
+        Dataset
+        """
         idx = np.flatnonzero((self.t >= t0) & (self.t <= t1))
         if idx.size == 0:
             raise ValueError(f"no samples between t = {t0} and {t1} s")
@@ -298,6 +399,13 @@ class Dataset:
 
     # -- I/O -----------------------------------------------------------------------------------------
     def to_pandas(self):
+        """The record as a pandas DataFrame.
+
+        Returns
+        -------
+        pandas.DataFrame
+            With a column ``t``; the units in ``frame.attrs["units"]``.
+        """
         import pandas as pd
 
         frame = pd.DataFrame({"t": self.t, **self._columns})
@@ -306,6 +414,21 @@ class Dataset:
 
     @classmethod
     def from_pandas(cls, frame, time: str = "t", units: Mapping[str, str] | None = None) -> "Dataset":
+        """A dataset from a pandas DataFrame with a time column.
+
+        Parameters
+        ----------
+        frame : pandas.DataFrame
+            Numeric columns.
+        time : str
+            Name of the time column.
+        units : mapping, optional
+            Column -> unit (default: ``frame.attrs["units"]``).
+
+        Returns
+        -------
+        Dataset
+        """
         if time not in frame.columns:
             raise ValueError(f"no time column {time!r}; columns: {list(frame.columns)}")
         from pandas.api.types import is_numeric_dtype
@@ -317,7 +440,17 @@ class Dataset:
         return cls(frame[time].to_numpy(dtype=float), cols, units or frame.attrs.get("units"))
 
     def to_csv(self, path) -> Path:
-        """Write ``t`` and all columns as CSV with a header row."""
+        """Write ``t`` and all columns as CSV with a header row.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file.
+
+        Returns
+        -------
+        Path
+        """
         path = Path(path)
         header = ",".join(["t", *self._columns])
         data = np.column_stack([self.t, *self._columns.values()])
@@ -331,6 +464,8 @@ class Dataset:
 
         Parameters
         ----------
+        path : str or Path
+            The file (errors name it; see :func:`casship.io.csv.read_frame`).
         time : str, optional
             Name of the time column; ``t`` or ``time`` by default.
         rename : mapping, optional
@@ -363,6 +498,15 @@ class Dataset:
 class Trajectory(Dataset):
     """A simulated record: a :class:`Dataset` whose columns include a model's states, inputs, outputs.
 
+    Parameters
+    ----------
+    t, columns, units, meta
+        As for :class:`Dataset`.
+    model_name : str
+        The model simulated.
+    state_names, input_names, output_names : sequence of str
+        Which columns are the model's states, inputs and outputs.
+
     Attributes
     ----------
     model_name : str
@@ -385,7 +529,17 @@ class Trajectory(Dataset):
                 "input_names": list(self.input_names), "output_names": list(self.output_names)}
 
     def slice(self, start: int | None = None, stop: int | None = None) -> "Trajectory":
-        """Rows ``start:stop`` as a Trajectory (names kept)."""
+        """Rows ``start:stop`` as a Trajectory (names kept).
+
+        Parameters
+        ----------
+        start, stop : int, optional
+            Row indices.
+
+        Returns
+        -------
+        Trajectory
+        """
         return Trajectory.from_dataset(super().slice(start, stop), self._names())
 
     def _like(self, data: Dataset) -> "Trajectory":
@@ -404,6 +558,17 @@ class Trajectory(Dataset):
 
         ``model`` is a :class:`~casship.Model` or a mapping with ``state_names``, ``input_names``,
         ``output_names`` (and optionally ``model_name``), e.g. the ``attrs`` of :meth:`to_pandas`.
+
+        Parameters
+        ----------
+        data : Dataset
+            The record.
+        model : Model or mapping
+            See above.
+
+        Returns
+        -------
+        Trajectory
         """
         get = (lambda k: model.get(k, ())) if isinstance(model, Mapping) else (lambda k: getattr(model, k))
         names = {k: tuple(get(k)) for k in ("state_names", "input_names", "output_names")}
@@ -418,7 +583,23 @@ class Trajectory(Dataset):
     @classmethod
     def from_pandas(cls, frame, time: str = "t", units: Mapping[str, str] | None = None,
                     model=None) -> "Trajectory":
-        """Inverse of :meth:`to_pandas`; names from ``model`` or else from ``frame.attrs``."""
+        """Inverse of :meth:`to_pandas`; names from ``model`` or else from ``frame.attrs``.
+
+        Parameters
+        ----------
+        frame : pandas.DataFrame
+            As written by :meth:`to_pandas`.
+        time : str
+            Time column.
+        units : mapping, optional
+            Column -> unit.
+        model : Model, optional
+            Names of states, inputs and outputs (default: ``frame.attrs``).
+
+        Returns
+        -------
+        Trajectory
+        """
         source = model if model is not None else frame.attrs
         if model is None and "state_names" not in frame.attrs:
             raise ValueError("Trajectory.from_pandas: the frame carries no state names; pass model=")
@@ -427,7 +608,21 @@ class Trajectory(Dataset):
     @classmethod
     def from_csv(cls, path, model=None, time: str | None = None, rename: Mapping[str, str] | None = None,
                  scale: Mapping[str, float] | None = None) -> "Trajectory":
-        """Read a CSV written by :meth:`Dataset.to_csv`; ``model`` names the states, inputs and outputs."""
+        """Read a CSV written by :meth:`Dataset.to_csv`; ``model`` names the states, inputs and outputs.
+
+        Parameters
+        ----------
+        path : str or Path
+            The file.
+        model : Model or mapping
+            Names of states, inputs and outputs.
+        time, rename, scale
+            As for :meth:`Dataset.from_csv`.
+
+        Returns
+        -------
+        Trajectory
+        """
         if model is None:
             raise ValueError("Trajectory.from_csv needs model= (a CSV file does not store the state names)")
         return cls.from_dataset(Dataset.from_csv(path, time=time, rename=rename, scale=scale), model)
@@ -439,8 +634,20 @@ class Trajectory(Dataset):
 
     @property
     def u(self) -> np.ndarray:
+        """Inputs as an (N, nu) array.
+
+        Returns
+        -------
+        numpy.ndarray
+        """
         return self.matrix(self.input_names)
 
     @property
     def y(self) -> np.ndarray:
+        """Outputs as an (N, ny) array.
+
+        Returns
+        -------
+        numpy.ndarray
+        """
         return self.matrix(self.output_names)

@@ -52,8 +52,8 @@ class DemoConfig:
         Seed of the random rudder and the sensor noise.
     """
 
-    dt: float = 2.0
-    trial_s: float = 800.0
+    dt: float = 1.0
+    trial_s: float = 1200.0
     free: tuple = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash", "R_0_dash", "X_vv_dash")
     random_record: bool = True         # a second identification record: random rudder (+-20 deg)
     guess_factor: float = 1.25
@@ -74,7 +74,7 @@ class DemoConfig:
         DemoConfig
         """
         if quick:
-            return cls(trial_s=600.0, free=("N_r_dash", "N_v_dash"), random_record=False, validation_s=500.0)
+            return cls(trial_s=700.0, free=("N_r_dash", "N_v_dash"), random_record=False, validation_s=500.0)
         return cls()
 
 
@@ -163,7 +163,7 @@ def _validate(ship, fit, guess, cfg: DemoConfig):
     variants = {"true": ship.params(), "fitted": ship.params(fit.params), "initial guess": ship.params(guess)}
     runs, table = {}, {}
     for man, (kind, rudder) in (("zigzag 10/10", ("zigzag", 10.0)), ("turning 35 deg", ("turning", 35.0))):
-        res = {name: run_maneuver(ship, kind, rudder_deg=rudder, p=p, dt=1.0, duration=cfg.validation_s)
+        res = {name: run_maneuver(ship, kind, rudder_deg=rudder, p=p, dt=cfg.dt, duration=cfg.validation_s)
                for name, p in variants.items()}
         runs[man] = {name: r.trajectory for name, r in res.items()}
         ref = res["true"].trajectory

@@ -21,8 +21,17 @@ METHODS = ("euler", "rk4", "cvodes")
 def rk4(rhs, z: tuple, h) -> tuple:
     """One classical Runge-Kutta step of ``dz/dt = rhs(*z)`` for a tuple of (symbolic) arrays ``z``.
 
-    ``rhs`` returns a tuple shaped like ``z``; the one RK4 of casship (the explicit discretisation,
-    the continuous-discrete EKF covariance, the Kalman-Bucy filter).
+    The one RK4 of casship (the explicit discretisation, the continuous-discrete EKF covariance,
+    the Kalman-Bucy filter).
+
+    Parameters
+    ----------
+    rhs : callable
+        ``rhs(*z)`` returns a tuple shaped like ``z``.
+    z : tuple
+        The state at the start of the step.
+    h : float or symbolic
+        Step length.
     """
     k1 = rhs(*z)
     k2 = rhs(*(a + h / 2 * k for a, k in zip(z, k1)))
@@ -32,7 +41,19 @@ def rk4(rhs, z: tuple, h) -> tuple:
 
 
 class DiscreteModel:
-    """A discrete-time view of a model.
+    """A discrete-time view of a model (build it with :func:`discretize`).
+
+    Parameters
+    ----------
+    model : Model
+    dt : float, optional
+        Nominal step [s] (a discrete-time model's own by default).
+    method : {"rk4", "euler", "cvodes"}, optional
+        Integration method of a continuous model (default ``"rk4"``).
+    substeps : int
+        Sub-steps of the explicit methods.
+    options : dict, optional
+        CVODES options.
 
     Attributes
     ----------
@@ -163,6 +184,7 @@ class DiscreteModel:
     # -- convenience ----------------------------------------------------------------------------------
     @property
     def name(self) -> str:
+        """The model's name."""
         return self.model.name
 
     def __repr__(self) -> str:
@@ -170,6 +192,10 @@ class DiscreteModel:
 
     def fold(self, n: int) -> ca.Function:
         """``F`` folded over ``n`` steps (``mapaccum``), cached per length.
+
+        Parameters
+        ----------
+        n : int
 
         ``fold(x0, U, p, W, dt) -> X`` with ``U`` (nu, n), ``W`` (nw, n), ``dt`` (1, n) and ``X`` the
         (nx, n) states after each step; see :func:`casship.simulate.fold_steps` for records of any length.
@@ -182,14 +208,33 @@ class DiscreteModel:
         return self._folds[n]
 
     def step(self, x, u, p=None, w=None, dt=None) -> np.ndarray:
-        """One step numerically (convenience; batch work should use :func:`casship.simulate`)."""
+        """One step numerically (convenience; batch work should use :func:`casship.simulate`).
+
+        Parameters
+        ----------
+        x, u : array
+            State and input held over the step.
+        p, w : array, optional
+            Parameters (nominal) and noise held over the step (zero).
+        dt : float, optional
+            Step length (the nominal one by default).
+        """
         m = self.model
         p = m.params() if p is None else p
         w = np.zeros(m.nw) if w is None else w
         return np.asarray(self.F(x, u, p, w, self.dt if dt is None else dt)).reshape(-1)
 
     def linearize(self, x, u, p=None, dt=None):
-        """Exact discrete Jacobians ``(A, B, G)`` at ``(x, u, p, w=0)``."""
+        """Exact discrete Jacobians ``(A, B, G)`` at ``(x, u, p, w=0)``.
+
+        Parameters
+        ----------
+        x, u : array
+        p : array, optional
+            Parameters (nominal by default).
+        dt : float, optional
+            Step length (the nominal one by default).
+        """
         m = self.model
         p = m.params() if p is None else p
         A, B, _, G = self.F_jac(x, u, p, np.zeros(m.nw), self.dt if dt is None else dt)
@@ -200,6 +245,15 @@ class DiscreteModel:
 
         Uses Van Loan's method on the exact linearisation at ``(x, u, p)``; compare with the
         zero-order-hold convention ``G Qd G'`` that the filters use when ``w`` is held over a step.
+
+        Parameters
+        ----------
+        Qc : array
+            Power spectral density of ``w``.
+        x, u : array
+            Operating point.
+        p : array, optional
+        dt : float, optional
         """
         self.require_continuous("process_noise (continuous white noise)")
         m = self.model

@@ -28,7 +28,19 @@ __all__ = ["ModelBuilder", "Model", "Variable", "Parameter"]
 
 @dataclass(frozen=True)
 class Variable:
-    """A named scalar of a model (state, input, noise channel or output)."""
+    """A named scalar of a model (state, input, noise channel or output).
+
+    Parameters
+    ----------
+    name : str
+        Identifier.
+    unit : str
+        SI unit.
+    angle : bool
+        An angle (residuals wrapped to (-pi, pi]).
+    doc : str
+        One-line description.
+    """
 
     name: str
     unit: str = ""
@@ -38,7 +50,19 @@ class Variable:
 
 @dataclass(frozen=True)
 class Parameter(Variable):
-    """A named model parameter with its nominal value and optional bounds."""
+    """A named model parameter with its nominal value and optional bounds.
+
+    Parameters
+    ----------
+    name, unit, angle, doc
+        As for :class:`Variable`.
+    value : float
+        Nominal value.
+    lower, upper : float
+        Bounds.
+    source : str
+        Where the value comes from.
+    """
 
     value: float = 0.0
     lower: float = -np.inf
@@ -127,16 +151,71 @@ class ModelBuilder:
         return sym
 
     def state(self, name: str, *, unit: str = "", angle: bool = False, doc: str = "") -> ca.SX:
-        """Declare a state; ``angle=True`` marks it as an angle (wrapped residuals)."""
+        """Declare a state; ``angle=True`` marks it as an angle (wrapped residuals).
+
+        Parameters
+        ----------
+        name : str
+            Identifier, unique in the model.
+        unit : str
+            SI unit (e.g. ``"rad"``, ``"m/s"``).
+        angle : bool
+            An angle: residuals are wrapped to (-pi, pi].
+        doc : str
+            One-line description.
+
+        Returns
+        -------
+        casadi.SX
+            The symbol, to write equations with.
+        """
         return self._declare("state", Variable(name, unit, angle, doc), self._states)
 
     def input(self, name: str, *, unit: str = "", angle: bool = False, doc: str = "") -> ca.SX:
-        """Declare a (known) input such as a rudder angle or propeller rate."""
+        """Declare a (known) input such as a rudder angle or propeller rate.
+
+        Parameters
+        ----------
+        name : str
+            Identifier, unique in the model.
+        unit : str
+            SI unit (e.g. ``"rad"``, ``"m/s"``).
+        angle : bool
+            An angle: residuals are wrapped to (-pi, pi].
+        doc : str
+            One-line description.
+
+        Returns
+        -------
+        casadi.SX
+            The symbol, to write equations with.
+        """
         return self._declare("input", Variable(name, unit, angle, doc), self._inputs)
 
     def param(self, name: str, value: float, *, bounds: tuple[float, float] | None = None,
               unit: str = "", doc: str = "", source: str = "") -> ca.SX:
-        """Declare a parameter with nominal ``value`` and optional ``bounds=(lower, upper)``."""
+        """Declare a parameter with nominal ``value`` and optional ``bounds=(lower, upper)``.
+
+        Parameters
+        ----------
+        name : str
+            Identifier, unique in the model.
+        value : float
+            Nominal value (finite).
+        bounds : (float, float), optional
+            Lower and upper bound (used by identification).
+        unit : str
+            SI unit (e.g. ``"rad"``, ``"m/s"``).
+        doc : str
+            One-line description.
+        source : str
+            Where the value comes from.
+
+        Returns
+        -------
+        casadi.SX
+            The symbol, to write equations with.
+        """
         value = float(value)
         if not np.isfinite(value):
             raise ValueError(f"parameter {name!r}: nominal value must be finite, got {value}")
@@ -148,7 +227,20 @@ class ModelBuilder:
 
     def param_as_state(self, name: str, *, doc: str = "") -> ca.SX:
         """Turn the declared parameter ``name`` into a state (same symbol and unit; for augmented-state
-        estimation). Give it an equation with :meth:`ode`, e.g. a random walk ``b.noise(...)``."""
+        estimation). Give it an equation with :meth:`ode`, e.g. a random walk ``b.noise(...)``.
+
+        Parameters
+        ----------
+        name : str
+            A declared parameter.
+        doc : str
+            One-line description.
+
+        Returns
+        -------
+        casadi.SX
+            The symbol, to write equations with.
+        """
         if self._kinds.get(name) != "param":
             raise ValueError(f"param_as_state: {name!r} is not a declared parameter of {self.name!r}")
         var = next(v for v in self._params if v.name == name)
@@ -158,11 +250,39 @@ class ModelBuilder:
         return self._symbols[name]
 
     def noise(self, name: str, *, unit: str = "", doc: str = "") -> ca.SX:
-        """Declare a process-noise channel ``w`` (zero mean; covariance given to estimators)."""
+        """Declare a process-noise channel ``w`` (zero mean; covariance given to estimators).
+
+        Parameters
+        ----------
+        name : str
+            Identifier, unique in the model.
+        unit : str
+            SI unit (e.g. ``"rad"``, ``"m/s"``).
+        doc : str
+            One-line description.
+
+        Returns
+        -------
+        casadi.SX
+            The symbol, to write equations with.
+        """
         return self._declare("noise", Variable(name, unit, False, doc), self._noises)
 
     def port(self, name: str, size: int = 1) -> ca.SX:
-        """Declare an additive port: a placeholder that later terms may feed (sum), zero if unfed."""
+        """Declare an additive port: a placeholder that later terms may feed (sum), zero if unfed.
+
+        Parameters
+        ----------
+        name : str
+            Identifier, unique in the model.
+        size : int
+            Length of the port vector.
+
+        Returns
+        -------
+        casadi.SX
+            The symbol, to write equations with.
+        """
         _check_name(name, self._kinds)
         sym = ca.SX.sym(name, size)
         self._kinds[name] = "port"
@@ -171,7 +291,15 @@ class ModelBuilder:
         return sym
 
     def feed(self, port: str, expr) -> None:
-        """Add ``expr`` to the port ``port`` (e.g. a wind force ``vertcat(X, Y, N)`` to ``tau``)."""
+        """Add ``expr`` to the port ``port`` (e.g. a wind force ``vertcat(X, Y, N)`` to ``tau``).
+
+        Parameters
+        ----------
+        port : str
+            A declared port.
+        expr : casadi.SX
+            Expression of the port's shape.
+        """
         if port not in self._ports:
             raise ValueError(f"unknown port {port!r}; ports: {sorted(self._ports)}")
         expr = ca.SX(expr)
@@ -184,6 +312,15 @@ class ModelBuilder:
 
         Simulators, manoeuvre runners, trim and the command line check inputs against it and raise a
         ``ValueError`` naming the variable and the range (unless the caller opts in to out-of-range use).
+
+        Parameters
+        ----------
+        name : str
+            A declared state or input.
+        lower, upper : float
+            The valid range in the variable's SI unit (``-inf``/``inf`` for one-sided ranges).
+        why : str
+            The reason, shown in error messages (e.g. ``"rudder stop"``).
         """
         if self._kinds.get(name) not in ("state", "input"):
             raise ValueError(f"limit: {name!r} is not a declared state or input of {self.name!r}")
@@ -191,7 +328,13 @@ class ModelBuilder:
 
     # -- equations ----------------------------------------------------------------------------
     def ode(self, **rhs) -> None:
-        """Set the time derivative of states by name, e.g. ``b.ode(psi=r, r=...)``."""
+        """Set the time derivative of states by name, e.g. ``b.ode(psi=r, r=...)``.
+
+        Parameters
+        ----------
+        **rhs
+            State name -> expression of its time derivative.
+        """
         if self.dt is not None:
             raise ValueError(f"model {self.name!r} is discrete-time (dt = {self.dt:g} s): give x[k+1] with next(...)")
         for name, expr in rhs.items():
@@ -204,6 +347,11 @@ class ModelBuilder:
 
         The model keeps ``(x[k+1] - x[k]) / dt`` as its rate ``f``, so that composition
         (:meth:`add_to_ode`, :func:`~casship.augment`) adds ``dt`` times a rate to the step.
+
+        Parameters
+        ----------
+        **rhs
+            State name -> expression of ``x[k+1]`` in the declared symbols.
         """
         if self.dt is None:
             raise ValueError(f"model {self.name!r} is continuous-time: give derivatives with ode(...), or "
@@ -214,7 +362,13 @@ class ModelBuilder:
             self._ode[name] = (_as_sx(expr, f"next for {name!r}") - self._symbols[name]) / self.dt
 
     def add_to_ode(self, **rhs) -> None:
-        """Add terms to existing state derivatives (for composing models)."""
+        """Add terms to existing state derivatives (for composing models).
+
+        Parameters
+        ----------
+        **rhs
+            State name -> expression added to its time derivative.
+        """
         for name, expr in rhs.items():
             if name not in self._ode:
                 raise ValueError(f"add_to_ode: state {name!r} has no equation yet")
@@ -222,7 +376,21 @@ class ModelBuilder:
 
     def output(self, name: str, expr, *, unit: str = "", angle: bool | None = None,
                doc: str = "") -> None:
-        """Declare an output ``y``; an output that is a state inherits its angle flag and unit by default."""
+        """Declare an output ``y``; an output that is a state inherits its angle flag and unit by default.
+
+        Parameters
+        ----------
+        name : str
+            Identifier, unique in the model.
+        expr : casadi.SX
+            Expression of states, inputs and parameters (no noise).
+        unit : str
+            SI unit (e.g. ``"rad"``, ``"m/s"``).
+        angle : bool, optional
+            An angle output (by default: inherited from the state it measures).
+        doc : str
+            One-line description.
+        """
         expr = _as_sx(expr, f"output {name!r}")
         measured = next((v for v in self._states if ca.is_equal(expr, self._symbols[v.name])), None)
         if angle is None:
@@ -243,7 +411,17 @@ class ModelBuilder:
 
     # -- lookup -------------------------------------------------------------------------------
     def sym(self, name: str) -> ca.SX:
-        """The symbol of a declared state, input, parameter, noise channel or port."""
+        """The symbol of a declared state, input, parameter, noise channel or port.
+
+        Parameters
+        ----------
+        name : str
+            A declared name.
+
+        Returns
+        -------
+        casadi.SX
+        """
         if name in self._symbols:
             return self._symbols[name]
         if name in self._ports:
@@ -251,6 +429,18 @@ class ModelBuilder:
         raise ValueError(f"unknown name {name!r} in model {self.name!r}")
 
     def has(self, name: str) -> bool:
+        """Whether ``name`` is declared (state, input, parameter, noise channel or port).
+
+        Parameters
+        ----------
+        name : str
+            A name.
+
+        Returns
+        -------
+        bool
+            Whether ``name`` is declared.
+        """
         return name in self._kinds
 
     # -- build --------------------------------------------------------------------------------
@@ -268,6 +458,17 @@ class ModelBuilder:
         return Model(self)
 
     def copy(self, name: str | None = None) -> "ModelBuilder":
+        """An independent copy of the builder (declarations and equations).
+
+        Parameters
+        ----------
+        name : str, optional
+            Name of the copy (default: this builder's).
+
+        Returns
+        -------
+        ModelBuilder
+        """
         new = ModelBuilder(name or self.name, self.doc, dt=self.dt)
         new._kinds = dict(self._kinds)
         new._symbols = dict(self._symbols)
@@ -310,6 +511,12 @@ def _vec(symbols: Iterable[ca.SX]) -> ca.SX:
 
 class Model:
     """An immutable model built by :class:`ModelBuilder` (continuous-time, or discrete-time with ``dt``).
+
+    Parameters
+    ----------
+    builder : ModelBuilder
+        The declarations and equations (copied); use :meth:`ModelBuilder.build` rather than this
+        constructor.
 
     Attributes
     ----------
@@ -435,17 +642,51 @@ class Model:
         return out
 
     def states(self, **values: float) -> np.ndarray:
-        """State vector with the given named entries, zeros elsewhere."""
+        """State vector with the given named entries, zeros elsewhere.
+
+        Parameters
+        ----------
+        **values
+            State name -> value.
+
+        Returns
+        -------
+        numpy.ndarray
+            The state vector (nx,).
+        """
         return self._named(self.state_names, values, "state", np.zeros(self.nx))
 
     def inputs(self, **values: float) -> np.ndarray:
-        """Input vector with the given named entries, zeros elsewhere."""
+        """Input vector with the given named entries, zeros elsewhere.
+
+        Parameters
+        ----------
+        **values
+            Input name -> value.
+
+        Returns
+        -------
+        numpy.ndarray
+            The input vector (nu,).
+        """
         return self._named(self.input_names, values, "input", np.zeros(self.nu))
 
     def params(self, base: np.ndarray | Mapping[str, float] | None = None, **overrides: float) -> np.ndarray:
         """Nominal parameter vector, or ``base``, with named ``overrides``.
 
         ``base`` may be a full vector or a mapping name -> value (e.g. a fit's estimates).
+
+        Parameters
+        ----------
+        base : array_like or mapping, optional
+            Full vector or name -> value (nominal by default).
+        **overrides
+            Parameter name -> value.
+
+        Returns
+        -------
+        numpy.ndarray
+            The parameter vector (np,).
         """
         if base is None:
             vec = self._nominal
@@ -458,12 +699,34 @@ class Model:
         return self._named(self.param_names, overrides, "parameter", vec)
 
     def param_dict(self, p: np.ndarray | None = None) -> dict[str, float]:
-        """Mapping name -> value of a parameter vector (nominal by default)."""
+        """Mapping name -> value of a parameter vector (nominal by default).
+
+        Parameters
+        ----------
+        p : array_like, optional
+            Parameter vector (nominal by default).
+
+        Returns
+        -------
+        dict
+        """
         vec = self._nominal if p is None else np.asarray(p, dtype=float)
         return {n: float(v) for n, v in zip(self.param_names, vec)}
 
     def index(self, name: str, kind: str = "state") -> int:
-        """Position of a named state, input, param, noise or output in its vector."""
+        """Position of a named state, input, param, noise or output in its vector.
+
+        Parameters
+        ----------
+        name : str
+            The name.
+        kind : {"state", "input", "param", "noise", "output"}
+            Which vector.
+
+        Returns
+        -------
+        int
+        """
         table = {"state": self.state_names, "input": self.input_names, "param": self.param_names,
                  "noise": self.noise_names, "output": self.output_names}
         if kind not in table:
@@ -475,11 +738,34 @@ class Model:
                              f"known: {list(table[kind])}") from None
 
     def indices(self, names: Iterable[str], kind: str = "state") -> list[int]:
+        """Positions of named entries in their vector (see :meth:`index`).
+
+        Parameters
+        ----------
+        names : iterable of str
+            The names.
+        kind : str
+            Which vector (see :meth:`index`).
+
+        Returns
+        -------
+        list of int
+        """
         return [self.index(n, kind) for n in names]
 
     # -- composition ------------------------------------------------------------------------------
     def builder(self, name: str | None = None) -> ModelBuilder:
-        """A builder pre-loaded with this model's declarations and equations, to extend it."""
+        """A builder pre-loaded with this model's declarations and equations, to extend it.
+
+        Parameters
+        ----------
+        name : str, optional
+            Name of the new model (default: this model's).
+
+        Returns
+        -------
+        ModelBuilder
+        """
         return self._builder.copy(name)
 
     def extend(self, term: Callable[[ModelBuilder], None], name: str | None = None) -> "Model":
@@ -490,6 +776,17 @@ class Model:
         >>> def push(b):
         ...     b.feed("tau", ca.vertcat(b.param("X_ext", 1.0), 0, 0))   # doctest: +SKIP
         >>> windy = ship.extend(push, name="ship+push")                     # doctest: +SKIP
+
+        Parameters
+        ----------
+        term : callable
+            ``term(builder)`` declares inputs/parameters and feeds ports.
+        name : str, optional
+            Name of the new model.
+
+        Returns
+        -------
+        Model
         """
         b = self.builder(name or self.name)
         term(b)
@@ -500,6 +797,17 @@ class Model:
 
         ``outputs`` is a list of state names (each measured directly, output named like the state)
         or a mapping output name -> state name or callable ``builder -> expression``.
+
+        Parameters
+        ----------
+        outputs : sequence of str or mapping
+            See above.
+        name : str, optional
+            Name of the new model.
+
+        Returns
+        -------
+        Model
         """
         b = self.builder(name or self.name)
         b._outputs, b._output_expr = [], {}

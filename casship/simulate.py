@@ -17,7 +17,17 @@ __all__ = ["simulate", "measure", "input_matrix", "fold_steps", "IntegrationErro
 
 class IntegrationError(RuntimeError):
     """An integrator (CVODES) failed; ``status`` is its return flag, ``step`` the first step of the
-    block of steps in which it failed."""
+    block of steps in which it failed.
+
+    Parameters
+    ----------
+    message : str
+        What failed, where.
+    status : str
+        The integrator's return flag (e.g. ``CV_TOO_MUCH_WORK``).
+    step : int
+        First step of the failing block.
+    """
 
     def __init__(self, message: str, status: str, step: int):
         super().__init__(message)
@@ -35,6 +45,21 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
     """Inputs as an (N, nu) array from an array, a mapping name -> array/constant or a Dataset.
 
     Returns ``None`` for a callable (evaluated during the simulation).
+
+    Parameters
+    ----------
+    model : Model
+        The model.
+    t : numpy.ndarray
+        Time grid [s].
+    inputs : array, mapping, Dataset or callable
+        See :func:`simulate`.
+    x0 : array_like, optional
+        Unused (kept for callers).
+
+    Returns
+    -------
+    numpy.ndarray or None
     """
     n = t.size
     if callable(inputs) and not isinstance(inputs, Dataset):
@@ -119,8 +144,27 @@ def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
 
     The record is processed in blocks by one cached ``mapaccum`` of the step Function (building a
     fold of the full length would cost more than evaluating it); the state is carried from block
-    to block, so the result is identical to a single fold. Returns the (len(dt) + 1, nx) array of
-    states, the first row being ``x0``.
+    to block, so the result is identical to a single fold.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+        The discretisation.
+    x0 : array_like (nx,)
+        Initial state.
+    U : array (n, nu)
+        Inputs per step.
+    p : array_like (np,)
+        Parameters.
+    W : array (n, nw)
+        Process noise per step.
+    dt : array_like (n,)
+        Step lengths [s].
+
+    Returns
+    -------
+    numpy.ndarray
+        The (len(dt) + 1, nx) states, the first row being ``x0``.
     """
     x0 = np.asarray(x0, dtype=float).reshape(-1)
     dt = np.asarray(dt, dtype=float).reshape(-1)

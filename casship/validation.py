@@ -123,7 +123,15 @@ def classify_maneuver(data: Dataset, rudder: str = "delta") -> tuple[str, dict]:
 
     A rudder that reverses sign at least twice (beyond half its largest deflection) is a
     zig-zag, whose switch heading is the heading change when the rudder leaves its first side,
-    snapped to a multiple of 5 deg if within 1.5 deg (else rounded to a whole degree); a record turning through more than 180 deg otherwise is a turning circle.
+    snapped to a multiple of 5 deg if within 1.5 deg (else rounded to a whole degree); a record
+    turning through more than 180 deg otherwise is a turning circle.
+
+    Parameters
+    ----------
+    data : Dataset
+        Record with the rudder column and ``psi``.
+    rudder : str
+        Name of the rudder column.
 
     Returns
     -------
@@ -158,7 +166,25 @@ def classify_maneuver(data: Dataset, rudder: str = "delta") -> tuple[str, dict]:
 
 
 def maneuver_metrics(data: Dataset, kind: str, options: dict, *, t_exec: float, L: float | None) -> dict:
-    """Metrics of ``kind`` (see :func:`classify_maneuver`) for a record, or ``{}`` if not defined."""
+    """Metrics of ``kind`` (see :func:`classify_maneuver`) for a record, or ``{}`` if not defined.
+
+    Parameters
+    ----------
+    data : Dataset
+        The record (``x, y, psi``).
+    kind : str
+        ``"turning"``, ``"zigzag"`` or ``"other"``.
+    options : dict
+        From :func:`classify_maneuver` (``heading_deg`` of a zig-zag).
+    t_exec : float
+        Execute time [s].
+    L : float or None
+        Ship length [m], for ratios.
+
+    Returns
+    -------
+    dict
+    """
     try:
         if kind == "turning":
             return turning_metrics(data, t_exec=t_exec, L=L)

@@ -306,7 +306,7 @@ def departures(head, alt_speed, speed_mss, alt_rate, sens, q_text, table_b) -> l
         Departure("speed of the simulated course change", "not stated in the available text (MSS exOtter: "
                   "surge force 40 N)", f"surge force {TAU_X:g} N ({head['speed_mps']:.2f} m/s), above the 1 m/s "
                   "from which the paper finds GNSS SOG/COG good",
-                  effect(head["numbers"], alt_speed, alt_name=f"MSS's {TAU_X_MSS:g} N ({speed_mss:.2f} m/s)")),
+                  effect(head["numbers"], alt_speed, alt_name=f"MSS's surge force {TAU_X_MSS:g} N ({speed_mss:.2f} m/s)")),
         Departure("GNSS rate", "5 Hz in the paper's Figs. 5-6 (MSS exOtter: every 5th of 50 Hz steps)",
                   f"{GNSS_RATE:g} Hz with the EKF at {1 / DT:.0f} Hz",
                   effect(head["numbers"], alt_rate, alt_name="GNSS at 10 Hz")),

@@ -165,7 +165,7 @@ class Departure:
     effect: str
 
 
-def effect(main: Mapping[str, float], alt: Mapping[str, float], *, alt_name: str = "other reading",
+def effect(main: Mapping[str, float], alt: Mapping[str, float], *, alt_name: str = "the other reading",
            spec: str = ".3g", units: Mapping[str, str] | None = None, relative: bool = True) -> str:
     """``"key: 1.23 -> 1.45 (+18 %); ..."`` -- headline numbers of this study vs the other reading
     (``relative=False`` leaves out the relative change, e.g. for numbers that are already errors in %)."""
@@ -181,7 +181,7 @@ def effect(main: Mapping[str, float], alt: Mapping[str, float], *, alt_name: str
         except (TypeError, ValueError):
             pass
         parts.append(f"{key}: {fmt(a, spec)} -> {fmt(b, spec)}{unit}{rel}")
-    return f"with the {alt_name}: " + "; ".join(parts)
+    return f"with {alt_name}: " + "; ".join(parts)
 
 
 class Report:

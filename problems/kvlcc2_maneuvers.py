@@ -121,14 +121,14 @@ def departures(speed: float, t_exec: float, dt: float, n_eq: float, n_meas: floa
         Departure("propeller rate", "the MARIN runs hold the approach speed at 1.53 rps (measured)",
                   f"solved for equilibrium at the measured approach speed ({n_eq:.3f} rps)",
                   effect(main, _turning_headline(ship, speed, t_exec, dt, duration, n=n_meas),
-                         alt_name=f"measured {n_meas:.3f} rps (the ship slows down)") if n_meas else
+                         alt_name=f"the measured {n_meas:.3f} rps (the ship slows down)") if n_meas else
                   "not measured (no MARIN data)"),
         Departure("rudder rate", "2.32 deg/s full scale (SIMMAN 2020 conditions); 1.76 deg/s is also quoted",
                   "2.32 deg/s", effect(main, _turning_headline(ship, speed, t_exec, dt, duration,
-                                                               rate=np.radians(1.76)), alt_name="1.76 deg/s")),
+                                                               rate=np.radians(1.76)), alt_name="a rudder rate of 1.76 deg/s")),
         Departure("wake fraction w_P0", "0.40 at model scale, 0.35 at full scale in the sources", "0.35 (full scale)",
                   effect(main, _turning_headline(kvlcc2({"w_P0": 0.40}), speed, t_exec, dt, duration),
-                         alt_name="model-scale 0.40")),
+                         alt_name="the model-scale w_P0 = 0.40")),
         Departure("scale of the hull coefficients", "Yasukawa & Yoshimura (2015) give model-scale coefficients",
                   "applied at full scale, as every implementation does (no scale-effect correction)", "not measured"),
     ]

@@ -217,7 +217,7 @@ def departures(main: dict, alt: dict, ship: cs.Model) -> list[Departure]:
                   "Gierusz's model (2001), which is not available", "a stand-in: KVLCC2 L7 MMG scaled by Froude "
                   f"similarity to L 13.75 m, B 2.38 m and 22 934 kg (draught {ship.vessel.draught:.3f} m at KVLCC2 "
                   f"L7's block coefficient {c_b:.3f})",
-                  effect(h, headline(alt["KVLCC2 L7 (7 m)"]), alt_name="study's earlier ship, KVLCC2 model L7")),
+                  effect(h, headline(alt["KVLCC2 L7 (7 m)"]), alt_name="the study's earlier ship, KVLCC2 model L7")),
         Departure("lake trials (Figs. 7-9)", "Blue Lady on Lake Silm near Ilawa, DGPS and gyro-compass records",
                   "not reproduced: the records are not available", "none (no data)"),
         Departure("G and Q (Eq. 61-62)", "garbled in the source text",

@@ -10,7 +10,7 @@ from casship.cli import main
 
 
 def test_autopilot_json_reports_margins_metrics_and_performance(capsys, tmp_path):
-    code = main(["autopilot", "shi-taylor", "--scenario", "course-20", "--t-end", "600", "--json", "--plot",
+    code = main(["autopilot", "--model", "shi-taylor", "--scenario", "course-20", "--t-end", "600", "--json", "--plot",
                  str(tmp_path), "--current", "0.5", "90"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
@@ -33,7 +33,7 @@ def test_autopilot_json_reports_margins_metrics_and_performance(capsys, tmp_path
      {"mode": "course", "gnss_std": 0.1, "compass_std": np.radians(1.0)}),
 ])
 def test_cli_and_api_give_the_same_design(capsys, name, args, api):
-    assert main(["autopilot", name, "--show-defaults", "--json", *args]) == 0
+    assert main(["autopilot", "--model", name, "--show-defaults", "--json", *args]) == 0
     cli = json.loads(capsys.readouterr().out)["settings"]
     d = ap.design_autopilot(cs.models.get_model(name), **api)
     for key, value in d.settings.as_dict().items():
@@ -56,10 +56,10 @@ def test_help_shows_the_rules(capsys):
 
 
 def test_autopilot_text_output_and_errors(capsys):
-    assert main(["autopilot", "shi-taylor", "--t-end", "200", "--wn", "0.05"]) == 0
+    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "200", "--wn", "0.05"]) == 0
     text = capsys.readouterr().out
     assert "margins (python-control)" in text and "Nomoto" in text and "rate limit active" in text
-    assert main(["autopilot", "no-such-ship"]) == 2
+    assert main(["autopilot", "--model", "no-such-ship"]) == 2
     assert "no-such-ship" in capsys.readouterr().err
-    assert main(["autopilot", "shi-taylor", "--scenario", "zigzag"]) == 2
+    assert main(["autopilot", "--model", "shi-taylor", "--scenario", "zigzag"]) == 2
     assert "zigzag" in capsys.readouterr().err

@@ -162,6 +162,7 @@ def test_angle_residuals_wrapped(name):
     res = make(name, dm, 1e-8, np.deg2rad(0.5) ** 2).filter(data, prior, seed=3)
     assert np.abs(res.innovations[:, 0]).max() < np.deg2rad(10.0)
     assert np.abs(np.rad2deg(cs.wrap(res["psi"] - traj["psi"]))).max() < 2.0
+    assert np.abs(np.rad2deg(cs.wrap(np.diff(res["psi"][5:])))).max() < 1.0    # no jump at the cut
     assert np.abs(res["r"] - traj["r"]).max() < 0.01
 
 

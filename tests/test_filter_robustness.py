@@ -1,5 +1,6 @@
-"""Consistency (NEES/NIS in chi-square bounds), angle wrap at +-180 deg, GNSS dropout, outlier
-gating and multi-rate GNSS, for the EKF and the UKF."""
+"""Consistency (NEES/NIS in chi-square bounds) on the SOG/COG model, GNSS dropout, outlier gating and
+multi-rate GNSS, for the EKF and the UKF (the heading across +-180 deg is checked for every estimator
+in test_estimator_contract.py)."""
 import numpy as np
 import pytest
 from scipy import stats
@@ -42,23 +43,6 @@ def test_nees_nis_in_chi_square_bounds(cls):
         assert lo < values.mean() < hi, (values.mean(), lo, hi)
         inside = np.mean((values > lo) & (values < hi))
         assert inside > 0.90, inside
-
-
-@pytest.mark.parametrize("cls", FILTERS)
-def test_heading_across_180_deg_no_spike(cls):
-    """Heading passes +-180 deg and the prior straddles it (truth +179.7, prior mean -179.9 deg)."""
-    m = cs.models.nomoto_first_order()
-    dm = cs.discretize(m, 0.2)
-    t = np.arange(0, 120, 0.2)
-    traj = cs.simulate(m, m.states(psi=np.deg2rad(179.7), r=0.004), t, {"delta": 0.0})
-    data = cs.measure(traj, m, {"psi": np.deg2rad(0.5)}, seed=5)
-    est = cls(dm, 1e-8, np.deg2rad(0.5) ** 2)
-    res = est.filter(data, cs.Gaussian(m.states(psi=np.deg2rad(-179.9), r=0.0), [np.deg2rad(2) ** 2, 1e-5]))
-    err = cs.wrap(res["psi"] - traj["psi"])
-    assert np.abs(np.rad2deg(err)).max() < 2.0
-    assert np.abs(np.rad2deg(res.innovations[:, 0])).max() < 5 * 2.0
-    assert np.abs(np.rad2deg(cs.wrap(np.diff(res["psi"])))).max() < 1.0
-    assert np.abs(res["r"] - traj["r"]).max() < 0.01
 
 
 @pytest.mark.parametrize("cls", FILTERS)

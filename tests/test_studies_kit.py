@@ -27,7 +27,7 @@ def test_md_table_and_effect():
     table = md_table({"a": {"x": 1.23456, "y": float("nan")}, "b": {"x": 2, "y": "ok"}}, first="case")
     assert table.splitlines() == ["| case | x | y |", "|---|---|---|", "| a | 1.235 | n/a |", "| b | 2 | ok |"]
     text = effect({"growth": 2.0, "gap": 0.5}, {"growth": 3.0, "gap": 0.25}, alt_name="other")
-    assert text == "with the other: growth: 2 -> 3 (+50 %); gap: 0.5 -> 0.25 (-50 %)"
+    assert text == "with other: growth: 2 -> 3 (+50 %); gap: 0.5 -> 0.25 (-50 %)"
 
 
 def test_studies_do_not_branch_on_estimator_names():

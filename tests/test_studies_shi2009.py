@@ -69,6 +69,9 @@ def test_mmg_truth_is_reported(quick):
     for key, row in mmg["table2"].items():
         assert np.isfinite(row["truth"]) and row["truth"] > 0, key
     assert set(mmg["claim"]) == {"steps", "settled_by_200", "settled_in_last_tenth"}
+    # the best Taylor model (least squares on six MMG manoeuvres) against the MMG truth: reported
+    assert set(mmg["least_squares_taylor_error_pct"]) == {"advance_m", "transfer_m", "tactical_diameter_m"}
+    assert all(np.isfinite(v) for v in mmg["least_squares_taylor_error_pct"].values())
 
 
 def test_convergence_step_criterion():

@@ -14,6 +14,8 @@ The package, one job per module:
 * :mod:`~casship.autopilot.ship_design` -- :func:`design_autopilot` and the :class:`Design` value;
 * :mod:`~casship.autopilot.closed_loop` -- the closed loop as one compiled CasADi step;
 * :mod:`~casship.autopilot.performance` -- course-changing and course-keeping checks;
+* :mod:`~casship.autopilot.guidance` -- waypoints, LOS and integral LOS;
+* :mod:`~casship.autopilot.mpc` -- a CasADi model-predictive course controller;
 * :mod:`~casship.autopilot.montecarlo` -- runs over sensor-noise seeds and speeds;
 * :mod:`~casship.autopilot.plots` -- figures.
 
@@ -26,7 +28,9 @@ from .closed_loop import ClosedLoop, ClosedLoopResult, LoopEstimator, Sensors
 from .defaults import RULES, AutopilotSettings, derive_settings
 from .designs import LQG, lqg_design, lqr_design, pid_pole_placement
 from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linear_estimator
+from .guidance import LOSGuidance, Waypoints, cross_track_metrics
 from .law import Actuator, Autopilot, PIDGains
+from .mpc import MPCAutopilot, mpc_for_design
 from .nomoto import Nomoto, fit_nomoto, nomoto_from_linear, nomoto_from_model
 from .performance import (CRITERIA, course_change_metrics, course_keeping_metrics, course_scenario,
                           performance_report, step_metrics)
@@ -42,4 +46,5 @@ __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "P
            "LoopEstimator", "Sensors", "WaveYaw", "course_ekf", "heading_kf", "heading_observer", "linear_estimator",
            "step_metrics", "course_change_metrics", "course_keeping_metrics", "performance_report", "CRITERIA",
            "course_scenario", "plot_design", "plot_closed_loop", "bode_phase_deg", "Design", "design_autopilot",
-           "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings"]
+           "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings", "Waypoints",
+           "LOSGuidance", "cross_track_metrics", "MPCAutopilot", "mpc_for_design"]

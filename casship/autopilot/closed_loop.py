@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap
-from ..data import Dataset
+from ..data import Dataset, Gaussian
 from .estimation import WaveYaw
 from .law import Actuator, Autopilot
 from .plants import SteeringPlant
@@ -105,9 +105,16 @@ class LoopEstimator:
         """Names of the step's memory slots (the estimator's memory)."""
         return tuple(self.est.memory)
 
-    def memory0(self) -> dict:
-        """Initial memory by slot name (:meth:`Estimator.memory_from` of the prior)."""
-        return self.est.memory_from(self.prior)
+    def prior_at(self, north: float, east: float, psi: float, r: float, chi: float):
+        """The prior moved to a start state: position and course (course estimator) or heading and
+        yaw rate (heading estimator) from the ship, the rest and the covariance from :attr:`prior`."""
+        mean = np.array(self.prior.mean, dtype=float)
+        ix = self.state_index
+        if self.kind == "course":
+            mean[ix("x_n")], mean[ix("y_n")], mean[ix("chi")] = north, east, chi
+        else:
+            mean[ix("psi")], mean[ix("r")] = psi, r
+        return Gaussian(mean, self.prior.cov)
 
     def state_index(self, name: str) -> int:
         return self.est.model.index(name)
@@ -180,12 +187,18 @@ class ClosedLoop:
         First-order wave yaw added to the measured heading and yaw rate.
     guidance : object, optional
         Path guidance (:class:`casship.autopilot.guidance.LOSGuidance`) giving the course command
-        from the position (the estimator's in course mode, the true one otherwise).
+        from the position (the estimator's in course mode, the last GNSS fix in heading mode, the
+        true one with ``estimator="truth"``).
+    controller : object, optional
+        A controller run from Python instead of ``autopilot``'s law, e.g.
+        :class:`~casship.autopilot.mpc.MPCAutopilot` (methods ``memory0(chi0)`` and
+        ``update(memory, ref, chi, r, dt, bias) -> (memory, command, log)``); only
+        :meth:`run_stepwise` runs it.
     """
 
     def __init__(self, plant: SteeringPlant, autopilot: Autopilot, actuator: Actuator, *, dt: float,
                  mode: str = "course", rate: str = "gyro", estimator="truth", sensors: Sensors | None = None,
-                 wave: WaveYaw | None = None, guidance=None):
+                 wave: WaveYaw | None = None, guidance=None, controller=None):
         if mode not in ("course", "heading"):
             raise ValueError(f"mode must be 'course' or 'heading', got {mode!r}")
         if rate not in ("estimator", "gyro"):
@@ -204,13 +217,14 @@ class ClosedLoop:
         self.plant, self.autopilot, self.actuator = plant, autopilot, actuator
         self.dt, self.mode, self.rate = float(dt), mode, rate
         self.estimator, self.sensors, self.wave, self.guidance = estimator, sensors or Sensors(), wave, guidance
+        self.controller = controller
         est_blocks = []
         if isinstance(estimator, LoopEstimator):
             fun = estimator.step
             est_blocks = [(f"est_{n}", fun.nnz_in(n)) for n in estimator.memory]
         m = plant.model
         blocks = [("x", m.nx), ("steer", 1), ("steer_prev", 1), *est_blocks,
-                  ("autopilot", len(Autopilot.MEMORY)), ("compass_hold", 1), ("chi_prev", 1)]
+                  ("autopilot", len(Autopilot.MEMORY)), ("compass_hold", 1), ("gnss_hold", 2), ("chi_prev", 1)]
         if wave is not None:
             blocks.append(("wave", 2))
         if guidance is not None:
@@ -236,6 +250,8 @@ class ClosedLoop:
         compass), ``dt_est`` the estimator's time since its previous sample (0 on the first), ``p``
         the ship's parameters; ``log`` holds :attr:`signals`.
         """
+        if self.controller is not None:
+            raise TypeError(f"the {type(self.controller).__name__} runs from Python: use run_stepwise")
         if self._step is None:
             self._build()
         return self._step
@@ -263,11 +279,13 @@ class ClosedLoop:
             else:
                 rate = meas["r"]
             return {"angle": angle, "rate": rate, "north": meas["north"], "east": meas["east"], "U": U_true,
-                    "angle_std": ca.SX(0), "memory": {}, "compass_hold": parts["compass_hold"]}
+                    "angle_std": ca.SX(0), "memory": {}, "compass_hold": parts["compass_hold"],
+                    "gnss_hold": parts["gnss_hold"]}
+        fix = ca.if_else(mask[0] > 0, meas["gnss"], parts["gnss_hold"])      # last GNSS fix (heading mode)
         if est == "raw":
             hold = ca.if_else(mask[1] > 0, meas["compass"], parts["compass_hold"])
-            return {"angle": hold, "rate": meas["gyro"], "north": meas["north"], "east": meas["east"], "U": U_true,
-                    "angle_std": ca.SX(0), "memory": {}, "compass_hold": hold}
+            return {"angle": hold, "rate": meas["gyro"], "north": fix[0], "east": fix[1], "U": U_true,
+                    "angle_std": ca.SX(0), "memory": {}, "compass_hold": hold, "gnss_hold": fix}
         fun = est.step
         call = {n: ca.reshape(parts[f"est_{n}"], fun.size_in(n)) for n in est.memory}
         model = est.est.model
@@ -290,11 +308,11 @@ class ClosedLoop:
             std = ca.sqrt(P[ix("chi"), ix("chi")])
         else:
             angle, rate_est = xh[ix("psi")], xh[ix("r")]
-            north, east, U = meas["north"], meas["east"], U_true
+            north, east, U = fix[0], fix[1], U_true
             std = ca.sqrt(P[ix("psi"), ix("psi")])
         rate = rate_est if self.rate == "estimator" else meas["gyro"]
         return {"angle": angle, "rate": rate, "north": north, "east": east, "U": U, "angle_std": std,
-                "memory": memory, "compass_hold": parts["compass_hold"]}
+                "memory": memory, "compass_hold": parts["compass_hold"], "gnss_hold": fix}
 
     def _build(self):
         m = self.plant.model
@@ -314,8 +332,8 @@ class ClosedLoop:
         command = ref
         nxt = {}
         if self.guidance is not None:
-            g = self.guidance.symbolic_step(parts["guidance"], est["north"], est["east"], est["U"],
-                                            meas["psi"] if self.mode == "heading" else est["angle"], self.dt)
+            g = self.guidance.symbolic_step(parts["guidance"], est["north"], est["east"], est["U"], est["angle"],
+                                            self.dt)
             command = g["chi_ref"]
             nxt["guidance"] = g["memory"]
             log.update({k: g[k] for k in self.guidance.LOG})
@@ -324,7 +342,7 @@ class ClosedLoop:
         steer_avg = 0.5 * (steer + act["steer"])          # the servo ramps over the sample
         x_next = self.plant.symbolic_step(x, steer_avg, p, self.dt)
         nxt.update({"x": x_next, "steer": act["steer"], "steer_prev": steer_avg, "autopilot": law["memory"],
-                    "compass_hold": est["compass_hold"], "chi_prev": motion[0]})
+                    "compass_hold": est["compass_hold"], "gnss_hold": est["gnss_hold"], "chi_prev": motion[0]})
         nxt.update({f"est_{n}": v for n, v in est["memory"].items()})
         if self.wave is not None:
             nxt["wave"] = wave_next
@@ -352,22 +370,34 @@ class ClosedLoop:
         if chi0 is None:
             chi0 = self.initial_angle(x0)
         parts = {"x": x0, "steer": 0.0, "steer_prev": 0.0, "autopilot": self.autopilot.memory0(chi0),
-                 "compass_hold": x0[m.index(pl.heading)], "chi_prev": chi0}
+                 "compass_hold": x0[m.index(pl.heading)], "gnss_hold": x0[[m.index(pl.north), m.index(pl.east)]],
+                 "chi_prev": chi0}
         if isinstance(self.estimator, LoopEstimator):
-            parts.update({f"est_{n}": v for n, v in self.estimator.memory0().items()})
+            memory = self.estimator.est.memory_from(self._prior(x0))
+            parts.update({f"est_{n}": v for n, v in memory.items()})
         if self.wave is not None:
             parts["wave"] = np.zeros(2)
         if self.guidance is not None:
             parts["guidance"] = self.guidance.memory0()
         return self.layout.pack(parts)
 
+    def _prior(self, x0):
+        """The estimator's prior at the start state ``x0``."""
+        pl, m = self.plant, self.plant.model
+        return self.estimator.prior_at(x0[m.index(pl.north)], x0[m.index(pl.east)], x0[m.index(pl.heading)],
+                                       x0[m.index(pl.yaw_rate)], self._course_over_ground(x0))
+
+    def _course_over_ground(self, x0) -> float:
+        pl = self.plant
+        chi = ca.Function("chi0", [], [pl.symbolic_motion(ca.DM(x0), 0.0, ca.DM(pl.pvec))[0]])
+        return float(chi()["o0"])
+
     def initial_angle(self, x0) -> float:
         """Course over ground (course mode) or heading at ``x0``."""
         pl, m = self.plant, self.plant.model
         if self.mode == "heading":
             return float(wrap(x0[m.index(pl.heading)]))
-        chi = ca.Function("chi0", [], [pl.symbolic_motion(ca.DM(x0), 0.0, ca.DM(pl.pvec))[0]])
-        return float(chi()["o0"])
+        return self._course_over_ground(x0)
 
     def schedule(self, n: int) -> np.ndarray:
         """Sensor availability masks ``(2, n)``: GNSS and compass readings at their rates."""
@@ -418,7 +448,7 @@ class ClosedLoop:
                 bad = start + int(np.argmax(~np.all(np.isfinite(S), axis=0)))
                 raise FloatingPointError(f"closed loop of {self.plant.model.name!r} diverged at t = {t[bad]:g} s")
             start += size
-        return self._dataset(t, np.hstack(logs))
+        return self._dataset(t, np.hstack(logs), x0)
 
     def run_stepwise(self, command, t_end: float, *, seed=0, x0=None) -> Dataset:
         """The same run, one part at a time from Python: the reference for :meth:`run`.
@@ -432,6 +462,7 @@ class ClosedLoop:
         s0 = self.layout.split(self.state0(x0))
         x, steer, steer_prev = s0["x"].copy(), 0.0, 0.0
         law_mem, hold, chi_prev = s0["autopilot"].copy(), float(s0["compass_hold"][0]), float(s0["chi_prev"][0])
+        fix = s0["gnss_hold"].copy()
         wave_x = np.zeros(2)
         plant_f = pl.step_function()
         law_f = self.autopilot.function
@@ -439,8 +470,11 @@ class ClosedLoop:
         a = self.actuator.symbolic_step(st, cmd, h)
         act_f = ca.Function("actuator", [st, cmd, h], [a["steer"], a["rate_limited"]], ["steer", "command", "dt"],
                             ["steer_next", "rate_limited"])
-        online = self.estimator.est.online(self.estimator.prior) if isinstance(self.estimator, LoopEstimator) else None
+        x_start = np.asarray(x0 if x0 is not None else (pl.x0 if pl.x0 is not None else m.states()), float)
+        online = self.estimator.est.online(self._prior(x_start)) if isinstance(self.estimator, LoopEstimator) \
+            else None
         guid_mem = self.guidance.memory0() if self.guidance is not None else None
+        ctrl_mem = self.controller.memory0(float(law_mem[0])) if self.controller is not None else None
         guid_f = self.guidance.function(self.dt) if self.guidance is not None else None
         if self.wave is not None:
             Ad, Bd = self.wave.discrete(self.dt)
@@ -451,12 +485,14 @@ class ClosedLoop:
             chi, U = float(mot["chi"]), float(mot["U"])
             psi_w = r_w = 0.0
             if self.wave is not None:
-                psi_w, r_w = wave_x[1], -self.wave.w0**2 * wave_x[0] - 2 * self.wave.lam * self.wave.w0 * wave_x[1]
+                psi_w, r_w = wave_x[0], wave_x[1]
                 wave_x = Ad @ wave_x + Bd[:, 0] * draws[4, k]
             gn, ge = x[ix] + sen.gnss_std * draws[0, k], x[iy] + sen.gnss_std * draws[1, k]
             compass = float(wrap(x[ipsi] + psi_w + sen.compass_std * draws[2, k]))
             gyro = x[ir] + r_w + sen.gyro_std * draws[3, k]
-            north, east, U_hat, std = x[ix], x[iy], U, 0.0
+            north, east, U_hat, std, bias = x[ix], x[iy], U, 0.0, 0.0
+            if masks[0, k]:
+                fix = np.array([gn, ge])
             if online is not None:
                 if self.estimator.kind == "course":
                     y = np.array([gn, ge]) if masks[0, k] else np.full(2, np.nan)
@@ -471,11 +507,13 @@ class ClosedLoop:
                     north, east, U_hat, std = xh[ixh("x_n")], xh[ixh("y_n")], xh[ixh("U")], np.sqrt(P[ixh("chi"), ixh("chi")])
                 else:
                     angle, rate, std = xh[ixh("psi")], xh[ixh("r")], np.sqrt(P[ixh("psi"), ixh("psi")])
+                    north, east, bias = fix[0], fix[1], xh[ixh("b")]
                 if self.rate == "gyro":
                     rate = gyro
             elif self.estimator == "raw":
                 hold = compass if masks[1, k] else hold
                 angle, rate = hold, gyro
+                north, east = fix
             else:
                 angle = chi if self.mode == "course" else x[ipsi]
                 if self.mode == "course":
@@ -485,13 +523,16 @@ class ClosedLoop:
             log = {}
             command = refs[k]
             if guid_f is not None:
-                own = x[ipsi] if self.mode == "heading" else angle
-                g = guid_f.call({"memory": guid_mem, "north": north, "east": east, "U": U_hat, "angle": own})
+                g = guid_f.call({"memory": guid_mem, "north": north, "east": east, "U": U_hat, "angle": angle})
                 guid_mem = np.asarray(g["memory_next"]).ravel()
                 command = float(g["chi_ref"])
                 log.update({key: float(g[key]) for key in self.guidance.LOG})
-            lo = law_f.call({"memory": law_mem, "ref": command, "chi": angle, "r": rate, "dt": self.dt})
-            law_mem = np.asarray(lo["memory_next"]).ravel()
+            if self.controller is None:
+                lo = law_f.call({"memory": law_mem, "ref": command, "chi": angle, "r": rate, "dt": self.dt})
+                law_mem = np.asarray(lo["memory_next"]).ravel()
+            else:
+                ctrl_mem, cmd, lo = self.controller.update(ctrl_mem, command, angle, rate, self.dt, bias)
+                lo = {**lo, "steer": cmd}
             ao = act_f.call({"steer": steer, "command": float(lo["steer"]), "dt": self.dt})
             steer_next = float(ao["steer_next"])
             steer_avg = 0.5 * (steer + steer_next)
@@ -506,12 +547,14 @@ class ClosedLoop:
             steer, steer_prev, chi_prev = steer_next, steer_avg, chi
             if not np.all(np.isfinite(x)):
                 raise FloatingPointError(f"closed loop of {m.name!r} diverged at t = {t[k]:g} s")
-        return self._dataset(t, np.array(rows).T)
+        return self._dataset(t, np.array(rows).T, x_start)
 
-    def _dataset(self, t, log) -> Dataset:
+    def _dataset(self, t, log, x0) -> Dataset:
         meta = {"mode": self.mode, "model": self.plant.model.name, "dt": self.dt, "rate": self.rate}
         if isinstance(self.estimator, LoopEstimator):
-            meta["estimator_prior"] = self.estimator.prior
+            pl = self.plant
+            x0 = np.asarray(x0 if x0 is not None else (pl.x0 if pl.x0 is not None else pl.model.states()), float)
+            meta["estimator_prior"] = self._prior(x0)
             meta["estimator"] = self.estimator.est
         cols = dict(zip(self.signals, log))
         cols["omega_chi"] = np.gradient(np.unwrap(cols["chi"]), t)      # true course rate

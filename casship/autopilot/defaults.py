@@ -118,7 +118,8 @@ RULES: dict[str, tuple[str, str]] = {
                                          "2 alpha2 r_max^2 / dt (in steps of 10^(1/4)) for which the steady-state "
                                          "filter (control.dlqe) puts at most min(rate_max actuator_T / 2, "
                                          "steer_max / 20) of sensor noise on the steering command"),
-    "observer_q": ("spectral densities", "yaw acceleration: the largest value up to 2 r_max^2 / |T| meeting the same "
+    "observer_q": ("spectral densities", "yaw acceleration: the largest value up to 2 (0.1 r_max)^2 / |T| (a yaw-rate "
+                                         "disturbance of 10 % of the preset turn rate over the time constant) meeting the same "
                                          "noise budget; rudder bias: (0.05 steer_max)^2 / (10 L/U)"),
     "segment": ("s", "40 / wn_ref per course change (scenario course-20 lasts two segments)"),
     "lqr_weights": ("", "q_e = 1, q_int = (wn/10)^2, q_r = 1/wn^2, r_delta = (1/(m wn^2))^2 (Bryson's rule at the "
@@ -237,7 +238,7 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
                 q_r, qb = val["observer_q"]
             else:
                 qb = q_b
-                q_r, _ = tune_heading_q(K=nom.K, T=nom.T, q_r_max=2 * val["r_max"] ** 2 / abs(nom.T), q_b=qb, dt=dt,
+                q_r, _ = tune_heading_q(K=nom.K, T=nom.T, q_r_max=2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T), q_b=qb, dt=dt,
                                         compass_every=max(1, int(round(1 / (val["compass_rate"] * dt)))),
                                         compass_std=val["compass_std"], gyro_std=val["gyro_std"], Kp=gains.Kp,
                                         Kd=Kd_est, budget=room)
@@ -287,7 +288,7 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
             val[key], src[key] = value, RULES[key][1]
     rule("ekf_alpha", lambda: (a1, wn))
     rule("ekf_q", lambda: (2 * a1 * (0.05 * speed) ** 2 / dt, 2 * wn * val["r_max"] ** 2 / dt))
-    rule("observer_q", lambda: (2 * val["r_max"] ** 2 / abs(nom.T), q_b))
+    rule("observer_q", lambda: (2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T), q_b))
     rule("lqr_weights", lambda: default_lqr_weights(nom, wn) if method == "lqr" else {})
     rule("segment", lambda: 40.0 / wr)
     for key in ("ekf_alpha", "ekf_q", "observer_q"):

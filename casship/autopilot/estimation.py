@@ -3,11 +3,10 @@
 * Course mode (Fossen & Fossen 2021): GNSS positions into the five-state SOG/COG EKF
   (:func:`casship.models.sog_cog`); :func:`course_ekf` tunes it from the sensor noise and the ship.
 * Heading mode: compass and rate gyro into a Kalman filter on the Nomoto model with a rudder-bias
-  state (:func:`heading_observer`), optionally with Fossen's wave filter: the first-order
-  (wave-frequency) yaw ``psi_w`` as a second-order resonant process
-  ``psi_w = K_w s / (s^2 + 2 lambda w0 s + w0^2) w`` (Fossen 2021, Sec. 10.2 and 13.4), so that the
-  estimate the autopilot steers on is the low-frequency heading and the rudder does not chase the
-  wave yaw.
+  state (:func:`heading_observer`), optionally with a wave filter (Fossen 2021, Sec. 10.2 and 13.4):
+  the first-order (wave-frequency) yaw as a second-order resonant process in the estimator
+  (:class:`WaveYaw`), so that the estimate the autopilot steers on is the low-frequency heading and
+  the rudder does not chase the wave yaw.
 * :class:`WaveYaw` is that resonant process as a python-control system and as a discrete step that
   the closed loop adds to the measured heading and yaw rate.
 """
@@ -28,12 +27,15 @@ __all__ = ["WaveYaw", "course_ekf", "course_prior", "heading_observer", "heading
 
 @dataclass(frozen=True)
 class WaveYaw:
-    """First-order wave-induced yaw: ``psi_w = K_w s / (s^2 + 2 lambda w0 s + w0^2) w``, ``w`` white.
+    """First-order (wave-frequency) yaw as a narrow resonant process driven by white noise.
 
-    ``K_w = 2 lambda w0 sigma`` makes ``sigma`` [rad] the peak amplitude of the transfer function,
-    the usual parametrisation of the linear wave spectrum approximation (Fossen 2021, Sec. 10.2.4);
-    for unit-intensity white noise the standard deviation of ``psi_w`` is
-    ``sigma sqrt(lambda w0)``.
+    ``psi_w'' + 2 lambda w0 psi_w' + w0^2 psi_w = K w`` with ``K = 2 lambda w0^2 sigma``, so that
+    ``sigma`` [rad] is the peak amplitude of ``psi_w / w`` (Fossen 2021, Sec. 10.2.4 uses the same
+    resonance); the states are the wave yaw ``psi_w`` and its rate ``r_w``, which the compass and
+    the rate gyro both see. For unit-intensity white noise the standard deviation of ``psi_w`` is
+    ``sigma sqrt(lambda w0)``. Fossen's wave filter writes the response with an extra zero at the
+    origin (``K_w s / (s^2 + 2 lambda w0 s + w0^2)``); its rate then holds the white noise itself,
+    which a gyro reading cannot be consistent with, so casship uses the position-and-rate form.
 
     Parameters
     ----------
@@ -58,39 +60,38 @@ class WaveYaw:
             raise ValueError(f"wave sigma must be >= 0, got {self.sigma}")
 
     @property
-    def K_w(self) -> float:
-        return 2 * self.lam * self.w0 * self.sigma
+    def K(self) -> float:
+        """Gain of the white noise on the wave yaw acceleration."""
+        return 2 * self.lam * self.w0**2 * self.sigma
 
     @property
     def std(self) -> float:
         """Standard deviation of ``psi_w`` [rad] for unit-intensity white noise."""
         return float(self.sigma * np.sqrt(self.lam * self.w0))
 
+    def _matrices(self):
+        A = np.array([[0.0, 1.0], [-self.w0**2, -2 * self.lam * self.w0]])
+        return A, np.array([[0.0], [self.K]])
+
     def system(self) -> control.StateSpace:
-        """Labelled state space: input ``w``, states ``xi_w, psi_w``, outputs ``psi_w, r_w``."""
-        w0, lam = self.w0, self.lam
-        A = np.array([[0.0, 1.0], [-w0**2, -2 * lam * w0]])
-        B = np.array([[0.0], [self.K_w]])
-        C = np.array([[0.0, 1.0], [-w0**2, -2 * lam * w0]])
-        return control.ss(A, B, C, np.array([[0.0], [self.K_w]]), states=["xi_w", "psi_w"], inputs=["w"],
+        """Labelled state space: input ``w``, states and outputs ``psi_w, r_w``."""
+        A, B = self._matrices()
+        return control.ss(A, B, np.eye(2), np.zeros((2, 1)), states=["psi_w", "r_w"], inputs=["w"],
                           outputs=["psi_w", "r_w"], name="wave_yaw")
 
     def discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Exact zero-order-hold discretisation ``(Ad, Bd)`` of the states ``xi_w, psi_w`` for a
-        white-noise draw per step scaled to the continuous intensity (``w = v / sqrt(dt)``, ``v``
-        standard normal)."""
+        """Exact zero-order-hold discretisation ``(Ad, Bd)`` of ``psi_w, r_w`` for a standard-normal
+        draw per step scaled to the continuous intensity (``w = v / sqrt(dt)``)."""
         from scipy.linalg import expm
 
-        A = np.array([[0.0, 1.0], [-self.w0**2, -2 * self.lam * self.w0]])
-        G = np.array([[0.0], [self.K_w]])
+        A, G = self._matrices()
         M = expm(np.block([[A, G], [np.zeros((1, 3))]]) * dt)
         return M[:2, :2], M[:2, 2:] / np.sqrt(dt)
 
     def symbolic_step(self, xw, draw, dt: float):
-        """Next ``[xi_w, psi_w]`` and the present ``(psi_w, r_w)`` (CasADi expressions)."""
+        """Next ``[psi_w, r_w]`` and the present ``(psi_w, r_w)`` (CasADi expressions)."""
         Ad, Bd = self.discrete(dt)
-        r_w = -self.w0**2 * xw[0] - 2 * self.lam * self.w0 * xw[1]
-        return ca.mtimes(ca.DM(Ad), xw) + ca.DM(Bd) * draw, xw[1], r_w
+        return ca.mtimes(ca.DM(Ad), xw) + ca.DM(Bd) * draw, xw[0], xw[1]
 
 
 def course_ekf(dt: float, *, gnss_std: float, alpha=(0.01, 0.1), q=(0.1, 0.01), options=None):
@@ -124,8 +125,8 @@ def heading_observer(K: float, T: float, wave: WaveYaw | None = None, *, steer: 
     """Nomoto heading model with a rudder bias and optionally Fossen's wave filter (a casship Model).
 
     States ``psi, r, b`` (``T r' + r = K (delta + b)``, ``b`` a slowly varying rudder bias that a
-    steady wind or current moment looks like), and with ``wave`` the wave states ``xi_w, psi_w``.
-    Outputs ``psi_m = psi + psi_w`` (compass) and ``r_m = r + r_w`` (rate gyro; ``r_w = psi_w'``).
+    steady wind or current moment looks like), and with ``wave`` the wave states ``psi_w, r_w``
+    (:class:`WaveYaw`). Outputs ``psi_m = psi + psi_w`` (compass) and ``r_m = r + r_w`` (rate gyro).
     Noises ``w_r`` (yaw acceleration), ``w_b`` (bias drift), ``w_w`` (wave intensity).
     """
     name = "heading-observer" + ("+wave" if wave is not None else "")
@@ -138,11 +139,10 @@ def heading_observer(K: float, T: float, wave: WaveYaw | None = None, *, steer: 
     b.ode(psi=r, r=(Kp * (delta + bias) - r) / Tp + b.noise("w_r"), b=b.noise("w_b"))
     psi_w = r_w = 0
     if wave is not None:
-        xi = b.state("xi_w", unit="rad s")
-        psi_w = b.state("psi_w", unit="rad")
+        psi_w = b.state("psi_w", unit="rad", doc="first-order wave yaw")
+        r_w = b.state("r_w", unit="rad/s", doc="its rate")
         w0, lam = b.param("w0", wave.w0, unit="rad/s"), b.param("lam", wave.lam)
-        r_w = -w0**2 * xi - 2 * lam * w0 * psi_w
-        b.ode(xi_w=psi_w, psi_w=r_w + wave.K_w * b.noise("w_w"))
+        b.ode(psi_w=r_w, r_w=-w0**2 * psi_w - 2 * lam * w0 * r_w + wave.K * b.noise("w_w"))
     b.output("psi_m", psi + psi_w, angle=True)
     b.output("r_m", r + r_w)
     return b.build()
@@ -165,7 +165,8 @@ def heading_kf(observer: Model, dt: float, *, compass_std: float, gyro_std: floa
 def heading_prior(observer: Model, psi: float, r: float, compass_std: float) -> Gaussian:
     """Prior of the heading observer at the start of a run."""
     mean = observer.states(psi=psi, r=r)
-    var = {"psi": compass_std**2, "r": 1e-6, "b": np.radians(2.0) ** 2, "xi_w": 1e-2, "psi_w": np.radians(2.0) ** 2}
+    var = {"psi": compass_std**2, "r": 1e-6, "b": np.radians(2.0) ** 2, "psi_w": np.radians(2.0) ** 2,
+           "r_w": np.radians(2.0) ** 2}
     return Gaussian(mean, np.diag([var[n] for n in observer.state_names]))
 
 

@@ -107,11 +107,12 @@ class SteeringPlant:
 
 
 def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable, name: str | None = None) -> Model:
-    """A copy of ``model`` whose inputs are replaced by ``new_inputs`` through an allocation.
+    """A copy of ``model`` whose inputs are driven by ``new_inputs`` through an allocation.
 
     ``allocation(new, p)`` receives dicts of the new input symbols and the model's parameter
     symbols by name and returns a dict old input name -> expression. Use it to steer a
-    thruster-driven craft by a yaw moment: ``{"n1": ..., "n2": ...}`` from ``tau_X, tau_N``.
+    thruster-driven craft by a yaw moment: ``{"n1": ..., "n2": ...}`` from ``tau_X, tau_N``. Inputs
+    the allocation does not give (e.g. a current or wind) stay inputs of the new model.
     """
     b = ModelBuilder(name or f"{model.name}+allocation", model.doc)
     xs = [b.state(v.name, unit=v.unit, angle=v.angle, doc=v.doc) for v in model.state_vars]
@@ -120,10 +121,13 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
     ws = [b.noise(v.name, unit=v.unit, doc=v.doc) for v in model.noise_vars]
     us = {n: b.input(n) for n in new_inputs}
     pd = dict(zip(model.param_names, ps))
-    mapping = allocation(us, pd)
-    missing = [n for n in model.input_names if n not in mapping]
-    if missing:
-        raise ValueError(f"allocation gives no expression for input(s) {missing} of {model.name!r}")
+    mapping = dict(allocation(us, pd))
+    unknown = [n for n in mapping if n not in model.input_names]
+    if unknown:
+        raise ValueError(f"allocation gives input(s) {unknown} that {model.name!r} does not have")
+    for v in model.input_vars:
+        if v.name not in mapping:
+            mapping[v.name] = b.input(v.name, unit=v.unit, angle=v.angle, doc=v.doc)
     old = ca.vertcat(model.x, model.p, model.w, model.u)
     new = ca.vertcat(*xs, *ps, *ws, *[ca.SX(mapping[n]) for n in model.input_names])
     xdot, y = ca.substitute([model.xdot, model.y], [old], [new])

@@ -122,7 +122,7 @@ class Design:
     def closed_loop_system(self, *, plant: SteeringPlant | None = None, environment: Mapping | None = None,
                            estimator="ekf", sensors: Sensors | None = None, wave: WaveYaw | None = None,
                            wave_filter: bool = False, guidance=None, mode: str | None = None,
-                           rate: str | None = None) -> ClosedLoop:
+                           rate: str | None = None, controller=None) -> ClosedLoop:
         """The :class:`ClosedLoop` of this design.
 
         Parameters
@@ -137,6 +137,10 @@ class Design:
             First-order wave yaw on the measured heading and rate.
         wave_filter : bool
             Put the wave model into the heading observer (Fossen's wave filter).
+        guidance : LOSGuidance, optional
+            Path following: the course command comes from the guidance.
+        controller : MPCAutopilot, optional
+            Replaces the PID/LQR law (the loop then runs step by step).
         """
         s = self.settings
         mode, rate = mode or s.mode, rate or s.rate
@@ -147,7 +151,7 @@ class Design:
             estimator = self.estimator("course" if mode == "course" else "heading",
                                        wave=wave if wave_filter else None, x0=pl.x0)
         return ClosedLoop(pl, self.autopilot, self.actuator, dt=s.dt, mode=mode, rate=rate, estimator=estimator,
-                          sensors=sensors or self.sensors(), wave=wave, guidance=guidance)
+                          sensors=sensors or self.sensors(), wave=wave, guidance=guidance, controller=controller)
 
     def simulate(self, scenario: str = "course-20", t_end: float | None = None, *, seed=0, stepwise: bool = False,
                  warn: bool = True, **loop_options) -> ClosedLoopResult:

@@ -1,4 +1,4 @@
-"""``casship autopilot MODEL``: design a course autopilot for a ship and run a course-change scenario.
+"""``casship autopilot --model NAME``: design a course autopilot for a ship and run a course-change scenario.
 
 The options are the settings of :func:`casship.autopilot.design_autopilot`, with the same defaults
 (:data:`casship.autopilot.RULES`, derived from the ship): an option left out takes the rule shown in
@@ -6,9 +6,9 @@ The options are the settings of :func:`casship.autopilot.design_autopilot`, with
 
 Example::
 
-    casship autopilot kvlcc2 --json
-    casship autopilot kvlcc2 --scenario course-60 --method lqr --wind 10 45 --plot out/
-    casship autopilot otter --mode course --gnss-std 0.02 --show-defaults
+    casship autopilot --model kvlcc2 --json
+    casship autopilot --model kvlcc2 --scenario course-60 --method lqr --wind 10 45 --plot out/
+    casship autopilot --model otter --mode course --gnss-std 0.02 --show-defaults
 """
 from __future__ import annotations
 
@@ -16,6 +16,8 @@ import json
 from pathlib import Path
 
 import numpy as np
+
+from ._common import add_model_option, require
 
 #: settings shown in degrees on the command line (name -> option suffix)
 _DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s"}
@@ -38,7 +40,7 @@ def register(sub) -> None:
                                    "nonlinear closed loop (sensors, estimator, steering gear) through a course "
                                    "change. Every setting defaults to the rule shown, derived from the ship; the "
                                    "Python API (casship.autopilot.design_autopilot) uses the same rules.")
-    p.add_argument("model", help="registered model name (see `casship simulate --list`)")
+    add_model_option(p, legacy_positional=True)
     p.add_argument("--scenario", default="course-20",
                    help="course-A (A deg, back to 0 at half the run; course-20 = Fossen & Fossen 2021) or step-A")
     p.add_argument("--t-end", type=float, default=None, help="duration [s] (default: two segments, see --segment)")
@@ -47,6 +49,7 @@ def register(sub) -> None:
             continue
         kw = {"default": None, "dest": name}
         unit_txt = {"deg": "deg", "deg_s": "deg/s"}.get(_DEGREES.get(name), unit)
+        rule = rule.replace("%", "%%")          # argparse formats help strings with %
         kw["help"] = f"[{unit_txt}] default: {rule}" if unit_txt else f"default: {rule}"
         if name in _CHOICES:
             kw["choices"] = _CHOICES[name]
@@ -63,7 +66,7 @@ def register(sub) -> None:
     p.add_argument("--show-defaults", action="store_true", help="print the settings for this ship and exit")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", default=None, metavar="DIR", help="save Bode/step and closed-loop plots to DIR")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, parser=p)
 
 
 def _clean(v):
@@ -104,6 +107,7 @@ def run(args) -> int:
     from ..models import get_model
     from ..models.wind import add_current, add_wind
 
+    require(args.parser, args, {"--model": args.model})
     model = get_model(args.model)
     env = {}
     if args.current is not None:

@@ -30,7 +30,8 @@ def register(sub) -> None:
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
     p.add_argument("--free", required=True,
                    help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
-    p.add_argument("--out", default="fit.json", help="JSON file for the fit (default fit.json)")
+    p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --out / --plot file")
     p.add_argument("--method", default="mle", choices=("mle", "oe"),
                    help="mle: likelihood through an EKF (default); oe: output error (simulation)")
     p.add_argument("--measured", default=None, help="outputs to use a,b,... (default: outputs in every record)")
@@ -177,6 +178,11 @@ def run(args) -> int:
     from ..identify import decimate
     from ..models import get_model
 
+    from ..outdir import check_output_file
+
+    check_output_file(args.out, overwrite=args.overwrite, what="--out")       # before minutes of fitting
+    if args.plot:
+        check_output_file(args.plot, overwrite=args.overwrite, what="--plot")
     model = get_model(args.model)
     records = [decimate(load_record(p), args.decimate) for p in args.data]
     free = _names(args.free)

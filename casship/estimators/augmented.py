@@ -87,7 +87,15 @@ def augment(model: Model, params: Sequence[str] = (), *, disturbances: Sequence[
 
 
 def per_name(value, names: Sequence[str], what: str) -> np.ndarray:
-    """One value per name from a scalar, a sequence or a mapping with exactly ``names`` as keys."""
+    """One value per name from a scalar, a sequence or a mapping with exactly ``names`` as keys.
+
+    Parameters
+    ----------
+    value : float, sequence or mapping
+    names : sequence of str
+    what : str
+        What the values are (for messages).
+    """
     names = list(names)
     if isinstance(value, Mapping):
         missing, extra = [n for n in names if n not in value], sorted(set(value) - set(names))
@@ -104,7 +112,13 @@ def per_name(value, names: Sequence[str], what: str) -> np.ndarray:
 
 
 def augmented_prior(prior: Gaussian, mean, var) -> Gaussian:
-    """``prior`` extended by independent entries of mean ``mean`` and variance ``var``."""
+    """``prior`` extended by independent entries of mean ``mean`` and variance ``var``.
+
+    Parameters
+    ----------
+    prior : Gaussian
+    mean, var : arrays
+    """
     mean, var = np.asarray(mean, dtype=float), np.asarray(var, dtype=float)
     n = prior.mean.size
     cov = np.zeros((n + mean.size, n + mean.size))
@@ -114,7 +128,14 @@ def augmented_prior(prior: Gaussian, mean, var) -> Gaussian:
 
 
 def augmented_noise(Q: np.ndarray, variances) -> np.ndarray:
-    """Block-diagonal ``diag(Q, variances)`` for the noise of an augmented model."""
+    """Block-diagonal ``diag(Q, variances)`` for the noise of an augmented model.
+
+    Parameters
+    ----------
+    Q : (n, n) array
+    variances : array
+        Variances of the new noise channels.
+    """
     v = np.asarray(variances, dtype=float)
     Qa = np.zeros((Q.shape[0] + v.size,) * 2)
     Qa[:Q.shape[0], :Q.shape[0]] = Q
@@ -124,13 +145,25 @@ def augmented_noise(Q: np.ndarray, variances) -> np.ndarray:
 
 @dataclass(frozen=True)
 class AugmentedResult:
-    """Result of :func:`augmented_ekf`: the filter run and the parameter trajectories."""
+    """Result of :func:`augmented_ekf`: the filter run and the parameter trajectories.
+
+    Parameters
+    ----------
+    result : FilterResult
+    params : tuple of str
+        The estimated parameters (states of the augmented model).
+    """
 
     result: FilterResult
     params: tuple
 
     def trajectory(self, name: str) -> np.ndarray:
-        """Estimate of parameter ``name`` over the record."""
+        """Estimate of parameter ``name`` over the record.
+
+        Parameters
+        ----------
+        name : str
+        """
         if name not in self.params:
             raise ValueError(f"unknown augmented parameter {name!r}; estimated: {list(self.params)}")
         return self.result[name]
@@ -173,6 +206,12 @@ def augmented_ekf(model: Model, params: Sequence[str], data: Dataset, *, dt: flo
         Initial parameter variances (seed 000: ``1e5``).
     p : array or mapping, optional
         Values of the parameters that are not estimated (nominal by default).
+    measured : sequence of str, optional
+        Measured outputs (all by default).
+    method : str
+        Discretisation method.
+    options : EKFOptions or mapping, optional
+        Options of the EKF.
     """
     aug = augment(model, params)
     names = list(params)

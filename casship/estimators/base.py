@@ -26,6 +26,7 @@ from scipy import stats
 from .._fast import DUPLICATE_NAMES, BufferedCall, compile_function, run_fold
 from ..data import Dataset, Gaussian, as_cov
 from ..discretize import DiscreteModel
+from .gaps import bridge_gaps
 from .options import DIAGNOSTICS, EstimatorOptions
 from .result import FilterResult
 from .update import residual
@@ -38,7 +39,14 @@ CONSTANT_INPUTS = ("p", "Q", "R")                            # the same for a wh
 
 def per_sample(a: np.ndarray, n: int) -> np.ndarray:
     """A fold output (``rows x c*n``, sample ``k`` in columns ``k*c .. k*c+c-1``) as an array indexed by
-    sample first: ``(n,)`` for scalars, ``(n, rows)`` for vectors, ``(n, rows, c)`` for matrices."""
+    sample first: ``(n,)`` for scalars, ``(n, rows)`` for vectors, ``(n, rows, c)`` for matrices.
+
+    Parameters
+    ----------
+    a : array (rows, c*n)
+    n : int
+        Number of samples.
+    """
     r, c = a.shape[0], a.shape[1] // n
     if c == 1:
         return a.T.copy() if r > 1 else a.reshape(n).copy()
@@ -125,7 +133,14 @@ class Estimator:
         raise NotImplementedError
 
     def memory_from(self, prior: Gaussian, rng=None) -> dict:
-        """The initial memory for the belief ``prior`` (name -> array)."""
+        """The initial memory for the belief ``prior`` (name -> array).
+
+        Parameters
+        ----------
+        prior : Gaussian
+        rng : numpy.random.Generator, optional
+            For estimators whose memory is drawn (an ensemble).
+        """
         return {"x": prior.mean.copy(), "P": prior.cov.copy()}
 
     # -- the step Function -------------------------------------------------------------------------
@@ -183,6 +198,13 @@ class Estimator:
         Inputs keep the step's names: the memory (initial), the per-sample inputs with the ``n``
         samples side by side (``y`` is ``ny x n``, a draw ``z`` of ``r x c`` is ``r x c*n``), and
         ``p, Q, R`` once. Outputs: the memory and the diagnostics at every sample, side by side.
+
+        Parameters
+        ----------
+        n : int
+            Number of samples.
+        outputs : sequence of str or "all"
+            Diagnostics to return (only these are computed).
         """
         names = self._output_names(outputs)
         key = (int(n), names)
@@ -213,7 +235,12 @@ class Estimator:
 
     # -- data ------------------------------------------------------------------------------------
     def gate_threshold(self, n_measured: int) -> float:
-        """Chi-square threshold of the gate for ``n_measured`` scalar measurements (inf: no gate)."""
+        """Chi-square threshold of the gate for ``n_measured`` scalar measurements (inf: no gate).
+
+        Parameters
+        ----------
+        n_measured : int
+        """
         if self.options.gate is None or n_measured == 0:
             return np.inf
         if n_measured not in self._gate_cache:
@@ -221,7 +248,20 @@ class Estimator:
         return self._gate_cache[n_measured]
 
     def prepare(self, data: Dataset, p=None) -> dict:
-        """Check a record and turn it into the step's named inputs (per-sample inputs as columns)."""
+        """Check a record and turn it into the step's named inputs (per-sample inputs as columns).
+
+        Parameters
+        ----------
+        data : Dataset
+            Inputs (finite) and measured outputs (NaN = not measured).
+        p : array or mapping, optional
+            Model parameters (nominal by default).
+
+        Returns
+        -------
+        dict
+            ``u_prev, u, y, mask, dt, gate`` with one column per sample, and ``p, Q, R``.
+        """
         m = self.model
         if not isinstance(data, Dataset):
             raise TypeError(f"data must be a casship.Dataset, got {type(data).__name__}")
@@ -253,6 +293,12 @@ class Estimator:
         """Standard-normal draws for ``n`` steps, per-step blocks side by side (name -> array).
 
         One row of ``rng.standard_normal`` per step, so the online runner draws the same numbers.
+
+        Parameters
+        ----------
+        n : int
+            Number of steps.
+        rng : numpy.random.Generator
         """
         shapes = self._draw_shapes()
         if not shapes:
@@ -265,6 +311,12 @@ class Estimator:
             out[name] = np.ascontiguousarray(block.transpose(2, 0, 1).reshape(r, n * c))
             start += size
         return out
+
+    def _operating_point(self, x=None, u=None, p=None):
+        """``(x, u, p)`` as arrays: zeros and the nominal parameters where not given."""
+        m = self.model
+        return (m.states() if x is None else np.asarray(x, dtype=float),
+                m.inputs() if u is None else np.asarray(u, dtype=float), m.params() if p is None else m.params(p))
 
     def _check_prior(self, prior: Gaussian) -> None:
         if not isinstance(prior, Gaussian):
@@ -297,6 +349,7 @@ class Estimator:
         FilterResult
         """
         self._check_prior(prior)
+        data = bridge_gaps(self, data, prior.mean, p)      # a gap too long for one prediction: raise or bridge
         arrays = self.prepare(data, p)
         n = len(data)
         rng = np.random.default_rng(seed)
@@ -311,8 +364,19 @@ class Estimator:
         return self.result(data, arrays, outs)
 
     def result(self, data: Dataset, arrays: dict, out: dict, estimator: str | None = None) -> FilterResult:
-        """Assemble a :class:`FilterResult` from the per-sample diagnostics ``out`` (name -> array
-        indexed by sample) of a run over ``data`` prepared as ``arrays``."""
+        """Assemble a :class:`FilterResult` from the per-sample diagnostics of a run.
+
+        Parameters
+        ----------
+        data : Dataset
+            The record.
+        arrays : dict
+            The record as prepared by :meth:`prepare`.
+        out : dict
+            Diagnostic name -> array indexed by sample.
+        estimator : str, optional
+            Name recorded in the result (default: the estimator's).
+        """
         m, n = self.model, len(data)
         mask = arrays["mask"].T
         e = np.array(out["e"], dtype=float).reshape(n, self.ny)
@@ -332,7 +396,11 @@ class Estimator:
 
         The Kalman family runs :meth:`filter` and a Rauch-Tung-Striebel pass over its result
         (:func:`~casship.estimators.rts.rts_smooth`); the MHE solves one window over the whole record.
-        Arguments as for :meth:`filter`.
+
+        Parameters
+        ----------
+        data, prior, p, seed
+            As for :meth:`filter`.
 
         Returns
         -------
@@ -413,6 +481,21 @@ class Estimator:
         ``run.update(y, dt, u_prev=None, u=None) -> x`` per sample; ``run.x``, ``run.P``, ``run.info``.
         Numbers equal :meth:`filter` on the same record (a stochastic estimator draws from ``seed``
         in the same order).
+
+        Parameters
+        ----------
+        prior : Gaussian
+            Belief about the state at the first sample.
+        p : array or mapping, optional
+            Model parameters (nominal by default).
+        u : array, optional
+            Inputs before the first update (zeros by default).
+        seed : int or numpy.random.Generator, optional
+            For stochastic estimators.
+
+        Returns
+        -------
+        OnlineRun
         """
         from .online import OnlineRun, StepEngine
 
@@ -420,11 +503,21 @@ class Estimator:
         return OnlineRun(StepEngine(self, prior, p, u, np.random.default_rng(seed)))
 
     def residual(self, y, yhat, mask):
-        """Masked residual of the measured outputs, angle channels wrapped."""
+        """Masked residual of the measured outputs, angle channels wrapped.
+
+        Parameters
+        ----------
+        y, yhat, mask : symbolic (ny,)
+        """
         return residual(y, yhat, mask, self.angle_meas)
 
     def h_meas(self, x, u, p):
-        """Symbolic measured outputs."""
+        """Symbolic measured outputs.
+
+        Parameters
+        ----------
+        x, u, p : symbolic
+        """
         return self.model.h(x, u, p)[self.meas_index]
 
     def __repr__(self) -> str:

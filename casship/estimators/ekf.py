@@ -20,6 +20,8 @@ class EKFOptions(EstimatorOptions):
 
     Parameters
     ----------
+    gate, jit, outputs
+        The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     covariance : {"discrete", "continuous"}
         ``"discrete"`` propagates ``P`` with the Jacobians of the discretised step
         (``A P A' + G Q G'``). ``"continuous"`` (continuous-discrete EKF) integrates
@@ -141,6 +143,13 @@ class EKF(Estimator):
         by default; for a linear model the operating point does not matter) are handed to
         python-control, which solves the discrete Riccati equation.
 
+        Parameters
+        ----------
+        x, u : array, optional
+            Operating point (zeros by default).
+        p : array or mapping, optional
+            Parameters (nominal by default).
+
         Returns
         -------
         L : (nx, ny) array
@@ -155,9 +164,7 @@ class EKF(Estimator):
             raise ValueError("steady_state: a continuous-discrete EKF has no constant discrete gain; "
                              "use covariance='discrete' or KalmanBucy.steady_state")
         m = self.model
-        x = m.states() if x is None else np.asarray(x, dtype=float)
-        u = m.inputs() if u is None else np.asarray(u, dtype=float)
-        p = m.params() if p is None else m.params(p)
+        x, u, p = self._operating_point(x, u, p)
         A, _, G = self.dmodel.linearize(x, u, p)
         H = np.array(m.h_jac(x, u, p)[0])[self.meas_index]
         L, P, _ = control.dlqe(A, G, H, self.Q, self.R)
@@ -201,6 +208,13 @@ def persistence_model(names, name: str = "persistence"):
     """A random-walk (persistence, ``A = I``) model measuring each named state directly.
 
     The baseline of seed 002: ``x[k+1] = x[k] + w``; use it with :class:`KF`.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The states (``psi``, ``chi`` and ``heading`` are angles).
+    name : str
+        Model name.
     """
     from ..model import ModelBuilder
 

@@ -30,6 +30,8 @@ class EnKFOptions(EstimatorOptions):
 
     Parameters
     ----------
+    gate, jit, outputs
+        The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     members : int
         Ensemble size ``N`` (seed 002: 100).
     """
@@ -119,7 +121,13 @@ class EnKF(Estimator):
         return {"X": self.ensemble(prior, rng)}
 
     def ensemble(self, prior: Gaussian, seed=None) -> np.ndarray:
-        """Initial ensemble (nx, N) drawn from ``prior``."""
+        """Initial ensemble (nx, N) drawn from ``prior``.
+
+        Parameters
+        ----------
+        prior : Gaussian
+        seed : int or numpy.random.Generator, optional
+        """
         self._check_prior(prior)
         return prior.sample(self.members, np.random.default_rng(seed)).T.copy()
 

@@ -35,6 +35,8 @@ class KalmanBucyOptions(EstimatorOptions):
 
     Parameters
     ----------
+    gate, jit, outputs
+        The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     substeps : int
         Sub-steps of the coupled estimate/Riccati equations between two samples.
     integrator : {"auto", "rk4", "split"}
@@ -170,7 +172,13 @@ class KalmanBucy(Estimator):
                 "nis": nis, "ll": ll, "accepted": S(1)}
 
     def smooth(self, data, prior, p=None, *, seed=None):
-        """Not available: a continuous filter has no one-step predictions to smooth (raises ``ValueError``)."""
+        """Not available: a continuous filter has no one-step predictions to smooth (raises ``ValueError``).
+
+        Parameters
+        ----------
+        data, prior, p, seed
+            As for :meth:`filter`.
+        """
         raise ValueError("KalmanBucy has no smoother: a continuous filter has no one-step predictions to "
                          "smooth; use KF, EKF, UKF, EnKF or MHE")
 
@@ -181,6 +189,13 @@ class KalmanBucy(Estimator):
         ``A, G, H, Qc = Q dt, Rc = R dt`` to python-control, which solves
         ``A P + P A' - P H' Rc^-1 H P + G Qc G' = 0``.
 
+        Parameters
+        ----------
+        x, u : array, optional
+            Operating point (zeros by default).
+        p : array or mapping, optional
+            Parameters (nominal by default).
+
         Returns
         -------
         L : (nx, ny) array
@@ -189,9 +204,7 @@ class KalmanBucy(Estimator):
         import control
 
         m = self.model
-        x = m.states() if x is None else np.asarray(x, dtype=float)
-        u = m.inputs() if u is None else np.asarray(u, dtype=float)
-        p = m.params() if p is None else m.params(p)
+        x, u, p = self._operating_point(x, u, p)
         A, _, _, G = (np.array(M) for M in m.f_jac(x, u, p, np.zeros(m.nw)))
         H = np.array(m.h_jac(x, u, p)[0])[self.meas_index, :]
         dt = self.dmodel.dt

@@ -13,13 +13,19 @@ import numpy as np
 from ..data import Gaussian
 from .options import DIAGNOSTICS
 
-__all__ = ["OnlineRun", "StepEngine"]
+__all__ = ["OnlineRun"]
 
 
 class OnlineRun:
     """An estimator running on a stream, one sample per :meth:`update`, its memory kept inside.
 
     Numbers equal :meth:`Estimator.filter` on the same record (tested for every estimator).
+    Built by ``est.online(prior, p, u=..., seed=...)``.
+
+    Parameters
+    ----------
+    engine : object
+        Does the work per sample (the step of a recursive estimator, the window of the MHE).
 
     Examples
     --------
@@ -35,7 +41,22 @@ class OnlineRun:
     def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
         """Predict over ``dt`` (0: no prediction, e.g. the first sample) with the input ``u_prev`` held
         (default: the ``u`` of the previous update), then update with ``y`` (NaN = not measured now)
-        using the outputs at input ``u`` (default: ``u_prev``). Returns a copy of the new mean."""
+        using the outputs at input ``u`` (default: ``u_prev``).
+
+        Parameters
+        ----------
+        y : array (ny,)
+            The measured outputs now, NaN where not measured.
+        dt : float
+            Time since the previous sample [s].
+        u_prev, u : array (nu,), optional
+            Inputs held since the previous sample, and now.
+
+        Returns
+        -------
+        array
+            A copy of the new mean.
+        """
         return self._engine.update(y, dt, u_prev, u)
 
     @property
@@ -101,6 +122,11 @@ class StepEngine:
         for k, v in est.memory_from(prior, rng).items():
             first[k] = v
         first["p"] = m.params() if p is None else m.params(p)
+        self._p = m.params() if p is None else m.params(p)
+        u_start = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
+        from .gaps import gap_limit
+
+        self._gap_limit = gap_limit(est, prior.mean, u_start, p) if u_start.size == m.nu else 0.0
         first["Q"], first["R"], first["gate"] = est.Q, est.R, np.inf
         u0 = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
         if u0.size != m.nu or not np.all(np.isfinite(u0)):
@@ -120,9 +146,41 @@ class StepEngine:
         self._P = [c.out("P") for c in self._calls]
 
     def update(self, y, dt, u_prev, u):
-        if not dt >= 0:
+        if not (dt >= 0 and np.isfinite(dt)):
             raise ValueError(f"dt must be >= 0 and finite, got {dt}")
+        if dt > self._gap_limit and self._bridged(y, dt, u_prev, u):
+            return self._x[1 - self._cur].copy()
+        return self._update(y, dt, u_prev, u)
+
+    def _bridged(self, y, dt, u_prev, u) -> bool:
+        """A gap longer than the one-step limit: raise, or predict across it in shorter steps."""
+        from .gaps import _message, bridge_pieces, gap_limit
+
+        x = self._x[1 - self._cur] if self.samples else self._prior.mean
+        held = self._u if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
+        limit = gap_limit(self._est, x, held, self._p)
+        if dt <= limit:
+            self._gap_limit = max(self._gap_limit, dt)
+            return False
+        where = f"before update {self.samples + 1}"
+        if self._est.options.on_gap == "raise":
+            raise ValueError(_message(self._est, where, float(dt), limit))
+        import warnings
+
+        pieces = bridge_pieces(float(dt), limit)
+        warnings.warn(f"{self._est.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
+                      f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=3)
+        nothing = np.full(self._ny, np.nan)
+        u_held = held.copy()
+        for _ in range(pieces - 1):
+            self._update(nothing, dt / pieces, u_held, u_held)
+        self._update(y, dt / pieces, u_held, u)
+        return True
+
+    def _update(self, y, dt, u_prev, u):
         y = np.asarray(y, dtype=float)
+        if y.ndim == 0 and self._ny == 1:         # one measured output: a scalar is its value
+            y = y.reshape(1)
         if y.shape != self._y.shape:
             raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got shape {y.shape}")
         self._y[:] = y

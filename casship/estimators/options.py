@@ -16,7 +16,16 @@ DIAGNOSTICS = ("x", "P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll", "a
 
 
 def check_int(value, name: str, low: int) -> int:
-    """``value`` as an int ``>= low``, or ``ValueError`` naming the option."""
+    """``value`` as an int ``>= low``, or ``ValueError`` naming the option.
+
+    Parameters
+    ----------
+    value : number
+    name : str
+        The option (for the message).
+    low : int
+        Smallest value allowed.
+    """
     if isinstance(value, bool) or not float(value).is_integer() or int(value) < low:
         raise ValueError(f"option {name!r} must be an integer >= {low}, got {value!r}")
     return int(value)
@@ -39,11 +48,19 @@ class EstimatorOptions:
         besides the memory: a subset of ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted``
         that contains ``x`` and ``P``. The compiled code computes only what is asked for; the
         default is the lean ``("x", "P")``. ``filter`` always computes every diagnostic.
+    max_gap : float or None
+        Longest sample interval [s] predicted in one step; by default the stability limit of a
+        fixed-step discretisation (see :mod:`casship.estimators.gaps`).
+    on_gap : {"raise", "bridge"}
+        What a longer interval does: raise ``ValueError`` naming it, or be bridged by
+        prediction-only steps (with a warning).
     """
 
     gate: float | None = None
     jit: bool = False
     outputs: tuple = ("x", "P")
+    max_gap: float | None = None
+    on_gap: str = "raise"
 
     def __post_init__(self):
         if self.gate is not None:
@@ -63,6 +80,13 @@ class EstimatorOptions:
         if "x" not in outputs or "P" not in outputs:
             raise ValueError(f"option 'outputs' must contain 'x' and 'P', got {list(outputs)}")
         object.__setattr__(self, "outputs", tuple(o for o in DIAGNOSTICS if o in outputs))
+        if self.max_gap is not None:
+            gap = float(self.max_gap)
+            if not gap > 0:
+                raise ValueError(f"option 'max_gap' is a positive time [s] (or None), got {self.max_gap!r}")
+            object.__setattr__(self, "max_gap", gap)
+        if self.on_gap not in ("raise", "bridge"):
+            raise ValueError(f"option 'on_gap' is 'raise' or 'bridge', got {self.on_gap!r}")
 
     @classmethod
     def known(cls) -> list[str]:
@@ -71,7 +95,14 @@ class EstimatorOptions:
 
     @classmethod
     def from_value(cls, value, owner: str) -> "EstimatorOptions":
-        """Options from ``None`` (defaults), an instance of this class or a mapping of names to values."""
+        """Options from ``None`` (defaults), an instance of this class or a mapping of names to values.
+
+        Parameters
+        ----------
+        value : None, EstimatorOptions or mapping
+        owner : str
+            The estimator (for messages).
+        """
         if value is None:
             return cls()
         if isinstance(value, cls):
@@ -86,7 +117,13 @@ class EstimatorOptions:
         return cls(**dict(value))
 
     def replace(self, **changes) -> "EstimatorOptions":
-        """A copy with some options changed (checked like the constructor)."""
+        """A copy with some options changed (checked like the constructor).
+
+        Parameters
+        ----------
+        **changes
+            Option name -> new value.
+        """
         unknown = sorted(set(changes) - set(self.known()))
         if unknown:
             raise ValueError(f"unknown option(s) {unknown}; known: {sorted(self.known())}")

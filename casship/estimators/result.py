@@ -25,6 +25,10 @@ def not_positive_definite(P: np.ndarray) -> np.ndarray:
     The test is scale-free: a negative variance fails, otherwise the smallest eigenvalue of the
     correlation matrix ``D^-1/2 P D^-1/2`` must not be below ``-1e-9`` (a state with zero variance
     must have zero covariances too).
+
+    Parameters
+    ----------
+    P : array (N, n, n)
     """
     P = np.asarray(P, dtype=float)
     if P.ndim != 3 or P.shape[1] != P.shape[2]:
@@ -66,15 +70,21 @@ class Health:
     is not positive semi-definite (``not_pd`` rows) is an error of its own: ``ok`` is then False
     whatever the NIS says.
 
-    Attributes
+    Parameters
     ----------
     window : int
+        Samples per window.
     alpha : float
+        Significance of the two-sided chi-square test.
     flagged : (n_windows,) bool
-    window_start : (n_windows,) int, first row of each window
-    nis_sum, dof : (n_windows,) summed NIS and number of scalar measurements
-    rejected : (n_windows,) int, gated samples per window
-    not_pd : (k,) int, rows whose covariance is not positive semi-definite
+    window_start : (n_windows,) int
+        First row of each window.
+    nis_sum, dof : (n_windows,) arrays
+        Summed NIS and number of scalar measurements.
+    rejected : (n_windows,) int
+        Gated samples per window.
+    not_pd : (k,) int
+        Rows whose covariance is not positive semi-definite.
     """
 
     window: int
@@ -109,23 +119,38 @@ class Health:
 class FilterResult:
     """Result of running an estimator over a record: a frozen value (arrays read-only).
 
-    Attributes
+    Built by the estimators (``filter``, ``smooth``, ``predict``) or read back with :meth:`load`.
+
+    Parameters
     ----------
-    t : (N,) time stamps [s]
-    x, P : filtered (or smoothed) means (N, nx) and covariances (N, nx, nx)
-    x_pred, P_pred : predicted means and covariances before each update
-    C : (N, nx, nx) cross-covariances of the previous filtered and the current predicted state
-    K : (N, nx, ny) gains applied (zero columns for unmeasured channels, zero when rejected)
-    innovations : (N, ny) residuals, NaN where the channel was not measured (angles wrapped)
-    S : (N, ny, ny) innovation covariances (unit rows/columns for unmeasured channels)
-    nis : (N,) normalised innovation squared
-    n_measured : (N,) number of scalar measurements used per sample
-    loglik_terms : (N,) log-likelihood of each sample's measurements given the past
-    rejected : (N,) True where the innovation gate rejected the update
-    inputs : (N, nu) the inputs of the record
+    t : (N,) array
+        Time stamps [s].
+    x, P : (N, nx) and (N, nx, nx) arrays
+        Filtered (or smoothed) means and covariances.
+    x_pred, P_pred : arrays
+        Predicted means and covariances before each update.
+    C : (N, nx, nx) array
+        Cross-covariances of the previous filtered and the current predicted state.
+    K : (N, nx, ny) array
+        Gains applied (zero columns for unmeasured channels, zero when rejected).
+    innovations : (N, ny) array
+        Residuals, NaN where the channel was not measured (angles wrapped).
+    S : (N, ny, ny) array
+        Innovation covariances (unit rows/columns for unmeasured channels).
+    nis : (N,) array
+        Normalised innovation squared.
+    n_measured : (N,) int array
+        Number of scalar measurements used per sample.
+    loglik_terms : (N,) array
+        Log-likelihood of each sample's measurements given the past.
+    rejected : (N,) bool array
+        True where the innovation gate rejected the update.
+    inputs : (N, nu) array
+        The inputs of the record.
     state_names, state_units, output_names, input_names : tuples of str
-    estimator : str, e.g. ``"EKF"``, ``"EKF+RTS"``, ``"EKF prediction"``
-    angle_states : (nx,) bool
+    estimator : str
+        E.g. ``"EKF"``, ``"EKF+RTS"``, ``"EKF prediction"``.
+    angle_states : (nx,) bool array
     """
 
     t: np.ndarray
@@ -199,14 +224,27 @@ class FilterResult:
         return np.sqrt(var)
 
     def nees(self, x_true: np.ndarray) -> np.ndarray:
-        """Normalised estimation error squared against true states (angles wrapped)."""
+        """Normalised estimation error squared against true states (angles wrapped).
+
+        Parameters
+        ----------
+        x_true : (N, nx) array
+        """
         err = np.asarray(x_true, dtype=float) - self.x
         if self.angle_states.any():
             err[:, self.angle_states] = wrap(err[:, self.angle_states])
         return np.einsum("ki,ki->k", err, np.linalg.solve(self.P, err[..., None])[..., 0])
 
     def health(self, window: int = 50, alpha: float = 0.01) -> Health:
-        """Windowed NIS test and covariance integrity check (see :class:`Health`)."""
+        """Windowed NIS test and covariance integrity check (see :class:`Health`).
+
+        Parameters
+        ----------
+        window : int
+            Samples per window.
+        alpha : float
+            Significance of the two-sided chi-square test per window.
+        """
         not_pd = not_positive_definite(self.P)
         n = self.nis.size // window
         if n == 0:
@@ -246,6 +284,13 @@ class FilterResult:
         """Estimates with +-2 standard deviations over time, one panel per state (PNG at ``path``).
 
         Angle states are drawn in degrees; axes carry the state units.
+
+        Parameters
+        ----------
+        path : path
+            The PNG file to write.
+        states : sequence of str, optional
+            The states to draw (all by default).
         """
         import matplotlib
 
@@ -284,7 +329,12 @@ class FilterResult:
 
     # -- storage ------------------------------------------------------------------------------------
     def save(self, path) -> Path:
-        """Write the result to ``path`` (numpy ``.npz``, no pickled objects); read back with :meth:`load`."""
+        """Write the result to ``path`` (numpy ``.npz``, no pickled objects); read back with :meth:`load`.
+
+        Parameters
+        ----------
+        path : path
+        """
         path = Path(path)
         meta = {k: list(getattr(self, k)) for k in _NAMES}
         meta["estimator"] = self.estimator
@@ -294,7 +344,12 @@ class FilterResult:
 
     @classmethod
     def load(cls, path) -> "FilterResult":
-        """Read a result written by :meth:`save`."""
+        """Read a result written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : path
+        """
         with np.load(Path(path), allow_pickle=False) as f:
             missing = [k for k in (*_ARRAYS, "meta") if k not in f.files]
             if missing:
@@ -303,7 +358,13 @@ class FilterResult:
             return cls(**{k: f[k] for k in _ARRAYS}, **{k: tuple(meta[k]) for k in _NAMES}, estimator=meta["estimator"])
 
     def replace(self, **changes) -> "FilterResult":
-        """A copy with some fields replaced (checked like the constructor)."""
+        """A copy with some fields replaced (checked like the constructor).
+
+        Parameters
+        ----------
+        **changes
+            Field name -> new value.
+        """
         known = {f.name for f in fields(self)}
         unknown = sorted(set(changes) - known)
         if unknown:

@@ -26,6 +26,12 @@ def psd_sqrt(P, tol: float = 0.0):
 
     A pivot that is not larger than ``tol`` gives a zero column instead of a division by zero, so
     states with zero variance (fixed parameters, noise-free channels) yield no NaN.
+
+    Parameters
+    ----------
+    P : symbolic or numeric (n, n)
+    tol : float
+        Largest pivot treated as zero.
     """
     n = P.shape[0]
     sym = type(P) if isinstance(P, (ca.SX, ca.MX)) else ca.SX
@@ -42,7 +48,15 @@ def psd_sqrt(P, tol: float = 0.0):
 
 
 def sigma_weights(n: int, alpha: float, beta: float, kappa: float):
-    """Scale ``c = n + lambda`` and the mean and covariance weights of the ``2n+1`` sigma points."""
+    """Scale ``c = n + lambda`` and the mean and covariance weights of the ``2n+1`` sigma points.
+
+    Parameters
+    ----------
+    n : int
+        State dimension.
+    alpha, beta, kappa : float
+        Scaled unscented transform parameters.
+    """
     lam = alpha**2 * (n + kappa) - n
     c = n + lam
     if c <= 0:
@@ -56,7 +70,12 @@ def sigma_weights(n: int, alpha: float, beta: float, kappa: float):
 
 def wrap_fast(angle):
     """Symbolic wrap to [-pi, pi) by ``floor`` (four cheap operations instead of ``atan2(sin, cos)``;
-    derivative 1 almost everywhere), for the many sigma-point and ensemble deviations."""
+    derivative 1 almost everywhere), for the many sigma-point and ensemble deviations.
+
+    Parameters
+    ----------
+    angle : symbolic
+    """
     return angle - 2 * np.pi * ca.floor((angle + np.pi) / (2 * np.pi))
 
 
@@ -65,6 +84,14 @@ def circular_mean(points, wm, angles):
 
     For an angle row the mean is the central point plus the weighted mean of the wrapped deviations
     from it, which equals the arithmetic mean when no point crosses +-pi and never jumps by 2 pi.
+
+    Parameters
+    ----------
+    points : symbolic (n, k)
+    wm : array (k,)
+        Mean weights.
+    angles : array (n,) of bool
+        Which rows are angles.
     """
     ref = points[:, 0]
     rows = []
@@ -78,7 +105,13 @@ def circular_mean(points, wm, angles):
 
 
 def weighted_outer(D, w=None):
-    """Symmetric ``sum_k w_k D[:, k] D[:, k]'`` (``w = 1`` if None), computing the upper triangle only."""
+    """Symmetric ``sum_k w_k D[:, k] D[:, k]'`` (``w = 1`` if None), computing the upper triangle only.
+
+    Parameters
+    ----------
+    D : symbolic (n, k)
+    w : array (k,), optional
+    """
     n = D.shape[0]
     Dw = D if w is None else D @ ca.DM(np.diag(w))
     rows = [[None] * n for _ in range(n)]
@@ -89,7 +122,14 @@ def weighted_outer(D, w=None):
 
 
 def deviations(points, mean, angles):
-    """Columns ``points[:, j] - mean`` with angle rows wrapped to (-pi, pi]."""
+    """Columns ``points[:, j] - mean`` with angle rows wrapped to (-pi, pi].
+
+    Parameters
+    ----------
+    points : symbolic (n, k)
+    mean : symbolic (n,)
+    angles : array (n,) of bool
+    """
     d = points - ca.repmat(mean, 1, points.shape[1])
     if not np.any(angles):
         return d
@@ -103,6 +143,8 @@ class UKFOptions(EstimatorOptions):
 
     Parameters
     ----------
+    gate, jit, outputs
+        The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     alpha, beta, kappa : float
         Scaled unscented transform parameters. The default ``alpha = 1, beta = 0, kappa = 3`` is
         the unscaled form of seed 002; ``alpha = 1e-3, beta = 2, kappa = 0`` is the common scaled form.

@@ -29,7 +29,12 @@ def _chol(S):
 
 
 def symmetric(A):
-    """``(A + A') / 2``."""
+    """``(A + A') / 2``.
+
+    Parameters
+    ----------
+    A : symbolic or numeric square matrix
+    """
     return 0.5 * (A + A.T)
 
 
@@ -39,6 +44,11 @@ def spd_solve(A, B):
     Unlike a general symbolic solve this keeps its accuracy when ``A`` is badly scaled (variances
     of latitude in rad^2 next to speeds in (m/s)^2): Cholesky's error is governed by the condition
     of the correlation matrix, not of ``A`` itself.
+
+    Parameters
+    ----------
+    A : symbolic (n, n)
+    B : symbolic (n, k)
     """
     L = _chol(symmetric(A))          # A = L' L, L upper triangular
     return ca.solve(L, ca.solve(L.T, B))
@@ -48,19 +58,42 @@ def residual(y, yhat, mask, angles):
     """Masked residual ``y - yhat``, angle channels wrapped to (-pi, pi].
 
     Unmeasured channels (``mask = 0``) give exactly 0 even when ``y`` holds NaN there.
+
+    Parameters
+    ----------
+    y, yhat, mask : symbolic (ny,)
+        Measurement, prediction and mask (1 = measured).
+    angles : sequence of bool
+        Which channels are angles.
     """
     e = y - yhat
     return ca.vertcat(*[ca.if_else(mask[i] > 0, wrap_sym(e[i]) if a else e[i], 0) for i, a in enumerate(angles)])
 
 
 def masked_innovation_cov(HPH, R, mask):
-    """``S`` with unmeasured channels replaced by unit diagonal entries (they then carry no gain)."""
+    """``S`` with unmeasured channels replaced by unit diagonal entries (they then carry no gain).
+
+    Parameters
+    ----------
+    HPH : symbolic (ny, ny)
+        Predicted output covariance.
+    R : symbolic (ny, ny)
+    mask : symbolic (ny,)
+    """
     Dm = ca.diag(mask)
     return symmetric(Dm @ (HPH + R) @ Dm + ca.diag(1 - mask))
 
 
 def gaussian_terms(e, S, mask):
-    """NIS ``e' S^-1 e`` and log-likelihood ``log N(e; 0, S)`` of a masked innovation."""
+    """NIS ``e' S^-1 e`` and log-likelihood ``log N(e; 0, S)`` of a masked innovation.
+
+    Parameters
+    ----------
+    e : symbolic (ny,)
+    S : symbolic (ny, ny)
+    mask : symbolic (ny,)
+        Counts the measured channels in the normalising constant.
+    """
     L = _chol(S)
     z = ca.solve(L.T, e)
     nis = ca.dot(z, z)
@@ -74,6 +107,17 @@ def joseph_update(xp, Pp, H, e, R, mask, gate):
     ``H`` rows of unmeasured channels (``mask = 0``) are ignored. The covariance update is the
     Joseph form ``(I - K H) Pp (I - K H)' + K R K'``, symmetric and positive semi-definite for any
     gain. An update whose NIS exceeds ``gate`` is not applied (``accepted = 0``).
+
+    Parameters
+    ----------
+    xp, Pp : symbolic
+        Predicted mean and covariance.
+    H : symbolic (ny, nx)
+        Output Jacobian.
+    e : symbolic (ny,)
+        Masked residual.
+    R, mask, gate : symbolic
+        Measurement covariance, mask and chi-square threshold.
 
     Returns
     -------

@@ -31,6 +31,7 @@ from ..discretize import discretize
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder
 from .result import FitResult
+from .records import record_label
 from .uncertainty import covariance_from_information, effective_samples, whiteness
 
 __all__ = ["rates_model", "smooth_trial", "inverse_dynamics", "linear_in"]
@@ -278,11 +279,12 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
                   status="least-squares", iterations=0, solve_time_s=time.perf_counter() - t0,
                   noise={"sigma": {f"{s}_dot": float(v * np.sqrt(s2)) for s, v in zip(states, sig)},
                          "weight_scale": float(np.sqrt(s2)), "prior": dict(prior)},
-                  x0=[], predictions=[])
+                  x0=[], predictions=[], records=[record_label(d, k) for k, d in enumerate(records)])
 
 
 def _fit_result(*, model: Model, params: dict, names, values, info, jac_nat, scale, cost, loglik, n_obs,
-                residuals, output_names, method, status, iterations, solve_time_s, noise, x0, predictions):
+                residuals, output_names, method, status, iterations, solve_time_s, noise, x0, predictions,
+                records):
     """The regression's :class:`FitResult`: covariance from the information matrix (delta method to
     natural units through ``jac_nat``), residual whiteness, and the model's identity."""
     del scale                                   # the covariance is already in natural units below
@@ -301,7 +303,7 @@ def _fit_result(*, model: Model, params: dict, names, values, info, jac_nat, sca
                      bic=float(k * np.log(max(n_obs, 1)) - 2 * loglik),
                      whiteness=whiteness(residuals, output_names), warnings=warn, method=method, status=status,
                      iterations=int(iterations), solve_time_s=float(solve_time_s), noise=noise, x0=x0,
-                     predictions=predictions, model_options=dict(model.meta.get("options", {})),
+                     predictions=predictions, records=list(records), model_options=dict(model.meta.get("options", {})),
                      param_set=vessel.param_set if vessel is not None else "", param_names=list(model.param_names))
 
 

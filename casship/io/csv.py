@@ -73,6 +73,8 @@ def from_frame(frame, columns: Mapping[str, str] | None = None, *, time: str = "
     latlon : (lat, lon), optional
         New names of geodetic columns (converted to rad via their units); adds ``x_n``, ``y_n``
         [m], local North-East on WGS-84 about ``origin_deg`` (the first finite position by default).
+    origin_deg : (lat, lon), optional
+        Origin of the local North-East frame [deg] (the first finite position by default).
     name : str
         Source name used in error messages and ``meta["source"]``.
 
@@ -185,6 +187,19 @@ def read_csv(path, columns: Mapping[str, str] | None = None, *, time: str = "t:s
     Parameters are those of :func:`from_frame`; ``read_options`` go to :func:`pandas.read_csv`
     (e.g. ``sep=";"``). :meth:`casship.Dataset.from_csv` covers files that are already in SI
     units with casship's names; this reader is for everything else.
+
+    Parameters
+    ----------
+    path : str, Path or file object
+        The CSV file (header row).
+    columns, time, wrap, latlon, origin_deg
+        As for :func:`from_frame`.
+    **read_options
+        Passed to :func:`pandas.read_csv`.
+
+    Returns
+    -------
+    Dataset
 
     Examples
     --------

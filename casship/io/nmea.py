@@ -57,7 +57,19 @@ _DATE = re.compile(r"^(\d{2})(\d{2})(\d{2})$")
 
 
 class NMEAError(ValueError):
-    """A malformed NMEA line, with its 1-based ``line_number`` and the ``line`` text."""
+    """A malformed NMEA line, with its 1-based ``line_number`` and the ``line`` text.
+
+    Parameters
+    ----------
+    source : str
+        File name (or ``<string>``, ``<stream>``).
+    line_number : int
+        1-based line number.
+    line : str
+        The line.
+    reason : str
+        What is wrong with it.
+    """
 
     def __init__(self, source: str, line_number: int, line: str, reason: str):
         self.source, self.line_number, self.line, self.reason = source, line_number, line, reason

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..model import Model, ModelBuilder
 
-__all__ = ["add_wind", "add_current", "fujiwara_coefficients", "fujiwara_loads", "relative_wind",
+__all__ = ["add_wind", "add_current", "fujiwara_coefficients", "fujiwara_loads", "relative_wind", "wind_term_model",
            "WIND_GEOMETRY_NAMES"]
 
 #: Geometry of the above-water hull: frontal/lateral projected areas, length overall, breadth,
@@ -147,21 +147,57 @@ def add_wind(model: Model, geometry: Mapping[str, float] | None = None, *, rho_a
     >>> ship.input_names
     ('delta', 'n', 'wind_speed', 'wind_dir')
     """
+    return wind_term_model(model, geometry, WIND_GEOMETRY_NAMES, _UNITS, fujiwara_loads, rho_air=rho_air,
+                           what="add_wind", label="Fujiwara", name=name or f"{model.name}+wind")
+
+
+def wind_term_model(model: Model, geometry: Mapping[str, float] | None, names, units: Mapping[str, str], loads, *,
+                    rho_air: float, what: str, label: str, name: str) -> Model:
+    """``model`` with wind loads ``loads(U_A, gamma, g, rho_air) -> (X, Y, N)`` fed into its ``tau`` port.
+
+    The shared body of :func:`add_wind` and of the other wind-load forms (seed 002's Eq. 34 in
+    :mod:`casship.models.wind_fourier`): checks the geometry (``names``; by default
+    ``model.vessel.wind``), makes it parameters ``wind_<name>`` (the centroid offsets ``C`` and
+    ``C_BR`` may be negative), adds the inputs ``wind_speed`` and ``wind_dir`` and the parameter
+    ``rho_air``, and uses the velocity over ground when the model has a current.
+
+    Parameters
+    ----------
+    model : Model
+    geometry : mapping or None
+        Geometry values (None: ``model.vessel.wind``).
+    names : sequence of str
+        The geometry names the load form needs.
+    units : mapping
+        Unit of each geometry name (default ``"m"``).
+    loads : callable
+        ``loads(U_A, gamma, g, rho_air) -> (X, Y, N)`` on CasADi symbols.
+    rho_air : float
+        Air density [kg/m^3].
+    what, label : str
+        The calling function's name (for messages) and the load form's name (for parameter docs).
+    name : str
+        Name of the new model.
+
+    Returns
+    -------
+    Model
+    """
     default = model.vessel.wind if model.vessel is not None else None
     geometry = dict(geometry if geometry is not None else default or {})
     geometry.pop("source", None)
-    missing = [k for k in WIND_GEOMETRY_NAMES if k not in geometry]
+    missing = [k for k in names if k not in geometry]
     if missing:
-        raise ValueError(f"add_wind: no value for wind geometry {missing} (model {model.name!r} has no "
+        raise ValueError(f"{what}: no value for wind geometry {missing} (model {model.name!r} has no "
                          "vessel wind geometry; pass geometry=...)")
-    unknown = set(geometry) - set(WIND_GEOMETRY_NAMES)
+    unknown = set(geometry) - set(names)
     if unknown:
-        raise ValueError(f"add_wind: unknown wind geometry name(s) {sorted(unknown)}; known: {WIND_GEOMETRY_NAMES}")
+        raise ValueError(f"{what}: unknown wind geometry name(s) {sorted(unknown)}; known: {tuple(names)}")
 
     def term(b: ModelBuilder) -> None:
-        _check_ship(b, "add_wind")
-        g = {k: b.param(f"wind_{k}", geometry[k], unit=_UNITS[k], doc=f"wind geometry {k} (Fujiwara)",
-                        bounds=(-np.inf, np.inf) if k == "C" else (1e-9, np.inf)) for k in WIND_GEOMETRY_NAMES}
+        _check_ship(b, what)
+        g = {k: b.param(f"wind_{k}", geometry[k], unit=units.get(k, "m"), doc=f"wind geometry {k} ({label})",
+                        bounds=(-np.inf, np.inf) if k in ("C", "C_BR") else (1e-9, np.inf)) for k in names}
         rho = b.param("rho_air", rho_air, unit="kg/m^3", doc="air density", bounds=(0.0, np.inf))
         speed = b.input("wind_speed", unit="m/s", doc="true wind speed")
         direction = b.input("wind_dir", unit="rad", angle=True, doc="true wind direction (from), clockwise from North")
@@ -170,10 +206,10 @@ def add_wind(model: Model, geometry: Mapping[str, float] | None = None, *, rho_a
             uc, vc = _current_body(b.sym("current_speed"), b.sym("current_dir"), psi)
             u, v = u + uc, v + vc
         U_A, gamma = relative_wind(u, v, psi, speed, direction)
-        X, Y, N = fujiwara_loads(U_A, gamma, g, rho)
+        X, Y, N = loads(U_A, gamma, g, rho)
         b.feed("tau", ca.vertcat(X, Y, N))
 
-    return model.extend(term, name or f"{model.name}+wind")
+    return model.extend(term, name)
 
 
 def _current_body(speed, direction, psi):

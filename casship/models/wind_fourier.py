@@ -28,11 +28,10 @@ from __future__ import annotations
 
 from typing import Mapping
 
-import casadi as ca
 import numpy as np
 
-from ..model import Model, ModelBuilder
-from .wind import _check_ship, _current_body, _lib, relative_wind
+from ..model import Model
+from .wind import _lib, wind_term_model
 
 __all__ = ["FOURIER_GEOMETRY_NAMES", "REGRESSION", "ESSO_OSAKA_3M_WIND", "fujiwara1998_coefficients",
            "fourier_wind_coefficients", "fourier_wind_loads", "add_fourier_wind"]
@@ -201,31 +200,5 @@ def add_fourier_wind(model: Model, geometry: Mapping[str, float] | None = None, 
     >>> ship.input_names[-2:]
     ('wind_speed', 'wind_dir')
     """
-    default = model.vessel.wind if model.vessel is not None else None
-    geometry = dict(geometry if geometry is not None else default or {})
-    geometry.pop("source", None)
-    missing = [k for k in FOURIER_GEOMETRY_NAMES if k not in geometry]
-    if missing:
-        raise ValueError(f"add_fourier_wind: no value for wind geometry {missing} (pass geometry=...)")
-    unknown = set(geometry) - set(FOURIER_GEOMETRY_NAMES)
-    if unknown:
-        raise ValueError(f"add_fourier_wind: unknown wind geometry name(s) {sorted(unknown)}; "
-                         f"known: {FOURIER_GEOMETRY_NAMES}")
-
-    def term(b: ModelBuilder) -> None:
-        _check_ship(b, "add_fourier_wind")
-        g = {k: b.param(f"wind_{k}", geometry[k], unit=_UNITS.get(k, "m"), doc=f"wind geometry {k} (Eq. 34)",
-                        bounds=(-np.inf, np.inf) if k in ("C", "C_BR") else (1e-9, np.inf))
-             for k in FOURIER_GEOMETRY_NAMES}
-        rho = b.param("rho_air", rho_air, unit="kg/m^3", doc="air density", bounds=(0.0, np.inf))
-        speed = b.input("wind_speed", unit="m/s", doc="true wind speed")
-        direction = b.input("wind_dir", unit="rad", angle=True, doc="true wind direction (from), clockwise from North")
-        u, v, psi = b.sym("u"), b.sym("v"), b.sym("psi")
-        if b.has("current_speed"):
-            uc, vc = _current_body(b.sym("current_speed"), b.sym("current_dir"), psi)
-            u, v = u + uc, v + vc
-        U_A, gamma = relative_wind(u, v, psi, speed, direction)
-        X, Y, N = fourier_wind_loads(U_A, gamma, g, rho)
-        b.feed("tau", ca.vertcat(X, Y, N))
-
-    return model.extend(term, name or f"{model.name}+wind34")
+    return wind_term_model(model, geometry, FOURIER_GEOMETRY_NAMES, _UNITS, fourier_wind_loads, rho_air=rho_air,
+                           what="add_fourier_wind", label="Eq. 34", name=name or f"{model.name}+wind34")

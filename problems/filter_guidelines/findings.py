@@ -183,7 +183,7 @@ def departures(table: dict) -> list[Departure]:
                   "[42] (not printed in the paper)",
                   "Eq. 34 as written, with the regression constants of Fujiwara, Ueno & Nimura (1998) read from two "
                   "public implementations (casship.models.wind_fourier)",
-                  effect(main, form, alt_name="Fujiwara 2005 regression (casship.models.wind), same geometry")),
+                  effect(main, form, alt_name="Fujiwara's 2005 regression (casship.models.wind), same geometry")),
         Departure("data noise of experiments 1 and 3", "w ~ N(0, R) with R = diag(5e-2), i.e. std 0.224",
                   f"std {DATA_STD:.3f} (the paper's text); the filters keep R = diag(5e-2)",
                   effect(main, noise, alt_name=f"data std {DATA_STD_ALT} (the smallest level of experiment 2)")),

@@ -124,19 +124,21 @@ def departures(main: dict, others: dict, mmg: dict | None) -> list[Departure]:
     mmg_text = ("not run" if mmg is None else
                 "with the KVLCC2 MMG model as the truth (its own structure unknown to the identified model): "
                 + "; ".join(f"{ITEM[k]} {fmt(mmg['aekf'][k], '+.1f')} % (augmented EKF), {fmt(mmg['mle'][k], '+.1f')} % "
-                            "(ML)" for k in TABLE2) + " (n/a: the identified model's manoeuvre diverged)")
+                            "(ML)" for k in TABLE2)
+                + (" (n/a: the identified model's manoeuvre diverged)"
+                   if any(not np.isfinite(v) for m in mmg.values() for v in m.values()) else ""))
     return [
         Departure("target ship", "a ship of the authors' shiphandling simulator (unnamed); its identified "
                   "Table 1 has no straight-run equilibrium as printed",
                   "the Taylor model itself, fitted by least squares to KVLCC2 MMG manoeuvres (so the truth is "
                   "in the model class); second run: the KVLCC2 MMG model as the truth", mmg_text),
         Departure("input over a step", "the mean of the samples at k and k+1 (Eq. 4, s_m(k))",
-                  "the mean, as written", eff("input held over the step", "input held (zero-order hold)")),
+                  "the mean, as written", eff("input held over the step", "the input held (zero-order hold)")),
         Departure("initial covariance P(0)", "1e5 I for all 19 states (Sect. 4.2)", "1e5 I, as written",
                   eff("P(0) of u, v, r = R", "P(0) = R for u, v, r (1e5 for the parameters)")),
         Departure("measurement variance R of u, v, r", "not stated",
                   "the RTS smoother's own mean variance of the smoothed u, v, r (no use of the truth)",
-                  eff("R from the smoothed-vs-true error", "RMS error of the smoothed velocities against the "
+                  eff("R from the smoothed-vs-true error", "R from the RMS error of the smoothed velocities against the "
                       "truth (needs the truth)")),
         Departure("process noise of the augmented EKF", "Q not stated", "1e-10 on u, v, r; parameters constant "
                   "(no random walk)", "not measured"),

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.lapack import dpotrf as _potrf, dtrtri as _trtri
 
-__all__ = ["inv_sqrt", "arrival_prior"]
+__all__: list[str] = []          # the package's own building blocks
 
 
 def inv_sqrt(P: np.ndarray) -> np.ndarray:

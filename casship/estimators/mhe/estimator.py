@@ -13,6 +13,7 @@ import numpy as np
 
 from ..._fast import DUPLICATE_NAMES
 from ...data import Dataset, Gaussian, as_cov
+from ...progress import track
 from ...discretize import DiscreteModel, discretize
 from ..augmented import augment, augmented_noise, augmented_prior
 from ..base import Estimator, per_sample
@@ -121,7 +122,15 @@ class MHE(Estimator):
         return self.options.horizon
 
     def window(self, N: int, solver: str | None = None) -> Window:
-        """The window problem of horizon ``N`` (built once per horizon and solver)."""
+        """The window problem of horizon ``N`` (built once per horizon and solver).
+
+        Parameters
+        ----------
+        N : int
+            Horizon (steps in the window).
+        solver : {"ipopt", "sqp", "rti"}, optional
+            Default: the ``solver`` option.
+        """
         solver = solver or self.options.solver
         if (N, solver) not in self._windows:
             self._windows[N, solver] = build_window(self, N, solver)
@@ -137,6 +146,12 @@ class MHE(Estimator):
         A prior over the original states is extended with the estimated parameters (mean: their
         value in ``p``, std: option ``estimate``) and the disturbances (mean 0, std from option
         ``disturbances``), independent of the rest. A prior over the augmented states is returned as is.
+
+        Parameters
+        ----------
+        prior : Gaussian
+        p : array or mapping, optional
+            Parameters of the original model (the prior means of the estimated ones).
         """
         if not isinstance(prior, Gaussian):
             raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
@@ -155,11 +170,17 @@ class MHE(Estimator):
         Estimator._check_prior(self, self.augmented_prior(prior))
 
     def prepare(self, data: Dataset, p=None) -> dict:
-        """The step inputs of a record (``p`` of the original model; estimated parameters dropped)."""
+        """The step inputs of a record (``p`` of the original model; estimated parameters dropped).
+
+        Parameters
+        ----------
+        data : Dataset
+        p : array or mapping, optional
+        """
         return super().prepare(data, self._full_params(p)[self._kept_params])
 
     # -- the estimator contract ---------------------------------------------------------------------
-    def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None, progress=None) -> FilterResult:
+    def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
         """Moving-horizon estimates over a record (one window solve per sample).
 
         Parameters
@@ -171,8 +192,6 @@ class MHE(Estimator):
         p : array or mapping, optional
             Parameters of the original model (estimated ones: prior means).
         seed : ignored (the MHE draws nothing)
-        progress : callable, optional
-            ``progress(k, n)`` called after each sample.
 
         Returns
         -------
@@ -188,27 +207,43 @@ class MHE(Estimator):
         nx = self.model.nx
         out = {k: [] for k in ("x", "P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll")}
         U, Up, Y, M, dt = arrays["u"].T, arrays["u_prev"].T, arrays["y"].T, arrays["mask"].T, arrays["dt"][0]
-        for k in range(n):
+        for k in track(range(n), f"MHE (N = {self.horizon}, {self.options.solver})", unit="sample"):
             x, P, info = engine.advance(Up[k], U[k], Y[k], M[k], dt[k], f"row {k} (t = {data.t[k]:g} s)")
             out["x"].append(x.copy())
             out["P"].append(P.reshape(nx, nx))
             for key in ("x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll"):
                 out[key].append(info[key])
-            if progress is not None:
-                progress(k + 1, n)
         out = {k: np.array(v) for k, v in out.items()}
         out["accepted"] = np.ones(n)
         return self.result(data, arrays, out)
 
     def online(self, prior: Gaussian, p=None, *, u=None, seed=None) -> OnlineRun:
         """A stateful runner on a stream (``update(y, dt, u_prev=None, u=None) -> x``), started from
-        ``prior``; numbers equal :meth:`filter` on the same record."""
+        ``prior``; numbers equal :meth:`filter` on the same record.
+
+        Parameters
+        ----------
+        prior : Gaussian
+        p : array or mapping, optional
+            Parameters of the original model.
+        u : array, optional
+            Inputs before the first update.
+        seed : ignored (the MHE draws nothing)
+        """
         self._check_prior(prior)
         return OnlineRun(WindowEngine(self, self.augmented_prior(prior, p), self._full_params(p)[self._kept_params], u))
 
     def predict(self, result: FilterResult, t, u=None, p=None, *, seed=None) -> FilterResult:
         """Predict past the last sample of ``result`` with the EKF that runs alongside the MHE
-        (with nothing measured the window adds nothing to it); see :meth:`Estimator.predict`."""
+        (with nothing measured the window adds nothing to it).
+
+        Parameters
+        ----------
+        result, t, u, seed
+            As for :meth:`Estimator.predict`.
+        p : array or mapping, optional
+            Parameters of the original model.
+        """
         pred = self._ekf.predict(result, t, u, self._full_params(p)[self._kept_params])
         return pred.replace(estimator=f"{self.name} prediction")
 
@@ -220,6 +255,14 @@ class MHE(Estimator):
         The initial guess is the EKF run (or ``guess``). Covariances are the diagonal blocks of the
         inverse Gauss-Newton Hessian at the solution. The real-time-iteration solver is iterated to
         convergence here (``"sqp"``).
+
+        Parameters
+        ----------
+        data, prior, p
+            As for :meth:`filter`.
+        seed : ignored
+        guess : FilterResult, optional
+            Initial guess of the trajectory (default: the EKF run).
 
         Returns
         -------

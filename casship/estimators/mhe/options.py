@@ -53,6 +53,8 @@ class MHEOptions(EstimatorOptions):
 
     Parameters
     ----------
+    gate, jit, outputs
+        The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     horizon : int
         Number of steps ``N`` in the window (``N + 1`` samples). ``N >= len(data) - 1`` turns
         ``filter`` into full-information estimation.

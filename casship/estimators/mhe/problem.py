@@ -22,7 +22,7 @@ from ...angles import wrap_sym
 from ...compile import compile_function
 from .riccati import riccati_step
 
-__all__ = ["Window", "build_window", "params_vector", "sqrt_factor"]
+__all__: list[str] = []          # the package's own building blocks
 
 
 def sqrt_factor(Q: np.ndarray, tol: float = 1e-12):

@@ -14,7 +14,7 @@ from ...data import Gaussian
 from .arrival import arrival_prior
 from .solvers import gauss_newton_start, solve_window
 
-__all__ = ["WindowEngine"]
+__all__: list[str] = []          # the package's own building blocks
 
 
 def _push(buffer: np.ndarray, value) -> None:

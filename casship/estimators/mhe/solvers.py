@@ -12,11 +12,18 @@ import numpy as np
 
 from .problem import Window
 
-__all__ = ["MHEFailed", "solve_window", "gauss_newton_start"]
+__all__ = ["MHEFailed"]
 
 
 class MHEFailed(RuntimeError):
-    """The NLP solver of a moving-horizon window did not succeed (``status`` holds its return status)."""
+    """The NLP solver of a moving-horizon window did not succeed (``status`` holds its return status).
+
+    Parameters
+    ----------
+    message : str
+    status : str
+        The solver's return status.
+    """
 
     def __init__(self, message: str, status: str):
         super().__init__(message)
