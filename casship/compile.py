@@ -46,10 +46,12 @@ import casadi as ca
 __all__ = ["compile_function", "cache_dir", "cache_info", "clear_cache", "CacheInfo", "DEFAULT_FLAGS",
            "find_compiler"]
 
-DEFAULT_FLAGS = ("-O3",)
-"""Optimisation flags used unless told otherwise (``-O1``: the fastest to compile, and within the
-spread of ``-O2``/``-O3`` at run time on casship's steps and folds; measured in
-``benchmarks/bench_compile.py``)."""
+DEFAULT_FLAGS = ("-O3", "-fno-math-errno")
+"""Compiler flags used unless told otherwise, chosen by measurement (``benchmarks/bench_compile.py``,
+``docs/benchmarks.md``): ``-O3`` runs the filter folds about 1.3 times faster than ``-O2`` at the same
+compile time; ``-fno-math-errno`` lets ``sqrt`` and friends compile to single instructions (the
+results are bit for bit the same, only ``errno`` is not set). ``-march=native`` is faster still
+but ties the code to the CPU (set it through ``CASSHIP_CFLAGS``; the cache key then includes the CPU)."""
 
 _ENV_DIR, _ENV_FLAGS = "CASSHIP_CACHE_DIR", "CASSHIP_CFLAGS"
 _OFF = ("off", "0", "no", "false", "none")

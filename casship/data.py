@@ -340,16 +340,48 @@ class Dataset:
             if rate < own * (1 - 1e-9):
                 raise ValueError(f"resample: rate {rate:g} Hz is below the record's rate {own:g} Hz (median step "
                                  f"{1 / own:g} s); that would drop samples: use decimate() to thin a record")
-        tol = 1e-9 * max(1.0, float(np.abs(self.t).max()))
         fine = self.t[0] + np.arange(0, int(np.floor((self.t[-1] - self.t[0]) * rate + 1e-9)) + 1) / rate
-        t = np.union1d(fine, self.t)
+        data = self.with_rows(fine, hold=hold)
+        data.meta["resampled_hz"] = rate
+        return data
+
+    def with_rows(self, times, *, hold: Sequence[str] = ()) -> "Dataset":
+        """The record with rows added at ``times`` (stamps equal to an existing row add nothing).
+
+        On a new row the ``hold`` columns keep the value of the row before (zero-order hold) and
+        every other column is NaN ("not measured"); the original rows are kept as they are.
+
+        Parameters
+        ----------
+        times : array_like
+            Time stamps [s] within ``[t[0], t[-1]]``.
+        hold : sequence of str
+            Columns held from the previous row (e.g. the model's inputs).
+
+        Returns
+        -------
+        Dataset
+
+        Raises
+        ------
+        ValueError
+            An unknown column in ``hold``, or a time outside the record.
+        """
+        unknown = [n for n in hold if n not in self._columns]
+        if unknown:
+            raise ValueError(f"unknown column(s) {unknown} in hold; columns: {list(self._columns)}")
+        times = np.asarray(times, dtype=float).reshape(-1)
+        tol = 1e-9 * max(1.0, float(np.abs(self.t).max()))
+        if times.size and (times.min() < self.t[0] - tol or times.max() > self.t[-1] + tol):
+            raise ValueError(f"with_rows: times must lie in [{self.t[0]:g}, {self.t[-1]:g}] s")
+        t = np.union1d(times, self.t)
         t = t[np.concatenate([[True], np.diff(t) > tol])]
         idx = np.searchsorted(self.t, t + tol, side="right") - 1
         exact = np.abs(self.t[idx] - t) <= tol
         t = np.where(exact, self.t[idx], t)                       # original stamps kept exactly
         cols = {name: (v[idx] if name in hold else np.where(exact, v[idx], np.nan))
                 for name, v in self._columns.items()}
-        return Dataset(t, cols, self.units, {**self.meta, "resampled_hz": rate})
+        return Dataset(t, cols, self.units, dict(self.meta))
 
     def select(self, names: Sequence[str]) -> "Dataset":
         """A dataset with only the named columns.

@@ -117,7 +117,34 @@ class Vessel:
             set_("wind", dict(self.wind))     # a copy (not compared; a proxy would not pickle)
 
     def replace(self, **changes) -> "Vessel":
-        """A copy with the given fields changed (e.g. another ``param_set`` after a fit)."""
+        """A copy with the given fields changed (e.g. another ``param_set`` after a fit).
+
+        The copy is checked like a new :class:`Vessel`.
+
+        Parameters
+        ----------
+        **changes
+            Field name -> new value (the constructor's parameters, in their units).
+
+        Returns
+        -------
+        Vessel
+            The new vessel; this one is unchanged.
+
+        Raises
+        ------
+        TypeError
+            For a name that is not a field.
+        ValueError
+            For an invalid value (e.g. a non-positive ``L_pp``).
+
+        Examples
+        --------
+        >>> from casship.models import kvlcc2
+        >>> vessel = kvlcc2().vessel
+        >>> vessel.replace(param_set="kvlcc2/my-fit").param_set
+        'kvlcc2/my-fit'
+        """
         return replace(self, **changes)
 
     @property
@@ -126,7 +153,26 @@ class Vessel:
         return None if self.U0 is None else self.U0 / np.sqrt(9.81 * self.L_pp)
 
     def check_inputs(self, input_names) -> None:
-        """Raise ``ValueError`` if a rudder or propeller named here is not among ``input_names``."""
+        """Raise ``ValueError`` if a rudder or propeller named here is not among ``input_names``.
+
+        Parameters
+        ----------
+        input_names : sequence of str
+            The input names of the model the vessel is attached to.
+
+        Raises
+        ------
+        ValueError
+            Naming the missing rudder or propeller inputs and listing ``input_names``.
+
+        Examples
+        --------
+        >>> from casship.models import kvlcc2
+        >>> kvlcc2().vessel.check_inputs(("delta",))
+        Traceback (most recent call last):
+        ...
+        ValueError: Vessel 'KVLCC2' names input(s) ['n'] that the model does not have; inputs: ['delta']
+        """
         missing = [n for n in (*self.rudders, *self.propellers) if n not in input_names]
         if missing:
             raise ValueError(f"Vessel {self.name!r} names input(s) {missing} that the model does not have; "
@@ -177,12 +223,50 @@ class Limit:
         object.__setattr__(self, "upper", hi)
 
     def contains(self, values) -> np.ndarray:
-        """Elementwise ``lower <= values <= upper``."""
+        """Elementwise ``lower <= values <= upper``.
+
+        Parameters
+        ----------
+        values : float or array_like
+            Values of the limited variable, in its SI unit.
+
+        Returns
+        -------
+        ndarray of bool
+            Of the shape of ``values`` (0-d for a scalar); NaN gives ``False``.
+
+        Examples
+        --------
+        >>> rudder = Limit("delta", -0.61, 0.61, "rudder stop")
+        >>> rudder.contains([0.0, 0.7, np.nan])
+        array([ True, False, False])
+        """
         values = np.asarray(values, dtype=float)
         return (values >= self.lower) & (values <= self.upper)
 
     def describe(self, unit: str = "", angle: bool = False) -> str:
-        """``"[lo, hi] unit (why)"`` with angles shown in degrees."""
+        """``"[lo, hi] unit (why)"`` with angles shown in degrees.
+
+        Parameters
+        ----------
+        unit : str
+            Unit of the variable, shown after the range (empty: none).
+        angle : bool
+            The variable is an angle [rad]: show the bounds in degrees with the unit ``deg``
+            (``unit`` is then ignored).
+
+        Returns
+        -------
+        str
+            The range with four significant digits, then the unit and the reason if any.
+
+        Examples
+        --------
+        >>> Limit("delta", -np.radians(35), np.radians(35), "rudder stop").describe(angle=True)
+        '[-35, 35] deg (rudder stop)'
+        >>> Limit("u", 0.0, why="ahead only").describe("m/s")
+        '[0, inf] m/s (ahead only)'
+        """
         conv = np.degrees if angle else (lambda v: v)
         unit = "deg" if angle else unit
         text = f"[{conv(self.lower):.4g}, {conv(self.upper):.4g}]" + (f" {unit}" if unit else "")

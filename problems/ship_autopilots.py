@@ -18,7 +18,6 @@ For the KVLCC2 tanker (full scale, 15.5 kn) and the Mariner-class cargo ship (15
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +32,7 @@ from casship.parallel import run_cases
 from casship.progress import progress
 
 from . import Study
+from .kit import Departure, Report, write_json
 
 # Parameters perturbed by +-20 % in the robustness cases (those that set the Nomoto K and T).
 SHIPS = {
@@ -227,21 +227,20 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
                           "segment": r.get("error", ""), "stable": False})
     for s in ships:
         _plots(out, s, designs[s], results)
-    (out / "report.md").write_text(_report(nomoto_rows, margin_rows, table, mc))
+    _report(nomoto_rows, margin_rows, table, mc, quick).write(out)
     summary = {"nomoto": nomoto_rows, "designs": margin_rows, "closed_loop": table, "monte_carlo": mc,
                "all_stable": all(r["stable"] for r in results),
                "all_margins_met": all(v["meets_GM6_PM45"] for v in margin_rows.values()),
                "zigzag_overshoot_1_deg": {s: ident[s]["zigzag_overshoot_1_deg"] for s in ships},
                "figures": sorted(p.name for p in out.glob("*.png"))}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    summary = write_json(out / "summary.json", summary)
     for _ in stages:
         pass
     return summary
 
 
-def _report(nomoto_rows, margin_rows, table, mc) -> str:
-    md = ["# Ship course autopilots on Nomoto models identified from zig-zags", "",
-          "Nomoto models: first order, fitted by maximum likelihood to simulated 10/10 and 20/20 zig-zags "
+def _report(nomoto_rows, margin_rows, table, mc, quick) -> Report:
+    md = ["Nomoto models: first order, fitted by maximum likelihood to simulated 10/10 and 20/20 zig-zags "
           f"(heading noise {np.degrees(HEADING_NOISE):.1f} deg at 1 Hz), and from the exact linearisation at "
           "the approach speed. The zig-zag fit has a much smaller K and T than the linearisation (nonlinear "
           "yaw damping at large rates) but nearly the same K/T, i.e. the same rudder effectiveness.", "",
@@ -276,7 +275,20 @@ def _report(nomoto_rows, margin_rows, table, mc) -> str:
         for v, r in rows.items():
             md.append(f"| {s} | {v} | {r['runs']} | {_fmt(r['overshoot_pct_max'])} | {_fmt(r['overshoot_pct_mean'])} | "
                       f"{_fmt(r['steady_error_deg_max'])} | {_fmt(r['rate_limited_fraction_max'])} |")
-    return "\n".join(md) + "\n"
+    rep = Report("Ship course autopilots on Nomoto models identified from zig-zags", quick=quick)
+    rep.add("\n".join(md))
+    pid = [v for k, v in margin_rows.items() if k.endswith("pid")][0]
+    rep.departures([
+        Departure("design model of the PID", "Fossen (2021, Sec. 15.3.4): pole placement on the first-order Nomoto "
+                  "model; MSS SIMmariner: wn = 0.05 rad/s, Ki = wn/10 Kp",
+                  "gains on the zig-zag fit with casship's bandwidth rule; margins on the linearised ship with the "
+                  "servo, the sensor delay and the heading observer",
+                  f"phase margin {pid['PM_deg']:.1f} deg on the linearised ship against "
+                  f"{pid['PM_deg_on_design_model']:.1f} deg on the first-order design model (first PID row)"),
+        Departure("sensors and steering gear", "not part of the design rule", "compass 0.5 deg at 10 Hz, rate gyro "
+                  "0.02 deg/s, GNSS 0.5 m at 5 Hz; 1 s servo with the ship's rudder rate limit",
+                  "not measured here (the Monte Carlo table varies the noise seed and the speed)")])
+    return rep
 
 
 STUDY = Study("ship-autopilots", "KVLCC2 and Mariner course autopilots on Nomoto models identified from zig-zags, "

@@ -316,16 +316,16 @@ def test_online_update_refuses_bad_dt_and_long_gaps():
     m, truth, data = _gap_record()
     prior = cs.Gaussian(m.states(), np.diag([1e-2, 1e-4]))
     run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4).online(prior, u=[0.1])
-    run.update(data["psi"][0], 0.0)
+    run.update(data["psi"][:1], 0.0)
     for bad in (np.nan, -1.0, np.inf):
         with pytest.raises(ValueError, match="dt must be >= 0 and finite"):
-            run.update(data["psi"][1], bad)
+            run.update(data["psi"][1:2], bad)
     with pytest.raises(ValueError, match="time gap of 1e\\+04 s before update 2"):
-        run.update(data["psi"][1], 1e4)
+        run.update(data["psi"][1:2], 1e4)
     bridged = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"on_gap": "bridge"}).online(prior, u=[0.1])
-    bridged.update(data["psi"][0], 0.0)
+    bridged.update(data["psi"][:1], 0.0)
     with pytest.warns(UserWarning, match="bridged by"):
-        x = bridged.update(data["psi"][-1], 1e4)
+        x = bridged.update(data["psi"][-1:], 1e4)
     assert np.all(np.isfinite(x))
     assert abs(x[1] - truth["r"][-1]) < 3 * np.sqrt(bridged.P[1, 1])
 
@@ -404,3 +404,13 @@ def test_identify_refuses_to_overwrite_a_fit(capsys, nomoto_record, tmp_path):
     _fails(capsys, ["identify", str(path), "--model", "nomoto1", "--free", "K", "--out", str(out)],
            "--out", "fit.json: file exists; pass --overwrite")
     assert out.read_text() == "{}"
+
+
+def test_health_reads_short():
+    m = cs.models.nomoto_first_order()
+    t = np.arange(0.0, 50.0, 0.5)
+    data = cs.measure(cs.simulate(m, m.states(), t, {"delta": 0.1}), m, {"psi": 0.01}, seed=1)
+    health = cs.EKF(cs.discretize(m, 0.5), Q=1e-8, R=1e-4).filter(data, cs.Gaussian(m.states(), 1e-2)).health()
+    text = repr(health)
+    assert "\n" not in text and "array(" not in text and len(text) < 120
+    assert text.startswith("Health(ok: 0 of 2 NIS window(s) of 50 flagged")

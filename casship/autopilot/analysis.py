@@ -29,7 +29,17 @@ __all__ = ["course_linearization", "loop_systems", "loop_transfer", "closed_loop
 def course_linearization(plant: SteeringPlant, x0=None) -> control.StateSpace:
     """Exact linearisation of the plant at ``x0`` from the steering input to ``chi, psi, r``.
 
-    A labelled :class:`control.StateSpace` (:func:`casship.linearize`) whose course-over-ground
+    Parameters
+    ----------
+    plant : SteeringPlant
+        The ship with its other inputs bound.
+    x0 : array, optional
+        Operating point (default: ``plant.x0``, the trim state).
+
+    Returns
+    -------
+    control.StateSpace
+        A labelled :class:`control.StateSpace` (:func:`casship.linearize`) whose course-over-ground
     output ``chi = atan2(y', x')`` is linearised exactly from the position rows of ``A`` and ``B``;
     states that no output sees (the positions) are left out.
     """
@@ -169,8 +179,29 @@ def loop_systems(plant_sys: control.StateSpace, gains: PIDGains, actuator: Actua
 def loop_transfer(plant_sys, gains: PIDGains, *, actuator_T: float = 0.0, delay: float = 0.0,
                   filter_T: float = 0.0, controlled: str = "chi", order: int | None = None):
     """Open-loop transfer function ``L`` of the course loop cut at the steering command, reduced
-    by ``control.minreal``. ``plant_sys`` is a labelled plant or a
-    :class:`~casship.autopilot.nomoto.Nomoto` model (its ``order`` 1 or 2 system)."""
+    by ``control.minreal``.
+
+    Parameters
+    ----------
+    plant_sys : control.StateSpace or Nomoto
+        A labelled plant, or a :class:`~casship.autopilot.nomoto.Nomoto` model (its ``order`` 1 or
+        2 system, heading fed back).
+    gains : PIDGains
+    actuator_T : float
+        Steering servo time constant [s].
+    delay : float
+        Measurement delay [s] (first-order Pade).
+    filter_T : float
+        Command low-pass time constant [s].
+    controlled : str
+        Plant output fed back as the course.
+    order : int, optional
+        Order of the Nomoto system (default: 2 when known).
+
+    Returns
+    -------
+    control.TransferFunction
+    """
     from .nomoto import Nomoto
 
     if isinstance(plant_sys, Nomoto):
@@ -182,12 +213,26 @@ def loop_transfer(plant_sys, gains: PIDGains, *, actuator_T: float = 0.0, delay:
 
 
 def closed_loop_tf(plant_sys, gains: PIDGains, **kw) -> control.TransferFunction:
-    """Closed loop from the set-point to the course without feed-forward: ``L / (1 + L)``."""
+    """Closed loop from the set-point to the course without feed-forward: ``L / (1 + L)``.
+
+    Parameters
+    ----------
+    plant_sys : control.StateSpace or Nomoto
+        As :func:`loop_transfer`.
+    gains : PIDGains
+    **kw
+        Options of :func:`loop_transfer`.
+    """
     return control.feedback(loop_transfer(plant_sys, gains, **kw), 1)
 
 
 def margins(L) -> dict:
     """Stability margins of the loop ``L`` as python-control reports them, with casship's reading.
+
+    Parameters
+    ----------
+    L : control.StateSpace or control.TransferFunction
+        The open loop (closed loop ``L / (1 + L)``).
 
     Returns
     -------
@@ -222,8 +267,25 @@ def course_change_demand(closed: control.StateSpace, change: float, t_end: float
                          n: int = 2000) -> dict:
     """Peak steering and steering-gear rate demanded by a course change on the linear closed loop.
 
-    ``closed`` is the closed loop with the reference model (input ``chi_ref``); the rate is the
-    servo's demand ``(command - steering)/T`` (or the command's rate for ``T = 0``).
+    Parameters
+    ----------
+    closed : control.StateSpace
+        Closed loop with the reference model (input ``chi_ref``; outputs ``chi, r, <steer>_c,
+        <steer>``), e.g. from :func:`loop_systems`.
+    change : float
+        Course change [rad].
+    t_end : float
+        Simulated time [s].
+    actuator : Actuator
+        The steering gear; the rate is the servo's demand ``(command - steering)/T`` (or the
+        command's rate for ``T = 0``).
+    n : int
+        Samples.
+
+    Returns
+    -------
+    dict
+        ``steer_max``, ``rate_max`` (peak demands) and ``overshoot_pct`` of the linear response.
     """
     steer = closed.output_labels[3]
     t = np.linspace(0.0, t_end, n)

@@ -107,7 +107,21 @@ class LoopEstimator:
 
     def prior_at(self, north: float, east: float, psi: float, r: float, chi: float):
         """The prior moved to a start state: position and course (course estimator) or heading and
-        yaw rate (heading estimator) from the ship, the rest and the covariance from :attr:`prior`."""
+        yaw rate (heading estimator) from the ship, the rest and the covariance from :attr:`prior`.
+
+        Parameters
+        ----------
+        north, east : float
+            Position [m].
+        psi, r : float
+            Heading [rad] and yaw rate [rad/s].
+        chi : float
+            Course over ground [rad].
+
+        Returns
+        -------
+        Gaussian
+        """
         mean = np.array(self.prior.mean, dtype=float)
         ix = self.state_index
         if self.kind == "course":
@@ -117,6 +131,12 @@ class LoopEstimator:
         return Gaussian(mean, self.prior.cov)
 
     def state_index(self, name: str) -> int:
+        """Index of the estimator's state ``name``.
+
+        Parameters
+        ----------
+        name : str
+        """
         return self.est.model.index(name)
 
 
@@ -145,8 +165,19 @@ class _Layout:
 
 @dataclass(frozen=True)
 class ClosedLoopResult:
-    """Record of a closed-loop run: ``data`` columns (SI units, angles in rad) and ``metrics`` per
-    command step (:func:`casship.autopilot.performance.course_change_metrics`)."""
+    """Record of a closed-loop run.
+
+    Parameters
+    ----------
+    data : Dataset
+        Logged signals (SI units, angles in rad).
+    metrics : list of dict
+        Per command step (:func:`casship.autopilot.performance.course_change_metrics`).
+    mode : str
+        ``"course"`` or ``"heading"``.
+    performance : dict
+        :func:`casship.autopilot.performance.performance_report` of the run.
+    """
 
     data: Dataset
     metrics: list
@@ -364,7 +395,20 @@ class ClosedLoop:
     # -- running -----------------------------------------------------------------------------------
     def state0(self, x0=None, chi0: float | None = None) -> np.ndarray:
         """Initial loop state: ship at ``x0`` (the plant's trim point by default), steering at rest,
-        estimator at its prior, reference model at the initial course."""
+        estimator at its prior, reference model at the initial course.
+
+        Parameters
+        ----------
+        x0 : array, optional
+            Ship state.
+        chi0 : float, optional
+            Initial course (or heading) of the reference model (default: the ship's).
+
+        Returns
+        -------
+        ndarray
+            The flat loop state (blocks in :attr:`layout`).
+        """
         pl, m = self.plant, self.plant.model
         x0 = np.asarray(x0 if x0 is not None else (pl.x0 if pl.x0 is not None else m.states()), float)
         if chi0 is None:
@@ -393,21 +437,40 @@ class ClosedLoop:
         return float(chi()["o0"])
 
     def initial_angle(self, x0) -> float:
-        """Course over ground (course mode) or heading at ``x0``."""
+        """Course over ground (course mode) or heading at ``x0``.
+
+        Parameters
+        ----------
+        x0 : array
+            Ship state.
+        """
         pl, m = self.plant, self.plant.model
         if self.mode == "heading":
             return float(wrap(x0[m.index(pl.heading)]))
         return self._course_over_ground(x0)
 
     def schedule(self, n: int) -> np.ndarray:
-        """Sensor availability masks ``(2, n)``: GNSS and compass readings at their rates."""
+        """Sensor availability masks ``(2, n)``: GNSS and compass readings at their rates.
+
+        Parameters
+        ----------
+        n : int
+            Samples.
+        """
         every = lambda rate: max(1, int(round(1.0 / (rate * self.dt))))  # noqa: E731
         k = np.arange(n)
         return np.vstack([(k % every(self.sensors.gnss_rate)) == 0,
                           (k % every(self.sensors.compass_rate)) == 0]).astype(float)
 
     def draws(self, n: int, seed) -> np.ndarray:
-        """Standard-normal draws ``(len(DRAWS), n)`` from ``seed`` (the same for both runners)."""
+        """Standard-normal draws ``(len(DRAWS), n)`` from ``seed`` (the same for both runners).
+
+        Parameters
+        ----------
+        n : int
+            Samples.
+        seed : int or Generator
+        """
         return np.random.default_rng(seed).standard_normal((len(DRAWS), n))
 
     def _inputs(self, command, t_end, seed):
@@ -426,8 +489,23 @@ class ClosedLoop:
     def run(self, command, t_end: float, *, seed=0, x0=None, chunk: int = 2048) -> Dataset:
         """Run the compiled loop (``mapaccum`` of :attr:`step`) for ``t_end`` seconds.
 
-        ``command`` is a function of time or an array on the loop grid. Returns the logged
-        :attr:`signals` as a :class:`~casship.data.Dataset` (``meta`` holds the estimator prior).
+        Parameters
+        ----------
+        command : callable or array
+            Course command [rad]: a function of time, or values on the loop grid.
+        t_end : float
+            Duration [s].
+        seed : int or Generator
+            Sensor-noise draws.
+        x0 : array, optional
+            Ship start state (default: the plant's trim point).
+        chunk : int
+            Samples per ``mapaccum`` piece.
+
+        Returns
+        -------
+        Dataset
+            The logged :attr:`signals` (``meta`` holds the estimator prior).
         """
         t, refs, draws, masks, dt_est = self._inputs(command, t_end, seed)
         s = self.state0(x0)
@@ -455,7 +533,20 @@ class ClosedLoop:
 
         Sensors are evaluated in numpy, the estimator runs through its online runner
         (``est.online(prior).update(y, dt, u_prev=...)``), the law, the steering gear and the ship
-        through their own CasADi Functions.
+        through their own CasADi Functions. A ``controller`` given to the loop (e.g. the MPC) runs
+        here instead of the law.
+
+        Parameters
+        ----------
+        command : callable or array
+        t_end : float
+        seed : int or Generator
+        x0 : array, optional
+            As :meth:`run`.
+
+        Returns
+        -------
+        Dataset
         """
         t, refs, draws, masks, dt_est = self._inputs(command, t_end, seed)
         pl, m, sen = self.plant, self.plant.model, self.sensors
@@ -562,7 +653,18 @@ class ClosedLoop:
 
     # -- code generation ----------------------------------------------------------------------------
     def export_c(self, directory, name: str = "closed_loop_step"):
-        """Write the loop step as C (:func:`casship.codegen.generate_c`); returns the ``CFiles``."""
+        """Write the loop step as C (:func:`casship.codegen.generate_c`).
+
+        Parameters
+        ----------
+        directory : path
+        name : str
+            C function name.
+
+        Returns
+        -------
+        CFiles
+        """
         from ..codegen import generate_c
 
         title = (f"{name}: closed loop of '{self.plant.model.name}' ({self.mode} autopilot, dt = {self.dt:g} s); "

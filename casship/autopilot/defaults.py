@@ -45,7 +45,12 @@ _SOLAS_RATE = np.radians(35.0 + 30.0) / 28.0      # SOLAS II-1/29.3.2: 35 deg on
 class AutopilotSettings:
     """Resolved settings of an autopilot design and its closed loop (SI units, radians).
 
-    ``sources`` maps each name to ``"given"`` or the rule that produced it.
+    Parameters
+    ----------
+    speed, method, mode, rate, wn, zeta, integral, wn_ref, zeta_ref, r_max, steer_max, steer_rate_max, actuator_T, filter_T, dt, delay, gnss_rate, gnss_std, compass_rate, compass_std, gyro_std, ekf_alpha, ekf_q, observer_q, segment, lqr_weights
+        The settings, each with its unit and rule in :data:`RULES`.
+    sources : dict
+        Name -> ``"given"`` or the rule that produced the value.
     """
 
     speed: float
@@ -156,10 +161,27 @@ def default_lqr_weights(nom: Nomoto, wn: float) -> dict:
 
 
 def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | None = None) -> AutopilotSettings:
-    """Apply :data:`RULES` to a ship (``plant`` at its trim point, its labelled course
-    linearisation ``lin``, its Nomoto model ``nom``); values in ``given`` replace the rules.
+    """Apply :data:`RULES` to a ship; values in ``given`` replace the rules.
 
-    Raises ``ValueError`` naming an unknown setting, or when no bandwidth meets the margins.
+    Parameters
+    ----------
+    plant : SteeringPlant
+        The ship at its trim point.
+    lin : control.StateSpace
+        Its labelled course linearisation.
+    nom : Nomoto
+        The design model.
+    given : mapping, optional
+        Settings given by the caller.
+
+    Returns
+    -------
+    AutopilotSettings
+
+    Raises
+    ------
+    ValueError
+        Naming an unknown setting, or when no bandwidth stabilises the ship within the noise budget.
     """
     g = _check_given(dict(given or {}))
     src = {k: "given" for k in g}

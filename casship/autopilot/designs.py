@@ -21,7 +21,14 @@ __all__ = ["as_nomoto", "pid_pole_placement", "lqr_design", "LQG", "lqg_design"]
 
 
 def as_nomoto(target, *, steer: str = "delta") -> Nomoto:
-    """A :class:`Nomoto` model from a Nomoto model or a labelled linearisation (``control.StateSpace``)."""
+    """A :class:`Nomoto` model from a Nomoto model or a labelled linearisation.
+
+    Parameters
+    ----------
+    target : Nomoto or control.StateSpace
+    steer : str
+        Steering input of the linearisation.
+    """
     if isinstance(target, Nomoto):
         return target
     if isinstance(target, control.StateSpace):
@@ -50,6 +57,16 @@ def pid_pole_placement(target, wn: float, zeta: float = 1.0, *, integral: str | 
         The design model, or the labelled linearisation it is reduced from.
     wn, zeta : float
         Natural frequency [rad/s] and relative damping of the closed loop.
+    integral : {"fossen", "exact", None}
+        Integral action (see above).
+    wi_ratio : float
+        Integrator pole over ``wn`` for ``"exact"``.
+    steer : str
+        Steering input of a linearisation.
+
+    Returns
+    -------
+    PIDGains
 
     Examples
     --------
@@ -93,6 +110,20 @@ def lqr_design(target, *, q_int: float, q_e: float, q_r: float = 0.0, r_delta: f
     ``r' = -r/T + (K/T) delta``; cost ``int q_int z^2 + q_e e^2 + q_r r^2 + r_delta delta^2 dt``.
     The optimal feedback ``delta = -(k_z z + k_e e + k_r r)`` is returned as ``Ki = k_z``,
     ``Kp = k_e``, ``Kd = k_r`` (with the closed-loop poles of ``control.lqr``).
+
+    Parameters
+    ----------
+    target : Nomoto or control.StateSpace
+    q_int, q_e, q_r : float
+        State weights (integral, course error, yaw rate).
+    r_delta : float
+        Steering weight.
+    steer : str
+        Steering input of a linearisation.
+
+    Returns
+    -------
+    PIDGains
     """
     for name, v in (("q_int", q_int), ("q_e", q_e), ("q_r", q_r)):
         if not (np.isfinite(v) and v >= 0):
@@ -111,7 +142,7 @@ def lqr_design(target, *, q_int: float, q_e: float, q_r: float = 0.0, r_delta: f
 class LQG:
     """LQR state feedback on the Nomoto model with a steady-state Kalman filter (``control.lqe``).
 
-    Attributes
+    Parameters
     ----------
     gains : PIDGains
         The LQR part (``lqr_design``).
@@ -141,6 +172,22 @@ def lqg_design(target, *, q_int: float, q_e: float, q_r: float = 0.0, r_delta: f
     gyro measure ``psi`` and ``r`` with variances ``heading_var`` and ``rate_var``; ``w_r`` and
     ``w_b`` are white with spectral densities ``yaw_accel_var`` and ``bias_var``. In the nonlinear
     closed loop the same model runs in casship's EKF (:func:`casship.autopilot.estimation.heading_observer`).
+
+    Parameters
+    ----------
+    target : Nomoto or control.StateSpace
+    q_int, q_e, q_r, r_delta : float
+        LQR weights (:func:`lqr_design`).
+    heading_var, rate_var : float
+        Measurement noise densities of compass and gyro.
+    yaw_accel_var, bias_var : float
+        Process noise densities.
+    steer : str
+        Steering input of a linearisation.
+
+    Returns
+    -------
+    LQG
     """
     gains = lqr_design(target, q_int=q_int, q_e=q_e, q_r=q_r, r_delta=r_delta, steer=steer)
     nom = as_nomoto(target, steer=steer)

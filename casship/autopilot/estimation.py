@@ -81,7 +81,13 @@ class WaveYaw:
 
     def discrete(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Exact zero-order-hold discretisation ``(Ad, Bd)`` of ``psi_w, r_w`` for a standard-normal
-        draw per step scaled to the continuous intensity (``w = v / sqrt(dt)``)."""
+        draw per step scaled to the continuous intensity (``w = v / sqrt(dt)``).
+
+        Parameters
+        ----------
+        dt : float
+            Step [s].
+        """
         from scipy.linalg import expm
 
         A, G = self._matrices()
@@ -89,7 +95,17 @@ class WaveYaw:
         return M[:2, :2], M[:2, 2:] / np.sqrt(dt)
 
     def symbolic_step(self, xw, draw, dt: float):
-        """Next ``[psi_w, r_w]`` and the present ``(psi_w, r_w)`` (CasADi expressions)."""
+        """Next ``[psi_w, r_w]`` and the present ``(psi_w, r_w)`` (CasADi expressions).
+
+        Parameters
+        ----------
+        xw : casadi.SX
+            State ``[psi_w, r_w]``.
+        draw : casadi.SX
+            Standard-normal draw of the step.
+        dt : float
+            Step [s].
+        """
         Ad, Bd = self.discrete(dt)
         return ca.mtimes(ca.DM(Ad), xw) + ca.DM(Bd) * draw, xw[0], xw[1]
 
@@ -107,6 +123,8 @@ def course_ekf(dt: float, *, gnss_std: float, alpha=(0.01, 0.1), q=(0.1, 0.01), 
         Singer constants of speed and course rate [1/s].
     q : (float, float)
         Variances of ``w_U`` and ``w_chi`` held over a sample (the estimator's ``Q``).
+    options : mapping, optional
+        EKF options.
     """
     from ..estimators import EKF
     from ..models import sog_cog
@@ -116,7 +134,19 @@ def course_ekf(dt: float, *, gnss_std: float, alpha=(0.01, 0.1), q=(0.1, 0.01), 
 
 
 def course_prior(north: float, east: float, speed: float, chi: float, gnss_std: float) -> Gaussian:
-    """Prior of the SOG/COG EKF at the start of a run (course known to about 5 deg)."""
+    """Prior of the SOG/COG EKF at the start of a run (course known to about 5 deg).
+
+    Parameters
+    ----------
+    north, east : float
+        Position [m].
+    speed : float
+        Speed over ground [m/s].
+    chi : float
+        Course [rad].
+    gnss_std : float
+        Position noise [m].
+    """
     return Gaussian(np.array([north, east, speed, chi, 0.0]),
                     np.diag([gnss_std**2, gnss_std**2, 1.0, np.radians(5.0) ** 2, 0.01]))
 
@@ -128,6 +158,15 @@ def heading_observer(K: float, T: float, wave: WaveYaw | None = None, *, steer: 
     steady wind or current moment looks like), and with ``wave`` the wave states ``psi_w, r_w``
     (:class:`WaveYaw`). Outputs ``psi_m = psi + psi_w`` (compass) and ``r_m = r + r_w`` (rate gyro).
     Noises ``w_r`` (yaw acceleration), ``w_b`` (bias drift), ``w_w`` (wave intensity).
+
+    Parameters
+    ----------
+    K, T : float
+        Nomoto gain and time constant.
+    wave : WaveYaw, optional
+        The wave model of the filter.
+    steer : str
+        Name of the steering input.
     """
     name = "heading-observer" + ("+wave" if wave is not None else "")
     b = ModelBuilder(name, "Nomoto heading model with rudder bias" + (" and wave filter" if wave else ""))
@@ -154,6 +193,19 @@ def heading_kf(observer: Model, dt: float, *, compass_std: float, gyro_std: floa
 
     ``q_r``, ``q_b``, ``q_w`` are spectral densities of ``w_r, w_b, w_w``; the filter's ``Q`` is
     ``q / dt`` (the variance of the noise held over a sample, RK4 step).
+
+    Parameters
+    ----------
+    observer : Model
+        From :func:`heading_observer`.
+    dt : float
+        Filter period [s].
+    compass_std, gyro_std : float
+        Measurement noise [rad], [rad/s].
+    q_r, q_b, q_w : float
+        Process noise densities.
+    options : mapping, optional
+        EKF options.
     """
     from ..estimators import EKF
 
@@ -163,7 +215,16 @@ def heading_kf(observer: Model, dt: float, *, compass_std: float, gyro_std: floa
 
 
 def heading_prior(observer: Model, psi: float, r: float, compass_std: float) -> Gaussian:
-    """Prior of the heading observer at the start of a run."""
+    """Prior of the heading observer at the start of a run.
+
+    Parameters
+    ----------
+    observer : Model
+    psi, r : float
+        Heading [rad] and yaw rate [rad/s].
+    compass_std : float
+        Heading noise [rad].
+    """
     mean = observer.states(psi=psi, r=r)
     var = {"psi": compass_std**2, "r": 1e-6, "b": np.radians(2.0) ** 2, "psi_w": np.radians(2.0) ** 2,
            "r_w": np.radians(2.0) ** 2}

@@ -30,7 +30,12 @@ __all__ = ["Waypoints", "LOSGuidance", "cross_track_metrics"]
 
 @dataclass(frozen=True)
 class Waypoints:
-    """A path through waypoints (North and East coordinates [m], at least two, no repeated point).
+    """A path through waypoints.
+
+    Parameters
+    ----------
+    north, east : sequence of float
+        Coordinates [m] (at least two points, no point repeating the one before).
 
     Examples
     --------
@@ -57,6 +62,7 @@ class Waypoints:
 
     @property
     def n_segments(self) -> int:
+        """Number of legs."""
         return len(self.north) - 1
 
     @property
@@ -70,7 +76,15 @@ class Waypoints:
         return np.hypot(np.diff(self.north), np.diff(self.east))
 
     def errors(self, north, east, segment: int):
-        """Along-track and cross-track errors [m] of positions against segment ``segment``."""
+        """Along-track and cross-track errors [m] of positions against a leg.
+
+        Parameters
+        ----------
+        north, east : float or array
+            Positions [m].
+        segment : int
+            Leg index.
+        """
         a = self.angles[segment]
         dn, de = np.asarray(north) - self.north[segment], np.asarray(east) - self.east[segment]
         return dn * np.cos(a) + de * np.sin(a), -dn * np.sin(a) + de * np.cos(a)
@@ -114,7 +128,16 @@ class LOSGuidance:
         reference model, ``Delta = max(5 U / wn_ref, 2 L)`` (MSS uses ``Delta = 500 m`` = 3.1 L for the
         Mariner), acceptance radius ``R = Delta``; with ``integral`` the ILOS gain ``kappa = U / 4``
         [m/s], which makes the linearised cross-track dynamics ``s^2 + (U/Delta) s + U kappa/Delta^2``
-        critically damped (the course loop's lag takes damping away; ``kappa = U/2`` oscillates)."""
+        critically damped (the course loop's lag takes damping away; ``kappa = U/2`` oscillates).
+
+        Parameters
+        ----------
+        waypoints : Waypoints
+        design : Design
+            The autopilot (its speed and reference-model bandwidth).
+        integral : bool
+            Integral LOS.
+        """
         s = design.settings
         v = design.plant.model.vessel
         L = v.L_pp if v is not None else 0.0
@@ -122,10 +145,25 @@ class LOSGuidance:
         return cls(waypoints, Delta, Delta, s.speed / 4 if integral else 0.0)
 
     def memory0(self) -> np.ndarray:
+        """Initial memory: first leg, no integral."""
         return np.zeros(2)
 
     def symbolic_step(self, mem, north, east, U, angle, dt) -> dict:
-        """One sample on CasADi expressions: the course command and the next memory."""
+        """One sample on CasADi expressions: the course command and the next memory.
+
+        Parameters
+        ----------
+        mem : casadi.SX
+            Leg index and ILOS integral.
+        north, east : casadi.SX
+            Position [m].
+        U : casadi.SX
+            Speed [m/s] (unused by LOS; kept for speed-dependent laws).
+        angle : casadi.SX
+            Course or heading [rad] (unused by LOS).
+        dt : float
+            Sample period [s].
+        """
         wp = self.waypoints
         k, y_int = mem[0], mem[1]
         n_seg = wp.n_segments
@@ -152,7 +190,13 @@ class LOSGuidance:
 
     def function(self, dt: float) -> ca.Function:
         """``los(memory, north, east, U, angle) -> (memory_next, chi_ref, cross_track, along_track,
-        segment, y_int)`` at sample period ``dt``."""
+        segment, y_int)``.
+
+        Parameters
+        ----------
+        dt : float
+            Sample period [s].
+        """
         mem = ca.SX.sym("memory", 2)
         n, e, U, ang = (ca.SX.sym(v) for v in ("north", "east", "U", "angle"))
         out = self.symbolic_step(mem, n, e, U, ang, dt)
@@ -162,8 +206,16 @@ class LOSGuidance:
 
 
 def cross_track_metrics(data: Dataset, *, start: float = 0.0, end: float | None = None) -> dict:
-    """Cross-track error measures of a path-following record between ``start`` and ``end`` [m]: RMS,
-    maximum, mean (the steady offset a current leaves without integral action) and the final value."""
+    """Cross-track error measures of a path-following record [m]: RMS, maximum, mean (the steady
+    offset a current leaves without integral action) and the final value.
+
+    Parameters
+    ----------
+    data : Dataset
+        A closed-loop record with guidance (column ``cross_track``).
+    start, end : float
+        Time window [s] (``end`` None: to the end).
+    """
     sel = (data.t >= start) & (data.t <= (data.t[-1] if end is None else end))
     if sel.sum() < 3:
         raise ValueError(f"fewer than 3 samples between t = {start:g} s and {end} s")

@@ -27,6 +27,17 @@ class PIDGains:
     """Gains of the control law plus the feed-forward model ``m, d`` and the placed poles.
 
     The linear controller they define is :meth:`controller` (a labelled python-control system).
+
+    Parameters
+    ----------
+    Kp, Kd, Ki : float
+        Proportional [steer/rad], derivative [steer s/rad] and integral [steer/(rad s)] gains.
+    m, d : float
+        Feed-forward model ``m a_d + d r_d`` (``T/K`` and ``1/K``).
+    method : str
+        How the gains were found.
+    poles : tuple
+        The closed-loop poles the design placed.
     """
 
     Kp: float
@@ -49,6 +60,15 @@ class PIDGains:
         Inputs ``chi_d, r_d, a_d`` (reference model) and ``chi, r`` (measured course and rate),
         output ``<steer>_c`` (the steering command), state ``z`` (integral of the course error).
         The angle wrap and the limits are the nonlinear parts left to :class:`Autopilot`.
+
+        Parameters
+        ----------
+        steer : str
+            Name of the steering input.
+        feedforward : bool
+            Include ``m a_d + d r_d``.
+        name : str
+            System name.
         """
         import control
 
@@ -102,12 +122,30 @@ class Autopilot:
             raise ValueError(f"filter_T must be >= 0, got {self.filter_T}")
 
     def memory0(self, chi0: float = 0.0) -> np.ndarray:
-        """Initial memory: reference model at rest at ``chi0``, no integral, no command."""
+        """Initial memory: reference model at rest at ``chi0``, no integral, no command.
+
+        Parameters
+        ----------
+        chi0 : float
+            Initial course (or heading) [rad].
+        """
         return np.array([chi0, 0.0, 0.0, 0.0, 0.0])
 
     def symbolic_step(self, mem, ref, chi, r, dt) -> dict:
         """One sample of the law on CasADi expressions; returns a dict of named expressions
-        (``memory, steer, chi_d, r_d, a_d, e``)."""
+        (``memory, steer, chi_d, r_d, a_d, e``).
+
+        Parameters
+        ----------
+        mem : casadi.SX
+            Memory (:attr:`MEMORY`).
+        ref : casadi.SX
+            Course command [rad].
+        chi, r : casadi.SX
+            Measured course [rad] and rate [rad/s].
+        dt : casadi.SX or float
+            Sample period [s].
+        """
         g = self.gains
         chi_d, r_d, a_d, integ, filt = (mem[i] for i in range(5))
         e = wrap_sym(chi - chi_d)
@@ -173,7 +211,17 @@ class Actuator:
             raise ValueError(f"actuator time constant T must be >= 0, got {self.T}")
 
     def symbolic_step(self, steer, command, dt) -> dict:
-        """``{"steer": next steering, "rate_limited": 1 where the rate limit is active}``."""
+        """``{"steer": next steering, "rate_limited": 1 where the rate limit is active}``.
+
+        Parameters
+        ----------
+        steer : casadi.SX
+            Present steering.
+        command : casadi.SX
+            Steering command.
+        dt : casadi.SX or float
+            Sample period [s].
+        """
         cmd = command
         if np.isfinite(self.steer_max):
             cmd = ca.fmin(ca.fmax(cmd, -self.steer_max), self.steer_max)

@@ -29,8 +29,11 @@ def _design(model_name: str, design_speed: float | None, settings: tuple):
 def run_case(case: Mapping) -> dict:
     """One closed-loop run (module level, so that it runs in worker processes).
 
-    ``case``: ``model`` (registered name), ``design_speed`` (None: the vessel's), ``speed`` (of the
-    run), ``seed``, ``scenario``, ``t_end`` (None: the design's), ``settings`` (tuple of pairs).
+    Parameters
+    ----------
+    case : mapping
+        ``model`` (registered name), ``design_speed`` (None: the vessel's), ``speed`` (of the run),
+        ``seed``, ``scenario``, ``t_end`` (None: the design's), ``settings`` (tuple of pairs).
     """
     from ..models import get_model
 
@@ -60,6 +63,10 @@ def monte_carlo(model_name: str, seeds: Sequence[int], speeds: Sequence[float] |
         Ship speeds of the runs [m/s] (default: the design speed only).
     design_speed : float, optional
         Speed the autopilot is designed for (default ``vessel.U0``).
+    scenario : str
+        Course-change scenario (:func:`~casship.autopilot.performance.course_scenario`).
+    t_end : float, optional
+        Run length (default: the design's two segments).
     workers, scheduler
         As :func:`casship.parallel.run_cases` (``workers=1`` serial; a Dask scheduler address).
     **settings

@@ -50,6 +50,8 @@ class MPCAutopilot:
         Steering limit, steering rate limit [unit/s] and turn-rate limit [rad/s].
     q_e, q_r, r_u : float
         Weights of the course error [1/rad^2], yaw rate [1/(rad/s)^2] and steering rate.
+    reference : ReferenceModel, optional
+        Reference model whose preview the plan tracks (None: the command itself).
     """
 
     nomoto: Nomoto
@@ -132,7 +134,13 @@ class MPCAutopilot:
         return out
 
     def memory0(self, chi0: float = 0.0) -> dict:
-        """Initial controller memory: the command at rest, no plan."""
+        """Initial controller memory: the command at rest, no plan.
+
+        Parameters
+        ----------
+        chi0 : float
+            Initial course (or heading) of the reference model [rad].
+        """
         N, nx = int(self.horizon), 3 + (self.order == 2)
         return {"steer_cmd": 0.0, "rate": 0.0, "X": np.zeros((nx, N + 1)), "U": np.zeros((1, N)), "count": 0,
                 "xr": np.array([chi0, 0.0, 0.0])}
@@ -141,8 +149,24 @@ class MPCAutopilot:
         """One loop sample: solve the QP when a new MPC period starts (warm-started with the previous
         plan shifted by one step), then ramp the command at the planned rate.
 
-        Returns ``(memory, steer_command, log)`` with ``log`` holding ``chi_d`` (the command),
-        ``r_d`` (the planned rate of turn) and ``e`` (the course error).
+        Parameters
+        ----------
+        memory : dict
+            From :meth:`memory0` or the previous update.
+        ref : float
+            Course command [rad].
+        chi, r : float
+            Estimated course [rad] and rate [rad/s].
+        dt : float
+            Loop period [s].
+        bias : float
+            Steering bias estimate (the heading observer's ``b``).
+
+        Returns
+        -------
+        (dict, float, dict)
+            Memory, steering command, and ``chi_d`` (reference), ``r_d`` (planned rate of turn),
+            ``e`` (course error).
         """
         every = max(1, int(round(self.period / dt)))
         e = float(wrap(chi - ref))
@@ -216,7 +240,18 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     periods of the reference model's natural frequency) in ``steps`` steps (the period rounded to a
     multiple of the loop period); weights: course error 1/(1 deg)^2, yaw rate ``1/r_max^2`` (both
     against the reference model's preview), steering rate ``(100 / rate_max)^2`` (a steering rate
-    of 1 % of the limit costs as much as 1 deg of course error)."""
+    of 1 % of the limit costs as much as 1 deg of course error).
+
+    Parameters
+    ----------
+    design : Design
+    horizon_time : float, optional
+        Prediction horizon [s].
+    steps : int
+        Steps over the horizon.
+    q_r, r_u : float, optional
+        Replace the yaw-rate and steering-rate weights.
+    """
     s = design.settings
     horizon_time = horizon_time or 6 * np.pi / s.wn_ref
     period = max(s.dt, round(horizon_time / steps / s.dt) * s.dt)

@@ -30,7 +30,7 @@ class Nomoto:
     and damping-like coefficients of ``m r' + d r = delta`` used by the designs (finite for a
     course-unstable ship, ``T < 0``).
 
-    Attributes
+    Parameters
     ----------
     K : float
         Gain [1/s] (or [1/(N m s)] for a yaw-moment input).
@@ -77,7 +77,13 @@ class Nomoto:
         return bool(np.isfinite(self.T1) and np.isfinite(self.T2) and np.isfinite(self.T3))
 
     def yaw_rate_tf(self, order: int = 1) -> control.TransferFunction:
-        """Transfer function ``r/delta`` (order 1 or 2) with labelled input and output."""
+        """Transfer function ``r/delta`` (order 1 or 2) with labelled input and output.
+
+        Parameters
+        ----------
+        order : int
+            1 or 2.
+        """
         if order == 2:
             if not self.second_order:
                 raise ValueError("this Nomoto model has no second-order time constants")
@@ -89,7 +95,17 @@ class Nomoto:
 
     def system(self, order: int = 1, *, steer: str = "delta", name: str = "nomoto") -> control.StateSpace:
         """The Nomoto model as a labelled :class:`control.StateSpace`: input ``steer``, outputs
-        ``psi`` and ``r`` (heading and yaw rate; the course equals the heading in this model)."""
+        ``psi`` and ``r`` (heading and yaw rate; the course equals the heading in this model).
+
+        Parameters
+        ----------
+        order : int
+            1, or 2 (observer form with the state ``xi``).
+        steer : str
+            Input name.
+        name : str
+            System name.
+        """
         if order == 1:
             A = np.array([[0.0, 1.0], [0.0, -1.0 / self.T]])
             B = np.array([[0.0], [self.K / self.T]])
@@ -121,6 +137,19 @@ def nomoto_from_linear(sys: control.StateSpace, *, steer: str = "delta", yaw_rat
     surge mode drop out); one remaining pole gives a first-order model, two real poles and at most
     one zero the second-order one (``K, T1, T2, T3`` with ``T = T1 + T2 - T3``), two complex poles
     the first-order equivalent from the coefficients.
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Labelled linearisation.
+    steer, yaw_rate : str
+        Input and output labels.
+    tol : float
+        Tolerance of ``control.minreal``.
+
+    Returns
+    -------
+    Nomoto
 
     Raises
     ------
@@ -163,6 +192,16 @@ def nomoto_from_model(model: Model, x=None, u=None, p=None, *, steer: str = "del
     """Nomoto model of ``model`` at the operating point ``(x, u, p)``: :func:`casship.linearize`
     then :func:`nomoto_from_linear`.
 
+    Parameters
+    ----------
+    model : Model
+    x, u, p : array or mapping, optional
+        Operating point and parameters.
+    steer, yaw_rate : str
+        Input and output names.
+    tol : float
+        Tolerance of ``control.minreal``.
+
     Examples
     --------
     >>> import casship as cs
@@ -182,6 +221,19 @@ def fit_nomoto(data: Dataset | Sequence[Dataset], *, steer: str = "delta", headi
     :class:`casship.identify.MLEProblem`), with a tiny process noise so that the fit is close to
     output error. The records need columns ``steer`` (rad) and ``heading`` (rad; NaN = not
     measured) on a uniform grid; the yaw rate starts at zero (records start on a straight course).
+
+    Parameters
+    ----------
+    data : Dataset or sequence of Dataset
+        The records.
+    steer, heading : str
+        Column names.
+    guess : Nomoto, optional
+        Initial guess (default K = 0.1, T = 50 s).
+    heading_var : float
+        Heading measurement variance [rad^2].
+    bias : bool
+        Fit a rudder bias.
 
     Returns
     -------

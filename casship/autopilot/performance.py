@@ -56,6 +56,23 @@ def step_metrics(t, y, target: float, steer=None, *, band: float = 0.02, abs_ban
     mean and maximum absolute steering and the RMS and maximum steering rate (per second). Times
     are measured from ``t[0]``; ``nan`` where not reached.
 
+    Parameters
+    ----------
+    t : array
+        Time [s].
+    y : array
+        Controlled angle [rad].
+    target : float
+        Commanded angle [rad].
+    steer : array, optional
+        Steering.
+    band : float
+        Settling band as a fraction of the change.
+    abs_band : float
+        Absolute settling band [rad] (the larger band counts).
+    ss_window : float
+        Fraction of the record at its end for the steady-state error.
+
     Examples
     --------
     >>> import numpy as np
@@ -103,7 +120,19 @@ def step_metrics(t, y, target: float, steer=None, *, band: float = 0.02, abs_ban
 def course_change_metrics(data: Dataset, step_times: Sequence[float], *, controlled: str = "chi",
                           settle_band: float = np.radians(1.0)) -> list[dict]:
     """:func:`step_metrics` for each command segment of a closed-loop record (command in ``ref``),
-    plus the fraction of the segment with the steering-gear rate limit active."""
+    plus the fraction of the segment with the steering-gear rate limit active.
+
+    Parameters
+    ----------
+    data : Dataset
+        Closed-loop record.
+    step_times : sequence of float
+        Times of the command changes [s].
+    controlled : str
+        Column of the controlled angle (``chi`` or ``psi``).
+    settle_band : float
+        Absolute settling band [rad].
+    """
     t = data.t
     y = data[controlled]
     bounds = list(step_times) + [t[-1] + 1.0]
@@ -123,7 +152,17 @@ def course_change_metrics(data: Dataset, step_times: Sequence[float], *, control
 def course_keeping_metrics(data: Dataset, *, controlled: str = "chi", start: float = 0.0) -> dict:
     """Course-keeping measures from ``start`` on: error RMS and maximum [deg] against the command,
     mean and RMS steering, RMS steering rate [unit/s], steering work ``int |d steer|`` [unit], and
-    the fraction of time with the steering-gear rate limit active."""
+    the fraction of time with the steering-gear rate limit active.
+
+    Parameters
+    ----------
+    data : Dataset
+        Closed-loop record.
+    controlled : str
+        Column of the controlled angle.
+    start : float
+        Start of the window [s].
+    """
     t = data.t
     sel = t >= start
     if sel.sum() < 3:
@@ -142,7 +181,19 @@ def course_keeping_metrics(data: Dataset, *, controlled: str = "chi", start: flo
 
 def performance_report(data: Dataset, steps: list[dict], *, steer_max: float, controlled: str = "chi") -> dict:
     """The checks of :data:`CRITERIA` on a run: per course change (overshoot, steady error) and over
-    the whole run (rate limit active, command at its limit), each with its threshold and a pass flag."""
+    the whole run (rate limit active, command at its limit), each with its threshold and a pass flag.
+
+    Parameters
+    ----------
+    data : Dataset
+        Closed-loop record.
+    steps : list of dict
+        From :func:`course_change_metrics`.
+    steer_max : float
+        Steering limit.
+    controlled : str
+        Column of the controlled angle.
+    """
     checks = []
     for k, mt in enumerate(steps):
         if "overshoot_pct" in mt:
@@ -170,6 +221,15 @@ def course_scenario(name: str, t_end: float | None = None, *, segment: float | N
     ``course-A``: A deg at t = 0, back to 0 at half the run (the two standard course changes;
     ``course-20`` is Fossen & Fossen 2021's); ``step-A``: A deg at t = 0, held. The run lasts
     ``t_end`` seconds, or two (one) ``segment`` lengths, or 40 s.
+
+    Parameters
+    ----------
+    name : str
+        Scenario name.
+    t_end : float, optional
+        Duration [s].
+    segment : float, optional
+        Length of one course change [s] when ``t_end`` is not given.
 
     Returns ``(command(t) -> rad, t_end, step_times)``.
 

@@ -70,17 +70,40 @@ class SteeringPlant:
             object.__setattr__(self, "x0", np.asarray(self.x0, dtype=float).reshape(m.nx))
 
     def replace(self, **changes) -> "SteeringPlant":
-        """A copy with fields changed (``inputs`` are merged into the present ones)."""
+        """A copy with fields changed (``inputs`` are merged into the present ones).
+
+        Parameters
+        ----------
+        **changes
+            Fields of :class:`SteeringPlant`.
+        """
         if "inputs" in changes:
             changes["inputs"] = {**self.inputs, **changes["inputs"]}
         return replace(self, **changes)
 
     def input_vector(self, steer: float = 0.0) -> np.ndarray:
-        """All inputs of the model with the steering input set to ``steer``."""
+        """All inputs of the model with the steering input set to ``steer``.
+
+        Parameters
+        ----------
+        steer : float
+        """
         return self.model.inputs(**{**self.inputs, self.steer: steer})
 
     def symbolic_step(self, x, steer, p, dt):
-        """One RK4 step of the ship with the other inputs bound (CasADi expressions)."""
+        """One RK4 step of the ship with the other inputs bound (CasADi expressions).
+
+        Parameters
+        ----------
+        x : casadi.SX
+            State.
+        steer : casadi.SX
+            Steering held over the step.
+        p : casadi.SX or array
+            Parameters.
+        dt : casadi.SX or float
+            Step [s].
+        """
         m = self.model
         dm = discretize(m, 1.0, "rk4")
         u = ca.SX(ca.DM(self.input_vector(0.0)))
@@ -88,7 +111,17 @@ class SteeringPlant:
         return dm.F(x, u, p, ca.SX.zeros(m.nw), dt)
 
     def symbolic_motion(self, x, steer, p):
-        """Course over ground, speed over ground and yaw rate at ``x`` (CasADi expressions)."""
+        """Course over ground, speed over ground and yaw rate at ``x`` (CasADi expressions).
+
+        Parameters
+        ----------
+        x : casadi.SX
+            State.
+        steer : casadi.SX or float
+            Steering.
+        p : casadi.SX or array
+            Parameters.
+        """
         m = self.model
         u = ca.SX(ca.DM(self.input_vector(0.0)))
         u[m.index(self.steer, "input")] = steer
@@ -113,6 +146,16 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
     symbols by name and returns a dict old input name -> expression. Use it to steer a
     thruster-driven craft by a yaw moment: ``{"n1": ..., "n2": ...}`` from ``tau_X, tau_N``. Inputs
     the allocation does not give (e.g. a current or wind) stay inputs of the new model.
+
+    Parameters
+    ----------
+    model : Model
+    new_inputs : sequence of str
+        Names of the new inputs.
+    allocation : callable
+        ``allocation(new, p) -> {old input: expression}``.
+    name : str, optional
+        Name of the new model.
     """
     b = ModelBuilder(name or f"{model.name}+allocation", model.doc)
     xs = [b.state(v.name, unit=v.unit, angle=v.angle, doc=v.doc) for v in model.state_vars]
@@ -146,6 +189,12 @@ def twin_propeller_allocation(model: Model, names: tuple[str, str] = ("n1", "n2"
     Thrust ``T = k n |n|`` (``k_pos`` ahead, ``k_neg`` astern) on lever arms ``-+ y_pont`` (port
     propeller ``n1``): ``tau_X = T1 + T2``, ``tau_N = y_pont (T1 - T2)``, inverted exactly. Reads
     ``k_pos``, ``k_neg`` and ``y_pont`` from the model's parameters. Use with :func:`steering_model`.
+
+    Parameters
+    ----------
+    model : Model
+    names : (str, str)
+        Port and starboard propeller inputs.
     """
     missing = [n for n in names if n not in model.input_names]
     missing += [k for k in ("k_pos", "k_neg", "y_pont") if k not in model.param_names]
@@ -165,7 +214,17 @@ def twin_propeller_allocation(model: Model, names: tuple[str, str] = ("n1", "n2"
 
 def twin_propeller_yaw_limit(model: Model, tau_X: float, p=None) -> float:
     """Largest yaw moment [N m] that keeps both propellers inside ``model.vessel.propeller_range``
-    at surge force ``tau_X``."""
+    at surge force ``tau_X``.
+
+    Parameters
+    ----------
+    model : Model
+        With ``k_pos, k_neg, y_pont`` parameters and a vessel propeller range.
+    tau_X : float
+        Surge force [N].
+    p : array or mapping, optional
+        Parameters.
+    """
     pd = model.param_dict(model.params(p) if p is not None else None)
     if model.vessel is None or model.vessel.propeller_range is None:
         raise ValueError(f"model {model.name!r} has no vessel propeller_range")

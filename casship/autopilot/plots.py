@@ -26,7 +26,14 @@ def _omega(L) -> np.ndarray:
 
 def bode_phase_deg(L, omega) -> np.ndarray:
     """The loop phase [deg] on ``omega`` as ``control.bode_plot`` draws it (continuous, starting
-    within -360..0 deg at the lowest frequency)."""
+    within -360..0 deg at the lowest frequency).
+
+    Parameters
+    ----------
+    L : control.StateSpace or control.TransferFunction
+    omega : array
+        Frequencies [rad/s].
+    """
     plt = _plt()
     fig, axes = plt.subplots(2, 1)
     cplt = control.bode_plot(L, omega, ax=axes.reshape(2, 1))
@@ -38,7 +45,18 @@ def bode_phase_deg(L, omega) -> np.ndarray:
 def plot_design(L, path, title: str = "", closed=None):
     """Bode plot of the loop ``L`` (``control.bode_plot`` with the margins marked) and the response
     of the closed loop to a unit course command (``closed``: a design's ``closed_loop``; default
-    ``L / (1 + L)``), as a PNG. Returns ``path``."""
+    ``L / (1 + L)``), as a PNG. Returns ``path``.
+
+    Parameters
+    ----------
+    L : control.StateSpace or control.TransferFunction
+        The open loop.
+    path : path
+        PNG file.
+    title : str
+    closed : control.StateSpace, optional
+        The closed loop.
+    """
     plt = _plt()
     fig = plt.figure(figsize=(7, 9))
     gs = fig.add_gridspec(3, 1)
@@ -60,7 +78,19 @@ def plot_design(L, path, title: str = "", closed=None):
 def plot_closed_loop(result, path, title: str = "", steer_label: str = "rudder [deg]",
                      steer_scale: float = float(np.degrees(1.0))):
     """Course (true, fed to the autopilot, desired, command), steering and track of a closed-loop
-    run (PNG). Returns ``path``."""
+    run (PNG). Returns ``path``.
+
+    Parameters
+    ----------
+    result : ClosedLoopResult
+    path : path
+        PNG file.
+    title : str
+    steer_label : str
+        Axis label of the steering.
+    steer_scale : float
+        Factor on the steering (degrees per radian by default).
+    """
     plt = _plt()
     d = result.data
     t = d.t

@@ -58,7 +58,17 @@ class ReferenceModel:
             raise ValueError(f"r_max must be positive, got {self.r_max}")
 
     def symbolic_step(self, xd, ref, dt):
-        """One Euler step of ``[chi_d, r_d, a_d]`` (CasADi expressions)."""
+        """One Euler step of ``[chi_d, r_d, a_d]`` (CasADi expressions).
+
+        Parameters
+        ----------
+        xd : casadi.SX
+            ``[chi_d, r_d, a_d]``.
+        ref : casadi.SX
+            Command [rad].
+        dt : casadi.SX or float
+            Step [s].
+        """
         wn, z = self.wn, self.zeta
         e = wrap_sym(ref - xd[0])
         jerk = wn**3 * e - (2 * z + 1) * wn**2 * xd[1] - (2 * z + 1) * wn * xd[2]
@@ -69,7 +79,13 @@ class ReferenceModel:
 
     def system(self, name: str = "reference") -> control.StateSpace:
         """The linear model (no rate saturation) as a labelled :class:`control.StateSpace`: input
-        ``chi_ref``, outputs (= states) ``chi_d, r_d, a_d``."""
+        ``chi_ref``, outputs (= states) ``chi_d, r_d, a_d``.
+
+        Parameters
+        ----------
+        name : str
+            System name.
+        """
         wn, z = self.wn, self.zeta
         A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0],
                       [-wn**3, -(2 * z + 1) * wn**2, -(2 * z + 1) * wn]])
@@ -84,8 +100,18 @@ class ReferenceModel:
         return control.tf([wn**3], np.polymul([1, wn], [1, 2 * z * wn, wn**2]), inputs="chi_ref", outputs="chi_d")
 
     def response(self, t, ref, x0=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """``(N, 3)`` array of ``chi_d, r_d, a_d`` for the command ``ref`` (array or constant) on the
-        uniform grid ``t`` (one compiled fold)."""
+        """``(N, 3)`` array of ``chi_d, r_d, a_d`` for the command ``ref`` on the uniform grid ``t``
+        (one compiled fold).
+
+        Parameters
+        ----------
+        t : array
+            Uniform time grid [s].
+        ref : float or array
+            Command [rad].
+        x0 : sequence of float
+            Initial ``chi_d, r_d, a_d``.
+        """
         t = np.asarray(t, dtype=float)
         if t.ndim != 1 or t.size < 2:
             raise ValueError("response needs a time grid of at least 2 samples")

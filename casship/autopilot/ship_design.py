@@ -34,7 +34,7 @@ class RateLimitWarning(UserWarning):
 class Design:
     """An autopilot designed for a ship at an operating point (see :func:`design_autopilot`).
 
-    Attributes
+    Parameters
     ----------
     plant : SteeringPlant
         The ship at its trim point (``plant.x0``) with the other inputs bound.
@@ -99,8 +99,15 @@ class Design:
     def estimator(self, kind: str | None = None, *, wave: WaveYaw | None = None, x0=None) -> LoopEstimator:
         """The loop's estimator (tuned by the settings) started at ``x0`` (the trim point).
 
-        ``kind="course"``: the SOG/COG EKF on GNSS; ``"heading"``: the heading observer on compass and
-        gyro, with the wave filter when ``wave`` is given.
+        Parameters
+        ----------
+        kind : {"course", "heading"}, optional
+            ``"course"``: the SOG/COG EKF on GNSS; ``"heading"``: the heading observer on compass and
+            gyro (default: the settings' mode).
+        wave : WaveYaw, optional
+            Put this wave model into the heading observer (wave filter).
+        x0 : array, optional
+            Start state (default: the trim point).
         """
         s, pl = self.settings, self.plant
         kind = kind or s.mode
@@ -133,12 +140,16 @@ class Design:
             Values of environment inputs of the plant (``wind_speed``, ``current_dir``, ...).
         estimator : {"ekf", "truth", "raw"} or LoopEstimator
             ``"ekf"``: the estimator of :meth:`estimator` for the mode.
+        sensors : Sensors, optional
+            Default: from the settings.
         wave : WaveYaw, optional
             First-order wave yaw on the measured heading and rate.
         wave_filter : bool
             Put the wave model into the heading observer (Fossen's wave filter).
         guidance : LOSGuidance, optional
             Path following: the course command comes from the guidance.
+        mode, rate : str, optional
+            Replace the settings' mode and rate source.
         controller : MPCAutopilot, optional
             Replaces the PID/LQR law (the loop then runs step by step).
         """
@@ -162,6 +173,8 @@ class Design:
         scenario : str
             ``course-A`` or ``step-A`` (:func:`~casship.autopilot.performance.course_scenario`); the
             segment length is ``settings.segment`` unless ``t_end`` is given.
+        t_end : float, optional
+            Duration [s].
         seed : int
             Sensor-noise seed.
         stepwise : bool
@@ -178,7 +191,18 @@ class Design:
                                   **loop_options)
 
     def evaluate(self, loop: ClosedLoop, data, steps, *, warn: bool = True) -> ClosedLoopResult:
-        """Metrics and the performance report of a closed-loop record."""
+        """Metrics and the performance report of a closed-loop record.
+
+        Parameters
+        ----------
+        loop : ClosedLoop
+        data : Dataset
+            Its record.
+        steps : sequence of float
+            Times of the command changes [s].
+        warn : bool
+            Warn when the rate limit is active too long.
+        """
         controlled = "chi" if loop.mode == "course" else "psi"
         metrics = course_change_metrics(data, steps, controlled=controlled)
         report = performance_report(data, metrics, steer_max=self.actuator.steer_max, controlled=controlled)

@@ -117,15 +117,9 @@ def bridge_gaps(est, data: Dataset, x, p=None) -> Dataset:
         pieces = bridge_pieces(float(data.dt[k]), limit)
         inserted.append(data.t[k] + np.arange(1, pieces) * (data.dt[k] / pieces))
     t_new = np.concatenate(inserted)
-    t = np.concatenate([data.t, t_new])
-    order = np.argsort(t, kind="stable")
-    src = np.searchsorted(data.t, t[order], side="right") - 1           # the row before (inputs held)
-    is_new = np.concatenate([np.zeros(len(data), bool), np.ones(t_new.size, bool)])[order]
-    cols = {}
-    for name in data.names:
-        v = data[name][src]
-        cols[name] = v if name in m.input_names else np.where(is_new, np.nan, v)
     warnings.warn(f"{est.name}: {long.size} time gap(s) longer than {limit:.4g} s (the first {where}) bridged "
                   f"by {t_new.size} prediction-only row(s); the result has {len(data) + t_new.size} rows",
                   UserWarning, stacklevel=3)
-    return Dataset(t[order], cols, data.units, {**data.meta, "bridged_rows": int(t_new.size)})
+    bridged = data.with_rows(t_new, hold=m.input_names)
+    bridged.meta["bridged_rows"] = int(t_new.size)
+    return bridged

@@ -96,6 +96,11 @@ class Health:
     rejected: np.ndarray
     not_pd: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
+    def __repr__(self) -> str:
+        return (f"Health({'ok' if self.ok else 'NOT ok'}: {int(self.flagged.sum())} of {self.flagged.size} NIS "
+                f"window(s) of {self.window} flagged at alpha {self.alpha:g}, {int(np.sum(self.rejected))} rejected, "
+                f"{self.not_pd.size} non-PD covariance(s))")
+
     @property
     def ok(self) -> bool:
         """No non-positive-definite covariance and fewer windows flagged than chance plus a margin."""

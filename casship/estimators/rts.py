@@ -86,7 +86,7 @@ def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
     if n == 1:
         return result.replace(estimator=f"{result.estimator}+RTS")
     angles = tuple(bool(a) for a in result.angle_states)
-    cols = lambda a: np.ascontiguousarray(np.concatenate(list(a), axis=1))  # noqa: E731 (sample blocks side by side)
+    cols = lambda a: np.ascontiguousarray(a.transpose(1, 0, 2).reshape(a.shape[1], -1))  # noqa: E731 (sample blocks side by side)
     per = {"x_filt": result.x[-2::-1].T, "P_filt": cols(result.P[-2::-1]), "x_pred": result.x_pred[:0:-1].T,
            "P_pred": cols(result.P_pred[:0:-1]), "C": cols(result.C[:0:-1])}
     _, outs = run_fold(lambda size: _backward_fold(nx, angles, size, bool(jit)), n - 1, FOLD_CHUNK,

@@ -87,7 +87,7 @@ class _Printer:
     def __init__(self, label: str, total: int, show: bool | None):
         from ..progress import bar
 
-        self.bar = bar(total, label, unit="iter") if show is not False else None
+        self.bar = bar(None, label, unit="iter") if show is not False else None
 
     def __call__(self, it: int, f: float, dec: float, lam: float) -> None:
         if self.bar is not None:

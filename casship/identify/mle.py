@@ -258,8 +258,8 @@ class MLEProblem(IdentificationProblem):
                 total = total - ca.sum2(out["ll"])
         return total
 
-    def _exact(self, z):
-        """Exact Hessian of the cost (prior included) in the solver's variables at ``z``."""
+    def _exact_cost(self):
+        """The cost (prior included) as a symbolic function of the solver's variables ``z``."""
         sp = self.space
         zs = ca.MX.sym("z", len(sp))
         theta = ca.vertcat(*[ca.exp(zs[i]) if e.log else zs[i] * e.scale for i, e in enumerate(sp.entries)])
@@ -317,7 +317,7 @@ class MLEProblem(IdentificationProblem):
         theta0 = sp.theta(guess)
         sp.check_bounds(theta0)
         self._check_finite(theta0)
-        zs, f = self._exact(None)
+        zs, f = self._exact_cost()
         lbz, ubz = sp.z_bounds()
         opts = {"max_iter": max_iter, "hessian_approximation": hessian, **dict(options or {})}
         z_opt, st, seconds = ipopt_solve(f, zs, sp.to_z(theta0), lbz, ubz, options=opts, name=self.method)

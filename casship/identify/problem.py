@@ -64,6 +64,11 @@ class IdentificationProblem:
             raise ValueError("nothing to estimate: give free parameters, biases, noise or estimate_x0")
         self.prior = _as_prior(prior)
         self._mu, self._prec = self.prior.vectors(self.space, model)
+        left_out = [n for n, a in zip(model.output_names, model.angle_outputs)
+                    if a and n not in self.measured and all(n in d for d in self.records)]
+        if left_out:
+            warnings.warn(f"{self.method}: heading {left_out} is measured in every record but not in the cost "
+                          f"(measured = {list(self.measured)})", IdentificationWarning, stacklevel=3)
 
     # -- what the subclasses provide ---------------------------------------------------------------
     def _residual_scale(self, f_data: float, n_obs: int) -> float:
@@ -242,7 +247,7 @@ class IdentificationProblem:
         s2 = self._residual_scale(f_data, n_obs)
         info = H / s2 + np.diag(self._prec)
         cov, warn = covariance_from_information(info, names)
-        robust, lags = sandwich_covariance(H / s2, self._prec, [(d["scores"] / s2, d["cols"]) for d in det], k, names)
+        robust, _ = sandwich_covariance(H / s2, self._prec, [(d["scores"] / s2, d["cols"]) for d in det], k, names)
         with np.errstate(invalid="ignore"):
             std = np.sqrt(np.diag(cov))
             corr = cov / np.outer(std, std)

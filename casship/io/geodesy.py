@@ -52,7 +52,34 @@ def geodetic_to_ne(lat, lon, lat0: float, lon0: float):
 
 
 def ne_to_geodetic(north, east, lat0: float, lon0: float):
-    """Inverse of :func:`geodetic_to_ne`: latitude and longitude [rad] of local North/East [m]."""
+    """Inverse of :func:`geodetic_to_ne`: latitude and longitude [rad] of local North/East [m].
+
+    The point of the tangent plane at ``lat0, lon0`` (height 0) is converted to geodetic
+    coordinates and its height is dropped, i.e. it is taken to the ellipsoid surface point with the
+    same latitude and longitude. The round trip through :func:`geodetic_to_ne` therefore returns
+    the North/East slightly shortened far from the origin: by about 0.02 mm at 1 km, 2.5 cm at
+    10 km and 3 m at 50 km (1 km North and 1 km East per km quoted, origin at 60 deg N). NaN
+    positions stay NaN.
+
+    Parameters
+    ----------
+    north, east : array_like
+        Local North and East coordinates [m], of the same shape.
+    lat0, lon0 : float
+        Origin of the local frame [rad].
+
+    Returns
+    -------
+    lat, lon : ndarray
+        Geodetic latitude and longitude [rad].
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> lat, lon = ne_to_geodetic(111.41, 0.0, np.radians(60.0), np.radians(10.0))
+    >>> round(float(np.degrees(lat)), 6), round(float(np.degrees(lon)), 6)
+    (60.001, 10.0)
+    """
     import pymap3d
 
     north = np.asarray(north, dtype=float)

@@ -112,7 +112,32 @@ def read_marin(path, *, flip_rudder: bool = True) -> Dataset:
 
 
 def marin_runs(folder) -> dict[str, Path]:
-    """The MARIN files in ``folder`` by short name (``tc_-35``, ``zz_10``, ``zz_-20``)."""
+    """The MARIN files in ``folder`` by short name (``tc_-35``, ``zz_10``, ``zz_-20``).
+
+    A file ``MARIN_FREE_KVLCC2_<short>_m.dat`` is listed as ``<short>``; other files are ignored.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The folder holding the MARIN ``.dat`` files (e.g. ``../shared/data/kvlcc2_marin_free``).
+
+    Returns
+    -------
+    dict of str to Path
+        Short name -> file path, sorted by file name; empty if the folder has no MARIN file.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``folder`` is not a directory.
+
+    Examples
+    --------
+    >>> runs = marin_runs("../shared/data/kvlcc2_marin_free")        # doctest: +SKIP
+    >>> sorted(runs)                                                  # doctest: +SKIP
+    ['tc_-35', 'zz_-20', 'zz_10']
+    >>> data = read_marin(runs["zz_10"])                              # doctest: +SKIP
+    """
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"folder {folder} does not exist")

@@ -112,6 +112,37 @@ def crossflow_integrals(a, b):
     ``I0 = (|p|^3 - |q|^3) / (3b)`` and ``I1 = [(p^3|p| - q^3|q|)/(4b) - a (|p|^3 - |q|^3)/(3b)] / b``
     with ``|b| > 2|a|`` there. Both branches meet with equal values and first derivatives.
     Works on numbers and CasADi symbols.
+
+    In the hull models ``g`` is the local cross-flow velocity along the hull, ``v + r L xi``
+    (``xi = x/L``, forward positive), so ``a`` is the sway velocity at midship and ``b`` the yaw
+    rate times the length (times a correction such as ``C_rY``); the cross-flow force is then
+    ``-rho/2 d L C_D I0`` and its moment ``-rho/2 d L^2 C_D I1``.
+
+    Parameters
+    ----------
+    a : float, array_like or casadi.SX/MX/DM
+        Value of ``g`` at midship (``xi = 0``), e.g. the sway velocity [m/s].
+    b : float, array_like or casadi.SX/MX/DM
+        Slope of ``g`` over the nondimensional length, e.g. ``r L`` [m/s]; the same shape as ``a``
+        (or broadcastable).
+
+    Returns
+    -------
+    I0, I1 : ndarray or casadi.SX/MX/DM
+        The two integrals, in the square of the unit of ``a`` and ``b`` (e.g. [m^2/s^2]);
+        numpy arrays (0-d for scalars) for numbers, CasADi expressions for symbols.
+
+    Examples
+    --------
+    >>> I0, I1 = crossflow_integrals(0.0, 1.0)   # pure yaw: no net force, a moment
+    >>> float(I0), float(I1)
+    (0.0, 0.03125)
+    >>> from scipy.integrate import quad         # g = 0.2 + xi changes sign at xi = -0.2
+    >>> I0_ref = quad(lambda xi: abs(0.2 + xi) * (0.2 + xi), -0.5, 0.5, points=[-0.2])[0]
+    >>> I1_ref = quad(lambda xi: abs(0.2 + xi) * (0.2 + xi) * xi, -0.5, 0.5, points=[-0.2])[0]
+    >>> I0, I1 = crossflow_integrals(0.2, 1.0)
+    >>> bool(abs(I0 - I0_ref) < 1e-12 and abs(I1 - I1_ref) < 1e-12)
+    True
     """
     lib = ca if any(isinstance(v, (ca.SX, ca.MX, ca.DM)) for v in (a, b)) else np
     p, q = a + b / 2, a - b / 2

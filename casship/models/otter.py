@@ -59,7 +59,28 @@ _HOERNER = np.array([
 
 
 def hoerner_cd(B: float, T: float) -> float:
-    """2-D cross-flow drag coefficient from Hoerner's curve at ``B / (2 T)`` (constant beyond the table)."""
+    """2-D cross-flow drag coefficient from Hoerner's curve at ``B / (2 T)`` (constant beyond the table).
+
+    Linear interpolation in the tabulated curve (as MSS ``Hoerner.m``); below the first and above the
+    last tabulated ratio the end values are used.
+
+    Parameters
+    ----------
+    B : float
+        Breadth of the section (for the Otter: one pontoon) [m].
+    T : float
+        Draught of the section [m].
+
+    Returns
+    -------
+    float
+        The drag coefficient ``C_D`` (dimensionless).
+
+    Examples
+    --------
+    >>> round(hoerner_cd(0.3, 0.2), 4)   # B / (2 T) = 0.75
+    0.9327
+    """
     return float(np.interp(B / (2 * T), _HOERNER[:, 0], _HOERNER[:, 1]))
 
 

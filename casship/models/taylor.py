@@ -29,7 +29,30 @@ SHI_ILLUSTRATIVE_VESSEL = Vessel("illustrative ship (Shi et al. 2009 model form)
 
 
 def shi_taylor_preset(params: dict | None = None, *, kinematics: bool = True) -> Model:
-    """:func:`shi_taylor` with :data:`SHI_DEFAULTS` on the illustrative vessel (registered as ``shi-taylor``)."""
+    """:func:`shi_taylor` with :data:`SHI_DEFAULTS` on the illustrative vessel (registered as ``shi-taylor``).
+
+    The vessel is :data:`SHI_ILLUSTRATIVE_VESSEL` (an assumed 100 m ship at 8 m/s and 1.5 rps), so
+    manoeuvres and autopilot tools find a length, an approach speed and a rudder limit.
+
+    Parameters
+    ----------
+    params : dict, optional
+        Overrides of the nominal values :data:`SHI_DEFAULTS` (names of :data:`SHI_PARAM_NAMES`).
+    kinematics : bool
+        Add the earth-fixed states ``x`` [m], ``y`` [m], ``psi`` [rad].
+
+    Returns
+    -------
+    Model
+        Named ``shi-taylor``: states ``u, v`` [m/s], ``r`` [rad/s] (+ ``x, y, psi``), inputs
+        ``delta`` [rad] and ``n`` [1/s], outputs ``u, v, r``.
+
+    Examples
+    --------
+    >>> m = shi_taylor_preset({"c1": 0.001}, kinematics=False)
+    >>> m.state_names, m.vessel.L_pp, m.param_dict()["c1"]
+    (('u', 'v', 'r'), 100.0, 0.001)
+    """
     return shi_taylor(params, kinematics=kinematics, vessel=SHI_ILLUSTRATIVE_VESSEL)
 
 

@@ -93,7 +93,35 @@ def relative_wind(u_g, v_g, psi, wind_speed, wind_dir):
     """Apparent wind speed ``U_A`` and angle ``gamma_A`` (off the bow, + from starboard).
 
     ``u_g, v_g`` is the ship's velocity over ground in body axes, ``wind_dir`` the true direction
-    the wind comes from (clockwise from North).
+    the wind comes from (clockwise from North). Works on numbers (numpy) and CasADi symbols.
+
+    Parameters
+    ----------
+    u_g, v_g : float, array_like or casadi.SX/MX
+        Surge and sway velocity over ground in body axes [m/s] (through the water plus current).
+    psi : float, array_like or casadi.SX/MX
+        Heading from North, clockwise positive [rad].
+    wind_speed : float, array_like or casadi.SX/MX
+        True wind speed [m/s].
+    wind_dir : float, array_like or casadi.SX/MX
+        True wind direction [rad]: where the wind comes *from*, clockwise from North.
+
+    Returns
+    -------
+    U_A : same type as the inputs
+        Apparent wind speed [m/s].
+    gamma_A : same type as the inputs
+        Apparent wind angle off the bow in [-pi, pi] [rad]: 0 for a head wind, positive for wind
+        from starboard.
+
+    Examples
+    --------
+    >>> U_A, gamma = relative_wind(0.0, 0.0, 0.0, 10.0, np.pi / 2)   # at rest, wind from the East
+    >>> float(U_A), float(gamma)
+    (10.0, 1.5707963267948966)
+    >>> U_A, gamma = relative_wind(5.0, 0.0, 0.0, 10.0, 0.0)          # 5 m/s into a northerly
+    >>> float(U_A), float(gamma)
+    (15.0, 0.0)
     """
     lib = _lib(u_g, v_g, psi, wind_speed, wind_dir)
     rel = wind_dir - psi
@@ -106,7 +134,37 @@ def relative_wind(u_g, v_g, psi, wind_speed, wind_dir):
 
 
 def fujiwara_loads(U_A, gamma, g: Mapping, rho_air: float = 1.225):
-    """Wind force ``(X, Y, N)`` [N, N, N m] in body axes for apparent wind ``U_A``, ``gamma``."""
+    """Wind force ``(X, Y, N)`` [N, N, N m] in body axes for apparent wind ``U_A``, ``gamma``.
+
+    ``X = q A_F C_X``, ``Y = q A_L C_Y``, ``N = q A_L L_OA C_N`` with ``q = rho_air U_A^2 / 2`` and the
+    signed coefficients of :func:`fujiwara_coefficients`. Works on numbers and CasADi symbols.
+
+    Parameters
+    ----------
+    U_A : float, array_like or casadi.SX/MX
+        Apparent wind speed [m/s] (see :func:`relative_wind`).
+    gamma : float, array_like or casadi.SX/MX
+        Apparent wind angle off the bow [rad], positive for wind from starboard, in [-pi, pi].
+    g : mapping
+        Above-water geometry with the keys of :data:`WIND_GEOMETRY_NAMES` (areas [m^2], lengths
+        [m]), e.g. ``model.vessel.wind``; other keys are ignored.
+    rho_air : float or casadi.SX/MX
+        Air density [kg/m^3].
+
+    Returns
+    -------
+    X, Y, N : same type as ``U_A``
+        Surge force [N], sway force [N] (to starboard) and yaw moment [N m] (clockwise seen from
+        above) in body axes.
+
+    Examples
+    --------
+    >>> from casship.models import kvlcc2
+    >>> g = kvlcc2().vessel.wind
+    >>> X, Y, N = fujiwara_loads(10.0, np.pi / 2, g)   # 10 m/s beam wind from starboard
+    >>> round(float(Y))                                 # pushes the ship to port
+    -227920
+    """
     C_X, C_Y, C_N = fujiwara_coefficients(gamma, g)
     q = 0.5 * rho_air * U_A**2
     return q * g["A_F"] * C_X, q * g["A_L"] * C_Y, q * g["A_L"] * g["L_OA"] * C_N
@@ -223,6 +281,31 @@ def add_current(model: Model, name: str | None = None) -> Model:
     ``u, v`` remain velocities through the water; the current (flowing *towards* ``current_dir``,
     clockwise from North) is added to ``x'`` and ``y'``. Add the current before the wind so that
     the wind sees the velocity over ground.
+
+    Parameters
+    ----------
+    model : Model
+        A 3-DOF ship with states ``u, v, x, y, psi`` (all casship ships).
+    name : str, optional
+        Name of the new model (default ``model.name + "+current"``).
+
+    Returns
+    -------
+    Model
+        With new inputs ``current_speed`` [m/s] and ``current_dir`` [rad, towards, clockwise from
+        North] after the model's own inputs.
+
+    Raises
+    ------
+    ValueError
+        If the model lacks one of the states ``u, v, x, y, psi``.
+
+    Examples
+    --------
+    >>> from casship.models import kvlcc2
+    >>> ship = add_wind(add_current(kvlcc2()))   # current first: the wind sees the ground speed
+    >>> ship.name, ship.input_names
+    ('kvlcc2+current+wind', ('delta', 'n', 'current_speed', 'current_dir', 'wind_speed', 'wind_dir'))
     """
     def term(b: ModelBuilder) -> None:
         _check_ship(b, "add_current")

@@ -1,8 +1,10 @@
 """Solving one MHE window: IPOPT or SQP to convergence, or one real-time Gauss-Newton iteration.
 
 A moving window warm-starts the NLP solvers with the previous window's solution shifted by one
-stage and improved by one Gauss-Newton step (the real-time iteration's step), with that step's
-multipliers of the dynamics: IPOPT then typically confirms the optimum in zero or one iteration.
+stage and improved by Gauss-Newton steps (the real-time iteration's step, repeated while it
+shrinks, at most four), with the multipliers of the dynamics from the last step: IPOPT then
+typically confirms the optimum without an iteration of its own, and iterates from there when the
+Gauss-Newton point is not optimal (active bounds, a strongly nonlinear window).
 """
 from __future__ import annotations
 
@@ -56,8 +58,14 @@ def _real_time_iteration(win: Window, z0, par, where: str) -> np.ndarray:
     return z
 
 
-def gauss_newton_start(win: Window, z0: np.ndarray, par: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """A start point for the NLP solvers: ``z0`` improved by one Gauss-Newton step.
+def gauss_newton_start(win: Window, z0: np.ndarray, par: np.ndarray, iterations: int = 4
+                       ) -> tuple[np.ndarray, np.ndarray | None]:
+    """A start point for the NLP solvers: ``z0`` improved by Gauss-Newton steps.
+
+    The steps stop when one is below ``1e-9`` of the size of ``z`` (converged), would leave the
+    bounds or is not finite (the last good point is kept), or after ``iterations``. On a window
+    without active bounds the result is then the optimum up to the solver's tolerance, which the
+    NLP solver confirms, typically without an iteration of its own.
 
     Parameters
     ----------
@@ -67,23 +75,32 @@ def gauss_newton_start(win: Window, z0: np.ndarray, par: np.ndarray) -> tuple[np
         The shifted previous solution.
     par : array
         The window's parameters.
+    iterations : int
+        The most Gauss-Newton steps taken.
 
     Returns
     -------
     z, lam_g : array, array or None
-        The improved point and the step's multipliers of the dynamics, or ``(z0, None)`` when the
-        step leaves the bounds or is not finite.
+        The improved point and the last step's multipliers of the dynamics, or ``(z0, None)`` when
+        not even the first step could be taken.
     """
     step = win.gn(multipliers=True)
-    step["z"], step["p"] = z0, par
-    try:
-        step()
-    except RuntimeError:
-        return z0, None
-    z, lam = step.out("z_next").ravel(), step.out("lam_g").ravel()
-    if _inside(win, z) and np.isfinite(lam.sum()):
-        return z.copy(), lam.copy()
-    return z0, None
+    z, lam = z0, None
+    step["p"] = par
+    for _ in range(iterations):
+        step["z"] = z
+        try:
+            step()
+        except RuntimeError:
+            break
+        z_new, lam_new = step.out("z_next").ravel(), step.out("lam_g").ravel()
+        if not (_inside(win, z_new) and np.isfinite(lam_new.sum())):
+            break
+        small = np.abs(z_new - z).max() <= 1e-9 * max(1.0, np.abs(z).max())
+        z, lam = z_new.copy(), lam_new.copy()
+        if small:
+            break
+    return z, lam
 
 
 def solve_window(win: Window, z0: np.ndarray, par: np.ndarray, where: str, lam_g0: np.ndarray | None = None
