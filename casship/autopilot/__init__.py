@@ -13,6 +13,7 @@ The package, one job per module:
 * :mod:`~casship.autopilot.defaults` -- the defaults, derived from the ship, shared with the CLI;
 * :mod:`~casship.autopilot.ship_design` -- :func:`design_autopilot` and the :class:`Design` value;
 * :mod:`~casship.autopilot.closed_loop` -- the closed loop as one compiled CasADi step;
+* :mod:`~casship.autopilot.components` -- sensors, the estimator in the loop, the record of a run;
 * :mod:`~casship.autopilot.performance` -- course-changing and course-keeping checks;
 * :mod:`~casship.autopilot.guidance` -- waypoints, LOS and integral LOS;
 * :mod:`~casship.autopilot.mpc` -- a CasADi model-predictive course controller;
@@ -24,7 +25,8 @@ propellers) turns the craft with the sign of the Nomoto gain ``K``; angles in ra
 heading from North clockwise, errors wrapped to (-pi, pi].
 """
 from .analysis import closed_loop_tf, course_linearization, loop_systems, loop_transfer, margins
-from .closed_loop import ClosedLoop, ClosedLoopResult, LoopEstimator, Sensors
+from .closed_loop import ClosedLoop
+from .components import ClosedLoopResult, LoopEstimator, Sensors
 from .defaults import RULES, AutopilotSettings, derive_settings
 from .designs import LQG, lqg_design, lqr_design, pid_pole_placement
 from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linear_estimator

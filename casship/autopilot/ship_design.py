@@ -13,7 +13,8 @@ import numpy as np
 
 from ..model import Model
 from .analysis import course_linearization, loop_systems, margins
-from .closed_loop import ClosedLoop, ClosedLoopResult, LoopEstimator, Sensors
+from .closed_loop import ClosedLoop
+from .components import ClosedLoopResult, LoopEstimator, Sensors
 from .defaults import AutopilotSettings, derive_settings
 from .designs import lqr_design, pid_pole_placement
 from .estimation import WaveYaw, linear_estimator, course_ekf, course_prior, heading_kf, heading_observer, heading_prior

@@ -1,0 +1,197 @@
+"""The parts of a closed loop that are values: the sensor suite, the estimator in the loop, the
+named blocks of the loop state, and the record of a run (used by
+:mod:`casship.autopilot.closed_loop`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import casadi as ca
+import numpy as np
+
+from ..data import Dataset, Gaussian
+
+__all__ = ["Sensors", "LoopEstimator", "ClosedLoopResult", "DRAWS", "MASKS", "Layout"]
+
+#: Names of the per-sample standard-normal draws (one row each in :meth:`ClosedLoop.draws`).
+DRAWS = ("gnss_north", "gnss_east", "compass", "gyro", "wave")
+#: Names of the per-sample availability masks.
+MASKS = ("gnss", "compass")
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """Sensor suite of the loop: GNSS positions, compass and rate gyro (white noise, SI units).
+
+    Parameters
+    ----------
+    gnss_rate, gnss_std : float
+        GNSS fix rate [Hz] and North/East position noise [m].
+    compass_rate, compass_std : float
+        Compass rate [Hz] and heading noise [rad].
+    gyro_std : float
+        Rate-gyro noise [rad/s] (one reading per loop sample).
+    """
+
+    gnss_rate: float = 5.0
+    gnss_std: float = 0.5
+    compass_rate: float = 10.0
+    compass_std: float = float(np.radians(0.5))
+    gyro_std: float = float(np.radians(0.01))
+
+    def __post_init__(self):
+        for name in ("gnss_rate", "compass_rate"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"sensor {name} must be positive, got {getattr(self, name)}")
+        for name in ("gnss_std", "compass_std", "gyro_std"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"sensor {name} must be >= 0, got {v}")
+
+
+@dataclass(frozen=True)
+class LoopEstimator:
+    """An estimator in the loop and how the loop reads it.
+
+    Parameters
+    ----------
+    est : Estimator
+        A casship estimator whose measured outputs are GNSS ``x_n, y_n`` (``kind="course"``) or
+        compass and gyro ``psi_m, r_m`` (``kind="heading"``).
+    prior : Gaussian
+        Its belief at the start of the run (before the first measurement).
+    kind : {"course", "heading"}
+    """
+
+    est: object
+    prior: object
+    kind: str = "course"
+
+    def __post_init__(self):
+        if self.kind not in ("course", "heading"):
+            raise ValueError(f"estimator kind must be 'course' or 'heading', got {self.kind!r}")
+        want = ("x_n", "y_n") if self.kind == "course" else ("psi_m", "r_m")
+        if tuple(self.est.measured) != want:
+            raise ValueError(f"a {self.kind} estimator must measure {list(want)}, this one measures "
+                             f"{list(self.est.measured)}")
+
+    @property
+    def step(self) -> ca.Function:
+        """The estimator's step Function (named slots; memory and ``x, P``)."""
+        return self.est.step
+
+    @property
+    def memory(self) -> tuple[str, ...]:
+        """Names of the step's memory slots (the estimator's memory)."""
+        return tuple(self.est.memory)
+
+    def prior_at(self, north: float, east: float, psi: float, r: float, chi: float):
+        """The prior moved to a start state: position and course (course estimator) or heading and
+        yaw rate (heading estimator) from the ship, the rest and the covariance from :attr:`prior`.
+
+        Parameters
+        ----------
+        north, east : float
+            Position [m].
+        psi, r : float
+            Heading [rad] and yaw rate [rad/s].
+        chi : float
+            Course over ground [rad].
+
+        Returns
+        -------
+        Gaussian
+        """
+        mean = np.array(self.prior.mean, dtype=float)
+        ix = self.state_index
+        if self.kind == "course":
+            mean[ix("x_n")], mean[ix("y_n")], mean[ix("chi")] = north, east, chi
+        else:
+            mean[ix("psi")], mean[ix("r")] = psi, r
+        return Gaussian(mean, self.prior.cov)
+
+    def state_index(self, name: str) -> int:
+        """Index of the estimator's state ``name``.
+
+        Parameters
+        ----------
+        name : str
+        """
+        return self.est.model.index(name)
+
+
+class Layout:
+    """Named blocks of a flat vector (the loop state).
+
+    Parameters
+    ----------
+    blocks : sequence of (str, int)
+        Block names and sizes, in order.
+    """
+
+    def __init__(self, blocks: Sequence[tuple[str, int]]):
+        self.names = [n for n, _ in blocks]
+        self.sizes = dict(blocks)
+        offsets = np.concatenate([[0], np.cumsum([k for _, k in blocks])]).astype(int)
+        self.slices = {n: slice(int(a), int(b)) for n, a, b in zip(self.names, offsets[:-1], offsets[1:])}
+        self.size = int(offsets[-1])
+
+    def split(self, v) -> dict:
+        """The blocks of ``v`` by name.
+
+        Parameters
+        ----------
+        v : casadi.SX or array
+        """
+        return {n: v[s] for n, s in self.slices.items()}
+
+    def join(self, parts: Mapping) -> ca.SX:
+        """One column of the named parts (CasADi), in block order.
+
+        Parameters
+        ----------
+        parts : mapping
+        """
+        return ca.vertcat(*[ca.reshape(parts[n], -1, 1) for n in self.names])
+
+    def pack(self, parts: Mapping) -> np.ndarray:
+        """One flat array of the named parts (numbers, matrices column-major), in block order.
+
+        Parameters
+        ----------
+        parts : mapping
+        """
+        out = np.zeros(self.size)
+        for n, s in self.slices.items():
+            out[s] = np.asarray(parts[n], float).reshape(-1, order="F")
+        return out
+
+
+@dataclass(frozen=True)
+class ClosedLoopResult:
+    """Record of a closed-loop run.
+
+    Parameters
+    ----------
+    data : Dataset
+        Logged signals (SI units, angles in rad).
+    metrics : list of dict
+        Per command step (:func:`casship.autopilot.performance.course_change_metrics`).
+    mode : str
+        ``"course"`` or ``"heading"``.
+    performance : dict
+        :func:`casship.autopilot.performance.performance_report` of the run.
+    """
+
+    data: Dataset
+    metrics: list
+    mode: str
+    performance: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """Mode, per-step metrics and the performance report."""
+        return {"mode": self.mode, "steps": self.metrics, "performance": self.performance}
+
+    def __repr__(self) -> str:
+        return (f"ClosedLoopResult(mode={self.mode!r}, samples={len(self.data)}, steps={len(self.metrics)}, "
+                f"rate_limited={self.performance.get('rate_limited_fraction', float('nan')):.3f})")
