@@ -36,8 +36,13 @@ def discover(only: list[str] | None = None) -> list[str]:
     return names
 
 
-def run_all(quick: bool = False, only: list[str] | None = None, verbose: bool = True) -> list[dict]:
-    """Import and run every benchmark module; returns all rows (with a ``module`` key each)."""
+def run_all(quick: bool = False, only: list[str] | None = None, verbose: bool = True,
+            figures: Path | None = None) -> list[dict]:
+    """Import and run every benchmark module; returns all rows (with a ``module`` key each).
+
+    A module with a ``plot(rows, path)`` function draws its figure into ``figures`` (when given) as
+    ``benchmarks-<topic>.png``.
+    """
     rows: list[dict] = []
     for name in discover(only):
         if verbose:
@@ -64,6 +69,11 @@ def run_all(quick: bool = False, only: list[str] | None = None, verbose: bool = 
             continue
         for r in result or []:
             rows.append({**r, "module": name})
+        if figures is not None and hasattr(module, "plot") and result:
+            path = Path(figures) / f"benchmarks-{name[len('bench_'):]}.png"
+            module.plot(result, path)
+            if verbose:
+                print(f"[bench] {name}: figure {path}", file=sys.stderr, flush=True)
         if verbose:
             print(f"[bench] {name} done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     return rows
@@ -83,7 +93,12 @@ def machine_info() -> dict:
                 break
     except OSError:
         pass
+    try:
+        load = [round(v, 2) for v in os.getloadavg()]
+    except OSError:
+        load = None
     return {"python": platform.python_version(), "casadi": casadi.__version__, "numpy": numpy.__version__,
+            "load_average": load,
             "scipy": scipy.__version__, "platform": platform.platform(), "cpu": cpu,
             "cpu_count": os.cpu_count(), "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
 
@@ -95,7 +110,9 @@ def results_markdown(rows: list[dict], info: dict, quick: bool, command: str) ->
     """The results section: command, machine, table."""
     return (f"{START}\n\nMeasured {info['date_utc']} UTC with `{command}`"
             + (" (quick sizes)" if quick else "") + " on:\n\n"
-            f"- CPU: {info['cpu']}, {info['cpu_count']} logical CPUs ({info['platform']})\n"
+            f"- CPU: {info['cpu']}, {info['cpu_count']} logical CPUs ({info['platform']})"
+            + (f"; load average at the end {info['load_average'][0]:g} (1 min), {info['load_average'][2]:g} (15 min)"
+               if info.get("load_average") else "") + "\n"
             f"- Python {info['python']}, CasADi {info['casadi']}, NumPy {info['numpy']}, SciPy {info['scipy']}\n\n"
             + format_table(rows) + "\n\nThe targets of issue 15 (ratio = median of the interleaved repeats, "
             "range in brackets):\n\n" + format_targets(rows) + f"\n\n{END}")
@@ -118,13 +135,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", default=None, help="write rows and machine description to this file")
     parser.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")
     parser.add_argument("--markdown", default=None,
-                        help="write the table and machine into the results section of this Markdown page")
+                        help="write the table and machine into the results section of this Markdown page "
+                             "(and the figures, benchmarks-<topic>.png, beside it)")
     args = parser.parse_args(argv)
     try:
         names = discover(args.only)
     except ValueError as exc:
         parser.error(str(exc))
-    rows = run_all(quick=args.quick, only=[n for n in names] if args.only else None)
+    figures = Path(args.markdown).parent if args.markdown else None
+    rows = run_all(quick=args.quick, only=[n for n in names] if args.only else None, figures=figures)
     info = machine_info()
     print(format_table(rows))
     print("\n" + format_targets(rows))

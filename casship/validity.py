@@ -205,19 +205,17 @@ def _amplification(method: str, z: np.ndarray) -> np.ndarray:
     return np.abs(sum(c * z**k for k, c in enumerate(coeffs)))
 
 
-def _critical_step(method: str, lam: complex) -> float:
-    """Largest ``h`` with ``|R(h lam)| <= 1`` for a decaying mode ``lam`` (bisection along the ray)."""
-    scale = 1.0 / abs(lam)
-    lo, hi = 0.0, 8.0 * scale             # the stability regions of euler and rk4 lie within |z| < 3
-    if _amplification(method, np.array(hi * lam)) <= 1.0:
-        return np.inf
+def _critical_steps(method: str, lam: np.ndarray) -> np.ndarray:
+    """Largest ``h`` with ``|R(h lam)| <= 1`` for each decaying mode ``lam`` (bisection along each
+    ray, all modes at once)."""
+    lam = np.asarray(lam, dtype=complex)
+    lo, hi = np.zeros(lam.shape), 8.0 / np.abs(lam)   # the stability regions of euler and rk4 lie within |z| < 3
+    unbounded = _amplification(method, hi * lam) <= 1.0
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if _amplification(method, np.array(mid * lam)) <= 1.0 + 1e-12:
-            lo = mid
-        else:
-            hi = mid
-    return lo
+        ok = _amplification(method, mid * lam) <= 1.0 + 1e-12
+        lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+    return np.where(unbounded, np.inf, lo)
 
 
 def stable_step(model: Model, x, u, p, method: str) -> float:
@@ -250,7 +248,7 @@ def stable_step(model: Model, x, u, p, method: str) -> float:
     lam = np.linalg.eigvals(A)
     scale = max(1e-300, float(np.abs(lam).max(initial=0.0)))
     decaying = lam[lam.real < -1e-9 * scale]
-    return float(min((_critical_step(method, complex(v)) for v in decaying), default=np.inf))
+    return float(_critical_steps(method, decaying).min(initial=np.inf))
 
 
 def check_step(model: Model, h: float, x, u, p, method: str, *, where: str = "") -> float:
