@@ -5,7 +5,9 @@ moving-horizon estimation, maximum-likelihood identification and the linearisati
 python-control turns into autopilots.
 """
 from .angles import wrap, unwrap
-from .data import Dataset, Gaussian, Trajectory
+from .data import Dataset
+from .gaussian import Gaussian
+from .trajectory import Trajectory
 from .discretize import DiscreteModel, discretize, van_loan
 from .model import Model, ModelBuilder
 from .vessel import Limit, Vessel

@@ -1,4 +1,6 @@
-"""Value objects: :class:`Gaussian`, :class:`Dataset` (time + named columns) and :class:`Trajectory`.
+"""Records: :class:`Dataset` (time stamps + named columns) and :func:`check_time`.
+
+The Gaussian belief lives in :mod:`casship.gaussian`, simulated records in :mod:`casship.trajectory`.
 
 A :class:`Dataset` is the one container for records: measured data (inputs and measurements, NaN =
 "not measured") and simulated trajectories alike. Columns are looked up by name; estimators and
@@ -6,13 +8,12 @@ fits pick the columns named like the model's inputs and outputs.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Gaussian", "Dataset", "Trajectory", "check_time", "as_cov"]
+__all__ = ["Dataset", "check_time"]
 
 
 def check_time(t, name: str = "time") -> np.ndarray:
@@ -44,95 +45,6 @@ def check_time(t, name: str = "time") -> np.ndarray:
         raise ValueError(f"{name}: time stamps must increase strictly; row {k + 1} ({t[k + 1]}) "
                          f"is not after row {k} ({t[k]})")
     return t
-
-
-def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_zero: bool = True) -> np.ndarray:
-    """Turn a covariance given as scalar, vector (diagonal), matrix or name->variance mapping into
-    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``.
-
-    Parameters
-    ----------
-    value : float, array or mapping
-        Scalar (times the identity), variances, matrix, or channel name -> variance.
-    n : int
-        Size.
-    name : str
-        What the covariance is (for messages).
-    names : sequence of str, optional
-        Channel names of a mapping.
-    allow_zero : bool
-        Accept a singular (positive semi-definite) matrix.
-    """
-    if isinstance(value, Mapping):
-        if names is None:
-            raise TypeError(f"{name}: a mapping needs channel names")
-        unknown = set(value) - set(names)
-        if unknown:
-            raise ValueError(f"{name}: unknown channel name(s) {sorted(unknown)}; known: {list(names)}")
-        missing = [c for c in names if c not in value]
-        if missing:
-            raise ValueError(f"{name}: no variance given for channel(s) {missing}")
-        value = [value[c] for c in names]
-    m = np.asarray(value, dtype=float)
-    if m.ndim == 0:
-        m = np.eye(n) * float(m)
-    elif m.ndim == 1:
-        if m.size != n:
-            raise ValueError(f"{name}: expected {n} variances, got {m.size}")
-        m = np.diag(m)
-    if m.shape != (n, n):
-        raise ValueError(f"{name}: expected shape ({n}, {n}), got {m.shape}")
-    if not np.all(np.isfinite(m)):
-        raise ValueError(f"{name}: contains non-finite entries")
-    if not np.allclose(m, m.T, rtol=1e-10, atol=1e-12 * np.abs(m).max(initial=0.0)):   # relative to the scale
-        raise ValueError(f"{name}: matrix is not symmetric")
-    m = 0.5 * (m + m.T)
-    if n:
-        eig = np.linalg.eigvalsh(m)
-        tol = 1e-12 * abs(eig).max()     # relative: variances of lat/lon in rad are ~1e-14
-        if eig.min() < -tol:
-            raise ValueError(f"{name}: not positive semi-definite (smallest eigenvalue {eig.min():.3g}); "
-                             "variances must be non-negative")
-        if not allow_zero and eig.min() <= tol:
-            raise ValueError(f"{name}: must be positive definite (smallest eigenvalue {eig.min():.3g})")
-    return m
-
-
-@dataclass(frozen=True)
-class Gaussian:
-    """A Gaussian belief ``N(mean, cov)``.
-
-    Parameters
-    ----------
-    mean : array_like, shape (n,)
-    cov : array_like, shape (n, n), or (n,) variances, or scalar
-    """
-
-    mean: np.ndarray
-    cov: np.ndarray
-
-    def __post_init__(self):
-        mean = np.asarray(self.mean, dtype=float).reshape(-1)
-        if not np.all(np.isfinite(mean)):
-            raise ValueError("Gaussian: mean contains non-finite entries")
-        object.__setattr__(self, "mean", mean)
-        object.__setattr__(self, "cov", as_cov(self.cov, mean.size, "Gaussian covariance"))
-
-    @property
-    def std(self) -> np.ndarray:
-        """Standard deviations (square roots of the variances)."""
-        return np.sqrt(np.diag(self.cov))
-
-    def sample(self, n: int, seed=None) -> np.ndarray:
-        """``n`` samples as rows, from a seed or ``numpy.random.Generator``.
-
-        Parameters
-        ----------
-        n : int
-        seed : int or numpy.random.Generator, optional
-        """
-        rng = np.random.default_rng(seed)
-        return rng.multivariate_normal(self.mean, self.cov, size=n, method="eigh")
 
 
 class Dataset:
@@ -525,161 +437,3 @@ class Dataset:
             data = data.with_columns(**{name: data[name] * factor})
         data.meta["source"] = str(path)
         return data
-
-
-class Trajectory(Dataset):
-    """A simulated record: a :class:`Dataset` whose columns include a model's states, inputs, outputs.
-
-    Parameters
-    ----------
-    t, columns, units, meta
-        As for :class:`Dataset`.
-    model_name : str
-        The model simulated.
-    state_names, input_names, output_names : sequence of str
-        Which columns are the model's states, inputs and outputs.
-
-    Attributes
-    ----------
-    model_name : str
-    state_names, input_names, output_names : tuple of str
-    """
-
-    def __init__(self, t, columns, *, model_name: str, state_names, input_names, output_names,
-                 units=None, meta=None):
-        super().__init__(t, columns, units, meta)
-        missing = [n for n in (*state_names, *input_names, *output_names) if n not in self._columns]
-        if missing:
-            raise ValueError(f"trajectory of {model_name!r} has no column(s) {missing}")
-        self.model_name = model_name
-        self.state_names = tuple(state_names)
-        self.input_names = tuple(input_names)
-        self.output_names = tuple(output_names)
-
-    def _names(self) -> dict:
-        return {"model_name": self.model_name, "state_names": list(self.state_names),
-                "input_names": list(self.input_names), "output_names": list(self.output_names)}
-
-    def slice(self, start: int | None = None, stop: int | None = None) -> "Trajectory":
-        """Rows ``start:stop`` as a Trajectory (names kept).
-
-        Parameters
-        ----------
-        start, stop : int, optional
-            Row indices.
-
-        Returns
-        -------
-        Trajectory
-        """
-        return Trajectory.from_dataset(super().slice(start, stop), self._names())
-
-    def _like(self, data: Dataset) -> "Trajectory":
-        return Trajectory.from_dataset(data, self._names())
-
-    # -- I/O with the names kept -----------------------------------------------------------------
-    def to_pandas(self):
-        """A DataFrame with ``t`` and all columns; the model and variable names go to ``frame.attrs``."""
-        frame = super().to_pandas()
-        frame.attrs.update(self._names())
-        return frame
-
-    @classmethod
-    def from_dataset(cls, data: Dataset, model) -> "Trajectory":
-        """View a record with a column for every state and input of ``model`` as a Trajectory.
-
-        ``model`` is a :class:`~casship.Model` or a mapping with ``state_names``, ``input_names``,
-        ``output_names`` (and optionally ``model_name``), e.g. the ``attrs`` of :meth:`to_pandas`.
-
-        Parameters
-        ----------
-        data : Dataset
-            The record.
-        model : Model or mapping
-            See above.
-
-        Returns
-        -------
-        Trajectory
-        """
-        get = (lambda k: model.get(k, ())) if isinstance(model, Mapping) else (lambda k: getattr(model, k))
-        names = {k: tuple(get(k)) for k in ("state_names", "input_names", "output_names")}
-        name = model.get("model_name", "") if isinstance(model, Mapping) else model.name
-        missing = [n for n in (*names["state_names"], *names["input_names"]) if n not in data]
-        if missing:
-            raise ValueError(f"record has no column(s) {missing} for the states/inputs of model {name!r}")
-        outputs = tuple(n for n in names["output_names"] if n in data)
-        return cls(data.t, {n: data[n] for n in data.names}, model_name=name, state_names=names["state_names"],
-                   input_names=names["input_names"], output_names=outputs, units=data.units, meta=data.meta)
-
-    @classmethod
-    def from_pandas(cls, frame, time: str = "t", units: Mapping[str, str] | None = None,
-                    model=None) -> "Trajectory":
-        """Inverse of :meth:`to_pandas`; names from ``model`` or else from ``frame.attrs``.
-
-        Parameters
-        ----------
-        frame : pandas.DataFrame
-            As written by :meth:`to_pandas`.
-        time : str
-            Time column.
-        units : mapping, optional
-            Column -> unit.
-        model : Model, optional
-            Names of states, inputs and outputs (default: ``frame.attrs``).
-
-        Returns
-        -------
-        Trajectory
-        """
-        source = model if model is not None else frame.attrs
-        if model is None and "state_names" not in frame.attrs:
-            raise ValueError("Trajectory.from_pandas: the frame carries no state names; pass model=")
-        return cls.from_dataset(Dataset.from_pandas(frame, time, units), source)
-
-    @classmethod
-    def from_csv(cls, path, model=None, time: str | None = None, rename: Mapping[str, str] | None = None,
-                 scale: Mapping[str, float] | None = None) -> "Trajectory":
-        """Read a CSV written by :meth:`Dataset.to_csv`; ``model`` names the states, inputs and outputs.
-
-        Parameters
-        ----------
-        path : str or Path
-            The file.
-        model : Model or mapping
-            Names of states, inputs and outputs.
-        time, rename, scale
-            As for :meth:`Dataset.from_csv`.
-
-        Returns
-        -------
-        Trajectory
-        """
-        if model is None:
-            raise ValueError("Trajectory.from_csv needs model= (a CSV file does not store the state names)")
-        return cls.from_dataset(Dataset.from_csv(path, time=time, rename=rename, scale=scale), model)
-
-    @property
-    def x(self) -> np.ndarray:
-        """States as an (N, nx) array."""
-        return self.matrix(self.state_names)
-
-    @property
-    def u(self) -> np.ndarray:
-        """Inputs as an (N, nu) array.
-
-        Returns
-        -------
-        numpy.ndarray
-        """
-        return self.matrix(self.input_names)
-
-    @property
-    def y(self) -> np.ndarray:
-        """Outputs as an (N, ny) array.
-
-        Returns
-        -------
-        numpy.ndarray
-        """
-        return self.matrix(self.output_names)

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from . import models
-from .data import Gaussian
+from .gaussian import Gaussian
 from .discretize import discretize
 from .estimators import EKF, UKF
 from .progress import progress

@@ -7,7 +7,8 @@ import numpy as np
 
 from ._fast import BufferedCall
 from .angles import wrap
-from .data import Dataset, Trajectory, check_time
+from .data import Dataset, check_time
+from .trajectory import Trajectory
 from .discretize import DiscreteModel, discretize
 from .model import Model
 from .validity import check_inputs, check_states, check_step, warn_states

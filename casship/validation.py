@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from .angles import wrap
-from .data import Dataset, Trajectory
+from .data import Dataset
+from .trajectory import Trajectory
 from .maneuvers import execute_time, turning_metrics, zigzag_metrics
 from .model import Model
 from .simulate import simulate

@@ -4,7 +4,8 @@ import pandas as pd
 import pytest
 
 import casship as cs
-from casship.data import as_cov, check_time
+from casship.data import check_time
+from casship.gaussian import as_cov
 from casship.models import nomoto_first_order
 
 

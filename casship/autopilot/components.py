@@ -9,7 +9,9 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from ..data import Dataset, Gaussian
+from ..data import Dataset
+
+from ..gaussian import Gaussian
 
 __all__ = ["Sensors", "LoopEstimator", "ClosedLoopResult", "DRAWS", "MASKS", "Layout"]
 

@@ -18,7 +18,7 @@ import casadi as ca
 import control
 import numpy as np
 
-from ..data import Gaussian
+from ..gaussian import Gaussian
 from ..discretize import discretize
 from ..model import Model, ModelBuilder
 

@@ -14,7 +14,9 @@ from typing import Sequence
 import control
 import numpy as np
 
-from ..data import Dataset, Gaussian
+from ..data import Dataset
+
+from ..gaussian import Gaussian
 from ..discretize import discretize
 from ..linear import linearize
 from ..model import Model

@@ -219,7 +219,7 @@ def _initial_velocity(data, names):
 
 def filter_file(args, model=None):
     """Run the command's estimation; returns ``(summary, result, data, measured)``."""
-    from ..data import Gaussian
+    from ..gaussian import Gaussian
     from ..discretize import discretize
     from ..estimators import ESTIMATORS
     from ..frames import wgs84_radii

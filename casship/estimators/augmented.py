@@ -12,7 +12,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..data import Dataset, Gaussian, as_cov
+from ..data import Dataset
+
+from ..gaussian import Gaussian, as_cov
 from ..discretize import discretize
 from ..model import Model, Variable
 from .result import FilterResult

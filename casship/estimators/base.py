@@ -24,7 +24,8 @@ import numpy as np
 from scipy import stats
 
 from .._fast import DUPLICATE_NAMES, BufferedCall, compile_function, run_fold
-from ..data import Dataset, Gaussian, as_cov
+from ..data import Dataset
+from ..gaussian import Gaussian, as_cov
 from ..discretize import DiscreteModel
 from .gaps import bridge_gaps
 from .options import DIAGNOSTICS, EstimatorOptions

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..data import Gaussian
+from ..gaussian import Gaussian
 from .base import Estimator
 from .options import EstimatorOptions, check_int
 from .ukf import psd_sqrt

@@ -10,7 +10,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..data import Gaussian
+from ..gaussian import Gaussian
 from .options import DIAGNOSTICS
 
 __all__ = ["OnlineRun"]

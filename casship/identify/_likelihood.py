@@ -9,7 +9,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..data import Gaussian
+from ..gaussian import Gaussian
 from ..estimators.base import CONSTANT_INPUTS, SAMPLE_INPUTS
 from ._compile import compiled
 from ._engine import CHUNK, Engine, Job, fold, per_sample, run_jobs

@@ -26,7 +26,8 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap
-from ..data import Dataset, Gaussian
+from ..data import Dataset
+from ..gaussian import Gaussian
 from ..discretize import discretize
 from ..frames import body_to_ned
 from ..model import Model, ModelBuilder

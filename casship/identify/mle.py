@@ -15,7 +15,9 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from ..data import Dataset, Gaussian
+from ..data import Dataset
+
+from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..estimators.base import Estimator
 from ._engine import CHUNK, _chunk, _pieces

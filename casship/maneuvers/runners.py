@@ -14,7 +14,8 @@ from typing import Mapping
 import numpy as np
 
 from ..angles import unwrap
-from ..data import Dataset, Trajectory
+from ..data import Dataset
+from ..trajectory import Trajectory
 from ..model import Model
 from ..simulate import simulate
 from ..validity import check_inputs, check_states

@@ -12,7 +12,8 @@ import casadi as ca
 import numpy as np
 
 from ..._fast import DUPLICATE_NAMES
-from ...data import Dataset, Gaussian, as_cov
+from ...data import Dataset
+from ...gaussian import Gaussian, as_cov
 from ...progress import track
 from ...discretize import DiscreteModel, discretize
 from ..augmented import augment, augmented_noise, augmented_prior

@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from ..._fast import BufferedCall
-from ...data import Gaussian
+from ...gaussian import Gaussian
 from .arrival import arrival_prior
 from .solvers import gauss_newton_start, solve_window
 

@@ -1,0 +1,98 @@
+"""The Gaussian belief value (:class:`Gaussian`) and covariance input checking (:func:`as_cov`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["Gaussian", "as_cov"]
+
+
+def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_zero: bool = True) -> np.ndarray:
+    """Turn a covariance given as scalar, vector (diagonal), matrix or name->variance mapping into
+    an (n, n) symmetric positive (semi-)definite matrix, or raise naming ``name``.
+
+    Parameters
+    ----------
+    value : float, array or mapping
+        Scalar (times the identity), variances, matrix, or channel name -> variance.
+    n : int
+        Size.
+    name : str
+        What the covariance is (for messages).
+    names : sequence of str, optional
+        Channel names of a mapping.
+    allow_zero : bool
+        Accept a singular (positive semi-definite) matrix.
+    """
+    if isinstance(value, Mapping):
+        if names is None:
+            raise TypeError(f"{name}: a mapping needs channel names")
+        unknown = set(value) - set(names)
+        if unknown:
+            raise ValueError(f"{name}: unknown channel name(s) {sorted(unknown)}; known: {list(names)}")
+        missing = [c for c in names if c not in value]
+        if missing:
+            raise ValueError(f"{name}: no variance given for channel(s) {missing}")
+        value = [value[c] for c in names]
+    m = np.asarray(value, dtype=float)
+    if m.ndim == 0:
+        m = np.eye(n) * float(m)
+    elif m.ndim == 1:
+        if m.size != n:
+            raise ValueError(f"{name}: expected {n} variances, got {m.size}")
+        m = np.diag(m)
+    if m.shape != (n, n):
+        raise ValueError(f"{name}: expected shape ({n}, {n}), got {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"{name}: contains non-finite entries")
+    if not np.allclose(m, m.T, rtol=1e-10, atol=1e-12 * np.abs(m).max(initial=0.0)):   # relative to the scale
+        raise ValueError(f"{name}: matrix is not symmetric")
+    m = 0.5 * (m + m.T)
+    if n:
+        eig = np.linalg.eigvalsh(m)
+        tol = 1e-12 * abs(eig).max()     # relative: variances of lat/lon in rad are ~1e-14
+        if eig.min() < -tol:
+            raise ValueError(f"{name}: not positive semi-definite (smallest eigenvalue {eig.min():.3g}); "
+                             "variances must be non-negative")
+        if not allow_zero and eig.min() <= tol:
+            raise ValueError(f"{name}: must be positive definite (smallest eigenvalue {eig.min():.3g})")
+    return m
+
+
+@dataclass(frozen=True)
+class Gaussian:
+    """A Gaussian belief ``N(mean, cov)``.
+
+    Parameters
+    ----------
+    mean : array_like, shape (n,)
+    cov : array_like, shape (n, n), or (n,) variances, or scalar
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+
+    def __post_init__(self):
+        mean = np.asarray(self.mean, dtype=float).reshape(-1)
+        if not np.all(np.isfinite(mean)):
+            raise ValueError("Gaussian: mean contains non-finite entries")
+        object.__setattr__(self, "mean", mean)
+        object.__setattr__(self, "cov", as_cov(self.cov, mean.size, "Gaussian covariance"))
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviations (square roots of the variances)."""
+        return np.sqrt(np.diag(self.cov))
+
+    def sample(self, n: int, seed=None) -> np.ndarray:
+        """``n`` samples as rows, from a seed or ``numpy.random.Generator``.
+
+        Parameters
+        ----------
+        n : int
+        seed : int or numpy.random.Generator, optional
+        """
+        rng = np.random.default_rng(seed)
+        return rng.multivariate_normal(self.mean, self.cov, size=n, method="eigh")
