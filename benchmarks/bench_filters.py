@@ -136,11 +136,11 @@ def _online(est, data, prior):
     Y = data.matrix(est.measured)
     run = est.online(prior)
     update = run.update
-    out = np.empty((len(data), prior.mean.size))
-    out[0] = update(Y[0], 0.0)
+    means = np.empty((len(data), prior.mean.size))
+    means[0] = update(Y[0], 0.0)
     for k in range(1, len(data)):
-        out[k] = update(Y[k], DT)
-    return out
+        means[k] = update(Y[k], DT)
+    return means
 
 
 def _rmse(x, traj):

@@ -189,11 +189,11 @@ def case(steps: int):
 def _online(est, data, prior, U, Y):
     run = est.online(prior, u=U[0])
     update = run.update
-    out = np.empty((len(data), 6))
-    out[0] = update(Y[0], 0.0, U[0], U[0])
+    means = np.empty((len(data), 6))
+    means[0] = update(Y[0], 0.0, U[0], U[0])
     for k in range(1, len(data)):
-        out[k] = update(Y[k], DT, U[k - 1], U[k])
-    return out
+        means[k] = update(Y[k], DT, U[k - 1], U[k])
+    return means
 
 
 FIRST_CALL = """

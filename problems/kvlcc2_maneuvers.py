@@ -53,11 +53,6 @@ def _metrics(data, kind, heading, t_exec):
     return zigzag_metrics(data, heading, t_exec=t_exec, L=L)
 
 
-def _decimate(data, step):
-    idx = np.arange(0, len(data), step)
-    return cs.Dataset(data.t[idx], {n: data[n][idx] for n in data.names}, data.units, data.meta)
-
-
 def _plot(path, name, records):
     import matplotlib
 
@@ -159,7 +154,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=N
         speed, first_side, t_exec = 15.5 * 1852 / 3600, 1.0, 10.0
         if measured is not None:
             if quick:
-                measured = _decimate(measured.between(0.0, 700.0 if kind == "zigzag" else 900.0), 4)
+                measured = measured.between(0.0, 700.0 if kind == "zigzag" else 900.0).decimate(4)
             speed = float(measured["u"][0])
             t_exec = cs.maneuvers.execute_time(measured)
             first_side = float(np.sign(measured["delta"][np.searchsorted(measured.t, t_exec) + 20]

@@ -177,6 +177,30 @@ def test_bad_input_is_named():
         MLEProblem(ekf, [np.zeros(3)], free=["K"])
 
 
+def test_too_little_data_and_long_gaps_are_refused():
+    data = _record(1, 300)
+    short = data.slice(0, 1)
+    short.meta["name"] = "stub"
+    with pytest.raises(ValueError, match="'stub' has 1 row"):
+        MLEProblem(_ekf(), short, free=["K"], x0=PRIOR)
+    with pytest.raises(ValueError, match="2 measured value.*2 free quantities"):
+        MLEProblem(_ekf(), data.slice(0, 2), free=["K", "T"], x0=PRIOR)
+    MLEProblem(_ekf(), data.slice(0, 2), free=["K", "T"], x0=PRIOR, prior={"K": 0.1})    # a prior closes it
+    t = data.t.copy()
+    t[150:] += 1e4                                                  # far beyond the rk4 stability limit
+    gapped = cs.Dataset(t, {n: data[n] for n in data.names})
+    with pytest.raises(ValueError, match="time gap of 1e\\+04 s .*rows 149 and 150"):
+        MLEProblem(_ekf(), gapped, free=["K"], x0=PRIOR)
+    with pytest.raises(ValueError, match="time gap .*rows 149 and 150"):
+        OutputErrorProblem(cs.models.nomoto_first_order(K=K_TRUE, T=T_TRUE), gapped, free=["K"], sigma={"psi": 0.01})
+    ekf = cs.EKF(cs.discretize(cs.models.nomoto_first_order(K=K_TRUE, T=T_TRUE), DT), Q=1e-7, R=1e-4,
+                 options={"on_gap": "bridge"})
+    with pytest.warns(UserWarning, match="bridged"):
+        prob = MLEProblem(ekf, gapped, free=["K"], x0=PRIOR)
+    assert len(prob.records[0]) > len(gapped)
+    assert prob._n_obs() == len(gapped)                             # bridging rows carry no measurement
+
+
 def test_likelihood_through_ukf_gradient_and_recovery():
     """The same problem through the UKF: exact gradient, and the fit agrees with the EKF's (linear
     measurement, mildly nonlinear dynamics: the two likelihoods are almost the same)."""

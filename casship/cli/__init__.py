@@ -53,7 +53,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _one_line(exc: BaseException) -> str:
-    text = str(exc) if not isinstance(exc, KeyError) else f"unknown name {exc.args[0]!r}" if exc.args else "KeyError"
+    if isinstance(exc, KeyError):
+        text = f"unknown name {next(iter(exc.args))!r}" if exc.args else "KeyError"
+    else:
+        text = str(exc)
     lines = [line.strip() for line in text.strip().splitlines() if line.strip()]
     return "; ".join(lines) or type(exc).__name__
 

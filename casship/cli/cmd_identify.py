@@ -175,7 +175,6 @@ def _problem(args, model, records, free, measured):
 
 
 def run(args) -> int:
-    from ..identify import decimate
     from ..models import get_model
 
     from ..outdir import check_output_file
@@ -184,7 +183,7 @@ def run(args) -> int:
     if args.plot:
         check_output_file(args.plot, overwrite=args.overwrite, what="--plot")
     model = get_model(args.model)
-    records = [decimate(load_record(p), args.decimate) for p in args.data]
+    records = [load_record(p).decimate(args.decimate) for p in args.data]
     free = _names(args.free)
     if not free:
         raise ValueError("--free: give at least one quantity")

@@ -20,7 +20,7 @@ class EKFOptions(EstimatorOptions):
 
     Parameters
     ----------
-    gate, jit, outputs
+    gate, jit, outputs, max_gap, on_gap
         The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     covariance : {"discrete", "continuous"}
         ``"discrete"`` propagates ``P`` with the Jacobians of the discretised step

@@ -30,7 +30,7 @@ class EnKFOptions(EstimatorOptions):
 
     Parameters
     ----------
-    gate, jit, outputs
+    gate, jit, outputs, max_gap, on_gap
         The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     members : int
         Ensemble size ``N`` (seed 002: 100).

@@ -35,7 +35,7 @@ class KalmanBucyOptions(EstimatorOptions):
 
     Parameters
     ----------
-    gate, jit, outputs
+    gate, jit, outputs, max_gap, on_gap
         The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     substeps : int
         Sub-steps of the coupled estimate/Riccati equations between two samples.

@@ -143,7 +143,7 @@ class UKFOptions(EstimatorOptions):
 
     Parameters
     ----------
-    gate, jit, outputs
+    gate, jit, outputs, max_gap, on_gap
         The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     alpha, beta, kappa : float
         Scaled unscented transform parameters. The default ``alpha = 1, beta = 0, kappa = 3`` is

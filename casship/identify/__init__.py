@@ -20,11 +20,11 @@ from .output_error import OutputErrorProblem
 from .params_file import read_params
 from .prior import Prior
 from .problem import IdentificationProblem
-from .records import decimate, initial_states, noise_std, share_labels
+from .records import initial_states, noise_std, share_labels
 from .inverse_dynamics import inverse_dynamics, linear_in, rates_model, smooth_trial
 from .result import FitResult, IdentificationError, IdentificationWarning
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
-           "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std", "decimate",
+           "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std",
            "share_labels", "initial_states", "read_params", "cross_validate", "CrossValidation"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]

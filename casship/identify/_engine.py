@@ -88,7 +88,8 @@ class Job:
 def _call(fun: ca.Function, args: list[dict]) -> list[dict]:
     """Evaluate ``fun`` on each argument set: one mapped call (threads) for several."""
     if len(args) == 1:
-        return [{k: np.asarray(v) for k, v in fun.call(args[0]).items()}]
+        (only,) = args
+        return [{k: np.asarray(v) for k, v in fun.call(only).items()}]
     key = (id(fun), len(args))
     if key not in _MAPS:
         _MAPS[key] = (fun, fun.map(len(args), "thread" if THREADS > 1 else "serial", min(THREADS, len(args))))

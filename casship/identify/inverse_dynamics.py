@@ -97,7 +97,7 @@ def smooth_trial(data: Dataset, sigma: Mapping[str, float], jerk: Mapping[str, f
     ...                  jerk={"u": 1e-3, "v": 1e-3, "r": 1e-5})           # doctest: +SKIP
     >>> s["r_dot"]                                                          # doctest: +SKIP
     """
-    from ..estimators import EKF, rts_smooth
+    from ..estimators import EKF
 
     m = rates_model()
     measured = tuple(measured or ("x", "y", "psi"))
@@ -129,7 +129,7 @@ def smooth_trial(data: Dataset, sigma: Mapping[str, float], jerk: Mapping[str, f
     spread.update({c: sigma[c] for c in measured})
     spread.update(dict(P0 or {}))
     prior = Gaussian(m.states(**first), np.diag([spread[s] ** 2 for s in m.state_names]))
-    sm = rts_smooth(ekf.filter(rec, prior))
+    sm = ekf.smooth(rec, prior)
     std = sm.std
     out = {name: np.asarray(data[name]) for name in data.names}
     for i, s in enumerate(m.state_names):

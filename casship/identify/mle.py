@@ -20,6 +20,7 @@ from ..data import Dataset
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..estimators.base import Estimator
+from ..estimators.gaps import bridge_gaps
 from ._engine import CHUNK, _chunk, _pieces
 from ._likelihood import LikelihoodEngine, StepSlots
 from ._solver import SolverReport
@@ -155,11 +156,14 @@ class MLEProblem(IdentificationProblem):
         rng = np.random.default_rng(seed)
         arrays = []
         for r, d in enumerate(self.records):
+            # a gap beyond the one-step prediction limit raises, or is bridged (option on_gap)
+            self.records[r] = d = bridge_gaps(est, d, self._priors[r].mean, self.space.base)
             a = est.prepare(d)
             per = {n: np.asarray(a[n], dtype=float) for n in StepSlots.SAMPLE}
             per.update(slots.draws(len(d), rng))
             arrays.append({**per, "prior": self._priors[r], "seed": int(rng.integers(2**31))})
         self.engine = LikelihoodEngine(slots, self.space, arrays, est.Q, est.R, jit)
+        self._check_data_amount()
 
     def _make_priors(self, m, records, x0, prior_var, estimated) -> list[Gaussian]:
         est, n = self.estimator, len(records)

@@ -19,7 +19,7 @@ from ..model import Model
 from ._engine import OutputErrorEngine
 from ._solver import SolverReport
 from .problem import IdentificationProblem
-from .records import as_records, noise_std
+from .records import as_records, check_gaps, noise_std
 from .result import FitResult
 
 __all__ = ["OutputErrorProblem"]
@@ -115,8 +115,10 @@ class OutputErrorProblem(IdentificationProblem):
             raise ValueError(f"segment must be >= 2 samples, got {segment}")
         self._setup(m, records, free, kwargs=kwargs, share=share, groups=groups, prior=prior, params=params, x0=x0,
                     estimate_x0=estimate_x0, bounds=bounds, scale=scale, measured=measured)
+        check_gaps(self.dmodel, self.records, self.x0, self.space.base, self.labels)
         self._arrays = [self._arrays_of(d) for d in self.records]
         self.engine = OutputErrorEngine(self.dmodel, self.space, self._arrays, self.meas_index, 1.0 / self.sigma, jit)
+        self._check_data_amount()
 
     def _sigma(self, records, measured, sigma) -> np.ndarray:
         m = self.dmodel.model

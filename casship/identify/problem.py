@@ -70,6 +70,14 @@ class IdentificationProblem:
             warnings.warn(f"{self.method}: heading {left_out} is measured in every record but not in the cost "
                           f"(measured = {list(self.measured)})", IdentificationWarning, stacklevel=3)
 
+    def _check_data_amount(self) -> None:
+        """Refuse a problem with no more measured values than free quantities the prior leaves open."""
+        n_obs, open_ = self._n_obs(), int(np.sum(self._prec == 0))
+        if n_obs <= open_:
+            raise ValueError(f"{self.method}: {n_obs} measured value(s) in {len(self.records)} record(s) for "
+                             f"{open_} free quantities without a prior ({', '.join(self.free)}): the data cannot "
+                             "determine them; give longer records, fewer free quantities or a prior")
+
     # -- what the subclasses provide ---------------------------------------------------------------
     def _residual_scale(self, f_data: float, n_obs: int) -> float:
         """Variance factor of the residuals (1 for a likelihood)."""

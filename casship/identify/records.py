@@ -1,9 +1,8 @@
-"""Records of an identification: decimation, noise estimates, initial states and groups.
+"""Records of an identification: noise estimates, initial states and groups.
 
 Functions here prepare what a multi-run fit needs from its records before any model is evaluated:
-a lighter record (:func:`decimate`), the measurement noise of each channel estimated from the
-record itself (:func:`noise_std`), each record's initial state from its first row, refusing a
-missing value (:func:`initial_states`), and the labels that say which records share a copy of a
+the measurement noise of each channel estimated from the record itself (:func:`noise_std`), each
+record's initial state from its first row, refusing a missing value (:func:`initial_states`), and the labels that say which records share a copy of a
 per-record or per-group quantity (:func:`share_labels`).
 """
 from __future__ import annotations
@@ -14,7 +13,7 @@ import numpy as np
 
 from ..data import Dataset
 
-__all__ = ["decimate", "noise_std", "initial_states", "share_labels", "record_label", "as_records"]
+__all__ = ["check_gaps", "noise_std", "initial_states", "share_labels", "record_label", "as_records"]
 
 
 def as_records(datasets) -> list[Dataset]:
@@ -32,6 +31,8 @@ def as_records(datasets) -> list[Dataset]:
     ------
     TypeError
         Naming the first item that is not a Dataset.
+    ValueError
+        For no records, or a record of fewer than two rows (naming it).
     """
     records = [datasets] if isinstance(datasets, Dataset) else list(datasets)
     if not records:
@@ -39,6 +40,9 @@ def as_records(datasets) -> list[Dataset]:
     for i, d in enumerate(records):
         if not isinstance(d, Dataset):
             raise TypeError(f"record {i} is a {type(d).__name__}, not a casship.Dataset")
+        if len(d) < 2:
+            raise ValueError(f"record {record_label(d, i)!r} has {len(d)} row(s); an identification record "
+                             "needs at least two samples")
     return records
 
 
@@ -57,36 +61,6 @@ def record_label(data: Dataset, i: int) -> str:
         ``meta["name"]``, else ``meta["source"]``, else ``"record i"``.
     """
     return str(data.meta.get("name", data.meta.get("source", f"record {i}")))
-
-
-def decimate(data: Dataset, k: int) -> Dataset:
-    """Every ``k``-th sample of a record (no filtering: decimate only records sampled well above the
-    dynamics and noise bandwidth of interest).
-
-    Parameters
-    ----------
-    data : Dataset
-    k : int
-        Keep samples ``0, k, 2k, ...``.
-
-    Returns
-    -------
-    Dataset
-
-    Examples
-    --------
-    >>> import numpy as np, casship as cs
-    >>> d = cs.Dataset(np.arange(10.0), {"a": np.arange(10.0)})
-    >>> decimate(d, 3).t.tolist()
-    [0.0, 3.0, 6.0, 9.0]
-    """
-    k = int(k)
-    if k < 1:
-        raise ValueError(f"decimation factor must be >= 1, got {k}")
-    if k == 1:
-        return data
-    idx = np.arange(0, len(data), k)
-    return Dataset(data.t[idx], {n: data[n][idx] for n in data.names}, data.units, data.meta)
 
 
 def noise_std(records, names: Sequence[str], angles: Sequence[str] = ()) -> dict[str, float]:
@@ -260,3 +234,40 @@ def share_labels(records, share: Mapping | None, groups: Mapping | None = None) 
             raise ValueError(f"share[{name!r}]: group labels must not be plain numbers (those name records)")
         out[name] = labels
     return out
+
+
+def check_gaps(dmodel, records, x0, params, labels) -> None:
+    """Refuse a sample interval longer than a fixed-step discretisation predicts over stably.
+
+    A simulation (output error) steps from sample to sample; over a gap beyond the stability limit of
+    ``euler``/``rk4`` at the start (:func:`casship.validity.stable_step` times the sub-steps) it
+    explodes instead of predicting. Adaptive and exact discretisations have no limit.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    records : list of Dataset
+    x0 : list of array
+        Each record's initial state (the linearisation point).
+    params : array
+        Parameter vector.
+    labels : list of str
+        Record names for the message.
+
+    Raises
+    ------
+    ValueError
+        Naming the record, the rows and the limit.
+    """
+    from ..validity import stable_step
+
+    m = dmodel.model
+    for d, x, label in zip(records, x0, labels):
+        u = d.matrix(m.input_names)[0] if m.nu else np.zeros(0)
+        limit = stable_step(m, np.asarray(x, dtype=float), u, params, dmodel.method) * getattr(dmodel, "substeps", 1)
+        long = np.flatnonzero(d.dt > limit)
+        if long.size:
+            k = int(long[0])
+            raise ValueError(f"record {label!r}: time gap of {d.dt[k]:.4g} s between t = {d.t[k]:g} and "
+                             f"{d.t[k + 1]:g} s (rows {k} and {k + 1}) is longer than {limit:.4g} s, the longest "
+                             f"step the {dmodel.method} simulation takes stably; split the record there")

@@ -241,7 +241,7 @@ def _encapsulated_problem(text: str) -> str | None:
 
 def _first_text(exc: Exception) -> str:
     """The message of a pynmea2 exception (whose first argument may be a tuple)."""
-    arg = exc.args[0] if exc.args else str(exc)
+    arg = next(iter(exc.args), str(exc))
     while isinstance(arg, tuple) and arg:
         arg = arg[0]
     return str(arg)

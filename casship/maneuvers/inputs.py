@@ -312,12 +312,12 @@ def _rate_limited(t: np.ndarray, target: np.ndarray, rate: float | None) -> np.n
         return target
     if rate <= 0:
         raise ValueError(f"rudder rate must be positive, got {rate}")
-    out = np.empty_like(target)
-    out[0] = target[0]
+    followed = np.empty_like(target)
+    followed[0] = target[0]
     steps = rate * np.diff(t)
     for k in range(1, t.size):
-        out[k] = out[k - 1] + np.clip(target[k] - out[k - 1], -steps[k - 1], steps[k - 1])
-    return out
+        followed[k] = followed[k - 1] + np.clip(target[k] - followed[k - 1], -steps[k - 1], steps[k - 1])
+    return followed
 
 
 def _open_loop(model: Model, t, delta, n, extra) -> dict[str, np.ndarray]:

@@ -53,7 +53,7 @@ class MHEOptions(EstimatorOptions):
 
     Parameters
     ----------
-    gate, jit, outputs
+    gate, jit, outputs, max_gap, on_gap
         The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     horizon : int
         Number of steps ``N`` in the window (``N + 1`` samples). ``N >= len(data) - 1`` turns

@@ -36,8 +36,8 @@ def _linearised(stage: ca.Function, term: ca.Function, arrival: ca.Function, nx:
     """SX Functions giving the stage, terminal and arrival Jacobians and values."""
     x, v, xn = ca.SX.sym("x", nx), ca.SX.sym("v", nv), ca.SX.sym("x_next", nx)
     rest = [ca.SX.sym(n, stage.size_in(n)) for n in ("u", "y", "mask", "u_prev_next", "dt_next", "p")]
-    out = stage(x, v, xn, *rest)
-    gap, r = out[0], out[1]
+    stage_out = stage.call(dict(zip(stage.name_in(), [x, v, xn, *rest])))
+    gap, r = stage_out["gap"], stage_out["r"]
     ny = r.numel() - nv
     rm = r[:ny]
     lin = ca.Function("mhe_stage_lin", [x, v, xn, *rest],
