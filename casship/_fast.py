@@ -155,7 +155,9 @@ def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, me
     memory : mapping name -> array
         Initial memory (matrices keep their shape).
     per_sample : mapping name -> array
-        Inputs that change per sample: the columns of sample ``k`` at ``[:, k*c:(k+1)*c]``.
+        Inputs that change per sample: the columns of sample ``k`` at ``[:, k*c:(k+1)*c]``, or a 3-D
+        array ``(n, rows, cols)`` of the samples' matrices (any strides: copied without an
+        intermediate).
     constants : mapping name -> array
         Inputs that are the same for every sample (written once per piece length).
     pad : mapping name -> value
@@ -194,6 +196,13 @@ def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, me
         for k, v in mem.items():
             call[k] = v
         for k, src in per_sample.items():
+            if src.ndim == 3:                         # (n, rows, cols): one strided copy into the buffer
+                r, c = src.shape[1:]
+                blocks = call.flat_in(k).reshape(size, c, r)
+                blocks[:take] = src[start:start + take].transpose(0, 2, 1)
+                if take < size:
+                    blocks[take:] = pad[k] if k in pad else blocks[take - 1]
+                continue
             view = call.arg(k)
             c = view.shape[1] // size
             view[:, :take * c] = src[:, start * c:(start + take) * c]

@@ -35,7 +35,7 @@ import numpy as np
 
 from .model import Model
 
-__all__ = ["ValidityError", "ValidityWarning", "OPT_IN", "MARGIN", "check_inputs", "check_states", "warn_states",
+__all__ = ["ValidityError", "ValidityWarning", "OPT_IN", "MARGIN", "check_inputs", "is_stable_step", "check_states", "warn_states",
            "stable_step", "check_step", "describe_limit"]
 
 #: How a caller opts in to out-of-range use (appended to every validity message).
@@ -218,6 +218,43 @@ def _critical_steps(method: str, lam: np.ndarray) -> np.ndarray:
     return np.where(unbounded, np.inf, lo)
 
 
+def _decaying_modes(model: Model, x, u, p) -> np.ndarray | None:
+    """Eigenvalues with negative real part of ``A = df/dx`` at ``(x, u, p)`` (None: A not finite)."""
+    A = np.array(model.f_jac(x, u, p, np.zeros(model.nw))[0], dtype=float).reshape(model.nx, model.nx)
+    if not np.all(np.isfinite(A)):
+        return None
+    lam = np.linalg.eigvals(A)
+    scale = max(1e-300, float(np.abs(lam).max(initial=0.0)))
+    return lam[lam.real < -1e-9 * scale]
+
+
+def is_stable_step(model: Model, x, u, p, method: str, h: float) -> bool:
+    """Whether the step ``h`` [s] keeps every decaying mode of ``model`` at ``(x, u, p)`` stable.
+
+    The same test as :func:`stable_step` at one step (``|R(h lam)| <= 1`` for every decaying mode),
+    without searching for the limit: the cheap check of a record whose longest interval is ``h``.
+
+    Parameters
+    ----------
+    model : Model
+        Continuous-time model.
+    x, u, p : array_like
+        State, input and parameter vectors of the linearisation point.
+    method : str
+        Fixed-step method (any other method is always stable).
+    h : float
+        The step [s].
+
+    Returns
+    -------
+    bool
+    """
+    if method not in _STABILITY:
+        return True
+    lam = _decaying_modes(model, np.asarray(x, dtype=float), np.asarray(u, dtype=float), p)
+    return lam is None or bool(np.all(_amplification(method, h * lam.astype(complex)) <= 1.0 + 1e-12))
+
+
 def stable_step(model: Model, x, u, p, method: str) -> float:
     """Largest stable step [s] of a fixed-step ``method`` for ``model`` linearised at ``(x, u, p)``.
 
@@ -242,12 +279,9 @@ def stable_step(model: Model, x, u, p, method: str) -> float:
     """
     if method not in _STABILITY:
         return np.inf
-    A = np.array(model.f_jac(x, u, p, np.zeros(model.nw))[0], dtype=float).reshape(model.nx, model.nx)
-    if not np.all(np.isfinite(A)):
+    decaying = _decaying_modes(model, x, u, p)
+    if decaying is None:
         return np.inf
-    lam = np.linalg.eigvals(A)
-    scale = max(1e-300, float(np.abs(lam).max(initial=0.0)))
-    decaying = lam[lam.real < -1e-9 * scale]
     return float(_critical_steps(method, decaying).min(initial=np.inf))
 
 

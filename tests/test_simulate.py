@@ -385,6 +385,18 @@ def test_step_limit_of_a_lightly_damped_mode_for_euler():
     assert abs(1 + (1.01 * h) * lam) > 1 > abs(1 + (0.99 * h) * lam)
 
 
+@pytest.mark.parametrize("method", ["euler", "rk4"])
+def test_one_step_stability_test_agrees_with_the_limit(method):
+    from casship.validity import is_stable_step, stable_step
+
+    m = cs.models.get_model("shi-taylor")
+    x, u, p = m.states(u=7.0, r=0.01), m.inputs(delta=0.1, n=1.5), m.params()
+    h = stable_step(m, x, u, p, method)
+    assert np.isfinite(h)
+    assert is_stable_step(m, x, u, p, method, 0.999 * h) and not is_stable_step(m, x, u, p, method, 1.001 * h)
+    assert is_stable_step(m, x, u, p, "cvodes", 1e6)
+
+
 def test_duplicate_and_nan_time_stamps_are_named():
     m = cs.models.nomoto_first_order()
     with pytest.raises(ValueError, match=r"t: time stamps must increase strictly; row 2 \(1.0\) is not after row 1"):

@@ -17,7 +17,7 @@ import warnings
 import numpy as np
 
 from ..data import Dataset
-from ..validity import stable_step
+from ..validity import is_stable_step, stable_step
 
 __all__ = ["gap_limit", "bridge_gaps", "bridge_pieces"]
 
@@ -63,6 +63,16 @@ def gap_limit(est, x, u, p=None) -> float:
         * getattr(dm, "substeps", 1)
 
 
+def _within_limit(est, x, u, p, dt: float) -> bool:
+    """Whether one prediction over ``dt`` [s] stays within :func:`gap_limit` (one stability test)."""
+    if est.options.max_gap is not None:
+        return dt <= est.options.max_gap
+    m, dm = est.model, est.dmodel
+    pv = m.params() if p is None else m.params(p)
+    return is_stable_step(m, np.asarray(x, dtype=float), np.asarray(u, dtype=float), pv, dm.method,
+                          dt / getattr(dm, "substeps", 1))
+
+
 def _message(est, where: str, gap: float, limit: float) -> str:
     return (f"{est.name}: time gap of {gap:.4g} s {where} is longer than {limit:.4g} s, the longest interval the "
             f"{est.dmodel.method} prediction bridges in one step (option max_gap; the stability limit by default); "
@@ -104,7 +114,10 @@ def bridge_gaps(est, data: Dataset, x, p=None) -> Dataset:
     if missing:
         return data                                # prepare() names the missing columns
     U = data.matrix(m.input_names)
-    limit = gap_limit(est, x, U[0] if m.nu else np.zeros(0), p)
+    u0 = U[0] if m.nu else np.zeros(0)
+    if _within_limit(est, x, u0, p, float(data.dt.max())):
+        return data                                # the usual case, without searching for the limit
+    limit = gap_limit(est, x, u0, p)
     long = np.flatnonzero(data.dt > limit)
     if long.size == 0:
         return data

@@ -6,6 +6,8 @@ memory kept in bound buffers), the window runner of the MHE.
 """
 from __future__ import annotations
 
+import math
+
 from collections.abc import Mapping
 
 import numpy as np
@@ -135,8 +137,8 @@ class StepEngine:
         self._y, self._mask = first.flat_in("y"), first.flat_in("mask")
         self._dt, self._gate = first.flat_in("dt"), first.flat_in("gate")
         self._u_prev, self._u = first.flat_in("u_prev"), first.flat_in("u")
-        self._ok = np.zeros(est.ny, dtype=bool)
         self._nu, self._ny = m.nu, est.ny
+        self._zeros_u = np.zeros(m.nu)
         self._gated = est.options.gate is not None
         self._thresholds = np.array([est.gate_threshold(c) for c in range(est.ny + 1)])
         self._draws = [(first.flat_in(k), r * c) for k, (r, c) in est._draw_shapes().items()]
@@ -146,7 +148,7 @@ class StepEngine:
         self._P = [c.out("P") for c in self._calls]
 
     def update(self, y, dt, u_prev, u):
-        if not (dt >= 0 and np.isfinite(dt)):
+        if not (dt >= 0 and math.isfinite(dt)):
             raise ValueError(f"dt must be >= 0 and finite, got {dt}")
         if dt > self._gap_limit and self._bridged(y, dt, u_prev, u):
             return self._x[1 - self._cur].copy()
@@ -178,17 +180,16 @@ class StepEngine:
         return True
 
     def _update(self, y, dt, u_prev, u):
-        y = np.asarray(y, dtype=float)
-        if y.ndim == 0 and self._ny == 1:         # one measured output: a scalar is its value
-            y = y.reshape(1)
-        if y.shape != self._y.shape:
-            raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got shape {y.shape}")
+        if type(y) is not np.ndarray or y.shape != self._y.shape:     # the fast path takes the array as is
+            y = np.asarray(y, dtype=float)
+            if y.ndim == 0 and self._ny == 1:         # one measured output: a scalar is its value
+                y = y.reshape(1)
+            if y.shape != self._y.shape:
+                raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got shape {y.shape}")
         self._y[:] = y
-        ok = self._ok
-        np.isfinite(self._y, out=ok)
-        self._mask[:] = ok
+        np.isfinite(self._y, out=self._mask)            # 1.0 where measured
         if self._gated:
-            self._gate[0] = self._thresholds[np.count_nonzero(ok)]
+            self._gate[0] = self._thresholds[np.count_nonzero(self._mask)]
         self._dt[0] = dt
         if self._nu:
             self._inputs(u_prev, u)
@@ -213,7 +214,9 @@ class StepEngine:
             self._u[:] = u
         else:
             self._u[:] = self._u_prev
-        if not (np.all(np.isfinite(self._u_prev)) and np.all(np.isfinite(self._u))):
+        # one test for NaN and inf in both: a dot product with zeros is NaN exactly then (0 * inf = NaN),
+        # a third of the time of two isfinite reductions on this per-sample path
+        if not math.isfinite(self._u_prev.dot(self._zeros_u) + self._u.dot(self._zeros_u)):
             raise ValueError(f"inputs must be finite, got u_prev = {self._u_prev}, u = {self._u}")
 
     @property
@@ -235,7 +238,7 @@ class StepEngine:
                 continue
             v = call.out(k)
             if k == "e":
-                values[k] = np.where(self._ok, v.ravel(), np.nan)
+                values[k] = np.where(self._mask > 0, v.ravel(), np.nan)
             elif k == "accepted":
                 values["rejected"] = bool(v[0, 0] < 0.5)
             elif v.size == 1:

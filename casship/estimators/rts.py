@@ -86,9 +86,9 @@ def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
     if n == 1:
         return result.replace(estimator=f"{result.estimator}+RTS")
     angles = tuple(bool(a) for a in result.angle_states)
-    cols = lambda a: np.ascontiguousarray(a.transpose(1, 0, 2).reshape(a.shape[1], -1))  # noqa: E731 (sample blocks side by side)
-    per = {"x_filt": result.x[-2::-1].T, "P_filt": cols(result.P[-2::-1]), "x_pred": result.x_pred[:0:-1].T,
-           "P_pred": cols(result.P_pred[:0:-1]), "C": cols(result.C[:0:-1])}
+    # backwards in time, as (sample, rows, cols) views: run_fold copies them straight into its buffers
+    per = {"x_filt": result.x[-2::-1, :, None], "P_filt": result.P[-2::-1], "x_pred": result.x_pred[:0:-1, :, None],
+           "P_pred": result.P_pred[:0:-1], "C": result.C[:0:-1]}
     _, outs = run_fold(lambda size: _backward_fold(nx, angles, size, bool(jit)), n - 1, FOLD_CHUNK,
                        memory={"x": result.x[-1], "P": result.P[-1]}, per_sample=per, constants={}, keep=("x", "P"))
     xs = np.vstack([outs["x"].reshape(n - 1, nx)[::-1], result.x[-1:]])
