@@ -57,3 +57,22 @@ def test_bad_file_raises(tmp_path):
         read_marin(f)
     with pytest.raises(FileNotFoundError):
         read_marin(tmp_path / "missing.dat")
+
+
+def test_trial_table_names_the_bad_line_and_value(tmp_path):
+    from pathlib import Path
+
+    from casship.io.table import read_numeric_rows
+
+    path = Path("trial.dat")
+    title = ["title", "units"]
+    good = ["0 1 2", "1 1 2", "2 1 2"]
+    assert read_numeric_rows(path, title + good, 2, ["time", "a", "b"]).shape == (3, 3)
+    with pytest.raises(ValueError, match=r"line 4 has 2 fields, expected 3 \(time a \?\)"):
+        read_numeric_rows(path, title + ["0 1 2", "1 1"], 2, ["time", "a", None])
+    with pytest.raises(ValueError, match=r"line 3 is not numeric: '0 x 2'"):
+        read_numeric_rows(path, title + ["0 x 2"], 2, ["time", "a", "b"])
+    with pytest.raises(ValueError, match="fewer than 3 data rows"):
+        read_numeric_rows(path, title + good[:2], 2, ["time", "a", "b"])
+    with pytest.raises(ValueError, match=r"non-finite value in column 1 \(a\) at data row 2"):
+        read_numeric_rows(path, title + good[:2] + ["2 nan 2"], 2, ["time", "a", "b"])

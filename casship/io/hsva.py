@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from ..data import Dataset
+from .table import read_numeric_rows
 
 __all__ = ["read_hsva", "hsva_runs", "HSVA_COLUMNS", "HSVA_SCALE"]
 
@@ -121,24 +122,7 @@ def read_hsva(path, *, full_scale: bool = False, flip_rudder: bool = True, scale
     if len(lines) < 5:
         raise ValueError(f"{path}: expected 4 title lines and data rows, got {len(lines)} lines")
     title = " | ".join(s.strip() for s in lines[:4] if s.strip())
-    rows = []
-    for number, line in enumerate(lines[4:], start=5):
-        fields = line.split()
-        if not fields:
-            continue
-        if len(fields) != len(HSVA_COLUMNS):
-            raise ValueError(f"{path}: line {number} has {len(fields)} fields, expected {len(HSVA_COLUMNS)}")
-        try:
-            rows.append([float(f) for f in fields])
-        except ValueError:
-            raise ValueError(f"{path}: line {number} is not numeric: {line!r}") from None
-    if len(rows) < 3:
-        raise ValueError(f"{path}: fewer than 3 data rows")
-    data = np.asarray(rows)
-    if not np.all(np.isfinite(data)):
-        row, col = np.argwhere(~np.isfinite(data))[0]
-        raise ValueError(f"{path}: non-finite value in column {col} ({HSVA_COLUMNS[col] or 'unestablished'}) "
-                         f"at data row {row}")
+    data = read_numeric_rows(path, lines, 4, HSVA_COLUMNS)
     col = {name: data[:, i] for i, name in enumerate(HSVA_COLUMNS) if name is not None}
     t = col["time"]
     if np.any(np.diff(t) <= 0):

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..data import Dataset
+from .table import read_numeric_rows
 
 __all__ = ["read_marin", "MARIN_COLUMNS", "marin_runs"]
 
@@ -68,24 +69,7 @@ def read_marin(path, *, flip_rudder: bool = True) -> Dataset:
         raise FileNotFoundError(f"MARIN file {path} does not exist")
     lines = path.read_text().splitlines()
     title = " ".join(s.strip() for s in lines[:2])
-    rows = []
-    for number, line in enumerate(lines[2:], start=3):
-        fields = line.split()
-        if not fields:
-            continue
-        if len(fields) != len(MARIN_COLUMNS):
-            raise ValueError(f"{path}: line {number} has {len(fields)} fields, expected {len(MARIN_COLUMNS)} "
-                             f"({' '.join(MARIN_COLUMNS)})")
-        try:
-            rows.append([float(f) for f in fields])
-        except ValueError:
-            raise ValueError(f"{path}: line {number} is not numeric: {line!r}") from None
-    if len(rows) < 3:
-        raise ValueError(f"{path}: fewer than 3 data rows")
-    data = np.asarray(rows)
-    if not np.all(np.isfinite(data)):
-        row, col = np.argwhere(~np.isfinite(data))[0]
-        raise ValueError(f"{path}: non-finite value in column {MARIN_COLUMNS[col]!r} at data row {row}")
+    data = read_numeric_rows(path, lines, 2, MARIN_COLUMNS)
     col = {name: data[:, i] for i, name in enumerate(MARIN_COLUMNS)}
     stamps = col["time"] - col["time"][0]
     k = np.arange(stamps.size, dtype=float)
