@@ -44,11 +44,20 @@ class EnKFOptions(EstimatorOptions):
 
 
 def _wrap_rows(D, angles):
-    """``D`` with its angle rows wrapped to [-pi, pi) (whole-matrix operations, no row slicing)."""
-    if not np.any(angles):
+    """``D`` with its angle rows wrapped to [-pi, pi).
+
+    Only the angle rows are computed on (a few of the rows: the wrap is the costliest elementwise
+    chain of the step), and the correction is scattered back by a constant 0/1 matrix.
+    """
+    rows = np.flatnonzero(np.asarray(angles, dtype=bool))
+    if not rows.size:
         return D
-    a = ca.repmat(ca.DM(np.asarray(angles, dtype=float)), 1, D.shape[1])
-    return D - a * (2 * np.pi * ca.floor((D + np.pi) / (2 * np.pi)))
+    A = D[rows.tolist(), :]
+    scatter = ca.DM.zeros(D.shape[0], rows.size)           # sparse: one entry per angle row
+    for j, i in enumerate(rows):
+        scatter[int(i), j] = 1.0
+    scatter = ca.sparsify(scatter)
+    return D - scatter @ (2 * np.pi * ca.floor((A + np.pi) / (2 * np.pi)))
 
 
 def _mean(X, angles):
