@@ -67,6 +67,7 @@ class BufferedCall:
         self._flat_in = dict(zip(self.names_in, self.args))
         self._flat_out = dict(zip(self.names_out, self.res))
         self._buf, self._trigger = fun.buffer()
+        self._redirected = {}
         for i, a in enumerate(self.args):
             self._buf.set_arg(i, memoryview(a))
         for i, r in enumerate(self.res):
@@ -103,6 +104,20 @@ class BufferedCall:
         else:
             raise ValueError(f"{self.fun.name()}: input {name!r} has shape {self._in[name].shape}, "
                              f"got {v.size} values (shape {v.shape})")
+
+    def redirect(self, name: str, target: np.ndarray | None) -> None:
+        """Write output ``name`` straight into ``target`` (a contiguous float vector of its size) on
+        the following calls, or back into its own array with ``None``. Lets a fold write its
+        per-sample results into the final result block without a copy."""
+        i = self.names_out.index(name)
+        if target is None:
+            self._redirected.pop(name, None)
+            self._buf.set_res(i, memoryview(self.res[i]))
+            return
+        if target.dtype != np.float64 or target.size != self.res[i].size or not target.flags.c_contiguous:
+            raise ValueError(f"{self.fun.name()}: output {name!r} needs a contiguous float vector of {self.res[i].size}")
+        self._redirected[name] = target                 # keeps the target alive while CasADi holds its address
+        self._buf.set_res(i, memoryview(target))
 
     def flat_in(self, name: str) -> np.ndarray:
         """The flat (column-major) array bound to input ``name``."""
@@ -211,13 +226,23 @@ def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, me
                     view[:, take * c:] = pad[k]
                 elif src.shape[0]:
                     view[:, take * c:] = np.tile(src[:, (start + take - 1) * c:(start + take) * c], (1, size - take))
-        call()
+        # a whole piece writes its results straight into the result block; a padded last piece
+        # writes into the call's own arrays and its first `take` samples are copied
         for k in keep:
             r, c = shapes[k]
-            flat[k][start * r * c:(start + take) * r * c] = call.flat_out(k)[:take * r * c]
+            call.redirect(k, flat[k][start * r * c:(start + size) * r * c] if take == size else None)
+        call()
+        if take < size:
+            for k in keep:
+                r, c = shapes[k]
+                flat[k][start * r * c:(start + take) * r * c] = call.flat_out(k)[:take * r * c]
         for k in mem:
-            c = shapes[k][1]
-            mem[k] = call.out(k)[:, (take - 1) * c:take * c].copy()
+            r, c = shapes[k]
+            if k in keep:
+                last = flat[k][(start + take - 1) * r * c:(start + take) * r * c]
+                mem[k] = last.reshape((r, c), order="F").copy()
+            else:
+                mem[k] = call.out(k)[:, (take - 1) * c:take * c].copy()
         start += take
     for k in flat:                                # read-only: results may share them without a copy
         for a in (flat[k].base, flat[k], outs[k]):
