@@ -7,7 +7,6 @@ memory kept in bound buffers), the window runner of the MHE.
 from __future__ import annotations
 
 import math
-
 from collections.abc import Mapping
 
 import numpy as np

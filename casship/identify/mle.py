@@ -16,7 +16,6 @@ import casadi as ca
 import numpy as np
 
 from ..data import Dataset
-
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..estimators.base import Estimator

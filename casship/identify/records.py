@@ -2,8 +2,9 @@
 
 Functions here prepare what a multi-run fit needs from its records before any model is evaluated:
 the measurement noise of each channel estimated from the record itself (:func:`noise_std`), each
-record's initial state from its first row, refusing a missing value (:func:`initial_states`), and the labels that say which records share a copy of a
-per-record or per-group quantity (:func:`share_labels`).
+record's initial state from its first row, refusing a missing value (:func:`initial_states`), and
+the labels that say which records share a copy of a per-record or per-group quantity
+(:func:`share_labels`); sample intervals a simulation cannot step over are refused (:func:`check_gaps`).
 """
 from __future__ import annotations
 
@@ -259,12 +260,16 @@ def check_gaps(dmodel, records, x0, params, labels) -> None:
     ValueError
         Naming the record, the rows and the limit.
     """
-    from ..validity import stable_step
+    from ..validity import is_stable_step, stable_step
 
     m = dmodel.model
+    substeps = getattr(dmodel, "substeps", 1)
     for d, x, label in zip(records, x0, labels):
         u = d.matrix(m.input_names)[0] if m.nu else np.zeros(0)
-        limit = stable_step(m, np.asarray(x, dtype=float), u, params, dmodel.method) * getattr(dmodel, "substeps", 1)
+        x = np.asarray(x, dtype=float)
+        if is_stable_step(m, x, u, params, dmodel.method, float(d.dt.max()) / substeps):
+            continue
+        limit = stable_step(m, x, u, params, dmodel.method) * substeps
         long = np.flatnonzero(d.dt > limit)
         if long.size:
             k = int(long[0])
