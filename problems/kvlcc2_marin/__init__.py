@@ -9,14 +9,17 @@ refinement of the full-scale :func:`casship.models.kvlcc2` with asymmetry terms 
 switches (``kvlcc2(asymmetry=True, smooth=True)``), asymmetry per facility.
 
 Validation (:mod:`.validate`): leave-one-run-out (every run held out once; the whole workflow,
-propulsion trim and free-set choice included, runs on the other fifteen) and leave-one-facility-out
-(train on one facility, predict the other's runs); each held-out run replayed with the published
+propulsion trim and free-set choice included, runs on the other fifteen), leave-one-facility-out
+(train on one facility, predict the other's runs) and leave-one-direction-out (train on the runs
+whose first rudder goes to one side, predict the runs that turn the other way first: the situation
+of a user who has trials in one direction only); each held-out run replayed with the published
 constants and with the fit that did not see it.
 
 Outputs (:mod:`.report`): ``report.md``, ``fit.json`` (the fit on all runs for the full-scale model,
 with the MARIN facility's asymmetry terms; replays with ``casship simulate --model kvlcc2 --params
 fit.json``), ``fit_all_runs.json`` (with all per-facility copies), ``fit_without_<run>.json``,
-``cross_validation.csv``, ``fig_heldout_<run>.png``, ``fig_facility_<name>.png``, ``summary.json``.
+``cross_validation.csv``, ``fig_heldout_<run>.png``, ``fig_facility_<name>.png``, ``fig_direction_<positive|negative>.png``,
+``summary.json``.
 """
 from __future__ import annotations
 
@@ -26,7 +29,7 @@ from casship.progress import track
 from casship.studies import Study
 
 from ..kit import data_folder
-from .data import load_runs
+from .data import first_rudder_side, load_runs
 from .report import write_outputs
 from .validate import evaluate
 from .workflow import fit_fold, smooth_runs, with_smoothed_speed
@@ -50,17 +53,20 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     runs = with_smoothed_speed(runs, smoothed)
     dt = QUICK["dt"] if quick else 2.0
     max_free = QUICK["max_free"] if quick else 15
-    folds = [(name,) for name in (QUICK["held_out"] if quick else [r.name for r in runs])]
-    facilities = sorted({r.facility for r in runs})
-    if not quick and len(facilities) > 1:
-        folds += [tuple(r.name for r in runs if r.facility == fac) for fac in facilities]
+    folds = [("run", name, (name,)) for name in (QUICK["held_out"] if quick else [r.name for r in runs])]
+    if not quick:
+        for kind, label_of in (("facility", lambda r: r.facility), ("direction", first_rudder_side)):
+            labels = {r.name: label_of(r) for r in runs}
+            if len(set(labels.values())) > 1:
+                folds += [(kind, label, tuple(n for n, v in labels.items() if v == label))
+                          for label in sorted(set(labels.values()))]
     everything = fit_fold(runs, smoothed, dt=dt, max_free=max_free)
     in_sample = [evaluate(r, everything)["row"] for r in runs]
     results = []
-    for held in track(folds, "kvlcc2-marin folds", unit="fold"):
+    for kind, label, held in track(folds, "kvlcc2-marin folds", unit="fold"):
         fold = fit_fold([r for r in runs if r.name not in held], smoothed, dt=dt, max_free=max_free)
         rows = [evaluate(r, fold) for r in runs if r.name in held]
-        results.append({"held": held, "fold": fold, "evaluations": rows})
+        results.append({"kind": kind, "label": label, "held": held, "fold": fold, "evaluations": rows})
     return write_outputs(out, runs, everything, results, in_sample, quick=quick)
 
 

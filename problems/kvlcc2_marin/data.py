@@ -21,7 +21,7 @@ import casship as cs
 from casship.io import hsva_runs, marin_runs, read_hsva, read_marin
 from casship.maneuvers import execute_time
 
-__all__ = ["Run", "load_runs", "fit_record", "approach", "FIT_DT", "INPUTS"]
+__all__ = ["Run", "load_runs", "fit_record", "approach", "first_rudder_side", "FIT_DT", "INPUTS"]
 
 FIT_DT = 2.0                       # s, sampling period of the fit records (full scale)
 INPUTS = ("delta", "n")
@@ -92,3 +92,13 @@ def approach(run: Run) -> dict:
     slope = float(np.polyfit(d.t[:k] - d.t[0], u, 1)[0])
     return {"t_exec_s": t_exec, "u": float(u.mean()), "n": float(np.mean(d["n"][:k])),
             "delta": float(np.mean(d["delta"][:k])), "r": float(np.mean(d["r"][:k])), "u_dot": slope}
+
+
+def first_rudder_side(run: Run) -> str:
+    """``"+"`` or ``"-"``: the sign of the first rudder deflection (5 deg from the approach angle), the
+    side the manoeuvre turns to first."""
+    d = np.asarray(run.data["delta"], dtype=float)
+    moved = np.flatnonzero(np.abs(d - d[0]) > np.radians(5.0))
+    if moved.size == 0:
+        raise ValueError(f"{run.name}: the rudder never moves by 5 deg")
+    return "+" if d[moved[0]] > d[0] else "-"

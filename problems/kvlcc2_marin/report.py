@@ -65,12 +65,16 @@ def _propulsion(runs, everything) -> tuple[str, dict]:
     return md_table(rows, first="run", spec=".4g"), rows
 
 
+_GROUP_TITLE = {"facility": lambda label: f"of {label}",
+                "direction": lambda label: f"with the first rudder {'positive' if label == '+' else 'negative'}"}
+
+
 def _figures(out: Path, runs, results) -> list[str]:
     names = []
     by_name = {r.name: r for r in runs}
     for res in results:
         evals = res["evaluations"]
-        if len(evals) == 1:
+        if res["kind"] == "run":
             ev = evals[0]
             run = by_name[ev["row"]["run"]]
             name = f"fig_heldout_{_slug(run.name)}.png"
@@ -79,8 +83,8 @@ def _figures(out: Path, runs, results) -> list[str]:
                              f"{run.name} replayed; fit on the other {len(res['fold'].train)} runs")
             names.append(name)
         else:
-            fac = by_name[evals[0]["row"]["run"]].facility
-            name = f"fig_facility_{fac}.png"
+            label = _GROUP_TITLE[res["kind"]](res["label"])
+            name = f"fig_{res['kind']}_{_slug(_GROUP_TITLE[res['kind']](res['label']).split()[-1])}.png"
             ncol = 3
             nrow = int(math.ceil(len(evals) / ncol))
             with figure(out / name, nrow, ncol, figsize=(15, 3.2 * nrow), squeeze=False) as (fig, axes):
@@ -88,7 +92,7 @@ def _figures(out: Path, runs, results) -> list[str]:
                     run = by_name[ev["row"]["run"]]
                     ax.plot(run.data.t, np.degrees(np.unwrap(run.data["psi"])), "k-", lw=1.2, label="measured")
                     ax.plot(ev["published"].t, np.degrees(ev["published"]["psi"]), "C1--", lw=1, label="published")
-                    ax.plot(ev["fit"].t, np.degrees(ev["fit"]["psi"]), "C0-", lw=1, label=f"fit without {fac}")
+                    ax.plot(ev["fit"].t, np.degrees(ev["fit"]["psi"]), "C0-", lw=1, label=f"fit without the runs {label}")
                     ax.set_title(run.name, fontsize=9)
                     ax.set_xlabel("t [s]")
                     ax.set_ylabel("heading [deg]")
@@ -135,18 +139,21 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, quick: boo
     fit_marin = dataclasses.replace(everything.fit, params=params_for(everything, "MARIN"))
     fit_marin.to_json(out / "fit.json")
     everything.fit.to_json(out / "fit_all_runs.json")
-    loro = [res for res in results if len(res["held"]) == 1]
-    lofo = [res for res in results if len(res["held"]) > 1]
+    loro = [res for res in results if res["kind"] == "run"]
+    lofo = [res for res in results if res["kind"] == "facility"]
+    lodo = [res for res in results if res["kind"] == "direction"]
     for res in loro:
         res["fold"].fit.to_json(out / f"fit_without_{_slug(res['held'][0])}.json")
     figs = _figures(out, runs, results)
     rows_loro = [ev["row"] for res in loro for ev in res["evaluations"]]
     rows_lofo = [ev["row"] for res in lofo for ev in res["evaluations"]]
+    rows_lodo = [ev["row"] for res in lodo for ev in res["evaluations"]]
     with open(out / "cross_validation.csv", "w", newline="") as fh:
-        keys = sorted({k for r in rows_loro + rows_lofo for k in r})
+        keys = sorted({k for r in rows_loro + rows_lofo + rows_lodo for k in r})
         writer = csv.DictWriter(fh, fieldnames=["validation", *keys])
         writer.writeheader()
-        for tag, rows in (("leave-one-run-out", rows_loro), ("leave-one-facility-out", rows_lofo)):
+        for tag, rows in (("leave-one-run-out", rows_loro), ("leave-one-facility-out", rows_lofo),
+                          ("leave-one-direction-out", rows_lodo)):
             for r in rows:
                 writer.writerow({"validation": tag, **r})
     prop_table, prop_rows = _propulsion(runs, everything)
@@ -166,6 +173,13 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, quick: boo
         rep.add(f"psi RMSE lower on {sum(r['psi_better'] for r in rows_lofo)} of {len(rows_lofo)}; indices "
                 f"closer on {sum(r['indices_closer'] for r in rows_lofo)} of {len(rows_lofo)}. "
                 + _shortfalls(rows_lofo), _cv_table(rows_lofo))
+    if rows_lodo:
+        rep.section("Leave-one-direction-out: runs that turn one way first predicted by a fit on the others")
+        rep.add("The runs are split by the side of their first rudder deflection; each side's runs are "
+                "replayed with a fit on the other side's (the situation of trials in one direction only). "
+                f"psi RMSE lower on {sum(r['psi_better'] for r in rows_lodo)} of {len(rows_lodo)}; indices "
+                f"closer on {sum(r['indices_closer'] for r in rows_lodo)} of {len(rows_lodo)}. "
+                + _shortfalls(rows_lodo), _cv_table(rows_lodo))
     rep.section("In training: the fit on all runs replayed on each of them")
     rep.add("What the model variant can do at best with this free set (not a prediction).", _cv_table(in_sample, "run (in training)"))
     rep.section("Free set, prior and estimates (fit on all runs)")
@@ -182,8 +196,8 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, quick: boo
     rep.section("Propulsion: propeller rate needed to hold each run's approach speed")
     rep.add(f"Straight-run resistance trimmed to R_0' = {everything.R_0:.5f} (published 0.022).", prop_table)
     rep.section("Folds")
-    fold_rows = {", ".join(res["held"]) if len(res["held"]) == 1 else f"all {len(res['held'])} runs of "
-                 + res["evaluations"][0]["row"]["facility"]: {
+    fold_rows = {", ".join(res["held"]) if res["kind"] == "run" else
+                 f"all {len(res['held'])} runs {_GROUP_TITLE[res['kind']](res['label'])}": {
                      "free": ", ".join(res["fold"].free), "fold time [s]": res["fold"].seconds,
                      "refinement time [s]": res["fold"].fit.solve_time_s, "status": res["fold"].fit.status}
                  for res in results}
@@ -198,7 +212,7 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, quick: boo
                "model_options": MODEL_OPTIONS, "free": everything.free, "R_0_dash": everything.R_0,
                "estimates": everything.fit.estimates, "fit_seconds": everything.fit.solve_time_s,
                "workflow_seconds": everything.seconds, "leave_one_run_out": rows_loro,
-               "leave_one_facility_out": rows_lofo, "in_sample": in_sample, "propulsion": prop_rows, "fit_json": str(out / "fit.json"),
+               "leave_one_facility_out": rows_lofo, "leave_one_direction_out": rows_lodo, "in_sample": in_sample, "propulsion": prop_rows, "fit_json": str(out / "fit.json"),
                "folds": {", ".join(res["held"]): {"free": res["fold"].free, "seconds": res["fold"].seconds,
                                                    "train": res["fold"].train} for res in results}}
     return write_json(out / "summary.json", summary)
