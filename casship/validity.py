@@ -31,6 +31,7 @@ from __future__ import annotations
 import warnings
 from typing import Mapping
 
+import casadi as ca
 import numpy as np
 
 from .model import Model
@@ -218,9 +219,30 @@ def _critical_steps(method: str, lam: np.ndarray) -> np.ndarray:
     return np.where(unbounded, np.inf, lo)
 
 
+_JACOBIAN_CALLS: dict[int, tuple] = {}
+
+
+def _state_jacobian(model: Model, x, u, p) -> np.ndarray:
+    """``A = df/dx`` at ``(x, u, p)`` through a buffered call of ``model.f_jac`` (checked once per record
+    by every batch estimator: no DM conversion)."""
+    from ._fast import BufferedCall
+
+    key = id(model.f_jac)
+    if key not in _JACOBIAN_CALLS:              # the Function is kept with its call, so its id stays unique
+        f = model.f_jac
+        args = {n: ca.SX.sym(n, f.sparsity_in(n)) for n in f.name_in()}
+        dense = ca.Function("state_jacobian", list(args.values()), [ca.densify(f.call(args)["A"])],
+                            list(args), ["A"])
+        _JACOBIAN_CALLS[key] = (f, BufferedCall(dense))
+    call = _JACOBIAN_CALLS[key][1]
+    call["x"], call["u"], call["p"], call["w"] = x, u, p, 0.0
+    call()
+    return call.out("A").copy()
+
+
 def _decaying_modes(model: Model, x, u, p) -> np.ndarray | None:
     """Eigenvalues with negative real part of ``A = df/dx`` at ``(x, u, p)`` (None: A not finite)."""
-    A = np.array(model.f_jac(x, u, p, np.zeros(model.nw))[0], dtype=float).reshape(model.nx, model.nx)
+    A = _state_jacobian(model, x, u, p)
     if not np.all(np.isfinite(A)):
         return None
     lam = np.linalg.eigvals(A)
