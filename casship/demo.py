@@ -50,6 +50,11 @@ class DemoConfig:
         Length of the validation manoeuvres [s].
     seed : int
         Seed of the random rudder and the sensor noise.
+    compile_fit : bool
+        Compile the likelihood and its sensitivities to C (kept in the on-disk cache). The quick
+        two-parameter fit runs faster interpreted (measured: about 4 s for the whole quick demo
+        against 5 s with the compiled code cached and 18 s when it is compiled first); the full
+        six-parameter fit runs faster compiled once the code is cached (6 s against 13 s).
     """
 
     dt: float = 1.0
@@ -59,6 +64,7 @@ class DemoConfig:
     guess_factor: float = 1.25
     validation_s: float = 900.0
     seed: int = 1
+    compile_fit: bool = True
 
     @classmethod
     def make(cls, quick: bool) -> "DemoConfig":
@@ -74,7 +80,8 @@ class DemoConfig:
         DemoConfig
         """
         if quick:
-            return cls(trial_s=700.0, free=("N_r_dash", "N_v_dash"), random_record=False, validation_s=500.0)
+            return cls(trial_s=700.0, free=("N_r_dash", "N_v_dash"), random_record=False, validation_s=500.0,
+                       compile_fit=False)
         return cls()
 
 
@@ -145,7 +152,8 @@ def _fit(ship, ekf, records, cfg: DemoConfig):
     guess = {k: truth[k] * cfg.guess_factor for k in cfg.free}
     data = [d for _, _, d in records]
     t0 = time.perf_counter()
-    fit = MLEProblem(ekf, data, free=list(cfg.free), x0=[_prior(ship, d) for d in data]).solve(guess=guess)
+    fit = MLEProblem(ekf, data, free=list(cfg.free), x0=[_prior(ship, d) for d in data],
+                     jit=None if cfg.compile_fit else False).solve(guess=guess)
     seconds = time.perf_counter() - t0
     rows = {k: {"true": truth[k], "guess": guess[k], "estimate": fit.estimates[k], "std_error": fit.std_errors[k],
                 "z": (fit.estimates[k] - truth[k]) / fit.std_errors[k]} for k in cfg.free}
