@@ -67,3 +67,19 @@ def test_tutorial_runs_and_predicts_the_held_out_zigzag(data_dir, tmp_path, monk
     assert 0.012 < ns["R_0"] < 0.017
     assert (tmp_path / "kvlcc2_marin_heldout.png").exists()
     assert np.isfinite(list(ns["fit"].estimates.values())).all()
+
+
+def test_runs_are_split_by_the_side_of_their_first_rudder():
+    import casship as cs
+    from problems.kvlcc2_marin.data import Run, first_rudder_side
+
+    t = np.arange(0.0, 100.0, 1.0)
+
+    def run(first_sign):
+        delta = np.where(t < 10, np.radians(0.5), first_sign * np.radians(20.0) * np.sign(np.sin(t / 15.0) + 1e-9))
+        return Run("test", "X", cs.Dataset(t, {"delta": delta}), "zigzag")
+
+    assert first_rudder_side(run(+1)) == "+"
+    assert first_rudder_side(run(-1)) == "-"
+    with pytest.raises(ValueError, match="never moves"):
+        first_rudder_side(Run("flat", "X", cs.Dataset(t, {"delta": np.zeros_like(t)}), "zigzag"))
