@@ -18,8 +18,8 @@ constants and with the fit that did not see it.
 Outputs (:mod:`.report`): ``report.md``, ``fit.json`` (the fit on all runs for the full-scale model,
 with the MARIN facility's asymmetry terms; replays with ``casship simulate --model kvlcc2 --params
 fit.json``), ``fit_all_runs.json`` (with all per-facility copies), ``fit_without_<run>.json``,
-``cross_validation.csv``, ``fig_heldout_<run>.png``, ``fig_facility_<name>.png``, ``fig_direction_<positive|negative>.png``,
-``summary.json``.
+``cross_validation.csv``, ``fig_heldout_<run>.png``, ``fig_facility_<name>.png``,
+``fig_direction_<positive|negative>.png``, ``summary.json``.
 """
 from __future__ import annotations
 
