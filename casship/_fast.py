@@ -119,6 +119,11 @@ class BufferedCall:
         self._redirected[name] = target                 # keeps the target alive while CasADi holds its address
         self._buf.set_res(i, memoryview(target))
 
+    def restore_outputs(self) -> None:
+        """Write every redirected output into its own array again (and let go of the targets)."""
+        for name in list(self._redirected):
+            self.redirect(name, None)
+
     def flat_in(self, name: str) -> np.ndarray:
         """The flat (column-major) array bound to input ``name``."""
         self.arg(name)
@@ -193,57 +198,63 @@ def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, me
     mem = {k: np.array(v, dtype=float) for k, v in memory.items()}
     shapes = None
     outs, flat, start, primed = {}, {}, 0, set()
-    while start < n:
-        size = min(chunk, 1 << (n - start - 1).bit_length())
-        take = min(size, n - start)
-        call = fold_call(size)
-        if shapes is None:
-            keep = list(call.names_out if keep is None else keep)
-            shapes = {k: (call.out(k).shape[0], call.out(k).shape[1] // size) for k in call.names_out}
-            for k in keep:
-                r, c = shapes[k]
-                block = np.empty((n, c, r))           # sample k's matrix in column-major order, as CasADi has it
-                outs[k], flat[k] = block.transpose(0, 2, 1), block.reshape(-1)
-        if id(call) not in primed:
-            for k, v in constants.items():
+    used = {}                                     # the calls of this run, by id
+    try:
+        while start < n:
+            size = min(chunk, 1 << (n - start - 1).bit_length())
+            take = min(size, n - start)
+            call = fold_call(size)
+            used[id(call)] = call
+            if shapes is None:
+                keep = list(call.names_out if keep is None else keep)
+                shapes = {k: (call.out(k).shape[0], call.out(k).shape[1] // size) for k in call.names_out}
+                for k in keep:
+                    r, c = shapes[k]
+                    block = np.empty((n, c, r))           # sample k's matrix in column-major order, as CasADi has it
+                    outs[k], flat[k] = block.transpose(0, 2, 1), block.reshape(-1)
+            if id(call) not in primed:
+                for k, v in constants.items():
+                    call[k] = v
+                primed.add(id(call))
+            for k, v in mem.items():
                 call[k] = v
-            primed.add(id(call))
-        for k, v in mem.items():
-            call[k] = v
-        for k, src in per_sample.items():
-            if src.ndim == 3:                         # (n, rows, cols): one strided copy into the buffer
-                r, c = src.shape[1:]
-                blocks = call.flat_in(k).reshape(size, c, r)
-                blocks[:take] = src[start:start + take].transpose(0, 2, 1)
+            for k, src in per_sample.items():
+                if src.ndim == 3:                         # (n, rows, cols): one strided copy into the buffer
+                    r, c = src.shape[1:]
+                    blocks = call.flat_in(k).reshape(size, c, r)
+                    blocks[:take] = src[start:start + take].transpose(0, 2, 1)
+                    if take < size:
+                        blocks[take:] = pad[k] if k in pad else blocks[take - 1]
+                    continue
+                view = call.arg(k)
+                c = view.shape[1] // size
+                view[:, :take * c] = src[:, start * c:(start + take) * c]
                 if take < size:
-                    blocks[take:] = pad[k] if k in pad else blocks[take - 1]
-                continue
-            view = call.arg(k)
-            c = view.shape[1] // size
-            view[:, :take * c] = src[:, start * c:(start + take) * c]
-            if take < size:
-                if k in pad:
-                    view[:, take * c:] = pad[k]
-                elif src.shape[0]:
-                    view[:, take * c:] = np.tile(src[:, (start + take - 1) * c:(start + take) * c], (1, size - take))
-        # a whole piece writes its results straight into the result block; a padded last piece
-        # writes into the call's own arrays and its first `take` samples are copied
-        for k in keep:
-            r, c = shapes[k]
-            call.redirect(k, flat[k][start * r * c:(start + size) * r * c] if take == size else None)
-        call()
-        if take < size:
+                    if k in pad:
+                        view[:, take * c:] = pad[k]
+                    elif src.shape[0]:
+                        view[:, take * c:] = np.tile(src[:, (start + take - 1) * c:(start + take) * c], (1, size - take))
+            # a whole piece writes its results straight into the result block; a padded last piece
+            # writes into the call's own arrays and its first `take` samples are copied
             for k in keep:
                 r, c = shapes[k]
-                flat[k][start * r * c:(start + take) * r * c] = call.flat_out(k)[:take * r * c]
-        for k in mem:
-            r, c = shapes[k]
-            if k in keep:
-                last = flat[k][(start + take - 1) * r * c:(start + take) * r * c]
-                mem[k] = last.reshape((r, c), order="F").copy()
-            else:
-                mem[k] = call.out(k)[:, (take - 1) * c:take * c].copy()
-        start += take
+                call.redirect(k, flat[k][start * r * c:(start + size) * r * c] if take == size else None)
+            call()
+            if take < size:
+                for k in keep:
+                    r, c = shapes[k]
+                    flat[k][start * r * c:(start + take) * r * c] = call.flat_out(k)[:take * r * c]
+            for k in mem:
+                r, c = shapes[k]
+                if k in keep:
+                    last = flat[k][(start + take - 1) * r * c:(start + take) * r * c]
+                    mem[k] = last.reshape((r, c), order="F").copy()
+                else:
+                    mem[k] = call.out(k)[:, (take - 1) * c:take * c].copy()
+            start += take
+    finally:                                      # cached calls must not keep (or write into) this result
+        for call in used.values():
+            call.restore_outputs()
     for k in flat:                                # read-only: results may share them without a copy
         for a in (flat[k].base, flat[k], outs[k]):
             a.setflags(write=False)

@@ -39,3 +39,18 @@ def test_batch_equals_online_across_pieces():
     for k in range(len(data)):
         x = run.update(Y[k], data.t[k] - data.t[k - 1] if k else 0.0, U[max(k - 1, 0)], U[k])
         np.testing.assert_allclose(x, res.x[k], rtol=1e-12, atol=1e-15)
+
+
+def test_cached_fold_calls_let_go_of_the_result():
+    import gc
+    import weakref
+
+    m, dm, data, prior = _record()
+    ekf = cs.EKF(dm, Q=1e-7, R=1e-4)
+    res = ekf.filter(data, prior)
+    assert all(not call._redirected for call in ekf._fold_calls.values())
+    block = weakref.ref(res.P.base if res.P.base is not None else res.P)
+    del res
+    gc.collect()
+    assert block() is None                      # no cached call keeps the result's memory alive
+    np.testing.assert_array_equal(ekf.filter(data, prior).x, ekf.filter(data, prior).x)
