@@ -109,8 +109,8 @@ def main(quick: bool = False) -> list[dict]:
         np.concatenate([[n, repeats], memory["x"], memory["P"].ravel(order="F"), record.ravel()]).astype(np.float64).tofile(
             folder / "in.bin")
         subprocess.run([str(exe), str(folder / "in.bin"), str(folder / "out.bin")], check=True)
-        c_time, *flat = np.fromfile(folder / "out.bin", dtype=np.float64)
-    xs = np.asarray(flat).reshape(n, m.nx)
+        written = np.fromfile(folder / "out.bin", dtype=np.float64)      # the loop's time, then the states
+    c_time, xs = float(written[0]), written[1:].reshape(n, m.nx)
     gap = float(np.max(np.abs(xs - batch.x)))
     check = f"max abs diff C loop vs Python filter = {gap:.1e} over {n} steps"
     rows = [row(name, c_time, "casship batch filter (CasADi VM fold)",
