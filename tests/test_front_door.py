@@ -330,6 +330,28 @@ def test_online_update_refuses_bad_dt_and_long_gaps():
     assert abs(x[1] - truth["r"][-1]) < 3 * np.sqrt(bridged.P[1, 1])
 
 
+def test_a_refused_online_update_changes_nothing():
+    m, truth, data = _gap_record()
+    prior = cs.Gaussian(m.states(), np.diag([1e-2, 1e-4]))
+    run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4).online(prior, u=[0.1])
+    run.update(data["psi"][:1], 0.0)
+    x, P = run.x, run.P
+    refused = [((np.array([np.inf]), 0.5), "measurement\\(s\\) \\['psi'\\] infinite"),
+               ((np.array([0.1]), 0.5, None, [np.nan]), "inputs \\['delta'\\] must be finite"),
+               ((np.array([0.1]), 0.5, None, [0.1, 0.2]), "u must hold 1 value for \\['delta'\\], got shape \\(2,\\)"),
+               (("abc", 0.5), "y must be 1 number for \\['psi'\\]"),
+               ((np.array([0.1, 0.2]), 0.5), "y must hold 1 value for \\['psi'\\]")]
+    for args, message in refused:
+        with pytest.raises(ValueError, match=message):
+            run.update(*args)
+        np.testing.assert_array_equal(run.x, x)
+        np.testing.assert_array_equal(run.P, P)
+    # the input held since the last accepted update is still the default (not the refused NaN)
+    reference = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4).online(prior, u=[0.1])
+    reference.update(data["psi"][:1], 0.0)
+    np.testing.assert_array_equal(run.update(data["psi"][1:2], 0.5), reference.update(data["psi"][1:2], 0.5))
+
+
 def test_wrong_shapes_are_named():
     m = cs.models.nomoto_first_order()
     t = np.arange(0.0, 1.0, 0.1)

@@ -138,6 +138,8 @@ class StepEngine:
         self._u_prev, self._u = first.flat_in("u_prev"), first.flat_in("u")
         self._nu, self._ny = m.nu, est.ny
         self._zeros_u = np.zeros(m.nu)
+        self._y_shape, self._u_shape = (est.ny,), (m.nu,)
+        self._ok = np.zeros(est.ny, dtype=bool)
         self._gated = est.options.gate is not None
         self._thresholds = np.array([est.gate_threshold(c) for c in range(est.ny + 1)])
         self._draws = [(first.flat_in(k), r * c) for k, (r, c) in est._draw_shapes().items()]
@@ -178,20 +180,53 @@ class StepEngine:
         self._update(y, dt / pieces, u_held, u)
         return True
 
+    def _vector(self, value, size: int, what: str, names) -> np.ndarray:
+        """``value`` as a float vector of ``size``, or ``ValueError`` naming ``what`` (the slow path:
+        ``_update`` takes a float array of the right shape as it is)."""
+        try:
+            v = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{what} must be {size} number{'s' * (size != 1)} for {list(names)}, "
+                             f"got {value!r}") from None
+        if v.ndim == 0 and size == 1:               # one value: a scalar is that value
+            v = v.reshape(1)
+        if v.shape != (size,):
+            raise ValueError(f"{what} must hold {size} value{'s' * (size != 1)} for {list(names)}, got shape {v.shape}")
+        return v
+
     def _update(self, y, dt, u_prev, u):
-        if type(y) is not np.ndarray or y.shape != self._y.shape:     # the fast path takes the array as is
-            y = np.asarray(y, dtype=float)
-            if y.ndim == 0 and self._ny == 1:         # one measured output: a scalar is its value
-                y = y.reshape(1)
-            if y.shape != self._y.shape:
-                raise ValueError(f"y must hold {self._ny} values for {list(self._est.measured)}, got shape {y.shape}")
+        # every argument is checked before a buffer is written: a refused update changes nothing
+        est, fast = self._est, np.ndarray
+        if type(y) is not fast or y.shape != self._y_shape or y.dtype != np.float64:
+            y = self._vector(y, self._ny, "y", est.measured)
+        if self._nu:
+            names, shape = est.model.input_names, self._u_shape
+            if u_prev is None:
+                u_prev = self._u
+            elif type(u_prev) is not fast or u_prev.shape != shape or u_prev.dtype != np.float64:
+                u_prev = self._vector(u_prev, self._nu, "u_prev", names)
+            if u is None:
+                u = u_prev
+            elif type(u) is not fast or u.shape != shape or u.dtype != np.float64:
+                u = self._vector(u, self._nu, "u", names)
+            # one test for NaN and inf in both: a dot product with zeros is NaN exactly then (0 * inf = NaN),
+            # a third of the time of two isfinite reductions on this per-sample path
+            if not math.isfinite(u_prev.dot(self._zeros_u) + u.dot(self._zeros_u)):
+                raise ValueError(f"inputs {list(names)} must be finite, got u_prev = {u_prev}, u = {u}")
+        measured = np.isfinite(y, out=self._ok)
+        n_measured = np.count_nonzero(measured)
+        if n_measured < self._ny and np.isinf(y).any():
+            bad = [n for n, v in zip(est.measured, y) if np.isinf(v)]
+            np.isfinite(self._y, out=self._ok)          # the mask of the last update, as before
+            raise ValueError(f"measurement(s) {bad} infinite (NaN means not measured)")
         self._y[:] = y
-        np.isfinite(self._y, out=self._mask)            # 1.0 where measured
+        self._mask[:] = measured
         if self._gated:
-            self._gate[0] = self._thresholds[np.count_nonzero(self._mask)]
+            self._gate[0] = self._thresholds[n_measured]
         self._dt[0] = dt
         if self._nu:
-            self._inputs(u_prev, u)
+            self._u_prev[:] = u_prev                    # before u: u_prev may be the u buffer itself
+            self._u[:] = u
         if self._n_draws:
             z = self._rng.standard_normal(self._n_draws)
             start = 0
@@ -203,20 +238,6 @@ class StepEngine:
         self._cur = 1 - cur
         self.samples += 1
         return self._x[cur].copy()
-
-    def _inputs(self, u_prev, u):
-        if u_prev is not None:
-            self._u_prev[:] = u_prev
-        else:
-            self._u_prev[:] = self._u                   # the input applied since the previous sample
-        if u is not None:
-            self._u[:] = u
-        else:
-            self._u[:] = self._u_prev
-        # one test for NaN and inf in both: a dot product with zeros is NaN exactly then (0 * inf = NaN),
-        # a third of the time of two isfinite reductions on this per-sample path
-        if not math.isfinite(self._u_prev.dot(self._zeros_u) + self._u.dot(self._zeros_u)):
-            raise ValueError(f"inputs must be finite, got u_prev = {self._u_prev}, u = {self._u}")
 
     @property
     def x(self) -> np.ndarray:
@@ -237,7 +258,7 @@ class StepEngine:
                 continue
             v = call.out(k)
             if k == "e":
-                values[k] = np.where(self._mask > 0, v.ravel(), np.nan)
+                values[k] = np.where(self._ok, v.ravel(), np.nan)
             elif k == "accepted":
                 values["rejected"] = bool(v[0, 0] < 0.5)
             elif v.size == 1:
