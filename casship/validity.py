@@ -229,6 +229,8 @@ def _state_jacobian(model: Model, x, u, p) -> np.ndarray:
 
     key = id(model.f_jac)
     if key not in _JACOBIAN_CALLS:              # the Function is kept with its call, so its id stays unique
+        if len(_JACOBIAN_CALLS) >= 64:          # a bounded cache: let the oldest model go
+            del _JACOBIAN_CALLS[next(iter(_JACOBIAN_CALLS))]
         f = model.f_jac
         args = {n: ca.SX.sym(n, f.sparsity_in(n)) for n in f.name_in()}
         dense = ca.Function("state_jacobian", list(args.values()), [ca.densify(f.call(args)["A"])],
