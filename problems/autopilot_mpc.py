@@ -148,8 +148,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
     summary = write_json(out / "summary.json", {"table": [{k: v for k, v in r.items() if k not in ("t", "psi", "steer")}
                                                           for r in results],
                                                 "figures": sorted(p.name for p in out.glob("*.png"))})
-    for _ in stages:
-        pass
+    next(stages, None)
     return summary
 
 

@@ -116,8 +116,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
                   "the filter knows the simulated w0 and lambda exactly", "not measured: a best case for the filter")])
     rep.write(out)
     summary = write_json(out / "summary.json", {"table": table, "figures": sorted(p.name for p in out.glob("*.png"))})
-    for _ in stages:
-        pass
+    next(stages, None)
     return summary
 
 

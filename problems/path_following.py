@@ -157,8 +157,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
                   "not measured: the old leg's integral is a wrong crab angle for a new path direction")])
     rep.write(out)
     summary = write_json(out / "summary.json", {"table": table, "figures": sorted(p.name for p in out.glob("*.png"))})
-    for _ in stages:
-        pass
+    next(stages, None)
     return summary
 
 
