@@ -136,10 +136,17 @@ class BufferedCall:
 
     def partner(self, memory) -> "BufferedCall":
         """A second buffered call of the same Function that reads the ``memory`` outputs of this one
-        and writes its ``memory`` outputs into this one's ``memory`` inputs (all other inputs and
-        outputs shared): alternating the two calls hands the memory over without a copy."""
+        and writes its ``memory`` outputs into this one's ``memory`` inputs (the other inputs shared,
+        the other outputs its own): alternating the two calls hands the memory over without a copy,
+        and the outputs of the call before the last stay readable.
+
+        Parameters
+        ----------
+        memory : sequence of str
+            Names that are both an input and an output.
+        """
         bind_in = {n: self.flat_in(n) for n in self.names_in}
-        bind_out = {n: self.flat_out(n) for n in self.names_out}
+        bind_out = {}
         for n in memory:
             bind_in[n], bind_out[n] = self.flat_out(n), self.flat_in(n)
         return BufferedCall(self.fun, cannot_fail=not self._checked, bind_in=bind_in, bind_out=bind_out)

@@ -25,6 +25,7 @@ otherwise. ``casship cache info`` and ``casship cache clear`` show and empty the
 """
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import json
 import os
@@ -56,7 +57,7 @@ but ties the code to the CPU (set it through ``CASSHIP_CFLAGS``; the cache key t
 _ENV_DIR, _ENV_FLAGS = "CASSHIP_CACHE_DIR", "CASSHIP_CFLAGS"
 _OFF = ("off", "0", "no", "false", "none")
 _SUFFIX = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
-_LOADED: dict[tuple, ca.Function] = {}   # (key, folder) -> loaded Function (this process)
+_LOADED: dict[tuple, tuple] = {}         # (key, folder) -> (loaded Function, ctypes library or None), this process
 _COMPILERS: dict[str, tuple[str, str]] = {}
 _LOCK = threading.Lock()
 
@@ -139,10 +140,11 @@ def _flags(flags: Sequence[str] | str | None) -> tuple[str, ...]:
     return flags
 
 
-def cache_key(fun: ca.Function, compiler: tuple[str, str], flags: Sequence[str]) -> str:
+def cache_key(fun: ca.Function, compiler: tuple[str, str], flags: Sequence[str], extra_source: str = "") -> str:
     """The cache key of ``fun`` compiled by ``compiler`` (path, version) with ``flags``: a SHA-256
     over the Function's serialised form, the compiler, the flags, CasADi's version and the platform
-    (with ``-march=native``-like flags also the CPU model and features)."""
+    (with ``-march=native``-like flags also the CPU model and features), and any C source compiled
+    with it."""
     h = hashlib.sha256()
     cpu = _cpu() if any("native" in f for f in flags) else ""   # code for this CPU only
     for part in ("casship-compile-1", ca.__version__, sys.platform, platform.machine(), cpu, compiler[0],
@@ -150,6 +152,8 @@ def cache_key(fun: ca.Function, compiler: tuple[str, str], flags: Sequence[str])
         h.update(part.encode())
         h.update(b"\0")
     h.update(fun.serialize().encode())
+    if extra_source:
+        h.update(b"\0extra\0" + extra_source.encode())
     return h.hexdigest()[:40]
 
 
@@ -193,12 +197,14 @@ def _verified(lib: Path, record: Path) -> dict | None:
 
 
 # -- compile and load ---------------------------------------------------------------------------------
-def _build(fun: ca.Function, name: str, folder: Path, stem: str, compiler: str, flags: Sequence[str]) -> Path:
-    """Generate ``fun`` as C in ``folder`` and compile it to the shared library ``stem + suffix``."""
+def _build(fun: ca.Function, name: str, folder: Path, stem: str, compiler: str, flags: Sequence[str],
+           extra_source: str = "") -> Path:
+    """Generate ``fun`` as C in ``folder`` (followed by ``extra_source``) and compile it to the shared
+    library ``stem + suffix``."""
     src = folder / f"{stem}.c"
     gen = ca.CodeGenerator(f"{stem}.c", {"with_header": False})
     gen.add(fun)
-    src.write_text(gen.dump())
+    src.write_text(gen.dump() + extra_source)
     lib = folder / f"{stem}{_SUFFIX}"
     cmd = [compiler, *flags, "-fPIC", "-shared", str(src), "-o", str(lib), "-lm"]
     try:
@@ -212,16 +218,22 @@ def _build(fun: ca.Function, name: str, folder: Path, stem: str, compiler: str, 
     return lib
 
 
-def _load(fun: ca.Function, lib: Path) -> ca.Function | None:
+def _load(fun: ca.Function, lib: Path, handle: bool) -> tuple | None:
+    """``(Function, ctypes library if handle else None)`` loaded from ``lib``, or None if it does not load
+    or differs from ``fun``. A ctypes handle is never closed, so it is opened only when asked for
+    (libraries with extra source) and only once the library is known to be the right one."""
     try:
         loaded = ca.external(fun.name(), str(lib))
-    except RuntimeError:
+        if not _same_signature(fun, loaded):
+            return None
+        return loaded, ctypes.CDLL(str(lib)) if handle else None
+    except (RuntimeError, OSError):
         return None
-    return loaded if _same_signature(fun, loaded) else None
 
 
 def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None, compiler: str | None = None,
-                     cache_dir: str | os.PathLike | None = None, cache: bool = True) -> ca.Function:
+                     cache_dir: str | os.PathLike | None = None, cache: bool = True, extra_source: str = "",
+                     library: bool = False):
     """``fun`` compiled to a shared library and loaded (``casadi.external``), cached on disk.
 
     Parameters
@@ -237,10 +249,16 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
         The cache directory (default: see :func:`cache_dir`).
     cache : bool
         ``False``: compile in a temporary folder, keep nothing on disk.
+    extra_source : str
+        C source compiled into the same library after ``fun``'s generated code (e.g. a driver
+        that calls it in a loop, see :mod:`casship.native_fold`). Part of the cache key.
+    library : bool
+        Also return the library as a ``ctypes.CDLL``, for calling ``extra_source``'s functions
+        (only with ``extra_source``).
 
     Returns
     -------
-    casadi.Function
+    casadi.Function, or (casadi.Function, ctypes.CDLL) with ``library=True``
         The compiled Function, with the same name, inputs, outputs and values as ``fun``.
 
     Raises
@@ -262,17 +280,19 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
         cc = find_compiler(compiler)
     except RuntimeError as exc:
         raise RuntimeError(f"compiling {fun.name()!r} to C: {exc}") from None
+    if library and not extra_source:
+        raise ValueError("compile_function: library=True is for calling extra_source; none given")
     flags = _flags(flags)
-    key = cache_key(fun, cc, flags)
+    key = cache_key(fun, cc, flags, extra_source)
     folder = _cache_folder(cache_dir) if cache else None
     with _LOCK:
-        if (key, folder) in _LOADED:
-            return _LOADED[key, folder]
-        loaded = _from_cache(fun, folder, key) if folder is not None else None
+        loaded = _LOADED.get((key, folder))
         if loaded is None:
-            loaded = _compile_into(fun, folder, key, cc, flags)
-        _LOADED[key, folder] = loaded
-        return loaded
+            loaded = _from_cache(fun, folder, key, bool(extra_source)) if folder is not None else None
+            if loaded is None:
+                loaded = _compile_into(fun, folder, key, cc, flags, extra_source)
+            _LOADED[key, folder] = loaded
+    return loaded if library else loaded[0]
 
 
 def _cache_folder(path) -> Path | None:
@@ -288,12 +308,12 @@ def _cache_folder(path) -> Path | None:
     return folder
 
 
-def _from_cache(fun, folder: Path, key: str) -> ca.Function | None:
+def _from_cache(fun, folder: Path, key: str, handle: bool = False) -> tuple | None:
     lib, record = folder / f"{key}{_SUFFIX}", folder / f"{key}.json"
     if not lib.exists() and not record.exists():
         return None
     if _verified(lib, record) is not None:
-        loaded = _load(fun, lib)
+        loaded = _load(fun, lib, handle)
         if loaded is not None:
             return loaded
     for p in (lib, record):                     # corrupted or foreign: rebuilt by the caller
@@ -304,13 +324,13 @@ def _from_cache(fun, folder: Path, key: str) -> ca.Function | None:
     return None
 
 
-def _compile_into(fun, folder: Path | None, key: str, cc: tuple[str, str], flags) -> ca.Function:
+def _compile_into(fun, folder: Path | None, key: str, cc: tuple[str, str], flags, extra_source: str) -> tuple:
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="casship-cc-", dir=folder, ignore_cleanup_errors=True) as tmp:
         stem = f"f{key[:16]}"
-        built = _build(fun, fun.name(), Path(tmp), stem, cc[0], flags)
+        built = _build(fun, fun.name(), Path(tmp), stem, cc[0], flags, extra_source)
         if folder is None:
-            loaded = _load(fun, built)
+            loaded = _load(fun, built, bool(extra_source))
             if loaded is None:
                 raise RuntimeError(f"the compiled library of {fun.name()!r} could not be loaded")
             return loaded
@@ -323,7 +343,7 @@ def _compile_into(fun, folder: Path | None, key: str, cc: tuple[str, str], flags
         tmp_record.write_text(json.dumps(meta, indent=1))
         os.replace(built, lib)                  # library first: a record always describes a whole file
         os.replace(tmp_record, record)
-    loaded = _load(fun, lib) if _verified(lib, record) else None
+    loaded = _load(fun, lib, bool(extra_source)) if _verified(lib, record) else None
     if loaded is None:
         raise RuntimeError(f"the compiled library of {fun.name()!r} in {folder} could not be loaded")
     return loaded

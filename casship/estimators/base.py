@@ -12,7 +12,8 @@ previous sample (0 on the first row: update only), ``gate`` the chi-square thres
 innovation test, ``<draws>`` the standard-normal draws of a stochastic estimator. The diagnostics
 are a subset of ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted`` chosen when the Function
 is built, so the compiled code computes only those. Batch filtering runs the step through
-``mapaccum`` over the record (:meth:`Estimator.fold`), online use calls it through bound buffers
+``mapaccum`` over the record (:meth:`Estimator.fold`), or, compiled (option ``jit``), through one C
+loop over the whole record (:class:`~casship.native_fold.NativeFold`); online use calls it through bound buffers
 (:class:`~casship.estimators.online.OnlineRun`), and the same Function is exported as C.
 """
 from __future__ import annotations
@@ -27,6 +28,7 @@ from .._fast import DUPLICATE_NAMES, BufferedCall, compile_function, run_fold
 from ..data import Dataset
 from ..gaussian import Gaussian, as_cov
 from ..discretize import DiscreteModel
+from ..native_fold import NativeFold
 from .gaps import bridge_gaps
 from .options import DIAGNOSTICS, EstimatorOptions
 from .result import FilterResult
@@ -227,6 +229,13 @@ class Estimator:
             self._compiled[key] = compile_function(make())
         return self._compiled[key]
 
+    def _native_fold(self, outputs) -> NativeFold:
+        """The step returning ``outputs``, compiled with its record loop (cached)."""
+        key = ("native", outputs)
+        if key not in self._compiled:
+            self._compiled[key] = NativeFold(self.step_function(outputs), self.memory)
+        return self._compiled[key]
+
     def _fold_call(self, size: int, outputs) -> BufferedCall:
         key = (size, outputs)
         if key not in self._fold_calls:
@@ -290,10 +299,11 @@ class Estimator:
                 "mask": mask.T.astype(float), "dt": dt[None, :], "gate": gate[None, :],
                 "p": m.params() if p is None else m.params(p), "Q": self.Q, "R": self.R}
 
-    def draws(self, n: int, rng) -> dict:
-        """Standard-normal draws for ``n`` steps, per-step blocks side by side (name -> array).
+    def sample_draws(self, n: int, rng) -> dict:
+        """Standard-normal draws for ``n`` steps, indexed by step first (name -> ``(n, rows, cols)`` view).
 
-        One row of ``rng.standard_normal`` per step, so the online runner draws the same numbers.
+        One row of ``rng.standard_normal`` per step, so the online runner draws the same numbers;
+        step ``k``'s matrix is that row's block in column-major order.
 
         Parameters
         ----------
@@ -308,10 +318,21 @@ class Estimator:
         z = rng.standard_normal((n, sum(sizes)))
         out, start = {}, 0
         for (name, (r, c)), size in zip(shapes.items(), sizes):
-            block = z[:, start:start + size].reshape(n, c, r)          # step k: column-major (r, c)
-            out[name] = np.ascontiguousarray(block.transpose(2, 0, 1).reshape(r, n * c))
+            out[name] = z[:, start:start + size].reshape(n, c, r).transpose(0, 2, 1)
             start += size
         return out
+
+    def draws(self, n: int, rng) -> dict:
+        """The draws of :meth:`sample_draws`, per-step blocks side by side (name -> ``rows x n*cols``).
+
+        Parameters
+        ----------
+        n : int
+            Number of steps.
+        rng : numpy.random.Generator
+        """
+        return {name: np.ascontiguousarray(v.transpose(1, 0, 2).reshape(v.shape[1], n * v.shape[2]))
+                for name, v in self.sample_draws(n, rng).items()}
 
     def _operating_point(self, x=None, u=None, p=None):
         """``(x, u, p)`` as arrays: zeros and the nominal parameters where not given."""
@@ -355,13 +376,18 @@ class Estimator:
         n = len(data)
         rng = np.random.default_rng(seed)
         memory = self.memory_from(prior, rng)
-        arrays.update(self.draws(n, rng))
+        draws = self.sample_draws(n, rng)
         outputs = self._output_names("all")
-        per = {k: arrays[k] for k in (*SAMPLE_INPUTS, *self._draw_shapes())}
-        pad = {"mask": 0.0, "dt": 0.0, **{k: 0.0 for k in self._draw_shapes()}}
-        _, outs = run_fold(lambda size: self._fold_call(size, outputs), n, self.FOLD_CHUNK, memory=memory,
-                           per_sample=per, constants={k: arrays[k] for k in CONSTANT_INPUTS}, pad=pad,
-                           keep=DIAGNOSTICS)
+        constants = {k: arrays[k] for k in CONSTANT_INPUTS}
+        if self.options.jit:                             # one C loop over the record
+            per = {**{k: arrays[k].T for k in SAMPLE_INPUTS}, **draws}
+            _, outs = self._native_fold(outputs).run(n, memory=memory, per_sample=per, constants=constants,
+                                                     keep=DIAGNOSTICS)
+        else:
+            per = {**{k: arrays[k] for k in SAMPLE_INPUTS}, **draws}
+            pad = {"mask": 0.0, "dt": 0.0, **{k: 0.0 for k in draws}}
+            _, outs = run_fold(lambda size: self._fold_call(size, outputs), n, self.FOLD_CHUNK, memory=memory,
+                               per_sample=per, constants=constants, pad=pad, keep=DIAGNOSTICS)
         return self.result(data, arrays, outs)
 
     def result(self, data: Dataset, arrays: dict, out: dict, estimator: str | None = None) -> FilterResult:

@@ -9,7 +9,7 @@ import numpy as np
 from ..discretize import rk4
 from .base import Estimator
 from .options import EstimatorOptions, check_int
-from .update import joseph_update, symmetric
+from .update import joseph_update, sandwich, symmetric
 
 __all__ = ["EKF", "KF", "EKFOptions", "persistence_model"]
 
@@ -119,7 +119,8 @@ class EKF(Estimator):
         w0 = self.sym.zeros(self.model.nw)
         xp = self.dmodel.F(x, s["u_prev"], s["p"], w0, s["dt"])
         A, _, _, G = self.dmodel.F_jac(x, s["u_prev"], s["p"], w0, s["dt"])
-        return xp, symmetric(A @ P @ A.T + G @ s["Q"] @ G.T), P @ A.T
+        C = P @ A.T
+        return xp, sandwich(A, P, C.T) + sandwich(G, s["Q"]), C
 
     def _predict_continuous(self, x, P, s):
         m = self.model

@@ -19,7 +19,7 @@ from ..gaussian import Gaussian
 from .base import Estimator
 from .options import EstimatorOptions, check_int
 from .ukf import psd_sqrt
-from .update import gaussian_terms, masked_innovation_cov, residual, spd_solve, symmetric
+from .update import gain_and_terms, masked_innovation_cov, residual, symmetric
 
 __all__ = ["EnKF", "EnKFOptions"]
 
@@ -189,7 +189,7 @@ class EnKF(Estimator):
         nx, ny = self.model.nx, self.ny
         S, Pxy, e = ca.SX.sym("S", ny, ny), ca.SX.sym("Pxy", nx, ny), ca.SX.sym("e", ny)
         mask, gate = ca.SX.sym("mask", ny), ca.SX.sym("gate")
-        nis, ll = gaussian_terms(e, S, mask)
+        K, nis, ll = gain_and_terms(S, Pxy.T, e, mask)
         acc = nis <= gate
-        return ca.Function("enkf_gain", [S, Pxy, e, mask, gate], [acc * spd_solve(S, Pxy.T).T, nis, ll, acc],
+        return ca.Function("enkf_gain", [S, Pxy, e, mask, gate], [acc * K, nis, ll, acc],
                            ["S", "Pxy", "e", "mask", "gate"], ["K", "nis", "ll", "accepted"])

@@ -9,12 +9,16 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
+import casadi as ca
 import numpy as np
 
+from .._fast import DUPLICATE_NAMES
 from ..gaussian import Gaussian
 from .options import DIAGNOSTICS
 
-__all__ = ["OnlineRun"]
+__all__ = ["OnlineRun", "online_step"]
+
+_ONLINE_EXTRAS = ("mask", "u_held", "status")       # outputs of online_step beyond the step's
 
 
 class OnlineRun:
@@ -101,12 +105,47 @@ class _Info(Mapping):
         return len(self._values)
 
 
+def online_step(est) -> ca.Function:
+    """The estimator's step (``options.outputs``) with the per-sample work of an online update inside.
+
+    Inputs: the step's, without ``mask`` and ``gate``, plus ``thresholds`` (the gate for 0 .. ny
+    measured channels). From the raw ``y`` (NaN = not measured) it forms the mask, the cleaned
+    measurement and the gate, then runs the step. Extra outputs: ``mask``, ``u_held`` (the ``u`` of
+    this update, the next one's default ``u_prev``) and ``status``, the number of values that make
+    the update invalid (an infinite measurement, a non-finite input); a caller that sees a non-zero
+    status throws the outputs away.
+
+    Parameters
+    ----------
+    est : Estimator
+    """
+    step = est.step_function()
+    kind = ca.SX if step.is_a("SXFunction") else ca.MX
+    ins = {k: kind.sym(k, *step.size_in(k)) for k in step.name_in() if k not in ("mask", "gate")}
+    thresholds = kind.sym("thresholds", est.ny + 1)
+    y = ins["y"]
+    measured = ca.fabs(y) < ca.inf                      # false for NaN and for +-inf
+    count = ca.sum1(measured)
+    gate = thresholds[est.ny]
+    for c in reversed(range(est.ny)):
+        gate = ca.if_else(count == c, thresholds[c], gate)
+    out = step.call({**ins, "y": ca.if_else(measured, y, 0), "mask": measured, "gate": gate})
+    finite_inputs = ca.sum1(ca.fabs(ins["u_prev"]) < ca.inf) + ca.sum1(ca.fabs(ins["u"]) < ca.inf)
+    status = ca.sum1(ca.fabs(y) == ca.inf) + 2 * est.model.nu - finite_inputs
+    names = [*step.name_out(), *_ONLINE_EXTRAS]
+    values = [*(out[k] for k in step.name_out()), measured, ins["u"], status]
+    return ca.Function(f"{step.name()}_online", [*ins.values(), thresholds], values, [*ins, "thresholds"], names,
+                       DUPLICATE_NAMES)
+
+
 class StepEngine:
-    """Online engine of a recursive estimator: its step Function through two bound buffer sets.
+    """Online engine of a recursive estimator: :func:`online_step` through two bound buffer sets.
 
     The two calls hand the memory to each other (one writes the memory the other reads), so an
     update writes the new sample into the shared input buffers, triggers one compiled evaluation
-    and flips: no copy of the memory, no ``DM`` conversion, no per-field Python work.
+    and flips: no copy of the memory, no ``DM`` conversion. The mask, the gate and the validity of
+    the sample are worked out inside the compiled call; an invalid sample is not flipped to, so it
+    changes nothing, and only then does Python look for what was wrong.
     """
 
     def __init__(self, est, prior: Gaussian, p, u, rng):
@@ -114,7 +153,7 @@ class StepEngine:
         self._est, self._rng = est, rng
         self._prior = prior
         m = est.model
-        fun = est._compiled_function(("step", est.options.outputs), lambda: est.step_function())
+        fun = est._compiled_function(("online", est.options.outputs), lambda: online_step(est))
         from .._fast import BufferedCall
 
         first = BufferedCall(fun, cannot_fail=est.options.jit)
@@ -122,26 +161,25 @@ class StepEngine:
         self._cur = 0                                   # the call whose inputs hold the memory now
         for k, v in est.memory_from(prior, rng).items():
             first[k] = v
-        first["p"] = m.params() if p is None else m.params(p)
         self._p = m.params() if p is None else m.params(p)
-        u_start = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
-        from .gaps import gap_limit
-
-        self._gap_limit = gap_limit(est, prior.mean, u_start, p) if u_start.size == m.nu else 0.0
-        first["Q"], first["R"], first["gate"] = est.Q, est.R, np.inf
+        first["p"] = self._p
         u0 = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
         if u0.size != m.nu or not np.all(np.isfinite(u0)):
             raise ValueError(f"u must be {m.nu} finite values for the inputs {list(m.input_names)}, got {u0}")
+        from .gaps import gap_limit
+
+        self._gap_limit = gap_limit(est, prior.mean, u0, p)
+        first["Q"], first["R"] = est.Q, est.R
+        first["thresholds"] = [est.gate_threshold(c) for c in range(est.ny + 1)]
         first["u_prev"], first["u"] = u0, u0
-        self._y, self._mask = first.flat_in("y"), first.flat_in("mask")
-        self._dt, self._gate = first.flat_in("dt"), first.flat_in("gate")
+        self._y, self._dt = first.flat_in("y"), first.flat_in("dt")
         self._u_prev, self._u = first.flat_in("u_prev"), first.flat_in("u")
+        self._held = [c.flat_out("u_held") for c in self._calls]
+        for held in self._held:                         # the default u_prev of the first update
+            held[:] = u0
+        self._status = [c.flat_out("status") for c in self._calls]
         self._nu, self._ny = m.nu, est.ny
-        self._zeros_u = np.zeros(m.nu)
         self._y_shape, self._u_shape = (est.ny,), (m.nu,)
-        self._ok = np.zeros(est.ny, dtype=bool)
-        self._gated = est.options.gate is not None
-        self._thresholds = np.array([est.gate_threshold(c) for c in range(est.ny + 1)])
         self._draws = [(first.flat_in(k), r * c) for k, (r, c) in est._draw_shapes().items()]
         self._n_draws = sum(size for _, size in self._draws)
         self._trig = [c.trigger if not c._checked else c for c in self._calls]
@@ -160,7 +198,7 @@ class StepEngine:
         from .gaps import _message, bridge_pieces, gap_limit
 
         x = self._x[1 - self._cur] if self.samples else self._prior.mean
-        held = self._u if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
+        held = self._held[1 - self._cur] if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
         limit = gap_limit(self._est, x, held, self._p)
         if dt <= limit:
             self._gap_limit = max(self._gap_limit, dt)
@@ -194,40 +232,36 @@ class StepEngine:
             raise ValueError(f"{what} must hold {size} value{'s' * (size != 1)} for {list(names)}, got shape {v.shape}")
         return v
 
+    def _refusal(self, y, u_prev, u) -> ValueError:
+        """What made the compiled update report an invalid sample (its outputs are not used)."""
+        est = self._est
+        bad = [n for n, v in zip(est.measured, y) if np.isinf(v)]
+        if bad:
+            return ValueError(f"measurement(s) {bad} infinite (NaN means not measured)")
+        return ValueError(f"inputs {list(est.model.input_names)} must be finite, got u_prev = {u_prev}, u = {u}")
+
     def _update(self, y, dt, u_prev, u):
-        # every argument is checked before a buffer is written: a refused update changes nothing
-        est, fast = self._est, np.ndarray
+        # shapes are checked before a buffer is written, values inside the compiled call: a refused
+        # update is never flipped to, so it changes nothing
+        fast = np.ndarray
         if type(y) is not fast or y.shape != self._y_shape or y.dtype != np.float64:
-            y = self._vector(y, self._ny, "y", est.measured)
+            y = self._vector(y, self._ny, "y", self._est.measured)
         if self._nu:
-            names, shape = est.model.input_names, self._u_shape
+            names, shape = self._est.model.input_names, self._u_shape
             if u_prev is None:
-                u_prev = self._u
+                u_prev = self._held[1 - self._cur]
             elif type(u_prev) is not fast or u_prev.shape != shape or u_prev.dtype != np.float64:
                 u_prev = self._vector(u_prev, self._nu, "u_prev", names)
             if u is None:
                 u = u_prev
             elif type(u) is not fast or u.shape != shape or u.dtype != np.float64:
                 u = self._vector(u, self._nu, "u", names)
-            # one test for NaN and inf in both: a dot product with zeros is NaN exactly then (0 * inf = NaN),
-            # a third of the time of two isfinite reductions on this per-sample path
-            if not math.isfinite(u_prev.dot(self._zeros_u) + u.dot(self._zeros_u)):
-                raise ValueError(f"inputs {list(names)} must be finite, got u_prev = {u_prev}, u = {u}")
-        measured = np.isfinite(y, out=self._ok)
-        n_measured = np.count_nonzero(measured)
-        if n_measured < self._ny and np.isinf(y).any():
-            bad = [n for n, v in zip(est.measured, y) if np.isinf(v)]
-            np.isfinite(self._y, out=self._ok)          # the mask of the last update, as before
-            raise ValueError(f"measurement(s) {bad} infinite (NaN means not measured)")
-        self._y[:] = y
-        self._mask[:] = measured
-        if self._gated:
-            self._gate[0] = self._thresholds[n_measured]
+            self._u_prev[...] = u_prev                  # [...] =: the quickest copy into a small array
+            self._u[...] = u
+        self._y[...] = y
         self._dt[0] = dt
-        if self._nu:
-            self._u_prev[:] = u_prev                    # before u: u_prev may be the u buffer itself
-            self._u[:] = u
         if self._n_draws:
+            rng_state = self._rng.bit_generator.state       # a refused update draws nothing
             z = self._rng.standard_normal(self._n_draws)
             start = 0
             for buf, size in self._draws:
@@ -235,6 +269,10 @@ class StepEngine:
                 start += size
         cur = self._cur
         self._trig[cur]()
+        if self._status[cur][0]:
+            if self._n_draws:
+                self._rng.bit_generator.state = rng_state
+            raise self._refusal(y, u_prev, u)
         self._cur = 1 - cur
         self.samples += 1
         return self._x[cur].copy()
@@ -254,11 +292,11 @@ class StepEngine:
         call = self._calls[1 - self._cur]
         values = {}
         for k in call.names_out:
-            if k in self._est.memory and k not in DIAGNOSTICS or k in ("x", "P"):
+            if k in self._est.memory and k not in DIAGNOSTICS or k in ("x", "P", *_ONLINE_EXTRAS):
                 continue
             v = call.out(k)
             if k == "e":
-                values[k] = np.where(self._ok, v.ravel(), np.nan)
+                values[k] = np.where(call.out("mask").ravel() > 0, v.ravel(), np.nan)
             elif k == "accepted":
                 values["rejected"] = bool(v[0, 0] < 0.5)
             elif v.size == 1:

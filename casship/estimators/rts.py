@@ -11,7 +11,8 @@ estimate for the UKF/EnKF). With the smoother gain ``J_k = C_{k+1} (P-_{k+1})^-1
 ``J_k`` comes from a Cholesky solve, which stays accurate for badly scaled covariances (latitude
 in rad next to speed in m/s) where a plain symbolic solve loses every digit and the smoothed
 covariances stop being positive definite. Differences of angle states are wrapped. The pass is one
-compiled fold (``mapaccum``) over the reversed record, in pieces of 512 samples through buffers.
+fold (``mapaccum``) over the reversed record, in pieces of 512 samples through buffers; compiled
+(``jit``), one C loop reads the filter's arrays backwards in place (:class:`~casship.native_fold.NativeFold`).
 """
 from __future__ import annotations
 
@@ -20,10 +21,11 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from .._fast import DUPLICATE_NAMES, BufferedCall, compile_function, run_fold
+from .._fast import DUPLICATE_NAMES, BufferedCall, run_fold
 from ..angles import wrap_sym
+from ..native_fold import NativeFold
 from .result import FilterResult
-from .update import spd_solve, symmetric
+from .update import from_lower, sandwich, spd_solve
 
 __all__ = ["rts_smooth", "backward_step"]
 
@@ -40,21 +42,22 @@ def backward_step(nx: int, angles: tuple) -> ca.Function:
     d = xs1 - xp1
     if any(angles):
         d = ca.vertcat(*[wrap_sym(d[i]) if angles[i] else d[i] for i in range(nx)])
-    J = spd_solve(Pp1, C.T).T
-    DJ = symmetric(Ps1 - Pp1) @ J.T
-    rows = [[None] * nx for _ in range(nx)]
-    for i in range(nx):                      # J D J' is symmetric: upper triangle only
-        for j in range(i, nx):
-            rows[i][j] = rows[j][i] = P[i, j] + ca.dot(J[i, :].T, DJ[:, j])
-    Ps = ca.vertcat(*[ca.horzcat(*r) for r in rows])
+    J = spd_solve(Pp1, C.T, exact=True).T        # the filters' covariances are exactly symmetric
+    JDJ = sandwich(J, from_lower(lambda i, j: Ps1[i, j] - Pp1[i, j], nx))
+    Ps = from_lower(lambda i, j: P[i, j] + JDJ[i, j], nx)
     return ca.Function("rts_step", [xs1, Ps1, x, P, xp1, Pp1, C], [x + J @ d, Ps, J],
                        ["x", "P", "x_filt", "P_filt", "x_pred", "P_pred", "C"], ["x", "P", "J"], DUPLICATE_NAMES)
 
 
 @lru_cache(maxsize=256)
-def _backward_fold(nx: int, angles: tuple, n: int, jit: bool = False) -> BufferedCall:
+def _backward_fold(nx: int, angles: tuple, n: int) -> BufferedCall:
     fold = backward_step(nx, angles).mapaccum(f"rts_fold{n}", n, ["x", "P"], ["x", "P"], DUPLICATE_NAMES)
-    return BufferedCall(compile_function(fold) if jit else fold, cannot_fail=jit)
+    return BufferedCall(fold)
+
+
+@lru_cache(maxsize=32)
+def _native_backward(nx: int, angles: tuple) -> NativeFold:
+    return NativeFold(backward_step(nx, angles), ["x", "P"])
 
 
 def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
@@ -89,8 +92,22 @@ def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
     # backwards in time, as (sample, rows, cols) views: run_fold copies them straight into its buffers
     per = {"x_filt": result.x[-2::-1, :, None], "P_filt": result.P[-2::-1], "x_pred": result.x_pred[:0:-1, :, None],
            "P_pred": result.P_pred[:0:-1], "C": result.C[:0:-1]}
-    _, outs = run_fold(lambda size: _backward_fold(nx, angles, size, bool(jit)), n - 1, FOLD_CHUNK,
-                       memory={"x": result.x[-1], "P": result.P[-1]}, per_sample=per, constants={}, keep=("x", "P"))
-    xs = np.vstack([outs["x"].reshape(n - 1, nx)[::-1], result.x[-1:]])
-    Ps = np.concatenate([outs["P"][::-1], result.P[-1:]], axis=0)
+    memory = {"x": result.x[-1], "P": result.P[-1]}
+    if jit:
+        # one block for the smoothed x and P (P per sample in column-major order), written backwards in place
+        fold = _native_backward(nx, angles)
+        flat = fold.blocks.take(n * (nx + nx * nx))
+        block = flat.reshape(n, nx + nx * nx)
+        xs, Ps = block[:, :nx], block[:, nx:].reshape(n, nx, nx).transpose(0, 2, 1)
+        xs[-1], Ps[-1] = result.x[-1], result.P[-1]
+        fold.run(n - 1, memory=memory, per_sample=per, keep=("x", "P"),
+                                         out={"x": xs[-2::-1], "P": Ps[-2::-1]})
+        flat.setflags(write=False)
+    else:
+        _, outs = run_fold(lambda size: _backward_fold(nx, angles, size), n - 1, FOLD_CHUNK, memory=memory,
+                           per_sample=per, constants={}, keep=("x", "P"))
+        xs = np.vstack([outs["x"].reshape(n - 1, nx)[::-1], result.x[-1:]])
+        Ps = np.concatenate([outs["P"][::-1], result.P[-1:]], axis=0)
+        for a in (xs, Ps):                        # own arrays: the result keeps them without a copy
+            a.setflags(write=False)
     return result.replace(x=xs, P=Ps, estimator=f"{result.estimator}+RTS")

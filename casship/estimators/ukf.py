@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 from .base import Estimator
 from .options import EstimatorOptions
-from .update import gaussian_terms, masked_innovation_cov, spd_solve, symmetric
+from .update import gain_and_terms, masked_innovation_cov, outer_sum, sandwich
 
-__all__ = ["UKF", "UKFOptions", "psd_sqrt", "sigma_weights", "circular_mean", "deviations", "wrap_fast", "weighted_outer"]
+__all__ = ["UKF", "UKFOptions", "psd_sqrt", "sigma_weights", "circular_mean", "deviations", "wrap_fast"]
 
 
 def psd_sqrt(P, tol: float = 0.0):
@@ -104,23 +104,6 @@ def circular_mean(points, wm, angles):
     return ca.vertcat(*rows)
 
 
-def weighted_outer(D, w=None):
-    """Symmetric ``sum_k w_k D[:, k] D[:, k]'`` (``w = 1`` if None), computing the upper triangle only.
-
-    Parameters
-    ----------
-    D : symbolic (n, k)
-    w : array (k,), optional
-    """
-    n = D.shape[0]
-    Dw = D if w is None else D @ ca.DM(np.diag(w))
-    rows = [[None] * n for _ in range(n)]
-    for i in range(n):
-        for j in range(i, n):
-            rows[i][j] = rows[j][i] = ca.dot(Dw[i, :], D[j, :])
-    return ca.vertcat(*[ca.horzcat(*r) for r in rows]) if n else D @ D.T
-
-
 def deviations(points, mean, angles):
     """Columns ``points[:, j] - mean`` with angle rows wrapped to (-pi, pi].
 
@@ -202,8 +185,8 @@ class UKF(Estimator):
         x, P = s["x"], s["P"]
         Wc = ca.DM(np.diag(wc))
 
-        def points(mean, cov):
-            L = np.sqrt(c) * psd_sqrt(symmetric(cov))
+        def points(mean, cov):                  # cov is exactly symmetric: its lower triangle is read
+            L = np.sqrt(c) * psd_sqrt(cov)
             return ca.horzcat(mean, ca.repmat(mean, 1, n) + L, ca.repmat(mean, 1, n) - L)
 
         # predict
@@ -214,7 +197,7 @@ class UKF(Estimator):
         dX0 = deviations(X, x, ang_x)
         dXf = deviations(Xf, xp, ang_x)
         G = dm.F_jac(x, s["u_prev"], s["p"], w0, s["dt"])[3]
-        Pp = weighted_outer(dXf, wc) + symmetric(G @ s["Q"] @ G.T)
+        Pp = outer_sum(dXf, wc) + sandwich(G, s["Q"])
         C = dX0 @ Wc @ dXf.T
         # update with redrawn points
         mask = s["mask"]
@@ -223,20 +206,19 @@ class UKF(Estimator):
         yhat = circular_mean(Y, wm, self.angle_meas)
         dY = ca.diag(mask) @ deviations(Y, yhat, self.angle_meas)
         dXp = deviations(Xp, xp, ang_x)
-        Pyy = weighted_outer(dY, wc)
+        Pyy = outer_sum(dY, wc)
         Pxy = dXp @ Wc @ dY.T
         e = self.residual(s["y"], yhat, mask)
         Sm = masked_innovation_cov(Pyy, s["R"], mask)
-        K = spd_solve(Sm, Pxy.T).T
-        nis, ll = gaussian_terms(e, Sm, mask)
+        K, nis, ll = gain_and_terms(Sm, Pxy.T, e, mask)
         acc = nis <= s["gate"]
         Ka = acc * K
         if np.all(wc >= 0):
             # Joseph form in sigma points: sum_i Wc_i (dX_i - K dY_i)(dX_i - K dY_i)' + K R K' equals
             # Pp - K S K' but is a sum of positive semi-definite terms (no loss of definiteness)
             D = dXp - Ka @ dY
-            P_upd = weighted_outer(D, wc) + Ka @ (ca.diag(mask) @ s["R"] @ ca.diag(mask)) @ Ka.T
+            P_upd = outer_sum(D, wc) + sandwich(Ka, ca.diag(mask) @ s["R"] @ ca.diag(mask))
         else:            # a negative central weight (scaled form): the plain update
-            P_upd = Pp - Ka @ Sm @ Ka.T
-        return {"x": xp + Ka @ e, "P": symmetric(P_upd), "x_pred": xp, "P_pred": Pp, "C": C,
+            P_upd = Pp - sandwich(Ka, Sm)
+        return {"x": xp + Ka @ e, "P": P_upd, "x_pred": xp, "P_pred": Pp, "C": C,
                 "e": e, "S": Sm, "K": Ka, "nis": nis, "ll": ll, "accepted": acc}
