@@ -21,7 +21,7 @@ Integrity
 
 The compiler is ``$CC`` if set, else ``gcc``, else ``cc``; the flags are :data:`DEFAULT_FLAGS`
 (chosen by measurement, see ``docs/benchmarks.md``) unless ``flags=`` or ``CASSHIP_CFLAGS`` says
-otherwise. ``casship cache info`` and ``casship cache clear`` show and empty the cache.
+otherwise. A compiler that refuses the default ``-march=native`` gets :data:`PORTABLE_FLAGS`. ``casship cache info`` and ``casship cache clear`` show and empty the cache.
 """
 from __future__ import annotations
 
@@ -44,21 +44,27 @@ from typing import Sequence
 
 import casadi as ca
 
-__all__ = ["compile_function", "cache_dir", "cache_info", "clear_cache", "CacheInfo", "DEFAULT_FLAGS",
+__all__ = ["compile_function", "cache_dir", "cache_info", "clear_cache", "CacheInfo", "DEFAULT_FLAGS", "PORTABLE_FLAGS",
            "find_compiler"]
 
-DEFAULT_FLAGS = ("-O3", "-fno-math-errno")
+DEFAULT_FLAGS = ("-O3", "-fno-math-errno", "-march=native")
 """Compiler flags used unless told otherwise, chosen by measurement (``benchmarks/bench_compile.py``,
 ``docs/benchmarks.md``): ``-O3`` runs the filter folds about 1.3 times faster than ``-O2`` at the same
-compile time; ``-fno-math-errno`` lets ``sqrt`` and friends compile to single instructions (the
-results are bit for bit the same, only ``errno`` is not set). ``-march=native`` is faster still
-but ties the code to the CPU (set it through ``CASSHIP_CFLAGS``; the cache key then includes the CPU)."""
+compile time; ``-fno-math-errno`` lets ``sqrt`` and friends compile to single instructions (only
+``errno`` is not set); ``-march=native`` uses the instructions of this CPU (fused multiply-add among
+them, so results differ from the interpreted step in the last bits) and makes the filter and
+smoother loops 10-17 % faster. Code compiled for one CPU is never loaded on another: the cache key
+then includes the CPU model and features."""
+
+PORTABLE_FLAGS = ("-O3", "-fno-math-errno")
+"""The default flags without ``-march=native``, for compilers that do not accept it."""
 
 _ENV_DIR, _ENV_FLAGS = "CASSHIP_CACHE_DIR", "CASSHIP_CFLAGS"
 _OFF = ("off", "0", "no", "false", "none")
 _SUFFIX = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
 _LOADED: dict[tuple, tuple] = {}         # (key, folder) -> (loaded Function, ctypes library or None), this process
 _COMPILERS: dict[str, tuple[str, str]] = {}
+_NO_NATIVE: set[tuple[str, str]] = set()   # compilers that refused -march=native in this process
 _LOCK = threading.Lock()
 
 
@@ -283,8 +289,22 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     if library and not extra_source:
         raise ValueError("compile_function: library=True is for calling extra_source; none given")
     flags = _flags(flags)
-    key = cache_key(fun, cc, flags, extra_source)
+    if flags == DEFAULT_FLAGS and cc in _NO_NATIVE:
+        flags = PORTABLE_FLAGS
     folder = _cache_folder(cache_dir) if cache else None
+    try:
+        loaded = _compiled(fun, cc, flags, folder, extra_source)
+    except RuntimeError:
+        if flags != DEFAULT_FLAGS:
+            raise
+        _NO_NATIVE.add(cc)                  # this compiler refuses -march=native: the portable flags
+        loaded = _compiled(fun, cc, PORTABLE_FLAGS, folder, extra_source)
+    return loaded if library else loaded[0]
+
+
+def _compiled(fun, cc, flags, folder, extra_source: str) -> tuple:
+    """``(Function, library or None)`` from this process, the cache or a fresh compile."""
+    key = cache_key(fun, cc, flags, extra_source)
     with _LOCK:
         loaded = _LOADED.get((key, folder))
         if loaded is None:
@@ -292,7 +312,7 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
             if loaded is None:
                 loaded = _compile_into(fun, folder, key, cc, flags, extra_source)
             _LOADED[key, folder] = loaded
-    return loaded if library else loaded[0]
+    return loaded
 
 
 def _cache_folder(path) -> Path | None:

@@ -215,3 +215,21 @@ def test_cache_command_info_and_clear(cache, capsys):
     assert [f.name for f in cache.iterdir()] == ["keep.txt"]
     assert cli_main(["cache", "info", "--dir", str(cache / "nowhere")]) == 0
     assert "entries: 0" in capsys.readouterr().out
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="the stand-in compiler is a shell script")
+def test_a_compiler_refusing_march_native_gets_the_portable_flags(cache, tmp_path, monkeypatch):
+    """The default flags include -march=native; a compiler that refuses it still compiles, with the
+    portable flags (and they are what the cache records)."""
+    real, _ = cc.find_compiler()
+    picky = tmp_path / "picky-cc"
+    picky.write_text("#!/bin/sh\nfor a in \"$@\"; do [ \"$a\" = -march=native ] && { echo 'unknown -march' >&2; exit 1; }; "
+                     f"done\nexec {real} \"$@\"\n")
+    picky.chmod(0o755)
+    monkeypatch.setattr(cc, "_NO_NATIVE", set())
+    x = ca.SX.sym("x", 2)
+    f = cc.compile_function(ca.Function("picky_thing", [x], [3 * x], ["x"], ["y"]), compiler=str(picky))
+    np.testing.assert_array_equal(np.array(f(x=[1.0, 2.0])["y"]).ravel(), [3.0, 6.0])
+    (record,) = [p for p in cache.iterdir() if p.suffix == ".json"]
+    assert json.loads(record.read_text())["flags"] == list(cc.PORTABLE_FLAGS)
+    assert "-march=native" in cc.DEFAULT_FLAGS and cc.find_compiler(str(picky)) in cc._NO_NATIVE

@@ -18,7 +18,7 @@ import numpy as np
 from ..gaussian import Gaussian
 from .base import Estimator
 from .options import EstimatorOptions, check_int
-from .ukf import psd_sqrt
+from .ukf import psd_sqrt, wrap_fast
 from .update import gain_and_terms, masked_innovation_cov, residual, symmetric
 
 __all__ = ["EnKF", "EnKFOptions"]
@@ -151,7 +151,7 @@ class EnKF(Estimator):
         yf, v, y, mask = S.sym("yf", self.ny), S.sym("v", self.ny), S.sym("y", self.ny), S.sym("mask", self.ny)
         K = S.sym("K", m.nx, self.ny)
         analysis = _member("enkf_member_analysis", {"xf": x, "yf": yf, "v": v, "y": y, "mask": mask, "K": K},
-                           {"xa": x + K @ residual(y + v, yf, mask, self.angle_meas)})
+                           {"xa": x + K @ residual(y + v, yf, mask, self.angle_meas, wrap_fast)})
         return forecast, output, analysis
 
     def _build(self, s: dict) -> dict:

@@ -147,7 +147,7 @@ def spd_solve(A, B, exact: bool = False):
     return _backward(L, _forward(L, B))
 
 
-def residual(y, yhat, mask, angles):
+def residual(y, yhat, mask, angles, wrap=wrap_sym):
     """Masked residual ``y - yhat``, angle channels wrapped to (-pi, pi].
 
     Unmeasured channels (``mask = 0``) give exactly 0 even when ``y`` holds NaN there.
@@ -158,9 +158,12 @@ def residual(y, yhat, mask, angles):
         Measurement, prediction and mask (1 = measured).
     angles : sequence of bool
         Which channels are angles.
+    wrap : callable
+        The wrap of angle channels (default ``atan2(sin, cos)``, smooth with derivative 1; the
+        ensemble's per-member residuals use the cheaper ``floor`` form, no derivative needed).
     """
     e = y - yhat
-    return ca.vertcat(*[ca.if_else(mask[i] > 0, wrap_sym(e[i]) if a else e[i], 0) for i, a in enumerate(angles)])
+    return ca.vertcat(*[ca.if_else(mask[i] > 0, wrap(e[i]) if a else e[i], 0) for i, a in enumerate(angles)])
 
 
 def masked_innovation_cov(HPH, R, mask):
