@@ -112,6 +112,18 @@ CASADI_SYMBOL_EXPORT int casship_fold_{name}(casadi_int n, const casadi_real* co
 """
 
 
+def _in_place(a: np.ndarray, n: int, rows: int, cols: int, what: str) -> bool:
+    """Whether ``a`` (``(n, rows*cols)`` or ``(n, rows, cols)``, else ``ValueError`` naming ``what``) holds
+    each sample's entries contiguously in column-major order, at a whole number of doubles apart."""
+    if a.ndim == 2 and a.shape == (n, rows * cols):
+        ok = a.strides[1] == _DOUBLE or a.shape[1] == 1
+    elif a.ndim == 3 and a.shape == (n, rows, cols):
+        ok = (a.strides[1] == _DOUBLE or rows == 1) and (a.strides[2] == _DOUBLE * rows or cols == 1)
+    else:
+        raise ValueError(f"{what} needs shape ({n}, {rows * cols}) or ({n}, {rows}, {cols}), got {a.shape}")
+    return ok and a.strides[0] % _DOUBLE == 0
+
+
 def _address(a: np.ndarray) -> int:
     return a.ctypes.data
 
@@ -166,17 +178,13 @@ class NativeFold:
         """``(array kept alive, address of sample 0, sample stride in doubles)`` of a per-sample input."""
         rows, cols = self._size_in[name]
         a = np.asarray(a, dtype=float)
-        if a.ndim == 2 and a.shape == (n, rows * cols):
-            ok = a.strides[1] == _DOUBLE or a.shape[1] == 1
-        elif a.ndim == 3 and a.shape == (n, rows, cols):
-            ok = (a.strides[1] == _DOUBLE or rows == 1) and (a.strides[2] == _DOUBLE * rows or cols == 1)
-        else:
-            raise ValueError(f"per-sample input {name!r} needs shape ({n}, {rows * cols}) or ({n}, {rows}, {cols}), "
-                             f"got {a.shape}")
-        if not ok or a.strides[0] % _DOUBLE:               # each sample's entries contiguous, column-major
-            block = np.empty((n, cols, rows))
-            block[:] = a.reshape(n, rows, cols).transpose(0, 2, 1)
-            a = block
+        if not _in_place(a, n, rows, cols, f"per-sample input {name!r}"):   # copied into the layout
+            if a.ndim == 2:                                 # rows: the samples' flat entries
+                a = np.ascontiguousarray(a)
+            else:
+                block = np.empty((n, cols, rows))
+                block[:] = a.transpose(0, 2, 1)
+                a = block
         return a, _address(a), a.strides[0] // _DOUBLE
 
     def _constant(self, name: str, v):
@@ -194,13 +202,7 @@ class NativeFold:
         rows, cols = self._size_out[name]
         if not isinstance(a, np.ndarray) or a.dtype != np.float64 or not a.flags.writeable:
             raise ValueError(f"output {name!r} needs a writable float64 array")
-        if a.ndim == 2 and a.shape == (n, rows * cols):
-            ok = a.strides[1] == _DOUBLE or a.shape[1] == 1
-        elif a.ndim == 3 and a.shape == (n, rows, cols):
-            ok = (a.strides[1] == _DOUBLE or rows == 1) and (a.strides[2] == _DOUBLE * rows or cols == 1)
-        else:
-            raise ValueError(f"output {name!r} needs shape ({n}, {rows * cols}) or ({n}, {rows}, {cols}), got {a.shape}")
-        if not ok or a.strides[0] % _DOUBLE:
+        if not _in_place(a, n, rows, cols, f"output {name!r}"):
             raise ValueError(f"output {name!r}: each sample's entries must be contiguous in column-major order")
         return _address(a), a.strides[0] // _DOUBLE
 

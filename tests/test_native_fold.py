@@ -101,3 +101,17 @@ def test_bad_calls_name_what_is_wrong():
         fold.run(2, per_sample={"u": np.ones((2, 2))}, keep=("x",), out={"x": np.ones((2, 2), dtype=int)}, **base)
     with pytest.raises(ValueError, match="not both an input and an output"):
         NativeFold(_accumulator(), ["norm"])
+
+
+def test_inputs_in_another_layout_are_copied_into_the_right_one():
+    """A matrix input given row-major per sample (or with gaps between the entries) is laid out
+    column-major before the loop reads it."""
+    M, v = ca.SX.sym("M", 2, 3), ca.SX.sym("v", 3)
+    acc = ca.SX.sym("acc", 2)
+    step = ca.Function("mv_step", [acc, M, v], [acc + M @ v], ["acc", "M", "v"], ["acc"],
+                       {"allow_duplicate_io_names": True})
+    fold = NativeFold(step, ["acc"])
+    rng = np.random.default_rng(1)
+    Ms, vs = rng.standard_normal((4, 2, 3)), rng.standard_normal((4, 6))[:, ::2]   # C order; strided
+    final, _ = fold.run(4, memory={"acc": [0.0, 0.0]}, per_sample={"M": Ms, "v": vs})
+    np.testing.assert_allclose(final["acc"].ravel(), sum(Ms[k] @ vs[k] for k in range(4)), rtol=1e-14)
