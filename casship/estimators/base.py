@@ -237,10 +237,10 @@ class Estimator:
         return self._compiled[key]
 
     def _fold_call(self, size: int, outputs) -> BufferedCall:
+        """The interpreted fold over ``size`` samples through buffers (compiled runs use :meth:`_native_fold`)."""
         key = (size, outputs)
         if key not in self._fold_calls:
-            fun = self._compiled_function(("fold",) + key, lambda: self.fold(size, outputs))
-            self._fold_calls[key] = BufferedCall(fun, cannot_fail=self.options.jit)
+            self._fold_calls[key] = BufferedCall(self.fold(size, outputs))
         return self._fold_calls[key]
 
     # -- data ------------------------------------------------------------------------------------
