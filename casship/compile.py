@@ -239,7 +239,7 @@ def _load(fun: ca.Function, lib: Path, handle: bool) -> tuple | None:
 
 def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None, compiler: str | None = None,
                      cache_dir: str | os.PathLike | None = None, cache: bool = True, extra_source: str = "",
-                     library: bool = False):
+                     library: bool = False, include_dirs: Sequence[str] = ()):
     """``fun`` compiled to a shared library and loaded (``casadi.external``), cached on disk.
 
     Parameters
@@ -261,6 +261,8 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     library : bool
         Also return the library as a ``ctypes.CDLL``, for calling ``extra_source``'s functions
         (only with ``extra_source``).
+    include_dirs : sequence of str
+        Header folders for ``extra_source`` (``-I``, after the flags). Part of the cache key.
 
     Returns
     -------
@@ -291,14 +293,15 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     flags = _flags(flags)
     if flags == DEFAULT_FLAGS and cc in _NO_NATIVE:
         flags = PORTABLE_FLAGS
+    includes = tuple(f"-I{d}" for d in include_dirs)
     folder = _cache_folder(cache_dir) if cache else None
     try:
-        loaded = _compiled(fun, cc, flags, folder, extra_source)
+        loaded = _compiled(fun, cc, (*flags, *includes), folder, extra_source)
     except RuntimeError:
         if flags != DEFAULT_FLAGS:
             raise
+        loaded = _compiled(fun, cc, (*PORTABLE_FLAGS, *includes), folder, extra_source)
         _NO_NATIVE.add(cc)                  # this compiler refuses -march=native: the portable flags
-        loaded = _compiled(fun, cc, PORTABLE_FLAGS, folder, extra_source)
     return loaded if library else loaded[0]
 
 

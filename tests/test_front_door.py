@@ -312,17 +312,19 @@ def test_estimator_facing_a_long_gap_raises_or_bridges():
         cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"on_gap": "ignore"})
 
 
-def test_online_update_refuses_bad_dt_and_long_gaps():
+@pytest.mark.parametrize("jit", [False, True], ids=["interpreted", "compiled"])
+def test_online_update_refuses_bad_dt_and_long_gaps(jit):
     m, truth, data = _gap_record()
     prior = cs.Gaussian(m.states(), np.diag([1e-2, 1e-4]))
-    run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4).online(prior, u=[0.1])
+    run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"jit": jit}).online(prior, u=[0.1])
     run.update(data["psi"][:1], 0.0)
     for bad in (np.nan, -1.0, np.inf):
         with pytest.raises(ValueError, match="dt must be >= 0 and finite"):
             run.update(data["psi"][1:2], bad)
     with pytest.raises(ValueError, match="time gap of 1e\\+04 s before update 2"):
         run.update(data["psi"][1:2], 1e4)
-    bridged = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"on_gap": "bridge"}).online(prior, u=[0.1])
+    bridged = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4,
+                     options={"on_gap": "bridge", "jit": jit}).online(prior, u=[0.1])
     bridged.update(data["psi"][:1], 0.0)
     with pytest.warns(UserWarning, match="bridged by"):
         x = bridged.update(data["psi"][-1:], 1e4)
@@ -330,10 +332,11 @@ def test_online_update_refuses_bad_dt_and_long_gaps():
     assert abs(x[1] - truth["r"][-1]) < 3 * np.sqrt(bridged.P[1, 1])
 
 
-def test_a_refused_online_update_changes_nothing():
+@pytest.mark.parametrize("jit", [False, True], ids=["interpreted", "compiled"])
+def test_a_refused_online_update_changes_nothing(jit):
     m, truth, data = _gap_record()
     prior = cs.Gaussian(m.states(), np.diag([1e-2, 1e-4]))
-    run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4).online(prior, u=[0.1])
+    run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"jit": jit}).online(prior, u=[0.1])
     run.update(data["psi"][:1], 0.0)
     x, P = run.x, run.P
     refused = [((np.array([np.inf]), 0.5), "measurement\\(s\\) \\['psi'\\] infinite"),

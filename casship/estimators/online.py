@@ -42,6 +42,9 @@ class OnlineRun:
 
     def __init__(self, engine):
         self._engine = engine
+        fast = getattr(engine, "compiled_update", None)
+        if fast is not None:            # the same update, one call into compiled code
+            self.update = fast
 
     def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
         """Predict over ``dt`` (0: no prediction, e.g. the first sample) with the input ``u_prev`` held
@@ -138,6 +141,19 @@ def online_step(est) -> ca.Function:
                        DUPLICATE_NAMES)
 
 
+def _native_update(est):
+    """The estimator's compiled online update (:class:`~casship.native_update.NativeUpdate`), or None:
+    built for jit estimators without random draws, where the headers are installed (cached)."""
+    if not est.options.jit or est._draw_shapes():
+        return None
+    key = ("update", est.options.outputs)
+    if key not in est._compiled:
+        from ..native_update import compile_update
+
+        est._compiled[key] = compile_update(online_step(est), est.model.nx, est.ny, est.model.nu)
+    return est._compiled[key]
+
+
 class StepEngine:
     """Online engine of a recursive estimator: :func:`online_step` through two bound buffer sets.
 
@@ -146,19 +162,27 @@ class StepEngine:
     and flips: no copy of the memory, no ``DM`` conversion. The mask, the gate and the validity of
     the sample are worked out inside the compiled call; an invalid sample is not flipped to, so it
     changes nothing, and only then does Python look for what was wrong.
+
+    For jit estimators without random draws, ``compiled_update`` does all of this in one call into
+    compiled code (:mod:`casship.native_update`): it takes float64 vectors and a number ``dt``
+    within the gap limit, and hands every other call (other types, keywords, gaps, invalid samples)
+    to :meth:`update`, on the same buffers and state. None where it cannot be built.
     """
 
     def __init__(self, est, prior: Gaussian, p, u, rng):
-        self.name, self.samples = est.name, 0
+        self.name = est.name
         self._est, self._rng = est, rng
         self._prior = prior
         m = est.model
-        fun = est._compiled_function(("online", est.options.outputs), lambda: online_step(est))
+        native = _native_update(est)
+        fun = native.fun if native else est._compiled_function(("online", est.options.outputs),
+                                                                lambda: online_step(est))
         from .._fast import BufferedCall
 
         first = BufferedCall(fun, cannot_fail=est.options.jit)
         self._calls = (first, first.partner(est.memory))
-        self._cur = 0                                   # the call whose inputs hold the memory now
+        # [the call whose inputs hold the memory now, samples taken]: shared with the compiled update
+        self._state = np.zeros(2, np.int64)
         for k, v in est.memory_from(prior, rng).items():
             first[k] = v
         self._p = m.params() if p is None else m.params(p)
@@ -168,7 +192,7 @@ class StepEngine:
             raise ValueError(f"u must be {m.nu} finite values for the inputs {list(m.input_names)}, got {u0}")
         from .gaps import gap_limit
 
-        self._gap_limit = gap_limit(est, prior.mean, u0, p)
+        self._gap_limit = np.array([gap_limit(est, prior.mean, u0, p)])
         first["Q"], first["R"] = est.Q, est.R
         first["thresholds"] = [est.gate_threshold(c) for c in range(est.ny + 1)]
         first["u_prev"], first["u"] = u0, u0
@@ -185,11 +209,25 @@ class StepEngine:
         self._trig = [c.trigger if not c._checked else c for c in self._calls]
         self._x = [c.flat_out("x") for c in self._calls]
         self._P = [c.out("P") for c in self._calls]
+        buffers = {"y": self._y, "dt": self._dt, "u_prev": self._u_prev, "u": self._u, "state": self._state,
+                   "gap_limit": self._gap_limit}
+        for c in range(2):
+            buffers.update({f"held{c}": self._held[c], f"x{c}": self._x[c], f"status{c}": self._status[c]})
+        # one call into compiled code, handing every call it does not take to the checked update
+        self.compiled_update = native.bind(self._calls, buffers, self.update) if native else None
 
-    def update(self, y, dt, u_prev, u):
+    @property
+    def _cur(self) -> int:
+        return int(self._state[0])
+
+    @property
+    def samples(self) -> int:
+        return int(self._state[1])
+
+    def update(self, y, dt, u_prev=None, u=None):
         if not (dt >= 0 and math.isfinite(dt)):
             raise ValueError(f"dt must be >= 0 and finite, got {dt}")
-        if dt > self._gap_limit and self._bridged(y, dt, u_prev, u):
+        if dt > self._gap_limit[0] and self._bridged(y, dt, u_prev, u):
             return self._x[1 - self._cur].copy()
         return self._update(y, dt, u_prev, u)
 
@@ -201,7 +239,7 @@ class StepEngine:
         held = self._held[1 - self._cur] if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
         limit = gap_limit(self._est, x, held, self._p)
         if dt <= limit:
-            self._gap_limit = max(self._gap_limit, dt)
+            self._gap_limit[0] = max(self._gap_limit[0], dt)
             return False
         where = f"before update {self.samples + 1}"
         if self._est.options.on_gap == "raise":
@@ -273,8 +311,8 @@ class StepEngine:
             if self._n_draws:
                 self._rng.bit_generator.state = rng_state
             raise self._refusal(y, u_prev, u)
-        self._cur = 1 - cur
-        self.samples += 1
+        self._state[0] = 1 - cur
+        self._state[1] += 1
         return self._x[cur].copy()
 
     @property
