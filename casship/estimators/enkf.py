@@ -4,9 +4,12 @@ The random draws are generated in numpy (from the ``seed``) and enter the compil
 per-step inputs ``z_w`` (nw x N) and ``z_v`` (ny x N), so a seeded run is reproducible and the
 batch fold and the online runner give identical numbers for the same draws.
 
-The members go through one member step ``map``-ped over the ensemble (model step, outputs and
-analysis), and the ensemble statistics are matrix products, so the size of the step Function and
-its compile time do not grow with the number of members.
+Every per-member computation is one SX member step ``map``-ped over the ensemble: the forecast
+(model step and outputs), the analysis, and the ensemble moments, which are sums of member
+products reduced by the ``map`` (one pass around a reference member, see :func:`_moments`), not
+generic dense matrix products. The inputs shared by all members go in as one packed vector. So the
+size of the step Function and its compile time do not grow with the number of members, and a
+step costs about the members' own arithmetic.
 """
 from __future__ import annotations
 
@@ -19,7 +22,7 @@ from ..gaussian import Gaussian
 from .base import Estimator
 from .options import EstimatorOptions, check_int
 from .ukf import psd_sqrt, wrap_fast
-from .update import gain_and_terms, masked_innovation_cov, residual, symmetric
+from .update import from_lower, gain_and_terms, masked_innovation_cov, residual
 
 __all__ = ["EnKF", "EnKFOptions"]
 
@@ -43,42 +46,89 @@ class EnKFOptions(EstimatorOptions):
         object.__setattr__(self, "members", check_int(self.members, "members", 2))
 
 
-def _wrap_rows(D, angles):
-    """``D`` with its angle rows wrapped to [-pi, pi).
-
-    Only the angle rows are computed on (a few of the rows: the wrap is the costliest elementwise
-    chain of the step), and the correction is scattered back by a constant 0/1 matrix.
-    """
-    rows = np.flatnonzero(np.asarray(angles, dtype=bool))
-    if not rows.size:
-        return D
-    A = D[rows.tolist(), :]
-    scatter = ca.DM.zeros(D.shape[0], rows.size)           # sparse: one entry per angle row
-    for j, i in enumerate(rows):
-        scatter[int(i), j] = 1.0
-    scatter = ca.sparsify(scatter)
-    return D - scatter @ (2 * np.pi * ca.floor((A + np.pi) / (2 * np.pi)))
-
-
-def _mean(X, angles):
-    """Ensemble mean of the columns of ``X``; angle rows averaged on the circle around the first member."""
-    N = X.shape[1]
+def _wrapped(d, angles):
+    """``d`` (SX vector) with its angle entries wrapped to [-pi, pi)."""
     if not np.any(angles):
-        return ca.sum2(X) / N
-    ref = X[:, 0]
-    return ref + ca.sum2(_wrap_rows(X - ca.repmat(ref, 1, N), angles)) / N
+        return d
+    return ca.vertcat(*[wrap_fast(d[i]) if angles[i] else d[i] for i in range(d.numel())])
 
 
-def _deviations(X, mean, angles):
-    """Columns of ``X`` minus ``mean``, angle rows wrapped to [-pi, pi)."""
-    return _wrap_rows(X - ca.repmat(mean, 1, X.shape[1]), angles)
+def _over_members(name: str, per_member: dict, shared: dict, outputs: dict, members: int, summed=()) -> dict:
+    """An SX member step evaluated for every member by one ``map``.
+
+    Parameters
+    ----------
+    name : str
+    per_member : dict name -> (SX symbol, MX columns)
+        Inputs that differ between members: column ``i`` goes to member ``i``.
+    shared : dict name -> (SX symbol, MX value)
+        Inputs that are the same for all members. They are packed into one vector, so ``map``
+        copies one block per member instead of one per input.
+    outputs : dict name -> SX
+        The member's outputs, in terms of the symbols.
+    members : int
+    summed : sequence of str
+        Outputs summed over the members (the others come out column by column).
+
+    Returns
+    -------
+    dict name -> MX
+    """
+    per_member = {k: v for k, v in per_member.items() if v[0].numel()}     # an empty mapped input makes
+    shared = {k: v for k, v in shared.items() if v[0].numel()}             # CasADi's C invalid
+    symbols = [v[0] for v in per_member.values()]
+    packed = ca.SX.sym("shared", sum(v[0].numel() for v in shared.values()))
+    pieces, start = [], 0
+    for sym, _ in shared.values():
+        pieces.append(ca.reshape(packed[start:start + sym.numel()], sym.shape))
+        start += sym.numel()
+    exprs = ca.substitute(list(outputs.values()), [v[0] for v in shared.values()], pieces) if shared \
+        else list(outputs.values())
+    step = ca.Function(f"{name}_member", [*symbols, packed], exprs)
+    names = list(outputs)
+    mapped = step.map(name, "serial", members, [len(symbols)], [names.index(k) for k in summed])
+    args = [v[1] for v in per_member.values()]
+    args.append(ca.vertcat(*[ca.vec(v[1]) for v in shared.values()]) if shared else ca.MX(0, 1))
+    return dict(zip(names, mapped.call(args)))
 
 
-def _member(name, inputs: dict, outputs: dict) -> tuple[ca.Function, list]:
-    """A member Function of the non-empty ``inputs`` (name -> SX) and the names it takes (empty
-    inputs, e.g. a model without inputs, are left out: a mapped empty input makes CasADi's C invalid)."""
-    used = [k for k, v in inputs.items() if v.numel()]
-    return ca.Function(name, [inputs[k] for k in used], list(outputs.values()), used, list(outputs)), used
+def _moments(name: str, ensembles: dict, angles: dict, pairs, members: int) -> tuple[dict, dict]:
+    """Means of ensembles (columns = members) and the sample covariances of the ``pairs`` of them.
+
+    One pass over the members, around the first member as reference ``r``: with the deviations
+    ``e_i = wrap(x_i - r)`` (angle rows wrapped, so means of angles are taken on the circle), the
+    mean is ``r + sum(e_i) / N`` and the covariance ``(sum(e_i f_i') - sum(e_i) sum(f_i)' / N) / (N - 1)``.
+    The reference is a member, so the sums are of deviations of the ensemble's own size (no
+    cancellation of large numbers). A pair of an ensemble with itself computes each entry below the
+    diagonal once and is exactly symmetric.
+
+    Parameters
+    ----------
+    name : str
+    ensembles : dict name -> MX (rows x members)
+    angles : dict name -> angle flags of the rows
+    pairs : sequence of (name, name)
+    members : int
+
+    Returns
+    -------
+    means : dict name -> MX
+    covariances : dict (name, name) -> MX
+    """
+    syms = {k: ca.SX.sym(k, X.shape[0]) for k, X in ensembles.items()}
+    refs = {k: ca.SX.sym(f"{k}_ref", X.shape[0]) for k, X in ensembles.items()}
+    dev = {k: _wrapped(syms[k] - refs[k], angles[k]) for k in ensembles}
+    outputs = {f"sum_{k}": dev[k] for k in ensembles}
+    for a, b in pairs:
+        outputs[f"sum_{a}_{b}"] = (from_lower(lambda i, j: dev[a][i] * dev[a][j], dev[a].numel()) if a == b
+                                   else dev[a] @ dev[b].T)
+    first = {k: X[:, 0] for k, X in ensembles.items()}
+    sums = _over_members(name, {k: (syms[k], X) for k, X in ensembles.items()},
+                         {f"{k}_ref": (refs[k], first[k]) for k in ensembles}, outputs, members, list(outputs))
+    means = {k: first[k] + sums[f"sum_{k}"] / members for k in ensembles}
+    covs = {(a, b): (sums[f"sum_{a}_{b}"] - sums[f"sum_{a}"] @ sums[f"sum_{b}"].T / members) / (members - 1)
+            for a, b in pairs}
+    return means, covs
 
 
 class EnKF(Estimator):
@@ -140,49 +190,42 @@ class EnKF(Estimator):
         self._check_prior(prior)
         return prior.sample(self.members, np.random.default_rng(seed)).T.copy()
 
-    def _member_functions(self):
-        """The per-member Functions (SX) with the names of their inputs, to be mapped over the ensemble."""
-        m, dm = self.model, self.dmodel
-        S = dm.symbolic
-        x, u, p, w, dt = S.sym("x", m.nx), S.sym("u", m.nu), S.sym("p", m.np), S.sym("w", m.nw), S.sym("dt")
-        forecast = _member("enkf_member_forecast", {"x": x, "u": u, "p": p, "w": w, "dt": dt},
-                           {"xf": dm.F(x, u, p, w, dt)})
-        output = _member("enkf_member_output", {"x": x, "u": u, "p": p}, {"y": self.h_meas(x, u, p)})
-        yf, v, y, mask = S.sym("yf", self.ny), S.sym("v", self.ny), S.sym("y", self.ny), S.sym("mask", self.ny)
-        K = S.sym("K", m.nx, self.ny)
-        analysis = _member("enkf_member_analysis", {"xf": x, "yf": yf, "v": v, "y": y, "mask": mask, "K": K},
-                           {"xa": x + K @ residual(y + v, yf, mask, self.angle_meas, wrap_fast)})
-        return forecast, output, analysis
-
     def _build(self, s: dict) -> dict:
-        m, N = self.model, self.members
-        (forecast, f_in), (output, o_in), (analysis, a_in) = self._member_functions()
+        m, N, ny = self.model, self.members, self.ny
         ang, angy = m.angle_states, self.angle_meas
-        scale = 1.0 / np.sqrt(N - 1)
         X, mask = s["X"], s["mask"]
         # one factor per step for all members (an SX Function of the small Q and R)
-        Qs, Rs = ca.SX.sym("Q", m.nw, m.nw), ca.SX.sym("R", self.ny, self.ny)
+        Qs, Rs = ca.SX.sym("Q", m.nw, m.nw), ca.SX.sym("R", ny, ny)
         LQ, LR = ca.Function("enkf_noise_roots", [Qs, Rs], [psd_sqrt(Qs), psd_sqrt(Rs)])(s["Q"], s["R"])
-
-        def mapped(fun, names, args):
-            return fun.map(N)(*[args[k] for k in names])
-
-        # forecast: every member through the model with its own held noise
-        Xf = mapped(forecast, f_in, {"x": X, "u": s["u_prev"], "p": s["p"], "w": LQ @ s["z_w"], "dt": s["dt"]})
-        x0, xp = _mean(X, ang), _mean(Xf, ang)
-        dX0, dXf = scale * _deviations(X, x0, ang), scale * _deviations(Xf, xp, ang)
-        # analysis with perturbed observations
-        Yf = mapped(output, o_in, {"x": Xf, "u": s["u"], "p": s["p"]})
-        yhat = _mean(Yf, angy)
-        dY = ca.diag(mask) @ (scale * _deviations(Yf, yhat, angy))
-        Sm = masked_innovation_cov(dY @ dY.T, s["R"], mask)
+        S = ca.SX
+        x, z_w, z_v = S.sym("x", m.nx), S.sym("z_w", m.nw), S.sym("z_v", ny)
+        yf = S.sym("yf", ny)
+        u_prev, u, p, dt = S.sym("u_prev", m.nu), S.sym("u", m.nu), S.sym("p", m.np), S.sym("dt")
+        Lq, Lr, y, mk, K_s = S.sym("LQ", m.nw, m.nw), S.sym("LR", ny, ny), S.sym("y", ny), S.sym("mask", ny), \
+            S.sym("K", m.nx, ny)
+        # forecast: every member through the model with its own held noise, and its outputs
+        xf = self.dmodel.F(x, u_prev, p, Lq @ z_w, dt)
+        fc = _over_members("enkf_forecast", {"x": (x, X), "z_w": (z_w, s["z_w"])},
+                           {"u_prev": (u_prev, s["u_prev"]), "u": (u, s["u"]), "p": (p, s["p"]), "LQ": (Lq, LQ),
+                            "dt": (dt, s["dt"])}, {"xf": xf, "yf": self.h_meas(xf, u, p)}, N)
+        Xf, Yf = fc["xf"], fc["yf"]
+        means, covs = _moments("enkf_forecast_moments", {"x": Xf, "y": Yf}, {"x": ang, "y": angy},
+                               [("x", "y"), ("y", "y")], N)
+        xp, yhat = means["x"], means["y"]
+        # analysis with perturbed observations (unmeasured channels carry no spread)
+        M = ca.diag(mask)
+        Sm = masked_innovation_cov(M @ covs["y", "y"] @ M, s["R"], mask)
         e = residual(s["y"], yhat, mask, angy)
-        K, nis, ll, acc = self._gain_function()(Sm, dXf @ dY.T, e, mask, s["gate"])
-        Xa = mapped(analysis, a_in, {"xf": Xf, "yf": Yf, "v": LR @ s["z_v"], "y": s["y"], "mask": mask, "K": K})
-        xa = _mean(Xa, ang)
-        dXa = scale * _deviations(Xa, xa, ang)
-        return {"X": Xa, "x": xa, "P": symmetric(dXa @ dXa.T), "x_pred": xp, "P_pred": symmetric(dXf @ dXf.T),
-                "C": dX0 @ dXf.T, "e": e, "S": Sm, "K": K, "nis": nis, "ll": ll, "accepted": acc}
+        K, nis, ll, acc = self._gain_function()(Sm, covs["x", "y"] @ M, e, mask, s["gate"])
+        xa = x + K_s @ residual(y + Lr @ z_v, yf, mk, angy, wrap_fast)
+        Xa = _over_members("enkf_analysis", {"xf": (x, Xf), "yf": (yf, Yf), "z_v": (z_v, s["z_v"])},
+                           {"y": (y, s["y"]), "mask": (mk, mask), "K": (K_s, K), "LR": (Lr, LR)}, {"xa": xa}, N)["xa"]
+        post, post_cov = _moments("enkf_analysis_moments", {"x": Xa}, {"x": ang}, [("x", "x")], N)
+        # diagnostics (built only when asked for: a step returning x and P leaves them out)
+        _, pred_cov = _moments("enkf_forecast_spread", {"x": Xf}, {"x": ang}, [("x", "x")], N)
+        _, step_cov = _moments("enkf_step_spread", {"x0": X, "x": Xf}, {"x0": ang, "x": ang}, [("x0", "x")], N)
+        return {"X": Xa, "x": post["x"], "P": post_cov["x", "x"], "x_pred": xp, "P_pred": pred_cov["x", "x"],
+                "C": step_cov["x0", "x"], "e": e, "S": Sm, "K": K, "nis": nis, "ll": ll, "accepted": acc}
 
     def _gain_function(self) -> ca.Function:
         """Gain (zero when gated out), NIS, log-likelihood and acceptance from ``S`` and ``Pxy`` (SX)."""
