@@ -71,7 +71,7 @@ def update_source(name: str, nx: int, ny: int, nu: int) -> str:
 
 typedef struct {{
   const casadi_real** arg[2];
-  casadi_real** res[2];
+  casadi_real** out[2];
   casadi_int* iw;
   casadi_real* w;
   casadi_real *y, *dt, *u_prev, *u;
@@ -96,40 +96,45 @@ static int cs_read(PyObject* o, casadi_real* dst, npy_intp n) {{
   return 1;
 }}
 
-static PyObject* cs_update(PyObject* self, PyObject* const* args, Py_ssize_t nargs, PyObject* kwnames) {{
+static PyObject* cs_update(PyObject* self, PyObject* const* given, Py_ssize_t nargs, PyObject* kwnames) {{
   cs_update_t* st = (cs_update_t*)PyCapsule_GetPointer(self, "casship.update");
+  PyObject *y_in, *dt_in, *u_prev_in, *u_in;
   long long cur;
   double dt;
   npy_intp nx = CS_NX;
   PyObject* x;
   if (st == NULL) return NULL;
   if (kwnames != NULL || nargs < 2 || nargs > 4) goto checked;
-  if (PyFloat_Check(args[1])) {{
-    dt = PyFloat_AS_DOUBLE(args[1]);
-  }} else if (PyLong_CheckExact(args[1])) {{
-    dt = PyLong_AsDouble(args[1]);
+  y_in = given[0];
+  dt_in = given[1];
+  u_prev_in = nargs > 2 ? given[2] : Py_None;
+  u_in = nargs > 3 ? given[3] : Py_None;
+  if (PyFloat_Check(dt_in)) {{
+    dt = PyFloat_AS_DOUBLE(dt_in);
+  }} else if (PyLong_CheckExact(dt_in)) {{
+    dt = PyLong_AsDouble(dt_in);
     if (dt == -1.0 && PyErr_Occurred()) {{ PyErr_Clear(); goto checked; }}
   }} else {{
     goto checked;
   }}
   if (!(dt >= 0 && dt <= st->gap_limit[0])) goto checked;
-  if (!cs_read(args[0], st->y, CS_NY)) goto checked;
+  if (!cs_read(y_in, st->y, CS_NY)) goto checked;
   cur = st->state[0];
 #if CS_NU > 0
-  if (nargs > 2 && args[2] != Py_None) {{
-    if (!cs_read(args[2], st->u_prev, CS_NU)) goto checked;
+  if (u_prev_in != Py_None) {{
+    if (!cs_read(u_prev_in, st->u_prev, CS_NU)) goto checked;
   }} else {{
     memcpy(st->u_prev, st->held[1 - cur], CS_NU * sizeof(casadi_real));
   }}
-  if (nargs > 3 && args[3] != Py_None) {{
-    if (!cs_read(args[3], st->u, CS_NU)) goto checked;
+  if (u_in != Py_None) {{
+    if (!cs_read(u_in, st->u, CS_NU)) goto checked;
   }} else {{
     memcpy(st->u, st->u_prev, CS_NU * sizeof(casadi_real));
   }}
 #endif
   st->dt[0] = dt;
   /* a failed or invalid sample is left to the checked update, which says what is wrong */
-  if ({name}(st->arg[cur], st->res[cur], st->iw, st->w, 0) || st->status[cur][0] != 0) goto checked;
+  if ({name}(st->arg[cur], st->out[cur], st->iw, st->w, 0) || st->status[cur][0] != 0) goto checked;
   x = PyArray_SimpleNew(1, &nx, NPY_DOUBLE);
   if (x == NULL) return NULL;
   memcpy(PyArray_DATA((PyArrayObject*)x), st->x[cur], CS_NX * sizeof(casadi_real));
@@ -137,7 +142,7 @@ static PyObject* cs_update(PyObject* self, PyObject* const* args, Py_ssize_t nar
   st->state[1] += 1;
   return x;
 checked:
-  return PyObject_Vectorcall(st->fallback, args, nargs, kwnames);
+  return PyObject_Vectorcall(st->fallback, given, nargs, kwnames);
 }}
 
 static void cs_release(PyObject* capsule) {{
@@ -160,8 +165,8 @@ CASADI_SYMBOL_EXPORT PyObject* casship_update_new_{name}(PyObject* fallback, PyO
   if (st == NULL) return PyErr_NoMemory();
   st->arg[0] = (const casadi_real**)(uintptr_t)a[0];
   st->arg[1] = (const casadi_real**)(uintptr_t)a[1];
-  st->res[0] = (casadi_real**)(uintptr_t)a[2];
-  st->res[1] = (casadi_real**)(uintptr_t)a[3];
+  st->out[0] = (casadi_real**)(uintptr_t)a[2];
+  st->out[1] = (casadi_real**)(uintptr_t)a[3];
   st->iw = (casadi_int*)(uintptr_t)a[4];
   st->w = (casadi_real*)(uintptr_t)a[5];
   st->y = (casadi_real*)(uintptr_t)a[6];
