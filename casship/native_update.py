@@ -70,8 +70,8 @@ def update_source(name: str, nx: int, ny: int, nu: int) -> str:
 #define CS_NU {nu}
 
 typedef struct {{
-  const casadi_real** arg[2];
-  casadi_real** out[2];
+  const casadi_real** arg_table[2];
+  casadi_real** res_table[2];
   casadi_int* iw;
   casadi_real* w;
   casadi_real *y, *dt, *u_prev, *u;
@@ -134,7 +134,7 @@ static PyObject* cs_update(PyObject* self, PyObject* const* given, Py_ssize_t na
 #endif
   st->dt[0] = dt;
   /* a failed or invalid sample is left to the checked update, which says what is wrong */
-  if ({name}(st->arg[cur], st->out[cur], st->iw, st->w, 0) || st->status[cur][0] != 0) goto checked;
+  if ({name}(st->arg_table[cur], st->res_table[cur], st->iw, st->w, 0) || st->status[cur][0] != 0) goto checked;
   x = PyArray_SimpleNew(1, &nx, NPY_DOUBLE);
   if (x == NULL) return NULL;
   memcpy(PyArray_DATA((PyArrayObject*)x), st->x[cur], CS_NX * sizeof(casadi_real));
@@ -163,10 +163,10 @@ CASADI_SYMBOL_EXPORT PyObject* casship_update_new_{name}(PyObject* fallback, PyO
   if (PyArray_API == NULL && _import_array() < 0) return NULL;
   st = (cs_update_t*)PyMem_Calloc(1, sizeof(cs_update_t));
   if (st == NULL) return PyErr_NoMemory();
-  st->arg[0] = (const casadi_real**)(uintptr_t)a[0];
-  st->arg[1] = (const casadi_real**)(uintptr_t)a[1];
-  st->out[0] = (casadi_real**)(uintptr_t)a[2];
-  st->out[1] = (casadi_real**)(uintptr_t)a[3];
+  st->arg_table[0] = (const casadi_real**)(uintptr_t)a[0];
+  st->arg_table[1] = (const casadi_real**)(uintptr_t)a[1];
+  st->res_table[0] = (casadi_real**)(uintptr_t)a[2];
+  st->res_table[1] = (casadi_real**)(uintptr_t)a[3];
   st->iw = (casadi_int*)(uintptr_t)a[4];
   st->w = (casadi_real*)(uintptr_t)a[5];
   st->y = (casadi_real*)(uintptr_t)a[6];
