@@ -22,6 +22,7 @@ import ctypes
 import os
 import sys
 import sysconfig
+
 import casadi as ca
 import numpy as np
 
@@ -228,7 +229,7 @@ class NativeUpdate:
 
     def __init__(self, online: ca.Function, nx: int, ny: int, nu: int):
         if sys.platform == "win32":         # an extension there links against the Python library
-            raise RuntimeError("the compiled update is built on Linux and macOS only")
+            raise RuntimeError("the compiled update is not built on Windows")
         headers = _header_dirs()
         if headers is None:
             raise RuntimeError("the Python or NumPy C headers are not installed")

@@ -84,11 +84,12 @@ def _over_members(name: str, per_member: dict, shared: dict, outputs: dict, memb
         start += sym.numel()
     exprs = ca.substitute(list(outputs.values()), [v[0] for v in shared.values()], pieces) if shared \
         else list(outputs.values())
-    step = ca.Function(f"{name}_member", [*symbols, packed], exprs)
+    step = ca.Function(f"{name}_member", [*symbols, packed] if shared else symbols, exprs)
     names = list(outputs)
-    mapped = step.map(name, "serial", members, [len(symbols)], [names.index(k) for k in summed])
+    mapped = step.map(name, "serial", members, [len(symbols)] if shared else [], [names.index(k) for k in summed])
     args = [v[1] for v in per_member.values()]
-    args.append(ca.vertcat(*[ca.vec(v[1]) for v in shared.values()]) if shared else ca.MX(0, 1))
+    if shared:
+        args.append(ca.vertcat(*[ca.vec(v[1]) for v in shared.values()]))
     return dict(zip(names, mapped.call(args)))
 
 
