@@ -91,3 +91,33 @@ def test_online_runner_reproduces_seeded_batch(case):
     for k in range(len(data)):
         x = run.update(Y[k], 0.0 if k == 0 else 0.1, u_prev=U[max(k - 1, 0)], u=U[k])
         np.testing.assert_allclose(x, res.x[k], rtol=1e-12, atol=1e-12)
+
+
+def test_one_pass_moments_equal_the_two_pass_sample_moments():
+    """Means (angles on the circle) and sample covariances from the member sums of ``_moments``
+    equal NumPy's two-pass ones, also for an angle row whose members straddle +-pi."""
+    import casadi as ca
+
+    from casship.estimators.enkf import _moments
+
+    rng = np.random.default_rng(7)
+    N = 40
+    A = rng.normal([[5.0], [-2.0], [np.pi - 0.05]], [[1.0], [0.3], [0.1]], size=(3, N))
+    A[2] = cs.wrap(A[2])                                     # some near +pi, some near -pi
+    B = rng.normal(size=(2, N)) + 0.5 * A[:2]
+    XA, XB = ca.MX.sym("A", 3, N), ca.MX.sym("B", 2, N)
+    means, covs = _moments("test_moments", {"a": XA, "b": XB}, {"a": [False, False, True], "b": [False, False]},
+                           [("a", "b"), ("a", "a")], N)
+    f = ca.Function("f", [XA, XB], [means["a"], means["b"], covs["a", "b"], covs["a", "a"]])
+    mean_a, mean_b, cov_ab, cov_aa = (np.array(v) for v in f(A, B))
+    da = A - A[:, :1]
+    da[2] = cs.wrap(da[2])
+    expect_a = A[:, 0] + da.mean(axis=1)
+    np.testing.assert_allclose(mean_a.ravel(), expect_a, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(mean_b.ravel(), B.mean(axis=1), rtol=1e-12, atol=1e-12)
+    dev_a = da - da.mean(axis=1, keepdims=True)
+    dev_b = B - B.mean(axis=1, keepdims=True)
+    np.testing.assert_allclose(cov_aa, dev_a @ dev_a.T / (N - 1), rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(cov_ab, dev_a @ dev_b.T / (N - 1), rtol=1e-11, atol=1e-13)
+    assert np.array_equal(cov_aa, cov_aa.T)
+    assert abs(cs.wrap(mean_a[2, 0] - np.pi)) < 0.1           # the circular mean, not ~0
