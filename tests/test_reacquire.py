@@ -49,10 +49,12 @@ def test_reacquire_changes_nothing_on_clean_data_and_online_equals_batch():
     res = ekf.filter(clean, prior)
     assert plain.rejected.sum() < 10                      # nothing close to ten in a row on clean data
     np.testing.assert_allclose(res.x, plain.x, rtol=0, atol=1e-12)
-    run_online = ekf.online(prior)
-    xs = [run_online.update(np.array([clean["x_n"][k], clean["y_n"][k]]), 0.0 if k == 0 else 0.1)
-          for k in range(300)]
-    np.testing.assert_allclose(np.array(xs), res.x[:300], rtol=0, atol=1e-10)
+    compiled = cs.EKF(ekf.dmodel, Q, 1.0, options={"gate": 0.999, "reacquire": 10, "jit": True})
+    for est in (ekf, compiled):                           # the compiled update carries the count too
+        run_online = est.online(prior)
+        xs = [run_online.update(np.array([clean["x_n"][k], clean["y_n"][k]]), 0.0 if k == 0 else 0.1)
+              for k in range(300)]
+        np.testing.assert_allclose(np.array(xs), res.x[:300], rtol=0, atol=1e-10)
     assert ekf.memory == ("x", "P", "rejections")             # the count of rejections is memory too
     assert ekf.step.name_out()[:3] == ["x", "P", "rejections"]
 
