@@ -312,20 +312,24 @@ def test_estimator_facing_a_long_gap_raises_or_bridges():
         cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"on_gap": "ignore"})
 
 
+def _started_gap_run(m, data, **options):
+    """An online EKF on the gap record (held rudder 0.1), after its first update."""
+    prior = cs.Gaussian(m.states(), np.diag([1e-2, 1e-4]))
+    run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options=options).online(prior, u=[0.1])
+    run.update(data["psi"][:1], 0.0)
+    return run
+
+
 @pytest.mark.parametrize("jit", [False, True], ids=["interpreted", "compiled"])
 def test_online_update_refuses_bad_dt_and_long_gaps(jit):
     m, truth, data = _gap_record()
-    prior = cs.Gaussian(m.states(), np.diag([1e-2, 1e-4]))
-    run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"jit": jit}).online(prior, u=[0.1])
-    run.update(data["psi"][:1], 0.0)
+    run = _started_gap_run(m, data, jit=jit)
     for bad in (np.nan, -1.0, np.inf):
         with pytest.raises(ValueError, match="dt must be >= 0 and finite"):
             run.update(data["psi"][1:2], bad)
     with pytest.raises(ValueError, match="time gap of 1e\\+04 s before update 2"):
         run.update(data["psi"][1:2], 1e4)
-    bridged = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4,
-                     options={"on_gap": "bridge", "jit": jit}).online(prior, u=[0.1])
-    bridged.update(data["psi"][:1], 0.0)
+    bridged = _started_gap_run(m, data, on_gap="bridge", jit=jit)
     with pytest.warns(UserWarning, match="bridged by"):
         x = bridged.update(data["psi"][-1:], 1e4)
     assert np.all(np.isfinite(x))
@@ -335,9 +339,7 @@ def test_online_update_refuses_bad_dt_and_long_gaps(jit):
 @pytest.mark.parametrize("jit", [False, True], ids=["interpreted", "compiled"])
 def test_a_refused_online_update_changes_nothing(jit):
     m, truth, data = _gap_record()
-    prior = cs.Gaussian(m.states(), np.diag([1e-2, 1e-4]))
-    run = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4, options={"jit": jit}).online(prior, u=[0.1])
-    run.update(data["psi"][:1], 0.0)
+    run = _started_gap_run(m, data, jit=jit)
     x, P = run.x, run.P
     refused = [((np.array([np.inf]), 0.5), "measurement\\(s\\) \\['psi'\\] infinite"),
                ((np.array([0.1]), 0.5, None, [np.nan]), "inputs \\['delta'\\] must be finite"),
@@ -350,8 +352,7 @@ def test_a_refused_online_update_changes_nothing(jit):
         np.testing.assert_array_equal(run.x, x)
         np.testing.assert_array_equal(run.P, P)
     # the input held since the last accepted update is still the default (not the refused NaN)
-    reference = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4).online(prior, u=[0.1])
-    reference.update(data["psi"][:1], 0.0)
+    reference = _started_gap_run(m, data)
     np.testing.assert_array_equal(run.update(data["psi"][1:2], 0.5), reference.update(data["psi"][1:2], 0.5))
 
 
