@@ -114,7 +114,7 @@ def results_markdown(rows: list[dict], info: dict, quick: bool, command: str) ->
             + (f"; load average at the end {info['load_average'][0]:g} (1 min), {info['load_average'][2]:g} (15 min)"
                if info.get("load_average") else "") + "\n"
             f"- Python {info['python']}, CasADi {info['casadi']}, NumPy {info['numpy']}, SciPy {info['scipy']}\n\n"
-            + format_table(rows) + "\n\nThe targets of issue 15 (ratio = median of the interleaved repeats, "
+            + format_table(rows) + "\n\nThe speed targets (ratio = median of the interleaved repeats, "
             "range in brackets):\n\n" + format_targets(rows) + f"\n\n{END}")
 
 

@@ -3,7 +3,7 @@
 Flags: the Functions casship compiles most (the EKF step, lean and with every diagnostic; the EKF
 and UKF folds over 512 samples that ``filter`` runs; the MHE real-time-iteration step, N = 20), on
 the 6-state ship model of ``bench_ship_filters``, compiled with ``-O1``, ``-O2``, ``-O3``,
-``-O3 -fno-math-errno`` (the default) and ``-O3 -fno-math-errno -march=native`` through :func:`casship.compile.compile_function` (no cache). Each is timed on
+``-O3 -fno-math-errno`` (the default) and ``-O3 -fno-math-errno -march=native`` through :func:`casship.runtime.compile_function` (no cache). Each is timed on
 the same inputs through bound buffers, all flag sets in turn, several rounds (median CPU time per
 call); the ratio is the ``-O2`` time over this one (above 1: faster than ``-O2``). The compile time
 is the wall-clock time of generating and compiling the C code.
@@ -27,8 +27,7 @@ import numpy as np
 
 import casship as cs
 from benchmarks import format_table, row
-from casship._fast import BufferedCall
-from casship.compile import DEFAULT_FLAGS, compile_function
+from casship.runtime import DEFAULT_FLAGS, BufferedCall, compile_function
 
 FLAG_SETS = (("-O1",), ("-O2",), ("-O3",), ("-O3", "-fno-math-errno"), ("-O3", "-fno-math-errno", "-march=native"))
 
@@ -126,7 +125,7 @@ model, dm, data, prior, Q, R, Qx, U, Y = case(600)
 what = {what!r}
 t0 = time.perf_counter()
 if what == "EKF step":
-    from casship.compile import compile_function
+    from casship.runtime import compile_function
     compile_function(cs.EKF(dm, Q, R).step_function())
 elif what in ("EKF filter", "UKF filter"):
     cls = cs.EKF if what == "EKF filter" else cs.UKF

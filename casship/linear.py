@@ -13,7 +13,7 @@ import casadi as ca
 import control
 import numpy as np
 
-from ._fast import BufferedCall
+from .runtime import BufferedCall
 from .model import Model
 
 __all__ = ["linearize", "to_iosys", "trim", "TrimResult", "output_map"]

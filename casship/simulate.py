@@ -5,7 +5,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from ._fast import BufferedCall
+from .runtime import BufferedCall
 from .angles import wrap
 from .data import Dataset, check_time
 from .trajectory import Trajectory

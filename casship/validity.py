@@ -225,7 +225,7 @@ _JACOBIAN_CALLS: dict[int, tuple] = {}
 def _state_jacobian(model: Model, x, u, p) -> np.ndarray:
     """``A = df/dx`` at ``(x, u, p)`` through a buffered call of ``model.f_jac`` (checked once per record
     by every batch estimator: no DM conversion)."""
-    from ._fast import BufferedCall
+    from .runtime import BufferedCall
 
     key = id(model.f_jac)
     if key not in _JACOBIAN_CALLS:              # the Function is kept with its call, so its id stays unique

@@ -9,7 +9,7 @@ import pytest
 import casship as cs
 from casship import autopilot as ap
 from casship.autopilot.montecarlo import monte_carlo
-from casship.codegen import compile_c, read_harness_output, write_harness
+from casship.runtime import compile_c, read_harness_output, write_harness
 
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: C export not compiled")
 

@@ -1,12 +1,12 @@
 """The compiled record loop (``NativeFold``): the same numbers as the step evaluated by CasADi, inputs
-read in place (reversed views too), memory carried from sample to sample, result blocks reused only
-when nobody holds them, and clear errors."""
+read in place (reversed views too), memory carried from sample to sample, results in fresh read-only
+memory that no later run writes into, and clear errors."""
 import casadi as ca
 import numpy as np
 import pytest
 
 import casship as cs
-from casship.native_fold import BlockPool, NativeFold
+from casship.runtime import NativeFold
 
 
 def _record(n=700, dt=0.5):
@@ -66,24 +66,30 @@ def test_memory_not_kept_still_runs_and_outputs_go_where_asked():
     np.testing.assert_allclose(target[:, 0, 0], [5, 4, 3, 2, 1])
 
 
-def test_result_blocks_are_reused_only_when_nobody_holds_them():
-    pool = BlockPool(keep=2)
-    a = pool.take(10)
-    a[:] = 1.0
-    view = a[2:5]
-    del a
-    b = pool.take(10)
-    assert not np.shares_memory(b, view)                # a view still refers to the first block
-    del view, b
-    c = pool.take(10)
-    assert c.flags.writeable and c.size == 10           # free again: handed out once more
+def test_results_are_never_written_again():
+    """Each run writes its results into memory of its own, read-only once written: a result kept, or
+    dropped and a new run started, is never the memory of a later run."""
+    fold = NativeFold(_accumulator(), ["x"])
+    U = np.ones((6, 2))
+    _, first = fold.run(6, memory={"x": [0.0, 0.0]}, per_sample={"u": U}, constants={"k": 1.0})
+    kept = first["x"].copy()
+    with pytest.raises(ValueError, match="read-only"):
+        first["x"][0] = 1.0
+    blocks = []
+    for k in range(3):
+        _, out = fold.run(6, memory={"x": [k + 1.0, 0.0]}, per_sample={"u": U}, constants={"k": 1.0})
+        assert not np.shares_memory(out["x"], first["x"])
+        assert all(not np.shares_memory(out["norm"], b) for b in blocks)
+        blocks.append(out["norm"])
+        del out
+    np.testing.assert_array_equal(first["x"], kept)
     m, dm, data, prior = _record()
     ekf = cs.EKF(dm, Q=1e-7, R=1e-4, options={"jit": True})
-    first = ekf.filter(data, prior)
-    kept = first.P.copy()
-    second = ekf.filter(data, prior)
-    np.testing.assert_array_equal(first.P, kept)        # a held result is never written again
-    assert not np.shares_memory(first.P, second.P)
+    one = ekf.filter(data, prior)
+    P = one.P.copy()
+    two = ekf.filter(data, prior)
+    np.testing.assert_array_equal(one.P, P)
+    assert not np.shares_memory(one.P, two.P)
 
 
 def test_bad_calls_name_what_is_wrong():

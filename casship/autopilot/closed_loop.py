@@ -491,7 +491,7 @@ class ClosedLoop:
 
     # -- code generation ----------------------------------------------------------------------------
     def export_c(self, directory, name: str = "closed_loop_step"):
-        """Write the loop step as C (:func:`casship.codegen.generate_c`).
+        """Write the loop step as C (:func:`casship.runtime.generate_c`).
 
         Parameters
         ----------
@@ -503,7 +503,7 @@ class ClosedLoop:
         -------
         CFiles
         """
-        from ..codegen import generate_c
+        from ..runtime import generate_c
 
         title = (f"{name}: closed loop of '{self.plant.model.name}' ({self.mode} autopilot, dt = {self.dt:g} s); "
                  f"log rows: {', '.join(self.signals)}")

@@ -1,4 +1,4 @@
-"""``casship cache info`` / ``casship cache clear``: the on-disk cache of compiled code (:mod:`casship.compile`)."""
+"""``casship cache info`` / ``casship cache clear``: the on-disk cache of compiled code (:mod:`casship.runtime`)."""
 from __future__ import annotations
 
 
@@ -6,15 +6,17 @@ def register(sub) -> None:
     p = sub.add_parser("cache", help="show or empty the cache of compiled C code (option jit)",
                        description="Compiled steps, folds and likelihoods are kept as shared libraries in a "
                                    "cache directory ($CASSHIP_CACHE_DIR, else $XDG_CACHE_HOME/casship or "
-                                   "~/.cache/casship), so that a new process does not compile them again.")
-    p.add_argument("action", choices=("info", "clear"), help="info: where, how many entries, how big; "
+                                   "~/.cache/casship), so that a new process does not compile them again. A folder "
+                                   "that belongs to another user or that others may write into is not used.")
+    p.add_argument("action", choices=("info", "clear"), help="info: where, how many entries, how big, which compiler, "
+                                                             "flags and time limit, how compiled code is called; "
                                                              "clear: delete every compiled library")
     p.add_argument("--dir", default=None, help="the cache directory (default: as described above)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from ..compile import cache_info, clear_cache
+    from ..runtime import cache_info, clear_cache
 
     if args.action == "info":
         print(cache_info(args.dir).summary())

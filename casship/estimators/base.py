@@ -13,7 +13,7 @@ innovation test, ``<draws>`` the standard-normal draws of a stochastic estimator
 are a subset of ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted`` chosen when the Function
 is built, so the compiled code computes only those. Batch filtering runs the step through
 ``mapaccum`` over the record (:meth:`Estimator.fold`), or, compiled (option ``jit``), through one C
-loop over the whole record (:class:`~casship.native_fold.NativeFold`); online use calls it through bound buffers
+loop over the whole record (:class:`~casship.runtime.NativeFold`); online use calls it through bound buffers
 (:class:`~casship.estimators.online.OnlineRun`), and the same Function is exported as C.
 """
 from __future__ import annotations
@@ -24,11 +24,10 @@ import casadi as ca
 import numpy as np
 from scipy import stats
 
-from .._fast import DUPLICATE_NAMES, BufferedCall, compile_function, run_fold
 from ..data import Dataset
 from ..gaussian import Gaussian, as_cov
 from ..discretize import DiscreteModel
-from ..native_fold import NativeFold
+from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, compile_function, run_fold
 from .gaps import bridge_gaps
 from .options import DIAGNOSTICS, EstimatorOptions
 from .result import FilterResult
@@ -524,10 +523,10 @@ class Estimator:
         -------
         OnlineRun
         """
-        from .online import OnlineRun, StepEngine
+        from .online import StepRun
 
         self._check_prior(prior)
-        return OnlineRun(StepEngine(self, prior, p, u, np.random.default_rng(seed)))
+        return StepRun(self, prior, p, u, np.random.default_rng(seed))
 
     def residual(self, y, yhat, mask):
         """Masked residual of the measured outputs, angle channels wrapped.

@@ -1,22 +1,28 @@
 """The one online protocol: ``run = est.online(prior, p); x = run.update(y, dt, u_prev=None, u=None)``.
 
-:class:`OnlineRun` is what every estimator's ``online`` returns. The work per sample is done by an
-engine: :class:`StepEngine` for the recursive estimators (one compiled call of the step per update,
-memory kept in bound buffers), the window runner of the MHE.
+:class:`OnlineRun` is what every estimator's ``online`` returns. For the recursive estimators it is
+a :class:`StepRun` (one evaluation of the step per update through CasADi's buffers, the memory kept
+in them); the MHE's run hands each sample to its window engine. A run holds a lock around every
+update and every read of its state, so calls from several threads are taken one at a time, each
+one whole.
 """
 from __future__ import annotations
 
 import math
+import numbers
+import threading
+import warnings
 from collections.abc import Mapping
 
 import casadi as ca
 import numpy as np
 
-from .._fast import DUPLICATE_NAMES
 from ..gaussian import Gaussian
+from ..runtime import DUPLICATE_NAMES, BufferedCall
+from .gaps import _message, bridge_pieces, gap_limit
 from .options import DIAGNOSTICS
 
-__all__ = ["OnlineRun", "online_step"]
+__all__ = ["OnlineRun", "StepRun", "online_step"]
 
 _ONLINE_EXTRAS = ("mask", "u_held", "status")       # outputs of online_step beyond the step's
 
@@ -25,7 +31,9 @@ class OnlineRun:
     """An estimator running on a stream, one sample per :meth:`update`, its memory kept inside.
 
     Numbers equal :meth:`Estimator.filter` on the same record (tested for every estimator).
-    Built by ``est.online(prior, p, u=..., seed=...)``.
+    Built by ``est.online(prior, p, u=..., seed=...)``. Safe to share between threads: an update
+    (and a read of ``x``, ``P`` or ``info``) holds the run's lock, so concurrent calls are taken one
+    at a time, in the order the threads get the lock.
 
     Parameters
     ----------
@@ -42,9 +50,7 @@ class OnlineRun:
 
     def __init__(self, engine):
         self._engine = engine
-        fast = getattr(engine, "compiled_update", None)
-        if fast is not None:            # the same update, one call into compiled code
-            self.update = fast
+        self._lock = threading.RLock()
 
     def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
         """Predict over ``dt`` (0: no prediction, e.g. the first sample) with the input ``u_prev`` held
@@ -65,23 +71,27 @@ class OnlineRun:
         array
             A copy of the new mean.
         """
-        return self._engine.update(y, dt, u_prev, u)
+        with self._lock:
+            return self._engine.update(y, dt, u_prev, u)
 
     @property
     def x(self) -> np.ndarray:
         """Current mean (copy)."""
-        return self._engine.x
+        with self._lock:
+            return self._engine.x
 
     @property
     def P(self) -> np.ndarray:
         """Current covariance (copy)."""
-        return self._engine.P
+        with self._lock:
+            return self._engine.P
 
     @property
     def info(self) -> Mapping:
         """Named diagnostics of the last update (those the estimator was built to return, see the
         ``outputs`` option; ``e`` is NaN where not measured, ``rejected`` is ``not accepted``)."""
-        return self._engine.info
+        with self._lock:
+            return self._engine.info
 
     def __repr__(self) -> str:
         return f"OnlineRun({self._engine.name}, samples={self._engine.samples})"
@@ -141,48 +151,40 @@ def online_step(est) -> ca.Function:
                        DUPLICATE_NAMES)
 
 
-def _native_update(est):
-    """The estimator's compiled online update (:class:`~casship.native_update.NativeUpdate`), or None:
-    built for jit estimators without random draws, where the headers are installed (cached)."""
-    if not est.options.jit or est._draw_shapes():
-        return None
-    key = ("update", est.options.outputs)
-    if key not in est._compiled:
-        from ..native_update import compile_update
-
-        est._compiled[key] = compile_update(online_step(est), est.model.nx, est.ny, est.model.nu)
-    return est._compiled[key]
-
-
-class StepEngine:
-    """Online engine of a recursive estimator: :func:`online_step` through two bound buffer sets.
+class StepRun(OnlineRun):
+    """The online run of a recursive estimator: :func:`online_step` through two bound buffer sets.
 
     The two calls hand the memory to each other (one writes the memory the other reads), so an
-    update writes the new sample into the shared input buffers, triggers one compiled evaluation
-    and flips: no copy of the memory, no ``DM`` conversion. The mask, the gate and the validity of
-    the sample are worked out inside the compiled call; an invalid sample is not flipped to, so it
-    changes nothing, and only then does Python look for what was wrong.
+    update writes the new sample into the shared input buffers, triggers one evaluation (compiled
+    with option ``jit``) and flips: no copy of the memory, no ``DM`` conversion. The mask, the gate
+    and the validity of the sample are worked out inside the evaluation; an invalid sample is not
+    flipped to, so it changes nothing, and only then does Python look for what was wrong. Float64
+    vectors of the right length and a float ``dt`` within the one-step gap limit take the short
+    way; anything else is converted (or refused) first, and a gap is bridged or refused.
 
-    For jit estimators without random draws, ``compiled_update`` does all of this in one call into
-    compiled code (:mod:`casship.native_update`): it takes float64 vectors and a number ``dt``
-    within the gap limit, and hands every other call (other types, keywords, gaps, invalid samples)
-    to :meth:`update`, on the same buffers and state. None where it cannot be built.
+    Parameters
+    ----------
+    est : Estimator
+        A recursive estimator (its step Function).
+    prior : Gaussian
+    p : array or mapping or None
+        Model parameters (nominal when None).
+    u : array or None
+        Inputs before the first update (zeros when None).
+    rng : numpy.random.Generator
+        The draws of a stochastic estimator.
     """
 
     def __init__(self, est, prior: Gaussian, p, u, rng):
+        self._lock = threading.RLock()
         self.name = est.name
         self._est, self._rng = est, rng
         self._prior = prior
         m = est.model
-        native = _native_update(est)
-        fun = native.fun if native else est._compiled_function(("online", est.options.outputs),
-                                                                lambda: online_step(est))
-        from .._fast import BufferedCall
-
+        fun = est._compiled_function(("online", est.options.outputs), lambda: online_step(est))
         first = BufferedCall(fun, cannot_fail=est.options.jit)
         self._calls = (first, first.partner(est.memory))
-        # [the call whose inputs hold the memory now, samples taken]: shared with the compiled update
-        self._state = np.zeros(2, np.int64)
+        self._cur, self.samples = 0, 0          # the call whose inputs hold the memory now, samples taken
         for k, v in est.memory_from(prior, rng).items():
             first[k] = v
         self._p = m.params() if p is None else m.params(p)
@@ -190,75 +192,117 @@ class StepEngine:
         u0 = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
         if u0.size != m.nu or not np.all(np.isfinite(u0)):
             raise ValueError(f"u must be {m.nu} finite values for the inputs {list(m.input_names)}, got {u0}")
-        from .gaps import gap_limit
-
-        self._gap_limit = np.array([gap_limit(est, prior.mean, u0, p)])
+        self._limit = float(gap_limit(est, prior.mean, u0, p))
         first["Q"], first["R"] = est.Q, est.R
         first["thresholds"] = [est.gate_threshold(c) for c in range(est.ny + 1)]
         first["u_prev"], first["u"] = u0, u0
-        self._y, self._dt = first.flat_in("y"), first.flat_in("dt")
-        self._u_prev, self._u = first.flat_in("u_prev"), first.flat_in("u")
-        self._held = [c.flat_out("u_held") for c in self._calls]
+        # the sample's buffers as memoryviews: a copy into one takes only float64 vectors of its length
+        self._y, self._u_prev, self._u = (memoryview(first.flat_in(k)) for k in ("y", "u_prev", "u"))
+        self._dt = memoryview(first.flat_in("dt"))
+        self._held = [memoryview(c.flat_out("u_held")) for c in self._calls]
         for held in self._held:                         # the default u_prev of the first update
             held[:] = u0
-        self._status = [c.flat_out("status") for c in self._calls]
         self._nu, self._ny = m.nu, est.ny
-        self._y_shape, self._u_shape = (est.ny,), (m.nu,)
         self._draws = [(first.flat_in(k), r * c) for k, (r, c) in est._draw_shapes().items()]
         self._n_draws = sum(size for _, size in self._draws)
-        self._trig = [c.trigger if not c._checked else c for c in self._calls]
         self._x = [c.flat_out("x") for c in self._calls]
         self._P = [c.out("P") for c in self._calls]
-        buffers = {"y": self._y, "dt": self._dt, "u_prev": self._u_prev, "u": self._u, "state": self._state,
-                   "gap_limit": self._gap_limit}
-        for c in range(2):
-            buffers.update({f"held{c}": self._held[c], f"x{c}": self._x[c], f"status{c}": self._status[c]})
-        # one call into compiled code, handing every call it does not take to the checked update
-        self.compiled_update = native.bind(self._calls, buffers, self.update) if native else None
+        # per buffer set: evaluate (CasADi's buffered call itself where it cannot fail), status, mean
+        self._sets = tuple((c.trigger if not c.checked else c, c.flat_out("status"), c.flat_out("x"))
+                           for c in self._calls)
 
-    @property
-    def _cur(self) -> int:
-        return int(self._state[0])
+    def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
+        """See :meth:`OnlineRun.update`."""
+        # The short way, written out: this is the per-sample cost of every online filter. A copy
+        # into a memoryview takes only a float64 vector of the right length (any stride) and
+        # raises for anything else, which then goes the long way (converted, or refused by name).
+        self._lock.acquire()
+        try:
+            if not (isinstance(dt, float) and 0.0 <= dt <= self._limit):
+                dt = self._irregular_dt(dt, y, u_prev, u)
+                if dt is None:                              # a gap, bridged
+                    return self._x[1 - self._cur].copy()
+            # shapes are checked by the copies, values inside the evaluation: a refused update is
+            # never flipped to, so it changes nothing the run keeps (the inputs are rewritten each time)
+            cur = self._cur
+            evaluate, status, x = self._sets[cur]
+            try:
+                self._y[:] = y
+            except (TypeError, ValueError):
+                self._y[:] = self._vector(y, self._ny, "y", self._est.measured)
+            if self._nu:
+                if u_prev is None:
+                    u_prev = self._held[1 - cur]
+                try:
+                    self._u_prev[:] = u_prev
+                except (TypeError, ValueError):
+                    self._u_prev[:] = self._vector(u_prev, self._nu, "u_prev", self._est.model.input_names)
+                try:
+                    self._u[:] = self._u_prev if u is None else u
+                except (TypeError, ValueError):
+                    self._u[:] = self._vector(u, self._nu, "u", self._est.model.input_names)
+            self._dt[0] = dt
+            rng_state = self._draw() if self._n_draws else None
+            evaluate()
+            if status[0]:
+                if rng_state is not None:                   # a refused update draws nothing
+                    self._rng.bit_generator.state = rng_state
+                raise self._refusal(self._y, self._u_prev, self._u)
+            self._cur = 1 - cur
+            self.samples += 1
+            return x.copy()
+        finally:
+            self._lock.release()
 
-    @property
-    def samples(self) -> int:
-        return int(self._state[1])
+    def _draw(self) -> dict:
+        """Write the standard-normal draws of one step into their buffers; the generator's state before."""
+        state = self._rng.bit_generator.state
+        z = self._rng.standard_normal(self._n_draws)
+        start = 0
+        for buf, size in self._draws:
+            buf[:] = z[start:start + size]
+            start += size
+        return state
 
-    def update(self, y, dt, u_prev=None, u=None):
-        if not (dt >= 0 and math.isfinite(dt)):
+    def _irregular_dt(self, dt, y, u_prev, u) -> float | None:
+        """``dt`` as a float within the one-step limit, or None when the gap was bridged here;
+        ``ValueError`` for a ``dt`` that is not a number >= 0 or a gap that is refused."""
+        if isinstance(dt, numbers.Real):
+            value = float(dt)
+        elif isinstance(dt, np.ndarray) and dt.size == 1 and dt.dtype.kind in "fiu":
+            value = float(dt.item())
+        else:
+            raise ValueError(f"dt must be a number >= 0 (seconds), got {dt!r}")
+        if not (value >= 0 and math.isfinite(value)):
             raise ValueError(f"dt must be >= 0 and finite, got {dt}")
-        if dt > self._gap_limit[0] and self._bridged(y, dt, u_prev, u):
-            return self._x[1 - self._cur].copy()
-        return self._update(y, dt, u_prev, u)
+        if value <= self._limit or not self._bridged(y, value, u_prev, u):
+            return value
+        return None
 
     def _bridged(self, y, dt, u_prev, u) -> bool:
         """A gap longer than the one-step limit: raise, or predict across it in shorter steps."""
-        from .gaps import _message, bridge_pieces, gap_limit
-
         x = self._x[1 - self._cur] if self.samples else self._prior.mean
-        held = self._held[1 - self._cur] if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
+        held = np.array(self._held[1 - self._cur]) if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
         limit = gap_limit(self._est, x, held, self._p)
         if dt <= limit:
-            self._gap_limit[0] = max(self._gap_limit[0], dt)
+            self._limit = max(self._limit, dt)
             return False
         where = f"before update {self.samples + 1}"
         if self._est.options.on_gap == "raise":
             raise ValueError(_message(self._est, where, float(dt), limit))
-        import warnings
-
         pieces = bridge_pieces(float(dt), limit)
         warnings.warn(f"{self._est.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
-                      f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=3)
+                      f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=4)
         nothing = np.full(self._ny, np.nan)
         u_held = held.copy()
         for _ in range(pieces - 1):
-            self._update(nothing, dt / pieces, u_held, u_held)
-        self._update(y, dt / pieces, u_held, u)
+            self.update(nothing, dt / pieces, u_held, u_held)
+        self.update(y, dt / pieces, u_held, u)
         return True
 
     def _vector(self, value, size: int, what: str, names) -> np.ndarray:
-        """``value`` as a float vector of ``size``, or ``ValueError`` naming ``what`` (the slow path:
-        ``_update`` takes a float array of the right shape as it is)."""
+        """``value`` as a float vector of ``size``, or ``ValueError`` naming ``what`` (the long way:
+        :meth:`update` takes a float64 array of the right shape as it is)."""
         try:
             v = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
@@ -271,60 +315,33 @@ class StepEngine:
         return v
 
     def _refusal(self, y, u_prev, u) -> ValueError:
-        """What made the compiled update report an invalid sample (its outputs are not used)."""
+        """What made the evaluation report an invalid sample (its outputs are not used)."""
         est = self._est
+        y, u_prev, u = (np.array(v) for v in (y, u_prev, u))
         bad = [n for n, v in zip(est.measured, y) if np.isinf(v)]
         if bad:
             return ValueError(f"measurement(s) {bad} infinite (NaN means not measured)")
         return ValueError(f"inputs {list(est.model.input_names)} must be finite, got u_prev = {u_prev}, u = {u}")
 
-    def _update(self, y, dt, u_prev, u):
-        # shapes are checked before a buffer is written, values inside the compiled call: a refused
-        # update is never flipped to, so it changes nothing
-        fast = np.ndarray
-        if type(y) is not fast or y.shape != self._y_shape or y.dtype != np.float64:
-            y = self._vector(y, self._ny, "y", self._est.measured)
-        if self._nu:
-            names, shape = self._est.model.input_names, self._u_shape
-            if u_prev is None:
-                u_prev = self._held[1 - self._cur]
-            elif type(u_prev) is not fast or u_prev.shape != shape or u_prev.dtype != np.float64:
-                u_prev = self._vector(u_prev, self._nu, "u_prev", names)
-            if u is None:
-                u = u_prev
-            elif type(u) is not fast or u.shape != shape or u.dtype != np.float64:
-                u = self._vector(u, self._nu, "u", names)
-            self._u_prev[...] = u_prev                  # [...] =: the quickest copy into a small array
-            self._u[...] = u
-        self._y[...] = y
-        self._dt[0] = dt
-        if self._n_draws:
-            rng_state = self._rng.bit_generator.state       # a refused update draws nothing
-            z = self._rng.standard_normal(self._n_draws)
-            start = 0
-            for buf, size in self._draws:
-                buf[:] = z[start:start + size]
-                start += size
-        cur = self._cur
-        self._trig[cur]()
-        if self._status[cur][0]:
-            if self._n_draws:
-                self._rng.bit_generator.state = rng_state
-            raise self._refusal(y, u_prev, u)
-        self._state[0] = 1 - cur
-        self._state[1] += 1
-        return self._x[cur].copy()
-
     @property
     def x(self) -> np.ndarray:
-        return self._x[1 - self._cur].copy() if self.samples else self._prior.mean.copy()
+        """Current mean (copy)."""
+        with self._lock:
+            return self._x[1 - self._cur].copy() if self.samples else self._prior.mean.copy()
 
     @property
     def P(self) -> np.ndarray:
-        return self._P[1 - self._cur].copy() if self.samples else self._prior.cov.copy()
+        """Current covariance (copy)."""
+        with self._lock:
+            return self._P[1 - self._cur].copy() if self.samples else self._prior.cov.copy()
 
     @property
     def info(self) -> Mapping:
+        """Named diagnostics of the last update (see :attr:`OnlineRun.info`)."""
+        with self._lock:
+            return self._info()
+
+    def _info(self) -> Mapping:
         if not self.samples:
             return _Info({}, (), self.name)
         call = self._calls[1 - self._cur]
@@ -342,3 +359,6 @@ class StepEngine:
             else:
                 values[k] = (v.ravel() if v.shape[1] == 1 else v).copy()
         return _Info(values, tuple(values), self.name)
+
+    def __repr__(self) -> str:
+        return f"OnlineRun({self.name}, samples={self.samples})"

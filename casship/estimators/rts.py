@@ -12,7 +12,7 @@ estimate for the UKF/EnKF). With the smoother gain ``J_k = C_{k+1} (P-_{k+1})^-1
 in rad next to speed in m/s) where a plain symbolic solve loses every digit and the smoothed
 covariances stop being positive definite. Differences of angle states are wrapped. The pass is one
 fold (``mapaccum``) over the reversed record, in pieces of 512 samples through buffers; compiled
-(``jit``), one C loop reads the filter's arrays backwards in place (:class:`~casship.native_fold.NativeFold`).
+(``jit``), one C loop reads the filter's arrays backwards in place (:class:`~casship.runtime.NativeFold`).
 """
 from __future__ import annotations
 
@@ -21,9 +21,8 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from .._fast import DUPLICATE_NAMES, BufferedCall, run_fold
+from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, run_fold
 from ..angles import wrap_sym
-from ..native_fold import NativeFold
 from .result import FilterResult
 from .update import from_lower, sandwich, spd_solve
 
@@ -96,12 +95,11 @@ def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
     if jit:
         # one block for the smoothed x and P (P per sample in column-major order), written backwards in place
         fold = _native_backward(nx, angles)
-        flat = fold.blocks.take(n * (nx + nx * nx))
+        flat = np.empty(n * (nx + nx * nx))
         block = flat.reshape(n, nx + nx * nx)
         xs, Ps = block[:, :nx], block[:, nx:].reshape(n, nx, nx).transpose(0, 2, 1)
         xs[-1], Ps[-1] = result.x[-1], result.P[-1]
-        fold.run(n - 1, memory=memory, per_sample=per, keep=("x", "P"),
-                                         out={"x": xs[-2::-1], "P": Ps[-2::-1]})
+        fold.run(n - 1, memory=memory, per_sample=per, keep=("x", "P"), out={"x": xs[-2::-1], "P": Ps[-2::-1]})
         flat.setflags(write=False)
     else:
         _, outs = run_fold(lambda size: _backward_fold(nx, angles, size), n - 1, FOLD_CHUNK, memory=memory,

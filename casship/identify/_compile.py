@@ -1,4 +1,4 @@
-"""Where identification compiles its Functions: :func:`casship.compile.compile_function` (shared
+"""Where identification compiles its Functions: :func:`casship.runtime.compile_function` (shared
 libraries, kept in memory and in the on-disk cache), with the flags that suit identification.
 
 The compiled Functions (sensitivity folds, lean cost folds, reverse sweeps) depend only on the model,
@@ -12,7 +12,7 @@ import warnings
 
 import casadi as ca
 
-from ..compile import compile_function
+from ..runtime import compile_function
 
 __all__ = ["compiled", "FLAGS"]
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..._fast import DUPLICATE_NAMES
+from ...runtime import DUPLICATE_NAMES
 from ...data import Dataset
 from ...gaussian import Gaussian, as_cov
 from ...progress import track

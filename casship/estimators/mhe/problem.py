@@ -17,9 +17,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..._fast import BufferedCall
 from ...angles import wrap_sym
-from ...compile import compile_function
+from ...runtime import BufferedCall, compile_function
 from .riccati import riccati_step
 
 __all__: list[str] = []          # the package's own building blocks

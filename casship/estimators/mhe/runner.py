@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from ..._fast import BufferedCall
+from ...runtime import BufferedCall
 from ...gaussian import Gaussian
 from .arrival import arrival_prior
 from .solvers import gauss_newton_start, solve_window

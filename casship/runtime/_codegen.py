@@ -27,7 +27,6 @@ then the diagnostics chosen when exporting (see :mod:`casship.estimators.base`).
 from __future__ import annotations
 
 import shutil
-import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -35,7 +34,8 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
-from ._fast import DUPLICATE_NAMES
+from ._buffers import DUPLICATE_NAMES
+from ._compiler import CompileError, run_compiler
 
 __all__ = ["CFiles", "generate_c", "export_estimator", "export_mhe_rti", "write_harness", "compile_c",
            "read_harness_output"]
@@ -129,7 +129,7 @@ def generate_c(fun: ca.Function, directory, name: str | None = None, *, title: s
     Examples
     --------
     >>> import casship as cs
-    >>> from casship.codegen import generate_c
+    >>> from casship.runtime import generate_c
     >>> ekf = cs.EKF(cs.discretize(cs.models.nomoto_first_order(), 0.1), Q=1e-8, R=1e-4)
     >>> files = generate_c(ekf.step, "build", "ekf_step")     # doctest: +SKIP
     """
@@ -337,16 +337,17 @@ def compile_c(sources: Sequence, output, compiler: str | None = None,
 
     ``-ffp-contract=off`` keeps the compiler from fusing multiply-adds, so results match CasADi's
     own evaluation to the last bits. Raises ``FileNotFoundError`` without a compiler and
-    ``RuntimeError`` with the compiler's messages when compilation fails.
+    :class:`CompileError` (a ``RuntimeError``) with the compiler's messages when compilation fails
+    or takes longer than ``$CASSHIP_COMPILE_TIMEOUT`` seconds.
     """
     cc = compiler or shutil.which("gcc") or shutil.which("cc")
     if not cc:
         raise FileNotFoundError("no C compiler found (gcc or cc)")
     output = Path(output)
     cmd = [cc, *flags, "-o", str(output), *[str(s) for s in sources], "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = run_compiler(cmd, str(output))
     if proc.returncode != 0:
-        raise RuntimeError(f"C compilation failed ({' '.join(cmd)}):\n{proc.stderr}")
+        raise CompileError(f"C compilation failed ({' '.join(cmd)}):\n{proc.stderr}")
     return output
 
 

@@ -1,11 +1,10 @@
-"""Low-overhead numeric calls of CasADi Functions: named buffers, compiled code and folds in pieces.
+"""Low-overhead numeric calls of CasADi Functions: named buffers and folds in pieces.
 
 Calling a Function with numpy arrays converts every argument to ``DM`` and every result back,
 which costs tens of microseconds per call. :class:`BufferedCall` instead binds preallocated numpy
-arrays once, addressed by the Function's input and output *names*; a call only triggers the
-evaluation. :func:`run_fold` runs a folded step Function (``mapaccum``) over a long record in
-pieces through such buffers; :func:`compile_function` (from :mod:`casship.compile`) compiles a Function
-to C through the on-disk cache.
+arrays once through CasADi's own buffer API (``Function.buffer``), addressed by the Function's
+input and output *names*; a call only triggers the evaluation. :func:`run_fold` runs a folded step
+Function (``mapaccum``) over a long record in pieces through such buffers.
 """
 from __future__ import annotations
 
@@ -14,9 +13,7 @@ from typing import Callable, Mapping
 import casadi as ca
 import numpy as np
 
-from .compile import compile_function  # noqa: F401  (the one compile path, re-exported)
-
-__all__ = ["BufferedCall", "compile_function", "run_fold", "DUPLICATE_NAMES"]
+__all__ = ["BufferedCall", "run_fold", "DUPLICATE_NAMES"]
 
 # Step Functions name their memory slots alike on both sides (input ``x``, output ``x``).
 DUPLICATE_NAMES = {"allow_duplicate_io_names": True}
@@ -30,6 +27,23 @@ class BufferedCall:
     output with ``call.out("x")`` (a view with the output's matrix shape, overwritten by the next
     call). ``call.arg(name)`` is the writable view of an input for loops that write it in place.
     All outputs live in one contiguous block (``call.block``), so one copy snapshots them.
+    ``call.trigger()`` evaluates without reading the status (CasADi's buffered evaluation itself,
+    no Python in between), for Functions that cannot fail (``call.checked`` is then false); it
+    works on the call's buffers, so whoever keeps ``call.trigger`` keeps ``call`` too.
+
+    A call is not for two threads at once: its buffers are shared state (the online runner holds
+    a lock around its calls).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+        A Function with dense inputs.
+    cannot_fail : bool
+        The caller knows that the evaluation cannot fail (compiled code): no status is read. SX
+        Functions never fail.
+    bind_in, bind_out : mapping name -> array, optional
+        Arrays to use as the buffers of those inputs and outputs (contiguous float vectors of
+        their sizes), shared with the caller.
 
     Examples
     --------
@@ -66,14 +80,14 @@ class BufferedCall:
         self._out = {n: r.reshape(fun.size_out(i), order="F") for i, (n, r) in enumerate(zip(self.names_out, self.res))}
         self._flat_in = dict(zip(self.names_in, self.args))
         self._flat_out = dict(zip(self.names_out, self.res))
-        self._buf, self._trigger = fun.buffer()
+        self._buf, self.trigger = fun.buffer()
         self._redirected = {}
         for i, a in enumerate(self.args):
             self._buf.set_arg(i, memoryview(a))
         for i, r in enumerate(self.res):
             self._buf.set_res(i, memoryview(r))
         # SX Functions (and compiled code, when the caller says so) cannot fail: no status round trip
-        self._checked = not (cannot_fail or fun.is_a("SXFunction"))
+        self.checked = not (cannot_fail or fun.is_a("SXFunction"))
 
     def _unknown(self, name, kind, names):
         return ValueError(f"{self.fun.name()} has no {kind} {name!r}; {kind}s: {list(names)}")
@@ -149,17 +163,13 @@ class BufferedCall:
         bind_out = {}
         for n in memory:
             bind_in[n], bind_out[n] = self.flat_out(n), self.flat_in(n)
-        return BufferedCall(self.fun, cannot_fail=not self._checked, bind_in=bind_in, bind_out=bind_out)
-
-    def trigger(self) -> None:
-        """Evaluate without fetching the return status (for Functions that cannot fail)."""
-        self._trigger()
+        return BufferedCall(self.fun, cannot_fail=not self.checked, bind_in=bind_in, bind_out=bind_out)
 
     def __call__(self) -> list:
         """Evaluate; raises ``RuntimeError`` if the evaluation reports a failure. Read the results
         by name with :meth:`out` (the flat output arrays are also returned, in output order)."""
-        self._trigger()
-        if self._checked:
+        self.trigger()
+        if self.checked:
             status = self._buf.ret()
             if status != 0:
                 raise RuntimeError(f"evaluation of {self.fun.name()} failed (status {status})")

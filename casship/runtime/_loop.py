@@ -1,69 +1,30 @@
 """A compiled step run over a whole record by one C loop: no pieces, no padding, no copies.
 
 ``mapaccum`` folds have a length fixed when they are built, so a record of any length runs in
-pieces (see :func:`casship._fast.run_fold`), each piece a Python round trip that rebinds buffers
+pieces (see :func:`~casship.runtime.run_fold`), each piece a Python round trip that rebinds buffers
 and copies the memory. :class:`NativeFold` compiles the step Function together with a small C
 driver that calls it once per sample, with each input pointing straight into the caller's arrays
 (any sample stride, also negative, so a reversed view needs no copy) and each output into the
 result arrays. The memory of sample ``k`` is read where sample ``k - 1`` wrote it. One call from
-Python runs the whole record, at the cost of the step's arithmetic alone.
+Python runs the whole record, at the cost of the step's arithmetic alone. The driver is plain C
+against the calling convention of CasADi's generated code, called through ``ctypes``.
 
-The result arrays of a run are views of one block. Once nothing outside refers to a block any more
-(its reference count says so), the next run writes into it again instead of asking the system for
-fresh memory: on a long record, the page faults of fresh memory cost more than the arithmetic.
+The result arrays of a run are views of one block of fresh memory, read-only once written: a
+result is never written again, by this run or a later one.
 """
 from __future__ import annotations
 
 import ctypes
-import sys
 from typing import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
 
-from .compile import compile_function
+from ._cache import compile_function
 
-__all__ = ["NativeFold", "BlockPool", "driver_source"]
+__all__ = ["NativeFold", "driver_source"]
 
 _DOUBLE = 8
-_SPARE_BLOCKS = 2          # result blocks a fold keeps for reuse
-
-
-class BlockPool:
-    """Blocks of doubles handed out for results and taken back once nobody else refers to them.
-
-    A block is reused only when its reference count shows that the pool holds the last reference
-    (every view of an array refers to the block that owns the memory), so memory somebody can
-    still read is never written again.
-
-    Parameters
-    ----------
-    keep : int
-        Blocks remembered for reuse (the most recent ones).
-    """
-
-    def __init__(self, keep: int = _SPARE_BLOCKS):
-        self._keep, self._blocks = keep, []
-
-    def take(self, size: int) -> np.ndarray:
-        """A writable flat block of ``size`` doubles (contents undefined).
-
-        Parameters
-        ----------
-        size : int
-            Number of doubles.
-        """
-        for i, b in enumerate(self._blocks):
-            # references: the list, the loop name and getrefcount's argument
-            if b.size == size and sys.getrefcount(b) == 3:
-                self._blocks.append(self._blocks.pop(i))
-                b.setflags(write=True)
-                return b
-        b = np.empty(size)
-        self._blocks.append(b)
-        if len(self._blocks) > self._keep:
-            self._blocks.pop(0)
-        return b
 
 
 def driver_source(name: str, n_in: int, n_out: int) -> str:
@@ -172,7 +133,6 @@ class NativeFold:
         self._work = (self.fun.sz_arg(), self.fun.sz_res(), self.fun.sz_iw(), self.fun.sz_w())
         self._feed = np.array([self.names_out.index(n) if n in self.memory else -1 for n in self.names_in],
                               dtype=np.int64)
-        self.blocks = BlockPool()
 
     def _per_sample(self, name: str, a, n: int):
         """``(array kept alive, address of sample 0, sample stride in doubles)`` of a per-sample input."""
@@ -256,11 +216,11 @@ class NativeFold:
                 raise ValueError(f"{self.fun.name()}: input {name!r} is not given")
             alive.append(a)
             in0[i], in_step[i] = addr, step
-        # one block for the outputs written here: a repeated run reuses the same memory pages
+        # one block for the outputs written here
         slots = {k: (n if k in keep else 2) for k in self.names_out
                  if k not in targets and (k in keep or k in self.memory)}
         sizes = {k: self._size_out[k][0] * self._size_out[k][1] for k in self.names_out}
-        block = self.blocks.take(sum(slots[k] * sizes[k] for k in slots))
+        block = np.empty(sum(slots[k] * sizes[k] for k in slots))
         views, offset = {}, 0
         for k, count in slots.items():
             rows, cols = self._size_out[k]
