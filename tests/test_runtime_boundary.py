@@ -70,7 +70,7 @@ def test_the_runtime_imports_no_other_part_of_casship():
 def test_the_former_modules_are_gone(old):
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module(old)
-    texts = [p for top in ("casship", "docs", "tests", "benchmarks", "examples") for p in (ROOT / top).rglob("*")
+    texts = [p for top in ("casship", "docs", "tests", "benchmarks", "examples", "problems") for p in (ROOT / top).rglob("*")
              if p.suffix in (".py", ".md") and p != Path(__file__)]
     texts.append(ROOT / "README.md")
     mentions = [str(p.relative_to(ROOT)) for p in texts if re.search(rf"{re.escape(old)}\b", p.read_text())]

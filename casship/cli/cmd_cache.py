@@ -25,6 +25,9 @@ def run(args) -> int:
     if info.path is None:
         print("compile cache is off; nothing to clear")
         return 0
+    if info.refused:
+        print(f"compile cache {info.path} is not used ({info.refused}); nothing removed")
+        return 0
     removed = clear_cache(args.dir)
     print(f"removed {removed} file(s) ({info.bytes / 1e6:.1f} MB) from {info.path}")
     return 0

@@ -212,8 +212,8 @@ class StepRun(OnlineRun):
                            for c in self._calls)
 
     def update(self, y, dt: float, u_prev=None, u=None) -> np.ndarray:
-        """See :meth:`OnlineRun.update`."""
-        # The short way, written out: this is the per-sample cost of every online filter. A copy
+        # (documented by OnlineRun.update) The short way, written out: this is the per-sample cost
+        # of every online filter. A copy
         # into a memoryview takes only a float64 vector of the right length (any stride) and
         # raises for anything else, which then goes the long way (converted, or refused by name).
         self._lock.acquire()

@@ -137,7 +137,8 @@ def _refuse(folder: Path, why: str) -> None:
     if folder not in _REFUSED:
         _REFUSED[folder] = why
         warnings.warn(f"casship compile cache {folder} is not used: {why}; compiled code goes to private "
-                      "temporary folders and is not kept", RuntimeWarning, stacklevel=4)
+                      f"temporary folders and is not kept (use a folder of your own with mode 700, e.g. "
+                      f"chmod 700 it if it is yours, or set {_ENV_DIR})", RuntimeWarning, stacklevel=4)
 
 
 def _usable_folder(path) -> Path | None:
@@ -368,7 +369,7 @@ def _compile(fun, cc, flags, folder, extra_source) -> tuple:
                 if hit is None:
                     hit = _compile_into(fun, folder, key, cc, flags, extra_source)
             return _remember(hit, key, folder)
-        except OSError as exc:
+        except OSError as exc:                  # read-only, full, or locked too long
             _refuse(folder, f"writing into it failed ({exc})")
     with tempfile.TemporaryDirectory(prefix="casship-cc-", ignore_cleanup_errors=True) as tmp:
         lib = build_library(fun, Path(tmp), f"f{key[:16]}", cc[0], flags, extra_source)
