@@ -10,8 +10,8 @@ heading residual wrapped, and the same prior.
 * EKF batch: ``EKF(..., options={"jit": True}).filter`` (the whole record through one compiled fold,
   every diagnostic of a ``FilterResult``) vs filterpy ``ExtendedKalmanFilter`` in its loop;
   identical algorithm, estimates agree to round-off.
-* EKF online: ``run.update(y, dt, u_prev, u)`` per sample (lean step, one compiled call) vs the same
-  filterpy loop.
+* EKF online: ``run.update(y, dt, u_prev, u)`` per sample (lean step, one evaluation of the compiled
+  step through CasADi's buffers) vs the same filterpy loop.
 * UKF batch: casship ``UKF`` (kappa = 3) vs filterpy ``UnscentedKalmanFilter`` with Julier points
   (kappa = 3), sigma points redrawn after the prediction as casship does; agree to round-off.
 * EnKF (100 members): casship ``EnKF`` vs filterpy ``EnsembleKalmanFilter``; different random

@@ -340,7 +340,7 @@ def _stand_in(tmp_path, name, body):
 
 
 @posix_only
-def test_a_compiler_refusing_march_native_gets_the_portable_flags(cache, tmp_path):
+def test_a_compiler_refusing_march_native_gets_the_portable_flags(cache, tmp_path, monkeypatch):
     """The default flags include -march=native; a compiler that refuses it still compiles, with the
     portable flags (and they are what the cache records and what cache info says)."""
     real, _ = rt.find_compiler()
@@ -351,6 +351,9 @@ def test_a_compiler_refusing_march_native_gets_the_portable_flags(cache, tmp_pat
     (record,) = _entry_files(cache)[1]
     assert json.loads(record.read_text())["flags"] == list(rt.PORTABLE_FLAGS)
     assert "-march=native" in rt.DEFAULT_FLAGS
+    monkeypatch.setenv("CC", picky)                               # cache info says which flags and why
+    info = rt.cache_info()
+    assert info.flags == rt.PORTABLE_FLAGS and "refuses -march=native" in info.flags_note
 
 
 @posix_only

@@ -420,7 +420,13 @@ class CacheInfo:
     compiler : str or None
         The C compiler and its version (``None``: none found, ``jit`` raises).
     flags : tuple of str
-        The flags used by default here, and ``flags_note`` why.
+        The flags used by default here.
+    flags_note : str
+        Why those flags (the defaults, ``$CASSHIP_CFLAGS``, or a compiler refusing ``-march=native``).
+    timeout : float
+        Seconds a compiler run may take.
+    paths : tuple of str
+        How compiled code is called here (the online update, the record loop).
     """
 
     path: Path | None
