@@ -496,25 +496,29 @@ def cache_info(path: str | os.PathLike | None = None) -> CacheInfo:
         return CacheInfo(folder, 0, 0, {}, refused=refused, **common)
     functions: dict[str, int] = {}
     entries = size = 0
-    for f in folder.iterdir():
-        if f.is_file():
-            size += f.stat().st_size
-            if f.suffix == ".json":
-                try:
-                    name = json.loads(f.read_text())["function"]
-                except (OSError, ValueError, KeyError, TypeError):
-                    name = "(unreadable record)"
-                functions[name] = functions.get(name, 0) + 1
-                entries += 1
+    try:
+        for f in folder.iterdir():
+            if f.is_file():
+                size += f.stat().st_size
+                if f.suffix == ".json":
+                    try:
+                        name = json.loads(f.read_text())["function"]
+                    except (OSError, ValueError, KeyError, TypeError):
+                        name = "(unreadable record)"
+                    functions[name] = functions.get(name, 0) + 1
+                    entries += 1
+    except OSError as exc:
+        return CacheInfo(folder, 0, 0, {}, refused=f"it cannot be read ({exc.strerror or exc})", **common)
     return CacheInfo(folder, entries, size, functions, **common)
 
 
 def clear_cache(path: str | os.PathLike | None = None) -> int:
     """Delete every compiled library and record in the compile cache.
 
-    Only files the cache writes (``<key>.so`` / ``.dylib`` / ``.dll``, ``<key>.json``,
-    ``<key>.lock`` and left-over ``casship-cc-*`` build folders) are removed; anything else in the
-    folder stays. A refused folder (see :func:`cache_info`) is not touched.
+    Only files the cache writes (``<key>.so`` / ``.dylib`` / ``.dll``, ``<key>.json`` and left-over
+    ``casship-cc-*`` build folders) are removed; anything else in the folder stays, and so do the
+    empty lock files ``<key>.lock`` (removing one while another process compiles under it would let
+    a second compile of the same key in). A refused folder (see :func:`cache_info`) is not touched.
 
     Parameters
     ----------
@@ -535,7 +539,7 @@ def clear_cache(path: str | os.PathLike | None = None) -> int:
             if f.is_dir() and f.name.startswith("casship-cc-"):
                 shutil.rmtree(f, ignore_errors=True)
                 removed += 1
-            elif f.is_file() and f.suffix in (".json", ".lock", SUFFIX) and _is_key(f.stem):
+            elif f.is_file() and f.suffix in (".json", SUFFIX) and _is_key(f.stem):
                 f.unlink(missing_ok=True)
                 removed += 1
         for k in [k for k in _LOADED.keys() if k[1] == folder]:
