@@ -75,6 +75,11 @@ class OnlineRun:
             return self._engine.update(y, dt, u_prev, u)
 
     @property
+    def samples(self) -> int:
+        """Samples taken so far."""
+        return self._engine.samples
+
+    @property
     def x(self) -> np.ndarray:
         """Current mean (copy)."""
         with self._lock:
@@ -184,7 +189,7 @@ class StepRun(OnlineRun):
         fun = est._compiled_function(("online", est.options.outputs), lambda: online_step(est))
         first = BufferedCall(fun, cannot_fail=est.options.jit)
         self._calls = (first, first.partner(est.memory))
-        self._cur, self.samples = 0, 0          # the call whose inputs hold the memory now, samples taken
+        self._cur, self._samples = 0, 0         # the call whose inputs hold the memory now, samples taken
         for k, v in est.memory_from(prior, rng).items():
             first[k] = v
         self._p = m.params() if p is None else m.params(p)
@@ -249,7 +254,7 @@ class StepRun(OnlineRun):
                     self._rng.bit_generator.state = rng_state
                 raise self._refusal(self._y, self._u_prev, self._u)
             self._cur = 1 - cur
-            self.samples += 1
+            self._samples += 1
             return x.copy()
         finally:
             self._lock.release()
@@ -281,13 +286,13 @@ class StepRun(OnlineRun):
 
     def _bridged(self, y, dt, u_prev, u) -> bool:
         """A gap longer than the one-step limit: raise, or predict across it in shorter steps."""
-        x = self._x[1 - self._cur] if self.samples else self._prior.mean
+        x = self._x[1 - self._cur] if self._samples else self._prior.mean
         held = np.array(self._held[1 - self._cur]) if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
         limit = gap_limit(self._est, x, held, self._p)
         if dt <= limit:
             self._limit = max(self._limit, dt)
             return False
-        where = f"before update {self.samples + 1}"
+        where = f"before update {self._samples + 1}"
         if self._est.options.on_gap == "raise":
             raise ValueError(_message(self._est, where, float(dt), limit))
         pieces = bridge_pieces(float(dt), limit)
@@ -324,16 +329,21 @@ class StepRun(OnlineRun):
         return ValueError(f"inputs {list(est.model.input_names)} must be finite, got u_prev = {u_prev}, u = {u}")
 
     @property
+    def samples(self) -> int:
+        """Samples taken so far."""
+        return self._samples
+
+    @property
     def x(self) -> np.ndarray:
         """Current mean (copy)."""
         with self._lock:
-            return self._x[1 - self._cur].copy() if self.samples else self._prior.mean.copy()
+            return self._x[1 - self._cur].copy() if self._samples else self._prior.mean.copy()
 
     @property
     def P(self) -> np.ndarray:
         """Current covariance (copy)."""
         with self._lock:
-            return self._P[1 - self._cur].copy() if self.samples else self._prior.cov.copy()
+            return self._P[1 - self._cur].copy() if self._samples else self._prior.cov.copy()
 
     @property
     def info(self) -> Mapping:
@@ -342,7 +352,7 @@ class StepRun(OnlineRun):
             return self._info()
 
     def _info(self) -> Mapping:
-        if not self.samples:
+        if not self._samples:
             return _Info({}, (), self.name)
         call = self._calls[1 - self._cur]
         values = {}
@@ -361,4 +371,4 @@ class StepRun(OnlineRun):
         return _Info(values, tuple(values), self.name)
 
     def __repr__(self) -> str:
-        return f"OnlineRun({self.name}, samples={self.samples})"
+        return f"OnlineRun({self.name}, samples={self._samples})"
