@@ -72,7 +72,7 @@ def test_heading_across_pi_is_wrapped():
 
 def test_online_runner_reproduces_filter():
     _, dm, _, data, prior = linear_case(duration=20.0)
-    mhe = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 6, "solver": "ipopt"})
+    mhe = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 6, "solver": "ipopt", "outputs": "all"})
     batch = mhe.filter(data, prior)
     U, Y = data.matrix(["delta"]), data.matrix(["psi"])
     run = mhe.online(prior, u=U[0])

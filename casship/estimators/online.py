@@ -233,22 +233,14 @@ class StepEngine:
 
     def _bridged(self, y, dt, u_prev, u) -> bool:
         """A gap longer than the one-step limit: raise, or predict across it in shorter steps."""
-        from .gaps import _message, bridge_pieces, gap_limit
+        from .gaps import online_pieces
 
         x = self._x[1 - self._cur] if self.samples else self._prior.mean
         held = self._held[1 - self._cur] if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
-        limit = gap_limit(self._est, x, held, self._p)
-        if dt <= limit:
+        pieces = online_pieces(self._est, float(dt), x, held, self._p, f"before update {self.samples + 1}")
+        if pieces == 1:
             self._gap_limit[0] = max(self._gap_limit[0], dt)
             return False
-        where = f"before update {self.samples + 1}"
-        if self._est.options.on_gap == "raise":
-            raise ValueError(_message(self._est, where, float(dt), limit))
-        import warnings
-
-        pieces = bridge_pieces(float(dt), limit)
-        warnings.warn(f"{self._est.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
-                      f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=3)
         nothing = np.full(self._ny, np.nan)
         u_held = held.copy()
         for _ in range(pieces - 1):

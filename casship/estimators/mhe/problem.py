@@ -124,8 +124,6 @@ def _meas_residual(mhe, x, u, p, y, mask):
 
 def _stage_functions(mhe):
     m, S, nv = mhe.model, ca.SX, mhe.nv
-    if mhe.dmodel.symbolic is ca.MX:
-        raise ValueError("MHE needs an explicit discretisation ('euler' or 'rk4')")
     x, xn, v = S.sym("x", m.nx), S.sym("x_next", m.nx), S.sym("v", nv)
     u, up, dt, p = S.sym("u", m.nu), S.sym("u_next_prev", m.nu), S.sym("dt"), S.sym("p", m.np)
     y, mask = S.sym("y", mhe.ny), S.sym("mask", mhe.ny)
