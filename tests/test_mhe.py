@@ -33,7 +33,7 @@ def psi_err(a, b):
     return cs.wrap(np.asarray(a) - np.asarray(b))
 
 
-@pytest.mark.parametrize("solver", ["ipopt", "sqp", "rti"])
+@pytest.mark.parametrize("solver", ["ipopt", "fatrop", "sqp", "rti"])
 @pytest.mark.parametrize("N", [1, 4])
 def test_linear_mhe_equals_kalman_filter(solver, N):
     _, dm, _, data, prior = linear_case()
@@ -121,6 +121,81 @@ def test_nonlinear_mhe_beats_ekf_monte_carlo():
     ekf_mean, mhe_mean = np.mean(ekf_rmse, axis=0), np.mean(mhe_rmse, axis=0)
     assert np.all(mhe_mean <= ekf_mean), (mhe_mean, ekf_mean)
     assert mhe_mean[0] < 0.8 * ekf_mean[0]        # surge speed: the clearest gain
+
+
+def test_fatrop_gives_ipopt_estimates_to_solver_tolerance():
+    """A nonlinear window with a Huber cost (the Gauss-Newton warm start is not the optimum, so both
+    solvers iterate): fatrop, exploiting the stage structure, and IPOPT reach the same estimates."""
+    m, dm, tr, data, prior, Qd, R = gps_case(0, duration=30.0)
+    res = {}
+    for solver in ("ipopt", "fatrop"):
+        mhe = cs.MHE(dm, Qd, R, options={"horizon": 10, "solver": solver, "huber": 1.0, "tol": 1e-9})
+        res[solver] = mhe.filter(data, prior)
+        assert mhe.window(10).solver.name() == f"mhe_{solver}_10"
+    scale = np.abs(res["ipopt"].x).max(axis=0)
+    assert np.all(np.abs(res["fatrop"].x - res["ipopt"].x).max(axis=0) <= 1e-7 * scale)
+    # and the estimates are not simply the start point: the Huber cost moves them off the quadratic one
+    plain = cs.MHE(dm, Qd, R, options={"horizon": 10}).filter(data, prior)
+    assert np.abs(plain.x - res["ipopt"].x).max() > 1e3 * np.abs(res["fatrop"].x - res["ipopt"].x).max()
+
+
+def test_every_accepted_option_is_honoured_or_refused():
+    _, dm, _, data, prior = linear_case(duration=10.0)
+    # refused: the gate (the MHE uses every sample; Huber is its guard), a QP solver the solver lacks
+    with pytest.raises(ValueError, match="MHE has no innovation gate; use option 'huber'"):
+        cs.MHE(dm, Q_LIN, R_LIN, options={"gate": 0.99})
+    for solver in ("ipopt", "fatrop"):
+        with pytest.raises(ValueError, match=f"option 'qpsol' is the QP solver of solvers 'sqp' and 'rti'; "
+                                             f"solver '{solver}' has none"):
+            cs.MHE(dm, Q_LIN, R_LIN, options={"solver": solver, "qpsol": "osqp"})
+    assert cs.MHE(dm, Q_LIN, R_LIN, options={"solver": "rti"}).options.qpsol == "qrqp"
+    with pytest.raises(ValueError, match="explicit discretisation"):
+        cs.MHE(cs.discretize(dm.model, 0.5, "cvodes"), Q_LIN, R_LIN)
+    # expand: by the rule (a small window is expanded, one past EXPAND_NODES is not), or as asked;
+    # the estimates are the same either way
+    from casship.estimators.mhe.problem import EXPAND_NODES, stage_nodes
+
+    auto = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 4})
+    assert auto.window(4).expanded and auto.window(4).solver.oracle().is_a("SXFunction")
+    big = EXPAND_NODES // stage_nodes(auto) + 1
+    assert not auto.window(big).expanded and auto.window(big).solver.oracle().is_a("MXFunction")
+    plain = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 4, "expand": False})
+    assert not plain.window(4).expanded
+    np.testing.assert_allclose(plain.filter(data, prior).x, auto.filter(data, prior).x, rtol=0, atol=1e-10)
+    # outputs: what the online run reports besides x and P
+    lean = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 4, "outputs": ("x", "P", "nis", "e")}).online(prior)
+    lean.update(data.matrix(["psi"])[0], 0.0)
+    assert set(lean.info) == {"nis", "e", "solve_time"}
+    full = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 4, "outputs": "all"}).online(prior)
+    full.update(data.matrix(["psi"])[0], 0.0)
+    assert set(full.info) == {"x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll", "rejected", "solve_time"}
+    with pytest.raises(KeyError):
+        lean.info["K"]
+    # time gaps: the options of every estimator, in batch, smoothing and online alike
+    t = data.t + np.where(np.arange(len(data)) >= 10, 20.0, 0.0)
+    gapped = cs.Dataset(t, {"delta": data["delta"], "psi": data["psi"]})
+    capped = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 4, "max_gap": 5.0})
+    for run in (capped.filter, capped.smooth):
+        with pytest.raises(ValueError, match="MHE: time gap of 20.5 s between t = 4.5 and 25 s .* longer than 5 s"):
+            run(gapped, prior)
+    bridged = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 4, "max_gap": 5.0, "on_gap": "bridge"})
+    with pytest.warns(UserWarning, match="bridged by 8 prediction-only row"):
+        sm = bridged.smooth(gapped, prior)
+    with pytest.warns(UserWarning, match="bridged by 8 prediction-only row"):
+        kf = cs.KF(dm, Q_LIN, R_LIN, options={"max_gap": 5.0, "on_gap": "bridge"}).smooth(gapped, prior)
+    np.testing.assert_allclose(sm.x, kf.x, rtol=0, atol=1e-9)       # full information = RTS, across the gap
+
+
+def test_the_mhe_has_no_step_function():
+    _, dm, _, data, prior = linear_case(duration=5.0)
+    mhe = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 4})
+    with pytest.raises(cs.estimators.NoStepFunction, match="MHE has no step Function"):
+        mhe.step
+    with pytest.raises(TypeError, match="MLEProblem folds a recursive estimator's step"):
+        cs.MLEProblem(mhe, data, free=["K"])
+    # the EKF that supplies the arrival cost is an estimator of its own, with its step
+    assert isinstance(mhe.arrival_filter, cs.EKF)
+    assert mhe.arrival_filter.step.name_in()[:2] == ["x", "P"]
 
 
 def test_arrival_cost_does_not_double_count():

@@ -1,4 +1,4 @@
-"""Solving one MHE window: IPOPT or SQP to convergence, or one real-time Gauss-Newton iteration.
+"""Solving one MHE window: IPOPT, fatrop or SQP to convergence, or one real-time Gauss-Newton iteration.
 
 A moving window warm-starts the NLP solvers with the previous window's solution shifted by one
 stage and improved by Gauss-Newton steps (the real-time iteration's step, repeated while it
@@ -126,9 +126,12 @@ def solve_window(win: Window, z0: np.ndarray, par: np.ndarray, where: str, lam_g
             status = _failed_status(win, z0, par, lam0)
             z, g, lam = np.full(win.nz, np.nan), np.zeros(0), None
     else:
-        sol = win.solver(x0=z0, p=par, lbx=win.lbx, ubx=win.ubx, lbg=0.0, ubg=0.0, lam_g0=lam0)
-        status = win.solver.stats()["return_status"]
-        z, g, lam = np.asarray(sol["x"]).reshape(-1), np.asarray(sol["g"]).ravel(), np.asarray(sol["lam_g"]).ravel()
+        sol = win.solver(x0=z0, p=par, lbx=win.lbx, ubx=win.ubx, lbg=0.0, ubg=0.0, lam_g0=win.lam_sign * lam0)
+        stats = win.solver.stats()
+        status = stats.get("unified_return_status", stats["return_status"]) if win.lam_sign < 0 \
+            else stats["return_status"]
+        z, g = np.asarray(sol["x"]).reshape(-1), np.asarray(sol["g"]).ravel()
+        lam = win.lam_sign * np.asarray(sol["lam_g"]).ravel()
     gap = float(np.max(np.abs(g), initial=0.0))
     if status not in win.ok_status or not np.all(np.isfinite(z)):
         raise MHEFailed(f"MHE ({win.solver.name()}) failed at {where}: solver status {status!r}", status)
