@@ -139,6 +139,22 @@ def test_fatrop_gives_ipopt_estimates_to_solver_tolerance():
     assert np.abs(plain.x - res["ipopt"].x).max() > 1e3 * np.abs(res["fatrop"].x - res["ipopt"].x).max()
 
 
+def test_solver_is_skipped_only_where_the_warm_start_solves_the_window(monkeypatch):
+    """Where the Gauss-Newton warm start already meets the first-order conditions to the solver's
+    tolerance, IPOPT is not called; the estimates equal those with IPOPT called on every window."""
+    import casship.estimators.mhe.solvers as solvers
+
+    m, dm, tr, data, prior, Qd, R = gps_case(1, duration=20.0)
+    check, accepted = solvers.first_order_optimal, []
+    monkeypatch.setattr(solvers, "first_order_optimal", lambda *a: accepted.append(check(*a)) or accepted[-1])
+    skipping = cs.MHE(dm, Qd, R, options={"horizon": 10}).filter(data, prior)
+    assert 0 < sum(accepted) < len(accepted)          # both happen on this record
+    monkeypatch.setattr(solvers, "first_order_optimal", lambda *a: False)
+    always = cs.MHE(dm, Qd, R, options={"horizon": 10}).filter(data, prior)
+    scale = np.abs(always.x).max(axis=0)
+    assert np.all(np.abs(skipping.x - always.x).max(axis=0) <= 1e-7 * scale)
+
+
 def test_every_accepted_option_is_honoured_or_refused():
     _, dm, _, data, prior = linear_case(duration=10.0)
     # refused: the gate (the MHE uses every sample; Huber is its guard), a QP solver the solver lacks

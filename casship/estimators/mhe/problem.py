@@ -72,6 +72,9 @@ class Window:
     _nlp_call: BufferedCall | None = None
     lam_sign: float = 1.0                 # -1: the solver's constraints are the negated gaps (fatrop)
     expanded: bool = False                # the NLP and the Gauss-Newton step in scalar expressions
+    tol: float = 1e-8                     # the NLP solver's convergence tolerance
+    make_kkt: object = None               # () -> Function (z, p, lam_g) -> (dual, primal) infeasibility
+    _kkt: BufferedCall | None = None
 
     def nlp_call(self) -> BufferedCall:
         """The NLP solver through bound buffers (bounds written once), for solvers that raise on failure."""
@@ -101,6 +104,13 @@ class Window:
         if self.gn_step is None:
             self.gn_step = self.make_gn(False)
         return self.gn_step
+
+    def kkt(self) -> BufferedCall:
+        """The first-order optimality errors of a point and multipliers (built on first use):
+        ``dual = max |grad f + G' lam_g|``, ``primal = max |g|``."""
+        if self._kkt is None:
+            self._kkt = BufferedCall(self.make_kkt())
+        return self._kkt
 
     def qp(self) -> tuple:
         """The Gauss-Newton QP data Function and the bounded QP solver (built on first use)."""
@@ -239,7 +249,16 @@ def build_window(mhe, N: int, solver: str) -> Window:
     win = Window(N, S, ix, iv, nz, lbx, ubx, ok, not (np.isfinite(lbx).any() or np.isfinite(ubx).any()),
                  nlp["g"].numel(), gauss_newton,
                  lambda: _bounded_qp(z, par, res, nlp["g"], N, o.qpsol or "qrqp"))
-    win.expanded = bool(expand)
+    win.expanded, win.tol = bool(expand), o.tol
+
+    def kkt_error():
+        lam = ca.MX.sym("lam_g", nlp["g"].numel())
+        dual = ca.gradient(nlp["f"] + ca.dot(lam, nlp["g"]), z)
+        fun = ca.Function(f"mhe_kkt_error_{N}", [z, par, lam], [ca.mmax(ca.fabs(dual)), ca.mmax(ca.fabs(nlp["g"]))],
+                          ["z", "p", "lam_g"], ["dual", "primal"])
+        return fun.expand() if expand else fun
+
+    win.make_kkt = kkt_error
     if solver == "fatrop":
         win.lam_sign = -1.0
     if solver == "rti":

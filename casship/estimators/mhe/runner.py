@@ -111,7 +111,8 @@ class WindowEngine:
             z0[: win.nz - stage] = self.z[stage:]
             z0[win.nz - stage: win.nz - nx] = 0.0
             z0[win.nz - nx:] = info["x_pred"]
-        np.clip(z0, win.lbx, win.ubx, out=z0)
+        if not win.unbounded:
+            np.clip(z0, win.lbx, win.ubx, out=z0)
         lam = None
         if win.solver is not None:                      # NLP solvers: warm start (primal and dual)
             z0, lam = gauss_newton_start(win, z0, self.par)
