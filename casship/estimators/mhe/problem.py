@@ -26,9 +26,10 @@ __all__: list[str] = []          # the package's own building blocks
 
 # Expand the window NLP (and the Gauss-Newton step) to scalar expressions when it has at most this
 # many scalar operations (horizon x operations of one stage, SX nodes). Expanded, a window solves
-# about twice as fast, but the build costs about 15 us per operation (1 s at 60 000, 4 s at 230 000,
-# on the ship models at N = 10 .. 200) against 0.05 - 0.3 s unexpanded: below the threshold the
-# expanded build stays near half a second. Measured in benchmarks/bench_mhe_build.py.
+# 1.2 - 2.8 times faster, but the build costs about 20 us per operation (1 s at 52 000 - 67 000,
+# 5 - 7 s at 210 000 - 270 000 on the ship models at N = 200) against 0.03 - 0.21 s unexpanded:
+# below the threshold the expanded build stays near half a second.
+# Measured in benchmarks/bench_mhe_build.py.
 EXPAND_NODES = 40_000
 
 
