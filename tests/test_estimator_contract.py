@@ -1,15 +1,18 @@
 """The estimator contract (docs/architecture.md), checked for every registered estimator.
 
 Every class in ``casship.estimators.ESTIMATORS`` gets every check below by being registered there:
-constructor and typed options, the step Function's named slots, lean and full steps, a linear model
-(all equal the Kalman filter and python-control's ``dlqe``/``lqe``), NaN rows, wrapped angle
-residuals, batch = online, NEES/NIS inside chi-square bounds on a nonlinear ship model, unknown names
-and options, results as values (frozen, repr, summary, save/load, plot), smoothing and prediction.
+the abstract contract, constructor and typed options, the step Function's named slots (or the
+refusal of an estimator without one), lean and full steps, a linear model (all equal the Kalman
+filter and python-control's ``dlqe``/``lqe``), NaN rows, wrapped angle residuals, batch = online,
+time gaps (raised, or bridged alike in batch and online), NEES/NIS inside chi-square bounds on a
+nonlinear ship model, unknown names and options, results as values (frozen, repr, summary,
+save/load, plot), smoothing and prediction.
 
 The traits a check needs come from the class: ``continuous`` (Q and R enter as spectral densities;
-compared with ``lqe`` and not expected to equal a discrete filter sample by sample) and
-``stochastic`` (draws random numbers: compared within Monte Carlo error). ``FAST`` lists options
-that keep an expensive estimator quick here; everything else runs on its defaults.
+compared with ``lqe`` and not expected to equal a discrete filter sample by sample),
+``stochastic`` (draws random numbers: compared within Monte Carlo error) and ``has_step`` (false:
+``step`` is refused). ``FAST`` lists options that keep an expensive estimator quick here;
+everything else runs on its defaults.
 """
 from __future__ import annotations
 
@@ -21,7 +24,7 @@ import pytest
 from scipy import stats
 
 import casship as cs
-from casship.estimators import ESTIMATORS, EstimatorOptions, FilterResult
+from casship.estimators import ESTIMATORS, EstimatorOptions, FilterResult, NoStepFunction
 from filter_models import oscillator_case
 
 FAST = {"mhe": {"solver": "rti", "horizon": 5}}
@@ -45,10 +48,16 @@ def kf_reference(linear):
     return cs.KF(dm, Q, R).filter(data, prior)
 
 
-def test_every_registered_estimator_is_checked():
+def test_every_registered_estimator_is_checked(linear):
     assert {"kf", "ekf", "ukf", "enkf", "kalman-bucy", "mhe"} <= set(ESTIMATORS)
     for cls in ESTIMATORS.values():
-        assert issubclass(cls, cs.estimators.Estimator)
+        assert issubclass(cls, cs.estimators.Estimator) and not cls.__abstractmethods__
+    # the contract itself is abstract: the five verbs are what an estimator must provide
+    assert set(cs.estimators.Estimator.__abstractmethods__) == {"filter", "online", "smooth", "predict", "step"}
+    with pytest.raises(TypeError, match="abstract"):
+        cs.estimators.Estimator(linear[1], Q, R)
+    # the recursive filters share the step-based template, the MHE keeps the contract by itself
+    assert not issubclass(ESTIMATORS["mhe"], cs.estimators.StepEstimator)
 
 
 # -- constructor, options, step -----------------------------------------------------------------------
@@ -79,6 +88,11 @@ def test_typed_options(name, linear):
 def test_step_has_named_slots_and_matrix_shapes(name, linear):
     m, dm, *_ = linear
     est = make(name, dm, Q, R)
+    if not ESTIMATORS[name].has_step:       # refused, saying why and what to use instead
+        with pytest.raises(NoStepFunction, match=rf"{est.name} has no step Function: .*\.online"):
+            est.step
+        assert not hasattr(est, "step") and not hasattr(est, "step_function")
+        return
     step, full = est.step, est.step_function("all")
     memory = est.memory
     draws = [n for n in step.name_in() if n.startswith("z_")]
@@ -188,6 +202,56 @@ def test_batch_equals_online_and_lean_equals_full(name, linear):
         runs[0].update([1.0], 0.1)
     with pytest.raises(ValueError, match="dt must be >= 0"):
         runs[0].update(Y[0], -0.1)
+
+
+# -- time gaps ------------------------------------------------------------------------------------------------
+
+def _gap_case(linear):
+    """The oscillator record's first 6 s with a gap of 5.1 s between rows 29 and 30."""
+    m, dm, traj, data, prior = linear
+    d = data.slice(0, 60)
+    t = d.t + np.where(np.arange(len(d)) >= 30, 5.0, 0.0)
+    return dm, cs.Dataset(t, {k: d[k] for k in ("f", "y1", "y2")}), prior
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_time_gaps_raise_or_are_bridged_alike_in_batch_and_online(name, linear):
+    dm, gapped, prior = _gap_case(linear)
+    msg = rf"{ESTIMATORS[name].name}: time gap of 5.1 s between t = 2.9 and 8 s \(rows 29 and 30\) is longer than 1 s"
+    with pytest.raises(ValueError, match=msg):
+        make(name, dm, Q, R, max_gap=1.0).filter(gapped, prior, seed=1)
+    # beyond the stability limit of the rk4 prediction (the default limit) as well
+    far = cs.Dataset(np.concatenate([gapped.t[:30], gapped.t[30:] + 1e4]), {k: gapped[k] for k in ("f", "y1", "y2")})
+    with pytest.raises(ValueError, match="is longer than .* s, the longest interval the rk4 prediction bridges"):
+        make(name, dm, Q, R).filter(far, prior, seed=1)
+    est = make(name, dm, Q, R, max_gap=1.0, on_gap="bridge", outputs="all")
+    with pytest.warns(UserWarning, match=r"1 time gap\(s\) longer than 1 s .* bridged by 10 prediction-only row"):
+        res = est.filter(gapped, prior, seed=4)
+    rows = np.flatnonzero(np.isin(res.t, gapped.t))
+    inserted = np.setdiff1d(np.arange(len(res.t)), rows)
+    assert len(res.t) == len(gapped) + 10 and np.diff(res.t).max() <= 0.5 + 1e-12
+    assert (res.n_measured[inserted] == 0).all() and np.isfinite(res.x).all()
+    spread = np.einsum("kii->k", res.P)
+    assert spread[inserted].max() > 2 * spread[rows[29]]          # the belief spreads across the gap
+    # online: the same bridging, the same numbers at the record's rows
+    U, Y = gapped.matrix(["f"]), gapped.matrix(["y1", "y2"])
+    run = est.online(prior, seed=4, u=U[0])
+    for k in range(len(gapped)):
+        dt = gapped.t[k] - gapped.t[k - 1] if k else 0.0
+        if k == 30:
+            with pytest.warns(UserWarning, match="time gap of 5.1 s before update 31 bridged by 10 prediction-only"):
+                x = run.update(Y[k], dt, u_prev=U[k - 1], u=U[k])
+        else:
+            x = run.update(Y[k], dt, u_prev=U[max(k - 1, 0)], u=U[k])
+        np.testing.assert_allclose(x, res.x[rows[k]], rtol=1e-9, atol=1e-11)
+        np.testing.assert_allclose(run.P, res.P[rows[k]], rtol=1e-9, atol=1e-13)
+    refusing = make(name, dm, Q, R, max_gap=1.0).online(prior, seed=4, u=U[0])
+    refusing.update(Y[0], 0.0, u_prev=U[0], u=U[0])
+    x0, P0 = refusing.x, refusing.P
+    with pytest.raises(ValueError, match="time gap of 5.1 s before update 2 is longer than 1 s"):
+        refusing.update(Y[1], 5.1, u_prev=U[0], u=U[1])
+    np.testing.assert_array_equal(refusing.x, x0)               # a refused update changes nothing
+    np.testing.assert_array_equal(refusing.P, P0)
 
 
 # -- statistical consistency on a nonlinear ship model ---------------------------------------------------

@@ -1,13 +1,16 @@
 """Estimators sharing one contract (``docs/architecture.md``): KF, EKF, UKF, EnKF, Kalman-Bucy, MHE.
 
-Every estimator is built as ``Est(dmodel, Q, R, *, measured=None, options=None)`` and offers
-``filter``, ``smooth``, ``predict``, ``online`` and the step Function ``step`` with named slots.
+Every estimator derives from the abstract :class:`Estimator`: it is built as ``Est(dmodel, Q, R, *,
+measured=None, options=None)`` and offers ``filter``, ``smooth``, ``predict``, ``online`` and
+``step`` (the step Function with named slots, or :class:`NoStepFunction` for the MHE, which has
+none). The recursive filters share the step-based template :class:`StepEstimator`.
 :data:`ESTIMATORS` maps names to classes; registering an estimator there also runs the
 conformance suite ``tests/test_estimator_contract.py`` on it.
 """
 from .options import EstimatorOptions
 from .result import FilterResult, Health
-from .base import Estimator
+from .contract import Estimator, NoStepFunction
+from .base import StepEstimator
 from .online import OnlineRun
 from .ekf import EKF, KF, EKFOptions, persistence_model
 from .ukf import UKF, UKFOptions
@@ -20,7 +23,7 @@ from .mhe import MHE, MHEFailed, MHEOptions
 # Estimators by command-line name (``casship filter --estimator NAME``); other modules may add theirs.
 ESTIMATORS = {"kf": KF, "ekf": EKF, "ukf": UKF, "enkf": EnKF, "kalman-bucy": KalmanBucy, "mhe": MHE}
 
-__all__ = ["Estimator", "EstimatorOptions", "FilterResult", "Health", "OnlineRun", "EKF", "KF", "EKFOptions",
-           "persistence_model", "UKF", "UKFOptions", "rts_smooth", "EnKF", "EnKFOptions", "KalmanBucy",
+__all__ = ["Estimator", "StepEstimator", "NoStepFunction", "EstimatorOptions", "FilterResult", "Health", "OnlineRun",
+           "EKF", "KF", "EKFOptions", "persistence_model", "UKF", "UKFOptions", "rts_smooth", "EnKF", "EnKFOptions", "KalmanBucy",
            "KalmanBucyOptions", "augment", "augmented_ekf", "AugmentedResult", "ESTIMATORS", "MHE", "MHEFailed",
            "MHEOptions"]

@@ -1,18 +1,18 @@
-"""The estimator contract: one constructor, one step shape with named slots, batch, online, smoothing.
+"""The step-based estimators (the Kalman family): the contract of :mod:`.contract` through one step Function.
 
 Every recursive estimator is one CasADi step Function with named slots (see
 ``docs/architecture.md``)::
 
     step(<memory>, u_prev, u, y, mask, dt, p, Q, R, gate, <draws>) -> (<memory>, <diagnostics>)
 
-``<memory>`` is the estimator's memory (:attr:`Estimator.memory`: ``x, P`` for the Kalman family,
+``<memory>`` is the estimator's memory (:attr:`StepEstimator.memory`: ``x, P`` for the Kalman family,
 the ensemble ``X`` for the EnKF) under the same names on both sides; matrices keep their shape.
 ``y`` holds the measured outputs (NaN or anything where ``mask`` is 0), ``dt`` the time since the
 previous sample (0 on the first row: update only), ``gate`` the chi-square threshold of the
 innovation test, ``<draws>`` the standard-normal draws of a stochastic estimator. The diagnostics
 are a subset of ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted`` chosen when the Function
 is built, so the compiled code computes only those. Batch filtering runs the step through
-``mapaccum`` over the record (:meth:`Estimator.fold`), or, compiled (option ``jit``), through one C
+``mapaccum`` over the record (:meth:`StepEstimator.fold`), or, compiled (option ``jit``), through one C
 loop over the whole record (:class:`~casship.runtime.NativeFold`); online use calls it through bound buffers
 (:class:`~casship.estimators.online.OnlineRun`), and the same Function is exported as C.
 """
@@ -22,18 +22,17 @@ from typing import Mapping, Sequence
 
 import casadi as ca
 import numpy as np
-from scipy import stats
 
 from ..data import Dataset
-from ..gaussian import Gaussian, as_cov
+from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, compile_function, run_fold
+from .contract import Estimator
 from .gaps import bridge_gaps
-from .options import DIAGNOSTICS, EstimatorOptions
+from .options import DIAGNOSTICS
 from .result import FilterResult
-from .update import residual
 
-__all__ = ["Estimator", "SAMPLE_INPUTS", "CONSTANT_INPUTS", "DIAGNOSTICS", "per_sample"]
+__all__ = ["StepEstimator", "SAMPLE_INPUTS", "CONSTANT_INPUTS", "DIAGNOSTICS", "per_sample"]
 
 SAMPLE_INPUTS = ("u_prev", "u", "y", "mask", "dt", "gate")   # change from sample to sample
 CONSTANT_INPUTS = ("p", "Q", "R")                            # the same for a whole record
@@ -55,8 +54,8 @@ def per_sample(a: np.ndarray, n: int) -> np.ndarray:
     return a.reshape(r, n, c).transpose(1, 0, 2).copy()
 
 
-class Estimator:
-    """Base class of the estimators (not used directly): the contract they share.
+class StepEstimator(Estimator):
+    """Base class of the recursive estimators (not used directly): the contract through one step Function.
 
     Parameters
     ----------
@@ -78,45 +77,18 @@ class Estimator:
         Names of the memory slots.
     """
 
-    name = "estimator"
-    Options = EstimatorOptions
     FOLD_CHUNK = 512
-    continuous = False       # Q and R enter as spectral densities Q dt, R dt
-    stochastic = False       # draws random numbers (reproducible with ``seed``)
-    linear = False           # needs a model linear in states, inputs and noise
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured: Sequence[str] | None = None, options=None):
-        if not isinstance(dmodel, DiscreteModel):
-            raise TypeError(f"{type(self).__name__} needs a DiscreteModel (use casship.discretize), "
-                            f"got {type(dmodel).__name__}")
-        model = dmodel.model
-        self.dmodel, self.model = dmodel, model
-        measured = tuple(model.output_names if measured is None else measured)
-        unknown = [n for n in measured if n not in model.output_names]
-        if unknown:
-            raise ValueError(f"unknown measured output(s) {unknown}; outputs: {list(model.output_names)}")
-        if not measured:
-            raise ValueError("at least one output must be measured")
-        self.measured = measured
-        self.meas_index = [model.index(n, "output") for n in measured]
-        self.ny = len(measured)
-        self.angle_meas = model.angle_outputs[self.meas_index]
-        self.Q = as_cov(Q, model.nw, "Q", model.noise_names)
-        self.R = as_cov(R, self.ny, "R", measured, allow_zero=False)
-        self.options = self.Options.from_value(options, type(self).__name__)
-        self._check_options()
+        super().__init__(dmodel, Q, R, measured=measured, options=options)
         self.sym = self._symbolic()
         self._steps: dict[tuple, ca.Function] = {}
         self._folds: dict[tuple, ca.Function] = {}
         self._fold_calls: dict[tuple, BufferedCall] = {}
         self._compiled: dict[tuple, ca.Function] = {}
-        self._gate_cache: dict[int, float] = {}
         self._build_expressions()
 
     # -- what subclasses provide ------------------------------------------------------------------
-    def _check_options(self) -> None:
-        """Checks of the options against the model (raise ``ValueError`` naming the option)."""
-
     def _symbolic(self):
         """``ca.SX`` or ``ca.MX`` for the step's symbols."""
         return self.dmodel.symbolic
@@ -243,61 +215,6 @@ class Estimator:
         return self._fold_calls[key]
 
     # -- data ------------------------------------------------------------------------------------
-    def gate_threshold(self, n_measured: int) -> float:
-        """Chi-square threshold of the gate for ``n_measured`` scalar measurements (inf: no gate).
-
-        Parameters
-        ----------
-        n_measured : int
-        """
-        if self.options.gate is None or n_measured == 0:
-            return np.inf
-        if n_measured not in self._gate_cache:
-            self._gate_cache[n_measured] = float(stats.chi2.ppf(self.options.gate, n_measured))
-        return self._gate_cache[n_measured]
-
-    def prepare(self, data: Dataset, p=None) -> dict:
-        """Check a record and turn it into the step's named inputs (per-sample inputs as columns).
-
-        Parameters
-        ----------
-        data : Dataset
-            Inputs (finite) and measured outputs (NaN = not measured).
-        p : array or mapping, optional
-            Model parameters (nominal by default).
-
-        Returns
-        -------
-        dict
-            ``u_prev, u, y, mask, dt, gate`` with one column per sample, and ``p, Q, R``.
-        """
-        m = self.model
-        if not isinstance(data, Dataset):
-            raise TypeError(f"data must be a casship.Dataset, got {type(data).__name__}")
-        missing = [n for n in (*m.input_names, *self.measured) if n not in data]
-        if missing:
-            raise ValueError(f"data has no column(s) {missing} needed by {self.name} on {m.name!r}; "
-                             f"columns: {list(data.names)}")
-        U = data.matrix(m.input_names, finite=True, what="input")
-        Y = data.matrix(self.measured)
-        if np.isinf(Y).any():
-            row, col = np.argwhere(np.isinf(Y))[0]
-            raise ValueError(f"measurement {self.measured[col]!r} is infinite at row {row}")
-        for j in np.flatnonzero(self.angle_meas):
-            col = Y[:, j]
-            big = np.abs(col[np.isfinite(col)])
-            if big.size and big.max() > 2 * np.pi + 1e-9:
-                raise ValueError(f"angle measurement {self.measured[j]!r} reaches {big.max():.4g}: "
-                                 "angles are in radians (degrees given?)")
-        dt = np.concatenate([[0.0], np.diff(data.t)])
-        self.dmodel.check_steps(dt[1:], data.t)
-        mask = np.isfinite(Y)
-        counts = mask.sum(axis=1)
-        gate = np.array([self.gate_threshold(int(c)) for c in counts]) if self.options.gate else np.full(len(data), np.inf)
-        return {"u_prev": np.vstack([U[:1], U[:-1]]).T, "u": U.T, "y": np.nan_to_num(Y, nan=0.0).T,
-                "mask": mask.T.astype(float), "dt": dt[None, :], "gate": gate[None, :],
-                "p": m.params() if p is None else m.params(p), "Q": self.Q, "R": self.R}
-
     def sample_draws(self, n: int, rng) -> dict:
         """Standard-normal draws for ``n`` steps, indexed by step first (name -> ``(n, rows, cols)`` view).
 
@@ -339,17 +256,6 @@ class Estimator:
         return (m.states() if x is None else np.asarray(x, dtype=float),
                 m.inputs() if u is None else np.asarray(u, dtype=float), m.params() if p is None else m.params(p))
 
-    def _check_prior(self, prior: Gaussian) -> None:
-        if not isinstance(prior, Gaussian):
-            raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
-        if prior.mean.size != self.model.nx:
-            raise ValueError(f"prior has {prior.mean.size} entries, model {self.model.name!r} has "
-                             f"{self.model.nx} states {list(self.model.state_names)}")
-        for i in np.flatnonzero(self.model.angle_states):
-            if abs(prior.mean[i]) > 2 * np.pi + 1e-9:
-                raise ValueError(f"prior mean of angle state {self.model.state_names[i]!r} is {prior.mean[i]:.4g}: "
-                                 "angles are in radians (degrees given?)")
-
     # -- batch -------------------------------------------------------------------------------------
     def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
         """Run the estimator over a whole record in one compiled fold.
@@ -388,34 +294,6 @@ class Estimator:
             _, outs = run_fold(lambda size: self._fold_call(size, outputs), n, self.FOLD_CHUNK, memory=memory,
                                per_sample=per, constants=constants, pad=pad, keep=DIAGNOSTICS)
         return self.result(data, arrays, outs)
-
-    def result(self, data: Dataset, arrays: dict, out: dict, estimator: str | None = None) -> FilterResult:
-        """Assemble a :class:`FilterResult` from the per-sample diagnostics of a run.
-
-        Parameters
-        ----------
-        data : Dataset
-            The record.
-        arrays : dict
-            The record as prepared by :meth:`prepare`.
-        out : dict
-            Diagnostic name -> array indexed by sample.
-        estimator : str, optional
-            Name recorded in the result (default: the estimator's).
-        """
-        m, n = self.model, len(data)
-        mask = arrays["mask"].T
-        e = np.array(out["e"], dtype=float).reshape(n, self.ny)
-        e[mask == 0] = np.nan
-        mat = lambda k, r, c: np.reshape(out[k], (n, r, c))  # noqa: E731
-        nx, ny = m.nx, self.ny
-        return FilterResult(
-            t=data.t, x=np.reshape(out["x"], (n, nx)), P=mat("P", nx, nx), x_pred=np.reshape(out["x_pred"], (n, nx)),
-            P_pred=mat("P_pred", nx, nx), C=mat("C", nx, nx), K=mat("K", nx, ny), innovations=e, S=mat("S", ny, ny),
-            nis=np.reshape(out["nis"], n), n_measured=mask.sum(axis=1), loglik_terms=np.reshape(out["ll"], n),
-            rejected=np.reshape(out["accepted"], n) < 0.5, inputs=arrays["u"].T, state_names=m.state_names,
-            state_units=tuple(v.unit for v in m.state_vars), output_names=self.measured, input_names=m.input_names,
-            estimator=estimator or self.name, angle_states=m.angle_states)
 
     def smooth(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
         """Fixed-interval smoothing of a record: the one smoothing entry point.
@@ -527,24 +405,3 @@ class Estimator:
 
         self._check_prior(prior)
         return StepRun(self, prior, p, u, np.random.default_rng(seed))
-
-    def residual(self, y, yhat, mask):
-        """Masked residual of the measured outputs, angle channels wrapped.
-
-        Parameters
-        ----------
-        y, yhat, mask : symbolic (ny,)
-        """
-        return residual(y, yhat, mask, self.angle_meas)
-
-    def h_meas(self, x, u, p):
-        """Symbolic measured outputs.
-
-        Parameters
-        ----------
-        x, u, p : symbolic
-        """
-        return self.model.h(x, u, p)[self.meas_index]
-
-    def __repr__(self) -> str:
-        return f"{type(self).__name__}({self.model.name!r}, measured={list(self.measured)})"

@@ -7,7 +7,7 @@ import casadi as ca
 import numpy as np
 
 from ..discretize import rk4
-from .base import Estimator
+from .base import StepEstimator
 from .options import EstimatorOptions, check_int
 from .update import joseph_update, sandwich, symmetric
 
@@ -54,7 +54,7 @@ class EKFOptions(EstimatorOptions):
             object.__setattr__(self, "reacquire", int(self.reacquire))
 
 
-class EKF(Estimator):
+class EKF(StepEstimator):
     """Extended Kalman filter with exact Jacobians, Joseph-form update and angle-aware residuals.
 
     Parameters

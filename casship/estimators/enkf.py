@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from ..gaussian import Gaussian
-from .base import Estimator
+from .base import StepEstimator
 from .options import EstimatorOptions, check_int
 from .ukf import psd_sqrt, wrap_fast
 from .update import from_lower, gain_and_terms, masked_innovation_cov, residual
@@ -132,7 +132,7 @@ def _moments(name: str, ensembles: dict, angles: dict, pairs, members: int) -> t
     return means, covs
 
 
-class EnKF(Estimator):
+class EnKF(StepEstimator):
     """Ensemble Kalman filter with ``N`` members and perturbed observations.
 
     Each member is propagated through the discretised model with its own process-noise draw

@@ -19,7 +19,7 @@ import numpy as np
 from ..data import Dataset
 from ..validity import is_stable_step, stable_step
 
-__all__ = ["gap_limit", "bridge_gaps", "bridge_pieces"]
+__all__ = ["gap_limit", "bridge_gaps", "bridge_pieces", "online_pieces"]
 
 
 def bridge_pieces(gap: float, limit: float) -> int:
@@ -136,3 +136,38 @@ def bridge_gaps(est, data: Dataset, x, p=None) -> Dataset:
     bridged = data.with_rows(t_new, hold=m.input_names)
     bridged.meta["bridged_rows"] = int(t_new.size)
     return bridged
+
+
+def online_pieces(est, dt: float, x, u, p, where: str) -> int:
+    """Number of equal steps an online update over ``dt`` [s] takes: 1 within :func:`gap_limit`, else
+    raise (``on_gap="raise"``) or bridge (``"bridge"``: more steps, with a warning).
+
+    Online runners call this only for an interval longer than the limit they found at the start,
+    so the stability limit is searched for only then.
+
+    Parameters
+    ----------
+    est : Estimator
+        The estimator (options ``max_gap``, ``on_gap``).
+    dt : float
+        The interval before the update [s].
+    x, u : array_like
+        Current state and the input held over the interval.
+    p : array_like or mapping, optional
+        Parameters (nominal by default).
+    where : str
+        Where the gap is (for the messages).
+
+    Returns
+    -------
+    int
+    """
+    limit = gap_limit(est, x, u, p)
+    if dt <= limit:
+        return 1
+    if est.options.on_gap == "raise":
+        raise ValueError(_message(est, where, float(dt), limit))
+    pieces = bridge_pieces(float(dt), limit)
+    warnings.warn(f"{est.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
+                  f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=4)
+    return pieces

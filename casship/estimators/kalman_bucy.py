@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from ..discretize import rk4
-from .base import Estimator
+from .base import StepEstimator
 from .options import EstimatorOptions, check_int
 from .update import gaussian_terms, joseph_update, masked_innovation_cov, symmetric
 
@@ -68,7 +68,7 @@ class KalmanBucyOptions(EstimatorOptions):
             raise ValueError(f"option 'steady_state' is True or False, got {self.steady_state!r}")
 
 
-class KalmanBucy(Estimator):
+class KalmanBucy(StepEstimator):
     """Kalman-Bucy filter integrated between the samples of a record.
 
     Parameters

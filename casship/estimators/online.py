@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 import numbers
 import threading
-import warnings
 from collections.abc import Mapping
 
 import casadi as ca
@@ -19,7 +18,7 @@ import numpy as np
 
 from ..gaussian import Gaussian
 from ..runtime import DUPLICATE_NAMES, BufferedCall
-from .gaps import _message, bridge_pieces, gap_limit
+from .gaps import gap_limit, online_pieces
 from .options import DIAGNOSTICS
 
 __all__ = ["OnlineRun", "StepRun", "online_step"]
@@ -288,16 +287,10 @@ class StepRun(OnlineRun):
         """A gap longer than the one-step limit: raise, or predict across it in shorter steps."""
         x = self._x[1 - self._cur] if self._samples else self._prior.mean
         held = np.array(self._held[1 - self._cur]) if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
-        limit = gap_limit(self._est, x, held, self._p)
-        if dt <= limit:
+        pieces = online_pieces(self._est, float(dt), x, held, self._p, f"before update {self._samples + 1}")
+        if pieces == 1:
             self._limit = max(self._limit, dt)
             return False
-        where = f"before update {self._samples + 1}"
-        if self._est.options.on_gap == "raise":
-            raise ValueError(_message(self._est, where, float(dt), limit))
-        pieces = bridge_pieces(float(dt), limit)
-        warnings.warn(f"{self._est.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
-                      f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=4)
         nothing = np.full(self._ny, np.nan)
         u_held = held.copy()
         for _ in range(pieces - 1):

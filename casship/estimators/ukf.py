@@ -14,7 +14,7 @@ import numpy as np
 
 from dataclasses import dataclass
 
-from .base import Estimator
+from .base import StepEstimator
 from .options import EstimatorOptions
 from .update import gain_and_terms, masked_innovation_cov, outer_sum, sandwich
 
@@ -148,7 +148,7 @@ class UKFOptions(EstimatorOptions):
             raise ValueError(f"option 'alpha' must be positive, got {self.alpha}")
 
 
-class UKF(Estimator):
+class UKF(StepEstimator):
     """Unscented Kalman filter with ``2n+1`` sigma points, angle-aware means and residuals.
 
     The process noise enters additively through the exact noise Jacobian of the discretised step at

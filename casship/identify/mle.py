@@ -18,7 +18,7 @@ import numpy as np
 from ..data import Dataset
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
-from ..estimators.base import Estimator
+from ..estimators.base import StepEstimator
 from ..estimators.gaps import bridge_gaps
 from ._engine import CHUNK, _chunk, _pieces
 from ._likelihood import LikelihoodEngine, StepSlots
@@ -70,7 +70,7 @@ class MLEProblem(IdentificationProblem):
 
     Parameters
     ----------
-    estimator : Estimator or DiscreteModel
+    estimator : StepEstimator or DiscreteModel
         A recursive estimator (``EKF``, ``UKF``, ...) whose model carries the parameters. A
         :class:`~casship.DiscreteModel` is wrapped in an :class:`~casship.EKF` with ``Q``, ``R`` and
         ``measured``.
@@ -137,8 +137,9 @@ class MLEProblem(IdentificationProblem):
                 raise ValueError("with a DiscreteModel give the noise covariances Q and R (or pass an estimator)")
             estimator = EKF(estimator, Q, R, measured=measured)
             kwargs.update(estimator=estimator, Q=None, R=None, measured=None)
-        elif not isinstance(estimator, Estimator):
-            raise TypeError(f"MLEProblem needs an estimator or a DiscreteModel, got {type(estimator).__name__}")
+        elif not isinstance(estimator, StepEstimator):
+            raise TypeError(f"MLEProblem folds a recursive estimator's step into the likelihood (KF, EKF, UKF, EnKF, "
+                            f"KalmanBucy) or takes a DiscreteModel, got {type(estimator).__name__}")
         elif Q is not None or R is not None or measured is not None:
             raise ValueError("Q, R and measured are given to the estimator, not to MLEProblem")
         self.estimator = est = estimator

@@ -242,7 +242,7 @@ def export_mhe_rti(mhe, directory, name: str | None = None) -> CFiles:
       ``M`` (ny x N+1 mask), ``dt`` (1 x N), the model parameters (np).
 
     The arrival cost of the next window comes from the EKF step running alongside the MHE, which
-    :func:`export_estimator` exports (``mhe.step``). Bounds on states or noise need the QP
+    :func:`export_estimator` exports (``mhe.arrival_filter``). Bounds on states or noise need the QP
     solver and are not part of this export.
     """
     if type(mhe).__name__ != "MHE" or not hasattr(mhe, "window"):

@@ -20,7 +20,8 @@ def inv_sqrt(P: np.ndarray) -> np.ndarray:
     of the largest)."""
     P = 0.5 * (P + P.T)
     L, info = _potrf(P, lower=1, clean=1)
-    if info == 0 and np.all(np.diag(L) > 1e-7 * np.sqrt(np.abs(np.diag(P)).max())):
+    # a positive definite P has a positive diagonal (potrf fails otherwise)
+    if info == 0 and L.diagonal().min() > 1e-7 * float(P.diagonal().max()) ** 0.5:
         Linv, info = _trtri(L, lower=1)
         if info == 0:
             return Linv

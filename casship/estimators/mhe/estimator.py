@@ -1,4 +1,4 @@
-"""The moving-horizon estimator: the estimator contract around the window problem.
+"""The moving-horizon estimator: the estimator contract kept by solving a window problem per sample.
 
 Covariances in the :class:`FilterResult`
     ``filter``: the covariance of the EKF recursion that runs alongside the MHE, linearised at and
@@ -11,29 +11,32 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ...runtime import DUPLICATE_NAMES
+from ...runtime import DUPLICATE_NAMES, compile_function
 from ...data import Dataset
 from ...gaussian import Gaussian, as_cov
 from ...progress import track
 from ...discretize import DiscreteModel, discretize
 from ..augmented import augment, augmented_noise, augmented_prior
-from ..base import Estimator, per_sample
+from ..base import per_sample
+from ..contract import Estimator, NoStepFunction
 from ..ekf import EKF
+from ..gaps import bridge_gaps
 from ..online import OnlineRun
+from ..options import DIAGNOSTICS
 from ..result import FilterResult
 from ..rts import rts_smooth
 from ..update import joseph_update
 from .options import MHEOptions, bound_pair
 from .problem import Window, build_window, params_vector, sqrt_factor
 from .arrival import inv_sqrt
-from .runner import WindowEngine
+from .runner import ARRIVAL_OUTPUTS, WindowEngine
 from .solvers import solve_window
 
 __all__ = ["MHE"]
 
 
 class MHE(Estimator):
-    """Moving-horizon estimator with the contract of the Kalman filters.
+    """Moving-horizon estimator with the contract of every estimator.
 
     Parameters
     ----------
@@ -44,7 +47,15 @@ class MHE(Estimator):
     measured : sequence of str, optional
     options : MHEOptions or mapping
         ``horizon``, ``solver``, ``qpsol``, ``arrival``, ``huber``, ``bounds``, ``noise_bounds``,
-        ``estimate``, ``disturbances``, ``max_iter``, ``tol``, ``expand``, ``jit``, ``outputs``.
+        ``estimate``, ``disturbances``, ``max_iter``, ``tol``, ``expand``, and those of every
+        estimator: ``jit``, ``outputs``, ``max_gap``, ``on_gap`` (``gate`` is refused: use ``huber``).
+
+    Attributes
+    ----------
+    arrival_filter : EKF
+        The EKF that runs alongside the MHE, linearised at the MHE's estimates: its prediction is the
+        arrival cost of the next window, and it gives the covariances, innovations and likelihood
+        terms of the result. Its step Function is what C export of the arrival cost takes.
 
     Notes
     -----
@@ -52,8 +63,10 @@ class MHE(Estimator):
     original states, then the estimated parameters, then the disturbances ``d_<state>``. The ``p``
     given to :meth:`filter` is a parameter vector (or mapping) of the original model. Solver
     failures raise :class:`MHEFailed` (a ``RuntimeError``) naming the row and the solver's return
-    status. :attr:`step` is the step Function of the EKF that runs alongside the MHE (arrival cost,
-    innovations, ``P``); the window problem itself is :meth:`window`.
+    status. The MHE has no step Function (each sample solves an optimisation problem):
+    :attr:`step` raises :class:`~casship.estimators.NoStepFunction` saying what to use; the window
+    problem itself is :meth:`window`. Time gaps longer than the one-step prediction limit raise or
+    are bridged by prediction-only rows (options ``max_gap``, ``on_gap``), in batch and online alike.
 
     Examples
     --------
@@ -64,6 +77,7 @@ class MHE(Estimator):
 
     name = "MHE"
     Options = MHEOptions
+    has_step = False
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured=None, options=None):
         if not isinstance(dmodel, DiscreteModel):
@@ -79,12 +93,18 @@ class MHE(Estimator):
         Qa = augmented_noise(as_cov(Q, base.nw, "Q", base.noise_names), extra_var)
         adm = dmodel if aug is base else discretize(aug, dmodel.dt, dmodel.method, dmodel.substeps)
         self._windows: dict[tuple, Window] = {}
+        self._arrival_steps: dict[tuple, ca.Function] = {}
         self._covariance_step = None
         super().__init__(adm, Qa, R, measured=measured, options=opts)
+        o = self.options
+        self.arrival_filter = EKF(self.dmodel, self.Q, self.R, measured=self.measured,
+                                  options={"jit": o.jit, "max_gap": o.max_gap, "on_gap": o.on_gap})
 
     # -- configuration -----------------------------------------------------------------------------
     def _check_options(self) -> None:
         o, m, b = self.options, self.model, self.base_model
+        if self.dmodel.symbolic is ca.MX:
+            raise ValueError(f"MHE needs an explicit discretisation ('euler' or 'rk4'), got {self.dmodel.method!r}")
         self.LQ, q_diag = sqrt_factor(self.Q)
         self.nv = self.LQ.shape[1]
         lo, hi = np.full(m.nx, -np.inf), np.full(m.nx, np.inf)
@@ -112,10 +132,29 @@ class MHE(Estimator):
         self.v_bounds = (vlo, vhi)
         self.R_diagonal = np.count_nonzero(self.R - np.diag(np.diag(self.R))) == 0
 
-    def _build_expressions(self) -> None:
-        # the step is that of the EKF that runs alongside the MHE (arrival cost, innovations, P)
-        self._ekf = EKF(self.dmodel, self.Q, self.R, measured=self.measured, options={"jit": self.options.jit})
-        self._inputs, self._exprs = self._ekf._inputs, self._ekf._exprs
+    @property
+    def step(self):
+        """The MHE has no step Function: this raises :class:`~casship.estimators.NoStepFunction`."""
+        raise NoStepFunction(
+            "MHE has no step Function: each sample solves the window's optimisation problem (MHE.window). "
+            "Use MHE.online(prior).update(y, dt) sample by sample, casship.runtime.export_mhe_rti for the "
+            "real-time-iteration step as C, or mhe.arrival_filter.step for the EKF step that supplies the "
+            "arrival cost")
+
+    def arrival_step(self, outputs) -> ca.Function:
+        """The step of :attr:`arrival_filter` returning its memory and ``outputs`` (compiled with option
+        ``jit``; cached).
+
+        Parameters
+        ----------
+        outputs : tuple of str
+            Diagnostics among ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted``.
+        """
+        key = tuple(outputs)
+        if key not in self._arrival_steps:
+            fun = self.arrival_filter.step_function(key)
+            self._arrival_steps[key] = compile_function(fun) if self.options.jit else fun
+        return self._arrival_steps[key]
 
     @property
     def horizon(self) -> int:
@@ -129,7 +168,7 @@ class MHE(Estimator):
         ----------
         N : int
             Horizon (steps in the window).
-        solver : {"ipopt", "sqp", "rti"}, optional
+        solver : {"ipopt", "fatrop", "sqp", "rti"}, optional
             Default: the ``solver`` option.
         """
         solver = solver or self.options.solver
@@ -140,6 +179,10 @@ class MHE(Estimator):
     # -- priors and parameters ------------------------------------------------------------------------
     def _full_params(self, p) -> np.ndarray:
         return self.base_model.params() if p is None else self.base_model.params(p)
+
+    def _params(self, p) -> np.ndarray:
+        """The parameter vector of the (augmented) model from one of the original model."""
+        return self._full_params(p)[self._kept_params]
 
     def augmented_prior(self, prior: Gaussian, p=None) -> Gaussian:
         """The prior over the augmented states.
@@ -168,17 +211,17 @@ class MHE(Estimator):
         return augmented_prior(prior, mean, self._extra_std ** 2)
 
     def _check_prior(self, prior: Gaussian) -> None:
-        Estimator._check_prior(self, self.augmented_prior(prior))
+        super()._check_prior(self.augmented_prior(prior))
 
     def prepare(self, data: Dataset, p=None) -> dict:
-        """The step inputs of a record (``p`` of the original model; estimated parameters dropped).
+        """The per-sample arrays of a record (``p`` of the original model; estimated parameters dropped).
 
         Parameters
         ----------
         data : Dataset
         p : array or mapping, optional
         """
-        return super().prepare(data, self._full_params(p)[self._kept_params])
+        return super().prepare(data, self._params(p))
 
     # -- the estimator contract ---------------------------------------------------------------------
     def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
@@ -198,21 +241,24 @@ class MHE(Estimator):
         -------
         FilterResult
             ``x``: the last state of each window; ``P``: the EKF covariance run alongside;
-            predictions, innovations and likelihood terms from that EKF step.
+            predictions, innovations and likelihood terms from that EKF step. A gap bridged by
+            prediction-only rows (``on_gap="bridge"``) adds those rows.
         """
         self._check_prior(prior)
         prior = self.augmented_prior(prior, p)
+        data = bridge_gaps(self, data, prior.mean, self._params(p))
         arrays = self.prepare(data, p)
         n = len(data)
-        engine = WindowEngine(self, prior, arrays["p"])
+        engine = WindowEngine(self, prior, arrays["p"], outputs=DIAGNOSTICS)
         nx = self.model.nx
-        out = {k: [] for k in ("x", "P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll")}
+        keys = ("x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll")
+        out = {k: [] for k in ("x", "P", *keys)}
         U, Up, Y, M, dt = arrays["u"].T, arrays["u_prev"].T, arrays["y"].T, arrays["mask"].T, arrays["dt"][0]
         for k in track(range(n), f"MHE (N = {self.horizon}, {self.options.solver})", unit="sample"):
             x, P, info = engine.advance(Up[k], U[k], Y[k], M[k], dt[k], f"row {k} (t = {data.t[k]:g} s)")
             out["x"].append(x.copy())
             out["P"].append(P.reshape(nx, nx))
-            for key in ("x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll"):
+            for key in keys:
                 out[key].append(info[key])
         out = {k: np.array(v) for k, v in out.items()}
         out["accepted"] = np.ones(n)
@@ -220,7 +266,10 @@ class MHE(Estimator):
 
     def online(self, prior: Gaussian, p=None, *, u=None, seed=None) -> OnlineRun:
         """A stateful runner on a stream (``update(y, dt, u_prev=None, u=None) -> x``), started from
-        ``prior``; numbers equal :meth:`filter` on the same record.
+        ``prior``; numbers equal :meth:`filter` on the same record, gaps included.
+
+        ``run.info`` holds the diagnostics of option ``outputs`` besides ``x`` and ``P`` (``rejected``
+        for ``accepted``) and ``solve_time``, the time of the update [s].
 
         Parameters
         ----------
@@ -232,7 +281,8 @@ class MHE(Estimator):
         seed : ignored (the MHE draws nothing)
         """
         self._check_prior(prior)
-        return OnlineRun(WindowEngine(self, self.augmented_prior(prior, p), self._full_params(p)[self._kept_params], u))
+        return OnlineRun(WindowEngine(self, self.augmented_prior(prior, p), self._params(p), u,
+                                      outputs=self.options.outputs))
 
     def predict(self, result: FilterResult, t, u=None, p=None, *, seed=None) -> FilterResult:
         """Predict past the last sample of ``result`` with the EKF that runs alongside the MHE
@@ -241,11 +291,11 @@ class MHE(Estimator):
         Parameters
         ----------
         result, t, u, seed
-            As for :meth:`Estimator.predict`.
+            As for :meth:`StepEstimator.predict <casship.estimators.base.StepEstimator.predict>`.
         p : array or mapping, optional
             Parameters of the original model.
         """
-        pred = self._ekf.predict(result, t, u, self._full_params(p)[self._kept_params])
+        pred = self.arrival_filter.predict(result, t, u, self._params(p))
         return pred.replace(estimator=f"{self.name} prediction")
 
     def smooth(self, data: Dataset, prior: Gaussian, p=None, *, seed=None, guess: FilterResult | None = None
@@ -273,13 +323,14 @@ class MHE(Estimator):
         """
         self._check_prior(prior)
         prior = self.augmented_prior(prior, p)
+        data = bridge_gaps(self, data, prior.mean, self._params(p))
         arrays = self.prepare(data, p)
         n = len(data)
         if n < 2:
             raise ValueError("smooth needs at least two samples")
         win = self.window(n - 1, "sqp" if self.options.solver == "rti" else None)
         if guess is None:
-            guess = self._ekf.filter(data, prior, arrays["p"])
+            guess = self.arrival_filter.filter(data, prior, arrays["p"])
         z0 = np.zeros(win.nz)
         z0[win.ix] = guess.x
         z0 = np.clip(z0, win.lbx, win.ubx)

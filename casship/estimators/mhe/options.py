@@ -11,7 +11,7 @@ from ..options import EstimatorOptions, check_int
 
 __all__ = ["MHEOptions", "SOLVERS", "ARRIVALS"]
 
-SOLVERS = ("ipopt", "sqp", "rti")
+SOLVERS = ("ipopt", "fatrop", "sqp", "rti")
 ARRIVALS = ("ekf", "fixed")
 QP_SOLVERS = ("qrqp", "osqp")
 
@@ -58,12 +58,15 @@ class MHEOptions(EstimatorOptions):
     horizon : int
         Number of steps ``N`` in the window (``N + 1`` samples). ``N >= len(data) - 1`` turns
         ``filter`` into full-information estimation.
-    solver : {"ipopt", "sqp", "rti"}
-        IPOPT with the exact Hessian (default); ``"sqp"``: CasADi ``sqpmethod`` with the
-        Gauss-Newton Hessian and a sparse QP solver, iterated to convergence; ``"rti"``: real-time
-        iteration, one Gauss-Newton step per sample from the shifted solution.
-    qpsol : {"qrqp", "osqp"}
-        QP solver of ``"sqp"`` and ``"rti"``.
+    solver : {"ipopt", "fatrop", "sqp", "rti"}
+        IPOPT with the exact Hessian (default); ``"fatrop"``: the interior-point method fatrop,
+        which exploits the stage structure of the window (exact Hessian); ``"sqp"``: CasADi
+        ``sqpmethod`` with the Gauss-Newton Hessian and a sparse QP solver, iterated to
+        convergence; ``"rti"``: real-time iteration, one Gauss-Newton step per sample from the
+        shifted solution.
+    qpsol : {"qrqp", "osqp"} or None
+        QP solver of ``"sqp"`` and ``"rti"`` (default ``"qrqp"``); refused with the interior-point
+        solvers, which have none.
     arrival : {"ekf", "fixed"}
         Arrival cost: the EKF prediction of the MHE's own filtered estimate (default), or a fixed
         weight on the previous window's estimate (double counts; for comparison only).
@@ -80,16 +83,20 @@ class MHEOptions(EstimatorOptions):
         Additive random-walk disturbances ``d_<state>`` on the state's derivative; the variance is
         that of the noise ``w_d_<state>`` driving ``d_<state>' = w_d_<state>`` (prior std 1 unless given).
     max_iter : int or None
-        Iteration limit of the NLP solver (IPOPT 100, SQP 50).
+        Iteration limit of the NLP solver (IPOPT and fatrop 100, SQP 50; with ``"rti"`` that of the
+        SQP iterations of :meth:`~casship.MHE.smooth`).
     tol : float
-        Convergence tolerance of IPOPT and SQP.
+        Convergence tolerance of IPOPT, fatrop and SQP (with ``"rti"``: of :meth:`~casship.MHE.smooth`).
     expand : bool or None
-        Expand the NLP to scalar expressions (default: when ``N <= 200``).
+        Expand the window problem to scalar expressions: faster solves, a longer build. ``None``
+        (default): when the window has at most ``EXPAND_NODES`` (40 000) scalar operations
+        (horizon times the operations of one stage), which keeps the build near half a second
+        (see ``docs/mhe.md``).
     """
 
     horizon: int = 20
     solver: str = "ipopt"
-    qpsol: str = "qrqp"
+    qpsol: str | None = None
     arrival: str = "ekf"
     huber: float | None = None
     bounds: Mapping | None = None
@@ -105,9 +112,16 @@ class MHEOptions(EstimatorOptions):
         if self.gate is not None:
             raise ValueError("MHE has no innovation gate; use option 'huber' against outliers")
         object.__setattr__(self, "horizon", check_int(self.horizon, "horizon", 1))
-        for name, allowed in (("solver", SOLVERS), ("arrival", ARRIVALS), ("qpsol", QP_SOLVERS)):
+        for name, allowed in (("solver", SOLVERS), ("arrival", ARRIVALS)):
             if getattr(self, name) not in allowed:
                 raise ValueError(f"option {name!r} must be one of {allowed}, got {getattr(self, name)!r}")
+        if self.qpsol is None:
+            object.__setattr__(self, "qpsol", "qrqp" if self.solver in ("sqp", "rti") else None)
+        elif self.solver not in ("sqp", "rti"):
+            raise ValueError(f"option 'qpsol' is the QP solver of solvers 'sqp' and 'rti'; solver {self.solver!r} "
+                             "has none")
+        elif self.qpsol not in QP_SOLVERS:
+            raise ValueError(f"option 'qpsol' must be one of {QP_SOLVERS}, got {self.qpsol!r}")
         if self.huber is not None:
             object.__setattr__(self, "huber", _positive(self.huber, "option 'huber' (a threshold)"))
         if self.max_iter is not None:

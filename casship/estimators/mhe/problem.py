@@ -23,6 +23,14 @@ from .riccati import riccati_step
 
 __all__: list[str] = []          # the package's own building blocks
 
+# Expand the window NLP (and the Gauss-Newton step) to scalar expressions when it has at most this
+# many scalar operations (horizon x operations of one stage, SX nodes). Expanded, a window solves
+# 1.2 - 2.8 times faster, but the build costs about 20 us per operation (1 s at 52 000 - 67 000,
+# 5 - 7 s at 210 000 - 270 000 on the ship models at N = 200) against 0.03 - 0.21 s unexpanded:
+# below the threshold the expanded build stays near half a second.
+# Measured in benchmarks/bench_mhe_build.py.
+EXPAND_NODES = 40_000
+
 
 def sqrt_factor(Q: np.ndarray, tol: float = 1e-12):
     """``L`` with ``L L' = Q`` and full column rank (columns for the nonzero variance directions),
@@ -62,6 +70,11 @@ class Window:
     gn_warm: BufferedCall | None = None
     _qp: tuple | None = None
     _nlp_call: BufferedCall | None = None
+    lam_sign: float = 1.0                 # -1: the solver's constraints are the negated gaps (fatrop)
+    expanded: bool = False                # the NLP and the Gauss-Newton step in scalar expressions
+    tol: float = 1e-8                     # the NLP solver's convergence tolerance
+    make_kkt: object = None               # () -> Function (z, p, lam_g) -> (dual, primal) infeasibility
+    _kkt: BufferedCall | None = None
 
     def nlp_call(self) -> BufferedCall:
         """The NLP solver through bound buffers (bounds written once), for solvers that raise on failure."""
@@ -91,6 +104,13 @@ class Window:
         if self.gn_step is None:
             self.gn_step = self.make_gn(False)
         return self.gn_step
+
+    def kkt(self) -> BufferedCall:
+        """The first-order optimality errors of a point and multipliers (built on first use):
+        ``dual = max |grad f + G' lam_g|``, ``primal = max |g|``."""
+        if self._kkt is None:
+            self._kkt = BufferedCall(self.make_kkt())
+        return self._kkt
 
     def qp(self) -> tuple:
         """The Gauss-Newton QP data Function and the bounded QP solver (built on first use)."""
@@ -123,8 +143,6 @@ def _meas_residual(mhe, x, u, p, y, mask):
 
 def _stage_functions(mhe):
     m, S, nv = mhe.model, ca.SX, mhe.nv
-    if mhe.dmodel.symbolic is ca.MX:
-        raise ValueError("MHE needs an explicit discretisation ('euler' or 'rk4')")
     x, xn, v = S.sym("x", m.nx), S.sym("x_next", m.nx), S.sym("v", nv)
     u, up, dt, p = S.sym("u", m.nu), S.sym("u_next_prev", m.nu), S.sym("dt"), S.sym("p", m.np)
     y, mask = S.sym("y", mhe.ny), S.sym("mask", mhe.ny)
@@ -141,6 +159,12 @@ def _stage_functions(mhe):
         d = ca.vertcat(*[wrap_sym(d[i]) if a else d[i] for i, a in enumerate(m.angle_states)])
     arrival = ca.Function("mhe_arrival", [x, xbar, W], [W @ d], ["x", "xbar", "W"], ["r"])
     return stage, term, arrival
+
+
+def stage_nodes(mhe) -> int:
+    """Scalar operations of one stage of the window (dynamics gap and residuals, SX nodes)."""
+    stage, _, _ = _stage_functions(mhe)
+    return int(stage.n_nodes())
 
 
 def _qp_options(qp: str) -> dict:
@@ -170,7 +194,7 @@ def build_window(mhe, N: int, solver: str) -> Window:
     res = ca.vertcat(arrival(X[:, 0], xbar, W), ca.vec(Rs), term(xN, Uh[:, N], Y[:, N], M[:, N], p))
     par = ca.vertcat(xbar, ca.vec(W), ca.vec(Uh), ca.vec(Up), ca.vec(Y), ca.vec(M), ca.vec(dt), p)
     nlp = {"x": z, "p": par, "f": 0.5 * ca.sumsqr(res), "g": ca.vec(G)}
-    expand = o.expand if o.expand is not None else N <= 200
+    expand = o.expand if o.expand is not None else N * int(stage.n_nodes()) <= EXPAND_NODES
     common = {"expand": bool(expand), "print_time": False, "error_on_fail": False}
     if solver == "ipopt":
         # warm start (the moving window passes the previous multipliers, shifted): primal and dual
@@ -181,12 +205,21 @@ def build_window(mhe, N: int, solver: str) -> Window:
         # error_on_fail: a failed solve raises from the buffered call (the status is then read by a plain call)
         S = ca.nlpsol(f"mhe_ipopt_{N}", "ipopt", nlp, {**common, "error_on_fail": True, "ipopt": iopts})
         ok = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    elif solver == "fatrop":
+        # fatrop's stage structure: z = [x_0 v_0 ... x_N] and the dynamics as x_{j+1} - F(...) = 0 (the
+        # negated gaps, so its multipliers are those of the other solvers negated); no other constraints
+        fopts = {"structure_detection": "manual", "N": N, "nx": [nx] * (N + 1), "nu": [nv] * N + [0],
+                 "ng": [0] * (N + 1),
+                 "fatrop": {"print_level": 0, "tol": o.tol, "max_iter": 100 if o.max_iter is None else o.max_iter}}
+        S = ca.nlpsol(f"mhe_fatrop_{N}", "fatrop", {**nlp, "g": -nlp["g"]}, {**common, **fopts})
+        ok = ("SOLVER_RET_SUCCESS",)
     elif solver == "sqp":
         J = ca.jacobian(res, z)
         lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", nlp["g"].numel())
         H = ca.Function("mhe_gn_hessian", [z, par, lam_f, lam_g], [lam_f * (J.T @ J)],
                         ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
-        sopts = {**common, "hess_lag": H, "qpsol": o.qpsol, "qpsol_options": _qp_options(o.qpsol),
+        qp = o.qpsol or "qrqp"
+        sopts = {**common, "hess_lag": H, "qpsol": qp, "qpsol_options": _qp_options(qp),
                  "print_iteration": False, "print_header": False, "print_status": False,
                  "max_iter": 50 if o.max_iter is None else o.max_iter, "tol_pr": o.tol, "tol_du": max(o.tol, 1e-8)}
         S = ca.nlpsol(f"mhe_sqp_{N}", "sqpmethod", nlp, sopts)
@@ -199,8 +232,9 @@ def build_window(mhe, N: int, solver: str) -> Window:
 
     def gauss_newton(multipliers: bool, method: str | None = None):
         # chosen by measurement (docs/benchmarks.md): compiled, the Riccati recursion is the fastest
-        # (about 0.6 us per stage); under the virtual machine the sparse QR of the KKT system is
-        method = method or ("riccati" if o.jit else "kkt")
+        # (about 0.6 us per stage); under the virtual machine the sparse QR of the expanded KKT system
+        # is, where expansion pays (its build grows with the expanded size like the NLP's)
+        method = method or ("riccati" if o.jit or not expand else "kkt")
         fun = (riccati_step(stage, term, arrival, nx, nv, N, z, par, pieces, multipliers) if method == "riccati"
                else _kkt_step(z, par, res, nlp["g"], N, multipliers))
         return BufferedCall(compile_function(fun) if o.jit else fun, cannot_fail=o.jit)
@@ -214,7 +248,19 @@ def build_window(mhe, N: int, solver: str) -> Window:
     lbx[iv], ubx[iv] = mhe.v_bounds
     win = Window(N, S, ix, iv, nz, lbx, ubx, ok, not (np.isfinite(lbx).any() or np.isfinite(ubx).any()),
                  nlp["g"].numel(), gauss_newton,
-                 lambda: _bounded_qp(z, par, res, nlp["g"], N, o.qpsol))
+                 lambda: _bounded_qp(z, par, res, nlp["g"], N, o.qpsol or "qrqp"))
+    win.expanded, win.tol = bool(expand), o.tol
+
+    def kkt_error():
+        lam = ca.MX.sym("lam_g", nlp["g"].numel())
+        dual = ca.gradient(nlp["f"] + ca.dot(lam, nlp["g"]), z)
+        fun = ca.Function(f"mhe_kkt_error_{N}", [z, par, lam], [ca.mmax(ca.fabs(dual)), ca.mmax(ca.fabs(nlp["g"]))],
+                          ["z", "p", "lam_g"], ["dual", "primal"])
+        return fun.expand() if expand else fun
+
+    win.make_kkt = kkt_error
+    if solver == "fatrop":
+        win.lam_sign = -1.0
     if solver == "rti":
         win.gn()
     return win

@@ -1,20 +1,27 @@
 """The per-sample recursion of the MHE, shared by ``MHE.filter`` and the online runner.
 
 Each sample: the arrival-cost EKF step from the previous MHE estimate (its named step Function),
-the window data shifted by one sample, a warm start shifted by one stage, one window solve.
+the window data shifted by one sample, a warm start shifted by one stage, one window solve. Online,
+an interval longer than the one-step prediction limit raises or is bridged by prediction-only
+samples, as ``filter`` bridges it by prediction-only rows (:mod:`casship.estimators.gaps`).
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
 
 from ...runtime import BufferedCall
 from ...gaussian import Gaussian
+from ..gaps import gap_limit, online_pieces
+from ..options import DIAGNOSTICS
 from .arrival import arrival_prior
 from .solvers import gauss_newton_start, solve_window
 
 __all__: list[str] = []          # the package's own building blocks
+
+ARRIVAL_OUTPUTS = ("x", "P", "x_pred", "P_pred")      # what the recursion itself needs of the EKF step
 
 
 def _push(buffer: np.ndarray, value) -> None:
@@ -27,10 +34,11 @@ class WindowEngine:
     """The moving window of an :class:`~casship.MHE` run (also its online engine).
 
     ``advance`` takes one sample (masked measurement) and returns the new estimate, the EKF
-    covariance run alongside and that step's diagnostics; ``update`` is the online protocol.
+    covariance run alongside and that step's diagnostics (``outputs``, at least those the recursion
+    needs); ``update`` is the online protocol.
     """
 
-    def __init__(self, mhe, prior: Gaussian, p_aug: np.ndarray, u=None):
+    def __init__(self, mhe, prior: Gaussian, p_aug: np.ndarray, u=None, outputs=DIAGNOSTICS):
         m, N = mhe.model, mhe.horizon
         self.name, self.samples, self.mhe = mhe.name, 0, mhe
         self.win = win = mhe.window(N)
@@ -54,8 +62,9 @@ class WindowEngine:
         view["p"][:] = p_aug
         self.p = view["p"]
         self._started = False
-        self.ekf = ekf = BufferedCall(mhe._compiled_function(("step", "all"), lambda: mhe.step_function("all")),
-                                      cannot_fail=mhe.options.jit)
+        self.outputs = tuple(o for o in DIAGNOSTICS if o in outputs)
+        needed = tuple(o for o in DIAGNOSTICS if o in (*ARRIVAL_OUTPUTS, *self.outputs))
+        self.ekf = ekf = BufferedCall(mhe.arrival_step(needed), cannot_fail=mhe.options.jit)
         ekf["p"], ekf["Q"], ekf["R"], ekf["gate"] = p_aug, mhe.Q, mhe.R, np.inf
         self._ekf_in = {k: ekf.flat_in(k) for k in ("x", "P", "u_prev", "u", "y", "mask", "dt")}
         self._ekf_out = {k: (ekf.offsets[i], ekf.offsets[i + 1], ekf.out(k).shape)
@@ -66,6 +75,7 @@ class WindowEngine:
             raise ValueError(f"u must be {nu} finite values for the inputs {list(m.input_names)}, got {u0}")
         self._u_prev, self._u = u0.copy(), u0.copy()
         self._info: dict = {}
+        self._gap_limit = gap_limit(mhe, prior.mean, u0, p_aug)
 
     def advance(self, u_prev, u, y, mask, dt, where: str):
         """One sample: EKF step from the previous MHE estimate, shift the window, solve it."""
@@ -77,9 +87,11 @@ class WindowEngine:
         ekf()
         snap = ekf.block.copy()                          # every output of the step in one copy
         out = {k: snap[a:b].reshape(shape, order="F") for k, (a, b, shape) in self._ekf_out.items()}
-        info = {k: out[k] for k in ("P_pred", "C", "S", "K")}
-        info.update(x_pred=out["x_pred"].ravel(), e=out["e"].ravel(), nis=float(out["nis"][0, 0]),
-                    ll=float(out["ll"][0, 0]))
+        info = {}
+        for k, v in out.items():
+            if k in ("x", "P"):
+                continue
+            info[k] = float(v[0, 0]) if k in ("nis", "ll", "accepted") else (v.ravel() if v.shape[1] == 1 else v)
         first = self.samples == 0
         # window data: slots 0..N hold rows k-N..k (rows before the record: dt = 0, nothing measured)
         if not self._started:
@@ -99,7 +111,8 @@ class WindowEngine:
             z0[: win.nz - stage] = self.z[stage:]
             z0[win.nz - stage: win.nz - nx] = 0.0
             z0[win.nz - nx:] = info["x_pred"]
-        np.clip(z0, win.lbx, win.ubx, out=z0)
+        if not win.unbounded:
+            np.clip(z0, win.lbx, win.ubx, out=z0)
         lam = None
         if win.solver is not None:                      # NLP solvers: warm start (primal and dual)
             z0, lam = gauss_newton_start(win, z0, self.par)
@@ -109,29 +122,59 @@ class WindowEngine:
         return self._x, self._P, info
 
     # -- the online protocol ------------------------------------------------------------------------
+    def _vector(self, value, size: int, what: str, names) -> np.ndarray:
+        try:
+            v = np.asarray(value, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"{what} must be {size} numbers for {list(names)}, got {value!r}") from None
+        if v.size != size:
+            raise ValueError(f"{what} must hold {size} values for {list(names)}, got {v.size}")
+        return v
+
     def update(self, y, dt, u_prev, u):
-        if not dt >= 0:
+        # everything is checked before anything changes: a refused update leaves the run as it was
+        mhe, m = self.mhe, self.mhe.model
+        if not (dt >= 0 and math.isfinite(dt)):
             raise ValueError(f"dt must be >= 0 and finite, got {dt}")
-        mhe = self.mhe
-        if u_prev is not None:
-            self._u_prev = np.asarray(u_prev, dtype=float).reshape(-1)
-        else:
-            self._u_prev = self._u
-        self._u = self._u_prev if u is None else np.asarray(u, dtype=float).reshape(-1)
-        if not np.isfinite(self._u_prev.sum() + self._u.sum()):
-            raise ValueError(f"inputs must be finite, got u_prev = {self._u_prev}, u = {self._u}")
-        y = np.asarray(y, dtype=float).reshape(-1)
-        if y.size != mhe.ny:
-            raise ValueError(f"y must hold {mhe.ny} values for {list(mhe.measured)}, got {y.size}")
-        ok = np.isfinite(y)
+        u_prev = self._u if u_prev is None else self._vector(u_prev, m.nu, "u_prev", m.input_names)
+        u = u_prev if u is None else self._vector(u, m.nu, "u", m.input_names)
+        if not np.isfinite(u_prev.sum() + u.sum()):
+            raise ValueError(f"inputs {list(m.input_names)} must be finite, got u_prev = {u_prev}, u = {u}")
+        y = self._vector(y, mhe.ny, "y", mhe.measured)
+        infinite = [n for n, v in zip(mhe.measured, y) if np.isinf(v)]
+        if infinite:
+            raise ValueError(f"measurement(s) {infinite} infinite (NaN means not measured)")
+        where = f"before update {self.samples + 1}"
+        pieces = 1
+        if dt > self._gap_limit:
+            pieces = online_pieces(mhe, float(dt), self._x, u_prev, self.p, where)
+            if pieces == 1:
+                self._gap_limit = float(dt)
         t0 = time.perf_counter()
-        _, _, info = self.advance(self._u_prev, self._u, np.where(ok, y, 0.0), ok.astype(float),
-                                  float(dt), f"online sample {self.samples}")
-        info["solve_time"] = time.perf_counter() - t0
-        info["e"] = np.where(ok, info["e"], np.nan)
-        info["rejected"] = False
-        self._info = info
+        nothing = np.zeros(mhe.ny)
+        for _ in range(pieces - 1):                 # prediction-only samples across a bridged gap
+            self.advance(u_prev, u_prev, nothing, nothing, dt / pieces, f"online sample {self.samples}")
+        ok = np.isfinite(y)
+        _, _, info = self.advance(u_prev, u, np.where(ok, y, 0.0), ok.astype(float), dt / pieces,
+                                  f"online sample {self.samples}")
+        self._u_prev, self._u = u_prev, u
+        self._info = self._public(info, ok)
+        self._info["solve_time"] = time.perf_counter() - t0
         return self._x.copy()
+
+    def _public(self, info: dict, measured: np.ndarray) -> dict:
+        """The diagnostics of option ``outputs`` (besides ``x`` and ``P``), ``e`` NaN where not measured."""
+        out = {}
+        for k in self.outputs:
+            if k in ("x", "P"):
+                continue
+            if k == "e":
+                out[k] = np.where(measured, info["e"], np.nan)
+            elif k == "accepted":
+                out["rejected"] = False             # the MHE has no gate: every sample is used
+            else:
+                out[k] = info[k]
+        return out
 
     @property
     def x(self) -> np.ndarray:

@@ -1,10 +1,12 @@
-"""Solving one MHE window: IPOPT or SQP to convergence, or one real-time Gauss-Newton iteration.
+"""Solving one MHE window: IPOPT, fatrop or SQP to convergence, or one real-time Gauss-Newton iteration.
 
 A moving window warm-starts the NLP solvers with the previous window's solution shifted by one
 stage and improved by Gauss-Newton steps (the real-time iteration's step, repeated while it
-shrinks, at most four), with the multipliers of the dynamics from the last step: IPOPT then
-typically confirms the optimum without an iteration of its own, and iterates from there when the
-Gauss-Newton point is not optimal (active bounds, a strongly nonlinear window).
+shrinks, at most four), with the multipliers of the dynamics from the last step. When that point
+already meets the first-order optimality conditions to the solver's tolerance, strictly inside
+the bounds, it is the solution the solver would return at its first convergence test, and the
+solver is not called (its set-up per call costs several times a Gauss-Newton step); otherwise
+(active bounds, a strongly nonlinear window) the solver iterates from there.
 """
 from __future__ import annotations
 
@@ -103,17 +105,38 @@ def gauss_newton_start(win: Window, z0: np.ndarray, par: np.ndarray, iterations:
     return z, lam
 
 
+def first_order_optimal(win: Window, z: np.ndarray, par: np.ndarray, lam_g: np.ndarray | None) -> bool:
+    """Whether ``z`` with the multipliers ``lam_g`` solves the window: strictly inside the bounds (so
+    no bound multiplier), the gradient of the Lagrangian and the dynamics gaps within the solver's
+    tolerance (unscaled, which is at least as strict as IPOPT's scaled test)."""
+    if lam_g is None or not np.isfinite(z.sum()):
+        return False
+    if not win.unbounded and not ((z > win.lbx).all() and (z < win.ubx).all()):
+        return False
+    call = win.kkt()
+    call["z"], call["p"], call["lam_g"] = z, par, lam_g
+    try:
+        call()
+    except RuntimeError:
+        return False
+    return bool(call.out("dual")[0, 0] <= win.tol and call.out("primal")[0, 0] <= win.tol)
+
+
 def solve_window(win: Window, z0: np.ndarray, par: np.ndarray, where: str, lam_g0: np.ndarray | None = None
                  ) -> tuple[np.ndarray, np.ndarray | None]:
     """The window's solution from the start point ``z0`` with the parameters ``par``.
 
-    ``lam_g0`` are start values of the multipliers of the dynamics constraints (IPOPT and SQP; zero
-    by default). Returns the solution and its multipliers (``None`` for the real-time iteration).
-    Raises :class:`MHEFailed` naming ``where`` and the solver's status when the solver fails or
-    returns a point that violates the dynamics (an infeasible window).
+    ``lam_g0`` are start values of the multipliers of the dynamics constraints (IPOPT, fatrop and
+    SQP; zero by default); when ``z0`` and ``lam_g0`` already solve the window
+    (:func:`first_order_optimal`) they are returned without calling the solver. Returns the
+    solution and its multipliers (``None`` for the real-time iteration). Raises :class:`MHEFailed`
+    naming ``where`` and the solver's status when the solver fails or returns a point that
+    violates the dynamics (an infeasible window).
     """
     if win.solver is None:
         return _real_time_iteration(win, z0, par, where), None
+    if first_order_optimal(win, z0, par, lam_g0):
+        return z0, lam_g0
     lam0 = 0.0 if lam_g0 is None else lam_g0
     if win.solver.class_name() == "IpoptInterface":     # bound buffers; a failure raises
         call = win.nlp_call()
@@ -126,9 +149,12 @@ def solve_window(win: Window, z0: np.ndarray, par: np.ndarray, where: str, lam_g
             status = _failed_status(win, z0, par, lam0)
             z, g, lam = np.full(win.nz, np.nan), np.zeros(0), None
     else:
-        sol = win.solver(x0=z0, p=par, lbx=win.lbx, ubx=win.ubx, lbg=0.0, ubg=0.0, lam_g0=lam0)
-        status = win.solver.stats()["return_status"]
-        z, g, lam = np.asarray(sol["x"]).reshape(-1), np.asarray(sol["g"]).ravel(), np.asarray(sol["lam_g"]).ravel()
+        sol = win.solver(x0=z0, p=par, lbx=win.lbx, ubx=win.ubx, lbg=0.0, ubg=0.0, lam_g0=win.lam_sign * lam0)
+        stats = win.solver.stats()
+        status = stats.get("unified_return_status", stats["return_status"]) if win.lam_sign < 0 \
+            else stats["return_status"]
+        z, g = np.asarray(sol["x"]).reshape(-1), np.asarray(sol["g"]).ravel()
+        lam = win.lam_sign * np.asarray(sol["lam_g"]).ravel()
     gap = float(np.max(np.abs(g), initial=0.0))
     if status not in win.ok_status or not np.all(np.isfinite(z)):
         raise MHEFailed(f"MHE ({win.solver.name()}) failed at {where}: solver status {status!r}", status)
