@@ -14,6 +14,7 @@ repository root::
     python tests/mutation.py -k likelihood      # the mutants whose name or file contains a word
     python tests/mutation.py --list             # the table of mutants, nothing run
     python tests/mutation.py --out mutation.md  # also write the result table (Markdown)
+    python tests/mutation.py -k reacquire --all-failures   # every test that fails, not only the first
 
 Python byte code of the mutated files goes to a temporary folder (``PYTHONPYCACHEPREFIX``), so no
 stale ``.pyc`` of a mutant can outlive it; compiled CasADi code is cached under a key of the
@@ -162,17 +163,16 @@ def _terminate(signum, frame):            # SIGTERM / SIGHUP: unwind through the
     raise KeyboardInterrupt(f"signal {signum}")
 
 
-def _failed_test(output: str) -> str:
-    m = re.search(r"^FAILED (\S+)", output, re.M) or re.search(r"^ERROR (\S+)", output, re.M)
-    return m.group(1) if m else ""
+def _failed_tests(output: str) -> list[str]:
+    return re.findall(r"^(?:FAILED|ERROR) (\S+)", output, re.M)
 
 
-def run_tests(tests, timeout: float) -> tuple[int, str, float]:
-    """Run ``tests`` with pytest (stop at the first failure); ``(exit code, output, seconds)``."""
+def run_tests(tests, timeout: float, first: bool = True) -> tuple[int, str, float]:
+    """Run ``tests`` with pytest (by default stopping at the first failure); ``(exit code, output, seconds)``."""
     with tempfile.TemporaryDirectory(prefix="casship-mutation-pyc-") as pyc:
         env = {**os.environ, "PYTHONPYCACHEPREFIX": pyc, "PYTHONDONTWRITEBYTECODE": "1"}
-        cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-rfE", "-p", "no:cacheprovider", "-W", "ignore",
-               *tests]
+        cmd = [sys.executable, "-m", "pytest", *(["-x"] if first else []), "-q", "-rfE", "-p", "no:cacheprovider",
+               "-W", "ignore", *tests]
         t0 = time.perf_counter()
         try:
             proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout)
@@ -208,6 +208,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", help="also write the result table (Markdown) to this file")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per mutant before it counts as killed")
     ap.add_argument("--no-baseline", action="store_true", help="skip running the tests once unmutated first")
+    ap.add_argument("--all-failures", action="store_true",
+                    help="run each mutant's tests to the end and list every test that fails (slower)")
     args = ap.parse_args(argv)
     chosen = [mu for mu in MUTANTS if not args.keyword
               or args.keyword.lower() in (mu.name + " " + mu.path).lower()]
@@ -235,9 +237,9 @@ def main(argv=None) -> int:
             path = ROOT / mu.path
             text = path.read_text()
             with _Restore(path, text, text.replace(mu.original, mu.replacement, 1)):
-                code, out, secs = run_tests(mu.tests, args.timeout)
+                code, out, secs = run_tests(mu.tests, args.timeout, first=not args.all_failures)
             if code == 1:
-                result, detail = "killed", f"`{_failed_test(out)}`"
+                result, detail = "killed", ", ".join(f"`{t}`" for t in _failed_tests(out))
             elif code == -1:
                 result, detail = "killed (timeout)", f"no result in {args.timeout:.0f} s"
             elif code == 0:

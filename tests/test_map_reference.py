@@ -62,8 +62,11 @@ def test_mle_map_cost_and_estimate_of_both_routes_equal_the_hand_computation():
         fit = prob.solve(guess={"g": 0.9, "bias[y1]": 0.0}, hessian=hessian, show=False)
         est = np.array([fit.estimates[n] for n in prob.free])
         assert np.all(np.abs(est - best) < 1e-4 * post_std), (hessian, (est - best) / post_std)
-        # the standard errors are the posterior ones: data information plus the prior's precision
+        # the standard errors are the posterior ones: data information plus the prior's precision, from
+        # the expected (Fisher) or the observed (exact Hessian) information alike: the cost is quadratic
         np.testing.assert_allclose([fit.std_errors[n] for n in prob.free], post_std, rtol=1e-6)
+        observed = prob.solve(guess={"g": 0.9, "bias[y1]": 0.0}, hessian=hessian, information="hessian", show=False)
+        np.testing.assert_allclose([observed.std_errors[n] for n in prob.free], post_std, rtol=1e-6)
 
 
 # -- output error (OutputErrorProblem) -------------------------------------------------------------------
