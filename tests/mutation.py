@@ -54,9 +54,9 @@ LIK, ENG = "casship/identify/_likelihood.py", "casship/identify/_engine.py"
 MLE, OE, PROB = "casship/identify/mle.py", "casship/identify/output_error.py", "casship/identify/problem.py"
 DISC, RTS, ANG = "casship/discretize.py", "casship/estimators/rts.py", "casship/angles.py"
 MET, MMG = "casship/maneuvers/metrics.py", "casship/models/mmg.py"
-T_LIK, T_UKF, T_FISH = "tests/test_likelihood_reference.py", "tests/test_ukf_reference.py", "tests/test_fisher_reference.py"
-T_GRAD, T_MAP, T_GATE = "tests/test_gradient_reference.py", "tests/test_map_reference.py", "tests/test_gate_reference.py"
-T_MMG = "tests/test_mmg_reference.py"
+T_LIK, T_UKF = "tests/test_likelihood_reference.py", "tests/test_ukf_reference.py"
+T_FISH, T_GRAD = "tests/test_fisher_reference.py", "tests/test_gradient_reference.py"
+T_MAP, T_GATE, T_MMG = "tests/test_map_reference.py", "tests/test_gate_reference.py", "tests/test_mmg_reference.py"
 
 MUTANTS = [
     # -- the statistics of the filters and the fits -------------------------------------------------------------
@@ -109,12 +109,14 @@ MUTANTS = [
       ("tests/test_discretize.py",)),
     M("RK4: k2 evaluated a full step ahead", DISC, "k2 = rhs(*(a + h / 2 * k for a, k in zip(z, k1)))",
       "k2 = rhs(*(a + h * k for a, k in zip(z, k1)))", ("tests/test_discretize.py",)),
-    M("Van Loan: sign of A", DISC, "M[:n, :n] = -A", "M[:n, :n] = A", ("tests/test_discretize.py", "tests/test_kf_ekf.py")),
+    M("Van Loan: sign of A", DISC, "M[:n, :n] = -A", "M[:n, :n] = A",
+      ("tests/test_discretize.py", "tests/test_kf_ekf.py")),
     M("Euler: half step", DISC, "return x + h * f(x, u, p, w)", "return x + 0.5 * h * f(x, u, p, w)",
       ("tests/test_discretize.py",)),
     # -- smoother -------------------------------------------------------------------------------------------
     M("RTS: correction subtracted", RTS, "[x + J @ d, Ps, J]", "[x - J @ d, Ps, J]", ("tests/test_rts.py",)),
-    M("RTS: gain transpose dropped", RTS, "J = spd_solve(Pp1, C.T, exact=True).T", "J = spd_solve(Pp1, C, exact=True).T",
+    M("RTS: gain transpose dropped", RTS, "J = spd_solve(Pp1, C.T, exact=True).T",
+      "J = spd_solve(Pp1, C, exact=True).T",
       ("tests/test_rts.py",)),
     M("RTS: covariance correction sign", RTS, "Ps1[i, j] - Pp1[i, j]", "Ps1[i, j] + Pp1[i, j]", ("tests/test_rts.py",)),
     # -- angle helpers --------------------------------------------------------------------------------------
@@ -122,7 +124,8 @@ MUTANTS = [
       "np.where(out < -np.pi, out + 2.0 * np.pi, out)", ("tests/test_properties.py", "tests/test_frames_kinematic.py")),
     M("wrap_sym: sine and cosine swapped", ANG, "ca.atan2(ca.sin(angle), ca.cos(angle))",
       "ca.atan2(ca.cos(angle), ca.sin(angle))", ("tests/test_properties.py", "tests/test_kf_ekf.py")),
-    M("wrap_fast: floor offset", UKF, "ca.floor((angle + np.pi) / (2 * np.pi))", "ca.floor((angle - np.pi) / (2 * np.pi))",
+    M("wrap_fast: floor offset", UKF, "ca.floor((angle + np.pi) / (2 * np.pi))",
+      "ca.floor((angle - np.pi) / (2 * np.pi))",
       ("tests/test_ukf.py", "tests/test_enkf.py")),
     # -- manoeuvre metrics ----------------------------------------------------------------------------------
     M("turning: lateral axis sign", MET, "lateral = -(x - x0) * np.sin(psi0)", "lateral = (x - x0) * np.sin(psi0)",
@@ -137,7 +140,8 @@ MUTANTS = [
       (T_MMG,)),
     M("MMG: N_H scaled by L, not L^2", MMG, "N_H = 0.5 * rho * L**2 * d", "N_H = 0.5 * rho * L * d", (T_MMG,)),
     M("MMG: sign of a_H x_H in N_R", MMG, '-(x_R + P["a_H"] * x_H)', '-(x_R - P["a_H"] * x_H)', (T_MMG,)),
-    M("MMG: wake C_2 switch reversed", MMG, 'ca.if_else(beta_P > 0, P["C_2_plus"]', 'ca.if_else(beta_P < 0, P["C_2_plus"]',
+    M("MMG: wake C_2 switch reversed", MMG, 'ca.if_else(beta_P > 0, P["C_2_plus"]',
+      'ca.if_else(beta_P < 0, P["C_2_plus"]',
       (T_MMG,)),
     M("MMG: flow-straightening switch reversed", MMG, 'ca.if_else(beta_R < 0, P["gamma_R_minus"]',
       'ca.if_else(beta_R > 0, P["gamma_R_minus"]', (T_MMG,)),

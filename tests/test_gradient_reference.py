@@ -71,7 +71,8 @@ def central_gradient(cost, at, names, rel=1e-6):
     return np.array(g)
 
 
-@pytest.mark.parametrize("make", [lambda: mle(cs.EKF), lambda: mle(cs.UKF), output_error], ids=["mle-ekf", "mle-ukf", "oe"])
+@pytest.mark.parametrize("make", [lambda: mle(cs.EKF), lambda: mle(cs.UKF), output_error],
+                         ids=["mle-ekf", "mle-ukf", "oe"])
 def test_gradient_of_every_kind_of_free_quantity_matches_central_differences(make):
     prob = make()
     at = {k: v for k, v in AT.items() if k in prob.free}
