@@ -89,6 +89,8 @@ MUTANTS = [
       "return float(np.sum(self._prec * d * d))", (T_MAP, T_GRAD)),
     M("MAP: observed information's prior without 0.5", MLE, "f = self._graph(ts) + 0.5 * ca.sum1(",
       "f = self._graph(ts) + ca.sum1(", (T_MAP, "tests/test_identify.py")),
+    M("output error: record steps unchecked for a discrete-time model", OE, "model.check_steps(np.diff(d.t), d.t)",
+      "pass", ("tests/test_output_error_discrete.py",)),
     M("gate: nis < gate instead of <=", UPD, "acc = nis <= gate", "acc = nis < gate", (T_GATE,)),
     M("gate: nis < gate instead of <= (UKF)", UKF, 'acc = nis <= s["gate"]', 'acc = nis < s["gate"]', (T_GATE,)),
     M("reacquire: one rejection too many", EKF, "force = (count >= reacquire)", "force = (count > reacquire)",
