@@ -32,7 +32,8 @@ class EKFOptions(EstimatorOptions):
     reacquire : int or None
         With a gate: after this many consecutive rejected samples the next measurement is used
         regardless of the gate, with the predicted covariance inflated by ``max(1, NIS / m)`` (``m``
-        scalar measurements) so that the innovation becomes consistent. A gated filter that
+        scalar measurements) so that the innovation becomes consistent. Rows that measure nothing
+        neither count nor reset the count. A gated filter that
         trusted a faulty sensor (a frozen fix) then finds the ship again instead of rejecting every
         correct fix that follows. Adds the memory slot ``rejections``.
     """
@@ -112,7 +113,8 @@ class EKF(StepEstimator):
             for k in ("x", "P", "K"):
                 out[k] = ca.if_else(force, forced[k], up[k])
             out["accepted"] = ca.fmax(up["accepted"], force)
-            out["rejections"] = ca.if_else(out["accepted"], 0, ca.if_else(measured > 0, count + 1, count))
+            # (a row measuring nothing passes the gate trivially: it must not reset the count)
+            out["rejections"] = ca.if_else(measured > 0, ca.if_else(out["accepted"], 0, count + 1), count)
         return out
 
     def _predict_discrete(self, x, P, s):

@@ -40,7 +40,7 @@ class EstimatorOptions:
     gate : float or None
         Probability of the chi-square innovation gate (e.g. 0.999); off by default. A sample whose
         normalised innovation squared exceeds the quantile for the number of channels measured is
-        not used for the update and is reported as rejected.
+        not used for the update and is reported as rejected (a NIS equal to the quantile passes).
     jit : bool
         Compile the step and its folds to C with the system compiler (CasADi JIT).
     outputs : tuple of str or "all"

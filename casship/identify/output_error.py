@@ -95,10 +95,13 @@ class OutputErrorProblem(IdentificationProblem):
                       estimate_x0=estimate_x0, share=share, groups=groups, prior=prior, shooting=shooting,
                       segment=segment, method=method, bounds=bounds, scale=scale, jit=jit)
         records = as_records(datasets)
-        if isinstance(model, Model):
-            model = discretize(model, float(np.median(np.diff(records[0].t))), method=method)
+        if isinstance(model, Model):          # a discrete-time model has its own step
+            model = discretize(model) if model.dt is not None else discretize(
+                model, float(np.median(np.diff(records[0].t))), method=method)
         if not isinstance(model, DiscreteModel):
             raise TypeError(f"OutputErrorProblem needs a Model or DiscreteModel, got {type(model).__name__}")
+        for d in records:                      # a discrete-time model steps its own dt, nothing else
+            model.check_steps(np.diff(d.t), d.t)
         if shooting not in ("single", "multiple"):
             raise ValueError(f"shooting must be 'single' or 'multiple', got {shooting!r}")
         self.dmodel = model
