@@ -27,6 +27,10 @@ _PAIRS = {"ekf_alpha", "ekf_q", "observer_q"}
 _SKIP = {"lqr_weights"}
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "design a course autopilot for a named model and run a course change"
+
+
 def _option(name: str) -> str:
     suffix = _DEGREES.get(name)
     return "--" + (f"{name}_{suffix}" if suffix else name).replace("_", "-")
@@ -35,7 +39,7 @@ def _option(name: str) -> str:
 def register(sub) -> None:
     from ..autopilot.defaults import RULES
 
-    p = sub.add_parser("autopilot", help="design a course autopilot for a named model and run a course change",
+    p = sub.add_parser("autopilot", help=HELP,
                        description="Design a course autopilot (python-control) for a registered ship and run the "
                                    "nonlinear closed loop (sensors, estimator, steering gear) through a course "
                                    "change. Every setting defaults to the rule shown, derived from the ship; the "

@@ -5,8 +5,12 @@ import sys
 from pathlib import Path
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "run the speed comparisons in benchmarks/ and print a table of ratios"
+
+
 def register(sub) -> None:
-    p = sub.add_parser("bench", help="run the speed comparisons in benchmarks/ and print a table of ratios")
+    p = sub.add_parser("bench", help=HELP)
     p.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
     p.add_argument("--json", default=None, help="write rows and machine description to this JSON file")
     p.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")

@@ -36,6 +36,10 @@ PRESETS = {
 }
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "run a state estimator (and smoother) over a record"
+
+
 def _positive(text: str) -> float:
     """argparse type: a positive finite number."""
     try:
@@ -48,7 +52,7 @@ def _positive(text: str) -> float:
 
 
 def register(sub) -> None:
-    p = sub.add_parser("filter", help="run a state estimator (and smoother) over a record",
+    p = sub.add_parser("filter", help=HELP,
                        description="Estimate the states of a registered model from a record (CSV, MARIN .dat, "
                                    "NMEA log) with a KF, EKF, UKF, EnKF, Kalman-Bucy filter or MHE; write "
                                    "estimates and standard deviations (CSV) and a plot.\n\n"

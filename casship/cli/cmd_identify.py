@@ -22,8 +22,12 @@ from pathlib import Path
 import numpy as np
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "fit model parameters to records (maximum likelihood or output error)"
+
+
 def register(sub) -> None:
-    p = sub.add_parser("identify", help="fit model parameters to records (maximum likelihood or output error)",
+    p = sub.add_parser("identify", help=HELP,
                        description="Estimate named parameters of a registered model from one or more records "
                                    "(one joint fit), with a prior, standard errors, correlations and warnings.")
     p.add_argument("data", nargs="+", help="records: CSV with a header row, or MARIN .dat")

@@ -18,8 +18,12 @@ _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diame
                  "initial_turning_time_s", "period_s", "initial_turning_distance_m")
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "simulate a manoeuvre of a named model and print its metrics"
+
+
 def register(sub) -> None:
-    p = sub.add_parser("simulate", help="simulate a manoeuvre of a named model and print its metrics",
+    p = sub.add_parser("simulate", help=HELP,
                        description="Simulate a standard manoeuvre of a registered model from a straight run "
                                    "(or replay the measured inputs of a record) and print the metrics. Inputs, "
                                    "speed and time step are checked against the model's validity ranges.\n\n"

@@ -4,8 +4,12 @@ from __future__ import annotations
 from pathlib import Path
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "run a study (seed-paper reproductions, real-data studies)"
+
+
 def register(sub) -> None:
-    p = sub.add_parser("study", help="run a study (seed-paper reproductions, real-data studies)",
+    p = sub.add_parser("study", help=HELP,
                        description="Run a study and write its report folder (report.md, figures, tables, "
                                    "summary.json). Measured data are found by --data DIR, else $CASSHIP_DATA, "
                                    "else ../shared/data beside a source checkout.")

@@ -29,7 +29,8 @@ from ..data import Dataset
 from ..gaussian import Gaussian, as_cov
 from ..discretize import DiscreteModel
 from ..native_fold import NativeFold
-from .gaps import bridge_gaps
+from ..validity import check_start
+from .gaps import checked_run
 from .options import DIAGNOSTICS, EstimatorOptions
 from .result import FilterResult
 from .update import residual
@@ -371,7 +372,25 @@ class Estimator:
         FilterResult
         """
         self._check_prior(prior)
-        data = bridge_gaps(self, data, prior.mean, p)      # a gap too long for one prediction: raise or bridge
+        if isinstance(data, Dataset) and all(n in data for n in self.model.input_names):
+            self._check_start(prior, data.matrix(self.model.input_names)[0] if self.model.nu else [], p)
+        # a gap too long for one prediction from the estimate before it: raise or bridge
+        return checked_run(self, data, lambda d: self._run(d, prior, p, seed), p)[1]
+
+    def _check_start(self, prior: Gaussian, u, p) -> None:
+        """Refuse a prior where the model's equations are not finite (e.g. an MMG ship at rest); ``u`` is
+        the first input (None: not known yet)."""
+        m = self.model
+        if self.dmodel.discrete or u is None:
+            return
+        u = np.asarray(u, dtype=float).reshape(-1)
+        if u.size != m.nu or not np.all(np.isfinite(u)):
+            return                                          # the callers name bad inputs
+        unset = prior.defaulted() if hasattr(prior, "defaulted") else None
+        check_start(m, prior.mean, u, m.params() if p is None else m.params(p), what="the prior mean", unset=unset)
+
+    def _run(self, data: Dataset, prior: Gaussian, p, seed) -> FilterResult:
+        """One run over the record as it is (the gaps checked by :meth:`filter`)."""
         arrays = self.prepare(data, p)
         n = len(data)
         rng = np.random.default_rng(seed)
@@ -527,6 +546,7 @@ class Estimator:
         from .online import OnlineRun, StepEngine
 
         self._check_prior(prior)
+        self._check_start(prior, self.model.inputs() if u is None else u, p)
         return OnlineRun(StepEngine(self, prior, p, u, np.random.default_rng(seed)))
 
     def residual(self, y, yhat, mask):

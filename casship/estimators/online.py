@@ -190,9 +190,10 @@ class StepEngine:
         u0 = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
         if u0.size != m.nu or not np.all(np.isfinite(u0)):
             raise ValueError(f"u must be {m.nu} finite values for the inputs {list(m.input_names)}, got {u0}")
-        from .gaps import gap_limit
+        from .gaps import gap_threshold
 
-        self._gap_limit = np.array([gap_limit(est, prior.mean, u0, p)])
+        # intervals beyond it are checked at the state where they happen (casship.estimators.gaps)
+        self._gap_limit = np.array([gap_threshold(est)])
         first["Q"], first["R"] = est.Q, est.R
         first["thresholds"] = [est.gate_threshold(c) for c in range(est.ny + 1)]
         first["u_prev"], first["u"] = u0, u0
@@ -232,21 +233,18 @@ class StepEngine:
         return self._update(y, dt, u_prev, u)
 
     def _bridged(self, y, dt, u_prev, u) -> bool:
-        """A gap longer than the one-step limit: raise, or predict across it in shorter steps."""
-        from .gaps import _message, bridge_pieces, gap_limit
+        """A gap: checked at the current estimate; raise, or predict across it in shorter steps."""
+        from .gaps import gap_pieces
 
         x = self._x[1 - self._cur] if self.samples else self._prior.mean
-        held = self._held[1 - self._cur] if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
-        limit = gap_limit(self._est, x, held, self._p)
-        if dt <= limit:
-            self._gap_limit[0] = max(self._gap_limit[0], dt)
-            return False
+        held = self._held[1 - self._cur] if u_prev is None else self._vector(u_prev, self._nu, "u_prev",
+                                                                               self._est.model.input_names)
         where = f"before update {self.samples + 1}"
-        if self._est.options.on_gap == "raise":
-            raise ValueError(_message(self._est, where, float(dt), limit))
+        pieces = gap_pieces(self._est, x, held, self._p, float(dt), where)
+        if pieces == 1:
+            return False
         import warnings
 
-        pieces = bridge_pieces(float(dt), limit)
         warnings.warn(f"{self._est.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
                       f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=3)
         nothing = np.full(self._ny, np.nan)

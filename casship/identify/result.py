@@ -15,10 +15,12 @@ from typing import Mapping
 import numpy as np
 from scipy import stats
 
+from ..errors import SolverError
+
 __all__ = ["FitResult", "IdentificationError", "IdentificationWarning"]
 
 
-class IdentificationError(RuntimeError):
+class IdentificationError(SolverError):
     """An identification cannot proceed (e.g. a non-finite cost at the start); carries a ``status``.
 
     Parameters
