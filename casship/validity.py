@@ -360,8 +360,8 @@ def check_start(model: Model, x, u, p, *, what: str = "the starting state", unse
     what : str
         How to call the start in the message.
     unset : list of str, optional
-        The states nothing gave a value (named in the message as the ones to give); default: the
-        states at zero.
+        The states nothing gave a value (named in the message as the ones to give); default (or
+        none): the states at zero.
     option : str
         How the caller gives starting values (e.g. ``"x0"`` or ``"--x0"``).
 
@@ -374,7 +374,7 @@ def check_start(model: Model, x, u, p, *, what: str = "the starting state", unse
     A = _state_jacobian(model, x, np.asarray(u, dtype=float), p)
     if np.all(np.isfinite(A)):
         return
-    if unset is None:
+    if not unset:
         unset = [n for n, v in zip(model.state_names, x) if v == 0.0]
     shown = ", ".join(f"{n} = {v:.4g}" for n, v in zip(model.state_names, x))
     give = ", ".join(f"{n}=..." for n in unset) or "a state where it is defined"
