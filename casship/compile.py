@@ -44,6 +44,8 @@ from typing import Sequence
 
 import casadi as ca
 
+from .progress import activity
+
 __all__ = ["compile_function", "cache_dir", "cache_info", "clear_cache", "CacheInfo", "DEFAULT_FLAGS", "PORTABLE_FLAGS",
            "find_compiler"]
 
@@ -214,7 +216,8 @@ def _build(fun: ca.Function, name: str, folder: Path, stem: str, compiler: str, 
     lib = folder / f"{stem}{_SUFFIX}"
     cmd = [compiler, *flags, "-fPIC", "-shared", str(src), "-o", str(lib), "-lm"]
     try:
-        out = subprocess.run(cmd, capture_output=True, text=True)
+        with activity(f"casship: compiling {name} to C (once; then kept in the cache)"):
+            out = subprocess.run(cmd, capture_output=True, text=True)
     finally:
         src.unlink(missing_ok=True)
     if out.returncode != 0 or not lib.is_file():

@@ -72,7 +72,7 @@ def positive(text: str) -> float:
     return value
 
 
-def parse_items(text: str | None, what: str = "list") -> list[str]:
+def parse_items(text: str | None, what: str = "list", *, unique: bool = True) -> list[str]:
     """Comma-separated items (commas inside brackets, as in ``bias[a,b]``, do not split).
 
     Parameters
@@ -81,6 +81,8 @@ def parse_items(text: str | None, what: str = "list") -> list[str]:
         The option's value (None or empty: no items).
     what : str
         The option, for messages.
+    unique : bool
+        Refuse an item given twice (a name); False for labels that repeat (one per record).
 
     Returns
     -------
@@ -89,7 +91,7 @@ def parse_items(text: str | None, what: str = "list") -> list[str]:
     Raises
     ------
     InputError
-        An empty item (``a,,b``), unbalanced brackets, or an item given twice.
+        An empty item (``a,,b``), unbalanced brackets, or (``unique``) an item given twice.
     """
     if not text:
         return []
@@ -109,7 +111,7 @@ def parse_items(text: str | None, what: str = "list") -> list[str]:
     if "" in out:
         raise InputError(f"{what}: empty item in {text!r}")
     twice = sorted({s for s in out if out.count(s) > 1})
-    if twice:
+    if twice and unique:
         raise InputError(f"{what}: {twice} given more than once")
     return out
 
