@@ -13,7 +13,34 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Dataset", "check_time"]
+__all__ = ["Dataset", "check_time", "check_rows", "MAX_ROWS"]
+
+
+#: Largest number of rows casship creates in one record (a time grid, a resampled record): 20 million
+#: rows are 160 MB per column; more is refused before memory runs out.
+MAX_ROWS = 20_000_000
+
+
+def check_rows(n: float, what: str) -> int:
+    """``n`` as the number of rows of a record about to be created, or ``InputError`` above :data:`MAX_ROWS`.
+
+    Parameters
+    ----------
+    n : float
+        Rows (e.g. a duration divided by a step).
+    what : str
+        What would be created, for the message (e.g. ``"simulate: 1e+09 s at 0.5 s"``).
+
+    Returns
+    -------
+    int
+    """
+    from .errors import InputError
+
+    if not n <= MAX_ROWS:
+        raise InputError(f"{what} would make {n:.3g} rows, more than casship creates in one record "
+                         f"({MAX_ROWS:.3g}, casship.data.MAX_ROWS); use a longer step or a shorter span")
+    return int(n)
 
 
 def check_time(t, name: str = "time") -> np.ndarray:
@@ -252,7 +279,9 @@ class Dataset:
             if rate < own * (1 - 1e-9):
                 raise ValueError(f"resample: rate {rate:g} Hz is below the record's rate {own:g} Hz (median step "
                                  f"{1 / own:g} s); that would drop samples: use decimate() to thin a record")
-        fine = self.t[0] + np.arange(0, int(np.floor((self.t[-1] - self.t[0]) * rate + 1e-9)) + 1) / rate
+        rows = check_rows(np.floor((self.t[-1] - self.t[0]) * rate + 1e-9) + 1,
+                          f"resample: {self.t[-1] - self.t[0]:g} s at {rate:g} Hz")
+        fine = self.t[0] + np.arange(0, rows) / rate
         data = self.with_rows(fine, hold=hold)
         data.meta["resampled_hz"] = rate
         return data
