@@ -137,7 +137,23 @@ def _check_given(given: Mapping) -> dict:
     unknown = sorted(set(given) - names)
     if unknown:
         raise ValueError(f"unknown autopilot setting(s) {unknown}; known: {sorted(names)}")
-    return {k: v for k, v in given.items() if v is not None}
+    given = {k: v for k, v in given.items() if v is not None}
+    for k, v in given.items():
+        unit = RULES.get(k, ("", ""))[0]
+        if isinstance(v, str) or k in ("lqr_weights",):
+            continue
+        values = np.atleast_1d(np.asarray(v, dtype=float))
+        least = 0.0 if k in _NON_NEGATIVE else None
+        if not np.all(np.isfinite(values)) or (least is not None and np.any(values < least)) \
+                or (least is None and k not in _SIGNED and np.any(values <= 0)):
+            need = ">= 0" if least is not None else "positive"
+            raise ValueError(f"autopilot setting {k} = {v} [{unit}] must be finite and {need}")
+    return given
+
+
+#: Settings that may be zero (the others, but for the signed ones, must be positive).
+_NON_NEGATIVE = ("delay", "filter_T", "actuator_T", "zeta", "zeta_ref", "gyro_std", "compass_std", "gnss_std")
+_SIGNED: tuple = ()
 
 
 def _vessel(plant: SteeringPlant, key: str):
