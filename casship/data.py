@@ -57,6 +57,9 @@ def check_time(t, name: str = "time") -> np.ndarray:
     -------
     numpy.ndarray
     """
+    if np.ma.isMaskedArray(t) and np.ma.getmaskarray(t).any():
+        raise ValueError(f"{name}: masked time stamp at row {int(np.flatnonzero(np.ma.getmaskarray(t))[0])}; every "
+                         "row needs its time")
     t = np.asarray(t, dtype=float)
     if t.ndim != 1:
         raise ValueError(f"{name}: expected a 1-D array of time stamps, got shape {t.shape}")
@@ -77,8 +80,9 @@ def check_time(t, name: str = "time") -> np.ndarray:
 class Dataset:
     """A record: strictly increasing time stamps and named, equally long columns.
 
-    NaN in a measurement column means "not measured at this sample". Inputs must be finite
-    wherever they are used (checked by the consumers, which name the offending column and row).
+    NaN in a measurement column means "not measured at this sample" (so does a masked entry of a
+    masked array). Inputs must be finite wherever they are used (checked by the consumers, which
+    name the offending column and row).
 
     Parameters
     ----------
@@ -100,6 +104,8 @@ class Dataset:
                 raise ValueError(f"column name {name!r} must be a non-empty string")
             if name == "t" or name == "time":
                 raise ValueError(f"column name {name!r} is reserved for the time stamps")
+            if np.ma.isMaskedArray(values):      # masked = not measured (NaN)
+                values = np.ma.filled(np.ma.asarray(values, dtype=float), np.nan)
             arr = np.asarray(values, dtype=float).reshape(-1)
             if arr.size != self.t.size:
                 raise ValueError(f"column {name!r} has {arr.size} rows, time has {self.t.size}")

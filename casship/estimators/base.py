@@ -99,6 +99,9 @@ class Estimator:
             raise ValueError(f"unknown measured output(s) {unknown}; outputs: {list(model.output_names)}")
         if not measured:
             raise ValueError("at least one output must be measured")
+        twice = sorted({n for n in measured if measured.count(n) > 1})
+        if twice:
+            raise ValueError(f"measured output(s) {twice} given more than once (each sample would be used twice)")
         self.measured = measured
         self.meas_index = [model.index(n, "output") for n in measured]
         self.ny = len(measured)

@@ -257,6 +257,12 @@ class StepEngine:
     def _vector(self, value, size: int, what: str, names) -> np.ndarray:
         """``value`` as a float vector of ``size``, or ``ValueError`` naming ``what`` (the slow path:
         ``_update`` takes a float array of the right shape as it is)."""
+        if np.ma.isMaskedArray(value):              # masked = not measured; an input must be there
+            hidden = np.ma.getmaskarray(value).ravel()
+            if what != "y" and hidden.any():
+                raise ValueError(f"{what} is masked for {[n for n, m in zip(names, hidden) if m]}; inputs must be "
+                                 "given")
+            value = np.ma.filled(np.ma.asarray(value, dtype=float), np.nan)
         try:
             v = np.asarray(value, dtype=float)
         except (TypeError, ValueError):
