@@ -191,3 +191,25 @@ def test_one_json_writer_keeps_non_finite_values_apart():
         {"a": "nan", "b": ["inf", "-inf"], "c": 3}
     with pytest.raises(TypeError, match="cannot write a object as JSON"):
         dumps({"x": object()})
+
+
+def test_building_an_mpc_prints_no_banner(capfd):
+    """Before: building an MPC printed the qpOASES licence banner on standard output."""
+    from casship import autopilot as ap
+    from casship.autopilot.mpc import MPCAutopilot
+
+    MPCAutopilot(ap.Nomoto(K=0.185, T=107.3), period=5.0, horizon=10, steer_max=0.6, rate_max=0.04, r_max=0.02)
+    assert "qpOASES" not in capfd.readouterr().out
+
+
+def test_a_stable_ship_loop_gives_no_badly_conditioned_warning():
+    """Before: every KVLCC2 autopilot printed scipy's "Badly conditioned filter coefficients" beside
+    "closed loop stable: True" (the stability came from a transfer function)."""
+    import warnings
+
+    from casship import autopilot as ap
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        design = ap.design_autopilot(cs.models.get_model("kvlcc2"))
+    assert design.margins["closed_loop_stable"] is True

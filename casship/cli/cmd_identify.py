@@ -16,6 +16,8 @@ to the MMG convention). ``--method mle`` (default) maximises the likelihood thro
 """
 from __future__ import annotations
 
+import warnings
+
 from ._common import check_outputs, load_record, number, parse_items, parse_pairs, print_json, write_output
 from .cmd_filter import DEFAULT_Q
 
@@ -146,7 +148,12 @@ def run(args) -> int:
         print(idf.summary())
         print(f"proposed free set (relative std error <= {idf.max_rel_std:g}, |rho| <= {idf.max_corr:g}): "
               f"{idf.propose()}")
-    fit = prob.solve(guess=guess, max_iter=args.max_iter)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit = prob.solve(guess=guess, max_iter=args.max_iter)
+    for w in caught:            # the fit's own warnings are printed once, with the fit
+        if not any(str(w.message).endswith(text) for text in fit.warnings):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     write_output(args.out, fit.to_json, option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
         write_output(args.plot, fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
