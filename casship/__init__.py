@@ -24,7 +24,7 @@ _EXPORTS = {
     "measure": "simulate", "simulate": "simulate",
     "EKF": "estimators", "KF": "estimators", "FilterResult": "estimators", "persistence_model": "estimators",
     "UKF": "estimators", "EnKF": "estimators", "KalmanBucy": "estimators", "augment": "estimators",
-    "MHE": "estimators", "prior_from_data": "estimators",
+    "MHE": "estimators", "prior_from_data": "estimators", "noise_from_data": "estimators",
     "linearize": "linear", "to_iosys": "linear", "trim": "linear",
     "FitResult": "identify", "MLEProblem": "identify", "OutputErrorProblem": "identify",
     "CasshipError": "errors", "InputError": "errors", "SolverError": "errors",
@@ -34,7 +34,8 @@ _SUBMODULES = ("frames", "identify", "models", "io")
 __all__ = ["ModelBuilder", "Model", "Vessel", "Limit", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
            "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "EnKF", "KalmanBucy", "augment",
            "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
-           "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE", "prior_from_data", "CasshipError",
+           "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE", "prior_from_data", "noise_from_data",
+           "CasshipError",
            "InputError", "SolverError", "io"]
 
 

@@ -191,7 +191,7 @@ def filter_file(args, model=None):
 
     from ..discretize import discretize
     from ..errors import InputError
-    from ..estimators import ESTIMATORS, prior_from_data
+    from ..estimators import ESTIMATORS, noise_from_data, prior_from_data
     from ..validity import check_inputs, check_step
 
     model = model if model is not None else load_model(args.model)
@@ -226,7 +226,7 @@ def filter_file(args, model=None):
         R = {k: v**2 for k, v in std.items()} if isinstance(std, dict) else std**2
         sources["R"] = "given (--R-std)"
     if R is None:
-        R, how = _record_noise(model, data, meas)
+        R, how = noise_from_data(model, data, meas)
         sources["R"] = "estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})"
                                                                   for n, v in R.items())
     Q = _variances(args.Q, model.noise_names, "--Q")
@@ -278,32 +278,6 @@ def filter_file(args, model=None):
         ok = np.isfinite(data["log_speed"])
         summary["rmse_U_vs_log_speed"] = float(np.sqrt(np.mean((result["U"][ok] - data["log_speed"][ok]) ** 2)))
     return summary, result, data, meas
-
-
-def _record_noise(model, data, measured) -> tuple[dict, dict]:
-    """Measurement variance of each channel from the record, and how it was found: the second differences
-    (:func:`casship.identify.noise_std`), or for a quantised channel (printed with few digits, where
-    those vanish) the quantisation noise ``q^2 / 12`` of its typical step ``q`` between distinct values."""
-    import numpy as np
-
-    from ..errors import InputError
-    from ..identify.records import noise_std
-
-    R, how = {}, {}
-    for n in measured:
-        angle = bool(model.angle_outputs[model.index(n, "output")])
-        y = np.asarray(data[n], dtype=float)
-        levels = np.unique(y[np.isfinite(y)])
-        q = float(np.median(np.diff(levels))) if levels.size >= 3 else 0.0
-        try:
-            var = noise_std(data, [n], [n] if angle else [])[n] ** 2
-        except ValueError:
-            var = 0.0
-        if not var > 0 and not q > 0:
-            raise InputError(f"the noise of {n!r} cannot be estimated from the record (a constant channel); give "
-                             "--R or --R-std")
-        R[n], how[n] = (var, "second differences") if var >= q**2 / 12 else (q**2 / 12, f"quantised: step {q:.3g}, q^2/12")
-    return R, how
 
 
 def _check_start(est, prior, data) -> None:

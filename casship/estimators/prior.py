@@ -1,4 +1,5 @@
-"""A starting belief from a record: :func:`prior_from_data`, the one rule of the API, the CLI and the studies.
+"""What a record says before a filter runs: the starting belief (:func:`prior_from_data`) and the
+measurement noise (:func:`noise_from_data`), one rule each for the API, the CLI and the studies.
 
 Each state starts, in this order, at
 
@@ -28,7 +29,7 @@ from ..data import Dataset
 from ..errors import InputError
 from ..gaussian import Gaussian, as_cov
 
-__all__ = ["prior_from_data", "DataPrior", "TRACK_POSITIONS"]
+__all__ = ["prior_from_data", "noise_from_data", "DataPrior", "TRACK_POSITIONS"]
 
 #: Position columns a track is read from (North-like first), in order of preference.
 TRACK_POSITIONS = (("x", "y"), ("x_n", "y_n"), ("lat", "lon"))
@@ -193,3 +194,73 @@ def prior_from_data(model, data: Dataset, *, measured: Sequence[str] = (), R=Non
                 continue
         sources[name] = "0 (default)"
     return DataPrior(mean, cov, names=names, sources=sources)
+
+
+def noise_from_data(model, data: Dataset, measured: Sequence[str]) -> tuple[dict, dict]:
+    """Measurement variance of each measured channel, estimated from the record, and how.
+
+    The second differences of a channel sampled faster than its dynamics measure its noise
+    (:func:`casship.identify.noise_std`). A channel printed with few digits (trial files keep three
+    significant digits) is quantised (it keeps its value between most samples): its error is at
+    least the quantisation noise ``q^2 / 12`` of its typical jump ``q``; a record whose reader states
+    the significant digits of its numbers (``meta["significant_digits"]``) gives the quantum of each
+    value (for columns in metres or metres per second, kept in the unit they were printed in). The
+    largest is taken.
+
+    Parameters
+    ----------
+    model : Model
+        The model (its angle outputs are unwrapped first).
+    data : Dataset
+        The record.
+    measured : sequence of str
+        The channels.
+
+    Returns
+    -------
+    (dict, dict)
+        Channel -> variance, and channel -> how it was found.
+
+    Raises
+    ------
+    InputError
+        A channel that is constant in the record (give its variance).
+
+    Examples
+    --------
+    >>> import numpy as np, casship as cs
+    >>> t = np.arange(0.0, 100.0)
+    >>> noisy = cs.Dataset(t, {"psi": 0.01 * t + 0.001 * np.random.default_rng(1).standard_normal(t.size)})
+    >>> R, how = cs.noise_from_data(cs.models.nomoto_first_order(), noisy, ["psi"])
+    >>> round(float(np.sqrt(R["psi"])), 4), how["psi"]
+    (0.001, 'second differences')
+    """
+    from ..identify.records import noise_std
+
+    R, how = {}, {}
+    for n in measured:
+        angle = bool(model.angle_outputs[model.index(n, "output")])
+        y = np.asarray(data[n], dtype=float)
+        steps = np.abs(np.diff(y[np.isfinite(y)]))
+        jumps = steps[steps > 0]
+        # quantised: the value stays put between most samples and jumps by about one step q
+        q = float(np.median(jumps)) if jumps.size and np.mean(steps == 0) > 0.5 else 0.0
+        found = [(q**2 / 12, f"quantised: step {q:.3g}, q^2/12")]
+        digits = data.meta.get("significant_digits")
+        if digits and data.units.get(n) in ("m", "m/s") and not angle:
+            # printed with a few significant digits: the quantum grows with the value (only for columns kept
+            # in the unit they were printed in; angles, rates and revolutions were converted)
+            v = np.abs(y[np.isfinite(y) & (y != 0)])
+            if v.size:
+                quanta = 10.0 ** (np.floor(np.log10(v)) - (int(digits) - 1))
+                found.append((float(np.mean(quanta**2)) / 12, f"{digits} significant digits: mean quantum^2/12"))
+        try:
+            found.append((noise_std(data, [n], [n] if angle else [])[n] ** 2, "second differences"))
+        except ValueError:
+            pass
+        var, text = max(found)
+        if not var > 0:
+            raise InputError(f"the noise of {n!r} cannot be estimated from the record (a constant channel); give "
+                             "its variance")
+        R[n], how[n] = var, text
+    return R, how
