@@ -9,6 +9,7 @@ Example::
     casship autopilot --model kvlcc2 --json
     casship autopilot --model kvlcc2 --scenario course-60 --method lqr --wind 10 45 --plot out/
     casship autopilot --model otter --mode course --gnss-std 0.02 --show-defaults
+    casship autopilot --model kvlcc2 --params fit.json           # on the ship identified by casship identify
 """
 from __future__ import annotations
 
@@ -63,6 +64,8 @@ def register(sub) -> None:
                    help="uniform current speed [m/s] and the direction it flows towards [deg]")
     p.add_argument("--wind", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=None,
                    help="true wind speed [m/s] and the direction it comes from [deg] (Fujiwara loads)")
+    p.add_argument("--params", default=None,
+                   help='JSON file {"params": {name: value}} (e.g. a fit of casship identify) with the ship\'s parameters')
     p.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
     p.add_argument("--show-defaults", action="store_true", help="print the settings for this ship and exit")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -135,8 +138,16 @@ def run(args) -> int:
 
     require(args.parser, args, {"--model": args.model})
     check_outputs({"--plot": args.plot}, overwrite=args.overwrite, folders=("--plot",))
-    model, env = _environment(args, get_model(args.model))
-    design = ap.design_autopilot(model, **settings_from_args(args))       # designed in calm water
+    if args.params:
+        from ..identify import read_params
+
+        ship, p = read_params(args.params, args.model)     # the fitted variant, checked against the file
+        given = ship.param_dict(p)
+    else:
+        ship, given = get_model(args.model), {}
+    model, env = _environment(args, ship)
+    p = model.params({k: v for k, v in given.items() if k in model.param_names}) if given else None
+    design = ap.design_autopilot(model, p=p, **settings_from_args(args))       # designed in calm water
     s = design.settings
     if args.show_defaults:
         rows = {k: {"value": v, "source": s.sources.get(k, "")} for k, v in s.as_dict().items()}

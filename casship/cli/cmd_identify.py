@@ -86,7 +86,8 @@ def _problem(args, model, records, free, measured):
 
     from ..discretize import discretize
     from ..estimators import EKF
-    from ..identify import MLEProblem, OutputErrorProblem, Prior, noise_std
+    from ..estimators import noise_from_data
+    from ..identify import MLEProblem, OutputErrorProblem, Prior
     from ..identify.params_file import read_params
 
     share = parse_pairs(args.share, "--share", numbers=False)
@@ -107,8 +108,9 @@ def _problem(args, model, records, free, measured):
     if unknown:
         raise ValueError(f"--R names {sorted(unknown)} not among measured outputs {measured}")
     rest = [n for n in measured if n not in R]
-    angles = [n for n in rest if model.angle_outputs[model.index(n, "output")]]
-    start = {n: s**2 for n, s in noise_std(records, rest, angles).items()}
+    start = {}
+    for n in rest:              # the record's noise, the median over the records, as the starting value
+        start[n] = float(np.median([noise_from_data(model, d, [n])[0][n] for d in records]))
     estimate = set(parse_items(args.estimate_noise, "--estimate-noise"))
     if estimate - {"Q", "R"}:
         raise ValueError(f"--estimate-noise: unknown {sorted(estimate - {'Q', 'R'})}; use Q, R or Q,R")
