@@ -92,4 +92,4 @@ def test_zigzag_side_is_never_guessed(capsys):
     assert main(base + ["--rudder-deg", "-20", "--first", "starboard"]) == 2
     assert "rudder_deg is negative (port first)" in capsys.readouterr().err
     assert main(["simulate", "--model", "kvlcc2", "--first", "port"]) == 2
-    assert "--first would have no effect" in capsys.readouterr().err
+    assert "--first would have no effect: not used by a turning manoeuvre" in capsys.readouterr().err

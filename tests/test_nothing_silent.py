@@ -213,3 +213,16 @@ def test_a_stable_ship_loop_gives_no_badly_conditioned_warning():
         warnings.simplefilter("error")
         design = ap.design_autopilot(cs.models.get_model("kvlcc2"))
     assert design.margins["closed_loop_stable"] is True
+
+
+def test_identify_and_simulate_options_without_effect_are_refused(tmp_path, capsys):
+    m, data = _nomoto_record()
+    path = tmp_path / "run.csv"
+    data.to_csv(path)
+    base = ["identify", str(path), "--model", "nomoto1", "--free", "K", "--out", str(tmp_path / "fit.json")]
+    _error(capsys, base + ["--method", "oe", "--R", "psi=1e-4"], "--R would have no effect")
+    _error(capsys, base + ["--sigma", "psi=0.01"], "--sigma would have no effect")
+    _error(capsys, base + ["--prior-weight", "2"], "--prior-weight would have no effect")
+    _error(capsys, base + ["--free", "K,K"], "['K'] given more than once")
+    _error(capsys, ["simulate", "--model", "kvlcc2", "--hold", "100"], "--hold would have no effect")
+    _error(capsys, ["simulate", "--model", "kvlcc2", "--seed", "3"], "--seed would have no effect")

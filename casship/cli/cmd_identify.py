@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import warnings
 
-from ._common import check_outputs, load_record, number, parse_items, parse_pairs, print_json, write_output
+from ._common import (check_outputs, load_record, number, parse_items, parse_pairs, print_json, refuse_unused,
+                      write_output)
 from .cmd_filter import DEFAULT_Q
 
 
@@ -64,7 +65,7 @@ def register(sub) -> None:
                    help="print the Fisher-information analysis of the free set at the guess before fitting")
     p.add_argument("--plot", default=None, help="PNG of measured outputs vs the fitted free-run simulation")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of a table")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, parser=p)
 
 
 def _bounds(text: str | None) -> dict:
@@ -131,6 +132,16 @@ def run(args) -> int:
     from ..errors import InputError
     from ..models import get_model
 
+    if args.method == "oe":
+        refuse_unused(args.parser, {"--R": args.R is not None, "--Q": args.Q is not None,
+                                    "--estimate-noise": args.estimate_noise is not None},
+                      "--method oe weighs the output errors with --sigma (no filter, no noise covariances)")
+    else:
+        refuse_unused(args.parser, {"--sigma": args.sigma is not None, "--shooting": args.shooting != "single"},
+                      "--method mle runs the likelihood through an EKF (no simulation weights or shooting)")
+    refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
+                                "--group": bool(args.group) and "=group" not in (args.share or "")},
+                  "--prior-weight weighs a --prior; --group labels the records for --share NAME=group")
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     if args.decimate < 1:
         raise InputError(f"--decimate: must be an integer >= 1, got {args.decimate}")

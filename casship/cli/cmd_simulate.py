@@ -44,7 +44,7 @@ def register(sub) -> None:
     p.add_argument("--duration", type=float, default=None, help="simulated time [s] (default: scaled with L/U)")
     p.add_argument("--dt", type=float, default=None, help="time step [s] (default: L/U/400, rounded)")
     p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random rudder sequence")
+    p.add_argument("--seed", type=int, default=None, help="seed of the random rudder sequence (default 0)")
     p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
     p.add_argument("--params", default=None,
                    help='JSON file {"params": {name: value}} overriding parameters (a fit file rebuilds the '
@@ -72,10 +72,16 @@ def run(args) -> int:
         unused = {"--maneuver": args.maneuver != "turning", "--rudder-deg": args.rudder_deg != 35.0,
                   "--heading-deg": args.heading_deg is not None, "--first": args.first is not None,
                   "--speed": args.speed is not None, "--rps": args.rps is not None,
-                  "--duration": args.duration is not None, "--dt": args.dt is not None, "--hold": args.hold is not None}
+                  "--duration": args.duration is not None, "--dt": args.dt is not None, "--hold": args.hold is not None,
+                  "--seed": args.seed is not None}
         refuse_unused(args.parser, unused, "--inputs replays the record's own inputs, start and time stamps")
-    elif args.first is not None and args.maneuver != "zigzag":
-        args.parser.error(f"--first would have no effect: it is the first side of a zig-zag, not of a {args.maneuver}")
+    else:
+        refuse_unused(args.parser, {"--first": args.first is not None and args.maneuver != "zigzag",
+                                    "--heading-deg": args.heading_deg is not None and args.maneuver != "zigzag",
+                                    "--hold": args.hold is not None and args.maneuver not in ("pullout", "spiral", "random"),
+                                    "--seed": args.seed is not None and args.maneuver != "random"},
+                      f"not used by a {args.maneuver} manoeuvre (--first, --heading-deg: zig-zag; --hold: pull-out, "
+                      "spiral, random; --seed: random)")
     stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
     if args.params:
         from ..identify import read_params
@@ -101,7 +107,7 @@ def run(args) -> int:
 
         res = run_maneuver(model, args.maneuver, rudder_deg=args.rudder_deg, heading_deg=args.heading_deg,
                            speed=args.speed, n=args.rps, duration=args.duration, dt=args.dt, p=p,
-                           hold=args.hold, seed=args.seed, method=args.method, check_limits=check, first=args.first)
+                           hold=args.hold, seed=0 if args.seed is None else args.seed, method=args.method, check_limits=check, first=args.first)
         traj = res.trajectory
         s = res.settings
         out.update({"maneuver": args.maneuver, "speed_mps": s["speed_mps"], "rps": s["n"],
