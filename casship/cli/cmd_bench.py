@@ -14,7 +14,9 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
     p.add_argument("--json", default=None, help="write rows and machine description to this JSON file")
     p.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")
-    p.add_argument("--markdown", default=None, help="write the results section of this Markdown page")
+    p.add_argument("--markdown", default=None, help="write the results section of this Markdown page (an existing "
+                                                    "page: only its results section is replaced)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
     p.set_defaults(func=run)
 
 
@@ -33,6 +35,13 @@ def _import_runner():
 
 
 def run(args) -> int:
+    from ._common import check_outputs
+
+    check_outputs({"--json": args.json, "--markdown": args.markdown}, overwrite=True)    # distinct paths
+    check_outputs({"--json": args.json}, overwrite=args.overwrite)
+    if args.markdown and not Path(args.markdown).is_file():
+        raise FileNotFoundError(f"--markdown {args.markdown}: no such page (the results section of an existing "
+                                "page is replaced)")
     runner = _import_runner()
     argv = (["--quick"] if args.quick else []) + (["--json", args.json] if args.json else [])
     if args.only:
