@@ -196,8 +196,9 @@ def checked_run(est, data: Dataset, run, p=None):
     original = data.t
     while True:
         result = run(data)
-        U = data.matrix(m.input_names) if m.nu else np.zeros((len(data), 0))
-        for k in _candidates(est, data):
+        candidates = _candidates(est, data)
+        U = data.matrix(m.input_names) if m.nu and candidates.size else np.zeros((len(data), 0))
+        for k in candidates:
             where = f"between t = {data.t[k]:g} and {data.t[k + 1]:g} s (rows {k} and {k + 1})"
             pieces = gap_pieces(est, result.x[k], U[k], p, float(data.dt[k]), where)
             if pieces > 1:
