@@ -143,17 +143,18 @@ def _check_given(given: Mapping) -> dict:
         if isinstance(v, str) or k in ("lqr_weights",):
             continue
         values = np.atleast_1d(np.asarray(v, dtype=float))
-        least = 0.0 if k in _NON_NEGATIVE else None
-        if not np.all(np.isfinite(values)) or (least is not None and np.any(values < least)) \
-                or (least is None and k not in _SIGNED and np.any(values <= 0)):
-            need = ">= 0" if least is not None else "positive"
-            raise ValueError(f"autopilot setting {k} = {v} [{unit}] must be finite and {need}")
+        finite = np.isfinite(values) | ((values == np.inf) & (k in _UNBOUNDED))
+        low = np.any(values < 0) if k in _NON_NEGATIVE else np.any(values <= 0)
+        if not np.all(finite) or low:
+            need = ">= 0" if k in _NON_NEGATIVE else "positive"
+            what = "finite (or inf: no limit)" if k in _UNBOUNDED else "finite"
+            raise ValueError(f"autopilot setting {k} = {v} [{unit}] must be {what} and {need}")
     return given
 
 
-#: Settings that may be zero (the others, but for the signed ones, must be positive).
+#: Settings that may be zero (the others must be positive), and limits that may be inf (no limit).
 _NON_NEGATIVE = ("delay", "filter_T", "actuator_T", "zeta", "zeta_ref", "gyro_std", "compass_std", "gnss_std")
-_SIGNED: tuple = ()
+_UNBOUNDED = ("steer_max", "steer_rate_max", "r_max")
 
 
 def _vessel(plant: SteeringPlant, key: str):
