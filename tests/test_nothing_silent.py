@@ -226,3 +226,14 @@ def test_identify_and_simulate_options_without_effect_are_refused(tmp_path, caps
     _error(capsys, base + ["--free", "K,K"], "['K'] given more than once")
     _error(capsys, ["simulate", "--model", "kvlcc2", "--hold", "100"], "--hold would have no effect")
     _error(capsys, ["simulate", "--model", "kvlcc2", "--seed", "3"], "--seed would have no effect")
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["simulate", "--model", "kvlcc2", "--maneuver", "random", "--seed", "-1"], "a seed is a whole number >= 0"),
+    (["study", "kvlcc2-maneuvers", "--workers", "-3"], "must be a whole number >= 1, got -3"),
+    (["identify", "x.csv", "--model", "nomoto1", "--free", "K", "--max-iter", "0"], "must be a whole number >= 1"),
+])
+def test_counts_and_seeds_are_checked_at_the_door(capsys, argv, text):
+    """Before: a negative seed ended in NumPy's "expected non-negative integer" (a bug report); --workers -3
+    was accepted."""
+    _error(capsys, argv, text)

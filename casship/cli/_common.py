@@ -14,7 +14,7 @@ import sys
 from ..errors import InputError
 
 __all__ = ["Parser", "UsageError", "HelpFormatter", "add_model_option", "require", "load_model", "add_overwrite_option",
-           "add_limits_option", "parse_items", "parse_pairs", "number", "positive", "finite", "load_record",
+           "add_limits_option", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
            "check_outputs", "write_output", "print_json", "refuse_unused"]
 
 
@@ -69,6 +69,28 @@ def positive(text: str) -> float:
     value = finite(text)
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def count(text: str) -> int:
+    """argparse type: a whole number >= 1 (workers, iterations, a decimation factor)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text}")
+    return value
+
+
+def seed(text: str) -> int:
+    """argparse type: a random seed, a whole number >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text}")
     return value
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import add_model_option, add_overwrite_option, check_outputs, print_json, require
+from ._common import add_model_option, add_overwrite_option, check_outputs, print_json, require, seed
 
 #: settings shown in degrees on the command line (name -> option suffix)
 _DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s"}
@@ -66,7 +66,7 @@ def register(sub) -> None:
                    help="true wind speed [m/s] and the direction it comes from [deg] (Fujiwara loads)")
     p.add_argument("--params", default=None,
                    help='JSON file {"params": {name: value}} (e.g. a fit of casship identify) with the ship\'s parameters')
-    p.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
+    p.add_argument("--seed", type=seed, default=0, help="sensor-noise seed")
     p.add_argument("--show-defaults", action="store_true", help="print the settings for this ship and exit")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", default=None, metavar="DIR", help="save Bode/step and closed-loop plots to the new folder DIR")

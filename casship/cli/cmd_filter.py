@@ -23,7 +23,7 @@ from __future__ import annotations
 import warnings
 
 from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model,
-                      load_record, parse_items, parse_pairs, positive, print_json, require, write_output)
+                      load_record, parse_items, parse_pairs, positive, print_json, require, seed, write_output)
 
 #: Variance of each process-noise channel when ``--Q`` is not given (in the channel's units squared).
 DEFAULT_Q = 1e-8
@@ -80,7 +80,7 @@ def register(sub) -> None:
                         "between the samples (Dataset.resample)")
     p.add_argument("--method", default="euler", choices=("euler", "rk4"), help="discretisation")
     p.add_argument("--options", default=None, help="estimator options key=value,... (e.g. gate=0.999,members=100)")
-    p.add_argument("--seed", type=int, default=0, help="seed of stochastic estimators (EnKF)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of stochastic estimators (EnKF)")
     p.add_argument("--out", default=None, help="CSV of estimates and standard deviations")
     p.add_argument("--plot", default=None, help="PNG plot of the estimates with 2-sigma bands")
     p.add_argument("--json", action="store_true", help="print a JSON summary")

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import warnings
 
-from ._common import (check_outputs, load_record, number, parse_items, parse_pairs, print_json, refuse_unused,
-                      write_output)
+from ._common import (check_outputs, count, load_record, number, parse_items, parse_pairs, positive, print_json,
+                      refuse_unused, write_output)
 from .cmd_filter import DEFAULT_Q
 
 
@@ -45,7 +45,7 @@ def register(sub) -> None:
     p.add_argument("--group", default=None, help="one group label per record A,A,B,... (for --share name=group)")
     p.add_argument("--prior", default=None,
                    help="Gaussian prior standard deviations name=std,... centred on the published values (MAP)")
-    p.add_argument("--prior-weight", dest="prior_weight", type=float, default=1.0, help="weight of the prior")
+    p.add_argument("--prior-weight", dest="prior_weight", type=positive, default=1.0, help="weight of the prior")
     p.add_argument("--bounds", default=None, help="bounds name=lower:upper,...")
     p.add_argument("--R", default=None, help="measurement variances name=value,... (mle; default: estimated)")
     p.add_argument("--Q", default=None, help=f"process-noise variances: scalar or name=value,... (mle; default "
@@ -58,9 +58,9 @@ def register(sub) -> None:
     p.add_argument("--params", default=None, help='JSON {"params": {...}} with the fixed parameter values')
     p.add_argument("--estimate-x0", dest="estimate_x0", default=None,
                    help="states whose initial values are estimated per record a,b,...")
-    p.add_argument("--decimate", type=int, default=1, help="keep every k-th sample (default 1)")
+    p.add_argument("--decimate", type=count, default=1, help="keep every k-th sample (default 1)")
     p.add_argument("--shooting", default="single", choices=("single", "multiple"), help="oe: shooting")
-    p.add_argument("--max-iter", dest="max_iter", type=int, default=100, help="iteration limit (default 100)")
+    p.add_argument("--max-iter", dest="max_iter", type=count, default=100, help="iteration limit (default 100)")
     p.add_argument("--identifiability", action="store_true",
                    help="print the Fisher-information analysis of the free set at the guess before fitting")
     p.add_argument("--plot", default=None, help="PNG of measured outputs vs the fitted free-run simulation")
@@ -143,8 +143,6 @@ def run(args) -> int:
                                 "--group": bool(args.group) and "=group" not in (args.share or "")},
                   "--prior-weight weighs a --prior; --group labels the records for --share NAME=group")
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
-    if args.decimate < 1:
-        raise InputError(f"--decimate: must be an integer >= 1, got {args.decimate}")
     model = get_model(args.model)
     records = [load_record(p, model, wrap_angles=True).decimate(args.decimate) for p in args.data]
     free = parse_items(args.free, "--free")

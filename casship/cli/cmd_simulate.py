@@ -9,7 +9,7 @@ Examples::
 from __future__ import annotations
 
 from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model, load_record,
-                      print_json, refuse_unused, require, write_output)
+                      print_json, refuse_unused, require, seed, write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
@@ -44,7 +44,7 @@ def register(sub) -> None:
     p.add_argument("--duration", type=float, default=None, help="simulated time [s] (default: scaled with L/U)")
     p.add_argument("--dt", type=float, default=None, help="time step [s] (default: L/U/400, rounded)")
     p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
-    p.add_argument("--seed", type=int, default=None, help="seed of the random rudder sequence (default 0)")
+    p.add_argument("--seed", type=seed, default=None, help="seed of the random rudder sequence (default 0)")
     p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
     p.add_argument("--params", default=None,
                    help='JSON file {"params": {name: value}} overriding parameters (a fit file rebuilds the '

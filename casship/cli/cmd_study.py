@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ._common import count
+
 
 #: One-line description (the command list of ``casship --help``).
 HELP = "run a study (seed-paper reproductions, real-data studies)"
@@ -21,7 +23,7 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true", help="small, fast variant (as run by the tests)")
     p.add_argument("--data", default=None, metavar="DIR", help="measured-data folder (default: $CASSHIP_DATA, "
                    "else ../shared/data beside a source checkout)")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU count)")
+    p.add_argument("--workers", type=count, default=None, help="local worker processes (default: CPU count)")
     p.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
     p.set_defaults(func=run)
 
