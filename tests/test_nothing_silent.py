@@ -81,6 +81,9 @@ def test_options_that_do_nothing_are_refused(tmp_path, capsys):
     _error(capsys, ["filter", str(path), "--model", "nomoto1", "--dt", "1e6"], "--dt would have no effect")
     _error(capsys, ["filter", str(path), "--model", "nomoto1", "--method", "rk4", "--dt", "300"],
            "--dt would have no effect")
+    _error(capsys, ["filter", str(path), "--model", "nomoto1", "--options", "gate=abc"], "option 'gate' is a number")
+    _error(capsys, ["filter", str(path), "--model", "nomoto1", "--options", "max_gap=inf"],
+           "option 'max_gap' is a positive time")           # an infinite limit would check no gap
     one = tmp_path / "one.csv"
     data.slice(0, 1).to_csv(one)
     _error(capsys, ["simulate", "--model", "nomoto1", "--inputs", str(one)], "the record has 1 row(s)")
