@@ -27,7 +27,7 @@ _EXPORTS = {
     "MHE": "estimators", "prior_from_data": "estimators", "noise_from_data": "estimators",
     "linearize": "linear", "to_iosys": "linear", "trim": "linear",
     "FitResult": "identify", "MLEProblem": "identify", "OutputErrorProblem": "identify",
-    "CasshipError": "errors", "InputError": "errors", "SolverError": "errors",
+    "CasshipError": "errors", "InputError": "errors", "SolverError": "errors", "SetupError": "errors",
 }
 _SUBMODULES = ("frames", "identify", "models", "io")
 
@@ -36,7 +36,7 @@ __all__ = ["ModelBuilder", "Model", "Vessel", "Limit", "DiscreteModel", "discret
            "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
            "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE", "prior_from_data", "noise_from_data",
            "CasshipError",
-           "InputError", "SolverError", "io"]
+           "InputError", "SolverError", "SetupError", "io"]
 
 
 class _Package(types.ModuleType):

@@ -132,7 +132,9 @@ def find_compiler(compiler: str | None = None) -> tuple[str, str]:
                 version = ""
             _COMPILERS[name] = (path, version)
             return path, version
-    raise RuntimeError(f"no C compiler found (tried {names}); install gcc or clang, or set CC")
+    from .errors import SetupError
+
+    raise SetupError(f"no C compiler found (tried {names}); install gcc or clang, or set CC")
 
 
 def _flags(flags: Sequence[str] | str | None) -> tuple[str, ...]:

@@ -20,7 +20,7 @@ True
 """
 from __future__ import annotations
 
-__all__ = ["CasshipError", "InputError", "SolverError"]
+__all__ = ["CasshipError", "InputError", "SolverError", "SetupError"]
 
 
 class CasshipError(Exception):
@@ -33,3 +33,8 @@ class InputError(CasshipError, ValueError):
 
 class SolverError(CasshipError, RuntimeError):
     """A numerical method that failed (an integrator, an optimiser, a filter that diverged), with its status."""
+
+
+class SetupError(CasshipError, RuntimeError):
+    """Something casship needs is missing from the environment (a C compiler, an optional package, a
+    folder of the source checkout), named with how to provide it."""

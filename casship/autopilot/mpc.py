@@ -230,7 +230,9 @@ class MPCAutopilot:
         if np.max(np.abs(resid)) > 1e-6 * scale or np.max(np.abs(X[:, 0] - x0)) > 1e-6 * scale:
             bad.append("the model")
         if bad:
-            raise RuntimeError(f"the MPC's QP solve failed (qpOASES): the plan breaks {', '.join(bad)}")
+            from ..errors import SolverError
+
+            raise SolverError(f"the MPC's QP solve failed (qpOASES): the plan breaks {', '.join(bad)}")
 
     def _ref_step(self) -> ca.Function:
         if getattr(self, "_ref_fun", None) is None:

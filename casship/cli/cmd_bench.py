@@ -27,7 +27,9 @@ def _import_runner():
         # benchmarks/ sits next to the casship package in a source checkout; it is not installed.
         root = Path(__file__).resolve().parents[2]
         if not (root / "benchmarks" / "__main__.py").is_file():
-            raise RuntimeError("the benchmarks/ folder of the casship source checkout was not found; "
+            from ..errors import SetupError
+
+            raise SetupError("the benchmarks/ folder of the casship source checkout was not found; "
                                "run 'casship bench' from a clone of the repository") from None
         sys.path.insert(0, str(root))
         from benchmarks import __main__ as runner

@@ -109,15 +109,17 @@ class Health:
         return bool(windows_ok and self.not_pd.size == 0)
 
     def raise_if_diverged(self) -> None:
-        """Raise ``RuntimeError`` describing the problem if not :attr:`ok`."""
+        """Raise :class:`~casship.errors.SolverError` (a ``RuntimeError``) describing the problem if not :attr:`ok`."""
+        from ..errors import SolverError
+
         if self.not_pd.size:
-            raise RuntimeError(f"filter health check failed: {self.not_pd.size} covariance(s) not positive "
-                               f"semi-definite (first at row {int(self.not_pd[0])})")
+            raise SolverError(f"filter health check failed: {self.not_pd.size} covariance(s) not positive "
+                              f"semi-definite (first at row {int(self.not_pd[0])})")
         if not self.ok:
             first = int(self.window_start[np.argmax(self.flagged)])
-            raise RuntimeError(f"filter health check failed: {int(self.flagged.sum())} of {self.flagged.size} "
-                               f"windows flagged (NIS outside the {100 * (1 - self.alpha):.0f}% chi-square "
-                               f"interval or most samples rejected by the gate; first at row {first})")
+            raise SolverError(f"filter health check failed: {int(self.flagged.sum())} of {self.flagged.size} "
+                              f"windows flagged (NIS outside the {100 * (1 - self.alpha):.0f}% chi-square "
+                              f"interval or most samples rejected by the gate; first at row {first})")
 
 
 @dataclass(frozen=True, eq=False, repr=False)
