@@ -3,25 +3,65 @@
 One symbolic model, written once, gives simulators, exact Jacobians, Kalman filters, smoothers,
 moving-horizon estimation, maximum-likelihood identification and the linearisations that
 python-control turns into autopilots.
+
+The names below are imported when first used (``import casship`` itself loads nothing heavy), so
+that the command line answers ``--help`` and argument errors without loading CasADi.
 """
-from .angles import wrap, unwrap
-from .data import Dataset
-from .gaussian import Gaussian
-from .trajectory import Trajectory
-from .discretize import DiscreteModel, discretize, van_loan
-from .model import Model, ModelBuilder
-from .vessel import Limit, Vessel
-from .simulate import measure, simulate
-from .estimators import EKF, KF, FilterResult, persistence_model
-from .estimators import UKF, EnKF, KalmanBucy, augment
-from .estimators import MHE
-from .linear import linearize, to_iosys, trim
-from .identify import FitResult, MLEProblem, OutputErrorProblem
-from . import frames, identify, models
-from . import io  # data import: read_csv (units), read_nmea (NMEA 0183), read_marin
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+import types
 
 __version__ = "0.1.0"
 
+# public name -> the module that defines it
+_EXPORTS = {
+    "wrap": "angles", "unwrap": "angles", "Dataset": "data", "Gaussian": "gaussian", "Trajectory": "trajectory",
+    "DiscreteModel": "discretize", "discretize": "discretize", "van_loan": "discretize",
+    "Model": "model", "ModelBuilder": "model", "Vessel": "vessel", "Limit": "vessel",
+    "measure": "simulate", "simulate": "simulate",
+    "EKF": "estimators", "KF": "estimators", "FilterResult": "estimators", "persistence_model": "estimators",
+    "UKF": "estimators", "EnKF": "estimators", "KalmanBucy": "estimators", "augment": "estimators",
+    "MHE": "estimators", "prior_from_data": "estimators", "noise_from_data": "estimators",
+    "linearize": "linear", "to_iosys": "linear", "trim": "linear",
+    "FitResult": "identify", "MLEProblem": "identify", "OutputErrorProblem": "identify",
+    "CasshipError": "errors", "InputError": "errors", "SolverError": "errors", "SetupError": "errors",
+}
+_SUBMODULES = ("frames", "identify", "models", "io")
+
 __all__ = ["ModelBuilder", "Model", "Vessel", "Limit", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
-           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "EnKF", "KalmanBucy", "augment", "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
-           "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE"]
+           "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "EnKF", "KalmanBucy", "augment",
+           "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
+           "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE", "prior_from_data", "noise_from_data",
+           "CasshipError",
+           "InputError", "SolverError", "SetupError", "io"]
+
+
+class _Package(types.ModuleType):
+    """The package, keeping the functions ``casship.discretize`` and ``casship.simulate`` when their
+    modules of the same name are imported (the import system binds a submodule on its package)."""
+
+    def __setattr__(self, name, value):
+        if isinstance(value, types.ModuleType) and _EXPORTS.get(name) == name:
+            value = getattr(value, name)
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
+    elif name in _SUBMODULES or (not name.startswith("__") and importlib.util.find_spec(f"{__name__}.{name}")):
+        value = importlib.import_module(f".{name}", __name__)        # any submodule, as after an import
+    else:
+        raise AttributeError(f"module 'casship' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

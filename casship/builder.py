@@ -195,7 +195,8 @@ class ModelBuilder:
         value : float
             Nominal value (finite).
         bounds : (float, float), optional
-            Lower and upper bound (used by identification).
+            Lower and upper bound: the parameter's valid range (``Model.params`` refuses a value
+            outside it; identification stays within it).
         unit : str
             SI unit (e.g. ``"rad"``, ``"m/s"``).
         doc : str

@@ -13,7 +13,34 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Dataset", "check_time"]
+__all__ = ["Dataset", "check_time", "check_rows", "MAX_ROWS"]
+
+
+#: Largest number of rows casship creates in one record (a time grid, a resampled record): 20 million
+#: rows are 160 MB per column; more is refused before memory runs out.
+MAX_ROWS = 20_000_000
+
+
+def check_rows(n: float, what: str) -> int:
+    """``n`` as the number of rows of a record about to be created, or ``InputError`` above :data:`MAX_ROWS`.
+
+    Parameters
+    ----------
+    n : float
+        Rows (e.g. a duration divided by a step).
+    what : str
+        What would be created, for the message (e.g. ``"simulate: 1e+09 s at 0.5 s"``).
+
+    Returns
+    -------
+    int
+    """
+    from .errors import InputError
+
+    if not n <= MAX_ROWS:
+        raise InputError(f"{what} would make {n:.3g} rows, more than casship creates in one record "
+                         f"({MAX_ROWS:.3g}, casship.data.MAX_ROWS); use a longer step or a shorter span")
+    return int(n)
 
 
 def check_time(t, name: str = "time") -> np.ndarray:
@@ -30,6 +57,9 @@ def check_time(t, name: str = "time") -> np.ndarray:
     -------
     numpy.ndarray
     """
+    if np.ma.isMaskedArray(t) and np.ma.getmaskarray(t).any():
+        raise ValueError(f"{name}: masked time stamp at row {int(np.flatnonzero(np.ma.getmaskarray(t))[0])}; every "
+                         "row needs its time")
     t = np.asarray(t, dtype=float)
     if t.ndim != 1:
         raise ValueError(f"{name}: expected a 1-D array of time stamps, got shape {t.shape}")
@@ -50,8 +80,9 @@ def check_time(t, name: str = "time") -> np.ndarray:
 class Dataset:
     """A record: strictly increasing time stamps and named, equally long columns.
 
-    NaN in a measurement column means "not measured at this sample". Inputs must be finite
-    wherever they are used (checked by the consumers, which name the offending column and row).
+    NaN in a measurement column means "not measured at this sample" (so does a masked entry of a
+    masked array). Inputs must be finite wherever they are used (checked by the consumers, which
+    name the offending column and row).
 
     Parameters
     ----------
@@ -73,6 +104,8 @@ class Dataset:
                 raise ValueError(f"column name {name!r} must be a non-empty string")
             if name == "t" or name == "time":
                 raise ValueError(f"column name {name!r} is reserved for the time stamps")
+            if np.ma.isMaskedArray(values):      # masked = not measured (NaN)
+                values = np.ma.filled(np.ma.asarray(values, dtype=float), np.nan)
             arr = np.asarray(values, dtype=float).reshape(-1)
             if arr.size != self.t.size:
                 raise ValueError(f"column {name!r} has {arr.size} rows, time has {self.t.size}")
@@ -252,7 +285,9 @@ class Dataset:
             if rate < own * (1 - 1e-9):
                 raise ValueError(f"resample: rate {rate:g} Hz is below the record's rate {own:g} Hz (median step "
                                  f"{1 / own:g} s); that would drop samples: use decimate() to thin a record")
-        fine = self.t[0] + np.arange(0, int(np.floor((self.t[-1] - self.t[0]) * rate + 1e-9)) + 1) / rate
+        rows = check_rows(np.floor((self.t[-1] - self.t[0]) * rate + 1e-9) + 1,
+                          f"resample: {self.t[-1] - self.t[0]:g} s at {rate:g} Hz")
+        fine = self.t[0] + np.arange(0, rows) / rate
         data = self.with_rows(fine, hold=hold)
         data.meta["resampled_hz"] = rate
         return data

@@ -10,7 +10,6 @@ figures and ``summary.json``.
 """
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,8 @@ import numpy as np
 from . import models
 from .gaussian import Gaussian
 from .discretize import discretize
-from .estimators import EKF, UKF
+from .estimators import EKF, UKF, prior_from_data
+from .io.jsonfile import write_json
 from .progress import progress
 from .simulate import measure, simulate
 
@@ -116,13 +116,14 @@ def _rudder_motion(truth) -> dict:
 
 
 def _prior(ship, data) -> Gaussian:
-    """The filter starts 5 % off in speed and knows little about it.
+    """The filter starts 5 % off in speed and knows little about it; the rest from the first samples
+    (:func:`casship.prior_from_data`).
 
     v = 1 mm/s keeps the start off v = r = 0, where the MMG wake and flow-straightening terms switch
     with the sign of the drift (not twice differentiable there, which the fit's exact Hessian would see).
     """
-    return Gaussian(ship.states(u=0.95 * ship.vessel.U0, v=1e-3, x=data["x"][0], y=data["y"][0],
-                                psi=data["psi"][0]), np.diag([1.0, 0.1, 1e-6, 4.0, 4.0, 1e-4]))
+    return prior_from_data(ship, data, measured=list(SENSORS), R={k: s**2 for k, s in SENSORS.items()},
+                           x0={"u": 0.95 * ship.vessel.U0, "v": 1e-3})
 
 
 def _filters(ship, data, truth, cfg: DemoConfig):
@@ -329,10 +330,11 @@ def _run(out: Path, quick: bool) -> dict:
         "EKF+RTS RMSE v [m/s]": round(rmse["EKF+RTS"]["v"], 4),
         "fit: largest |estimate - true| / std error": round(worst_z, 2),
         "10/10 zig-zag position RMS, fitted vs true [m]": round(validation["zigzag 10/10"]["fitted"]["position_rms_m"], 2),
-        "autopilot 20 deg change: overshoot [deg]": round(loop.metrics[0]["overshoot_deg"], 2),
+        "autopilot 20 deg change: overshoot [%] ([deg])": f"{loop.metrics[0]['overshoot_pct']:.2f} % "
+                                                          f"({loop.metrics[0]['overshoot_deg']:.2f} deg)",
         "run time [s]": round(total, 1),
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+    write_json(out / "summary.json", summary)
     (out / "report.md").write_text(_report(summary, ship))
     next(steps, None)
     return summary
@@ -345,6 +347,9 @@ def _report(s: dict, ship) -> str:
         f"Ship: {s['ship']} (MMG standard method, L_pp = {ship.vessel.L_pp:g} m), approach speed "
         f"{ship.vessel.U0:.2f} m/s. Identification records: {' and '.join(s['identification_records'])}, "
         f"{s['trial_s']:g} s each at dt = {s['dt_s']:g} s" + (" (quick mode)." if s["quick"] else "."), "",
+        "**The trials are simulated, not measured:** the MMG model with its published parameters plays the ship, "
+        "and simulated sensors with seeded noise measure it, so every estimate can be compared with the truth. "
+        "For measured trials see the ship workflow in docs/getting-started.md and `casship study kvlcc2-marin`.", "",
         "| record | max rudder angle [deg] | max rudder rate [deg/s] | RMS rudder rate [deg/s] |",
         "|---|---|---|---|",
         *(f"| {name} | {r['max_rudder_deg']:.1f} | {r['max_rudder_rate_deg_s']:.2f} | {r['rms_rudder_rate_deg_s']:.2f} |"
@@ -394,11 +399,12 @@ def _report(s: dict, ship) -> str:
               f"{1 / d['settings']['dt']:g} Hz on the true (nominal) ship with a 1 Hz compass and a rate gyro into "
               "the heading observer, rudder limited to 35 deg and 2.32 deg/s (rate limit active "
               f"{100 * s['autopilot']['performance']['rate_limited_fraction']:.1f} % of the time):", "",
-              "| step | change [deg] | rise time [s] | overshoot [deg] | settling time [s] | steady error [deg] | "
+              "| step | change [deg] | rise time [s] | overshoot [%] ([deg]) | settling time [s] | steady error [deg] | "
               "max rudder angle [deg] | max rudder rate [deg/s] | RMS rudder rate [deg/s] |",
               "|---|---|---|---|---|---|---|---|---|"]
     for i, m in enumerate(s["autopilot"]["closed_loop"]):
-        lines.append(f"| {i + 1} | {m['change_deg']:.1f} | {m['rise_time_s']:.0f} | {m['overshoot_deg']:.2f} | "
+        lines.append(f"| {i + 1} | {m['change_deg']:.1f} | {m['rise_time_s']:.0f} | {m['overshoot_pct']:.2f} "
+                     f"({m['overshoot_deg']:.2f}) | "
                      f"{m['settling_time_s']:.0f} | {m['steady_state_error_deg']:.2f} | "
                      f"{np.degrees(m['steer_max_abs']):.1f} | {np.degrees(m['steer_rate_max']):.2f} | "
                      f"{np.degrees(m['steer_rate_rms']):.2f} |")

@@ -238,7 +238,24 @@ class Model:
             vec = np.asarray(base, dtype=float)
             if vec.shape != (self.np,):
                 raise ValueError(f"params: expected a vector of {self.np} parameters, got shape {vec.shape}")
-        return self._named(self.param_names, overrides, "parameter", vec)
+        vec = self._named(self.param_names, overrides, "parameter", vec)
+        if base is not None or overrides:
+            self._check_params(vec)
+        return vec
+
+    def _check_params(self, vec: np.ndarray) -> None:
+        """Every parameter finite and within its declared (physical) bounds, or ``InputError`` naming it."""
+        from .errors import InputError
+
+        bad = np.flatnonzero(~np.isfinite(vec) | (vec < self.param_lower) | (vec > self.param_upper))
+        if bad.size:
+            i = int(bad[0])
+            var = self.param_vars[i]
+            unit = f" {var.unit}" if var.unit and var.unit != "-" else ""
+            what = "is not finite" if not np.isfinite(vec[i]) else \
+                f"is outside its valid range [{self.param_lower[i]:g}, {self.param_upper[i]:g}]{unit}"
+            raise InputError(f"parameter {var.name!r} = {vec[i]:g}{unit} of model {self.name!r} {what}"
+                             + (f" ({var.doc})" if var.doc else ""))
 
     def param_dict(self, p: np.ndarray | None = None) -> dict[str, float]:
         """Mapping name -> value of a parameter vector (nominal by default).

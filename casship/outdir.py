@@ -9,7 +9,11 @@ One rule for every command that writes results (``casship demo``, ``casship stud
   stays beside the new ones; only a folder written by casship (it holds the marker file
   :data:`MARKER`) or an empty one is ever removed;
 * results are written into a temporary sibling folder (or file) that is renamed into place when
-  the run succeeds, so a failed run leaves neither a half-written folder nor a damaged old one.
+  the run succeeds, so a failed run leaves neither a half-written folder nor a damaged old one;
+* the rename never replaces what appeared (or changed) at the path while the run was working: a
+  new path is claimed without replacing (a hard link for files), an old one is compared with its
+  :func:`stamp` taken when the run was checked. Then nothing is replaced, the new results stay in
+  their temporary sibling, and the error names both.
 
 Examples
 --------
@@ -29,10 +33,44 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["output_folder", "output_file", "check_output_folder", "check_output_file", "MARKER"]
+__all__ = ["output_folder", "output_file", "check_output_folder", "check_output_file", "stamp", "MARKER"]
 
 #: Name of the marker file written into every output folder (it allows ``overwrite`` to clear it).
 MARKER = ".casship-output"
+
+
+def stamp(path) -> tuple | None:
+    """What is at ``path`` now, to tell later whether it changed: None (nothing), a file's identity,
+    size and modification time, or a folder's listing with those of every entry.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    tuple or None
+    """
+    path = Path(path)
+    try:
+        st = path.lstat()
+    except FileNotFoundError:
+        return None
+    if not path.is_dir():
+        return ("file", st.st_ino, st.st_size, st.st_mtime_ns)
+    entries = []
+    for sub in sorted(path.rglob("*")):
+        try:
+            s = sub.lstat()
+        except FileNotFoundError:          # removed while listing: it changed
+            continue
+        entries.append((str(sub.relative_to(path)), s.st_ino, s.st_size, s.st_mtime_ns))
+    return ("folder", st.st_ino, tuple(entries))
+
+
+def _changed(path: Path, expect, what: str, kept: Path) -> FileExistsError:
+    return FileExistsError(f"{what} {path}: it changed while casship was running (something else wrote there); "
+                           f"nothing was replaced; the new results are in {kept}")
 
 
 def _protected(path: Path) -> str | None:
@@ -106,6 +144,7 @@ def output_folder(path, *, overwrite: bool = False, what: str = "--out") -> Iter
         as it was.
     """
     path = check_output_folder(path, overwrite=overwrite, what=what)
+    before = stamp(path)
     parent = path.absolute().parent
     parent.mkdir(parents=True, exist_ok=True)
     tmp = parent / f".{path.name}.partial-{os.getpid()}"
@@ -118,13 +157,18 @@ def output_folder(path, *, overwrite: bool = False, what: str = "--out") -> Iter
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    if path.exists():
+    if stamp(path) != before:
+        raise _changed(path, before, what, tmp)
+    if before is not None:
         old = parent / f".{path.name}.old-{os.getpid()}"
         path.rename(old)              # the new folder takes its place before the old one is removed
         tmp.rename(path)
         shutil.rmtree(old, ignore_errors=True)
     else:
-        tmp.rename(path)
+        try:
+            tmp.rename(path)          # refused if a non-empty folder or a file appeared meanwhile
+        except OSError:
+            raise _changed(path, before, what, tmp) from None
 
 
 def check_output_file(path, *, overwrite: bool = False, what: str = "--out") -> Path:
@@ -163,7 +207,7 @@ def check_output_file(path, *, overwrite: bool = False, what: str = "--out") -> 
 
 
 @contextmanager
-def output_file(path, *, overwrite: bool = False, what: str = "--out") -> Iterator[Path]:
+def output_file(path, *, overwrite: bool = False, what: str = "--out", expect=False) -> Iterator[Path]:
     """Context manager yielding a temporary file name that replaces ``path`` when the block succeeds.
 
     Parameters
@@ -174,14 +218,24 @@ def output_file(path, *, overwrite: bool = False, what: str = "--out") -> Iterat
         Replace an existing file.
     what : str
         Name of the option, used in messages.
+    expect : tuple or None, optional
+        The :func:`stamp` of ``path`` when the caller checked it (default: now). If ``path`` differs
+        from it at the end, nothing is replaced.
 
     Yields
     ------
     Path
-        A temporary sibling name with the same suffix; on success it is renamed to ``path``; if the
+        A temporary sibling name with the same suffix; on success it is moved to ``path``; if the
         block raises, it is removed and ``path`` is left as it was.
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` appeared or changed while the block ran (the new file is kept under its temporary
+        name, given in the message).
     """
     path = check_output_file(path, overwrite=overwrite, what=what)
+    before = stamp(path) if expect is False else expect
     tmp = path.absolute().parent / f".{path.stem}.partial-{os.getpid()}{path.suffix}"
     try:
         yield tmp
@@ -190,4 +244,16 @@ def output_file(path, *, overwrite: bool = False, what: str = "--out") -> Iterat
         raise
     if not tmp.exists():
         raise FileNotFoundError(f"{what} {path}: nothing was written")
-    os.replace(tmp, path)
+    if stamp(path) != before:
+        raise _changed(path, before, what, tmp)
+    if before is not None:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)            # claims the name only if it is still free
+    except FileExistsError:
+        raise _changed(path, before, what, tmp) from None
+    except OSError:                   # no hard links here: the rename right after the check
+        os.rename(tmp, path)
+        return
+    tmp.unlink()

@@ -29,7 +29,9 @@ def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, sc
         try:
             from dask.distributed import Client
         except ImportError as exc:  # pragma: no cover - optional extra
-            raise RuntimeError("a Dask scheduler was given but dask.distributed is not installed "
+            from .errors import SetupError
+
+            raise SetupError("a Dask scheduler was given but dask.distributed is not installed "
                                "(pip install 'casship[dask]')") from exc
         with Client(scheduler) as client:
             return client.gather(client.map(func, cases, pure=False))

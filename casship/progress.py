@@ -6,7 +6,9 @@ them.
 
 * :func:`progress` walks through named stages (``next(steps)`` before each stage);
 * :func:`track` wraps an iterable (Monte Carlo runs, cross-validation folds, records);
-* :func:`bar` is a bar advanced by hand (``b.update()``), e.g. from an optimiser's callback.
+* :func:`bar` is a bar advanced by hand (``b.update()``), e.g. from an optimiser's callback;
+* :func:`activity` shows that one long call is running (its name and the elapsed time), e.g. a C
+  compiler.
 
 Examples
 --------
@@ -22,11 +24,13 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
+from contextlib import contextmanager
 from typing import Iterable, Iterator, TypeVar
 
 from tqdm.auto import tqdm
 
-__all__ = ["progress", "track", "bar", "enabled"]
+__all__ = ["progress", "track", "bar", "enabled", "activity"]
 
 T = TypeVar("T")
 
@@ -143,3 +147,39 @@ def progress(stages: Iterable[str], label: str, stream=None) -> Iterator[None]:
         b.set_description_str(f"{label} [{total}/{total}] done", refresh=False)
         b.n = total
         b.refresh()
+
+
+@contextmanager
+def activity(label: str, *, stream=None, every: float = 0.5) -> Iterator[None]:
+    """Show ``label`` and the elapsed time while the block runs (a call that reports no progress itself).
+
+    Parameters
+    ----------
+    label : str
+        What is running (e.g. ``"compiling ekf_step to C (once; then cached)"``).
+    stream : file-like, optional
+        Where to draw (standard error by default).
+    every : float
+        Seconds between redraws.
+
+    Yields
+    ------
+    None
+    """
+    stream = stream or sys.stderr
+    if not enabled(stream):
+        yield
+        return
+    done = threading.Event()
+    with tqdm(total=None, desc=label, file=stream, leave=False, bar_format="{desc} {elapsed}") as b:
+        def tick():
+            while not done.wait(every):
+                b.refresh()
+
+        thread = threading.Thread(target=tick, daemon=True)
+        thread.start()
+        try:
+            yield
+        finally:
+            done.set()
+            thread.join()

@@ -8,6 +8,7 @@ import numpy as np
 from .runtime import BufferedCall
 from .angles import wrap
 from .data import Dataset, check_time
+from .errors import SolverError
 from .trajectory import Trajectory
 from .discretize import DiscreteModel, discretize
 from .model import Model
@@ -16,7 +17,7 @@ from .validity import check_inputs, check_states, check_step, warn_states
 __all__ = ["simulate", "measure", "input_matrix", "fold_steps", "IntegrationError"]
 
 
-class IntegrationError(RuntimeError):
+class IntegrationError(SolverError):
     """An integrator (CVODES) failed; ``status`` is its return flag, ``step`` the first step of the
     block of steps in which it failed.
 

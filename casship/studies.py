@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import importlib.util
 import inspect
-import json
 import sys
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Callable, Mapping
 
+from .io.jsonfile import write_json
 from .io.datadir import data_dir as _data_dir
 from .outdir import output_folder
 
@@ -137,10 +137,6 @@ def get_study(name: str) -> Study:
     return table[name]
 
 
-def _json_ready(value):
-    return json.loads(json.dumps(value, default=float, allow_nan=True))
-
-
 def run_study(study: Study | str, out, *, quick: bool = False, workers: int | None = None,
               scheduler: str | None = None, data=None, overwrite: bool = False, stream=None) -> dict:
     """Run a study into the folder ``out`` (see :func:`casship.outdir.output_folder`).
@@ -187,6 +183,5 @@ def run_study(study: Study | str, out, *, quick: bool = False, workers: int | No
         elif study.needs_data:
             raise TypeError(f"study {study.name!r} needs measured data but its run() takes no data_dir")
         summary = study.run(staging, **kwargs)
-        summary = _json_ready({"quick": bool(quick), **(summary or {})})
-        (staging / "summary.json").write_text(json.dumps(summary, indent=2))
+        summary = write_json(staging / "summary.json", {"quick": bool(quick), **(summary or {})}, nonfinite="keep")
     return summary

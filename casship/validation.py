@@ -221,6 +221,8 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     -------
     ReplayResult
     """
+    if len(data) < 2:
+        raise ValueError(f"replay: the record has {len(data)} row(s); a replay compares at least two samples")
     if x0 is None:
         values = {}
         for name in model.state_names:

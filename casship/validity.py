@@ -34,16 +34,17 @@ from typing import Mapping
 import casadi as ca
 import numpy as np
 
+from .errors import InputError
 from .model import Model
 
 __all__ = ["ValidityError", "ValidityWarning", "OPT_IN", "MARGIN", "check_inputs", "is_stable_step", "check_states", "warn_states",
-           "stable_step", "check_step", "describe_limit"]
+           "stable_step", "check_step", "describe_limit", "check_start"]
 
 #: How a caller opts in to out-of-range use (appended to every validity message).
 OPT_IN = "pass check_limits=False (command line: --allow-out-of-range) for a deliberate out-of-range study"
 
 
-class ValidityError(ValueError):
+class ValidityError(InputError):
     """A value outside the range a model is valid for, or a step beyond an integrator's stability limit."""
 
 
@@ -341,3 +342,42 @@ def check_step(model: Model, h: float, x, u, p, method: str, *, where: str = "")
                             f"{model.name!r} (eigenvalues of its linearisation at the start); use a shorter step, "
                             "max_step= (sub-steps) or method='cvodes' (adaptive), or " + OPT_IN)
     return limit
+
+
+def check_start(model: Model, x, u, p, *, what: str = "the starting state", unset: list[str] | None = None,
+                option: str = "x0") -> None:
+    """Raise :class:`ValidityError` if the model's equations are not finite at ``(x, u, p)``.
+
+    An estimator linearises the model at its prior: where the Jacobian is not finite (the MMG
+    models at rest, ``u = v = 0``, divide by the speed) every estimate would be NaN.
+
+    Parameters
+    ----------
+    model : Model
+        Continuous-time model.
+    x, u, p : array_like
+        The start (e.g. a prior mean and the first input) and the parameters.
+    what : str
+        How to call the start in the message.
+    unset : list of str, optional
+        The states nothing gave a value (named in the message as the ones to give); default (or
+        none): the states at zero.
+    option : str
+        How the caller gives starting values (e.g. ``"x0"`` or ``"--x0"``).
+
+    Raises
+    ------
+    ValidityError
+        Naming the start, the states to give and how.
+    """
+    x = np.asarray(x, dtype=float)
+    A = _state_jacobian(model, x, np.asarray(u, dtype=float), p)
+    if np.all(np.isfinite(A)):
+        return
+    if not unset:
+        unset = [n for n, v in zip(model.state_names, x) if v == 0.0]
+    shown = ", ".join(f"{n} = {v:.4g}" for n, v in zip(model.state_names, x))
+    give = ", ".join(f"{n}=..." for n in unset) or "a state where it is defined"
+    raise ValidityError(f"model {model.name!r} cannot start at {what} ({shown}): its equations are not finite "
+                        f"there (e.g. at rest for a model that divides by the speed); give the starting value: "
+                        f"{option} {give}")

@@ -149,14 +149,12 @@ def part_b(folder: Path, quick: bool = False):
         r_lat, r_lon = _rad_per_m(lat[0])
         ekf = cs.EKF(cs.discretize(sog_cog_latlon(), dt, "euler"), Q=np.diag([0.01, 0.001]),
                      R=np.diag([(std * r_lat) ** 2, (std * r_lon) ** 2]))
-        # SOG and COG start from the displacement over the first 5 s (like MSS's x_prd_init): a prior
-        # of U = 0, chi = 0 can converge to the mirror solution U < 0, chi + 180 deg.
+        # SOG and COG start from the track of the first 5 s (like MSS's x_prd_init; cs.prior_from_data):
+        # a prior of U = 0, chi = 0 can converge to the mirror solution U < 0, chi + 180 deg.
         north, east = cs.frames.latlon_to_ne(lat, lon, lat[0], lon[0])
-        k5 = int(np.searchsorted(t, t[0] + 5.0))
-        U0 = float(np.hypot(north[k5], east[k5]) / (t[k5] - t[0]))
-        chi0 = float(np.arctan2(east[k5], north[k5]))
-        prior = cs.Gaussian(np.array([lat[0], lon[0], U0, chi0, 0.0]),
-                            np.diag([(std * r_lat) ** 2, (std * r_lon) ** 2, 0.25, np.radians(30) ** 2, 0.01]))
+        start = cs.prior_from_data(ekf.model, data, measured=ekf.measured, R=ekf.R, window=5.0)
+        prior = cs.Gaussian(start.mean, np.diag([(std * r_lat) ** 2, (std * r_lon) ** 2, 0.25, np.radians(30) ** 2,
+                                                 0.01]))
         # process noise by maximum likelihood through the EKF (R fixed at the assumed 0.5 m)
         fit = MLEProblem(ekf, data, noise={"Q": True}, x0=prior).solve()
         Qf = np.diag([fit.estimates["Q[w_U]"], fit.estimates["Q[w_chi]"]])

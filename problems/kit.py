@@ -14,7 +14,6 @@
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -24,6 +23,7 @@ from pathlib import Path
 from typing import Iterable, Iterator, Mapping, Sequence
 
 from casship.io import data_dir as _data_dir
+from casship.io.jsonfile import json_ready as _json_ready, write_json as _write_json
 from casship.parallel import run_cases
 
 __all__ = ["resolve_data_dir", "data_folder", "announce", "run_cases", "md_table", "figure", "json_ready",
@@ -122,23 +122,14 @@ def figure(path: str | os.PathLike, nrows: int = 1, ncols: int = 1, **kwargs) ->
 
 
 def json_ready(value):
-    """``value`` with numpy scalars/arrays as plain numbers/lists (NaN kept), ready for ``json.dumps``."""
-    return json.loads(json.dumps(value, default=_default, allow_nan=True))
-
-
-def _default(obj):
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    return float(obj)
+    """``value`` with numpy scalars/arrays as plain numbers/lists (NaN kept), ready for ``json.dumps``
+    (:func:`casship.io.jsonfile.json_ready`)."""
+    return _json_ready(value, nonfinite="keep")
 
 
 def write_json(path: str | os.PathLike, value) -> dict:
-    """Write ``value`` as indented JSON; returns the JSON-ready value."""
-    ready = json_ready(value)
-    Path(path).write_text(json.dumps(ready, indent=2))
-    return ready
+    """Write ``value`` as indented JSON (NaN kept); returns the JSON-ready value."""
+    return _write_json(path, value, nonfinite="keep")
 
 
 # -- the report --------------------------------------------------------------------------------------------

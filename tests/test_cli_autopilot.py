@@ -1,5 +1,6 @@
 """``casship autopilot`` on the command line: the same design as the Python API, defaults in --help."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -63,3 +64,29 @@ def test_autopilot_text_output_and_errors(capsys):
     assert "no-such-ship" in capsys.readouterr().err
     assert main(["autopilot", "--model", "shi-taylor", "--scenario", "zigzag"]) == 2
     assert "zigzag" in capsys.readouterr().err
+
+
+def test_autopilot_refuses_settings_that_mean_nothing(capsys):
+    """Before: course-720 wrapped to no turn and passed its checks; a negative delay and a current of
+    1e6 m/s were accepted."""
+    for argv, text in ((["--scenario", "course-720"], "must be non-zero and within +-180 deg"),
+                       (["--delay", "-1"], "autopilot setting delay = -1.0 [s] must be finite and >= 0"),
+                       (["--current", "1e6", "0"], "--current: speed 1e+06 m/s towards 0 deg must be finite, >= 0")):
+        assert main(["autopilot", "--model", "kvlcc2"] + argv) == 2
+        err = capsys.readouterr().err
+        assert text in err and "Traceback" not in err, err
+
+
+def test_autopilot_plot_folder_follows_the_overwrite_rule(tmp_path, capsys):
+    """Before: --plot DIR overwrote the user's files and had no --overwrite."""
+    folder = tmp_path / "plots"
+    folder.mkdir()
+    (folder / "mine.txt").write_text("the user's file")
+    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "300", "--plot", str(folder)]) == 2
+    assert "pass --overwrite" in capsys.readouterr().err and (folder / "mine.txt").exists()
+    fresh = tmp_path / "fresh"
+    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "300", "--plot", str(fresh), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert all(Path(p).is_file() for p in out["plots"])
+    for m in out["metrics"]:       # overshoot in % with its degrees beside it
+        assert "overshoot_pct" in m and "overshoot_deg" in m

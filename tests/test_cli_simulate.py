@@ -26,10 +26,11 @@ def test_turning_json_form(capsys):
 
 def test_zigzag_port_first_and_rps(capsys, tmp_path):
     csv, png = tmp_path / "zz.csv", tmp_path / "zz.png"
-    out = _json(capsys, ["simulate", "--model", "kvlcc2-l7", "--maneuver", "zigzag", "--rudder-deg", "20", "--heading-deg", "-20",
+    out = _json(capsys, ["simulate", "--model", "kvlcc2-l7", "--maneuver", "zigzag", "--rudder-deg", "20", "--first", "port",
                          "--rps", "11.0", "--speed", "1.18", "--json", "--csv", str(csv), "--plot", str(png)])
     assert out["rps"] == 11.0 and out["L_pp_m"] == 7.0
-    assert out["metrics"]["first_side"] == -1
+    assert out["metrics"]["first_side"] == -1 and out["first_side"] == "port"
+    assert out["metrics"]["overshoot_1_pct"] == pytest.approx(100 * out["metrics"]["overshoot_1_deg"] / 20)
     assert out["metrics"]["overshoot_1_deg"] > 0 and out["metrics"]["overshoot_2_deg"] > 0
     data = Dataset.from_csv(csv)
     assert {"u", "v", "r", "x", "y", "psi", "delta", "n"} <= set(data.names)
@@ -77,3 +78,18 @@ def test_replay_marin(capsys, data_dir):
     assert set(out["replay"]) == {"psi_rmse_deg", "position_rmse_m", "u_rmse_mps"}
     assert out["measured_metrics"]["overshoot_1_deg"] == pytest.approx(9.33, abs=0.05)
     assert 0 < out["replay"]["psi_rmse_deg"] < 30
+
+
+def test_zigzag_side_is_never_guessed(capsys):
+    """Before: the side was sign(rudder) x sign(heading), so -20/-20 ran starboard first, and no output
+    said which side went first."""
+    base = ["simulate", "--model", "kvlcc2-l7", "--maneuver", "zigzag", "--duration", "60"]
+    out = _json(capsys, base + ["--rudder-deg", "-20", "--heading-deg", "-20", "--json"])
+    assert out["first_side"] == "port" and out["metrics"]["first_side"] == -1
+    assert main(base + ["--rudder-deg", "20"]) == 0
+    assert "first rudder to starboard" in capsys.readouterr().out
+    assert _json(capsys, base + ["--rudder-deg", "20", "--heading-deg", "-20", "--json"])["first_side"] == "port"
+    assert main(base + ["--rudder-deg", "-20", "--first", "starboard"]) == 2
+    assert "rudder_deg is negative (port first)" in capsys.readouterr().err
+    assert main(["simulate", "--model", "kvlcc2", "--first", "port"]) == 2
+    assert "--first would have no effect: not used by a turning manoeuvre" in capsys.readouterr().err

@@ -14,6 +14,7 @@ def test_demo_quick_writes_report_and_recovers_the_ship(tmp_path, capsys):
     summary = json.loads((tmp_path / "summary.json").read_text())
     report = (tmp_path / "report.md").read_text()
     assert report.splitlines()[0].startswith("# casship demo (quick run)")
+    assert "The trials are simulated, not measured" in report      # before: the report did not say so
     # rudder rate next to rudder angle, for the records and the closed loop; never above the ship's limit
     assert "| max rudder angle [deg] | max rudder rate [deg/s] |" in report
     for motion in summary["rudder"].values():

@@ -225,7 +225,7 @@ def test_time_gaps_raise_or_are_bridged_alike_in_batch_and_online(name, linear):
     with pytest.raises(ValueError, match="is longer than .* s, the longest interval the rk4 prediction bridges"):
         make(name, dm, Q, R).filter(far, prior, seed=1)
     est = make(name, dm, Q, R, max_gap=1.0, on_gap="bridge", outputs="all")
-    with pytest.warns(UserWarning, match=r"1 time gap\(s\) longer than 1 s .* bridged by 10 prediction-only row"):
+    with pytest.warns(UserWarning, match=r"1 time gap\(s\) longer than the prediction bridges in one step .* bridged by 10 prediction-only row"):
         res = est.filter(gapped, prior, seed=4)
     rows = np.flatnonzero(np.isin(res.t, gapped.t))
     inserted = np.setdiff1d(np.arange(len(res.t)), rows)

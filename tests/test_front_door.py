@@ -87,10 +87,22 @@ def nomoto_record(tmp_path):
 
 
 def test_filter_reports_every_missing_option_at_once(capsys, nomoto_record):
-    path, _ = nomoto_record
     _fails(capsys, ["filter"], "the following arguments are required: DATA, --model")
-    _fails(capsys, ["filter", str(path), "--model", "nomoto1"],
-           "the following arguments are required: --R (or --R-std), --Q (for w_r)")
+
+
+def test_filter_takes_what_is_not_given_from_the_record_and_says_so(capsys, nomoto_record):
+    """Before: R and Q were required; now R is estimated from the record, Q takes a stated default and
+    the start comes from the first samples, each named in the output."""
+    import json
+
+    path, _ = nomoto_record
+    assert main(["filter", str(path), "--model", "nomoto1", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["R"].startswith("estimated from the record: psi std 0.01")      # measured with std 0.01
+    assert summary["Q"].startswith("default 1e-08 per channel ['w_r'] (not tuned")
+    assert "first sample of column 'psi'" in summary["prior"]["psi"]
+    assert "rate of column 'psi'" in summary["prior"]["r"]
+    assert 0.2 < summary["nis_per_measurement"] < 5
 
 
 def test_filter_list_works_alone(capsys):
@@ -106,7 +118,7 @@ def test_filter_list_works_alone(capsys):
     (["--estimator", "ekff"], ["unknown estimator 'ekff'"]),
     (["--R=-1e-4"], ["not positive semi-definite"]),
     (["--R", "phi=1e-4"], ["--R: unknown name(s) ['phi']"]),
-    (["--x0", "bogus=1"], ["unknown state name 'bogus'"]),
+    (["--x0", "bogus=1"], ["--x0: unknown name(s) ['bogus']"]),
     (["--options", "gait=0.9"], ["unknown option(s) ['gait']"]),
     (["--measured", "heading"], ["no column(s) ['heading']"]),
 ])

@@ -90,7 +90,7 @@ def test_propeller_rate_gives_equilibrium():
 
 def test_zigzag_controller_switches_on_heading():
     ship = kvlcc2()
-    res = run_maneuver(ship, "zigzag", rudder_deg=20, heading_deg=-20, duration=500, dt=0.5)
+    res = run_maneuver(ship, "zigzag", rudder_deg=20, first="port", duration=500, dt=0.5)
     tr = res.trajectory
     assert res.metrics["first_side"] == -1
     # the rudder starts to port (negative) and is reversed when the heading change reaches -20 deg

@@ -62,7 +62,11 @@ def test_named_vectors():
     np.testing.assert_array_equal(m.params(), [0.08, 25.0])
     np.testing.assert_array_equal(m.params(T=10.0), [0.08, 10.0])
     np.testing.assert_array_equal(m.params({"K": 0.2}, T=3.0), [0.2, 3.0])
-    np.testing.assert_array_equal(m.params(np.array([1.0, 2.0]), K=5.0), [5.0, 2.0])
+    np.testing.assert_array_equal(m.params(np.array([1.0, 2.0]), K=0.5), [0.5, 2.0])
+    with pytest.raises(ValueError, match=r"parameter 'K' = 5 1/s of model 'nomoto1' is outside its valid range \[0, 1\]"):
+        m.params(K=5.0)                 # the declared bounds are the parameter's valid range
+    with pytest.raises(ValueError, match="parameter 'T' = nan of model 'nomoto1' is not finite"):
+        m.params(T=np.nan)
     assert m.param_dict() == {"K": 0.08, "T": 25.0}
     assert m.param_dict([1.0, 2.0]) == {"K": 1.0, "T": 2.0}
     assert m.index("r") == 1 and m.index("T", "param") == 1 and m.index("psi", "output") == 0

@@ -86,5 +86,5 @@ def test_mariner_decelerates_in_a_turn_and_zigzag_runs():
     res = run_maneuver(mariner(), "turning", rudder_deg=35, duration=600)
     assert res.metrics["steady_speed_mps"] < 0.9 * 7.7175
     assert res.metrics["turn_direction"] == 1
-    zz = run_maneuver(mariner(), "zigzag", rudder_deg=20, heading_deg=-20, duration=400)
+    zz = run_maneuver(mariner(), "zigzag", rudder_deg=20, first="port", duration=400)
     assert zz.metrics["first_side"] == -1 and zz.metrics["overshoot_1_deg"] > 0

@@ -251,16 +251,31 @@ def margins(L) -> dict:
     gm_db = float(20 * np.log10(gm)) if np.isfinite(gm) and gm > 0 else float("inf")
     upper = float(20 * np.log10(gms[up].min())) if up.any() else float("inf")
     lower = float(20 * np.log10(gms[lo].max())) if lo.any() else float("-inf")
-    cl = control.feedback(L, 1)
-    if isinstance(cl, control.StateSpace):      # drop modes the loop neither moves nor sees (positions)
-        cl = control.minreal(control.ss2tf(cl), verbose=False)
     return {"gain_margin_db": gm_db, "gain_margin_side": "lower" if gm_db < 0 else "upper",
             "phase_margin_deg": float(pm), "stability_margin": float(sm),
             "phase_crossover_rad_s": float(wpc), "gain_crossover_rad_s": float(wgc),
             "upper_gain_margin_db": upper, "lower_gain_margin_db": lower,
             "upper_crossover_rad_s": float(wgs[up][np.argmin(gms[up])]) if up.any() else float("nan"),
             "lower_crossover_rad_s": float(wgs[lo][np.argmax(gms[lo])]) if lo.any() else float("nan"),
-            "closed_loop_stable": bool(np.all(np.real(cl.poles()) < 0))}
+            "closed_loop_stable": bool(np.all(np.real(_loop_poles(control.feedback(L, 1))) < 0))}
+
+
+def _loop_poles(cl) -> np.ndarray:
+    """Poles of the closed loop without the modes it neither moves nor sees (positions): the
+    Popov-Belevitch-Hautus test on the state-space form (no transfer function, whose polynomial
+    coefficients are badly conditioned for a ship loop)."""
+    cl = control.ss(cl)
+    A, B, C = (np.asarray(m, dtype=float) for m in (cl.A, cl.B, cl.C))
+    n = A.shape[0]
+    lam = np.linalg.eigvals(A)
+    keep = []
+    for z in lam:
+        M = A - z * np.eye(n)
+        tol = 1e-9 * max(1.0, np.linalg.norm(A))
+        moved = np.linalg.matrix_rank(np.hstack([M, B]), tol) == n
+        seen = np.linalg.matrix_rank(np.vstack([M, C]), tol) == n
+        keep.append(moved and seen)
+    return lam[np.array(keep, dtype=bool)] if n else lam
 
 
 def course_change_demand(closed: control.StateSpace, change: float, t_end: float, *, actuator: Actuator,

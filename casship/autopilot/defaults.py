@@ -137,7 +137,24 @@ def _check_given(given: Mapping) -> dict:
     unknown = sorted(set(given) - names)
     if unknown:
         raise ValueError(f"unknown autopilot setting(s) {unknown}; known: {sorted(names)}")
-    return {k: v for k, v in given.items() if v is not None}
+    given = {k: v for k, v in given.items() if v is not None}
+    for k, v in given.items():
+        unit = RULES.get(k, ("", ""))[0]
+        if isinstance(v, str) or k in ("lqr_weights",):
+            continue
+        values = np.atleast_1d(np.asarray(v, dtype=float))
+        finite = np.isfinite(values) | ((values == np.inf) & (k in _UNBOUNDED))
+        low = np.any(values < 0) if k in _NON_NEGATIVE else np.any(values <= 0)
+        if not np.all(finite) or low:
+            need = ">= 0" if k in _NON_NEGATIVE else "positive"
+            what = "finite (or inf: no limit)" if k in _UNBOUNDED else "finite"
+            raise ValueError(f"autopilot setting {k} = {v} [{unit}] must be {what} and {need}")
+    return given
+
+
+#: Settings that may be zero (the others must be positive), and limits that may be inf (no limit).
+_NON_NEGATIVE = ("delay", "filter_T", "actuator_T", "zeta", "zeta_ref", "gyro_std", "compass_std", "gnss_std")
+_UNBOUNDED = ("steer_max", "steer_rate_max", "r_max")
 
 
 def _vessel(plant: SteeringPlant, key: str):

@@ -21,6 +21,10 @@ MPC period.
 """
 from __future__ import annotations
 
+import io
+import os
+import sys
+from contextlib import contextmanager, redirect_stdout
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -75,7 +79,8 @@ class MPCAutopilot:
                 raise ValueError(f"MPC {name} must be positive and finite, got {v}")
         if int(self.horizon) != self.horizon or self.horizon < 2:
             raise ValueError(f"MPC horizon must be an integer >= 2, got {self.horizon}")
-        self._solver = self._build()
+        with _quiet_stdout():           # qpOASES prints its licence banner when its first solver is made
+            self._solver = self._build()
 
     @property
     def order(self) -> int:
@@ -225,7 +230,9 @@ class MPCAutopilot:
         if np.max(np.abs(resid)) > 1e-6 * scale or np.max(np.abs(X[:, 0] - x0)) > 1e-6 * scale:
             bad.append("the model")
         if bad:
-            raise RuntimeError(f"the MPC's QP solve failed (qpOASES): the plan breaks {', '.join(bad)}")
+            from ..errors import SolverError
+
+            raise SolverError(f"the MPC's QP solve failed (qpOASES): the plan breaks {', '.join(bad)}")
 
     def _ref_step(self) -> ca.Function:
         if getattr(self, "_ref_fun", None) is None:
@@ -259,3 +266,31 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
                         q_e=1.0 / np.radians(1.0) ** 2, q_r=(1.0 / s.r_max**2) if q_r is None else q_r,
                         r_u=(100.0 / s.steer_rate_max) ** 2 if r_u is None else r_u,
                         reference=design.autopilot.reference)
+
+
+@contextmanager
+def _quiet_stdout():
+    """Standard output discarded while the block runs (Python's and file descriptor 1 of compiled code)."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):         # no real descriptor (an embedded interpreter)
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null, redirect_stdout(io.StringIO()):     # CasADi may print through Python
+            os.dup2(null.fileno(), 1)
+            yield
+    finally:
+        _flush_c_stdout()           # what compiled code buffered goes to the null device, not later to the user
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _flush_c_stdout() -> None:
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):
+        pass

@@ -246,6 +246,9 @@ def course_scenario(name: str, t_end: float | None = None, *, segment: float | N
         raise ValueError(f"unknown scenario {name!r}; use course-A or step-A (A in degrees)") from None
     if kind not in ("course", "step"):
         raise ValueError(f"unknown scenario {name!r}; use course-A or step-A (A in degrees)")
+    if not (np.isfinite(a) and 0 < abs(a) <= np.pi):
+        raise ValueError(f"scenario {name!r}: the course change {angle} deg must be non-zero and within +-180 deg "
+                         "(a course is an angle: a larger change wraps to a smaller one)")
     if t_end is None:
         t_end = (2 * segment if kind == "course" else segment) if segment is not None else 40.0
     t_end = float(t_end)

@@ -61,7 +61,7 @@ def plot_design(L, path, title: str = "", closed=None):
     fig = plt.figure(figsize=(7, 9))
     gs = fig.add_gridspec(3, 1)
     bode_axes = np.array([[fig.add_subplot(gs[0])], [fig.add_subplot(gs[1])]])
-    control.bode_plot(L, _omega(L), ax=bode_axes, display_margins=True, title=title or "loop")
+    control.bode_plot(L, _omega(L), ax=bode_axes, display_margins=True, dB=True, title=title or "loop")
     ax = fig.add_subplot(gs[2])
     cl = control.ss(closed if closed is not None else control.feedback(L, 1))
     resp = control.step_response(cl[0, 0])          # first output (the course) from the first input

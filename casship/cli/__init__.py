@@ -1,10 +1,15 @@
 """The ``casship`` command line: one sub-command per module ``casship/cli/cmd_*.py``.
 
-Each such module defines ``register(subparsers)``, which adds its parser and sets ``func``. Every
-sub-command shows its defaults in ``--help``. A user error (bad value, unknown name, missing file,
-out-of-range input) ends with exit code 2 and one line ``casship CMD: error: ...`` naming the
-item; ``--debug`` shows the Python traceback instead. Warnings print as one line
-``casship CMD: warning: ...``.
+Each such module defines ``HELP`` (its one-line description) and ``register(subparsers)``, which
+adds its parser and sets ``func``; only the command being run is registered in full, so that
+``--help`` and argument errors answer without loading CasADi. Every sub-command shows its defaults
+in ``--help``.
+
+Errors: casship's own errors (:mod:`casship.errors`, ``ValueError`` raised by casship's checks)
+and ``OSError`` (a missing or unwritable file) end with exit code 2 and one line
+``casship CMD: error: ...`` naming the item. Anything else is a bug in casship: it is reported as
+one (``casship CMD: internal error: ...``, exit code 1). ``--debug`` shows the Python traceback of
+either. Warnings print as one line ``casship CMD: warning: ...``.
 """
 from __future__ import annotations
 
@@ -13,17 +18,29 @@ import importlib
 import pkgutil
 import sys
 import warnings
+from pathlib import Path
 
 from ._common import HelpFormatter, Parser, UsageError
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "is_user_error"]
 
-#: Exceptions that are a user's error (bad input, missing file, failed solve): one line, exit 2.
-USER_ERRORS = (ValueError, TypeError, KeyError, OSError, RuntimeError, ArithmeticError)
+_PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``casship`` argument parser with every sub-command registered.
+def _commands() -> dict[str, str]:
+    """Command name -> module name, from the ``cmd_*`` modules (nothing imported)."""
+    return {info.name[4:]: info.name for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name)
+            if info.name.startswith("cmd_")}
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``casship`` argument parser.
+
+    Parameters
+    ----------
+    command : str, optional
+        The one sub-command to register in full (its options and help); the others are listed with
+        their one-line help only. Default: every sub-command in full.
 
     Returns
     -------
@@ -38,33 +55,74 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"casship {__version__}")
     parser.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):
-        if info.name.startswith("cmd_"):
-            importlib.import_module(f"{__name__}.{info.name}").register(sub)
-    for name, command in sub.choices.items():
-        command.formatter_class = HelpFormatter
-        if command.description is None:
+    for name, module_name in _commands().items():
+        module = importlib.import_module(f"{__name__}.{module_name}")
+        if command is None or name == command:
+            module.register(sub)
+        else:
+            sub.add_parser(name, help=module.HELP, add_help=False)
+    for name, command_parser in sub.choices.items():
+        command_parser.formatter_class = HelpFormatter
+        if command_parser.description is None:
             # the one-line help of the command list doubles as the description of its own --help
-            command.description = next((a.help for a in sub._choices_actions if a.dest == name), None)
-        if not any("--debug" in a.option_strings for a in command._actions):
-            command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                                 help="show the Python traceback of an error")
+            command_parser.description = next((a.help for a in sub._choices_actions if a.dest == name), None)
+        if not any("--debug" in a.option_strings for a in command_parser._actions):
+            command_parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                                        help="show the Python traceback of an error")
     return parser
 
 
 def _one_line(exc: BaseException) -> str:
-    if isinstance(exc, KeyError):
-        text = f"unknown name {next(iter(exc.args))!r}" if exc.args else "KeyError"
-    else:
-        text = str(exc)
-    lines = [line.strip() for line in text.strip().splitlines() if line.strip()]
+    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
     return "; ".join(lines) or type(exc).__name__
+
+
+def _raised_by_casship(exc: BaseException) -> bool:
+    """Whether the innermost frame of ``exc``'s traceback is casship's own code (a deliberate check)."""
+    tb = exc.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    try:
+        Path(tb.tb_frame.f_code.co_filename).resolve().relative_to(_PACKAGE_ROOT)
+    except ValueError:
+        return False
+    return True
+
+
+def is_user_error(exc: BaseException) -> bool:
+    """Whether ``exc`` is a user's error (one line, exit 2) rather than a bug in casship.
+
+    casship's own error types (:class:`casship.errors.CasshipError` and its subclasses), ``OSError``
+    (files), and a ``ValueError`` raised by one of casship's checks (casship's convention for bad
+    input) are user errors. Anything else (a ``TypeError``, ``KeyError``, a ``ValueError`` from
+    inside NumPy or CasADi, ...) is a bug.
+
+    Parameters
+    ----------
+    exc : BaseException
+
+    Returns
+    -------
+    bool
+    """
+    from ..errors import CasshipError
+
+    if isinstance(exc, (CasshipError, OSError)):
+        return True
+    return type(exc) is ValueError and _raised_by_casship(exc)
 
 
 def _usage(exc: UsageError) -> int:
     exc.parser.print_usage(sys.stderr)
     print(f"{exc.parser.prog}: error: {exc}", file=sys.stderr)
     return 2
+
+
+def _selected(argv: list[str]) -> str | None:
+    """The sub-command named in ``argv`` (the first word that is not an option), if any."""
+    return next((a for a in argv if not a.startswith("-")), None)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,9 +136,12 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit code: 0 success, 2 user error (one line on standard error), 130 interrupted.
+        Exit code: 0 success, 2 user error (one line on standard error), 1 a bug in casship,
+        130 interrupted.
     """
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    command = _selected(argv)
+    parser = build_parser(command if command in _commands() else "")
     try:
         args = parser.parse_args(argv)
     except UsageError as exc:
@@ -103,11 +164,15 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             print(f"casship {command}: interrupted", file=sys.stderr)
             return 130
-        except USER_ERRORS as exc:
+        except Exception as exc:
             if getattr(args, "debug", False):
                 raise
-            print(f"casship {command}: error: {_one_line(exc)}", file=sys.stderr)
-            return 2
+            if is_user_error(exc):
+                print(f"casship {command}: error: {_one_line(exc)}", file=sys.stderr)
+                return 2
+            print(f"casship {command}: internal error (a bug in casship): {type(exc).__name__}: {_one_line(exc)}; "
+                  f"run it again with --debug for the traceback and report it", file=sys.stderr)
+            return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

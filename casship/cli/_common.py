@@ -1,10 +1,21 @@
-"""Shared pieces of the sub-commands: the model option, required options, output checks, record reading."""
+"""Shared pieces of the sub-commands: parsing, the model option, required options, records and outputs.
+
+One way each: :func:`parse_items` / :func:`parse_pairs` for every ``a,b`` and ``name=value,...``
+option, :func:`load_record` for every record a command reads, :func:`check_outputs` and
+:func:`write_output` for every file a command writes (distinct paths, the ``--overwrite`` rule,
+atomic writes), :func:`print_json` for every ``--json`` answer.
+"""
 from __future__ import annotations
 
 import argparse
+import math
+import sys
+
+from ..errors import InputError
 
 __all__ = ["Parser", "UsageError", "HelpFormatter", "add_model_option", "require", "load_model", "add_overwrite_option",
-           "add_limits_option"]
+           "add_limits_option", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
+           "check_outputs", "write_output", "print_json", "refuse_unused"]
 
 
 class UsageError(Exception):
@@ -33,6 +44,141 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefau
         return super()._get_help_string(action)
 
 
+# -- values ---------------------------------------------------------------------------------------------
+def number(text: str, what: str) -> float:
+    """``text`` as a finite float, or :class:`~casship.errors.InputError` naming ``what``."""
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        raise InputError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise InputError(f"{what}: must be finite, got {text}")
+    return value
+
+
+def finite(text: str) -> float:
+    """argparse type: a finite number."""
+    try:
+        return number(text, "value")
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("value: ")) from None
+
+
+def positive(text: str) -> float:
+    """argparse type: a positive finite number."""
+    value = finite(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def count(text: str) -> int:
+    """argparse type: a whole number >= 1 (workers, iterations, a decimation factor)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text}")
+    return value
+
+
+def seed(text: str) -> int:
+    """argparse type: a random seed, a whole number >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text}")
+    return value
+
+
+def parse_items(text: str | None, what: str = "list", *, unique: bool = True) -> list[str]:
+    """Comma-separated items (commas inside brackets, as in ``bias[a,b]``, do not split).
+
+    Parameters
+    ----------
+    text : str or None
+        The option's value (None or empty: no items).
+    what : str
+        The option, for messages.
+    unique : bool
+        Refuse an item given twice (a name); False for labels that repeat (one per record).
+
+    Returns
+    -------
+    list of str
+
+    Raises
+    ------
+    InputError
+        An empty item (``a,,b``), unbalanced brackets, or (``unique``) an item given twice.
+    """
+    if not text:
+        return []
+    out, depth, cur = [], 0, ""
+    for ch in text:
+        depth += (ch == "[") - (ch == "]")
+        if depth < 0:
+            raise InputError(f"{what}: unbalanced ']' in {text!r}")
+        if ch == "," and depth == 0:
+            out.append(cur.strip())
+            cur = ""
+        else:
+            cur += ch
+    if depth:
+        raise InputError(f"{what}: unbalanced '[' in {text!r}")
+    out.append(cur.strip())
+    if "" in out:
+        raise InputError(f"{what}: empty item in {text!r}")
+    twice = sorted({s for s in out if out.count(s) > 1})
+    if twice and unique:
+        raise InputError(f"{what}: {twice} given more than once")
+    return out
+
+
+def parse_pairs(text: str | None, what: str, *, numbers: bool = True, names=None) -> dict:
+    """``name=value,...`` as a dict (values as finite numbers, or as text with ``numbers=False``).
+
+    Parameters
+    ----------
+    text : str or None
+        The option's value (None or empty: an empty dict).
+    what : str
+        The option, for messages (e.g. ``"--R"``).
+    numbers : bool
+        Convert the values to finite floats.
+    names : sequence of str, optional
+        The accepted names (an unknown one raises, listing them).
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    InputError
+        An item that is not ``name=value``, a name given twice, a value that is not a finite number,
+        or an unknown name.
+    """
+    out = {}
+    for item in parse_items(text, what):
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep or not key or not value:
+            raise InputError(f"{what}: expected name=value items, got {item!r}")
+        if key in out:
+            raise InputError(f"{what}: {key!r} given more than once")
+        out[key] = number(value, f"{what} {key}") if numbers else value
+    if names is not None:
+        unknown = [k for k in out if k not in names]
+        if unknown:
+            raise InputError(f"{what}: unknown name(s) {unknown}; known: {list(names)}")
+    return out
+
+
+# -- options ----------------------------------------------------------------------------------------------
 def add_model_option(parser: argparse.ArgumentParser, legacy_positional: bool = False) -> None:
     """``--model NAME``, the one way every sub-command takes the model.
 
@@ -58,6 +204,13 @@ def require(parser: argparse.ArgumentParser, args, needed: dict[str, object]) ->
         parser.error(f"the following arguments are required: {', '.join(missing)}")
 
 
+def refuse_unused(parser: argparse.ArgumentParser, given: dict[str, bool], reason: str) -> None:
+    """Refuse options that would have no effect (usage error naming them and why)."""
+    unused = [name for name, is_given in given.items() if is_given]
+    if unused:
+        parser.error(f"{', '.join(unused)} would have no effect: {reason}")
+
+
 def load_model(name: str):
     """The registered model ``name`` (an unknown name raises ``ValueError`` listing the known ones)."""
     from ..models import get_model
@@ -76,3 +229,99 @@ def add_limits_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--allow-out-of-range", dest="allow_out_of_range", action="store_true",
                         help="run although inputs, states or the time step leave the model's validity "
                              "ranges (a deliberate out-of-range study)")
+
+
+# -- records ----------------------------------------------------------------------------------------------
+def load_record(path, model=None, *, wrap_angles: bool = False):
+    """A record by :func:`casship.io.read_record` (CSV, MARIN, HSVA, NMEA), the one reader of the commands.
+
+    Parameters
+    ----------
+    path : str or Path
+    model : Model, optional
+        With ``wrap_angles``: the model whose angle outputs are wrapped to (-pi, pi] (trial files hold
+        a continuous heading; an estimator compares angles on the circle).
+    wrap_angles : bool
+        Wrap the model's angle outputs.
+
+    Returns
+    -------
+    Dataset
+        ``meta["name"]`` is the file name.
+    """
+    from pathlib import Path
+
+    from ..angles import wrap
+    from ..io import read_record
+
+    data = read_record(path)
+    if wrap_angles and model is not None:
+        angles = {n: wrap(data[n]) for n, a in zip(model.output_names, model.angle_outputs) if a and n in data}
+        if angles:
+            data = data.with_columns(**angles)
+    data.meta.setdefault("name", Path(path).name)
+    return data
+
+
+# -- outputs ---------------------------------------------------------------------------------------------
+def check_outputs(outputs: dict[str, object], *, overwrite: bool, folders: tuple[str, ...] = ()) -> dict:
+    """Check every output of a command before any work: distinct paths, the ``--overwrite`` rule.
+
+    Parameters
+    ----------
+    outputs : dict
+        Option (``"--out"``) -> path (None: not asked for).
+    overwrite : bool
+        The command's ``--overwrite``.
+    folders : tuple of str
+        The options whose path is a folder.
+
+    Returns
+    -------
+    dict
+        Option -> the stamp of what is at its path now (see :func:`casship.outdir.stamp`), for
+        :func:`write_output`.
+
+    Raises
+    ------
+    InputError
+        Two options naming the same path.
+    FileExistsError, PermissionError, ...
+        As :func:`casship.outdir.check_output_file` and :func:`~casship.outdir.check_output_folder`.
+    """
+    from pathlib import Path
+
+    from ..outdir import check_output_file, check_output_folder, stamp
+
+    given = {k: Path(v) for k, v in outputs.items() if v}
+    seen = {}
+    for option, path in given.items():
+        key = path.absolute().resolve()
+        if key in seen:
+            raise InputError(f"{seen[key]} and {option} name the same path {path}: one would replace the other")
+        seen[key] = option
+    stamps = {}
+    for option, path in given.items():
+        check = check_output_folder if option in folders else check_output_file
+        check(path, overwrite=overwrite, what=option)
+        stamps[option] = stamp(path)
+    return stamps
+
+
+def write_output(path, write, *, option: str, overwrite: bool, stamps: dict) -> None:
+    """Write one output file atomically: ``write(tmp)`` into a temporary sibling, then move it into place.
+
+    The move never replaces a file that appeared (or changed) since :func:`check_outputs` looked,
+    with or without ``--overwrite`` (see :func:`casship.outdir.output_file`).
+    """
+    from ..outdir import output_file
+
+    with output_file(path, overwrite=overwrite, what=option, expect=stamps.get(option)) as tmp:
+        write(tmp)
+
+
+def print_json(value, stream=None) -> None:
+    """Print one JSON object (:func:`casship.io.jsonfile.dumps`: numpy values as numbers, non-finite as text)."""
+    from ..io.jsonfile import dumps
+
+    print(dumps(value), file=stream or sys.stdout)

@@ -9,15 +9,13 @@ Example::
     casship autopilot --model kvlcc2 --json
     casship autopilot --model kvlcc2 --scenario course-60 --method lqr --wind 10 45 --plot out/
     casship autopilot --model otter --mode course --gnss-std 0.02 --show-defaults
+    casship autopilot --model kvlcc2 --params fit.json           # on the ship identified by casship identify
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-import numpy as np
-
-from ._common import add_model_option, require
+from ._common import add_model_option, add_overwrite_option, check_outputs, print_json, require, seed
 
 #: settings shown in degrees on the command line (name -> option suffix)
 _DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s"}
@@ -25,6 +23,10 @@ _CHOICES = {"method": ("pid", "lqr"), "mode": ("heading", "course"), "rate": ("e
             "integral": ("fossen", "exact", "none")}
 _PAIRS = {"ekf_alpha", "ekf_q", "observer_q"}
 _SKIP = {"lqr_weights"}
+
+
+#: One-line description (the command list of ``casship --help``).
+HELP = "design a course autopilot for a named model and run a course change"
 
 
 def _option(name: str) -> str:
@@ -35,7 +37,7 @@ def _option(name: str) -> str:
 def register(sub) -> None:
     from ..autopilot.defaults import RULES
 
-    p = sub.add_parser("autopilot", help="design a course autopilot for a named model and run a course change",
+    p = sub.add_parser("autopilot", help=HELP,
                        description="Design a course autopilot (python-control) for a registered ship and run the "
                                    "nonlinear closed loop (sensors, estimator, steering gear) through a course "
                                    "change. Every setting defaults to the rule shown, derived from the ship; the "
@@ -62,29 +64,20 @@ def register(sub) -> None:
                    help="uniform current speed [m/s] and the direction it flows towards [deg]")
     p.add_argument("--wind", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=None,
                    help="true wind speed [m/s] and the direction it comes from [deg] (Fujiwara loads)")
-    p.add_argument("--seed", type=int, default=0, help="sensor-noise seed")
+    p.add_argument("--params", default=None,
+                   help='JSON file {"params": {name: value}} (e.g. a fit of casship identify) with the ship\'s parameters')
+    p.add_argument("--seed", type=seed, default=0, help="sensor-noise seed")
     p.add_argument("--show-defaults", action="store_true", help="print the settings for this ship and exit")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--plot", default=None, metavar="DIR", help="save Bode/step and closed-loop plots to DIR")
+    p.add_argument("--plot", default=None, metavar="DIR", help="save Bode/step and closed-loop plots to the new folder DIR")
+    add_overwrite_option(p)
     p.set_defaults(func=run, parser=p)
-
-
-def _clean(v):
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    if isinstance(v, complex):
-        return [v.real, v.imag]
-    if isinstance(v, (float, np.floating)):
-        return None if not np.isfinite(v) else float(v)
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
 
 
 def settings_from_args(args) -> dict:
     """The settings given on the command line, in SI units (the others follow the rules)."""
+    import numpy as np
+
     from ..autopilot.defaults import RULES
 
     out = {}
@@ -102,60 +95,105 @@ def settings_from_args(args) -> dict:
     return out
 
 
-def run(args) -> int:
-    from .. import autopilot as ap
-    from ..models import get_model
+def _environment(args, model):
+    """The current and wind options, checked: finite, non-negative, a current within the ship's speed range."""
+    import numpy as np
+
+    from ..errors import InputError
     from ..models.wind import add_current, add_wind
 
-    require(args.parser, args, {"--model": args.model})
-    model = get_model(args.model)
     env = {}
     if args.current is not None:
+        speed, direction = args.current
+        limit = model.limits.get("u")
+        top = limit.upper if limit is not None and np.isfinite(limit.upper) else 2 * model.vessel.U0
+        if not (np.isfinite(speed) and np.isfinite(direction) and 0 <= speed <= top):
+            raise InputError(f"--current: speed {speed:g} m/s towards {direction:g} deg must be finite, >= 0 and at "
+                             f"most {top:g} m/s (the speed range of model {model.name!r})")
         model = add_current(model)
-        env.update(current_speed=args.current[0], current_dir=float(np.radians(args.current[1])))
+        env.update(current_speed=speed, current_dir=float(np.radians(direction)))
     if args.wind is not None:
+        speed, direction = args.wind
+        if not (np.isfinite(speed) and np.isfinite(direction) and speed >= 0):
+            raise InputError(f"--wind: speed {speed:g} m/s from {direction:g} deg must be finite and >= 0")
         model = add_wind(model)
-        env.update(wind_speed=args.wind[0], wind_dir=float(np.radians(args.wind[1])))
-    design = ap.design_autopilot(model, **settings_from_args(args))       # designed in calm water
+        env.update(wind_speed=speed, wind_dir=float(np.radians(direction)))
+    return model, env
+
+
+def _db(value: float) -> str:
+    """A gain margin in dB; beyond 100 dB either way it bounds nothing in practice."""
+    if value != value:
+        return "none"
+    if abs(value) > 100:
+        return f"{'>' if value > 0 else '<'} {100 if value > 0 else -100} dB (none in practice)"
+    return f"{value:.1f} dB"
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from .. import autopilot as ap
+    from ..models import get_model
+
+    require(args.parser, args, {"--model": args.model})
+    check_outputs({"--plot": args.plot}, overwrite=args.overwrite, folders=("--plot",))
+    if args.params:
+        from ..identify import read_params
+
+        ship, p = read_params(args.params, args.model)     # the fitted variant, checked against the file
+        given = ship.param_dict(p)
+    else:
+        ship, given = get_model(args.model), {}
+    model, env = _environment(args, ship)
+    p = model.params({k: v for k, v in given.items() if k in model.param_names}) if given else None
+    design = ap.design_autopilot(model, p=p, **settings_from_args(args))       # designed in calm water
     s = design.settings
     if args.show_defaults:
         rows = {k: {"value": v, "source": s.sources.get(k, "")} for k, v in s.as_dict().items()}
         if args.json:
-            print(json.dumps(_clean({"model": args.model, "settings": rows})))
+            print_json({"model": args.model, "settings": rows})
         else:
             for k, row in rows.items():
                 print(f"{k:>15} = {row['value']!s:<40} ({row['source']})")
         return 0
     res = design.simulate(args.scenario, args.t_end, seed=args.seed, environment=env)
     steer_unit = "N m" if design.plant.steer == "tau_N" else "deg"
+    metrics, previous = [], 0.0
+    for m in res.metrics:          # overshoot in % of the course change, with degrees beside it
+        change = abs(m["target_deg"] - previous)
+        previous = m["target_deg"]
+        metrics.append({**m, "overshoot_deg": m.get("overshoot_pct", np.nan) / 100 * change})
     out = {"model": args.model, "scenario": args.scenario, "t_end_s": float(res.data.t[-1]), "environment": env,
-           **design.summary(), "metrics": res.metrics, "performance": res.performance}
+           **design.summary(), "metrics": metrics, "performance": res.performance}
     if args.plot:
-        folder = Path(args.plot)
-        folder.mkdir(parents=True, exist_ok=True)
-        loop_png, run_png = folder / f"{args.model}_loop.png", folder / f"{args.model}_{args.scenario}.png"
-        ap.plot_design(design.loop, loop_png, f"{args.model}: loop on the linearised ship", design.closed_loop)
-        ap.plot_closed_loop(res, run_png, f"{args.model} {args.scenario} ({s.mode}, {s.method})",
-                            **({"steer_label": "yaw moment [N m]", "steer_scale": 1.0} if steer_unit == "N m" else {}))
-        out["plots"] = [str(loop_png), str(run_png)]
+        from ..outdir import output_folder
+
+        with output_folder(args.plot, overwrite=args.overwrite, what="--plot") as folder:
+            loop_png, run_png = folder / f"{args.model}_loop.png", folder / f"{args.model}_{args.scenario}.png"
+            ap.plot_design(design.loop, loop_png, f"{args.model}: loop on the linearised ship", design.closed_loop)
+            ap.plot_closed_loop(res, run_png, f"{args.model} {args.scenario} ({s.mode}, {s.method})",
+                                **({"steer_label": "yaw moment [N m]", "steer_scale": 1.0} if steer_unit == "N m"
+                                   else {}))
+        out["plots"] = [str(Path(args.plot) / p.name) for p in (loop_png, run_png)]
     if args.json:
-        print(json.dumps(_clean(out)))
+        print_json(out)
         return 0
     mg, nom, g = design.margins, design.nomoto, design.gains
     print(f"{args.model} at {s.speed:.3g} m/s: Nomoto K = {nom.K:.4g} 1/s, T = {nom.T:.4g} s"
           + (f" (T1 {nom.T1:.4g}, T2 {nom.T2:.4g}, T3 {nom.T3:.4g})" if nom.second_order else ""))
     print(f"{g.method}: wn = {s.wn:.4g} rad/s, Kp = {g.Kp:.4g}, Kd = {g.Kd:.4g} s, Ki = {g.Ki:.4g} 1/s; "
           f"{s.mode} mode, loop period {s.dt:g} s")
-    print(f"margins (python-control): gain {mg['gain_margin_db']:.1f} dB ({mg['gain_margin_side']}), phase "
+    print(f"margins (python-control): gain {_db(mg['gain_margin_db'])} ({mg['gain_margin_side']}), phase "
           f"{mg['phase_margin_deg']:.1f} deg at {mg['gain_crossover_rad_s']:.3g} rad/s; upper/lower gain margin "
-          f"{mg['upper_gain_margin_db']:.1f}/{mg['lower_gain_margin_db']:.1f} dB; closed loop stable: "
+          f"{_db(mg['upper_gain_margin_db'])}/{_db(mg['lower_gain_margin_db'])}; closed loop stable: "
           f"{mg['closed_loop_stable']}")
     sc = 1.0 if steer_unit == "N m" else float(np.degrees(1.0))
-    print(f"{'segment':>8} {'target':>7} {'rise s':>8} {'over %':>7} {'settle s':>9} {'ss err':>7} "
-          f"{'max steer':>10} {'rate lim':>9}  (steering in {steer_unit})")
-    for k, m in enumerate(res.metrics):
+    print(f"{'segment':>8} {'target':>7} {'rise s':>8} {'over %':>7} {'over deg':>9} {'settle s':>9} {'ss err':>7} "
+          f"{'max steer':>10} {'rate lim':>9}  (target, errors in deg; steering in {steer_unit})")
+    for k, m in enumerate(metrics):
         print(f"{k:>8d} {m['target_deg']:>7.1f} {m.get('rise_time_s', np.nan):>8.1f} "
-              f"{m.get('overshoot_pct', np.nan):>7.2f} {m.get('settling_time_s', np.nan):>9.1f} "
+              f"{m.get('overshoot_pct', np.nan):>7.2f} {m['overshoot_deg']:>9.3f} {m.get('settling_time_s', np.nan):>9.1f} "
               f"{m['steady_state_error_deg']:>7.2f} {sc * m['steer_max_abs']:>10.2f} "
               f"{m.get('rate_limited_fraction', np.nan):>9.3f}")
     for c in res.performance["checks"]:

@@ -2,8 +2,12 @@
 from __future__ import annotations
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "show or empty the cache of compiled C code (option jit)"
+
+
 def register(sub) -> None:
-    p = sub.add_parser("cache", help="show or empty the cache of compiled C code (option jit)",
+    p = sub.add_parser("cache", help=HELP,
                        description="Compiled steps, folds and likelihoods are kept as shared libraries in a "
                                    "cache directory ($CASSHIP_CACHE_DIR, else $XDG_CACHE_HOME/casship or "
                                    "~/.cache/casship), so that a new process does not compile them again. A folder "

@@ -6,8 +6,12 @@ from pathlib import Path
 from ._common import add_overwrite_option
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "end-to-end demonstration on built-in defaults (writes a report folder)"
+
+
 def register(sub) -> None:
-    p = sub.add_parser("demo", help="end-to-end demonstration on built-in defaults (writes a report folder)",
+    p = sub.add_parser("demo", help=HELP,
                        description="KVLCC2 sea trials simulated and measured with noisy sensors; EKF, UKF and RTS "
                                    "estimates; a maximum-likelihood fit of hull derivatives; validation manoeuvres; "
                                    "a course autopilot on the fitted model. Writes report.md, summary.json and "

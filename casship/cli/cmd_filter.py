@@ -1,54 +1,49 @@
-"""``casship filter DATA.csv``: run a state estimator (and optionally the RTS smoother) over a record.
+"""``casship filter DATA --model NAME``: run a state estimator (and optionally the RTS smoother) over a record.
 
 Examples::
 
+    casship filter ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --model kvlcc2 --measured x,y,psi
     casship filter ../shared/data/usv_fuzhou_gnss/zigzag_30_inter_xy.csv --preset usv-gnss \\
-        --model sog-cog --estimator ekf --smooth --out est.csv --plot est.png
+        --model sog-cog-latlon --smooth --out est.csv --plot est.png
     casship filter trial.csv --model nomoto1 --estimator ukf --measured psi --R psi=1e-4 --Q 1e-8 \\
         --columns psi=heading:deg,delta=rudder:deg --time time:s --out est.csv
 
+What is not given is taken from the record, and the output says where each value came from: the
+measurement variances ``R`` estimated from the record (:func:`casship.identify.noise_std`), the
+starting state by :func:`casship.prior_from_data` (first samples, speed and course from the track),
+``Q`` at :data:`DEFAULT_Q` per noise channel (a default, not a tuning: compare the NIS per
+measurement in the output with 1, or estimate ``Q`` with ``casship identify --estimate-noise Q``).
+A run that diverges (a non-finite estimate or log-likelihood) is an error.
+
 Estimators are looked up by name in :data:`casship.estimators.ESTIMATORS` (``kf``, ``ekf``,
-``ukf``, ``enkf``, ``kalman-bucy``, and any that other modules register there).
+``ukf``, ``enkf``, ``kalman-bucy``, ``mhe``, and any that other modules register there).
 """
 from __future__ import annotations
 
-import argparse
-import json
-from pathlib import Path
+import warnings
 
-import numpy as np
+from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model,
+                      load_record, parse_items, parse_pairs, positive, print_json, require, seed, write_output)
 
-from ._common import add_limits_option, add_model_option, add_overwrite_option, load_model, require
+#: Variance of each process-noise channel when ``--Q`` is not given (in the channel's units squared).
+DEFAULT_Q = 1e-8
 
 PRESETS = {
     "usv-gnss": {
         "doc": "USV GNSS logs (time [s], lat/lon [deg]): lat/lon in rad and local x_n, y_n [m]; "
-               "the log's own speed/heading kept as log_speed, log_heading for comparison",
+               "the log's own speed [kn] and heading [deg] kept as log_speed, log_heading for comparison",
         "time": "time:s",
         "columns": {"lat": "lat:deg", "lon": "lon:deg", "log_speed": "speed:kn", "log_heading": "heading:deg"},
         "latlon": ("lat", "lon"),
-        # chosen so that the NIS per measurement is about 1 on the 30 deg zig-zag log (resampled 2 Hz,
-        # 1e-6 deg position resolution); the log's 'speed' column is in knots (it matches the
-        # speed over ground of the positions only as kn)
-        "gnss_std_m": 0.1,
-        "Q": {"w_U": 0.004, "w_chi": 0.001},
     },
 }
 
-
-def _positive(text: str) -> float:
-    """argparse type: a positive finite number."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not np.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return value
+#: One-line description (the command list of ``casship --help``).
+HELP = "run a state estimator (and smoother) over a record"
 
 
 def register(sub) -> None:
-    p = sub.add_parser("filter", help="run a state estimator (and smoother) over a record",
+    p = sub.add_parser("filter", help=HELP,
                        description="Estimate the states of a registered model from a record (CSV, MARIN .dat, "
                                    "NMEA log) with a KF, EKF, UKF, EnKF, Kalman-Bucy filter or MHE; write "
                                    "estimates and standard deviations (CSV) and a plot.\n\n"
@@ -60,7 +55,7 @@ def register(sub) -> None:
     p.add_argument("--list", action="store_true", help="list the estimators and presets and exit")
     p.add_argument("--smooth", action="store_true",
                    help="smooth instead of filter (est.smooth: RTS for the Kalman filters, full information for mhe)")
-    p.add_argument("--preset", default=None, choices=sorted(PRESETS), help="column/noise preset")
+    p.add_argument("--preset", default=None, choices=sorted(PRESETS), help="column preset of a log format")
     p.add_argument("--columns", default=None,
                    help="NEW=SOURCE[:UNIT],... CSV columns to read and convert to SI (e.g. psi=heading:deg); "
                         "default: all columns as they are")
@@ -69,22 +64,23 @@ def register(sub) -> None:
                                                   "also give local x_n, y_n [m]")
     p.add_argument("--measured", default=None, help="measured outputs a,b (default: outputs present in the data)")
     p.add_argument("--R", default=None, help="measurement variances: scalar or name=value,... (SI units); "
-                                             "required unless --R-std or a preset gives them")
+                                             "default: estimated from the record")
     p.add_argument("--R-std", dest="R_std", default=None, help="measurement standard deviations, as --R")
-    p.add_argument("--Q", default=None, help="process-noise variances: scalar or name=value,...; required "
-                                             "unless a preset gives them or the model has no noise channels")
-    p.add_argument("--x0", default=None, help="initial state name=value,... (default: first measurement of "
-                                              "directly measured states, else 0)")
+    p.add_argument("--Q", default=None, help=f"process-noise variances: scalar or name=value,... (default "
+                                             f"{DEFAULT_Q:g} per channel)")
+    p.add_argument("--x0", default=None, help="initial state name=value,... (default: from the record, see "
+                                              "casship.prior_from_data)")
     p.add_argument("--P0", default=None, help="initial variances: scalar or name=value,... (default 1, R for "
                                               "measured states)")
-    p.add_argument("--dt", type=_positive, default=None,
-                   help="nominal filter step [s] (default: median data step)")
-    p.add_argument("--rate", type=_positive, default=None,
+    p.add_argument("--dt", type=positive, default=None,
+                   help="nominal step [s] of the continuous-time kalman-bucy filter (Qc = Q dt; default: the "
+                        "median data step); the other estimators step at the record's time stamps")
+    p.add_argument("--rate", type=positive, default=None,
                    help="run the filter at RATE Hz (not below the data rate), inserting prediction-only rows "
                         "between the samples (Dataset.resample)")
     p.add_argument("--method", default="euler", choices=("euler", "rk4"), help="discretisation")
     p.add_argument("--options", default=None, help="estimator options key=value,... (e.g. gate=0.999,members=100)")
-    p.add_argument("--seed", type=int, default=0, help="seed of stochastic estimators (EnKF)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of stochastic estimators (EnKF)")
     p.add_argument("--out", default=None, help="CSV of estimates and standard deviations")
     p.add_argument("--plot", default=None, help="PNG plot of the estimates with 2-sigma bands")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -94,41 +90,21 @@ def register(sub) -> None:
 
 
 # -- argument parsing helpers --------------------------------------------------------------------
-def _pairs(text: str | None, what: str) -> dict[str, str]:
-    if not text:
-        return {}
-    out = {}
-    for item in text.split(","):
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise ValueError(f"{what}: expected name=value items, got {item!r}")
-        out[key.strip()] = value.strip()
-    return out
+def _variances(text: str | None, names, what: str):
+    """Scalar or name=value list -> a number or a dict over ``names`` (every name needs a value)."""
+    from ._common import number
 
-
-def _number(value: str, what: str) -> float:
-    try:
-        return float(value)
-    except ValueError:
-        raise ValueError(f"{what}: {value!r} is not a number") from None
-
-
-def _variances(text: str | None, names, what: str, default=None):
-    """Scalar or name=value list -> a dict over ``names`` (missing names take ``default``)."""
     if text is None:
-        return default
+        return None
     text = text.strip()
     if "=" not in text:
-        return _number(text, what)
-    pairs = {k: _number(v, f"{what} {k}") for k, v in _pairs(text, what).items()}
-    unknown = set(pairs) - set(names)
-    if unknown:
-        raise ValueError(f"{what}: unknown name(s) {sorted(unknown)}; known: {list(names)}")
-    if isinstance(default, dict):
-        return {**default, **pairs}
+        return number(text, what)
+    pairs = parse_pairs(text, what, names=names)
     missing = [n for n in names if n not in pairs]
     if missing:
-        raise ValueError(f"{what}: no value for {missing}")
+        from ..errors import InputError
+
+        raise InputError(f"{what}: no value for {missing}")
     return pairs
 
 
@@ -144,7 +120,6 @@ def _option_value(text: str):
 # -- the command ----------------------------------------------------------------------------------
 def run(args) -> int:
     from ..estimators import ESTIMATORS
-    from ..outdir import check_output_file
 
     if args.list:
         for name, cls in ESTIMATORS.items():
@@ -153,166 +128,149 @@ def run(args) -> int:
             print(f"preset {name:8s} {preset['doc']}")
         return 0
     require(args.parser, args, {"DATA": args.data, "--model": args.model})
-    model = load_model(args.model)
-    preset = PRESETS.get(args.preset, {})
-    missing = []
-    if args.R is None and args.R_std is None and "gnss_std_m" not in preset:
-        missing.append("--R (or --R-std)")
-    if args.Q is None and model.nw and not set(preset.get("Q", {})) & set(model.noise_names):
-        missing.append(f"--Q (for {', '.join(model.noise_names)})")
-    require(args.parser, args, {name: None for name in missing})
+    if args.dt is not None and args.estimator != "kalman-bucy":
+        args.parser.error("--dt would have no effect: the filter steps at the record's time stamps (use --rate to "
+                          "run it faster); --dt is the nominal step of --estimator kalman-bucy")
     if args.estimator not in ESTIMATORS:
-        raise ValueError(f"--estimator: unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
-    for option, path in (("--out", args.out), ("--plot", args.plot)):
-        if path:
-            check_output_file(path, overwrite=args.overwrite, what=option)
+        from ..errors import InputError
+
+        raise InputError(f"--estimator: unknown estimator {args.estimator!r}; known: {sorted(ESTIMATORS)}")
+    if args.R is not None and args.R_std is not None:
+        args.parser.error("give --R or --R-std, not both")
+    stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
+    model = load_model(args.model)
     summary, result, data, meas = filter_file(args, model)
     if args.out:
-        result.to_dataset().to_csv(args.out)
+        write_output(args.out, lambda tmp: result.to_dataset().to_csv(tmp), option="--out",
+                     overwrite=args.overwrite, stamps=stamps)
         summary["out"] = str(args.out)
     if args.plot:
-        plot_result(result, data, meas, args.plot)
+        overlay = {n: data[n] for n in meas if n in result.state_names}
+        write_output(args.plot, lambda tmp: result.plot(tmp, measured=overlay, t_measured=data.t), option="--plot",
+                     overwrite=args.overwrite, stamps=stamps)
         summary["plot"] = str(args.plot)
     if args.json:
-        print(json.dumps(summary, indent=2, default=float))
+        print_json(summary)
     else:
         for key, value in summary.items():
-            print(f"{key}: {value}")
+            if isinstance(value, dict):
+                print(f"{key}:")
+                for k, v in value.items():
+                    print(f"  {k}: {v}")
+            else:
+                print(f"{key}: {value}")
     return 0
 
 
-def load_data(args):
+def load_data(args, model=None):
     """The record as a Dataset in SI units (any format of :func:`casship.io.read_record`; for CSV also
-    the preset, ``--columns``, ``--time``, ``--latlon``)."""
-    from ..io import read_csv, read_record
+    the preset, ``--columns``, ``--time``, ``--latlon``); the model's angle outputs wrapped."""
+    from pathlib import Path
+
+    from ..errors import InputError
+    from ..io import read_csv
 
     path = Path(args.data)
-    preset = {}
-    if args.preset:
-        if args.preset not in PRESETS:
-            raise ValueError(f"unknown preset {args.preset!r}; known: {sorted(PRESETS)}")
-        preset = PRESETS[args.preset]
+    preset = PRESETS[args.preset] if args.preset else {}
     columns = dict(preset.get("columns", {}))
-    columns.update(_pairs(args.columns, "--columns"))
-    latlon = tuple(args.latlon.split(",")) if args.latlon else preset.get("latlon")
+    columns.update(parse_pairs(args.columns, "--columns", numbers=False))
+    latlon = tuple(parse_items(args.latlon, "--latlon")) if args.latlon else preset.get("latlon")
     if latlon is not None and len(latlon) != 2:
-        raise ValueError(f"--latlon: expected LAT,LON, got {args.latlon!r}")
+        raise InputError(f"--latlon: expected LAT,LON, got {args.latlon!r}")
     time = args.time or preset.get("time")
     if not columns and time is None and latlon is None:
-        return read_record(path), preset
+        return load_record(path, model, wrap_angles=True)
     if not path.is_file():
         raise FileNotFoundError(f"data file {path}: no such file")
-    return read_csv(path, columns or None, time=time or "t:s", latlon=latlon), preset
-
-
-def _initial_velocity(data, names):
-    """Speed and course from a straight-line fit of the first few seconds of positions."""
-    xn, yn = data[names[0]], data[names[1]]
-    ok = np.flatnonzero(np.isfinite(xn) & np.isfinite(yn))
-    ok = ok[data.t[ok] <= data.t[ok[0]] + 5.0] if ok.size else ok
-    if ok.size < 3:
-        return 0.0, 0.0
-    vx = np.polyfit(data.t[ok], xn[ok], 1)[0]
-    vy = np.polyfit(data.t[ok], yn[ok], 1)[0]
-    return float(np.hypot(vx, vy)), float(np.arctan2(vy, vx))
+    return read_csv(path, columns or None, time=time or "t:s", latlon=latlon)
 
 
 def filter_file(args, model=None):
     """Run the command's estimation; returns ``(summary, result, data, measured)``."""
-    from ..gaussian import Gaussian
+    import numpy as np
+
     from ..discretize import discretize
-    from ..estimators import ESTIMATORS
-    from ..frames import wgs84_radii
+    from ..errors import InputError
+    from ..estimators import ESTIMATORS, noise_from_data, prior_from_data
     from ..validity import check_inputs, check_step
 
-    data, preset = load_data(args)
     model = model if model is not None else load_model(args.model)
+    data = load_data(args, model)
     if args.measured:
-        meas = tuple(s.strip() for s in args.measured.split(","))
+        meas = tuple(parse_items(args.measured, "--measured"))
     else:
         meas = tuple(n for n in model.output_names if n in data)
         if not meas:
-            raise ValueError(f"the data have none of the outputs {list(model.output_names)} of model "
+            raise InputError(f"the data have none of the outputs {list(model.output_names)} of model "
                              f"{args.model!r}; columns: {list(data.names)} (use --columns or --measured)")
     missing = [n for n in (*model.input_names, *meas) if n not in data]
     if missing:
-        raise ValueError(f"the data have no column(s) {missing} needed by model {args.model!r}; "
+        raise InputError(f"the data have no column(s) {missing} needed by model {args.model!r}; "
                          f"columns: {list(data.names)} (use --columns)")
     if args.rate:
         try:
             data = data.resample(args.rate, hold=model.input_names)
         except ValueError as exc:
-            raise ValueError(f"--rate: {exc}") from None
+            raise InputError(f"--rate: {exc}") from None
     if len(data) < 2:
-        raise ValueError(f"data {args.data}: {len(data)} row(s); a filter run needs at least two")
+        raise InputError(f"data {args.data}: {len(data)} row(s); a filter run needs at least two")
     dt = args.dt or float(np.median(np.diff(data.t)))
     dm = discretize(model, dt, method=args.method)
+    sources = {}
 
-    # measurement covariance: --R / --R-std, else the preset's GNSS accuracy
+    # measurement covariance: --R / --R-std, else estimated from the record
     R = _variances(args.R, meas, "--R")
+    sources["R"] = "given (--R)"
     if args.R_std is not None:
-        if R is not None:
-            raise ValueError("give --R or --R-std, not both")
         std = _variances(args.R_std, meas, "--R-std")
         R = {k: v**2 for k, v in std.items()} if isinstance(std, dict) else std**2
-    if R is None and "gnss_std_m" in preset:
-        s = preset["gnss_std_m"]
-        lat0 = float(np.nanmedian(data["lat"])) if "lat" in data else 0.0
-        r_n, r_m = wgs84_radii(lat0)
-        per = {"x_n": s**2, "y_n": s**2, "lat": (s / r_m) ** 2, "lon": (s / (r_n * np.cos(lat0))) ** 2}
-        if all(n in per for n in meas):
-            R = {n: per[n] for n in meas}
+        sources["R"] = "given (--R-std)"
     if R is None:
-        raise ValueError("give the measurement variances with --R or --R-std")
+        R, how = noise_from_data(model, data, meas)
+        sources["R"] = "estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})"
+                                                                  for n, v in R.items())
     Q = _variances(args.Q, model.noise_names, "--Q")
+    sources["Q"] = "given (--Q)"
     if Q is None:
-        pq = preset.get("Q", {})
-        Q = {n: pq.get(n, 0.0) for n in model.noise_names} if set(pq) & set(model.noise_names) else 0.0
-        if Q == 0.0 and model.nw:
-            raise ValueError(f"give the process-noise variances with --Q for {list(model.noise_names)}")
-    options = {k: _option_value(v) for k, v in _pairs(args.options, "--options").items()}
-    cls = ESTIMATORS[args.estimator]
-    est = cls(dm, Q, R, measured=meas, options=options)
+        Q = DEFAULT_Q
+        sources["Q"] = (f"default {DEFAULT_Q:g} per channel {list(model.noise_names)} (not tuned: compare the NIS "
+                        "per measurement with 1, or estimate Q with casship identify --estimate-noise Q)") \
+            if model.nw else "none (no noise channels)"
+    options = {k: _option_value(v) for k, v in parse_pairs(args.options, "--options", numbers=False).items()}
+    est = ESTIMATORS[args.estimator](dm, Q, R, measured=meas, options=options)
 
-    # prior: directly measured states from the first sample, given values, else 0
-    x0 = model.states()
-    Rm = est.R
-    P0 = np.ones(model.nx)
-    for j, name in enumerate(meas):
-        if name in model.state_names:
-            col = data[name]
-            ok = np.flatnonzero(np.isfinite(col))
-            if ok.size:
-                i = model.index(name)
-                x0[i], P0[i] = col[ok[0]], Rm[j, j]
-    if {"U", "chi"} <= set(model.state_names):
-        pos = ("x_n", "y_n") if "x_n" in data else None
-        if pos is not None:
-            U0, chi0 = _initial_velocity(data, pos)
-            x0[model.index("U")], x0[model.index("chi")] = U0, chi0
-            P0[model.index("U")], P0[model.index("chi")] = 0.25, np.deg2rad(20.0) ** 2
-    if "omega_chi" in model.state_names:
-        P0[model.index("omega_chi")] = 0.01
-    for k, v in _pairs(args.x0, "--x0").items():
-        x0[model.index(k)] = _number(v, f"--x0 {k}")
-    P0v = _variances(args.P0, model.state_names, "--P0", default=None)
-    if isinstance(P0v, dict):
-        for k, v in P0v.items():
-            P0[model.index(k)] = v
-    elif P0v is not None:
-        P0[:] = P0v
-    prior = Gaussian(x0, P0)
+    x0 = parse_pairs(args.x0, "--x0", names=model.state_names)
+    prior = prior_from_data(model, data, measured=meas, R=est.R, x0=x0)
+    P0 = _variances(args.P0, model.state_names, "--P0")
+    if P0 is not None:
+        var = np.diag(prior.cov).copy()
+        if isinstance(P0, dict):
+            var[[model.index(k) for k in P0]] = list(P0.values())
+        else:
+            var[:] = P0
+        prior = type(prior)(prior.mean, var, names=prior.names, sources=prior.sources)
     if not args.allow_out_of_range:
         U = data.matrix(model.input_names, finite=True, what="input")
         check_inputs(model, U, data.t)
         k = int(np.argmax(data.dt))
-        check_step(model, float(data.dt[k]), x0, U[0] if model.nu else np.zeros(0), model.params(),
+        check_step(model, float(data.dt[k]), prior.mean, U[0] if model.nu else np.zeros(0), model.params(),
                    args.method, where=f" (the data step from t = {data.t[k]:g} to {data.t[k + 1]:g} s)")
+    _check_start(est, prior, data)
     result = (est.smooth if args.smooth else est.filter)(data, prior, seed=args.seed)
+    _check_finite(result)
+    n_meas = result.n_measured.sum()
+    nis = float(np.nansum(result.nis) / n_meas) if n_meas else float("nan")
+    if n_meas and not 0.2 <= nis <= 5.0:
+        warnings.warn(f"the NIS per measurement is {nis:.3g} (about 1 when Q and R describe the record): the "
+                      f"estimates and their standard deviations are not to be trusted as they are; R: {sources['R']}; "
+                      f"Q: {sources['Q']}", UserWarning, stacklevel=2)
     health = result.health()
-    summary = {"model": args.model, "estimator": result.estimator, "rows": len(data), "dt_s": dt,
-               "measured": list(meas), "updates": int((result.n_measured > 0).sum()),
-               "rejected": int(result.rejected.sum()), "loglik": result.loglik, "health_ok": health.ok}
+    summary = {"model": args.model, "estimator": result.estimator, "rows": len(data), "dt_s": dt, "measured": list(meas),
+               "updates": int((result.n_measured > 0).sum()), "rejected": int(result.rejected.sum()),
+               "loglik": result.loglik, "nis_per_measurement": nis, "health_ok": health.ok,
+               "R": sources["R"], "Q": sources["Q"],
+               "prior": {n: f"{m:.6g} +- {s:.3g} ({prior.sources[n]})" for n, m, s in
+                         zip(model.state_names, prior.mean, prior.std)}}
     for name in ("U", "chi"):
         if name in model.state_names:
             summary[f"final_{name}"] = float(result[name][-1])
@@ -322,33 +280,28 @@ def filter_file(args, model=None):
     return summary, result, data, meas
 
 
-def plot_result(result, data, measured, path) -> Path:
-    """Estimates with 2-sigma bands, one panel per state, measurements overlaid where they are states."""
-    import matplotlib
+def _check_start(est, prior, data) -> None:
+    """The model must be finite at the start: name the states to give with --x0."""
+    from ..validity import check_start
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    m = est.model
+    check_start(m, prior.mean, data.matrix(m.input_names)[0] if m.nu else [], m.params(), what="the starting state",
+                unset=prior.defaulted(), option="--x0")
 
-    names = result.state_names
-    fig, axes = plt.subplots(len(names), 1, figsize=(8, 1.9 * len(names)), sharex=True, squeeze=False)
-    std = result.std
-    for i, (ax, name) in enumerate(zip(axes[:, 0], names)):
-        x = result.x[:, i]
-        if result.angle_states is not None and result.angle_states[i]:
-            x = np.unwrap(x)
-        ax.fill_between(result.t, x - 2 * std[:, i], x + 2 * std[:, i], color="C0", alpha=0.25, lw=0)
-        ax.plot(result.t, x, "C0", lw=1.2, label=result.estimator)
-        if name in measured:
-            ax.plot(data.t, data[name], ".", color="C1", ms=2, label="measured")
-        if name == "U" and "log_speed" in data:
-            ax.plot(data.t, data["log_speed"], "C2", lw=0.8, label="log speed")
-        if name == "chi" and "log_heading" in data:
-            ax.plot(data.t, np.unwrap(data["log_heading"]), "C2", lw=0.8, label="log heading")
-        ax.set_ylabel(name)
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
+
+def _check_finite(result) -> None:
+    """A run with a non-finite estimate or log-likelihood is an error, never a result."""
+    import numpy as np
+
+    from ..errors import SolverError
+
+    bad = np.argwhere(~np.isfinite(result.x))
+    if bad.size:
+        k, i = bad[0]
+        raise SolverError(f"the estimate of {result.state_names[i]!r} is not finite from row {k} (t = "
+                          f"{result.t[k]:g} s): the filter diverged; check the starting state (--x0), R, Q and the "
+                          "record")
+    if not np.isfinite(result.loglik):
+        k = int(np.flatnonzero(~np.isfinite(result.loglik_terms))[0])
+        raise SolverError(f"the log-likelihood is not finite (first at row {k}, t = {result.t[k]:g} s): the filter "
+                          "diverged; check the starting state (--x0), R, Q and the record")

@@ -16,14 +16,19 @@ to the MMG convention). ``--method mle`` (default) maximises the likelihood thro
 """
 from __future__ import annotations
 
-import json
-from pathlib import Path
+import warnings
 
-import numpy as np
+from ._common import (check_outputs, count, load_record, number, parse_items, parse_pairs, positive, print_json,
+                      refuse_unused, write_output)
+from .cmd_filter import DEFAULT_Q
+
+
+#: One-line description (the command list of ``casship --help``).
+HELP = "fit model parameters to records (maximum likelihood or output error)"
 
 
 def register(sub) -> None:
-    p = sub.add_parser("identify", help="fit model parameters to records (maximum likelihood or output error)",
+    p = sub.add_parser("identify", help=HELP,
                        description="Estimate named parameters of a registered model from one or more records "
                                    "(one joint fit), with a prior, standard errors, correlations and warnings.")
     p.add_argument("data", nargs="+", help="records: CSV with a header row, or MARIN .dat")
@@ -40,10 +45,11 @@ def register(sub) -> None:
     p.add_argument("--group", default=None, help="one group label per record A,A,B,... (for --share name=group)")
     p.add_argument("--prior", default=None,
                    help="Gaussian prior standard deviations name=std,... centred on the published values (MAP)")
-    p.add_argument("--prior-weight", dest="prior_weight", type=float, default=1.0, help="weight of the prior")
+    p.add_argument("--prior-weight", dest="prior_weight", type=positive, default=1.0, help="weight of the prior")
     p.add_argument("--bounds", default=None, help="bounds name=lower:upper,...")
     p.add_argument("--R", default=None, help="measurement variances name=value,... (mle; default: estimated)")
-    p.add_argument("--Q", default=None, help="process-noise variances: scalar or name=value,... (mle; default 1e-8)")
+    p.add_argument("--Q", default=None, help=f"process-noise variances: scalar or name=value,... (mle; default "
+                                             f"{DEFAULT_Q:g})")
     p.add_argument("--estimate-noise", dest="estimate_noise", default=None,
                    help="noise variances to estimate: Q, R or Q,R (mle; R is estimated when --R is absent)")
     p.add_argument("--sigma", default=None,
@@ -52,110 +58,61 @@ def register(sub) -> None:
     p.add_argument("--params", default=None, help='JSON {"params": {...}} with the fixed parameter values')
     p.add_argument("--estimate-x0", dest="estimate_x0", default=None,
                    help="states whose initial values are estimated per record a,b,...")
-    p.add_argument("--decimate", type=int, default=1, help="keep every k-th sample (default 1)")
+    p.add_argument("--decimate", type=count, default=1, help="keep every k-th sample (default 1)")
     p.add_argument("--shooting", default="single", choices=("single", "multiple"), help="oe: shooting")
-    p.add_argument("--max-iter", dest="max_iter", type=int, default=100, help="iteration limit (default 100)")
+    p.add_argument("--max-iter", dest="max_iter", type=count, default=100, help="iteration limit (default 100)")
     p.add_argument("--identifiability", action="store_true",
                    help="print the Fisher-information analysis of the free set at the guess before fitting")
     p.add_argument("--plot", default=None, help="PNG of measured outputs vs the fitted free-run simulation")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of a table")
-    p.set_defaults(func=run)
-
-
-def _pairs(text: str | None, what: str) -> dict[str, float]:
-    out = {}
-    for item in _names(text):
-        if "=" not in item:
-            raise ValueError(f"{what}: expected name=value, got {item!r}")
-        k, v = item.split("=", 1)
-        try:
-            out[k.strip()] = float(v)
-        except ValueError:
-            raise ValueError(f"{what}: value of {k.strip()!r} is not a number ({v!r})") from None
-    return out
-
-
-def _names(text: str | None) -> list[str]:
-    """Comma-separated items; commas inside brackets (``bias[a,b]``) do not split."""
-    if not text:
-        return []
-    out, depth, cur = [], 0, ""
-    for ch in text:
-        depth += (ch == "[") - (ch == "]")
-        if ch == "," and depth == 0:
-            out.append(cur.strip())
-            cur = ""
-        else:
-            cur += ch
-    out.append(cur.strip())
-    return [s for s in out if s]
+    p.set_defaults(func=run, parser=p)
 
 
 def _bounds(text: str | None) -> dict:
+    from ..errors import InputError
+
     out = {}
-    for item in _names(text):
-        name, _, rng = item.partition("=")
+    for name, rng in parse_pairs(text, "--bounds", numbers=False).items():
         lo, sep, hi = rng.partition(":")
         if not sep:
-            raise ValueError(f"--bounds: expected name=lower:upper, got {item!r}")
-        try:
-            out[name.strip()] = (float(lo) if lo.strip() else -float("inf"), float(hi) if hi.strip() else float("inf"))
-        except ValueError:
-            raise ValueError(f"--bounds: {item!r} is not name=lower:upper with numbers") from None
+            raise InputError(f"--bounds: expected name=lower:upper, got {name}={rng}")
+        lower = number(lo, f"--bounds {name} lower") if lo.strip() else -float("inf")
+        upper = number(hi, f"--bounds {name} upper") if hi.strip() else float("inf")
+        out[name] = (lower, upper)
     return out
 
 
-def load_record(path):
-    """A CSV (header row) or MARIN ``.dat`` record as a :class:`casship.Dataset`."""
-    from ..data import Dataset
-    from ..io.marin import read_marin
-
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"record {path} does not exist")
-    if path.suffix.lower() == ".dat":
-        from ..angles import wrap
-
-        data = read_marin(path)
-        data = data.with_columns(psi=wrap(data["psi"]))   # the files hold a continuous heading
-    else:
-        data = Dataset.from_csv(path)
-    data.meta.setdefault("name", path.name)
-    return data
-
-
 def _problem(args, model, records, free, measured):
+    import numpy as np
+
     from ..discretize import discretize
     from ..estimators import EKF
-    from ..identify import MLEProblem, OutputErrorProblem, Prior, noise_std
+    from ..estimators import noise_from_data
+    from ..identify import MLEProblem, OutputErrorProblem, Prior
     from ..identify.params_file import read_params
 
-    share = {}
-    for item in _names(args.share):
-        name, _, how = item.partition("=")
-        if not how:
-            raise ValueError(f"--share: expected name=record|all|group, got {item!r}")
-        share[name.strip()] = how.strip()
-    labels = _names(args.group)
+    share = parse_pairs(args.share, "--share", numbers=False)
+    labels = parse_items(args.group, "--group", unique=False)
     groups = {"group": labels} if labels else None
     if any(h == "group" for h in share.values()) and not labels:
         raise ValueError("--share name=group needs --group with one label per record")
-    prior = Prior(_pairs(args.prior, "--prior"), weight=args.prior_weight) if args.prior else None
+    prior = Prior(parse_pairs(args.prior, "--prior"), weight=args.prior_weight) if args.prior else None
     params = read_params(args.params, model)[1] if args.params else None
     common = dict(share=share or None, groups=groups, prior=prior, params=params, bounds=_bounds(args.bounds) or None,
-                  estimate_x0=_names(args.estimate_x0))
+                  estimate_x0=parse_items(args.estimate_x0, "--estimate-x0"))
     if args.method == "oe":
-        sigma = _pairs(args.sigma, "--sigma")
+        sigma = parse_pairs(args.sigma, "--sigma")
         return OutputErrorProblem(model, records, free, measured=measured, sigma=sigma or "estimate",
                                   shooting=args.shooting, **common)
-    R = _pairs(args.R, "--R")
+    R = parse_pairs(args.R, "--R")
     unknown = set(R) - set(measured)
     if unknown:
         raise ValueError(f"--R names {sorted(unknown)} not among measured outputs {measured}")
     rest = [n for n in measured if n not in R]
-    angles = [n for n in rest if model.angle_outputs[model.index(n, "output")]]
-    start = {n: s**2 for n, s in noise_std(records, rest, angles).items()}
-    estimate = set(_names(args.estimate_noise))
+    start = {}
+    for n in rest:              # the record's noise, the median over the records, as the starting value
+        start[n] = float(np.median([noise_from_data(model, d, [n])[0][n] for d in records]))
+    estimate = set(parse_items(args.estimate_noise, "--estimate-noise"))
     if estimate - {"Q", "R"}:
         raise ValueError(f"--estimate-noise: unknown {sorted(estimate - {'Q', 'R'})}; use Q, R or Q,R")
     noise = {}
@@ -165,44 +122,54 @@ def _problem(args, model, records, free, measured):
         noise["R"] = rest
     if "Q" in estimate:
         noise["Q"] = True
-    try:
-        Q = float(args.Q) if args.Q else 1e-8
-    except ValueError:
-        Q = _pairs(args.Q, "--Q")
+    Q = (parse_pairs(args.Q, "--Q") if "=" in args.Q else number(args.Q, "--Q")) if args.Q else DEFAULT_Q
     dt = float(np.median(np.concatenate([np.diff(d.t) for d in records])))
     ekf = EKF(discretize(model, dt), Q, {**start, **R}, measured=measured)
     return MLEProblem(ekf, records, free, noise=noise, **common)
 
 
 def run(args) -> int:
+    from ..errors import InputError
     from ..models import get_model
 
-    from ..outdir import check_output_file
-
-    check_output_file(args.out, overwrite=args.overwrite, what="--out")       # before minutes of fitting
-    if args.plot:
-        check_output_file(args.plot, overwrite=args.overwrite, what="--plot")
+    if args.method == "oe":
+        refuse_unused(args.parser, {"--R": args.R is not None, "--Q": args.Q is not None,
+                                    "--estimate-noise": args.estimate_noise is not None},
+                      "--method oe weighs the output errors with --sigma (no filter, no noise covariances)")
+    else:
+        refuse_unused(args.parser, {"--sigma": args.sigma is not None, "--shooting": args.shooting != "single"},
+                      "--method mle runs the likelihood through an EKF (no simulation weights or shooting)")
+    refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
+                                "--group": bool(args.group) and "=group" not in (args.share or "")},
+                  "--prior-weight weighs a --prior; --group labels the records for --share NAME=group")
+    stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
-    records = [load_record(p).decimate(args.decimate) for p in args.data]
-    free = _names(args.free)
+    records = [load_record(p, model, wrap_angles=True).decimate(args.decimate) for p in args.data]
+    free = parse_items(args.free, "--free")
     if not free:
-        raise ValueError("--free: give at least one quantity")
-    measured = _names(args.measured) or [n for n in model.output_names if all(n in d for d in records)]
+        raise InputError("--free: give at least one quantity")
+    measured = parse_items(args.measured, "--measured") or [n for n in model.output_names
+                                                               if all(n in d for d in records)]
     if not measured:
-        raise ValueError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
+        raise InputError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
     prob = _problem(args, model, records, free, measured)
-    guess = _pairs(args.guess, "--guess")
+    guess = parse_pairs(args.guess, "--guess")
     if args.identifiability:
         idf = prob.identifiability(guess or None)
         print(idf.summary())
         print(f"proposed free set (relative std error <= {idf.max_rel_std:g}, |rho| <= {idf.max_corr:g}): "
               f"{idf.propose()}")
-    fit = prob.solve(guess=guess, max_iter=args.max_iter)
-    fit.to_json(args.out)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit = prob.solve(guess=guess, max_iter=args.max_iter)
+    for w in caught:            # the fit's own warnings are printed once, with the fit
+        if not any(str(w.message).endswith(text) for text in fit.warnings):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    write_output(args.out, fit.to_json, option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
-        fit.plot(args.plot)
+        write_output(args.plot, fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
     if args.json:
-        print(json.dumps(fit.to_dict()))
+        print_json(fit.to_dict())
     else:
         print(fit.summary())
         print(f"fit written to {args.out}")

@@ -3,23 +3,26 @@
 Examples::
 
     casship simulate --model kvlcc2 --maneuver turning --rudder-deg 35 --speed 7.97 --json
-    casship simulate --model kvlcc2-l7 --maneuver zigzag --rudder-deg 20 --heading-deg -20 --csv zz.csv --plot zz.png
+    casship simulate --model kvlcc2-l7 --maneuver zigzag --rudder-deg 20 --first port --csv zz.csv --plot zz.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --json
 """
 from __future__ import annotations
 
-import json
-import math
-
-from ._common import add_limits_option, add_model_option, add_overwrite_option, load_model, require
+from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model, load_record,
+                      print_json, refuse_unused, require, seed, write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
-                 "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_2_deg", "overshoot_3_deg",
+                 "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
+                 "overshoot_2_pct", "overshoot_3_deg", "overshoot_3_pct",
                  "initial_turning_time_s", "period_s", "initial_turning_distance_m")
 
 
+#: One-line description (the command list of ``casship --help``).
+HELP = "simulate a manoeuvre of a named model and print its metrics"
+
+
 def register(sub) -> None:
-    p = sub.add_parser("simulate", help="simulate a manoeuvre of a named model and print its metrics",
+    p = sub.add_parser("simulate", help=HELP,
                        description="Simulate a standard manoeuvre of a registered model from a straight run "
                                    "(or replay the measured inputs of a record) and print the metrics. Inputs, "
                                    "speed and time step are checked against the model's validity ranges.\n\n"
@@ -32,13 +35,16 @@ def register(sub) -> None:
                    help="rudder angle [deg]; positive turns to starboard; negative zig-zag = port first")
     p.add_argument("--heading-deg", type=float, default=None,
                    help="zig-zag switch heading [deg] (default |rudder|); negative = port first")
+    p.add_argument("--first", default=None, choices=("port", "starboard"),
+                   help="zig-zag: the side of the first rudder (default: port if --rudder-deg or --heading-deg is "
+                        "negative, else starboard)")
     p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: the preset's U0)")
     p.add_argument("--rps", type=float, default=None,
                    help="propeller rate [1/s]; by default solved for equilibrium at --speed")
     p.add_argument("--duration", type=float, default=None, help="simulated time [s] (default: scaled with L/U)")
     p.add_argument("--dt", type=float, default=None, help="time step [s] (default: L/U/400, rounded)")
     p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random rudder sequence")
+    p.add_argument("--seed", type=seed, default=None, help="seed of the random rudder sequence (default 0)")
     p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
     p.add_argument("--params", default=None,
                    help='JSON file {"params": {name: value}} overriding parameters (a fit file rebuilds the '
@@ -54,36 +60,29 @@ def register(sub) -> None:
     p.set_defaults(func=run, parser=p)
 
 
-def _load_record(path):
-    from ..io import read_record
-
-    return read_record(path)
-
-
-def _clean(obj):
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if hasattr(obj, "item"):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def run(args) -> int:
     from ..models import model_names
-    from ..outdir import check_output_file
 
     if args.list:
         for name, doc in model_names().items():
             print(f"{name:18s} {doc}")
         return 0
     require(args.parser, args, {"--model": args.model})
-    for option, path in (("--csv", args.csv), ("--plot", args.plot)):
-        if path:
-            check_output_file(path, overwrite=args.overwrite, what=option)
+    if args.inputs:
+        unused = {"--maneuver": args.maneuver != "turning", "--rudder-deg": args.rudder_deg != 35.0,
+                  "--heading-deg": args.heading_deg is not None, "--first": args.first is not None,
+                  "--speed": args.speed is not None, "--rps": args.rps is not None,
+                  "--duration": args.duration is not None, "--dt": args.dt is not None, "--hold": args.hold is not None,
+                  "--seed": args.seed is not None}
+        refuse_unused(args.parser, unused, "--inputs replays the record's own inputs, start and time stamps")
+    else:
+        refuse_unused(args.parser, {"--first": args.first is not None and args.maneuver != "zigzag",
+                                    "--heading-deg": args.heading_deg is not None and args.maneuver != "zigzag",
+                                    "--hold": args.hold is not None and args.maneuver not in ("pullout", "spiral", "random"),
+                                    "--seed": args.seed is not None and args.maneuver != "random"},
+                      f"not used by a {args.maneuver} manoeuvre (--first, --heading-deg: zig-zag; --hold: pull-out, "
+                      "spiral, random; --seed: random)")
+    stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
     if args.params:
         from ..identify import read_params
 
@@ -98,7 +97,7 @@ def run(args) -> int:
     if args.inputs:
         from ..validation import replay
 
-        measured = _load_record(args.inputs)
+        measured = load_record(args.inputs)
         res = replay(model, measured, p, method=args.method, check_limits=check)
         traj = res.trajectory
         out.update({"maneuver": f"replay ({res.kind})", "inputs": str(args.inputs), "replay": res.errors,
@@ -108,26 +107,42 @@ def run(args) -> int:
 
         res = run_maneuver(model, args.maneuver, rudder_deg=args.rudder_deg, heading_deg=args.heading_deg,
                            speed=args.speed, n=args.rps, duration=args.duration, dt=args.dt, p=p,
-                           hold=args.hold, seed=args.seed, method=args.method, check_limits=check)
+                           hold=args.hold, seed=0 if args.seed is None else args.seed, method=args.method, check_limits=check, first=args.first)
         traj = res.trajectory
         s = res.settings
         out.update({"maneuver": args.maneuver, "speed_mps": s["speed_mps"], "rps": s["n"],
-                    "rudder_deg": args.rudder_deg, "metrics": res.metrics, "settings": s})
+                    "rudder_deg": args.rudder_deg, "metrics": _with_percent(res.metrics, s), "settings": s})
+        if "first_side" in s:
+            out["first_side"] = s["first_side"]
     if args.csv:
-        traj.to_csv(args.csv)
+        write_output(args.csv, traj.to_csv, option="--csv", overwrite=args.overwrite, stamps=stamps)
         out["csv"] = str(args.csv)
     if args.plot:
-        _plot(traj, measured, args.plot, title=f"{args.model}: {out['maneuver']}")
+        write_output(args.plot, lambda tmp: _plot(traj, measured, tmp, title=f"{args.model}: {out['maneuver']}"),
+                     option="--plot", overwrite=args.overwrite, stamps=stamps)
         out["plot"] = str(args.plot)
     if args.json:
-        print(json.dumps(_clean(out)))
+        print_json(out)
     else:
         _print_text(out)
     return 0
 
 
+def _with_percent(metrics: dict, settings: dict) -> dict:
+    """Zig-zag overshoot angles [deg] with the overshoot in % of the switch heading beside them."""
+    heading = abs(settings.get("heading_deg") or 0.0)
+    out = {}
+    for k, v in metrics.items():
+        out[k] = v
+        if k.startswith("overshoot_") and k.endswith("_deg") and heading:
+            out[k[:-4] + "_pct"] = 100.0 * v / heading
+    return out
+
+
 def _print_text(out) -> None:
     print(f"model {out['model']} (L_pp = {out['L_pp_m']} m), manoeuvre {out['maneuver']}")
+    if "first_side" in out:
+        print(f"first rudder to {out['first_side']}")
     if out.get("speed_mps") is not None:
         rps = out.get("rps")
         print(f"approach speed {out['speed_mps']:.3f} m/s" + (f", propeller {rps:.4f} 1/s" if rps is not None else ""))
@@ -152,13 +167,11 @@ def _print_text(out) -> None:
 
 
 def _plot(traj, measured, path, title="") -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.figure import Figure
 
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
+    fig = Figure(figsize=(11, 4.5))
+    ax1, ax2 = fig.subplots(1, 2)
     ax1.plot(traj["y"], traj["x"], label="simulated")
     if measured is not None:
         ax1.plot(measured["y"], measured["x"], "--", label="measured")
@@ -176,9 +189,8 @@ def _plot(traj, measured, path, title="") -> None:
         if name.startswith("delta"):
             ax2.plot(traj.t, np.degrees(traj[name]), ":", label=f"{name} [deg]")
     ax2.set_xlabel("time [s]")
-    ax2.set_ylabel("[deg]")
+    ax2.set_ylabel("heading, rudder [deg]")
     ax2.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    fig.savefig(path, dpi=110, format="png")

@@ -3,9 +3,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ._common import count
+
+
+#: One-line description (the command list of ``casship --help``).
+HELP = "run a study (seed-paper reproductions, real-data studies)"
+
 
 def register(sub) -> None:
-    p = sub.add_parser("study", help="run a study (seed-paper reproductions, real-data studies)",
+    p = sub.add_parser("study", help=HELP,
                        description="Run a study and write its report folder (report.md, figures, tables, "
                                    "summary.json). Measured data are found by --data DIR, else $CASSHIP_DATA, "
                                    "else ../shared/data beside a source checkout.")
@@ -17,7 +23,7 @@ def register(sub) -> None:
     p.add_argument("--quick", action="store_true", help="small, fast variant (as run by the tests)")
     p.add_argument("--data", default=None, metavar="DIR", help="measured-data folder (default: $CASSHIP_DATA, "
                    "else ../shared/data beside a source checkout)")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU count)")
+    p.add_argument("--workers", type=count, default=None, help="local worker processes (default: CPU count)")
     p.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
     p.set_defaults(func=run)
 

@@ -19,6 +19,7 @@ from .enkf import EnKF, EnKFOptions
 from .kalman_bucy import KalmanBucy, KalmanBucyOptions
 from .augmented import AugmentedResult, augment, augmented_ekf
 from .mhe import MHE, MHEFailed, MHEOptions
+from .prior import DataPrior, noise_from_data, prior_from_data
 
 # Estimators by command-line name (``casship filter --estimator NAME``); other modules may add theirs.
 ESTIMATORS = {"kf": KF, "ekf": EKF, "ukf": UKF, "enkf": EnKF, "kalman-bucy": KalmanBucy, "mhe": MHE}
@@ -26,4 +27,4 @@ ESTIMATORS = {"kf": KF, "ekf": EKF, "ukf": UKF, "enkf": EnKF, "kalman-bucy": Kal
 __all__ = ["Estimator", "StepEstimator", "NoStepFunction", "EstimatorOptions", "FilterResult", "Health", "OnlineRun",
            "EKF", "KF", "EKFOptions", "persistence_model", "UKF", "UKFOptions", "rts_smooth", "EnKF", "EnKFOptions", "KalmanBucy",
            "KalmanBucyOptions", "augment", "augmented_ekf", "AugmentedResult", "ESTIMATORS", "MHE", "MHEFailed",
-           "MHEOptions"]
+           "MHEOptions", "prior_from_data", "noise_from_data", "DataPrior"]

@@ -28,7 +28,7 @@ from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, compile_function, run_fold
 from .contract import Estimator
-from .gaps import bridge_gaps
+from .gaps import checked_run
 from .options import DIAGNOSTICS
 from .result import FilterResult
 
@@ -276,7 +276,13 @@ class StepEstimator(Estimator):
         FilterResult
         """
         self._check_prior(prior)
-        data = bridge_gaps(self, data, prior.mean, p)      # a gap too long for one prediction: raise or bridge
+        if isinstance(data, Dataset) and all(n in data for n in self.model.input_names):
+            self._check_start(prior, data.matrix(self.model.input_names)[0] if self.model.nu else [], p)
+        # a gap too long for one prediction from the estimate before it: raise or bridge
+        return checked_run(self, data, lambda d: self._run(d, prior, p, seed), p)[1]
+
+    def _run(self, data: Dataset, prior: Gaussian, p, seed) -> FilterResult:
+        """One run over the record as it is (the gaps checked by :meth:`filter`)."""
         arrays = self.prepare(data, p)
         n = len(data)
         rng = np.random.default_rng(seed)
@@ -404,4 +410,5 @@ class StepEstimator(Estimator):
         from .online import StepRun
 
         self._check_prior(prior)
+        self._check_start(prior, self.model.inputs() if u is None else u, p)
         return StepRun(self, prior, p, u, np.random.default_rng(seed))

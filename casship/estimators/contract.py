@@ -27,6 +27,7 @@ from scipy import stats
 from ..data import Dataset
 from ..discretize import DiscreteModel
 from ..gaussian import Gaussian, as_cov
+from ..validity import check_start
 from .options import EstimatorOptions
 from .result import FilterResult
 from .update import residual
@@ -84,6 +85,9 @@ class Estimator(abc.ABC):
             raise ValueError(f"unknown measured output(s) {unknown}; outputs: {list(model.output_names)}")
         if not measured:
             raise ValueError("at least one output must be measured")
+        twice = sorted({n for n in measured if measured.count(n) > 1})
+        if twice:
+            raise ValueError(f"measured output(s) {twice} given more than once (each sample would be used twice)")
         self.measured = measured
         self.meas_index = [model.index(n, "output") for n in measured]
         self.ny = len(measured)
@@ -263,6 +267,18 @@ class Estimator(abc.ABC):
             rejected=np.reshape(out["accepted"], n) < 0.5, inputs=arrays["u"].T, state_names=m.state_names,
             state_units=tuple(v.unit for v in m.state_vars), output_names=self.measured, input_names=m.input_names,
             estimator=estimator or self.name, angle_states=m.angle_states)
+
+    def _check_start(self, prior: Gaussian, u, p) -> None:
+        """Refuse a prior where the model's equations are not finite (e.g. an MMG ship at rest); ``u`` is
+        the first input (None: not known yet)."""
+        m = self.model
+        if self.dmodel.discrete or u is None:
+            return
+        u = np.asarray(u, dtype=float).reshape(-1)
+        if u.size != m.nu or not np.all(np.isfinite(u)):
+            return                                          # the callers name bad inputs
+        unset = prior.defaulted() if hasattr(prior, "defaulted") else None
+        check_start(m, prior.mean, u, m.params() if p is None else m.params(p), what="the prior mean", unset=unset)
 
     def residual(self, y, yhat, mask):
         """Masked residual of the measured outputs, angle channels wrapped.

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import numbers
 import threading
+import warnings
 from collections.abc import Mapping
 
 import casadi as ca
@@ -18,7 +19,7 @@ import numpy as np
 
 from ..gaussian import Gaussian
 from ..runtime import DUPLICATE_NAMES, BufferedCall
-from .gaps import gap_limit, online_pieces
+from .gaps import gap_pieces, gap_threshold
 from .options import DIAGNOSTICS
 
 __all__ = ["OnlineRun", "StepRun", "online_step"]
@@ -196,7 +197,8 @@ class StepRun(OnlineRun):
         u0 = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
         if u0.size != m.nu or not np.all(np.isfinite(u0)):
             raise ValueError(f"u must be {m.nu} finite values for the inputs {list(m.input_names)}, got {u0}")
-        self._limit = float(gap_limit(est, prior.mean, u0, p))
+        # intervals beyond it are checked at the state where they happen (casship.estimators.gaps)
+        self._limit = float(gap_threshold(est))
         first["Q"], first["R"] = est.Q, est.R
         first["thresholds"] = [est.gate_threshold(c) for c in range(est.ny + 1)]
         first["u_prev"], first["u"] = u0, u0
@@ -230,6 +232,8 @@ class StepRun(OnlineRun):
             # never flipped to, so it changes nothing the run keeps (the inputs are rewritten each time)
             cur = self._cur
             evaluate, status, x = self._sets[cur]
+            if isinstance(y, np.ma.MaskedArray):        # its buffer holds no mask: the long way
+                y = self._vector(y, self._ny, "y", self._est.measured)
             try:
                 self._y[:] = y
             except (TypeError, ValueError):
@@ -237,6 +241,10 @@ class StepRun(OnlineRun):
             if self._nu:
                 if u_prev is None:
                     u_prev = self._held[1 - cur]
+                elif isinstance(u_prev, np.ma.MaskedArray):
+                    u_prev = self._vector(u_prev, self._nu, "u_prev", self._est.model.input_names)
+                if isinstance(u, np.ma.MaskedArray):
+                    u = self._vector(u, self._nu, "u", self._est.model.input_names)
                 try:
                     self._u_prev[:] = u_prev
                 except (TypeError, ValueError):
@@ -284,13 +292,16 @@ class StepRun(OnlineRun):
         return None
 
     def _bridged(self, y, dt, u_prev, u) -> bool:
-        """A gap longer than the one-step limit: raise, or predict across it in shorter steps."""
+        """A gap: checked at the current estimate; raise, or predict across it in shorter steps."""
         x = self._x[1 - self._cur] if self._samples else self._prior.mean
-        held = np.array(self._held[1 - self._cur]) if u_prev is None else np.asarray(u_prev, dtype=float).reshape(-1)
-        pieces = online_pieces(self._est, float(dt), x, held, self._p, f"before update {self._samples + 1}")
+        held = np.array(self._held[1 - self._cur]) if u_prev is None else self._vector(u_prev, self._nu, "u_prev",
+                                                                                         self._est.model.input_names)
+        where = f"before update {self._samples + 1}"
+        pieces = gap_pieces(self._est, x, held, self._p, float(dt), where)
         if pieces == 1:
-            self._limit = max(self._limit, dt)
             return False
+        warnings.warn(f"{self._est.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
+                      f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=4)
         nothing = np.full(self._ny, np.nan)
         u_held = held.copy()
         for _ in range(pieces - 1):
@@ -301,6 +312,12 @@ class StepRun(OnlineRun):
     def _vector(self, value, size: int, what: str, names) -> np.ndarray:
         """``value`` as a float vector of ``size``, or ``ValueError`` naming ``what`` (the long way:
         :meth:`update` takes a float64 array of the right shape as it is)."""
+        if np.ma.isMaskedArray(value):              # masked = not measured; an input must be there
+            hidden = np.ma.getmaskarray(value).ravel()
+            if what != "y" and hidden.any():
+                raise ValueError(f"{what} is masked for {[n for n, m in zip(names, hidden) if m]}; inputs must be "
+                                 "given")
+            value = np.ma.filled(np.ma.asarray(value, dtype=float), np.nan)
         try:
             v = np.asarray(value, dtype=float)
         except (TypeError, ValueError):

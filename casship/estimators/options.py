@@ -64,7 +64,7 @@ class EstimatorOptions:
 
     def __post_init__(self):
         if self.gate is not None:
-            gate = float(self.gate)
+            gate = _number(self.gate, "gate")
             if not 0 < gate < 1:
                 raise ValueError(f"option 'gate' is a probability in (0, 1), got {self.gate!r}")
             object.__setattr__(self, "gate", gate)
@@ -81,8 +81,8 @@ class EstimatorOptions:
             raise ValueError(f"option 'outputs' must contain 'x' and 'P', got {list(outputs)}")
         object.__setattr__(self, "outputs", tuple(o for o in DIAGNOSTICS if o in outputs))
         if self.max_gap is not None:
-            gap = float(self.max_gap)
-            if not gap > 0:
+            gap = _number(self.max_gap, "max_gap")
+            if not (gap > 0 and gap < float("inf")):
                 raise ValueError(f"option 'max_gap' is a positive time [s] (or None), got {self.max_gap!r}")
             object.__setattr__(self, "max_gap", gap)
         if self.on_gap not in ("raise", "bridge"):
@@ -128,3 +128,11 @@ class EstimatorOptions:
         if unknown:
             raise ValueError(f"unknown option(s) {unknown}; known: {sorted(self.known())}")
         return replace(self, **changes)
+
+
+def _number(value, name: str) -> float:
+    """An option's value as a float, or ``ValueError`` naming the option."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"option {name!r} is a number, got {value!r}") from None

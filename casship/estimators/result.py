@@ -109,15 +109,17 @@ class Health:
         return bool(windows_ok and self.not_pd.size == 0)
 
     def raise_if_diverged(self) -> None:
-        """Raise ``RuntimeError`` describing the problem if not :attr:`ok`."""
+        """Raise :class:`~casship.errors.SolverError` (a ``RuntimeError``) describing the problem if not :attr:`ok`."""
+        from ..errors import SolverError
+
         if self.not_pd.size:
-            raise RuntimeError(f"filter health check failed: {self.not_pd.size} covariance(s) not positive "
-                               f"semi-definite (first at row {int(self.not_pd[0])})")
+            raise SolverError(f"filter health check failed: {self.not_pd.size} covariance(s) not positive "
+                              f"semi-definite (first at row {int(self.not_pd[0])})")
         if not self.ok:
             first = int(self.window_start[np.argmax(self.flagged)])
-            raise RuntimeError(f"filter health check failed: {int(self.flagged.sum())} of {self.flagged.size} "
-                               f"windows flagged (NIS outside the {100 * (1 - self.alpha):.0f}% chi-square "
-                               f"interval or most samples rejected by the gate; first at row {first})")
+            raise SolverError(f"filter health check failed: {int(self.flagged.sum())} of {self.flagged.size} "
+                              f"windows flagged (NIS outside the {100 * (1 - self.alpha):.0f}% chi-square "
+                              f"interval or most samples rejected by the gate; first at row {first})")
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -285,7 +287,7 @@ class FilterResult:
             lines.append(f"{n:>12s} {self.x[-1, i]:14.6g} {sd}  {self.state_units[i]}")
         return "\n".join(lines)
 
-    def plot(self, path, states=None) -> Path:
+    def plot(self, path, states=None, *, measured=None, t_measured=None) -> Path:
         """Estimates with +-2 standard deviations over time, one panel per state (PNG at ``path``).
 
         Angle states are drawn in degrees; axes carry the state units.
@@ -296,31 +298,44 @@ class FilterResult:
             The PNG file to write.
         states : sequence of str, optional
             The states to draw (all by default).
+        measured : mapping state -> array, optional
+            Measurements of states to draw over the estimates (same units as the states).
+        t_measured : array, optional
+            Their time stamps (default: the result's).
         """
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure
 
         names = list(self.state_names if states is None else states)
         unknown = [n for n in names if n not in self.state_names]
         if unknown:
             raise ValueError(f"unknown state(s) {unknown}; states: {list(self.state_names)}")
+        measured = dict(measured or {})
+        unknown = [n for n in measured if n not in self.state_names]
+        if unknown:
+            raise ValueError(f"measured: unknown state(s) {unknown}; states: {list(self.state_names)}")
+        t_meas = self.t if t_measured is None else np.asarray(t_measured, dtype=float)
         idx = [self.state_names.index(n) for n in names]
         std = self.std
-        fig, axes = plt.subplots(len(names), 1, figsize=(7.5, 1.8 * len(names) + 0.8), sharex=True, squeeze=False)
+        fig = Figure(figsize=(7.5, 1.8 * len(names) + 0.8))
+        axes = fig.subplots(len(names), 1, sharex=True, squeeze=False)
         for ax, name, i in zip(axes[:, 0], names, idx):
-            scale, unit = (180 / np.pi, "deg") if self.angle_states[i] else (1.0, self.state_units[i] or "-")
-            xv, sv = scale * self.x[:, i], scale * std[:, i]
+            angle = self.angle_states is not None and self.angle_states[i]
+            scale, unit = (180 / np.pi, "deg") if angle else (1.0, self.state_units[i] or "-")
+            xv = np.unwrap(self.x[:, i]) if angle else self.x[:, i]
+            xv, sv = scale * xv, scale * std[:, i]
             ax.fill_between(self.t, xv - 2 * sv, xv + 2 * sv, alpha=0.3, lw=0, label="+-2 std")
             ax.plot(self.t, xv, lw=1.0, label=self.estimator)
+            if name in measured:
+                ym = np.asarray(measured[name], dtype=float)
+                if angle:        # drawn on the branch of the estimate
+                    ym = ym + 2 * np.pi * np.round((np.interp(t_meas, self.t, xv / scale) - ym) / (2 * np.pi))
+                ax.plot(t_meas, scale * ym, ".", ms=2, label="measured")
             ax.set_ylabel(f"{name} [{unit}]")
         axes[0, 0].legend(loc="best", fontsize=8)
         axes[-1, 0].set_xlabel("t [s]")
         fig.tight_layout()
         path = Path(path)
-        fig.savefig(path, dpi=120)
-        plt.close(fig)
+        fig.savefig(path, dpi=120, format="png")
         return path
 
     def to_dataset(self) -> Dataset:

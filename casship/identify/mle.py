@@ -157,7 +157,7 @@ class MLEProblem(IdentificationProblem):
         arrays = []
         for r, d in enumerate(self.records):
             # a gap beyond the one-step prediction limit raises, or is bridged (option on_gap)
-            self.records[r] = d = bridge_gaps(est, d, self._priors[r].mean, self.space.base)
+            self.records[r] = d = bridge_gaps(est, d, self._priors[r], self.space.base)
             a = est.prepare(d)
             per = {n: np.asarray(a[n], dtype=float) for n in StepSlots.SAMPLE}
             per.update(slots.draws(len(d), rng))

@@ -286,8 +286,11 @@ class IdentificationProblem:
                 ratio = std_r / std
             ratio = ratio[np.isfinite(ratio)]
             span = f"{ratio.min():.2g}-{ratio.max():.2g} times" if ratio.size else "unlike"
-            out.append(f"residuals of {coloured} are not white (Ljung-Box): the standard errors are optimistic; "
-                       f"the robust ones (std_errors_robust, HAC sandwich) are {span} the model-based ones")
+            reading = ("the model-based standard errors are optimistic" if ratio.size and ratio.min() > 1 else
+                       "the model-based standard errors are conservative" if ratio.size and ratio.max() < 1 else
+                       "the model-based standard errors do not hold as they are")
+            out.append(f"residuals of {coloured} are not white (Ljung-Box): {reading}; the robust ones "
+                       f"(std_errors_robust, HAC sandwich) are {span} the model-based ones")
         for w in out:
             if w.startswith(("solver stopped", "residuals of")):
                 warnings.warn(f"{self.method}: {w}", IdentificationWarning, stacklevel=3)

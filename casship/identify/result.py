@@ -15,10 +15,12 @@ from typing import Mapping
 import numpy as np
 from scipy import stats
 
+from ..errors import SolverError
+
 __all__ = ["FitResult", "IdentificationError", "IdentificationWarning"]
 
 
-class IdentificationError(RuntimeError):
+class IdentificationError(SolverError):
     """An identification cannot proceed (e.g. a non-finite cost at the start); carries a ``status``.
 
     Parameters
@@ -39,21 +41,10 @@ class IdentificationWarning(UserWarning):
 
 
 def _clean(value):
-    """JSON-friendly copy (numpy to Python, non-finite floats to strings)."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _clean(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        v = float(value)
-        return v if np.isfinite(v) else ("nan" if np.isnan(v) else ("inf" if v > 0 else "-inf"))
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
+    """JSON-friendly copy (numpy to Python, non-finite floats to strings): :func:`casship.io.jsonfile.json_ready`."""
+    from ..io.jsonfile import json_ready
+
+    return json_ready(value)
 
 
 def _unclean(value):

@@ -176,7 +176,25 @@ def read_frame(path, **read_options):
         raise ValueError(f"{name}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
     if frame.shape[0] == 0:
         raise ValueError(f"{name}: no data rows below the header {list(frame.columns)}")
+    header = _header(path, read_options)
+    twice = sorted({c for c in header if header.count(c) > 1})
+    if twice:
+        raise ValueError(f"{name}: column(s) {twice} appear more than once in the header; which one is meant "
+                         "cannot be told: rename or remove the copies")
     return frame
+
+
+def _header(path, read_options) -> list[str]:
+    """The header row as written (pandas renames a repeated name ``psi`` to ``psi.1``)."""
+    import pandas as pd
+
+    options = {k: v for k, v in read_options.items() if k in ("sep", "delimiter", "comment", "skiprows", "encoding")}
+    if not isinstance(path, (str, Path)):
+        if not hasattr(path, "seek"):
+            return []
+        path.seek(0)
+    row = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False, **options)
+    return [str(v).strip() for v in row.iloc[0].tolist()] if len(row) else []
 
 
 def read_csv(path, columns: Mapping[str, str] | None = None, *, time: str = "t:s", wrap: Sequence[str] = (),

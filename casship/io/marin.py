@@ -57,7 +57,8 @@ def read_marin(path, *, flip_rudder: bool = True) -> Dataset:
     -------
     Dataset
         Columns ``u, v, r, x, y, psi, delta, n, phi, p, x_dot, y_dot`` in SI units and radians;
-        ``meta`` holds ``source``, ``title``, ``dt``, ``time_residual_quanta`` and ``rudder_sign_flipped``.
+        ``meta`` holds ``source``, ``title``, ``dt``, ``time_residual_quanta``, ``significant_digits`` (3:
+        the quantisation of every value) and ``rudder_sign_flipped``.
 
     Examples
     --------
@@ -89,7 +90,7 @@ def read_marin(path, *, flip_rudder: bool = True) -> Dataset:
             "phi": np.radians(col["phi"]), "p": np.radians(col["p"]), "x_dot": x_dot, "y_dot": y_dot}
     units = {"u": "m/s", "v": "m/s", "r": "rad/s", "x": "m", "y": "m", "psi": "rad", "delta": "rad",
              "n": "1/s", "phi": "rad", "p": "rad/s", "x_dot": "m/s", "y_dot": "m/s"}
-    meta = {"source": str(path), "title": title, "dt": dt, "time_residual_quanta": residual,
+    meta = {"source": str(path), "title": title, "dt": dt, "time_residual_quanta": residual, "significant_digits": 3,
             "rudder_sign_flipped": bool(flip_rudder), "vessel": "KVLCC2 (MARIN free running, full scale)",
             "L_pp": 320.0}
     return Dataset(t, cols, units, meta)

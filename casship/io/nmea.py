@@ -38,6 +38,7 @@ import numpy as np
 
 from ..angles import wrap
 from ..data import Dataset
+from ..errors import InputError
 from .geodesy import geodetic_to_ne
 
 __all__ = ["read_nmea", "NMEAError", "SUPPORTED_SENTENCES"]
@@ -56,7 +57,7 @@ _LON = re.compile(r"^(\d{3})(\d{2}(?:\.\d*)?)$")
 _DATE = re.compile(r"^(\d{2})(\d{2})(\d{2})$")
 
 
-class NMEAError(ValueError):
+class NMEAError(InputError):
     """A malformed NMEA line, with its 1-based ``line_number`` and the ``line`` text.
 
     Parameters

@@ -14,7 +14,7 @@ from typing import Mapping
 import numpy as np
 
 from ..angles import unwrap
-from ..data import Dataset
+from ..data import Dataset, check_rows
 from ..trajectory import Trajectory
 from ..model import Model
 from ..simulate import simulate
@@ -130,7 +130,7 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
                  speed: float | None = None, n: float | None = None, duration: float | None = None,
                  dt: float | None = None, t_exec: float | None = None, p=None, hold: float | None = None,
                  seed=None, method: str = "rk4", rate: float | None | str = "model",
-                 check_limits: bool = True) -> ManeuverResult:
+                 check_limits: bool = True, first: str | None = None) -> ManeuverResult:
     """Simulate a named manoeuvre from a straight run and compute its metrics.
 
     Parameters
@@ -139,10 +139,9 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
         A 3-DOF ship model with states ``u, v, r, x, y, psi``.
     kind : {"turning", "zigzag", "pullout", "spiral", "random"}
     rudder_deg : float
-        Rudder angle [deg]; negative = to port (for a zig-zag: port first).
+        Rudder angle [deg]; negative = to port (for a zig-zag: port first, unless ``first`` says it).
     heading_deg : float, optional
-        Zig-zag switch heading [deg] (default ``|rudder_deg|``); its sign, if negative, also
-        selects port first.
+        Zig-zag switch heading [deg] (default ``|rudder_deg|``); negative also means port first.
     speed : float, optional
         Approach speed [m/s] (default ``model.vessel.U0``).
     n : float, optional
@@ -164,6 +163,10 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
         Check the rudder angle, propeller rate and speed against the model's declared ranges
         (``model.limits``) and the time step against the integrator's stability limit;
         ``False`` is the explicit opt-in for a deliberate out-of-range study.
+    first : {"port", "starboard"}, optional
+        Zig-zag: the side the rudder goes to first. Without it, port when ``rudder_deg`` or
+        ``heading_deg`` is negative, else starboard; a negative angle with ``first="starboard"`` is
+        an error. The side is in ``settings["first_side"]``.
 
     Returns
     -------
@@ -212,11 +215,16 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
         raise ValueError(f"dt = {dt:g} s must be shorter than the duration {duration:g} s")
     rudder = np.radians(rudder_deg)
     defaults = {"turning": 50 * T, "zigzag": 16 * T, "pullout": 40 * T, "spiral": None, "random": 20 * T}
+    span = 15 * float(hold or 12 * T) if kind == "spiral" else (duration or defaults[kind])
+    check_rows(span / dt + 1, f"{kind}: {span:g} s at steps of {dt:g} s")
     x0 = straight_run_state(model, speed)
     settings = {"kind": kind, "rudder_deg": rudder_deg, "speed_mps": speed, "n": n, "dt_s": dt, "t_exec_s": t_exec}
+    if first is not None and kind != "zigzag":
+        raise ValueError(f"first (the side of a zig-zag's first rudder) means nothing for a {kind} manoeuvre")
     if kind == "zigzag":
         heading = np.radians(abs(heading_deg) if heading_deg is not None else abs(rudder_deg))
-        sign = np.sign(rudder_deg) * (np.sign(heading_deg) if heading_deg else 1.0)
+        sign = _first_side(rudder_deg, heading_deg, first)
+        settings["first_side"] = "starboard" if sign > 0 else "port"
         t = np.arange(0.0, (duration or defaults["zigzag"]) + dt / 2, dt)
         ctrl = ZigZag(model, sign * abs(rudder), heading, n, t_exec=t_exec, rate=rate)
         traj = simulate(model, x0, t, ctrl, pv, method=method, check_limits=check_limits)
@@ -247,6 +255,18 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
         if kind == "pullout":
             metrics = _pullout_metrics(traj, t_exec + float(hold or 20 * T))
     return ManeuverResult(traj, metrics, settings)
+
+
+def _first_side(rudder_deg: float, heading_deg: float | None, first: str | None) -> float:
+    """+1 (starboard first) or -1 (port first): ``first``, else port when either angle is negative."""
+    negative = [k for k, v in (("rudder_deg", rudder_deg), ("heading_deg", heading_deg)) if v is not None and v < 0]
+    if first is None:
+        return -1.0 if negative else 1.0
+    if first not in ("port", "starboard"):
+        raise ValueError(f"first must be 'port' or 'starboard', got {first!r}")
+    if first == "starboard" and negative:
+        raise ValueError(f"first='starboard' but {negative[0]} is negative (port first): give magnitudes with first")
+    return 1.0 if first == "starboard" else -1.0
 
 
 def _finite(value, what: str) -> float:

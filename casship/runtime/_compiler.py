@@ -21,6 +21,9 @@ from typing import Sequence
 
 import casadi as ca
 
+from ..errors import SetupError
+from ..progress import activity
+
 __all__ = ["CompileError", "DEFAULT_FLAGS", "PORTABLE_FLAGS", "DEFAULT_TIMEOUT", "find_compiler", "chosen_flags",
            "compile_timeout", "accepts_native", "build_library", "run_compiler", "SUFFIX"]
 
@@ -45,8 +48,9 @@ _COMPILERS: dict[str, tuple[str, str]] = {}
 _NATIVE: dict[tuple[str, str], bool] = {}          # (path, version) -> accepts -march=native
 
 
-class CompileError(RuntimeError):
-    """C code could not be compiled here: no compiler, a compiler error, or the time limit."""
+class CompileError(SetupError):
+    """C code could not be compiled here: no compiler, a compiler error, or the time limit (a
+    :class:`casship.errors.SetupError`, so a ``RuntimeError``)."""
 
 
 def find_compiler(compiler: str | None = None) -> tuple[str, str]:
@@ -140,7 +144,8 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     except OSError as exc:
         raise CompileError(f"compiling {what}: the compiler {cmd[0]} cannot be run ({exc})") from None
     try:
-        out, err = proc.communicate(timeout=limit)
+        with activity(f"casship: compiling {what} to C (once; then kept in the cache)"):
+            out, err = proc.communicate(timeout=limit)
     except subprocess.TimeoutExpired:
         if posix:                           # the driver and the passes it started (cc1, as, ld)
             try:

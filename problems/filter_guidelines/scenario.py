@@ -154,8 +154,8 @@ def noisy(tr, ship, std: float, seed: int) -> cs.Dataset:
 
 
 def prior(data: cs.Dataset, model) -> cs.Gaussian:
-    """x(0) = y(0), P(0) = I (seed 002 Eq. 27, 31)."""
-    return cs.Gaussian(np.array([data[s][0] for s in model.state_names]), np.eye(model.nx))
+    """x(0) = y(0), P(0) = I (seed 002 Eq. 27, 31): :func:`casship.prior_from_data` with unit variances."""
+    return cs.prior_from_data(model, data, var=1.0)
 
 
 def rmse(res, tr) -> dict:

@@ -246,7 +246,7 @@ class MHE(Estimator):
         """
         self._check_prior(prior)
         prior = self.augmented_prior(prior, p)
-        data = bridge_gaps(self, data, prior.mean, self._params(p))
+        data = bridge_gaps(self, data, prior, self._params(p), through=self.arrival_filter)
         arrays = self.prepare(data, p)
         n = len(data)
         engine = WindowEngine(self, prior, arrays["p"], outputs=DIAGNOSTICS)
@@ -323,7 +323,7 @@ class MHE(Estimator):
         """
         self._check_prior(prior)
         prior = self.augmented_prior(prior, p)
-        data = bridge_gaps(self, data, prior.mean, self._params(p))
+        data = bridge_gaps(self, data, prior, self._params(p), through=self.arrival_filter)
         arrays = self.prepare(data, p)
         n = len(data)
         if n < 2:

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
 
 from ...runtime import BufferedCall
 from ...gaussian import Gaussian
-from ..gaps import gap_limit, online_pieces
+from ..gaps import gap_pieces, gap_threshold
 from ..options import DIAGNOSTICS
 from .arrival import arrival_prior
 from .solvers import gauss_newton_start, solve_window
@@ -75,7 +76,7 @@ class WindowEngine:
             raise ValueError(f"u must be {nu} finite values for the inputs {list(m.input_names)}, got {u0}")
         self._u_prev, self._u = u0.copy(), u0.copy()
         self._info: dict = {}
-        self._gap_limit = gap_limit(mhe, prior.mean, u0, p_aug)
+        self._gap_limit = gap_threshold(mhe)      # longer intervals are checked at the estimate there
 
     def advance(self, u_prev, u, y, mask, dt, where: str):
         """One sample: EKF step from the previous MHE estimate, shift the window, solve it."""
@@ -147,9 +148,10 @@ class WindowEngine:
         where = f"before update {self.samples + 1}"
         pieces = 1
         if dt > self._gap_limit:
-            pieces = online_pieces(mhe, float(dt), self._x, u_prev, self.p, where)
-            if pieces == 1:
-                self._gap_limit = float(dt)
+            pieces = gap_pieces(mhe, self._x, u_prev, self.p, float(dt), where)
+            if pieces > 1:
+                warnings.warn(f"{mhe.name}: time gap of {dt:.4g} s {where} bridged by {pieces - 1} prediction-only "
+                              f"step(s) of {dt / pieces:.4g} s", UserWarning, stacklevel=4)
         t0 = time.perf_counter()
         nothing = np.zeros(mhe.ny)
         for _ in range(pieces - 1):                 # prediction-only samples across a bridged gap

@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...errors import SolverError
 from .problem import Window
 
 __all__ = ["MHEFailed"]
 
 
-class MHEFailed(RuntimeError):
+class MHEFailed(SolverError):
     """The NLP solver of a moving-horizon window did not succeed (``status`` holds its return status).
 
     Parameters

@@ -1,0 +1,40 @@
+"""casship's own error types: what casship raises on purpose, as opposed to a bug.
+
+Every error casship raises on purpose names the offending item (an option, a column, a state, a
+file) and says what would be accepted. They share the base :class:`CasshipError`; each also derives
+from the built-in exception a caller would expect (``ValueError`` for bad input, ``RuntimeError``
+for a solver that failed), so ``except ValueError`` keeps working.
+
+The command line (:func:`casship.cli.main`) turns these, and ``OSError`` (a missing or unwritable
+file), into one line ``casship CMD: error: ...`` with exit code 2; anything else is a bug in casship
+and is reported as one (exit code 1), with ``--debug`` for the traceback.
+
+Examples
+--------
+>>> from casship.errors import CasshipError, InputError
+>>> try:
+...     raise InputError("--dt: must be positive, got -1")
+... except ValueError as exc:                    # an InputError is a ValueError
+...     isinstance(exc, CasshipError)
+True
+"""
+from __future__ import annotations
+
+__all__ = ["CasshipError", "InputError", "SolverError", "SetupError"]
+
+
+class CasshipError(Exception):
+    """Base of every error casship raises on purpose (bad input, a failed solve): never a bug."""
+
+
+class InputError(CasshipError, ValueError):
+    """Bad input (a value, a name, a record, a setting), named in the message with what is accepted."""
+
+
+class SolverError(CasshipError, RuntimeError):
+    """A numerical method that failed (an integrator, an optimiser, a filter that diverged), with its status."""
+
+
+class SetupError(CasshipError, RuntimeError):
+    """Something casship needs is missing from the environment (a C compiler, an optional package, a
+    folder of the source checkout), named with how to provide it."""
