@@ -80,7 +80,9 @@ class Trial:
         return Dataset(self.t, cols, meta={"trial": self.name})
 
     def to_csv(self, path, approach: Approach) -> Path:
-        """Write the trial as a CSV a tank can run: ``t_s``, rudder in degrees, propeller rate.
+        """Write the trial as a CSV a tank can run: ``t_s``, ``rudder_deg`` (held from this time to the
+        next row; positive turns to starboard) and the propeller rate (column named like the model's
+        propeller input), one row per step, from the straight approach at ``approach.speed``.
 
         Parameters
         ----------
@@ -96,8 +98,6 @@ class Trial:
         prop = approach.propellers[0] if approach.propellers else None
         with path.open("w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow([f"# {self.name}: approach {approach.speed:.4g} m/s, rudder held over each step of "
-                        f"{self.dt:g} s; positive rudder turns to starboard"])
             w.writerow(["t_s", "rudder_deg"] + ([f"{prop}"] if prop else []))
             for k, t in enumerate(self.t[:-1]):
                 w.writerow([f"{t:.6g}", f"{np.degrees(self.rudder[k]):.4f}"] + ([f"{approach.n:.6g}"] if prop else []))
