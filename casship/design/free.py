@@ -60,6 +60,15 @@ class TrialLimits:
     def resolved(self, approach: Approach) -> "TrialLimits":
         """These limits with the vessel's defaults filled in, checked for a possible trial.
 
+        Parameters
+        ----------
+        approach : Approach
+            The ship, its approach and the design's step.
+
+        Returns
+        -------
+        TrialLimits
+
         Raises
         ------
         ValueError
@@ -154,7 +163,8 @@ def optimise_free_trial(approach: Approach, belief: ParameterBelief, noise: Mapp
     criterion : {"D", "A"}, optional
         Instead of a target.
     start : Trial, optional
-        Starting rudder record (sampled at the knots); default a 10 deg sine of period 8 knots.
+        Starting rudder record (sampled at the knots, its last value held beyond its end, limited to
+        the rudder angle); default a 10 deg sine of period 8 knots.
     max_iter : int
         IPOPT iteration limit.
 
@@ -232,7 +242,8 @@ def optimise_free_trial(approach: Approach, belief: ParameterBelief, noise: Mapp
     bad = limits.violations(trial, approach, tol=1e-4)
     report = {"status": st.get("return_status", "unknown"), "iterations": int(st.get("iter_count", 0)),
               "objective_start": f_start, "objective": float(sol["f"]), "violations": bad,
-              "objective_kind": "log variance" if gradient is not None else f"criterion {criterion}"}
+              "objective_kind": "log variance" if gradient is not None else f"criterion {criterion}",
+              "start": start.name if start is not None else "sine"}
     if bad or not st.get("success", False) and report["status"] not in ("Maximum_Iterations_Exceeded",):
         raise FreeTrialError(f"free trial: IPOPT ended with {report['status']!r}" +
                              (f"; limits broken: {'; '.join(bad)}" if bad else ""))

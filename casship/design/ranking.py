@@ -17,7 +17,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .belief import ParameterBelief
-from .free import TrialLimits, optimise_free_trial
+from .free import FreeTrialError, TrialLimits, optimise_free_trial
 from .information import CRITERIA, check_noise, criterion_value, trial_information
 from .sensitivity import Approach
 from .targets import TargetValue, get_target
@@ -72,7 +72,16 @@ class DesignResult:
         return self.trials[(ok or self.rows)[0]["trial"]]
 
     def row(self, name: str) -> dict:
-        """The row of trial ``name``."""
+        """The row of trial ``name``.
+
+        Parameters
+        ----------
+        name : str
+
+        Returns
+        -------
+        dict
+        """
         for r in self.rows:
             if r["trial"] == name:
                 return r
@@ -123,7 +132,16 @@ class DesignResult:
                            for n, t in self.trials.items()}}
 
     def to_json(self, path) -> Path:
-        """Write :meth:`to_dict` as JSON."""
+        """Write :meth:`to_dict` as JSON.
+
+        Parameters
+        ----------
+        path : str or Path
+
+        Returns
+        -------
+        Path
+        """
         path = Path(path)
         path.write_text(json.dumps(self.to_dict(), indent=2, default=float))
         return path
@@ -206,7 +224,8 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
         Optimise a free rudder sequence within these limits and rank it too; the standard trials
         are checked against them (the ``violations`` column).
     start : Trial, optional
-        Starting sequence of the free optimisation.
+        Starting sequence of the free optimisation (default a sine); the best-ranked candidate that
+        keeps the limits other than the duration is a second start, and the better result is kept.
     max_iter : int
         Iteration limit of the free optimisation.
     jit : bool, optional
@@ -254,23 +273,43 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
         raise ValueError(f"candidate trials need distinct names, got {names}")
     next(steps)
     info = {t.name: trial_information(approach, t, belief.names, noise, jit=jit) for t in trials}
+    sd0 = np.sqrt(belief.variance_of(tv.gradient))
+
+    def row(t):
+        after = belief.after(info[t.name])
+        sd = np.sqrt(after.variance_of(tv.gradient))
+        return {"trial": t.name, "kind": t.kind, "duration_s": t.duration, "sides": sorted(t.sides()),
+                "sd_before": float(sd0), "sd_after": float(sd), "reduction": float(sd0 / sd) if sd > 0 else np.inf,
+                "criterion": criterion_value(after, belief, criterion) if criterion else None,
+                "violations": limits.violations(t, approach) if limits is not None else []}
+
+    def key(r):
+        return r["criterion"] if criterion else r["sd_after"]
+
+    rows = sorted((row(t) for t in trials), key=key)
     free_report = {}
     if limits is not None:
         next(steps)
-        free, free_report = optimise_free_trial(approach, belief, noise, limits, gradient=None if criterion else
-                                                tv.gradient, criterion=criterion, start=start, max_iter=max_iter)
+        # two starts: the given one (or a sine) and the best standard trial that keeps the other limits
+        lim = limits.resolved(approach)
+        starts = [start] + [trials[[t.name for t in trials].index(r["trial"])] for r in rows
+                            if not [v for v in r["violations"] if not v.startswith("duration")]][:1]
+        best, errors = None, []
+        for s in starts:
+            try:
+                cand = optimise_free_trial(approach, belief, noise, lim, gradient=None if criterion else tv.gradient,
+                                           criterion=criterion, start=s, max_iter=max_iter)
+            except FreeTrialError as exc:
+                errors.append(exc)
+                continue
+            if best is None or cand[1]["objective"] < best[1]["objective"]:
+                best = cand
+        if best is None:
+            raise errors[-1]
+        free, free_report = best
         trials.append(free)
         info[free.name] = trial_information(approach, free, belief.names, noise, jit=jit)
+        rows = sorted(rows + [row(free)], key=key)
     next(steps, None)
-    sd0 = np.sqrt(belief.variance_of(tv.gradient))
-    rows = []
-    for t in trials:
-        after = belief.after(info[t.name])
-        sd = np.sqrt(after.variance_of(tv.gradient))
-        rows.append({"trial": t.name, "kind": t.kind, "duration_s": t.duration, "sides": sorted(t.sides()),
-                     "sd_before": float(sd0), "sd_after": float(sd), "reduction": float(sd0 / sd) if sd > 0 else np.inf,
-                     "criterion": criterion_value(after, belief, criterion) if criterion else None,
-                     "violations": limits.violations(t, approach) if limits is not None else []})
-    rows.sort(key=lambda r: r["criterion"] if criterion else r["sd_after"])
     return DesignResult(tv, belief, noise, rows, {t.name: t for t in trials}, criterion, free_report,
                         {"speed_mps": approach.speed, "n": approach.n, "dt_s": approach.dt}, info)

@@ -63,20 +63,41 @@ class ManoeuvreFold:
         return np.arange(self.n + 1) * self.dt
 
     def param_vector(self, theta):
-        """The full parameter vector with ``theta`` in place (symbolic if ``theta`` is)."""
+        """The full parameter vector with ``theta`` in place (symbolic if ``theta`` is).
+
+        Parameters
+        ----------
+        theta : casadi.MX or array_like (k,)
+        """
         P = ca.MX(ca.DM(self.p)) if isinstance(theta, ca.MX) else ca.DM(self.p)
         for j, i in enumerate(self.index):
             P[i] = theta[j]
         return P
 
     def states(self, theta, U):
-        """States ``(nx, n + 1)`` for parameters ``theta`` and inputs ``U`` (``nu x n``, held per step)."""
+        """States ``(nx, n + 1)`` for parameters ``theta`` and inputs ``U`` (``nu x n``, held per step).
+
+        Parameters
+        ----------
+        theta : casadi.MX or array_like (k,)
+        U : casadi.MX or array (nu, n)
+        """
         X = self._fold(self.x0, U, self.param_vector(theta), ca.DM.zeros(self.model.nw, 1), self.dt)
         return ca.horzcat(ca.DM(self.x0), X)
 
     def outputs(self, theta, U, X, measured: Sequence[str]):
         """Measured outputs ``(len(measured), n + 1)`` of the states ``X`` (inputs held: the last
-        step's input is used at the last sample)."""
+        step's input is used at the last sample).
+
+        Parameters
+        ----------
+        theta : casadi.MX or array_like (k,)
+        U : casadi.MX or array (nu, n)
+        X : casadi.MX (nx, n + 1)
+            From :meth:`states`.
+        measured : sequence of str
+            Output names.
+        """
         rows = self.model.indices(measured, "output")
         Ufull = ca.horzcat(U, U[:, -1])
         Y = self.model.h.map(self.n + 1)(X, Ufull, self.param_vector(theta))
@@ -128,9 +149,13 @@ class Approach:
         Approach speed [m/s] (default ``model.vessel.U0``).
     dt : float, optional
         Step of the design's simulations [s] (default ``L/U / 40`` rounded down to 1, 2 or 5 x 10^k).
+    n : float, optional
+        Propeller rate (default: the rate that holds ``speed`` with ``p``), e.g. the rate a trial was
+        designed with, to run it on another ship.
     """
 
-    def __init__(self, model: Model, p, *, speed: float | None = None, dt: float | None = None):
+    def __init__(self, model: Model, p, *, speed: float | None = None, dt: float | None = None,
+                 n: float | None = None):
         from ..maneuvers import propeller_inputs, propeller_rate_for_speed, rudder_inputs, straight_run_state, vessel_of
         from ..maneuvers.runners import _nice_step
 
@@ -146,7 +171,10 @@ class Approach:
         self.dt = float(dt) if dt is not None else _nice_step(self.time_scale / 40)
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt must be a positive number [s], got {dt}")
-        self.n = propeller_rate_for_speed(model, self.speed, self.p) if self.propellers else None
+        if n is not None and not (np.isfinite(n) and self.propellers):
+            raise ValueError(f"n = {n}: a finite propeller rate for a model with a propeller input")
+        self.n = None if not self.propellers else (float(n) if n is not None else
+                                                  propeller_rate_for_speed(model, self.speed, self.p))
         self.x0 = straight_run_state(model, self.speed)
         self.rudder_max = vessel.rudder_max
         self.rudder_rate = vessel.rudder_rate

@@ -48,7 +48,19 @@ class Target:
     unit = ""
 
     def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:  # pragma: no cover - abstract
-        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``."""
+        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
+
+        Parameters
+        ----------
+        approach : Approach
+            Model, parameters, approach speed, propeller rate and step.
+        names : sequence of str
+            The uncertain parameters (the gradient's order).
+
+        Returns
+        -------
+        TargetValue
+        """
         raise NotImplementedError
 
 
@@ -121,17 +133,40 @@ class Turning(Target):
 
     @property
     def name(self) -> str:
+        """E.g. ``tactical_diameter_starboard_35``."""
         return f"{self.quantity}_{'starboard' if self.side > 0 else 'port'}_{self.rudder_deg:g}"
 
     unit = "m"
 
     def rudder(self, approach: Approach):
-        """Rudder angle at the sample times ``t`` (a callable)."""
+        """The rudder law ``t -> delta`` [rad]: to the angle at the vessel's rate from t = 0.
+
+        Parameters
+        ----------
+        approach : Approach
+
+        Returns
+        -------
+        callable
+        """
         delta = self.side * np.radians(self.rudder_deg)
         rate = approach.rudder_rate
         return lambda t: delta * (np.minimum(1.0, rate * np.asarray(t) / abs(delta)) if rate else np.ones_like(t))
 
     def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
+        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
+
+        Parameters
+        ----------
+        approach : Approach
+            Model, parameters, approach speed, propeller rate and step.
+        names : sequence of str
+            The uncertain parameters (the gradient's order).
+
+        Returns
+        -------
+        TargetValue
+        """
         level = np.radians(90.0 if self.quantity != "tactical_diameter" else 180.0)
         law = self.rudder(approach)
         n = _steps_to(approach, law, level)
@@ -180,10 +215,22 @@ class FirstOvershoot(Target):
 
     @property
     def name(self) -> str:
+        """E.g. ``first_overshoot_20_20_starboard``."""
         return f"first_overshoot_{self.rudder_deg:g}_{self.heading_deg:g}_{'starboard' if self.side > 0 else 'port'}"
 
     def law(self, approach: Approach, lib=np):
-        """Rudder at times ``t`` for a switch time ``t1`` (``lib``: numpy or casadi)."""
+        """The rudder law ``(t, t1) -> delta`` [rad] for a switch time ``t1``.
+
+        Parameters
+        ----------
+        approach : Approach
+        lib : module
+            ``numpy`` (numbers) or ``casadi`` (``t1`` a symbol).
+
+        Returns
+        -------
+        callable
+        """
         dz = np.radians(self.rudder_deg)
         rate = approach.rudder_rate or 1e6 * dz            # no rate: a step within a microsecond
 
@@ -195,6 +242,19 @@ class FirstOvershoot(Target):
         return rudder
 
     def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
+        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
+
+        Parameters
+        ----------
+        approach : Approach
+            Model, parameters, approach speed, propeller rate and step.
+        names : sequence of str
+            The uncertain parameters (the gradient's order).
+
+        Returns
+        -------
+        TargetValue
+        """
         level = np.radians(self.heading_deg)
         law = self.law(approach)
         n_switch = _steps_to(approach, lambda t: law(t, np.inf), level, extra=1)
@@ -244,13 +304,28 @@ class Difference(Target):
 
     @property
     def name(self) -> str:
+        """The label."""
         return self.label
 
     @property
     def unit(self) -> str:
+        """The unit of both terms."""
         return self.first.unit
 
     def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
+        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
+
+        Parameters
+        ----------
+        approach : Approach
+            Model, parameters, approach speed, propeller rate and step.
+        names : sequence of str
+            The uncertain parameters (the gradient's order).
+
+        Returns
+        -------
+        TargetValue
+        """
         a, b = self.first.evaluate(approach, names), self.second.evaluate(approach, names)
         return TargetValue(self.name, a.value - b.value, a.gradient - b.gradient, a.unit)
 

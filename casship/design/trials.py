@@ -69,7 +69,16 @@ class Trial:
         return set(np.sign(big).astype(int).tolist())
 
     def record(self, approach: Approach) -> Dataset:
-        """The noise-free record of this trial on the model at ``approach.p`` (all outputs, inputs)."""
+        """The noise-free record of this trial on the model at ``approach.p`` (all outputs, inputs).
+
+        Parameters
+        ----------
+        approach : Approach
+
+        Returns
+        -------
+        Dataset
+        """
         from ..simulate import simulate
 
         m = approach.model
