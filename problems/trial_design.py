@@ -45,7 +45,7 @@ NOISE = {"psi": np.radians(0.2), "r": np.radians(0.02), "u": 0.02}
 TRUTH_SEED = 7
 TARGET = "port_starboard_difference"
 QUICK = {"dt": 4.0, "seeds": 3, "max_iter": 30}
-FULL = {"dt": 2.0, "seeds": 12, "max_iter": 150}
+FULL = {"dt": 2.0, "seeds": 12, "max_iter": 150, "max_iter_fitted": 40}   # part 1: some 35 parameters
 
 
 def study_model() -> cs.Model:
@@ -108,7 +108,7 @@ def _fitted_ship(out: Path, data_dir, quick: bool, cfg: dict, rep: Report) -> di
             f"{len(belief.names)} uncertain parameters. Noise of one {dt:g} s sample, as the fit weighs it: "
             + ", ".join(f"{k} {v:.3g}" for k, v in noise.items()) + " (SI, rad).")
     for target in ("tactical_diameter", TARGET):
-        res = design_trials(model, belief, noise, target, p=approach.p, dt=dt, max_iter=cfg["max_iter"],
+        res = design_trials(model, belief, noise, target, p=approach.p, dt=dt, max_iter=cfg.get("max_iter_fitted", 0),
                             limits=None if quick else _limits(approach))
         (out / f"ranking_fit_{target}.md").write_text(res.table() + "\n")
         res.plot(out / f"fig_fit_{target}.png", approach)

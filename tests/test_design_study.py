@@ -13,17 +13,30 @@ from problems import get_study
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_trial_design_quick_closed_check(tmp_path):
-    """Without measured data part 1 is skipped (an empty data folder); the closed check runs."""
-    empty = tmp_path / "no-data"
-    empty.mkdir()
+def _data_or_empty(tmp_path):
+    """The measured-data folder when there is one, else an empty folder (part 1 is then skipped)."""
+    from casship.io import data_dir
+
+    try:
+        folder = data_dir()
+    except FileNotFoundError:
+        folder = None
+    if folder is None or not (folder / "kvlcc2_marin_free").is_dir():
+        folder = tmp_path / "no-data"
+        folder.mkdir()
+        return folder, False
+    return folder, True
+
+
+def test_trial_design_quick(tmp_path):
+    """The closed check always; with the shared runs also part 1 (skipped, and said so, without them)."""
+    data, have = _data_or_empty(tmp_path)
     out = tmp_path / "out"
-    summary = get_study("trial-design").run(out, quick=True, workers=1, data_dir=empty)
+    summary = get_study("trial-design").run(out, quick=True, workers=1, data_dir=data)
     for name in ("report.md", "summary.json", "closed_check.md", "ranking_closed_check.md", "fig_closed_check.png",
                  "free_trial.csv"):
         assert (out / name).is_file(), name
     assert json.loads((out / "summary.json").read_text())["study"] == "trial-design"
-    assert summary["fitted_ship"] is None
     check = summary["closed_check"]
     rows, verdict = check["rows"], check["verdict"]
     assert verdict["recommended"] == "free" and set(rows) == {"free", verdict["best_standard_realised"]}
@@ -33,22 +46,20 @@ def test_trial_design_quick_closed_check(tmp_path):
     assert verdict["predicted_vs_realised_factor"] < 2.0
     assert all(r["converged"] == 3 for r in rows.values())
     report = (out / "report.md").read_text()
-    assert report.splitlines()[0].endswith("(quick run)") and "Skipped: no measured data" in report
+    assert report.splitlines()[0].endswith("(quick run)")
     header = next(csv.reader((out / "free_trial.csv").open()))
     assert header == ["t_s", "rudder_deg", "n"]
-
-
-def test_trial_design_quick_on_the_fitted_ship(tmp_path, data_dir):
-    """With the shared runs the fitted KVLCC2's asymmetry is best resolved by a trial in both directions."""
-    summary = get_study("trial-design").run(tmp_path, quick=True, workers=1, data_dir=data_dir)
+    if not have:
+        assert summary["fitted_ship"] is None and "Skipped: no measured data" in report
+        return
+    # the fitted KVLCC2's asymmetry is best resolved by a trial in both directions
     designs = summary["fitted_ship"]["designs"]
     asym = designs["port_starboard_difference"]["ranking"]
     assert asym[0]["sides"] == [-1, 1]
     assert all(r["sd_after"] < r["sd_before"] for r in asym)
-    td = designs["tactical_diameter"]["ranking"]
-    one_sided = [r for r in td if r["kind"] == "turning"]
-    assert one_sided[0]["trial"] == "turning 35 starboard"   # the target's own side teaches more about it
-    assert (tmp_path / "fit.json").is_file()
+    turns = [r["trial"] for r in designs["tactical_diameter"]["ranking"] if r["kind"] == "turning"]
+    assert turns[0] == "turning 35 starboard"       # the target's own side teaches more about it
+    assert (out / "fit.json").is_file()
 
 
 @pytest.mark.slow
