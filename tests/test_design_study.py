@@ -65,8 +65,13 @@ def test_trial_design_quick(tmp_path):
 @pytest.mark.slow
 def test_trial_design_full(tmp_path, data_dir):
     summary = get_study("trial-design").run(tmp_path, quick=False, workers=2, data_dir=data_dir)
+    """The factors stated in docs/trial-design.md: realised RMSE within a factor 3 of the design's prediction
+    (the free trial's is optimistic, being linearised at the prior mean), within 1.6 of the prediction
+    linearised at the true ship."""
     verdict = summary["closed_check"]["verdict"]
-    assert verdict["recommended_beats_best_standard"] and verdict["predicted_vs_realised_factor"] < 2.0
+    assert verdict["recommended_beats_best_standard"] and verdict["predicted_vs_realised_factor"] < 3.0
+    for row in summary["closed_check"]["rows"].values():
+        assert 1 / 1.6 < row["realised_rmse_m"] / row["predicted_at_truth_m"] < 1.6
 
 
 def test_trial_design_page_example_runs(tmp_path, monkeypatch):

@@ -167,11 +167,14 @@ class DesignResult:
         axes = fig.subplots(1 if approach is None else 2, 1 if approach is None else 2, squeeze=False).ravel()
         names = [r["trial"] for r in self.rows]
         ax = axes[0]
-        ax.barh(names[::-1], [r["sd_after"] * scale for r in self.rows][::-1], color="tab:blue", label="after")
-        ax.axvline(self.rows[0]["sd_before"] * scale, color="k", ls="--", label="now")
+        from matplotlib.ticker import NullFormatter
+
+        ax.barh(names[::-1], [r["sd_after"] * scale for r in self.rows][::-1], color="tab:blue")
+        ax.axvline(self.rows[0]["sd_before"] * scale, color="k", ls="--")
         ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(f"standard deviation of {self.target.name} [{unit}]")
-        ax.legend(loc="lower right")
+        ax.set_title("after each trial (bars) and now (dashed)")
         if approach is not None:
             best = self.best
             rec = best.record(approach)
