@@ -37,7 +37,7 @@ class TrialLimits:
     Parameters
     ----------
     duration : float
-        Length of the trial [s].
+        Length of the trial [s] (a free trial has the whole steps that fit in it).
     rudder_max : float, optional
         Largest rudder angle [rad] (default: the vessel's rudder stop).
     rudder_rate : float, optional
@@ -188,7 +188,7 @@ def optimise_free_trial(approach: Approach, belief: ParameterBelief, noise: Mapp
     noise = check_noise(approach.model, noise)
     lim = limits.resolved(approach)
     dt, names, k = approach.dt, belief.names, len(belief.names)
-    n = int(round(lim.duration / dt))
+    n = int(np.floor(lim.duration / dt + 1e-9))
     m = int(np.floor(n * dt / lim.knot + 1e-9))
     B = _interpolation(n, dt, lim.knot, m)
     fold = approach.fold(names, n)
