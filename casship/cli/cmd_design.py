@@ -20,7 +20,7 @@ import json
 
 import numpy as np
 
-from ._common import add_overwrite_option, require
+from ._common import add_overwrite_option
 
 
 #: The targets of :data:`casship.design.TARGETS` (listed here so that the command line starts without CasADi).
@@ -31,7 +31,7 @@ TARGET_NAMES = ("tactical_diameter", "tactical_diameter_port", "advance", "advan
 def register(sub) -> None:
     p = sub.add_parser("design-trial", help="rank the trials that would most reduce a prediction's uncertainty, "
                                             "and optimise a free rudder sequence")
-    p.add_argument("--model", default=None, metavar="NAME", help="registered model name")
+    p.add_argument("--model", required=True, metavar="NAME", help="registered model name")
     p.add_argument("--params", default=None, help="fit file (JSON from casship identify or a study): parameters, "
                                                   "covariance, noise")
     p.add_argument("--prior-std", dest="prior_std", default=None,
@@ -62,7 +62,7 @@ def register(sub) -> None:
     p.add_argument("--plot", default=None, help="PNG: ranking, the best trial's rudder, track and speed")
     p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
     add_overwrite_option(p)
-    p.set_defaults(func=run, parser=p)
+    p.set_defaults(func=run)
 
 
 def _pairs(text, what: str) -> dict[str, float]:
@@ -127,7 +127,6 @@ def run(args) -> int:
     from ..models import get_model
     from ..outdir import check_output_file, output_file
 
-    require(args.parser, args, {"--model": args.model})
     free = args.free
     if free:
         check_output_file(args.csv, overwrite=args.overwrite, what="--csv")      # before minutes of work
