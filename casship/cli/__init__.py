@@ -28,8 +28,9 @@ _PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 
 
 def _commands() -> dict[str, str]:
-    """Command name -> module name, from the ``cmd_*`` modules (nothing imported)."""
-    return {info.name[4:]: info.name for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name)
+    """Command name -> module name, from the ``cmd_*`` modules (nothing imported; ``cmd_design_trial``
+    is the command ``design-trial``)."""
+    return {info.name[4:].replace("_", "-"): info.name for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name)
             if info.name.startswith("cmd_")}
 
 

@@ -1,0 +1,165 @@
+"""``casship design-trial --model NAME --params fit.json --target tactical_diameter``: which trial to run next.
+
+Examples::
+
+    casship design-trial --model kvlcc2 --params fit.json --target tactical_diameter
+    casship design-trial --model kvlcc2 --params fit.json --prior-std N_r_dash=0.01,Y_vvr_dash=0.2 \\
+        --target port_starboard_difference --duration 900 --corridor 1500 --speed-min 4 --csv next.csv --plot next.png
+    casship design-trial --model kvlcc2 --prior-std N_r_dash=0.01,N_v_dash=0.03 --sigma psi=0.0035,r=0.0002 --no-free
+
+What is known now comes from ``--params`` (a fit file: its covariance over the free parameters,
+its noise standard deviations) and/or ``--prior-std`` (standard deviations of more parameters,
+around the file's or the published values). The ranked list gives, for each candidate trial, the
+target's expected standard deviation before and after it; the optimised free rudder sequence is
+written as a CSV a tank can run (time, rudder in degrees, propeller rate). Every option maps onto
+:func:`casship.design.design_trials`.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from ._common import add_overwrite_option
+
+
+#: The targets of :data:`casship.design.TARGETS` (listed here so that the command line starts without CasADi).
+TARGET_NAMES = ("tactical_diameter", "tactical_diameter_port", "advance", "advance_port", "transfer", "first_overshoot",
+                "first_overshoot_port", "port_starboard_difference")
+
+
+HELP = "rank the trials that would most reduce a prediction's uncertainty, and optimise a free rudder sequence"
+
+
+def register(sub) -> None:
+    p = sub.add_parser("design-trial", help=HELP)
+    p.add_argument("--model", required=True, metavar="NAME", help="registered model name")
+    p.add_argument("--params", default=None, help="fit file (JSON from casship identify or a study): parameters, "
+                                                  "covariance, noise")
+    p.add_argument("--prior-std", dest="prior_std", default=None,
+                   help="standard deviations name=std,... of uncertain parameters the fit holds fixed (or all, "
+                        "without --params)")
+    p.add_argument("--target", default="tactical_diameter", choices=TARGET_NAMES, help="the prediction to resolve")
+    p.add_argument("--criterion", default=None, choices=("D", "A"),
+                   help="rank by a classical criterion on the parameters instead (the target is still reported)")
+    p.add_argument("--sigma", default=None, help="noise standard deviation of one sample per measured output "
+                                                 "name=value,... in SI units and radians (default: the fit file's)")
+    p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: the vessel's)")
+    p.add_argument("--dt", type=float, default=None, help="design step and sampling of a trial [s] (default L/U/40)")
+    p.add_argument("--turning", default="35", help="turning-circle rudder angles [deg], comma-separated")
+    p.add_argument("--zigzag", default="10,20", help="zig-zag angles [deg], comma-separated")
+    p.add_argument("--pullout", default="35", help="pull-out rudder angles [deg], comma-separated ('' for none)")
+    p.add_argument("--no-spiral", dest="spiral", action="store_false", help="leave the spiral out")
+    p.add_argument("--no-free", dest="free", action="store_false", help="rank the standard trials only")
+    p.add_argument("--duration", type=float, default=None, help="free trial: duration [s] (default 25 L/U)")
+    p.add_argument("--rudder-max-deg", dest="rudder_max_deg", type=float, default=None,
+                   help="free trial: largest rudder angle [deg] (default: the rudder stop)")
+    p.add_argument("--rudder-rate-deg", dest="rudder_rate_deg", type=float, default=None,
+                   help="free trial: largest rudder rate [deg/s] (default: the vessel's)")
+    p.add_argument("--corridor", type=float, default=None, help="free trial: half width of the track corridor [m]")
+    p.add_argument("--speed-min", dest="speed_min", type=float, default=None, help="free trial: speed floor [m/s]")
+    p.add_argument("--knot", type=float, default=None, help="free trial: time between rudder knots [s] (default L/U/4)")
+    p.add_argument("--max-iter", dest="max_iter", type=int, default=150, help="free trial: iteration limit")
+    p.add_argument("--csv", default="free_trial.csv", help="the free rudder sequence as CSV")
+    p.add_argument("--plot", default=None, help="PNG: ranking, the best trial's rudder, track and speed")
+    p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
+    add_overwrite_option(p)
+    p.set_defaults(func=run)
+
+
+def _pairs(text, what: str) -> dict[str, float]:
+    out = {}
+    for item in [s.strip() for s in (text or "").split(",") if s.strip()]:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"{what}: expected name=value, got {item!r}")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise ValueError(f"{what}: value of {name.strip()!r} is not a number ({value!r})") from None
+    return out
+
+
+def _angles(text, what: str) -> list[float]:
+    try:
+        out = [float(s) for s in (text or "").split(",") if s.strip()]
+    except ValueError:
+        raise ValueError(f"{what}: expected comma-separated angles in degrees, got {text!r}") from None
+    bad = [a for a in out if not (0 < a <= 90)]
+    if bad:
+        raise ValueError(f"{what}: angles must be in (0, 90] deg, got {bad}")
+    return out
+
+
+def _belief_and_noise(args, model):
+    """The belief and the noise from ``--params`` / ``--prior-std`` / ``--sigma``."""
+    from ..design import ParameterBelief
+    from ..identify import FitResult, read_params
+
+    extra = _pairs(args.prior_std, "--prior-std")
+    sigma = _pairs(args.sigma, "--sigma")
+    if args.params:
+        model, p = read_params(args.params, args.model)
+        fit = FitResult.from_json(args.params)
+        has_free = any(q.split("@", 1)[0] in model.param_names for q in fit.free)
+        if has_free:
+            belief = ParameterBelief.from_fit(fit, extra_std=extra, params=model.param_dict(p))
+        elif extra:
+            belief = ParameterBelief.from_std(extra, model.param_dict(p), source=f"prior around {args.params}")
+        else:
+            raise ValueError(f"--params {args.params} estimates no model parameter; give --prior-std")
+        if not sigma:
+            noise = fit.noise.get("sigma") or {}
+            scale = float(fit.noise.get("weight_scale", 1.0))
+            sigma = {k: float(v) * scale for k, v in noise.items()}
+            if not sigma:
+                raise ValueError(f"--params {args.params} holds no output noise (an output-error fit's sigma); give --sigma")
+    else:
+        if not extra:
+            raise ValueError("give --params (a fit file) or --prior-std (what is uncertain now)")
+        if not sigma:
+            raise ValueError("without --params give --sigma: the noise of each measured output")
+        p = model.params()
+        belief = ParameterBelief.from_std(extra, model.param_dict(), source="prior around the published values")
+    return model, p, belief, sigma
+
+
+def run(args) -> int:
+    from ..design import Approach, TrialLimits, design_trials, standard_trials
+    from ..models import get_model
+    from ..outdir import check_output_file, output_file
+
+    free = args.free
+    if free:
+        check_output_file(args.csv, overwrite=args.overwrite, what="--csv")      # before minutes of work
+    if args.plot:
+        check_output_file(args.plot, overwrite=args.overwrite, what="--plot")
+    model = get_model(args.model)
+    model, p, belief, sigma = _belief_and_noise(args, model)
+    approach = Approach(model, p, speed=args.speed, dt=args.dt)
+    limits = None
+    if free:
+        duration = args.duration if args.duration is not None else round(25 * approach.time_scale / approach.dt) * approach.dt
+        limits = TrialLimits(duration, rudder_max=None if args.rudder_max_deg is None else np.radians(args.rudder_max_deg),
+                             rudder_rate=None if args.rudder_rate_deg is None else np.radians(args.rudder_rate_deg),
+                             corridor=args.corridor, speed_min=args.speed_min, knot=args.knot)
+        limits.resolved(approach)
+    candidates = standard_trials(approach, turning=_angles(args.turning, "--turning"),
+                                 zigzag=_angles(args.zigzag, "--zigzag"), pullout=_angles(args.pullout, "--pullout"),
+                                 spiral=args.spiral)
+    res = design_trials(model, belief, sigma, args.target, criterion=args.criterion, p=p, speed=args.speed,
+                        dt=approach.dt, candidates=candidates, limits=limits, max_iter=args.max_iter)
+    if free:
+        with output_file(args.csv, overwrite=args.overwrite, what="--csv") as tmp:
+            res.trials["free"].to_csv(tmp, approach)
+    if args.plot:
+        with output_file(args.plot, overwrite=args.overwrite, what="--plot") as tmp:
+            res.plot(tmp, approach)
+    if args.json:
+        print(json.dumps(res.to_dict(), default=float))
+    else:
+        print(res.summary())
+        print(res.table())
+        if free:
+            print(f"free trial ({res.free['status']}, {res.free['iterations']} iterations) written to {args.csv}")
+    return 0

@@ -1,0 +1,110 @@
+"""The expected information of a trial and the classical design criteria.
+
+A trial's Fisher information about the uncertain parameters is the Gauss-Newton matrix ``J' J`` of
+the output-error likelihood the fit uses (:class:`casship.identify.OutputErrorProblem`: measured
+channels, noise standard deviations as weights, wrapped heading residuals), at the current estimate,
+on the trial's noise-free record. ``J`` holds the exact sensitivities of the simulated outputs
+(the problem's compiled forward-sensitivity fold). For a linear-Gaussian model it is the Fisher
+matrix exactly; for a nonlinear one it is the expected information to first order.
+"""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .belief import ParameterBelief
+from .sensitivity import Approach
+from .trials import Trial
+
+__all__ = ["trial_information", "criterion_value", "CRITERIA", "check_noise"]
+
+#: Classical criteria on the posterior covariance (smaller is better).
+CRITERIA = ("D", "A")
+
+
+def check_noise(model, noise: Mapping[str, float]) -> dict:
+    """The measurement noise standard deviations by output name, checked.
+
+    Parameters
+    ----------
+    model : Model
+    noise : mapping output name -> standard deviation (SI units, radians)
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    ValueError
+        No channel, an unknown output name, or a deviation that is not positive and finite.
+    """
+    noise = {str(k): float(v) for k, v in dict(noise).items()}
+    if not noise:
+        raise ValueError("no measured channel: give the noise standard deviation of at least one output")
+    unknown = [k for k in noise if k not in model.output_names]
+    if unknown:
+        raise ValueError(f"noise given for {unknown}, which are not outputs of {model.name!r}: {list(model.output_names)}")
+    bad = [k for k, v in noise.items() if not (np.isfinite(v) and v > 0)]
+    if bad:
+        raise ValueError(f"noise standard deviations must be positive and finite: {bad}")
+    return noise
+
+
+def trial_information(approach: Approach, trial: Trial, names: Sequence[str], noise: Mapping[str, float], *,
+                      jit: bool | None = None) -> np.ndarray:
+    """Fisher information of one trial about the parameters ``names`` at ``approach.p``.
+
+    Parameters
+    ----------
+    approach : Approach
+        Model, current estimate, approach.
+    trial : Trial
+    names : sequence of str
+        The uncertain parameters.
+    noise : mapping output -> standard deviation
+        Measured channels and the standard deviation of one sample (as the fit weighs them).
+    jit : bool, optional
+        Compile the likelihood's fold (None: when a compiler works).
+
+    Returns
+    -------
+    (k, k) array
+        ``J' J`` of the weighted residuals ``(y - yhat) / sigma`` over the trial's samples.
+    """
+    from ..identify import OutputErrorProblem
+
+    noise = check_noise(approach.model, noise)
+    if abs(trial.dt - approach.dt) > 1e-12 * approach.dt:
+        raise ValueError(f"trial {trial.name!r} has step {trial.dt:g} s, the design {approach.dt:g} s")
+    record = trial.record(approach)
+    prob = OutputErrorProblem(approach.model, [record], free=list(names), measured=list(noise), sigma=noise,
+                              params=approach.p, x0=[approach.x0], jit=jit)
+    info = prob.information()
+    return 0.5 * (info + info.T)
+
+
+def criterion_value(after: ParameterBelief, prior: ParameterBelief, criterion: str) -> float:
+    """D- or A-criterion of the belief after a trial, relative to the belief before it.
+
+    ``D``: ``log det cov_after - log det cov_prior`` (the log of the shrinkage of the uncertainty
+    ellipsoid's volume; unit-free). ``A``: the mean of ``var_after / var_prior`` over the parameters
+    (the trace of the covariance scaled by the prior variances, so that units do not weigh).
+
+    Parameters
+    ----------
+    after, prior : ParameterBelief
+        Over the same parameters.
+    criterion : {"D", "A"}
+
+    Returns
+    -------
+    float
+        Smaller is better (0 and 1 for a trial that teaches nothing).
+    """
+    if criterion not in CRITERIA:
+        raise ValueError(f"unknown criterion {criterion!r}; use one of {CRITERIA}")
+    if criterion == "D":
+        return float(np.linalg.slogdet(after.cov)[1] - np.linalg.slogdet(prior.cov)[1])
+    return float(np.mean(np.diag(after.cov) / np.diag(prior.cov)))

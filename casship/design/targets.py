@@ -1,0 +1,367 @@
+"""Predictions a user cares about, with their exact gradients with respect to the uncertain parameters.
+
+A target is a manoeuvre metric of the model at the current parameters (tactical diameter, advance,
+transfer, the first overshoot of a zig-zag, the port/starboard difference of any of them). Its
+value and gradient come from one symbolic simulation (:class:`~.sensitivity.ManoeuvreFold`) and
+its exact sensitivities: an event (a heading change of 90 or 180 deg, the zig-zag's rudder switch)
+is located by linear interpolation between samples, and the implicit-function rule carries the
+sensitivity of the event time into the metric. The zig-zag's switching time is itself a symbol of
+the rudder law, so the gradient of the overshoot includes how the switch moves with the
+parameters. The gradient is that of the metric computed on the design's grid, exactly.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import casadi as ca
+import numpy as np
+
+from .sensitivity import Approach
+
+__all__ = ["Target", "TargetValue", "Turning", "FirstOvershoot", "Difference", "TARGETS", "get_target"]
+
+
+@dataclass(frozen=True)
+class TargetValue:
+    """A target's value at the current parameters and its gradient.
+
+    Parameters
+    ----------
+    name : str
+    value : float
+    gradient : (k,) array
+        Ordered like the uncertain parameters.
+    unit : str
+    """
+
+    name: str
+    value: float
+    gradient: np.ndarray
+    unit: str
+
+
+class Target:
+    """Base class: a scalar prediction of a manoeuvre (``evaluate`` gives value and gradient)."""
+
+    name = "target"
+    unit = ""
+
+    def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:  # pragma: no cover - abstract
+        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
+
+        Parameters
+        ----------
+        approach : Approach
+            Model, parameters, approach speed, propeller rate and step.
+        names : sequence of str
+            The uncertain parameters (the gradient's order).
+
+        Returns
+        -------
+        TargetValue
+        """
+        raise NotImplementedError
+
+
+def _crossing(s: np.ndarray, ds: np.ndarray, level: float, start: int, what: str):
+    """First sample interval where ``s`` reaches ``level`` (from index ``start``): the fraction of
+    the step and its derivative (implicit function on the linear interpolation)."""
+    idx = np.flatnonzero(s[start:] >= level)
+    if idx.size == 0 or start + idx[0] == 0:
+        raise ValueError(f"{what}: the heading change never reaches {np.degrees(level):.4g} deg in the simulated "
+                         "time (a larger rudder angle, or a longer record?)")
+    k = start + idx[0]
+    span = s[k] - s[k - 1]
+    frac = (level - s[k - 1]) / span
+    dfrac = (-(1.0 - frac) * ds[k - 1] - frac * ds[k]) / span
+    return k, frac, dfrac
+
+
+def _interp(v: np.ndarray, dv: np.ndarray, k: int, frac: float, dfrac: np.ndarray):
+    """Value and derivative of ``v`` interpolated at ``k - 1 + frac``."""
+    return (v[k - 1] + frac * (v[k] - v[k - 1]),
+            (1.0 - frac) * dv[k - 1] + frac * dv[k] + (v[k] - v[k - 1]) * dfrac)
+
+
+def _steps_to(approach: Approach, rudder_row, level: float, start_frac: float = 0.0, extra: int = 3,
+              horizon: float = 60.0) -> int:
+    """Steps until the heading change ``side * psi`` first reaches ``level`` in a plain simulation
+    (no sensitivities), plus ``extra``; ``horizon`` in units of L/U."""
+    from ..simulate import fold_steps
+
+    m = approach.model
+    n = int(np.ceil(horizon * approach.time_scale / approach.dt))
+    U = approach.inputs(rudder_row(approach.midpoints(n)))
+    X = fold_steps(approach.dmodel, approach.x0, U.T, approach.p, np.zeros((n, m.nw)), np.full(n, approach.dt))
+    psi = X[:, m.index("psi")]
+    reached = np.flatnonzero(np.abs(psi) >= level)
+    if reached.size == 0:
+        return n
+    return int(min(reached[0] + extra, n))
+
+
+@dataclass(frozen=True)
+class Turning(Target):
+    """Advance, transfer or tactical diameter of a turning circle from the approach.
+
+    Measured from the execute (t = 0, rudder moved at the vessel's rudder rate) in the frame of
+    the approach heading, as :func:`casship.maneuvers.turning_metrics` does: advance along the
+    approach at a 90 deg heading change, transfer across it then, tactical diameter across it at
+    180 deg. Lengths are positive for a turn to either side.
+
+    Parameters
+    ----------
+    quantity : {"advance", "transfer", "tactical_diameter"}
+    side : {+1, -1}
+        +1 starboard, -1 port.
+    rudder_deg : float
+        Rudder angle [deg].
+    """
+
+    quantity: str = "tactical_diameter"
+    side: int = 1
+    rudder_deg: float = 35.0
+
+    def __post_init__(self):
+        if self.quantity not in ("advance", "transfer", "tactical_diameter"):
+            raise ValueError(f"unknown turning quantity {self.quantity!r}; use advance, transfer or tactical_diameter")
+        if self.side not in (1, -1):
+            raise ValueError(f"side must be +1 (starboard) or -1 (port), got {self.side}")
+        if not (0 < self.rudder_deg <= 90):
+            raise ValueError(f"rudder_deg must be in (0, 90], got {self.rudder_deg}")
+
+    @property
+    def name(self) -> str:
+        """E.g. ``tactical_diameter_starboard_35``."""
+        return f"{self.quantity}_{'starboard' if self.side > 0 else 'port'}_{self.rudder_deg:g}"
+
+    unit = "m"
+
+    def rudder(self, approach: Approach):
+        """The rudder law ``t -> delta`` [rad]: to the angle at the vessel's rate from t = 0.
+
+        Parameters
+        ----------
+        approach : Approach
+
+        Returns
+        -------
+        callable
+        """
+        delta = self.side * np.radians(self.rudder_deg)
+        rate = approach.rudder_rate
+        return lambda t: delta * (np.minimum(1.0, rate * np.asarray(t) / abs(delta)) if rate else np.ones_like(t))
+
+    def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
+        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
+
+        Parameters
+        ----------
+        approach : Approach
+            Model, parameters, approach speed, propeller rate and step.
+        names : sequence of str
+            The uncertain parameters (the gradient's order).
+
+        Returns
+        -------
+        TargetValue
+        """
+        level = np.radians(90.0 if self.quantity != "tactical_diameter" else 180.0)
+        law = self.rudder(approach)
+        n = _steps_to(approach, law, level)
+        fold = approach.fold(names, n)
+        U = approach.inputs(law(approach.midpoints(n)))
+        X, dX = fold.sensitivities(lambda tau: ca.MX(ca.DM(U)))
+        m = approach.model
+        ipsi, ix, iy = m.index("psi"), m.index("x"), m.index("y")
+        k, frac, dfrac = _crossing(self.side * X[:, ipsi], self.side * dX[:, ipsi], level, 1, self.name)
+        if self.quantity == "advance":
+            v, dv = _interp(X[:, ix], dX[:, ix], k, frac, dfrac)
+        else:
+            v, dv = _interp(self.side * X[:, iy], self.side * dX[:, iy], k, frac, dfrac)
+        return TargetValue(self.name, float(v), np.asarray(dv, dtype=float), self.unit)
+
+
+@dataclass(frozen=True)
+class FirstOvershoot(Target):
+    """First overshoot angle of a zig-zag (rudder ``rudder_deg``, switch at ``heading_deg``).
+
+    The rudder goes to ``side * rudder_deg`` at t = 0 at the vessel's rate; when the heading change
+    reaches ``heading_deg`` (time ``t1``, interpolated) it is reversed at the same rate. The
+    overshoot is the largest heading change after ``t1`` less ``heading_deg``. Its gradient
+    combines the parameters' effect with ``t1`` held and the effect of ``t1`` (a symbol of the
+    rudder law) times ``d t1 / d theta``.
+
+    Parameters
+    ----------
+    rudder_deg, heading_deg : float
+        Zig-zag angles [deg] (20/20 by default).
+    side : {+1, -1}
+        First rudder to starboard (+1) or port (-1).
+    """
+
+    rudder_deg: float = 20.0
+    heading_deg: float = 20.0
+    side: int = 1
+
+    unit = "rad"
+
+    def __post_init__(self):
+        if self.side not in (1, -1):
+            raise ValueError(f"side must be +1 (starboard) or -1 (port), got {self.side}")
+        if not (0 < self.rudder_deg <= 90 and 0 < self.heading_deg < 180):
+            raise ValueError(f"zig-zag angles must be positive degrees, got {self.rudder_deg}/{self.heading_deg}")
+
+    @property
+    def name(self) -> str:
+        """E.g. ``first_overshoot_20_20_starboard``."""
+        return f"first_overshoot_{self.rudder_deg:g}_{self.heading_deg:g}_{'starboard' if self.side > 0 else 'port'}"
+
+    def law(self, approach: Approach, lib=np):
+        """The rudder law ``(t, t1) -> delta`` [rad] for a switch time ``t1``.
+
+        Parameters
+        ----------
+        approach : Approach
+        lib : module
+            ``numpy`` (numbers) or ``casadi`` (``t1`` a symbol).
+
+        Returns
+        -------
+        callable
+        """
+        dz = np.radians(self.rudder_deg)
+        rate = approach.rudder_rate or 1e6 * dz            # no rate: a step within a microsecond
+
+        def rudder(t, t1):
+            first = lib.fmin(dz, rate * t) if lib is ca else np.minimum(dz, rate * t)
+            back = rate * (t - t1)
+            back = lib.fmin(lib.fmax(back, 0.0), 2 * dz) if lib is ca else np.clip(back, 0.0, 2 * dz)
+            return self.side * (first - back)
+        return rudder
+
+    def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
+        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
+
+        Parameters
+        ----------
+        approach : Approach
+            Model, parameters, approach speed, propeller rate and step.
+        names : sequence of str
+            The uncertain parameters (the gradient's order).
+
+        Returns
+        -------
+        TargetValue
+        """
+        level = np.radians(self.heading_deg)
+        law = self.law(approach)
+        n_switch = _steps_to(approach, lambda t: law(t, np.inf), level, extra=1)
+        t_grid = np.arange(n_switch + 1) * approach.dt
+        # the switch: heading change reaches the switch angle (nothing before it depends on t1)
+        pre = approach.fold(names, n_switch)
+        U = approach.inputs(law(approach.midpoints(n_switch), np.inf))
+        X, dX = pre.sensitivities(lambda tau: ca.MX(ca.DM(U)))
+        ipsi = approach.model.index("psi")
+        k, frac, dfrac = _crossing(self.side * X[:, ipsi], self.side * dX[:, ipsi], level, 1, self.name)
+        t1 = float(t_grid[k - 1] + frac * approach.dt)
+        dt1 = approach.dt * dfrac
+        rate = approach.rudder_rate
+        if rate and rate * t1 < np.radians(self.rudder_deg):
+            raise ValueError(f"{self.name}: the heading reaches the switch angle at {t1:.3g} s, before the rudder "
+                             f"reached {self.rudder_deg:g} deg")
+        # after the switch: simulate to the first peak of the heading change, t1 a symbol
+        n = int(n_switch + np.ceil(4 * approach.time_scale / approach.dt))
+        full = approach.fold(names, n)
+        tt = approach.midpoints(n)
+        law_ca = self.law(approach, ca)
+        X, dX = full.sensitivities(lambda tau: approach.inputs(law_ca(ca.DM(tt).T, tau[0])), [t1])
+        s = self.side * X[:, ipsi]
+        after = np.arange(k, n + 1)
+        j = int(after[np.argmax(s[after])])
+        if j == n:
+            raise ValueError(f"{self.name}: no first overshoot within {n * approach.dt:g} s after the execute")
+        ds = self.side * dX[j, ipsi]
+        grad = ds[:-1] + ds[-1] * dt1
+        return TargetValue(self.name, float(s[j] - level), np.asarray(grad, dtype=float), self.unit)
+
+
+@dataclass(frozen=True)
+class Difference(Target):
+    """``first - second``: e.g. the starboard minus the port tactical diameter.
+
+    Parameters
+    ----------
+    first, second : Target
+    label : str
+        Name of the difference.
+    """
+
+    first: Target
+    second: Target
+    label: str = "difference"
+
+    @property
+    def name(self) -> str:
+        """The label."""
+        return self.label
+
+    @property
+    def unit(self) -> str:
+        """The unit of both terms."""
+        return self.first.unit
+
+    def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
+        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
+
+        Parameters
+        ----------
+        approach : Approach
+            Model, parameters, approach speed, propeller rate and step.
+        names : sequence of str
+            The uncertain parameters (the gradient's order).
+
+        Returns
+        -------
+        TargetValue
+        """
+        a, b = self.first.evaluate(approach, names), self.second.evaluate(approach, names)
+        return TargetValue(self.name, a.value - b.value, a.gradient - b.gradient, a.unit)
+
+
+#: The named targets (``casship design-trial --target NAME``).
+TARGETS = {
+    "tactical_diameter": Turning("tactical_diameter", 1),
+    "tactical_diameter_port": Turning("tactical_diameter", -1),
+    "advance": Turning("advance", 1),
+    "advance_port": Turning("advance", -1),
+    "transfer": Turning("transfer", 1),
+    "first_overshoot": FirstOvershoot(20.0, 20.0, 1),
+    "first_overshoot_port": FirstOvershoot(20.0, 20.0, -1),
+    "port_starboard_difference": Difference(Turning("tactical_diameter", 1), Turning("tactical_diameter", -1),
+                                            "port_starboard_difference"),
+}
+
+
+def get_target(target) -> Target:
+    """A :class:`Target` from a name in :data:`TARGETS` (or a Target, returned as is).
+
+    Parameters
+    ----------
+    target : str or Target
+
+    Returns
+    -------
+    Target
+
+    Raises
+    ------
+    ValueError
+        An unknown name (the known ones are listed).
+    """
+    if isinstance(target, Target):
+        return target
+    if target not in TARGETS:
+        raise ValueError(f"unknown target {target!r}; known: {list(TARGETS)}")
+    return TARGETS[target]
