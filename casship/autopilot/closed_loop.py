@@ -206,7 +206,7 @@ class ClosedLoop:
             command = g["chi_ref"]
             nxt["guidance"] = g["memory"]
             log.update({k: g[k] for k in self.guidance.LOG})
-        law = self.autopilot.symbolic_step(parts["autopilot"], command, est["angle"], est["rate"], self.dt)
+        law = self.autopilot.symbolic_step(parts["autopilot"], command, est["angle"], est["rate"], self.dt, est["U"])
         act = self.actuator.symbolic_step(steer, law["steer"], self.dt)
         steer_avg = 0.5 * (steer + act["steer"])          # the servo ramps over the sample
         x_next = self.plant.symbolic_step(x, steer_avg, p, self.dt)
@@ -457,7 +457,8 @@ class ClosedLoop:
                 command = float(g["chi_ref"])
                 log.update({key: float(g[key]) for key in self.guidance.LOG})
             if self.controller is None:
-                lo = law_f.call({"memory": law_mem, "ref": command, "chi": angle, "r": rate, "dt": self.dt})
+                lo = law_f.call({"memory": law_mem, "ref": command, "chi": angle, "r": rate, "dt": self.dt,
+                                 "speed": U_hat})
                 law_mem = np.asarray(lo["memory_next"]).ravel()
             else:
                 ctrl_mem, cmd, lo = self.controller.update(ctrl_mem, command, angle, rate, self.dt, bias)

@@ -19,7 +19,8 @@ from ..discretize import discretize
 from ..linear import trim
 from ..model import Model, ModelBuilder
 
-__all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation",
+__all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation", "SteeringFeedforward",
+           "steering_feedforward", "piecewise_linear",
            "twin_propeller_yaw_limit"]
 
 
@@ -314,3 +315,162 @@ def steering_plant(model: Model, speed: float | None = None, *, p=None, steer: s
         inputs[free] = tr.values[free]
     others = {n: float(u[model.index(n, "input")]) for n in model.input_names if n != steer}
     return SteeringPlant(model, steer, others, p, x0=x)
+
+
+@dataclass(frozen=True)
+class SteeringFeedforward:
+    """The steady steering that holds a rate of turn, from the nonlinear ship (a reverse spiral at
+    the design speed).
+
+    For each rate of turn ``r`` on the grid the steering and the sway velocity are solved
+    (:func:`casship.trim`) so that sway and yaw accelerate no more, the surge speed held at the
+    design speed: the quasi-steady turn of a course change, which is over before the speed has
+    dropped (a ship that keeps turning slows down and needs more steering than this). On a
+    course-unstable ship the curve is not monotonic near ``r = 0`` (the spiral loop): the steady
+    steering there has the opposite sign and the feedback keeps the turn stable.
+
+    Parameters
+    ----------
+    rates : tuple of float
+        Rates of turn [rad/s], increasing, symmetric about 0 (fractions :attr:`FRACTIONS` of
+        ``r_top``).
+    steer : tuple of float
+        Steady steering at each rate.
+    r_top : float
+        The rate of turn the ship reaches in this way with the full steering (the smaller of the
+        two sides) [rad/s].
+    steer_max : float
+        The steering limit the table was made for.
+    """
+
+    rates: tuple
+    steer: tuple
+    r_top: float
+    steer_max: float
+
+    #: Grid of the table as fractions of ``r_top``.
+    FRACTIONS = tuple(np.linspace(-1.0, 1.0, 17))
+
+    def __call__(self, r):
+        """Steady steering at rate ``r`` (numbers or CasADi expressions; clamped at the table's ends).
+
+        Parameters
+        ----------
+        r : float or casadi.SX
+        """
+        return piecewise_linear(r, self.rates, self.steer)
+
+    def rate_for(self, fraction: float) -> float:
+        """The smallest rate of turn [rad/s] (both sides) at which the steady steering reaches
+        ``fraction`` of the steering limit.
+
+        Parameters
+        ----------
+        fraction : float
+            Of the steering limit, in (0, 1].
+        """
+        r, s = np.asarray(self.rates), np.asarray(self.steer) / self.steer_max
+        out = []
+        for side in (1, -1):
+            sel = side * r >= 0
+            rr, ss = side * r[sel], side * s[sel]
+            order = np.argsort(rr)
+            rr, ss = rr[order], ss[order]
+            above = np.flatnonzero(ss >= fraction)
+            if above.size == 0:
+                out.append(rr[-1])
+                continue
+            k = int(above[-1])
+            while k > 0 and ss[k - 1] >= fraction:      # the last crossing from below (past the spiral loop)
+                k -= 1
+            if k == 0:
+                out.append(rr[0])
+                continue
+            out.append(rr[k - 1] + (fraction - ss[k - 1]) * (rr[k] - rr[k - 1]) / (ss[k] - ss[k - 1]))
+        return float(min(out))
+
+
+def piecewise_linear(x, xs, ys):
+    """Linear interpolation through ``(xs, ys)`` clamped at the ends, as a sum of clipped ramps
+    (works on numbers and CasADi expressions; ``ys`` may be expressions).
+
+    Parameters
+    ----------
+    x : float or casadi.SX
+    xs : sequence of float
+        Increasing breakpoints.
+    ys : sequence
+        Values at the breakpoints.
+    """
+    xs = [float(v) for v in xs]
+    if len(xs) != len(ys) or len(xs) < 2 or np.any(np.diff(xs) <= 0):
+        raise ValueError("piecewise_linear needs at least two increasing breakpoints and one value for each")
+    out = ys[0]
+    for i in range(len(xs) - 1):
+        w = (x - xs[i]) / (xs[i + 1] - xs[i])
+        w = ca.fmin(ca.fmax(w, 0), 1) if isinstance(w, (ca.SX, ca.MX, ca.DM)) else min(max(w, 0.0), 1.0)
+        out = out + (ys[i + 1] - ys[i]) * w
+    return out
+
+
+def steering_feedforward(plant: SteeringPlant, steer_max: float, *, x0=None) -> SteeringFeedforward:
+    """The :class:`SteeringFeedforward` of a ship at its operating point.
+
+    The rate of turn is raised from 0 in steps (each trim starting from the last) until the steady
+    steering passes ``steer_max`` on each side; ``r_top`` is where it reaches the limit, and the
+    table is then solved on :attr:`SteeringFeedforward.FRACTIONS` of ``r_top``.
+
+    Parameters
+    ----------
+    plant : SteeringPlant
+    steer_max : float
+        Steering limit.
+    x0 : array, optional
+        Straight-run state (default ``plant.x0``).
+
+    Raises
+    ------
+    ValueError
+        When no steady turn is found below 20 times ``0.3 U/L`` (or 2 rad/s).
+    """
+    from ..linear import trim
+
+    m = plant.model
+    x0 = np.asarray(x0 if x0 is not None else plant.x0, float)
+    js, ir = m.index(plant.steer, "input"), m.index(plant.yaw_rate)
+    sway = "v" if "v" in m.state_names else None
+    free = ([sway] if sway else []) + [plant.steer]
+    zero = ([sway] if sway else []) + [plant.yaw_rate]
+
+    def solve(r, x, u):
+        x = np.array(x, float)
+        x[ir] = r
+        tr = trim(m, x, u, plant.pvec, free=free, zero=zero, check_limits=False)
+        return tr.x, tr.u, float(tr.u[js])
+
+    vessel = m.vessel
+    U = float(np.hypot(x0[m.index("u")], x0[sway and m.index(sway)] if sway else 0.0)) if "u" in m.state_names else 1.0
+    step = (0.3 * U / vessel.L_pp if vessel is not None and vessel.L_pp else 0.1) / 8
+    tops = []
+    for side in (1.0, -1.0):
+        x, u, prev = x0.copy(), plant.input_vector(0.0), (0.0, 0.0)
+        for k in range(1, 161):
+            r = side * k * step
+            x, u, s = solve(r, x, u)
+            if side * s >= steer_max:
+                r0, s0 = prev
+                tops.append(abs(r0 + (side * steer_max - s0) * (r - r0) / (s - s0)))
+                break
+            prev = (r, s)
+        else:
+            raise ValueError(f"{m.name!r}: no steady turn reaches the steering limit {steer_max:.4g} below "
+                             f"{160 * step:.3g} rad/s")
+    r_top = float(min(tops))
+    rates = [f * r_top for f in SteeringFeedforward.FRACTIONS]
+    steer = [0.0] * len(rates)
+    mid = len(rates) // 2
+    for idx in (range(mid, len(rates)), range(mid, -1, -1)):     # from straight ahead outwards
+        x, u = x0.copy(), plant.input_vector(0.0)
+        for i in idx:
+            x, u, steer[i] = solve(rates[i], x, u)
+    return SteeringFeedforward(tuple(rates), tuple(steer), r_top, float(steer_max))

@@ -15,7 +15,30 @@ import numpy as np
 
 from ..angles import wrap_sym
 
-__all__ = ["ReferenceModel"]
+__all__ = ["ReferenceModel", "reference_step"]
+
+
+def reference_step(xd, ref, dt, wn, zeta, r_max):
+    """One Euler step of ``[chi_d, r_d, a_d]`` with numbers or CasADi expressions for ``wn, zeta,
+    r_max`` (``r_max = inf``: no rate saturation); see :class:`ReferenceModel`.
+
+    Parameters
+    ----------
+    xd : casadi.SX
+        ``[chi_d, r_d, a_d]``.
+    ref : casadi.SX
+        Command [rad].
+    dt : casadi.SX or float
+        Step [s].
+    wn, zeta, r_max : float or casadi.SX
+        Natural frequency [rad/s], relative damping, rate limit [rad/s].
+    """
+    e = wrap_sym(ref - xd[0])
+    jerk = wn**3 * e - (2 * zeta + 1) * wn**2 * xd[1] - (2 * zeta + 1) * wn * xd[2]
+    r_next = xd[1] + dt * xd[2]
+    if not (isinstance(r_max, float) and not np.isfinite(r_max)):
+        r_next = ca.fmin(ca.fmax(r_next, -r_max), r_max)
+    return ca.vertcat(wrap_sym(xd[0] + dt * xd[1]), r_next, xd[2] + dt * jerk)
 
 
 @dataclass(frozen=True)
@@ -69,13 +92,7 @@ class ReferenceModel:
         dt : casadi.SX or float
             Step [s].
         """
-        wn, z = self.wn, self.zeta
-        e = wrap_sym(ref - xd[0])
-        jerk = wn**3 * e - (2 * z + 1) * wn**2 * xd[1] - (2 * z + 1) * wn * xd[2]
-        r_next = xd[1] + dt * xd[2]
-        if np.isfinite(self.r_max):
-            r_next = ca.fmin(ca.fmax(r_next, -self.r_max), self.r_max)
-        return ca.vertcat(wrap_sym(xd[0] + dt * xd[1]), r_next, xd[2] + dt * jerk)
+        return reference_step(xd, ref, dt, self.wn, self.zeta, self.r_max)
 
     def system(self, name: str = "reference") -> control.StateSpace:
         """The linear model (no rate saturation) as a labelled :class:`control.StateSpace`: input

@@ -262,7 +262,8 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
         gains = lqr_design(nom, **s.lqr_weights)
     reference = ReferenceModel(s.wn_ref, s.zeta_ref, s.r_max)
     actuator = Actuator(s.steer_max, s.steer_rate_max, s.actuator_T)
-    autopilot = Autopilot(gains, reference, s.steer_max, filter_T=s.filter_T)
+    autopilot = Autopilot(gains, reference, s.steer_max, filter_T=s.filter_T,
+                          steering=s.steering if s.feedforward == "nonlinear" else None)
     controlled = "chi" if s.mode == "course" else "psi"
     L, closed = loop_systems(lin, gains, actuator, delay=s.delay, reference=reference, controlled=controlled,
                              filter_T=s.filter_T, estimator=linear_estimator(s, nom, plant.steer), rate=s.rate)

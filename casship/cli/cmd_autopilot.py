@@ -22,9 +22,10 @@ from ._common import add_model_option, require
 #: settings shown in degrees on the command line (name -> option suffix)
 _DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s"}
 _CHOICES = {"method": ("pid", "lqr"), "mode": ("heading", "course"), "rate": ("estimator", "gyro"),
+            "feedforward": ("nonlinear", "linear"),
             "integral": ("fossen", "exact", "none")}
 _PAIRS = {"ekf_alpha", "ekf_q", "observer_q"}
-_SKIP = {"lqr_weights"}
+_SKIP = {"lqr_weights", "turn_rate_top"}
 
 
 def _option(name: str) -> str:
