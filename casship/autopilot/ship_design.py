@@ -58,6 +58,10 @@ class Design:
     actuator : Actuator
         The steering gear.
     settings : AutopilotSettings
+    schedule : tuple of Design
+        With a gain schedule: the point designs at the schedule's speeds (``autopilot`` is then a
+        :class:`~casship.autopilot.schedule.ScheduledAutopilot`; ``gains``, ``loop``, ``margins`` are
+        the schedule's at this design's speed).
     """
 
     plant: SteeringPlant
@@ -71,6 +75,7 @@ class Design:
     autopilot: Autopilot
     actuator: Actuator
     settings: AutopilotSettings
+    schedule: tuple = ()
 
     @property
     def x0(self) -> np.ndarray:
@@ -218,7 +223,7 @@ class Design:
 
 def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer: str | None = None,
                      inputs: Mapping[str, float] | None = None, nomoto: Nomoto | None = None,
-                     **settings) -> Design:
+                     schedule=None, **settings) -> Design:
     """Design a course autopilot for ``model`` at a straight-run ``speed``.
 
     Steps: the operating point (:func:`~casship.autopilot.plants.steering_plant`: trim of the
@@ -242,6 +247,11 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
         Values of other inputs held fixed (a propeller rate given here is not trimmed).
     nomoto : Nomoto, optional
         Design on this model instead of the linearisation's.
+    schedule : sequence of float or "default", optional
+        Gain scheduling: design at each of these speeds [m/s] (``"default"``: 40 % to 100 % of the
+        approach speed, :func:`~casship.autopilot.schedule.default_schedule`) and run one law
+        interpolating them in the measured speed (:class:`~casship.autopilot.schedule.ScheduledAutopilot`);
+        the returned design is at ``speed``, with the schedule's gains there.
     **settings
         Any name of :data:`~casship.autopilot.defaults.RULES` (``wn``, ``wn_ref``, ``method``,
         ``mode``, ``dt``, ``gnss_std``, ...); an unknown name raises ``ValueError``.
@@ -252,6 +262,13 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
     >>> d = design_autopilot(get_model("kvlcc2"))       # doctest: +SKIP
     >>> control.margin(d.loop)                          # doctest: +SKIP
     """
+    if settings.get("speed") is not None:      # the speed setting is the operating point
+        if speed is not None and float(settings["speed"]) != float(speed):
+            raise ValueError(f"speed {speed} and the speed setting {settings['speed']} disagree")
+        speed = settings.pop("speed")
+    if schedule is not None:
+        return _scheduled_design(model, speed, schedule, p=p, steer=steer, inputs=inputs, nomoto=nomoto,
+                                 settings=settings)
     plant = steering_plant(model, speed, p=p, steer=steer, inputs=inputs)
     lin = course_linearization(plant)
     nom = nomoto if nomoto is not None else nomoto_from_linear(lin, steer=plant.steer)
@@ -269,6 +286,36 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
                              filter_T=s.filter_T, estimator=linear_estimator(s, nom, plant.steer), rate=s.rate)
     controller = gains.controller(steer=plant.steer)
     return Design(plant, lin, nom, gains, controller, L, closed, margins(L), autopilot, actuator, s)
+
+
+def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, settings) -> Design:
+    """The design at ``speed`` whose law is the gain schedule over the ``schedule`` speeds."""
+    from dataclasses import replace
+
+    from .schedule import ScheduledAutopilot, default_schedule
+
+    if nomoto is not None:
+        raise ValueError("a gain schedule designs on each speed's own linearisation; do not give nomoto")
+    point = design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
+    speeds = default_schedule(point.settings.speed if speed is None else speed) \
+        if isinstance(schedule, str) and schedule == "default" else schedule
+    try:
+        speeds = sorted(float(v) for v in speeds)
+    except (TypeError, ValueError):
+        raise ValueError(f"schedule must be a sequence of speeds [m/s] or 'default', got {schedule!r}") from None
+    designs = tuple(design_autopilot(model, v, p=p, steer=steer, inputs=inputs, **settings) for v in speeds)
+    law = ScheduledAutopilot(tuple(speeds), tuple(d.autopilot for d in designs))
+    s0 = point.settings
+    here = law.at(s0.speed)
+    src = {**s0.sources, **{k: f"gain schedule over {['%.3g' % v for v in speeds]} m/s" for k in
+                            ("wn_ref", "r_max", "steer_max")}}
+    s = replace(s0, wn_ref=here.reference.wn, r_max=here.reference.r_max, steer_max=here.steer_max,
+                segment=max(s0.segment, max(d.settings.segment for d in designs)), sources=src)
+    L, closed = loop_systems(point.linearization, here.gains, point.actuator, delay=s.delay, reference=here.reference,
+                             controlled="chi" if s.mode == "course" else "psi", filter_T=s.filter_T,
+                             estimator=linear_estimator(s, point.nomoto, point.plant.steer), rate=s.rate)
+    return Design(point.plant, point.linearization, point.nomoto, here.gains, here.gains.controller(steer=point.plant.steer),
+                  L, closed, margins(L), law, point.actuator, s, designs)
 
 
 def simulate_autopilot(design: Design, command, t_end: float, *, step_times=(0.0,), seed=0, stepwise: bool = False,

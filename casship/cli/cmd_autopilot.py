@@ -59,6 +59,9 @@ def register(sub) -> None:
         else:
             kw["type"] = float
         p.add_argument(_option(name), **kw)
+    p.add_argument("--schedule", type=float, nargs="*", default=None, metavar="SPEED",
+                   help="gain scheduling over the speed: design at these speeds [m/s] (none given: 40, 55, 70, 85 and "
+                        "100 %% of the approach speed) and interpolate the law in the measured speed")
     p.add_argument("--current", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=None,
                    help="uniform current speed [m/s] and the direction it flows towards [deg]")
     p.add_argument("--wind", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=None,
@@ -117,7 +120,8 @@ def run(args) -> int:
     if args.wind is not None:
         model = add_wind(model)
         env.update(wind_speed=args.wind[0], wind_dir=float(np.radians(args.wind[1])))
-    design = ap.design_autopilot(model, **settings_from_args(args))       # designed in calm water
+    schedule = None if args.schedule is None else (args.schedule or "default")
+    design = ap.design_autopilot(model, schedule=schedule, **settings_from_args(args))       # designed in calm water
     s = design.settings
     if args.show_defaults:
         rows = {k: {"value": v, "source": s.sources.get(k, "")} for k, v in s.as_dict().items()}
