@@ -13,6 +13,7 @@ The package, one job per module:
 * :mod:`~casship.autopilot.defaults` -- the defaults, derived from the ship, shared with the CLI;
 * :mod:`~casship.autopilot.ship_design` -- :func:`design_autopilot` and the :class:`Design` value;
 * :mod:`~casship.autopilot.schedule` -- gain scheduling over the speed;
+* :mod:`~casship.autopilot.slot` -- any python-control controller as the law of the compiled loop;
 * :mod:`~casship.autopilot.closed_loop` -- the closed loop as one compiled CasADi step;
 * :mod:`~casship.autopilot.components` -- sensors, the estimator in the loop, the record of a run;
 * :mod:`~casship.autopilot.performance` -- course-changing and course-keeping checks;
@@ -41,6 +42,7 @@ from .plants import SteeringFeedforward, SteeringPlant, steering_feedforward, st
 from .plots import bode_phase_deg, plot_closed_loop, plot_design
 from .reference import ReferenceModel
 from .schedule import ScheduledAutopilot, default_schedule
+from .slot import LinearController
 from .ship_design import Design, RateLimitWarning, design_autopilot, simulate_autopilot
 
 __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "PIDGains", "pid_pole_placement",
@@ -52,4 +54,4 @@ __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "P
            "course_scenario", "plot_design", "plot_closed_loop", "bode_phase_deg", "Design", "design_autopilot",
            "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings", "Waypoints",
            "LOSGuidance", "cross_track_metrics", "MPCAutopilot", "mpc_for_design", "ScheduledAutopilot",
-           "default_schedule", "SteeringFeedforward", "steering_feedforward"]
+           "default_schedule", "SteeringFeedforward", "steering_feedforward", "LinearController"]

@@ -93,7 +93,7 @@ class ClosedLoop:
             est_blocks = [(f"est_{n}", fun.nnz_in(n)) for n in estimator.memory]
         m = plant.model
         blocks = [("x", m.nx), ("steer", 1), ("steer_prev", 1), *est_blocks,
-                  ("autopilot", len(Autopilot.MEMORY)), ("compass_hold", 1), ("gnss_hold", 2), ("chi_prev", 1)]
+                  ("autopilot", len(autopilot.MEMORY)), ("compass_hold", 1), ("gnss_hold", 2), ("chi_prev", 1)]
         if wave is not None:
             blocks.append(("wave", 2))
         if guidance is not None:
@@ -206,7 +206,8 @@ class ClosedLoop:
             command = g["chi_ref"]
             nxt["guidance"] = g["memory"]
             log.update({k: g[k] for k in self.guidance.LOG})
-        law = self.autopilot.symbolic_step(parts["autopilot"], command, est["angle"], est["rate"], self.dt, est["U"])
+        law = self.autopilot.symbolic_step(parts["autopilot"], command, est["angle"], est["rate"], self.dt, est["U"],
+                                           steer=steer)
         act = self.actuator.symbolic_step(steer, law["steer"], self.dt)
         steer_avg = 0.5 * (steer + act["steer"])          # the servo ramps over the sample
         x_next = self.plant.symbolic_step(x, steer_avg, p, self.dt)
@@ -220,7 +221,7 @@ class ClosedLoop:
             "north": meas["north"], "east": meas["east"], "psi": meas["psi"], "r": meas["r"], "U": motion[1],
             "chi": motion[0], "chi_hat": est["angle"], "omega_hat": est["rate"], "U_hat": est["U"],
             "chi_std": est["angle_std"], "steer": steer, "steer_cmd": law["steer"], "chi_d": law["chi_d"],
-            "r_d": law["r_d"], "ref": command, "e": law["e"], "rate_limited": act["rate_limited"],
+            "r_d": law["r_d"], "a_d": law["a_d"], "ref": command, "e": law["e"], "rate_limited": act["rate_limited"],
             "gnss_north": ca.if_else(mask[0] > 0, meas["gnss"][0], nan),
             "gnss_east": ca.if_else(mask[0] > 0, meas["gnss"][1], nan),
             "compass": ca.if_else(mask[1] > 0, meas["compass"], nan), "gyro": meas["gyro"], "psi_wave": psi_w,
@@ -458,7 +459,7 @@ class ClosedLoop:
                 log.update({key: float(g[key]) for key in self.guidance.LOG})
             if self.controller is None:
                 lo = law_f.call({"memory": law_mem, "ref": command, "chi": angle, "r": rate, "dt": self.dt,
-                                 "speed": U_hat})
+                                 "speed": U_hat, "steering": steer})
                 law_mem = np.asarray(lo["memory_next"]).ravel()
             else:
                 ctrl_mem, cmd, lo = self.controller.update(ctrl_mem, command, angle, rate, self.dt, bias)
@@ -469,6 +470,7 @@ class ClosedLoop:
             log.update({"north": x[ix], "east": x[iy], "psi": x[ipsi], "r": x[ir], "U": U, "chi": chi,
                         "chi_hat": angle, "omega_hat": rate, "U_hat": U_hat, "chi_std": std, "steer": steer,
                         "steer_cmd": float(lo["steer"]), "chi_d": float(lo["chi_d"]), "r_d": float(lo["r_d"]),
+                        "a_d": float(lo.get("a_d", np.nan)),
                         "ref": command, "e": float(lo["e"]), "rate_limited": float(ao["rate_limited"]),
                         "gnss_north": gn if masks[0, k] else np.nan, "gnss_east": ge if masks[0, k] else np.nan,
                         "compass": compass if masks[1, k] else np.nan, "gyro": gyro, "psi_wave": psi_w})

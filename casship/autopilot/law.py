@@ -154,7 +154,7 @@ class Autopilot:
             out.update({f"ff_{i}": v for i, v in enumerate(self.steering.steer)})
         return out
 
-    def symbolic_step(self, mem, ref, chi, r, dt, speed=None) -> dict:
+    def symbolic_step(self, mem, ref, chi, r, dt, speed=None, steer=None) -> dict:
         """One sample of the law on CasADi expressions; returns a dict of named expressions
         (``memory, steer, chi_d, r_d, a_d, e``).
 
@@ -170,19 +170,21 @@ class Autopilot:
             Sample period [s].
         speed : casadi.SX, optional
             Speed [m/s] (for a scheduled law; a point design ignores it).
+        steer : casadi.SX, optional
+            Present steering (unused by this law; the loop passes it to every law).
         """
         return law_step(self, self.parameters(speed), mem, ref, chi, r, dt)
 
     @property
     def function(self) -> ca.Function:
-        """``autopilot(memory, ref, chi, r, dt, speed) -> (memory_next, steer, chi_d, r_d, a_d, e)``
-        with ``memory`` as in :attr:`MEMORY`."""
-        mem, ref, chi, r, dt, U = (ca.SX.sym(n, k) for n, k in (("memory", 5), ("ref", 1), ("chi", 1), ("r", 1),
-                                                                 ("dt", 1), ("speed", 1)))
-        out = self.symbolic_step(mem, ref, chi, r, dt, U)
+        """``autopilot(memory, ref, chi, r, dt, speed, steering) -> (memory_next, steer, chi_d, r_d, a_d, e)``
+        with ``memory`` as in :attr:`MEMORY` (``speed`` used by a schedule, ``steering`` by none)."""
+        mem, ref, chi, r, dt, U, st = (ca.SX.sym(n, k) for n, k in (("memory", 5), ("ref", 1), ("chi", 1), ("r", 1),
+                                                                     ("dt", 1), ("speed", 1), ("steering", 1)))
+        out = self.symbolic_step(mem, ref, chi, r, dt, U, st)
         names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
-        return ca.Function("autopilot", [mem, ref, chi, r, dt, U], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt", "speed"], ["memory_next"] + names[1:])
+        return ca.Function("autopilot", [mem, ref, chi, r, dt, U, st], [out[k] for k in names],
+                           ["memory", "ref", "chi", "r", "dt", "speed", "steering"], ["memory_next"] + names[1:])
 
 
 def law_step(law, P: dict, mem, ref, chi, r, dt) -> dict:

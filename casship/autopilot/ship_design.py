@@ -23,6 +23,7 @@ from .nomoto import Nomoto, nomoto_from_linear
 from .performance import CRITERIA, course_change_metrics, course_scenario, performance_report
 from .plants import SteeringPlant, steering_plant
 from .reference import ReferenceModel
+from .slot import LinearController
 
 __all__ = ["Design", "design_autopilot", "simulate_autopilot", "RateLimitWarning"]
 
@@ -156,8 +157,9 @@ class Design:
             Path following: the course command comes from the guidance.
         mode, rate : str, optional
             Replace the settings' mode and rate source.
-        controller : MPCAutopilot, optional
-            Replaces the PID/LQR law (the loop then runs step by step).
+        controller : control.StateSpace, control.TransferFunction, LinearController or MPCAutopilot, optional
+            Replaces the PID/LQR law: a python-control controller runs in the compiled loop
+            (:meth:`linear_controller`); an :class:`~casship.autopilot.mpc.MPCAutopilot` step by step.
         """
         s = self.settings
         mode, rate = mode or s.mode, rate or s.rate
@@ -167,8 +169,32 @@ class Design:
         if estimator == "ekf":
             estimator = self.estimator("course" if mode == "course" else "heading",
                                        wave=wave if wave_filter else None, x0=pl.x0)
-        return ClosedLoop(pl, self.autopilot, self.actuator, dt=s.dt, mode=mode, rate=rate, estimator=estimator,
+        law = self.autopilot
+        if isinstance(controller, (control.StateSpace, control.TransferFunction)):
+            controller = self.linear_controller(controller)
+        if isinstance(controller, LinearController):
+            law, controller = controller, None
+        return ClosedLoop(pl, law, self.actuator, dt=s.dt, mode=mode, rate=rate, estimator=estimator,
                           sensors=sensors or self.sensors(), wave=wave, guidance=guidance, controller=controller)
+
+    def linear_controller(self, sys, **options) -> LinearController:
+        """A python-control controller in this design's loop: its reference model, loop period and
+        steering gear (:class:`~casship.autopilot.slot.LinearController`).
+
+        Parameters
+        ----------
+        sys : control.StateSpace or control.TransferFunction
+            Inputs named among ``chi_d, r_d, a_d, chi, r, psi_m, r_m, e``; one output.
+        **options
+            ``method`` (sampling of a continuous controller), ``anti_windup``.
+
+        Examples
+        --------
+        >>> lqg = lqg_design(d.nomoto, q_int=1e-6, q_e=1.0, heading_var=1e-5, rate_var=1e-9,
+        ...                  yaw_accel_var=1e-10)                          # doctest: +SKIP
+        >>> res = d.simulate(controller=lqg.controller, estimator="raw")   # doctest: +SKIP
+        """
+        return LinearController(sys, self.settings.dt, self.autopilot.reference, self.actuator, **options)
 
     def simulate(self, scenario: str = "course-20", t_end: float | None = None, *, seed=0, stepwise: bool = False,
                  warn: bool = True, **loop_options) -> ClosedLoopResult:
