@@ -131,7 +131,7 @@ RULES: dict[str, tuple[str, str]] = {
     "compass_rate": ("Hz", "10"),
     "compass_std": ("rad", "0.5 deg"),
     "gyro_std": ("rad/s", "0.02 deg/s"),
-    "ekf_alpha": ("1/s", "speed: 1/T_surge of the linearisation; course rate: wn_ref"),
+    "ekf_alpha": ("1/s", "speed: 1/T_surge of the linearisation; course rate: wn"),
     "ekf_q": ("(m/s^2)^2, (rad/s^2)^2", "speed: 2 alpha1 (0.05 U)^2 / dt; course rate: the largest value up to "
                                          "2 alpha2 r_max^2 / dt (in steps of 10^(1/4)) for which the steady-state "
                                          "filter (control.dlqe) puts at most min(rate_max actuator_T / 2, "

@@ -4,10 +4,13 @@ autopilot performance standards where they state a criterion.
 IMO Resolution A.342(IX), as amended by MSC.64(67) Annex 3 ("Recommendation on performance
 standards for heading control systems"), asks (sections as numbered in the resolution):
 
-* 2.1 keep a preset heading "with minimum operation of the ship's steering gear" -> rudder activity
-  (mean and RMS steering, RMS steering rate, steering work) while course keeping;
-* 3.2 turns "based either on a preset turning radius or a preset rate of turn" -> the reference
-  model's turn-rate limit and the peak rate reached;
+* 2.1 keep a preset heading "with minimum operation of the ship's steering gear" -> the fraction of
+  time the steering gear runs at its rate limit, and beside it the steering travel per hour (the
+  sum of the steering's movements, e.g. deg/h: the wear the rate-limit figure does not show);
+  course keeping: mean and RMS steering, RMS steering rate, steering work;
+* 3.2 turns "based either on a preset turning radius or a preset rate of turn" -> the peak rate of
+  turn the ship reaches against the preset rate (the reference model's turn-rate limit ``r_max``),
+  checked on the ship: at most 10 % above it;
 * 3.3 rudder angle limitation, with an indication "when the angle of limitation has been commanded
   or reached" -> the fraction of time the command sits on the limit;
 * 3.4 means "to prevent unnecessary activation of the rudder due to normal yaw motion" -> the wave
@@ -18,7 +21,9 @@ The resolution gives no numbers. ISO 11674:2019 (the test standard for MSC.64(67
 its test methods and acceptance values with ship simulators; its numbers are not public and are not
 used here. The thresholds casship reports against are therefore its own readings, stated with each
 check (:data:`CRITERIA`): overshoot at most 10 % of the change, steady error at most 0.5 deg (or
-2 % of the change), steering-gear rate limit active at most 10 % of the time.
+2 % of the change), steering-gear rate limit active at most 10 % of the time, rate of turn at
+most 10 % above the preset rate. Settling is reported per change (last entry into the band of 2 %
+of the change or 1 deg) and checked: a change that has not settled by the end of its segment fails.
 """
 from __future__ import annotations
 
@@ -41,6 +46,11 @@ CRITERIA = {
     "rate_limited_fraction": (0.10, "of the time",
                               "steering gear not driven at its rate limit (casship's reading of 2.1 'minimum "
                               "operation of the steering gear')"),
+    "turn_rate_ratio": (1.10, "of the preset rate of turn",
+                        "MSC.64(67) Annex 3, 3.2 turns at a preset rate of turn (casship reads: the peak rate of "
+                        "turn at most 10 % above it)"),
+    "settled": (0.02, "of the change (or 1 deg)", "each change settles within its segment (casship's reading "
+                "of 3.6)"),
     "at_limit_fraction": (0.0, "of the time (reported)", "MSC.64(67) Annex 3, 3.3 rudder angle limitation "
                           "commanded or reached (indication; no threshold)"),
 }
@@ -145,6 +155,8 @@ def course_change_metrics(data: Dataset, step_times: Sequence[float], *, control
         mt = step_metrics(t[sel], y[sel], target, data["steer"][sel], abs_band=settle_band)
         if "rate_limited" in data:
             mt["rate_limited_fraction"] = float(np.mean(data["rate_limited"][sel] > 0.5))
+        mt["steer_travel"] = float(np.sum(np.abs(np.diff(data["steer"][sel]))))
+        mt["turn_rate_max"] = float(np.max(np.abs(data["r"][sel]))) if "r" in data else float("nan")
         out.append(mt)
     return out
 
@@ -179,9 +191,12 @@ def course_keeping_metrics(data: Dataset, *, controlled: str = "chi", start: flo
     return out
 
 
-def performance_report(data: Dataset, steps: list[dict], *, steer_max: float, controlled: str = "chi") -> dict:
-    """The checks of :data:`CRITERIA` on a run: per course change (overshoot, steady error) and over
-    the whole run (rate limit active, command at its limit), each with its threshold and a pass flag.
+def performance_report(data: Dataset, steps: list[dict], *, steer_max: float, controlled: str = "chi",
+                       r_max: float | None = None) -> dict:
+    """The checks of :data:`CRITERIA` on a run: per course change (overshoot, settling, steady
+    error) and over the whole run (rate limit active, with the steering travel per hour beside it;
+    peak rate of turn against the preset ``r_max``; command at its limit), each with its threshold
+    and a pass flag.
 
     Parameters
     ----------
@@ -193,6 +208,8 @@ def performance_report(data: Dataset, steps: list[dict], *, steer_max: float, co
         Steering limit.
     controlled : str
         Column of the controlled angle.
+    r_max : float, optional
+        The preset rate of turn [rad/s] (section 3.2 is checked when given).
     """
     checks = []
     for k, mt in enumerate(steps):
@@ -200,6 +217,9 @@ def performance_report(data: Dataset, steps: list[dict], *, steer_max: float, co
             checks.append({"check": f"overshoot, change {k + 1}", "value": mt["overshoot_pct"],
                            "threshold": CRITERIA["overshoot_pct"][0], "unit": "%",
                            "ok": bool(mt["overshoot_pct"] <= CRITERIA["overshoot_pct"][0])})
+        if "settling_time_s" in mt:
+            checks.append({"check": f"settled, change {k + 1}", "value": mt["settling_time_s"], "threshold": None,
+                           "unit": "s", "ok": bool(np.isfinite(mt["settling_time_s"]))})
         lim = max(CRITERIA["steady_state_error_deg"][0], 0.02 * abs(mt.get("change_deg", 0.0)))
         checks.append({"check": f"steady error, change {k + 1}", "value": mt["steady_state_error_deg"],
                        "threshold": lim, "unit": "deg", "ok": bool(abs(mt["steady_state_error_deg"]) <= lim)})
@@ -209,10 +229,21 @@ def performance_report(data: Dataset, steps: list[dict], *, steer_max: float, co
     checks.append({"check": "steering-gear rate limit active", "value": frac,
                    "threshold": CRITERIA["rate_limited_fraction"][0], "unit": "fraction of time",
                    "ok": bool(frac < CRITERIA["rate_limited_fraction"][0])})
+    duration = float(data.t[-1] - data.t[0])
+    travel = float(np.sum(np.abs(np.diff(data["steer"])))) * 3600.0 / duration if duration > 0 else float("nan")
+    checks.append({"check": "steering travel per hour", "value": travel, "threshold": None, "unit": "steering units/h",
+                   "ok": None})
+    out = {"rate_limited_fraction": frac, "at_limit_fraction": at_limit, "steer_travel_per_hour": travel}
+    if r_max is not None and "r" in data:
+        ratio = float(np.max(np.abs(data["r"])) / r_max)
+        checks.append({"check": "peak rate of turn / preset rate (3.2)", "value": ratio,
+                       "threshold": CRITERIA["turn_rate_ratio"][0], "unit": "",
+                       "ok": bool(ratio <= CRITERIA["turn_rate_ratio"][0])})
+        out["turn_rate_ratio"] = ratio
     checks.append({"check": "steering command at its limit", "value": at_limit, "threshold": None,
                    "unit": "fraction of time", "ok": None})
-    return {"rate_limited_fraction": frac, "at_limit_fraction": at_limit, "checks": checks,
-            "all_ok": all(c["ok"] for c in checks if c["ok"] is not None)}
+    out.update(checks=checks, all_ok=all(c["ok"] for c in checks if c["ok"] is not None))
+    return out
 
 
 def course_scenario(name: str, t_end: float | None = None, *, segment: float | None = None):

@@ -237,7 +237,8 @@ class Design:
         """
         controlled = "chi" if loop.mode == "course" else "psi"
         metrics = course_change_metrics(data, steps, controlled=controlled)
-        report = performance_report(data, metrics, steer_max=self.actuator.steer_max, controlled=controlled)
+        report = performance_report(data, metrics, steer_max=self.actuator.steer_max, controlled=controlled,
+                                    r_max=self.settings.r_max)
         limit = CRITERIA["rate_limited_fraction"][0]
         if warn and report["rate_limited_fraction"] >= limit:
             warnings.warn(f"{self.plant.model.name}: the steering gear ran at its rate limit "

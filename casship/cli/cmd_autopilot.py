@@ -87,6 +87,16 @@ def _clean(v):
     return v
 
 
+def _course_changes(res, steer_unit: str) -> list:
+    """Per change: overshoot in % with degrees beside it, settling time, rate-limited fraction and
+    steering travel (degrees for a rudder, N m for a yaw moment)."""
+    sc, unit = (float(np.degrees(1.0)), "deg") if steer_unit == "deg" else (1.0, "N_m")
+    return [{"change_deg": m["change_deg"], "overshoot_pct": m.get("overshoot_pct"),
+             "overshoot_deg": m.get("overshoot_deg"), "settling_time_s": m.get("settling_time_s"),
+             "rate_limited_fraction": m.get("rate_limited_fraction"), f"steer_travel_{unit}": sc * m["steer_travel"],
+             "turn_rate_max_deg_s": float(np.degrees(m["turn_rate_max"]))} for m in res.metrics]
+
+
 def settings_from_args(args) -> dict:
     """The settings given on the command line, in SI units (the others follow the rules)."""
     from ..autopilot.defaults import RULES
@@ -134,7 +144,13 @@ def run(args) -> int:
     res = design.simulate(args.scenario, args.t_end, seed=args.seed, environment=env)
     steer_unit = "N m" if design.plant.steer == "tau_N" else "deg"
     out = {"model": args.model, "scenario": args.scenario, "t_end_s": float(res.data.t[-1]), "environment": env,
-           **design.summary(), "metrics": res.metrics, "performance": res.performance}
+           **design.summary(), "metrics": res.metrics, "performance": res.performance,
+           "course_changes": _course_changes(res, steer_unit)}
+    perf = res.performance
+    travel_key = "steer_travel_deg_per_hour" if steer_unit == "deg" else "steer_travel_N_m_per_hour"
+    out[travel_key] = perf["steer_travel_per_hour"] * (float(np.degrees(1.0)) if steer_unit == "deg" else 1.0)
+    if design.schedule:
+        out["schedule_speeds_m_s"] = list(design.autopilot.speeds)
     if args.plot:
         folder = Path(args.plot)
         folder.mkdir(parents=True, exist_ok=True)
@@ -163,6 +179,9 @@ def run(args) -> int:
               f"{m.get('overshoot_pct', np.nan):>7.2f} {m.get('settling_time_s', np.nan):>9.1f} "
               f"{m['steady_state_error_deg']:>7.2f} {sc * m['steer_max_abs']:>10.2f} "
               f"{m.get('rate_limited_fraction', np.nan):>9.3f}")
+    travel = res.performance["steer_travel_per_hour"] * sc
+    print(f"steering travel {travel:.4g} {steer_unit}/h beside the rate limit active "
+          f"{res.performance['rate_limited_fraction']:.3f} of the time")
     for c in res.performance["checks"]:
         flag = "" if c["ok"] is None else ("ok" if c["ok"] else "NOT MET")
         print(f"  {c['check']}: {c['value']:.4g} {c['unit']} {flag}")
