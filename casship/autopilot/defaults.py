@@ -238,10 +238,20 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         rule("steer_max", lambda: float(_vessel(plant, "rudder_max") or np.radians(35.0)))
         rule("steer_rate_max", lambda: float(_vessel(plant, "rudder_rate") or _SOLAS_RATE))
         rule("actuator_T", lambda: 1.0)
-    steering = steering_feedforward(plant, val["steer_max"]) if "v" in m.state_names or "u" in m.state_names \
-        else None
+    steering = None
+    if "u" in m.state_names and "v" in m.state_names:
+        try:
+            steering = steering_feedforward(plant, val["steer_max"])
+        except ValueError as err:         # no steady turn reaches the limit: the linear feed-forward
+            if g.get("feedforward") == "nonlinear":
+                raise
+            src["feedforward"] = f"'linear' ({err})"
+            val["feedforward"] = feedforward = "linear"
     rule("turn_rate_top", lambda: steering.r_top if steering is not None else float("nan"))
     rule("r_max", lambda: min(0.3 / LU, steering.rate_for(0.5)) if steering is not None else 0.3 / LU)
+    if feedforward == "nonlinear" and steering is None and g.get("feedforward") != "nonlinear":
+        val["feedforward"] = feedforward = "linear"
+        src["feedforward"] = "'linear' (the model has no sway state for the steady turns)"
     if feedforward == "nonlinear" and steering is None:
         raise ValueError(f"model {m.name!r} has no sway/surge states for the nonlinear feed-forward; use "
                          "feedforward='linear'")

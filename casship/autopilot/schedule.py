@@ -72,10 +72,25 @@ class ScheduledAutopilot:
         object.__setattr__(self, "speeds", tuple(map(float, speeds)))
 
     # the structure of the law (law_step reads these)
-    feedforward = property(lambda self: self.laws[0].feedforward)
-    anti_windup = property(lambda self: self.laws[0].anti_windup)
-    filter_T = property(lambda self: self.laws[0].filter_T)
-    steering = property(lambda self: self.laws[0].steering)
+    @property
+    def feedforward(self) -> bool:
+        """Whether the law has the feed-forward (the same in every design)."""
+        return self.laws[0].feedforward
+
+    @property
+    def anti_windup(self) -> bool:
+        """Whether the integrator is held at the limit (the same in every design)."""
+        return self.laws[0].anti_windup
+
+    @property
+    def filter_T(self) -> float:
+        """Command low-pass time constant [s] (the same in every design)."""
+        return self.laws[0].filter_T
+
+    @property
+    def steering(self):
+        """The first design's steering table (its values are scheduled by :meth:`parameters`)."""
+        return self.laws[0].steering
 
     def memory0(self, chi0: float = 0.0) -> np.ndarray:
         """Initial memory (as :meth:`Autopilot.memory0`).
