@@ -61,7 +61,8 @@ def run_case(case: dict) -> dict:
     name, label = case["ship"], case["controller"]
     mode, integral = CONTROLLERS[label]
     model = ship_model(name)
-    design = ap.design_autopilot(model, mode=mode)
+    # the study compares LOS and ILOS on the linear feed-forward it was tuned with
+    design = ap.design_autopilot(model, mode=mode, feedforward="linear")
     wp, Delta = scenario(design)
     guidance = LOSGuidance.for_design(wp, design, integral=integral)
     if case.get("lookahead_L") or case.get("kappa_U"):
