@@ -26,7 +26,7 @@ def test_scheduled_law_equals_the_point_design_at_each_design_speed(kvlcc2_sched
         g = point.autopilot.function
         assert point.settings.speed == pytest.approx(speed)
         for _ in range(5):
-            args = {"memory": rng.normal(scale=[0.3, 0.005, 1e-4, 5.0, 0.1]), "ref": rng.normal(),
+            args = {"memory": rng.normal(scale=[0.3, 0.005, 1e-4, 5.0, 0.1, 1e-4]), "ref": rng.normal(),
                     "chi": rng.normal(), "r": rng.normal(scale=0.005), "dt": 0.2, "speed": speed}
             a, b = f.call(args), g.call({**args, "speed": 0.0})       # a point design ignores the speed
             for key in a:

@@ -38,6 +38,10 @@ class PIDGains:
         How the gains were found.
     poles : tuple
         The closed-loop poles the design placed.
+    m_hf, T3 : float
+        With a second-order Nomoto model: ``T1 T2 / (K T3)`` (the inertia the ship shows to a quick
+        change of the steering) and ``T3``; the nonlinear law's feed-forward then inverts the
+        second-order model (see :func:`law_step`). NaN: the first-order ``m a_d``.
     """
 
     Kp: float
@@ -47,12 +51,16 @@ class PIDGains:
     d: float
     method: str = ""
     poles: tuple = ()
+    m_hf: float = float("nan")
+    T3: float = float("nan")
 
     def __post_init__(self):
         for name in ("Kp", "Kd", "Ki", "m", "d"):
             v = getattr(self, name)
             if not np.isfinite(v):
                 raise ValueError(f"gain {name} must be finite, got {v}")
+        if np.isfinite(self.T3) and not self.T3 > 0:
+            raise ValueError(f"T3 must be positive, got {self.T3}")
 
     def controller(self, *, steer: str = "delta", feedforward: bool = True, name: str = "autopilot"):
         """The linear control law as a labelled :class:`control.StateSpace`.
@@ -118,8 +126,8 @@ class Autopilot:
     filter_T: float = 0.0
     steering: object = None
 
-    #: Names of the memory entries of :attr:`function`.
-    MEMORY = ("chi_d", "r_d", "a_d", "z", "filtered")
+    #: Names of the memory entries of :attr:`function` (``w``: ``a_d`` low-passed by ``T3``).
+    MEMORY = ("chi_d", "r_d", "a_d", "z", "filtered", "w")
 
     def __post_init__(self):
         if not self.steer_max > 0:
@@ -135,7 +143,7 @@ class Autopilot:
         chi0 : float
             Initial course (or heading) [rad].
         """
-        return np.array([chi0, 0.0, 0.0, 0.0, 0.0])
+        return np.array([chi0, 0.0, 0.0, 0.0, 0.0, 0.0])
 
     def parameters(self, speed=None) -> dict:
         """The numbers of the law by name: gains, feed-forward model, reference model and the
@@ -147,8 +155,10 @@ class Autopilot:
             Ignored by a point design (used by :class:`~casship.autopilot.schedule.ScheduledAutopilot`).
         """
         g, ref = self.gains, self.reference
-        out = {"Kp": g.Kp, "Kd": g.Kd, "Ki": g.Ki, "m": g.m, "d": g.d, "wn_ref": ref.wn, "zeta_ref": ref.zeta,
-               "r_max": ref.r_max, "steer_max": self.steer_max}
+        second = np.isfinite(g.m_hf) and np.isfinite(g.T3)
+        out = {"Kp": g.Kp, "Kd": g.Kd, "Ki": g.Ki, "m": g.m, "d": g.d, "m_hf": g.m_hf if second else g.m,
+               "T3": g.T3 if second else 1.0, "wn_ref": ref.wn, "zeta_ref": ref.zeta, "r_max": ref.r_max,
+               "steer_max": self.steer_max}
         if self.steering is not None:
             out["r_top"] = self.steering.r_top
             out.update({f"ff_{i}": v for i, v in enumerate(self.steering.steer)})
@@ -179,7 +189,7 @@ class Autopilot:
     def function(self) -> ca.Function:
         """``autopilot(memory, ref, chi, r, dt, speed, steering) -> (memory_next, steer, chi_d, r_d, a_d, e)``
         with ``memory`` as in :attr:`MEMORY` (``speed`` used by a schedule, ``steering`` by none)."""
-        mem, ref, chi, r, dt, U, st = (ca.SX.sym(n, k) for n, k in (("memory", 5), ("ref", 1), ("chi", 1), ("r", 1),
+        mem, ref, chi, r, dt, U, st = (ca.SX.sym(n, k) for n, k in (("memory", 6), ("ref", 1), ("chi", 1), ("r", 1),
                                                                      ("dt", 1), ("speed", 1), ("steering", 1)))
         out = self.symbolic_step(mem, ref, chi, r, dt, U, st)
         names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
@@ -192,19 +202,29 @@ def law_step(law, P: dict, mem, ref, chi, r, dt) -> dict:
     expressions) and its structure (feed-forward, filter, anti-windup, steering table) from ``law``.
 
     One function for the point design and the gain schedule, so that both are the same law.
+
+    The feed-forward inverts the Nomoto model along the reference: ``delta = (1/K) (1 + T1 s)
+    (1 + T2 s) / (1 + T3 s) r_d``, written as ``s(r_d) + m w + m_hf (a_d - w)`` with ``w = a_d / (1 + T3
+    s)`` (a memory state), ``m = T/K``, ``m_hf = T1 T2 / (K T3)``, and the static part ``s(r_d)``
+    the nonlinear ship's steady steering (or the linear ``d r_d``). At low frequency it is the
+    first-order ``m a_d + d r_d``; a quick change of the reference sees the smaller inertia
+    ``m_hf`` the ship shows at once (the first-order ``m`` would overdrive the start of a large
+    turn and carry the ship past the preset rate).
     """
     from .plants import SteeringFeedforward, piecewise_linear
     from .reference import reference_step
 
-    chi_d, r_d, a_d, integ, filt = (mem[i] for i in range(5))
+    chi_d, r_d, a_d, integ, filt, w = (mem[i] for i in range(6))
     e = wrap_sym(chi - chi_d)
     ff = 0
     if law.feedforward:
+        accel = P["m"] * w + P["m_hf"] * (a_d - w)
         if law.steering is not None:
             table = [P[f"ff_{i}"] for i in range(len(SteeringFeedforward.FRACTIONS))]
-            ff = P["m"] * a_d + piecewise_linear(r_d / P["r_top"], SteeringFeedforward.FRACTIONS, table)
+            ff = accel + piecewise_linear(r_d / P["r_top"], SteeringFeedforward.FRACTIONS, table)
         else:
-            ff = P["m"] * a_d + P["d"] * r_d
+            ff = accel + P["d"] * r_d
+    w_next = w + (1 - ca.exp(-dt / P["T3"])) * (a_d - w)
     raw = ff - (P["Kp"] * e + P["Kd"] * (r - r_d) + P["Ki"] * integ)
     if law.filter_T > 0:
         filt_next = filt + dt / (law.filter_T + dt) * (raw - filt)      # backward-Euler low-pass
@@ -220,7 +240,7 @@ def law_step(law, P: dict, mem, ref, chi, r, dt) -> dict:
     else:
         integ_next = integ + dt * e
     xd_next = reference_step(mem[:3], ref, dt, P["wn_ref"], P["zeta_ref"], P["r_max"])
-    return {"memory": ca.vertcat(xd_next, integ_next, filt_next), "steer": sat, "chi_d": chi_d,
+    return {"memory": ca.vertcat(xd_next, integ_next, filt_next, w_next), "steer": sat, "chi_d": chi_d,
             "r_d": r_d, "a_d": a_d, "e": e}
 
 

@@ -40,9 +40,11 @@ def reference_step(xd, ref, dt, wn, zeta, r_max):
     if not (isinstance(r_max, float) and not np.isfinite(r_max)):
         # at the rate limit the acceleration pushing further out is held at 0: left to integrate (as
         # in MSS refModel) it winds up and its feed-forward m a_d drives the ship past the preset rate
-        out = ca.logic_or(ca.logic_and(r_next >= r_max, a_next > 0), ca.logic_and(r_next <= -r_max, a_next < 0))
-        a_next = ca.if_else(out, 0, a_next)
+        # and near the limit it is capped so that the rate approaches the limit smoothly (at the
+        # model's own rate (2 zeta + 1) wn) instead of hitting it with full acceleration
         r_next = ca.fmin(ca.fmax(r_next, -r_max), r_max)
+        k = (2 * zeta + 1) * wn
+        a_next = ca.fmin(ca.fmax(a_next, -k * (r_max + r_next)), k * (r_max - r_next))
     return ca.vertcat(wrap_sym(xd[0] + dt * xd[1]), r_next, a_next)
 
 
@@ -51,8 +53,10 @@ class ReferenceModel:
     """Third-order reference model with rate saturation.
 
     ``a_d' = wn^3 (ref - chi_d) - (2 zeta + 1) wn^2 r_d - (2 zeta + 1) wn a_d``, ``r_d`` saturated
-    at ``r_max`` (Euler steps, as MSS), and ``a_d`` held at 0 while ``r_d`` sits at the limit and
-    ``a_d`` would push it further (MSS lets it integrate on, which winds up the feed-forward). ``r_max = inf`` gives the linear filter
+    at ``r_max`` (Euler steps, as MSS). Unlike MSS, ``a_d`` is capped at ``(2 zeta + 1) wn (r_max -
+    |r_d|)`` towards the limit, so the rate approaches the limit smoothly and ``a_d`` cannot wind up
+    while ``r_d`` sits there (with MSS's clipping of the rate alone the acceleration keeps growing,
+    and its feed-forward drives the ship past the preset rate). ``r_max = inf`` gives the linear filter
     ``wn^3 / ((s + wn)(s^2 + 2 zeta wn s + wn^2))``. The command error ``ref - chi_d`` is taken on
     the circle, so a command across +-180 deg turns the short way.
 

@@ -142,7 +142,8 @@ class ScheduledAutopilot:
         """
         P = {k: float(v) for k, v in self.parameters(float(speed)).items()}
         g0 = self.laws[0].gains
-        gains = PIDGains(P["Kp"], P["Kd"], P["Ki"], P["m"], P["d"], f"scheduled ({g0.method})")
+        gains = PIDGains(P["Kp"], P["Kd"], P["Ki"], P["m"], P["d"], f"scheduled ({g0.method})", m_hf=P["m_hf"],
+                         T3=P["T3"])
         ref = ReferenceModel(P["wn_ref"], P["zeta_ref"], P["r_max"])
         steering = None
         if self.steering is not None:

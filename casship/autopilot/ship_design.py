@@ -5,7 +5,7 @@ gear, the settings and where each came from).
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping
 
 import control
@@ -304,6 +304,8 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
         gains = pid_pole_placement(nom, s.wn, s.zeta, integral=s.integral)
     else:
         gains = lqr_design(nom, **s.lqr_weights)
+    if nom.second_order and nom.T3 > 0:       # the inertia of a quick steering change, for the feed-forward
+        gains = replace(gains, m_hf=nom.T1 * nom.T2 / (nom.K * nom.T3), T3=nom.T3)
     reference = ReferenceModel(s.wn_ref, s.zeta_ref, s.r_max)
     actuator = Actuator(s.steer_max, s.steer_rate_max, s.actuator_T)
     autopilot = Autopilot(gains, reference, s.steer_max, filter_T=s.filter_T,
@@ -317,8 +319,6 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
 
 def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, settings) -> Design:
     """The design at ``speed`` whose law is the gain schedule over the ``schedule`` speeds."""
-    from dataclasses import replace
-
     from .schedule import ScheduledAutopilot, default_schedule
 
     if nomoto is not None:
