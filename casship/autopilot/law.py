@@ -164,7 +164,7 @@ class Autopilot:
             out.update({f"ff_{i}": v for i, v in enumerate(self.steering.steer)})
         return out
 
-    def symbolic_step(self, mem, ref, chi, r, dt, speed=None, steer=None) -> dict:
+    def symbolic_step(self, mem, ref, chi, r, dt, speed=None, steer=None, bias=None) -> dict:
         """One sample of the law on CasADi expressions; returns a dict of named expressions
         (``memory, steer, chi_d, r_d, a_d, e``).
 
@@ -182,19 +182,22 @@ class Autopilot:
             Speed [m/s] (for a scheduled law; a point design ignores it).
         steer : casadi.SX, optional
             Present steering (unused by this law; the loop passes it to every law).
+        bias : casadi.SX, optional
+            The heading observer's steering-bias estimate (unused by this law).
         """
         return law_step(self, self.parameters(speed), mem, ref, chi, r, dt)
 
     @property
     def function(self) -> ca.Function:
-        """``autopilot(memory, ref, chi, r, dt, speed, steering) -> (memory_next, steer, chi_d, r_d, a_d, e)``
-        with ``memory`` as in :attr:`MEMORY` (``speed`` used by a schedule, ``steering`` by none)."""
+        """``autopilot(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d, r_d, a_d, e)``
+        with ``memory`` as in :attr:`MEMORY` (``speed`` used by a schedule, ``steering`` and ``bias`` by none)."""
         mem, ref, chi, r, dt, U, st = (ca.SX.sym(n, k) for n, k in (("memory", 6), ("ref", 1), ("chi", 1), ("r", 1),
                                                                      ("dt", 1), ("speed", 1), ("steering", 1)))
-        out = self.symbolic_step(mem, ref, chi, r, dt, U, st)
+        bias = ca.SX.sym("bias")
+        out = self.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
         names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
-        return ca.Function("autopilot", [mem, ref, chi, r, dt, U, st], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt", "speed", "steering"], ["memory_next"] + names[1:])
+        return ca.Function("autopilot", [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
+                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"], ["memory_next"] + names[1:])
 
 
 def law_step(law, P: dict, mem, ref, chi, r, dt) -> dict:

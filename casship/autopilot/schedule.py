@@ -116,7 +116,7 @@ class ScheduledAutopilot:
         tables = [law.parameters() for law in self.laws]
         return {k: piecewise_linear(speed, self.speeds, [t[k] for t in tables]) for k in tables[0]}
 
-    def symbolic_step(self, mem, ref, chi, r, dt, speed=None, steer=None) -> dict:
+    def symbolic_step(self, mem, ref, chi, r, dt, speed=None, steer=None, bias=None) -> dict:
         """One sample of the law at the measured ``speed`` (see :meth:`Autopilot.symbolic_step`).
 
         Parameters
@@ -125,7 +125,7 @@ class ScheduledAutopilot:
             As :meth:`Autopilot.symbolic_step`.
         speed : casadi.SX
             Speed [m/s] (the course estimator's in course mode, the speed log's in heading mode).
-        steer : casadi.SX, optional
+        steer, bias : casadi.SX, optional
             Unused.
         """
         return law_step(self, self.parameters(speed), mem, ref, chi, r, dt)

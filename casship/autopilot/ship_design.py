@@ -24,6 +24,7 @@ from .performance import CRITERIA, course_change_metrics, course_scenario, perfo
 from .plants import SteeringPlant, steering_plant
 from .reference import ReferenceModel
 from .slot import LinearController
+from .mpc import MPCAutopilot, MPCLaw
 
 __all__ = ["Design", "design_autopilot", "simulate_autopilot", "RateLimitWarning"]
 
@@ -159,7 +160,8 @@ class Design:
             Replace the settings' mode and rate source.
         controller : control.StateSpace, control.TransferFunction, LinearController or MPCAutopilot, optional
             Replaces the PID/LQR law: a python-control controller runs in the compiled loop
-            (:meth:`linear_controller`); an :class:`~casship.autopilot.mpc.MPCAutopilot` step by step.
+            (:meth:`linear_controller`), and so does an :class:`~casship.autopilot.mpc.MPCAutopilot`
+            (its QP solved by HPIPM as a call node of the loop's step).
         """
         s = self.settings
         mode, rate = mode or s.mode, rate or s.rate
@@ -171,11 +173,16 @@ class Design:
                                        wave=wave if wave_filter else None, x0=pl.x0)
         law = self.autopilot
         if isinstance(controller, (control.StateSpace, control.TransferFunction)):
-            controller = self.linear_controller(controller)
-        if isinstance(controller, LinearController):
-            law, controller = controller, None
+            law = self.linear_controller(controller)
+        elif isinstance(controller, MPCAutopilot):
+            law = controller.law(s.dt)
+        elif controller is not None:
+            if not isinstance(controller, (LinearController, MPCLaw)):
+                raise TypeError(f"controller must be a python-control system, a LinearController or an "
+                                f"MPCAutopilot, got {type(controller).__name__}")
+            law = controller
         return ClosedLoop(pl, law, self.actuator, dt=s.dt, mode=mode, rate=rate, estimator=estimator,
-                          sensors=sensors or self.sensors(), wave=wave, guidance=guidance, controller=controller)
+                          sensors=sensors or self.sensors(), wave=wave, guidance=guidance)
 
     def linear_controller(self, sys, **options) -> LinearController:
         """A python-control controller in this design's loop: its reference model, loop period and

@@ -135,7 +135,7 @@ class LinearController:
         step = a.rate_max * dt
         return ca.if_else(ca.fabs(change) > step, steer + ca.fmin(ca.fmax(change, -step), step) / gain, cmd)
 
-    def symbolic_step(self, mem, ref, chi, r, dt, speed=None, steer=None) -> dict:
+    def symbolic_step(self, mem, ref, chi, r, dt, speed=None, steer=None, bias=None) -> dict:
         """One sample: reference model, controller output and state update (CasADi expressions).
 
         Parameters
@@ -152,6 +152,8 @@ class LinearController:
             Unused.
         steer : casadi.SX, optional
             Present steering (for the anti-windup against the rate limit).
+        bias : casadi.SX, optional
+            Unused.
         """
         chi_d, r_d, a_d = mem[0], mem[1], mem[2]
         x = mem[3:]
@@ -175,11 +177,12 @@ class LinearController:
 
     @property
     def function(self) -> ca.Function:
-        """``controller(memory, ref, chi, r, dt, speed, steering) -> (memory_next, steer, chi_d, r_d, a_d, e)``."""
+        """``controller(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d, r_d, a_d, e)``."""
         n = len(self.MEMORY)
         mem, ref, chi, r, dt, U, st = (ca.SX.sym(k, s) for k, s in (("memory", n), ("ref", 1), ("chi", 1), ("r", 1),
                                                                      ("dt", 1), ("speed", 1), ("steering", 1)))
-        out = self.symbolic_step(mem, ref, chi, r, dt, U, st)
+        bias = ca.SX.sym("bias")
+        out = self.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
         names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
-        return ca.Function("controller", [mem, ref, chi, r, dt, U, st], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt", "speed", "steering"], ["memory_next"] + names[1:])
+        return ca.Function("controller", [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
+                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"], ["memory_next"] + names[1:])
