@@ -111,9 +111,11 @@ class MPCAutopilot:
         X = [ca.SX.sym(f"x{k}", nx) for k in range(N + 1)]
         U = [ca.SX.sym(f"u{k}", 2) for k in range(N)]
         b, target = ca.SX.sym("b"), ca.SX.sym("target", 2, N)
-        # exact (l1) penalty on the slack: above the largest price a course error of pi over the
-        # horizon can put on the rate of turn; a small quadratic term keeps the Hessian definite
-        l_slack = 100 * (self.q_e * np.pi + self.q_r * self.r_max) * N * self.period
+        # exact (l1) penalty on the slack: the largest price the cost can put on the rate of turn of
+        # one step (a course error of pi on every later step, moved by the period) bounds the
+        # multiplier; a small quadratic term keeps the Hessian definite. (A larger weight only
+        # slows the interior point down.)
+        l_slack = 2 * (self.q_e * np.pi + 2 * self.q_r * self.r_max) * N * self.period
         q_slack = l_slack / self.r_max
         z, g, lbg, ubg, cost = [], [], [], [], 0
         for k in range(N):
