@@ -250,8 +250,10 @@ def course_scenario(name: str, t_end: float | None = None, *, segment: float | N
     """A named course-change scenario.
 
     ``course-A``: A deg at t = 0, back to 0 at half the run (the two standard course changes;
-    ``course-20`` is Fossen & Fossen 2021's); ``step-A``: A deg at t = 0, held. The run lasts
-    ``t_end`` seconds, or two (one) ``segment`` lengths, or 40 s.
+    ``course-20`` is Fossen & Fossen 2021's); ``step-A``: A deg at t = 0, held; ``rot-R``: a turn at
+    the rate of turn R deg/min (the rate-of-turn mode of a heading control system: the course
+    command moves at that rate) for half the run, then the course held. The run lasts ``t_end``
+    seconds, or two (one) ``segment`` lengths, or 40 s.
 
     Parameters
     ----------
@@ -274,14 +276,18 @@ def course_scenario(name: str, t_end: float | None = None, *, segment: float | N
         kind, angle = name.rsplit("-", 1)
         a = float(np.radians(float(angle)))
     except ValueError:
-        raise ValueError(f"unknown scenario {name!r}; use course-A or step-A (A in degrees)") from None
-    if kind not in ("course", "step"):
-        raise ValueError(f"unknown scenario {name!r}; use course-A or step-A (A in degrees)")
+        raise ValueError(f"unknown scenario {name!r}; use course-A, step-A (A in degrees) or rot-R (R in "
+                         "deg/min)") from None
+    if kind not in ("course", "step", "rot"):
+        raise ValueError(f"unknown scenario {name!r}; use course-A, step-A (A in degrees) or rot-R (R in deg/min)")
     if t_end is None:
-        t_end = (2 * segment if kind == "course" else segment) if segment is not None else 40.0
+        t_end = (2 * segment if kind in ("course", "rot") else segment) if segment is not None else 40.0
     t_end = float(t_end)
     if not t_end > 0:
         raise ValueError(f"t_end must be positive, got {t_end}")
+    if kind == "rot":
+        rate, stop = a / 60.0, t_end / 2
+        return (lambda t: float(np.angle(np.exp(1j * rate * min(t, stop))))), t_end, [0.0, stop]
     if kind == "course":
         back = t_end / 2
         return (lambda t: a if t < back else 0.0), t_end, [0.0, back]
