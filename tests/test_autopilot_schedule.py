@@ -57,6 +57,28 @@ def test_half_speed_course_changes_with_the_schedule(kvlcc2_schedule):
         assert m["overshoot_pct"] <= 10.0 and np.isfinite(m["settling_time_s"])
 
 
+def test_closed_loop_through_a_speed_change():
+    """KVLCC2 slows from U0 to U0/2 (the propeller rate ramped down over 200 s), then changes course
+    by 60 deg and back: the schedule, fed the measured speed, steers as at the slow speed; the design
+    made at U0 overshoots more."""
+    ship = get_model("kvlcc2")
+    U0 = ship.vessel.U0
+    fixed = ap.design_autopilot(ship)
+    scheduled = ap.design_autopilot(ship, schedule="default")
+    plant = ap.speed_profile(fixed.plant, [0.0, 200.0], [U0, U0 / 2])
+    t0 = 2000.0
+    over = {}
+    for name, d in (("fixed", fixed), ("scheduled", scheduled)):
+        seg = d.settings.segment
+        res = ap.simulate_autopilot(d, lambda t, seg=seg: np.radians(60.0) if t0 <= t < t0 + seg else 0.0,
+                                    t0 + 2 * seg, step_times=[0.0, t0, t0 + seg], plant=plant, warn=False)
+        assert res.data["U"][int(t0 / d.settings.dt)] == pytest.approx(U0 / 2, rel=0.02)
+        over[name] = max(m["overshoot_pct"] for m in res.metrics[1:])
+        if name == "scheduled":
+            assert res.performance["all_ok"], [c for c in res.performance["checks"] if c["ok"] is False]
+    assert over["scheduled"] <= 10.0 < over["fixed"]
+
+
 def test_schedule_errors_name_the_problem():
     ship = get_model("kvlcc2")
     with pytest.raises(ValueError, match="schedule speeds"):

@@ -32,13 +32,13 @@ from .components import ClosedLoopResult, LoopEstimator, Sensors
 from .defaults import RULES, AutopilotSettings, derive_settings
 from .designs import LQG, lqg_design, lqr_design, pid_pole_placement
 from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linear_estimator
-from .guidance import LOSGuidance, Waypoints, cross_track_metrics
+from .guidance import LOSGuidance, Waypoints, cross_track_metrics, track_deviation
 from .law import Actuator, Autopilot, PIDGains
-from .mpc import MPCAutopilot, mpc_for_design
+from .mpc import MPCAutopilot, MPCLaw, mpc_for_design
 from .nomoto import Nomoto, fit_nomoto, nomoto_from_linear, nomoto_from_model
 from .performance import (CRITERIA, course_change_metrics, course_keeping_metrics, course_scenario,
                           performance_report, step_metrics)
-from .plants import SteeringFeedforward, SteeringPlant, steering_feedforward, steering_model, steering_plant, twin_propeller_allocation, twin_propeller_yaw_limit
+from .plants import SteeringFeedforward, SteeringPlant, speed_profile, steering_feedforward, steering_model, steering_plant, twin_propeller_allocation, twin_propeller_yaw_limit
 from .plots import bode_phase_deg, plot_closed_loop, plot_design
 from .reference import ReferenceModel
 from .schedule import ScheduledAutopilot, default_schedule
@@ -54,4 +54,5 @@ __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "P
            "course_scenario", "plot_design", "plot_closed_loop", "bode_phase_deg", "Design", "design_autopilot",
            "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings", "Waypoints",
            "LOSGuidance", "cross_track_metrics", "MPCAutopilot", "mpc_for_design", "ScheduledAutopilot",
-           "default_schedule", "SteeringFeedforward", "steering_feedforward", "LinearController"]
+           "default_schedule", "SteeringFeedforward", "steering_feedforward", "LinearController", "speed_profile",
+           "track_deviation", "MPCLaw"]

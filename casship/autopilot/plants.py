@@ -20,7 +20,7 @@ from ..linear import trim
 from ..model import Model, ModelBuilder
 
 __all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation", "SteeringFeedforward",
-           "steering_feedforward", "piecewise_linear",
+           "steering_feedforward", "piecewise_linear", "speed_profile",
            "twin_propeller_yaw_limit"]
 
 
@@ -140,7 +140,8 @@ class SteeringPlant:
                            ["x", "steer", "p", "dt"], ["x_next", "chi", "U"])
 
 
-def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable, name: str | None = None) -> Model:
+def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable, name: str | None = None, *,
+                   clock: str | None = None) -> Model:
     """A copy of ``model`` whose inputs are driven by ``new_inputs`` through an allocation.
 
     ``allocation(new, p)`` receives dicts of the new input symbols and the model's parameter
@@ -157,15 +158,22 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
         ``allocation(new, p) -> {old input: expression}``.
     name : str, optional
         Name of the new model.
+    clock : str, optional
+        Add a state of this name counting time (``clock' = 1``), given to the allocation among
+        the new inputs (an input that follows a schedule in time).
     """
     b = ModelBuilder(name or f"{model.name}+allocation", model.doc)
     xs = [b.state(v.name, unit=v.unit, angle=v.angle, doc=v.doc) for v in model.state_vars]
+    tick = b.state(clock, unit="s", doc="time") if clock else None
     ps = [b.param(v.name, v.value, bounds=(v.lower, v.upper), unit=v.unit, doc=v.doc, source=v.source)
           for v in model.param_vars]
     ws = [b.noise(v.name, unit=v.unit, doc=v.doc) for v in model.noise_vars]
     us = {n: b.input(n) for n in new_inputs}
+    if clock:
+        us[clock] = tick
     pd = dict(zip(model.param_names, ps))
     mapping = dict(allocation(us, pd))
+    replaced = set(mapping)
     unknown = [n for n in mapping if n not in model.input_names]
     if unknown:
         raise ValueError(f"allocation gives input(s) {unknown} that {model.name!r} does not have")
@@ -175,13 +183,65 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
     old = ca.vertcat(model.x, model.p, model.w, model.u)
     new = ca.vertcat(*xs, *ps, *ws, *[ca.SX(mapping[n]) for n in model.input_names])
     xdot, y = ca.substitute([model.xdot, model.y], [old], [new])
-    b.ode(**{n: xdot[i] for i, n in enumerate(model.state_names)})
+    b.ode(**{n: xdot[i] for i, n in enumerate(model.state_names)}, **({clock: ca.SX(1.0)} if clock else {}))
     for i, v in enumerate(model.output_vars):
         b.output(v.name, y[i], unit=v.unit, angle=v.angle, doc=v.doc)
     b.meta.update(dict(model.meta))
     if model.vessel is not None:      # the new inputs are generalised forces, not rudders or propellers
-        b.vessel = model.vessel.replace(rudders=(), propellers=())
+        kept = [n for n in model.input_names if n not in replaced]
+        b.vessel = model.vessel.replace(rudders=tuple(r for r in model.vessel.rudders if r in kept),
+                                        propellers=tuple(q for q in model.vessel.propellers if q in kept))
     return b.build()
+
+
+def speed_profile(plant: SteeringPlant, times: Sequence[float], speeds: Sequence[float], *,
+                  propulsion: str | None = None) -> SteeringPlant:
+    """The plant with its propulsion following a speed profile in time: a speed change in the
+    closed loop.
+
+    At each of ``times`` the propulsion input (a propeller rate, or the surge force of a craft
+    steered by a yaw moment) takes the value that holds ``speeds`` on a straight run (solved by
+    :func:`casship.trim`), linearly in between and held beyond; the ship's speed follows through
+    its own surge dynamics. The model gains a state ``t_clock`` (time, from 0).
+
+    Parameters
+    ----------
+    plant : SteeringPlant
+        The ship at its first operating point.
+    times : sequence of float
+        Increasing times [s].
+    speeds : sequence of float
+        Straight-run speeds [m/s] at those times.
+    propulsion : str, optional
+        The input that sets the speed (default: ``tau_X`` of a twin-propeller craft, else the
+        vessel's first propeller).
+    """
+    from ..linear import trim
+
+    m = plant.model
+    times, speeds = [float(t) for t in times], [float(v) for v in speeds]
+    if len(times) != len(speeds) or len(times) < 2 or np.any(np.diff(times) <= 0):
+        raise ValueError("speed_profile needs at least two increasing times and one speed for each")
+    if propulsion is None:
+        props = [n for n in ("tau_X",) + tuple(m.vessel.propellers if m.vessel else ()) if n in plant.inputs]
+        if not props:
+            raise ValueError(f"no propulsion input among {sorted(plant.inputs)} of {m.name!r}; give propulsion")
+        propulsion = props[0]
+    if propulsion not in plant.inputs:
+        raise ValueError(f"{propulsion!r} is not a bound input of the plant; inputs: {sorted(plant.inputs)}")
+    values = []
+    for v in speeds:
+        tr = trim(m, m.states(u=v), plant.input_vector(0.0), plant.pvec, free=[propulsion], zero=["u"])
+        values.append(float(tr.values[propulsion]))
+
+    def schedule(new, p):
+        return {propulsion: piecewise_linear(new["t_clock"], times, values)}
+
+    model = steering_model(m, [], schedule, name=f"{m.name}_profile", clock="t_clock")
+    x0 = np.concatenate([plant.x0, [0.0]])
+    others = {k: v for k, v in plant.inputs.items() if k != propulsion}
+    return SteeringPlant(model, plant.steer, others, plant.p, plant.north, plant.east, plant.heading, plant.yaw_rate,
+                         x0=x0)
 
 
 def twin_propeller_allocation(model: Model, names: tuple[str, str] = ("n1", "n2")):
