@@ -38,7 +38,8 @@ from .mpc import MPCAutopilot, MPCLaw, mpc_for_design
 from .nomoto import Nomoto, fit_nomoto, nomoto_from_linear, nomoto_from_model
 from .performance import (CRITERIA, course_change_metrics, course_keeping_metrics, course_scenario,
                           performance_report, step_metrics)
-from .plants import SteeringFeedforward, SteeringPlant, speed_profile, steering_feedforward, steering_model, steering_plant, twin_propeller_allocation, twin_propeller_yaw_limit
+from .plants import (SteeringFeedforward, SteeringPlant, speed_profile, steering_feedforward, steering_model,
+                     steering_plant, twin_propeller_allocation, twin_propeller_yaw_limit)
 from .plots import bode_phase_deg, plot_closed_loop, plot_design
 from .reference import ReferenceModel
 from .schedule import ScheduledAutopilot, default_schedule

@@ -79,7 +79,8 @@ class Waypoints:
         """Length of each segment [m]."""
         return np.hypot(np.diff(self.north), np.diff(self.east))
 
-    def track(self, turn_radius: float | None = None, spacing: float | None = None, extend: float = 0.0) -> np.ndarray:
+    def track(self, turn_radius: float | None = None, spacing: float | None = None,
+              extend: float = 0.0) -> np.ndarray:
         """The intended track as ``(n, 2)`` North/East points: the legs, joined by arcs of
         ``turn_radius`` tangent to both legs (corners without one).
 
@@ -113,7 +114,8 @@ class Waypoints:
                 p, heading, turn = arcs[k]
                 side = np.sign(turn)
                 centre = p + side * turn_radius * np.array([-np.sin(heading), np.cos(heading)])
-                phi = heading - side * np.pi / 2 + np.linspace(0.0, turn, max(3, int(abs(turn) * turn_radius / spacing)))
+                steps = max(3, int(abs(turn) * turn_radius / spacing))
+                phi = heading - side * np.pi / 2 + np.linspace(0.0, turn, steps)
                 pts.append(centre + turn_radius * np.column_stack([np.cos(phi + np.pi), np.sin(phi + np.pi)]) * -1)
         return np.vstack(pts)
 

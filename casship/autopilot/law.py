@@ -197,7 +197,8 @@ class Autopilot:
         out = self.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
         names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
         return ca.Function("autopilot", [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"], ["memory_next"] + names[1:])
+                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"],
+                           ["memory_next"] + names[1:])
 
 
 def law_step(law, P: dict, mem, ref, chi, r, dt) -> dict:

@@ -348,7 +348,8 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
     L, closed = loop_systems(point.linearization, here.gains, point.actuator, delay=s.delay, reference=here.reference,
                              controlled="chi" if s.mode == "course" else "psi", filter_T=s.filter_T,
                              estimator=linear_estimator(s, point.nomoto, point.plant.steer), rate=s.rate)
-    return Design(point.plant, point.linearization, point.nomoto, here.gains, here.gains.controller(steer=point.plant.steer),
+    controller = here.gains.controller(steer=point.plant.steer)
+    return Design(point.plant, point.linearization, point.nomoto, here.gains, controller,
                   L, closed, margins(L), law, point.actuator, s, designs)
 
 

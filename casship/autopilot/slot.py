@@ -71,7 +71,8 @@ class LinearController:
                 labels = ["e"]
             sys = control.ss(sys, inputs=labels, outputs=list(sys.output_labels))
         if not isinstance(sys, control.StateSpace):
-            raise TypeError(f"the controller must be a control.StateSpace or TransferFunction, got {type(sys).__name__}")
+            raise TypeError(f"the controller must be a control.StateSpace or TransferFunction, got "
+                            f"{type(sys).__name__}")
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be positive, got {dt}")
         if sys.noutputs != 1:
@@ -177,7 +178,8 @@ class LinearController:
 
     @property
     def function(self) -> ca.Function:
-        """``controller(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d, r_d, a_d, e)``."""
+        """``controller(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d, r_d,
+        a_d, e)``."""
         n = len(self.MEMORY)
         mem, ref, chi, r, dt, U, st = (ca.SX.sym(k, s) for k, s in (("memory", n), ("ref", 1), ("chi", 1), ("r", 1),
                                                                      ("dt", 1), ("speed", 1), ("steering", 1)))
@@ -185,4 +187,5 @@ class LinearController:
         out = self.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
         names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
         return ca.Function("controller", [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"], ["memory_next"] + names[1:])
+                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"],
+                           ["memory_next"] + names[1:])
