@@ -4,18 +4,22 @@ autopilot performance standards where they state a criterion.
 IMO Resolution A.342(IX), as amended by MSC.64(67) Annex 3 ("Recommendation on performance
 standards for heading control systems"), asks (sections as numbered in the resolution):
 
-* 2.1 keep a preset heading "with minimum operation of the ship's steering gear" -> the fraction of
-  time the steering gear runs at its rate limit, and beside it the steering travel per hour (the
-  sum of the steering's movements, e.g. deg/h: the wear the rate-limit figure does not show);
-  course keeping: mean and RMS steering, RMS steering rate, steering work;
-* 3.2 turns "based either on a preset turning radius or a preset rate of turn" -> the peak rate of
-  turn the ship reaches against the preset rate (the reference model's turn-rate limit ``r_max``),
-  checked on the ship: at most 10 % above it;
+* 2.1 keep a preset heading "with minimum operation of the ship's steering gear" -> checked: the
+  fraction of time the steering gear runs at its rate limit (:func:`performance_report`);
+  reported beside it: the steering travel per hour (the sum of the steering's movements, e.g.
+  deg/h: the wear the rate-limit figure does not show); reported by
+  :func:`course_keeping_metrics`: mean and RMS steering, RMS steering rate, steering work;
+* 3.2 turns "based either on a preset turning radius or a preset rate of turn" -> checked: the
+  peak rate of turn the ship reaches against the preset rate (the reference model's turn-rate
+  limit ``r_max``), at most 10 % above it; the preset rate itself is kept within the ship's
+  turning ability by the design rules (:data:`~casship.autopilot.defaults.RULES`, ``r_max``);
 * 3.3 rudder angle limitation, with an indication "when the angle of limitation has been commanded
-  or reached" -> the fraction of time the command sits on the limit;
-* 3.4 means "to prevent unnecessary activation of the rudder due to normal yaw motion" -> the wave
-  filter and the rudder activity in waves;
-* 3.6 "change to a preset heading without significant overshoot" -> overshoot of each course change.
+  or reached" -> reported (no threshold): the fraction of time the command sits on the limit;
+* 3.4 means "to prevent unnecessary activation of the rudder due to normal yaw motion" -> not a
+  check here: the wave filter of the heading observer provides it, and the autopilot-waves study
+  and the tests measure the rudder activity it saves;
+* 3.6 "change to a preset heading without significant overshoot" -> checked: the overshoot of each
+  course change, and that each change settles.
 
 The resolution gives no numbers. ISO 11674:2019 (the test standard for MSC.64(67) Annex 3) states
 its test methods and acceptance values with ship simulators; its numbers are not public and are not
