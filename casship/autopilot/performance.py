@@ -235,8 +235,8 @@ def performance_report(data: Dataset, steps: list[dict], *, steer_max: float, co
                    "ok": bool(frac < CRITERIA["rate_limited_fraction"][0])})
     duration = float(data.t[-1] - data.t[0])
     travel = float(np.sum(np.abs(np.diff(data["steer"])))) * 3600.0 / duration if duration > 0 else float("nan")
-    checks.append({"check": "steering travel per hour", "value": travel, "threshold": None, "unit": "steering units/h",
-                   "ok": None})
+    checks.append({"check": "steering travel per hour", "value": travel, "threshold": None,
+                   "unit": "rad/h of rudder (N m/h of yaw moment)", "ok": None})
     out = {"rate_limited_fraction": frac, "at_limit_fraction": at_limit, "steer_travel_per_hour": travel}
     if r_max is not None and "r" in data:
         ratio = float(np.max(np.abs(data["r"])) / r_max)

@@ -331,7 +331,9 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
     if nomoto is not None:
         raise ValueError("a gain schedule designs on each speed's own linearisation; do not give nomoto")
     point = design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
-    speeds = default_schedule(point.settings.speed if speed is None else speed) \
+    vessel = model.vessel
+    approach = vessel.U0 if vessel is not None and vessel.U0 else point.settings.speed
+    speeds = default_schedule(max(approach, point.settings.speed)) \
         if isinstance(schedule, str) and schedule == "default" else schedule
     try:
         speeds = sorted(float(v) for v in speeds)
