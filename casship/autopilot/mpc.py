@@ -17,7 +17,7 @@ linearly with the horizon. Between solves the steering command ramps at the plan
 steering gear is never asked for more than its rate limit.
 
 The MPC runs inside the compiled closed loop (:meth:`MPCAutopilot.law`: the solve is a call node
-of the loop's step, taken once per MPC period through ``casadi.Function.conditional``), and from
+of the loop's step, taken once per ``replan`` interval through ``casadi.Function.conditional``), and from
 Python (:meth:`MPCAutopilot.update`, which checks each plan against the limits and the model and
 raises on a failed solve).
 """
@@ -54,6 +54,10 @@ class MPCAutopilot:
         Weights of the course error [1/rad^2], yaw rate [1/(rad/s)^2] and steering rate.
     reference : ReferenceModel, optional
         Reference model whose preview the plan tracks (None: the command itself).
+    replan : float, optional
+        Time between solves [s] (default: the period). Solving more often than the model's step
+        (the plan's first rate applied until the next solve) keeps the feedback of a long horizon
+        with a coarse step.
     """
 
     nomoto: Nomoto
@@ -66,6 +70,7 @@ class MPCAutopilot:
     q_r: float = 0.0
     r_u: float = 1.0
     reference: ReferenceModel | None = None
+    replan: float | None = None
     _solver: object = field(default=None, init=False, repr=False)
 
     MEMORY_LOG = ("chi_d", "r_d", "e")
@@ -75,6 +80,8 @@ class MPCAutopilot:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"MPC {name} must be positive and finite, got {v}")
+        if self.replan is not None and not (np.isfinite(self.replan) and 0 < self.replan <= self.period):
+            raise ValueError(f"MPC replan must be in (0, period], got {self.replan}")
         if int(self.horizon) != self.horizon or self.horizon < 2:
             raise ValueError(f"MPC horizon must be an integer >= 2, got {self.horizon}")
         self._solver = self._build()
@@ -220,7 +227,7 @@ class MPCAutopilot:
             Memory, steering command, and ``chi_d`` (reference), ``r_d`` (planned rate of turn),
             ``e`` (course error).
         """
-        every = max(1, int(round(self.period / dt)))
+        every = max(1, int(round((self.replan or self.period) / dt)))
         e = float(wrap(chi - ref))
         mem = dict(memory)
         if self.reference is not None:      # the reference model runs at the loop rate, as in the PID law
@@ -294,7 +301,7 @@ class MPCLaw:
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be positive, got {dt}")
         self.mpc, self.dt = mpc, float(dt)
-        self.every = max(1, int(round(mpc.period / dt)))
+        self.every = max(1, int(round((mpc.replan or mpc.period) / dt)))
         N = int(mpc.horizon)
         self.MEMORY = ("chi_d", "r_d", "a_d", "steer_cmd", "rate", "count") + tuple(f"plan{k}" for k in range(N))
         self.reference = mpc.reference
@@ -356,7 +363,7 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     """An MPC with the design's model, limits and reference model: horizon ``6 pi / wn_ref`` (three
     periods of the reference model's natural frequency) in ``steps`` steps (the period rounded to a
     multiple of the loop period; on a course-unstable ship (``T < 0``) at most ``|T| / 10``, the
-    horizon then shorter); weights: course error 1/(1 deg)^2, yaw rate ``1/r_max^2`` (both
+    horizon then shorter), re-planned ten times per period; weights: course error 1/(1 deg)^2, yaw rate ``1/r_max^2`` (both
     against the reference model's preview), steering rate ``(100 / rate_max)^2`` (a steering rate
     of 1 % of the limit costs as much as 1 deg of course error).
 
@@ -378,6 +385,7 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
         period = min(period, abs(nom.T) / 10)
     period = max(s.dt, round(period / s.dt) * s.dt)
     return MPCAutopilot(design.nomoto, period, steps, s.steer_max, s.steer_rate_max, s.r_max,
+                        replan=max(s.dt, round(period / 10 / s.dt) * s.dt),
                         q_e=1.0 / np.radians(1.0) ** 2, q_r=(1.0 / s.r_max**2) if q_r is None else q_r,
                         r_u=(100.0 / s.steer_rate_max) ** 2 if r_u is None else r_u,
                         reference=design.autopilot.reference)
