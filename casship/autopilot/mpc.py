@@ -363,9 +363,10 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     """An MPC with the design's model, limits and reference model: horizon ``6 pi / wn_ref`` (three
     periods of the reference model's natural frequency) in ``steps`` steps (the period rounded to a
     multiple of the loop period; on a course-unstable ship (``T < 0``) at most ``|T| / 10``, the
-    horizon then shorter), re-planned ten times per period; weights: course error 1/(1 deg)^2, yaw rate ``1/r_max^2`` (both
-    against the reference model's preview), steering rate ``(100 / rate_max)^2`` (a steering rate
-    of 1 % of the limit costs as much as 1 deg of course error).
+    horizon then shorter), re-planned ten times per period; weights: course error 1/(1 deg)^2, yaw
+    rate ``1/r_max^2`` (both against the reference model's preview), steering rate
+    ``(100 / rate_max)^2`` (a steering rate of 1 % of the limit costs as much as 1 deg of course
+    error).
 
     Parameters
     ----------
