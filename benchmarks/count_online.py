@@ -15,7 +15,6 @@ import collections
 import sys
 
 import casadi as ca
-import numpy as np
 
 import casship as cs
 from benchmarks.bench_ship_filters import DT, case

@@ -19,6 +19,7 @@ import numpy as np
 
 from casship import autopilot as ap
 from casship.models import get_model
+from casship.models import otter as casship_otter
 from casship.progress import progress
 
 from . import Study
@@ -36,7 +37,9 @@ def wave_yaw(name: str) -> ap.WaveYaw:
 
 def run_case(case: dict) -> dict:
     """One run (module level, for worker processes)."""
-    d = ap.design_autopilot(get_model(case["ship"]))
+    # the Otter of MSS otter.m 2021 (Munk moment neglected), the craft the study was tuned on
+    ship = casship_otter(munk_moment=False) if case["ship"] == "otter" else get_model(case["ship"])
+    d = ap.design_autopilot(ship)
     res = d.simulate("course-20", wave=wave_yaw(case["ship"]), wave_filter=case["filter"], seed=case["seed"],
                      warn=False)
     keep = ap.course_keeping_metrics(res.data, controlled="psi", start=0.75 * res.data.t[-1])

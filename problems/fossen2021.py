@@ -25,7 +25,8 @@ import numpy as np
 import casship as cs
 from casship import autopilot as ap
 from casship.identify import MLEProblem
-from casship.models import get_model, sog_cog, sog_cog_latlon
+from casship.models import sog_cog, sog_cog_latlon
+from casship.models import otter as casship_otter
 from casship.progress import progress
 
 from . import Study
@@ -328,7 +329,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=N
     stages = progress(["Otter course autopilot with the EKF in the loop (c)", "EKFs NE and lat/lon (a)",
                        "sensitivity and departures", "real USV GNSS logs (b)", "figures and report"], "fossen2021")
     next(stages)
-    otter, otter_source = get_model("otter"), "casship.models 'otter' (MSS otter.m, horizontal plane)"
+    # the paper's Otter: MSS otter.m of 2021, which neglected the Munk moment (revision 2021-06-21)
+    otter = casship_otter(munk_moment=False)
+    otter_source = "casship.models.otter(munk_moment=False) (MSS otter.m of 2021, horizontal plane)"
     design, res, n12, speed = part_c(otter, quick)
     d = res.data
     back = d.t[np.flatnonzero((d.t > 0) & np.isclose(d["ref"], 0.0))[0]]

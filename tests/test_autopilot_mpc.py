@@ -1,4 +1,4 @@
-"""The CasADi MPC course controller: constraints held, warm start, closed loop."""
+"""The CasADi MPC course controller (HPIPM): constraints held, warm start, the compiled loop."""
 import numpy as np
 import pytest
 
@@ -10,6 +10,11 @@ from casship.autopilot.mpc import MPCAutopilot, mpc_for_design
 @pytest.fixture(scope="module")
 def otter():
     return ap.design_autopilot(cs.models.get_model("otter"))
+
+
+@pytest.fixture(scope="module")
+def kvlcc2():
+    return ap.design_autopilot(cs.models.get_model("kvlcc2"))
 
 
 def test_plan_respects_rudder_angle_rate_and_turn_rate_limits():
@@ -44,16 +49,43 @@ def test_warm_start_gives_the_cold_start_solution():
     np.testing.assert_allclose(np.asarray(warm["U"]), np.asarray(cold["U"]), atol=1e-9)
 
 
-def test_mpc_closed_loop_on_the_otter(otter):
+def test_mpc_closed_loop_on_the_course_unstable_otter(otter):
+    """The QP keeps the stage structure (no condensing), so the unstable craft's predictions stay
+    well conditioned; the compiled loop equals the step-by-step run."""
     mpc = mpc_for_design(otter)
-    with pytest.raises(TypeError, match="run_stepwise"):
-        otter.closed_loop_system(controller=mpc).step
-    res = otter.simulate("course-20", 40.0, controller=mpc, stepwise=True)
+    loop = otter.closed_loop_system(controller=mpc)
+    command, t_end, steps = ap.course_scenario("course-20", segment=otter.settings.segment)
+    data = loop.run(command, t_end, seed=0)
+    res = otter.evaluate(loop, data, steps, warn=False)
     for m in res.metrics:
         assert m["overshoot_pct"] <= 10.0
         assert abs(m["steady_state_error_deg"]) <= 0.5
     assert np.all(np.abs(res.data["steer"]) <= otter.settings.steer_max + 1e-9)
     assert res.performance["rate_limited_fraction"] == 0.0
+    compiled, stepwise = loop.run(command, 20.0, seed=0), loop.run_stepwise(command, 20.0, seed=0)
+    for key in ("steer_cmd", "steer", "psi"):
+        np.testing.assert_allclose(compiled[key], stepwise[key], rtol=0, atol=1e-10)
+
+
+def test_compiled_mpc_respects_its_limits_where_they_bind(kvlcc2):
+    """KVLCC2, 60-step horizon, no reference model (the plan sees the whole 90 deg change at once):
+    the plan drives the steering to its limit at the rate limit, and neither is exceeded."""
+    d = kvlcc2
+    s = d.settings
+    mpc = ap.MPCAutopilot(d.nomoto, period=2.0, horizon=60, steer_max=s.steer_max, rate_max=s.steer_rate_max,
+                          r_max=s.r_max, q_e=1.0 / np.radians(1.0) ** 2, q_r=1.0 / s.r_max**2,
+                          r_u=(1.0 / s.steer_rate_max) ** 2)
+    loop = d.closed_loop_system(controller=mpc)
+    data = loop.run(np.radians(90.0), 600.0, seed=2)
+    cmd, planned_rate = data["steer_cmd"], data["a_d"]
+    tol = 1e-7
+    assert np.max(np.abs(cmd)) <= s.steer_max * (1 + tol)
+    assert np.max(np.abs(cmd)) >= s.steer_max * (1 - 1e-4)                 # the angle limit binds
+    assert np.max(np.abs(planned_rate)) <= s.steer_rate_max * (1 + tol)
+    assert np.max(np.abs(planned_rate)) >= s.steer_rate_max * (1 - 1e-4)     # the rate limit binds
+    assert np.max(np.abs(np.diff(cmd))) <= s.steer_rate_max * s.dt * (1 + tol)
+    # the steering gear follows the command without its rate limit ever acting
+    assert np.mean(data["rate_limited"]) == 0.0
 
 
 def test_mpc_settings_are_checked():

@@ -28,6 +28,29 @@ def test_autopilot_json_reports_margins_metrics_and_performance(capsys, tmp_path
     assert (tmp_path / "shi-taylor_course-20.png").exists() and (tmp_path / "shi-taylor_loop.png").exists()
 
 
+def test_autopilot_json_course_changes_schedule_and_mpc(capsys):
+    """The JSON carries per change the overshoot in % with degrees beside it, the settling time,
+    the rate-limited fraction and the steering travel; --schedule designs over speeds; --controller
+    mpc runs the MPC in the compiled loop."""
+    code = main(["autopilot", "--model", "otter", "--speed", "1.0", "--schedule", "--scenario", "course-90", "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["schedule_speeds_m_s"] == pytest.approx([0.8, 1.1, 1.4, 1.7, 2.0])
+    assert out["settings"]["speed"] == pytest.approx(1.0)
+    for c in out["course_changes"]:
+        assert set(c) >= {"change_deg", "overshoot_pct", "overshoot_deg", "settling_time_s", "rate_limited_fraction",
+                          "steer_travel_N_m"}
+        assert c["overshoot_deg"] == pytest.approx(c["overshoot_pct"] / 100 * abs(c["change_deg"]))
+        assert c["overshoot_pct"] <= 10.0 and c["settling_time_s"] is not None
+    assert out["steer_travel_N_m_per_hour"] > 0
+    code = main(["autopilot", "--model", "otter", "--controller", "mpc", "--scenario", "course-20", "--t-end", "60",
+                 "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["controller"] == "mpc" and out["mpc"]["solver"] == "hpipm" and out["mpc"]["horizon"] == 60
+    assert all(c["overshoot_pct"] <= 10.0 for c in out["course_changes"])
+
+
 @pytest.mark.parametrize("name, args, api", [
     ("kvlcc2", [], {}),
     ("otter", ["--mode", "course", "--gnss-std", "0.1", "--compass-std-deg", "1.0"],

@@ -7,7 +7,6 @@ naming the item and, for validity ranges, the range and the way to opt in.
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 import pytest

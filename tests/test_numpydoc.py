@@ -19,7 +19,6 @@ import inspect
 import pkgutil
 import warnings
 
-import pytest
 
 import casship
 from numpydoc import docscrape as numpydoc_docscrape

@@ -12,6 +12,8 @@ The package, one job per module:
 * :mod:`~casship.autopilot.analysis` -- python-control loops (``interconnect``) and margins;
 * :mod:`~casship.autopilot.defaults` -- the defaults, derived from the ship, shared with the CLI;
 * :mod:`~casship.autopilot.ship_design` -- :func:`design_autopilot` and the :class:`Design` value;
+* :mod:`~casship.autopilot.schedule` -- gain scheduling over the speed;
+* :mod:`~casship.autopilot.slot` -- any python-control controller as the law of the compiled loop;
 * :mod:`~casship.autopilot.closed_loop` -- the closed loop as one compiled CasADi step;
 * :mod:`~casship.autopilot.components` -- sensors, the estimator in the loop, the record of a run;
 * :mod:`~casship.autopilot.performance` -- course-changing and course-keeping checks;
@@ -30,15 +32,18 @@ from .components import ClosedLoopResult, LoopEstimator, Sensors
 from .defaults import RULES, AutopilotSettings, derive_settings
 from .designs import LQG, lqg_design, lqr_design, pid_pole_placement
 from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linear_estimator
-from .guidance import LOSGuidance, Waypoints, cross_track_metrics
+from .guidance import LOSGuidance, Waypoints, cross_track_metrics, track_deviation
 from .law import Actuator, Autopilot, PIDGains
-from .mpc import MPCAutopilot, mpc_for_design
+from .mpc import MPCAutopilot, MPCLaw, mpc_for_design
 from .nomoto import Nomoto, fit_nomoto, nomoto_from_linear, nomoto_from_model
 from .performance import (CRITERIA, course_change_metrics, course_keeping_metrics, course_scenario,
                           performance_report, step_metrics)
-from .plants import SteeringPlant, steering_model, steering_plant, twin_propeller_allocation, twin_propeller_yaw_limit
+from .plants import (SteeringFeedforward, SteeringPlant, speed_profile, steering_feedforward, steering_model,
+                     steering_plant, twin_propeller_allocation, twin_propeller_yaw_limit)
 from .plots import bode_phase_deg, plot_closed_loop, plot_design
 from .reference import ReferenceModel
+from .schedule import ScheduledAutopilot, default_schedule
+from .slot import LinearController
 from .ship_design import Design, RateLimitWarning, design_autopilot, simulate_autopilot
 
 __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "PIDGains", "pid_pole_placement",
@@ -49,4 +54,6 @@ __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "P
            "step_metrics", "course_change_metrics", "course_keeping_metrics", "performance_report", "CRITERIA",
            "course_scenario", "plot_design", "plot_closed_loop", "bode_phase_deg", "Design", "design_autopilot",
            "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings", "Waypoints",
-           "LOSGuidance", "cross_track_metrics", "MPCAutopilot", "mpc_for_design"]
+           "LOSGuidance", "cross_track_metrics", "MPCAutopilot", "mpc_for_design", "ScheduledAutopilot",
+           "default_schedule", "SteeringFeedforward", "steering_feedforward", "LinearController", "speed_profile",
+           "track_deviation", "MPCLaw"]

@@ -58,16 +58,19 @@ class ClosedLoop:
         Path guidance (:class:`casship.autopilot.guidance.LOSGuidance`) giving the course command
         from the position (the estimator's in course mode, the last GNSS fix in heading mode, the
         true one with ``estimator="truth"``).
-    controller : object, optional
-        A controller run from Python instead of ``autopilot``'s law, e.g.
-        :class:`~casship.autopilot.mpc.MPCAutopilot` (methods ``memory0(chi0)`` and
-        ``update(memory, ref, chi, r, dt, bias) -> (memory, command, log)``); only
-        :meth:`run_stepwise` runs it.
+    Notes
+    -----
+    The law is any object with ``MEMORY``, ``memory0(chi0)``, ``symbolic_step(memory, ref, chi, r,
+    dt, speed, steer=, bias=)`` and ``function`` (:class:`~casship.autopilot.law.Autopilot`, its
+    gain schedule, :class:`~casship.autopilot.slot.LinearController`); a law whose step is an
+    MX Function with a solver call (``mx_law = True``: the MPC of
+    :meth:`~casship.autopilot.mpc.MPCAutopilot.law`) is composed at the Function level: the
+    sensing part, the law's call and the acting part form the loop's step.
     """
 
     def __init__(self, plant: SteeringPlant, autopilot: Autopilot, actuator: Actuator, *, dt: float,
                  mode: str = "course", rate: str = "gyro", estimator="truth", sensors: Sensors | None = None,
-                 wave: WaveYaw | None = None, guidance=None, controller=None):
+                 wave: WaveYaw | None = None, guidance=None):
         if mode not in ("course", "heading"):
             raise ValueError(f"mode must be 'course' or 'heading', got {mode!r}")
         if rate not in ("estimator", "gyro"):
@@ -86,14 +89,13 @@ class ClosedLoop:
         self.plant, self.autopilot, self.actuator = plant, autopilot, actuator
         self.dt, self.mode, self.rate = float(dt), mode, rate
         self.estimator, self.sensors, self.wave, self.guidance = estimator, sensors or Sensors(), wave, guidance
-        self.controller = controller
         est_blocks = []
         if isinstance(estimator, LoopEstimator):
             fun = estimator.step
             est_blocks = [(f"est_{n}", fun.nnz_in(n)) for n in estimator.memory]
         m = plant.model
         blocks = [("x", m.nx), ("steer", 1), ("steer_prev", 1), *est_blocks,
-                  ("autopilot", len(Autopilot.MEMORY)), ("compass_hold", 1), ("gnss_hold", 2), ("chi_prev", 1)]
+                  ("autopilot", len(autopilot.MEMORY)), ("compass_hold", 1), ("gnss_hold", 2), ("chi_prev", 1)]
         if wave is not None:
             blocks.append(("wave", 2))
         if guidance is not None:
@@ -119,8 +121,6 @@ class ClosedLoop:
         compass), ``dt_est`` the estimator's time since its previous sample (0 on the first), ``p``
         the ship's parameters; ``log`` holds :attr:`signals`.
         """
-        if self.controller is not None:
-            raise TypeError(f"the {type(self.controller).__name__} runs from Python: use run_stepwise")
         if self._step is None:
             self._build()
         return self._step
@@ -148,13 +148,13 @@ class ClosedLoop:
             else:
                 rate = meas["r"]
             return {"angle": angle, "rate": rate, "north": meas["north"], "east": meas["east"], "U": U_true,
-                    "angle_std": ca.SX(0), "memory": {}, "compass_hold": parts["compass_hold"],
+                    "angle_std": ca.SX(0), "bias": ca.SX(0), "memory": {}, "compass_hold": parts["compass_hold"],
                     "gnss_hold": parts["gnss_hold"]}
         fix = ca.if_else(mask[0] > 0, meas["gnss"], parts["gnss_hold"])      # last GNSS fix (heading mode)
         if est == "raw":
             hold = ca.if_else(mask[1] > 0, meas["compass"], parts["compass_hold"])
             return {"angle": hold, "rate": meas["gyro"], "north": fix[0], "east": fix[1], "U": U_true,
-                    "angle_std": ca.SX(0), "memory": {}, "compass_hold": hold, "gnss_hold": fix}
+                    "angle_std": ca.SX(0), "bias": ca.SX(0), "memory": {}, "compass_hold": hold, "gnss_hold": fix}
         fun = est.step
         call = {n: ca.reshape(parts[f"est_{n}"], fun.size_in(n)) for n in est.memory}
         model = est.est.model
@@ -179,8 +179,9 @@ class ClosedLoop:
             angle, rate_est = xh[ix("psi")], xh[ix("r")]
             north, east, U = fix[0], fix[1], U_true
             std = ca.sqrt(P[ix("psi"), ix("psi")])
+        bias = xh[ix("b")] if est.kind == "heading" and "b" in model.state_names else ca.SX(0)
         rate = rate_est if self.rate == "estimator" else meas["gyro"]
-        return {"angle": angle, "rate": rate, "north": north, "east": east, "U": U, "angle_std": std,
+        return {"angle": angle, "rate": rate, "north": north, "east": east, "U": U, "angle_std": std, "bias": bias,
                 "memory": memory, "compass_hold": parts["compass_hold"], "gnss_hold": fix}
 
     def _build(self):
@@ -206,7 +207,16 @@ class ClosedLoop:
             command = g["chi_ref"]
             nxt["guidance"] = g["memory"]
             log.update({k: g[k] for k in self.guidance.LOG})
-        law = self.autopilot.symbolic_step(parts["autopilot"], command, est["angle"], est["rate"], self.dt)
+        composed = getattr(self.autopilot, "mx_law", False)
+        n_mem = len(self.autopilot.MEMORY)
+        law_in = ca.vertcat(parts["autopilot"], command, est["angle"], est["rate"], est["U"], steer, est["bias"])
+        if composed:          # the law's outputs enter as symbols; its MX call is composed below
+            law_out = ca.SX.sym("law_out", n_mem + 5)
+            law = dict(zip(("steer", "chi_d", "r_d", "a_d", "e"), ca.vertsplit(law_out[n_mem:])))
+            law["memory"] = law_out[:n_mem]
+        else:
+            law = self.autopilot.symbolic_step(parts["autopilot"], command, est["angle"], est["rate"], self.dt,
+                                               est["U"], steer=steer, bias=est["bias"])
         act = self.actuator.symbolic_step(steer, law["steer"], self.dt)
         steer_avg = 0.5 * (steer + act["steer"])          # the servo ramps over the sample
         x_next = self.plant.symbolic_step(x, steer_avg, p, self.dt)
@@ -220,15 +230,24 @@ class ClosedLoop:
             "north": meas["north"], "east": meas["east"], "psi": meas["psi"], "r": meas["r"], "U": motion[1],
             "chi": motion[0], "chi_hat": est["angle"], "omega_hat": est["rate"], "U_hat": est["U"],
             "chi_std": est["angle_std"], "steer": steer, "steer_cmd": law["steer"], "chi_d": law["chi_d"],
-            "r_d": law["r_d"], "ref": command, "e": law["e"], "rate_limited": act["rate_limited"],
+            "r_d": law["r_d"], "a_d": law["a_d"], "ref": command, "e": law["e"], "rate_limited": act["rate_limited"],
             "gnss_north": ca.if_else(mask[0] > 0, meas["gnss"][0], nan),
             "gnss_east": ca.if_else(mask[0] > 0, meas["gnss"][1], nan),
             "compass": ca.if_else(mask[1] > 0, meas["compass"], nan), "gyro": meas["gyro"], "psi_wave": psi_w,
         })
         self._log_names = tuple(log)
-        self._step = ca.Function("closed_loop", [s, ref, draws, mask, dt_est, p],
-                                 [self.layout.join(nxt), ca.vertcat(*log.values())],
-                                 ["s", "ref", "draws", "mask", "dt_est", "p"], ["s_next", "log"])
+        names_in, names_out = ["s", "ref", "draws", "mask", "dt_est", "p"], ["s_next", "log"]
+        outputs = [self.layout.join(nxt), ca.vertcat(*log.values())]
+        if not composed:
+            self._step = ca.Function("closed_loop", [s, ref, draws, mask, dt_est, p], outputs, names_in, names_out)
+            return
+        sensing = ca.Function("loop_sensing", [s, ref, draws, mask, dt_est, p], [law_in])
+        acting = ca.Function("loop_acting", [s, ref, draws, mask, dt_est, p, law_out], outputs)
+        args = [ca.MX.sym(n, *sx.shape) for n, sx in zip(names_in, (s, ref, draws, mask, dt_est, p))]
+        li = ca.vertsplit(sensing(*args), [0, n_mem, n_mem + 1, n_mem + 2, n_mem + 3, n_mem + 4, n_mem + 5,
+                                           n_mem + 6])
+        lo = self.autopilot.function(li[0], li[1], li[2], li[3], self.dt, li[4], li[5], li[6])
+        self._step = ca.Function("closed_loop", args, acting(*args, ca.vertcat(*lo)), names_in, names_out)
 
     # -- running -----------------------------------------------------------------------------------
     def state0(self, x0=None, chi0: float | None = None) -> np.ndarray:
@@ -371,7 +390,7 @@ class ClosedLoop:
 
         Sensors are evaluated in numpy, the estimator runs through its online runner
         (``est.online(prior).update(y, dt, u_prev=...)``), the law, the steering gear and the ship
-        through their own CasADi Functions. A ``controller`` given to the loop (e.g. the MPC) runs
+        through their own CasADi Functions (the law through its ``function``, an MPC's QP included).
         here instead of the law.
 
         Parameters
@@ -403,7 +422,6 @@ class ClosedLoop:
         online = self.estimator.est.online(self._prior(x_start)) if isinstance(self.estimator, LoopEstimator) \
             else None
         guid_mem = self.guidance.memory0() if self.guidance is not None else None
-        ctrl_mem = self.controller.memory0(float(law_mem[0])) if self.controller is not None else None
         guid_f = self.guidance.function(self.dt) if self.guidance is not None else None
         if self.wave is not None:
             Ad, Bd = self.wave.discrete(self.dt)
@@ -456,18 +474,16 @@ class ClosedLoop:
                 guid_mem = np.asarray(g["memory_next"]).ravel()
                 command = float(g["chi_ref"])
                 log.update({key: float(g[key]) for key in self.guidance.LOG})
-            if self.controller is None:
-                lo = law_f.call({"memory": law_mem, "ref": command, "chi": angle, "r": rate, "dt": self.dt})
-                law_mem = np.asarray(lo["memory_next"]).ravel()
-            else:
-                ctrl_mem, cmd, lo = self.controller.update(ctrl_mem, command, angle, rate, self.dt, bias)
-                lo = {**lo, "steer": cmd}
+            lo = law_f.call({"memory": law_mem, "ref": command, "chi": angle, "r": rate, "dt": self.dt,
+                             "speed": U_hat, "steering": steer, "bias": bias})
+            law_mem = np.asarray(lo["memory_next"]).ravel()
             ao = act_f.call({"steer": steer, "command": float(lo["steer"]), "dt": self.dt})
             steer_next = float(ao["steer_next"])
             steer_avg = 0.5 * (steer + steer_next)
             log.update({"north": x[ix], "east": x[iy], "psi": x[ipsi], "r": x[ir], "U": U, "chi": chi,
                         "chi_hat": angle, "omega_hat": rate, "U_hat": U_hat, "chi_std": std, "steer": steer,
                         "steer_cmd": float(lo["steer"]), "chi_d": float(lo["chi_d"]), "r_d": float(lo["r_d"]),
+                        "a_d": float(lo.get("a_d", np.nan)),
                         "ref": command, "e": float(lo["e"]), "rate_limited": float(ao["rate_limited"]),
                         "gnss_north": gn if masks[0, k] else np.nan, "gnss_east": ge if masks[0, k] else np.nan,
                         "compass": compass if masks[1, k] else np.nan, "gyro": gyro, "psi_wave": psi_w})

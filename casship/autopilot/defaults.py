@@ -28,7 +28,7 @@ from .designs import lqr_design, pid_pole_placement
 from .estimation import linear_estimator, tune_course_q, tune_heading_q
 from .law import Actuator
 from .nomoto import Nomoto
-from .plants import SteeringPlant, twin_propeller_yaw_limit
+from .plants import SteeringPlant, steering_feedforward, twin_propeller_yaw_limit
 from .reference import ReferenceModel
 
 __all__ = ["AutopilotSettings", "RULES", "derive_settings", "STANDARD_CHANGE_DEG"]
@@ -47,10 +47,12 @@ class AutopilotSettings:
 
     Parameters
     ----------
-    speed, method, mode, rate, wn, zeta, integral, wn_ref, zeta_ref, r_max, steer_max, steer_rate_max, actuator_T, filter_T, dt, delay, gnss_rate, gnss_std, compass_rate, compass_std, gyro_std, ekf_alpha, ekf_q, observer_q, segment, lqr_weights
+    speed, method, mode, rate, wn, zeta, integral, wn_ref, zeta_ref, r_max, steer_max, steer_rate_max, actuator_T, filter_T, dt, delay, gnss_rate, gnss_std, compass_rate, compass_std, gyro_std, ekf_alpha, ekf_q, observer_q, segment, feedforward, turn_rate_top, lqr_weights
         The settings, each with its unit and rule in :data:`RULES`.
     sources : dict
         Name -> ``"given"`` or the rule that produced the value.
+    steering : SteeringFeedforward, optional
+        The steady-steering table of the ship (:func:`~casship.autopilot.plants.steering_feedforward`).
     """
 
     speed: float
@@ -78,13 +80,17 @@ class AutopilotSettings:
     ekf_q: tuple
     observer_q: tuple
     segment: float
+    feedforward: str = "nonlinear"
+    turn_rate_top: float = float("nan")
     lqr_weights: dict = field(default_factory=dict)
     sources: dict = field(default_factory=dict, compare=False)
+    steering: object = field(default=None, compare=False, repr=False)
 
     def as_dict(self) -> dict:
-        """Values (tuples as lists), without the sources."""
+        """Values (tuples as lists), without the sources and the steering table."""
         out = asdict(self)
         out.pop("sources")
+        out.pop("steering")
         return {k: list(v) if isinstance(v, tuple) else v for k, v in out.items()}
 
 
@@ -94,8 +100,9 @@ RULES: dict[str, tuple[str, str]] = {
     "method": ("", "'pid' (Fossen's pole placement); 'lqr' (integral LQR, control.lqr)"),
     "mode": ("", "'heading' (compass and rate gyro into the heading observer: a heading control system, IMO "
                  "A.342(IX)); 'course' (GNSS into the SOG/COG EKF, Fossen & Fossen 2021)"),
-    "rate": ("", "'estimator' (the estimator's course or yaw rate, Fossen & Fossen 2021); 'gyro' (the rate gyro as "
-                 "read)"),
+    "rate": ("", "'estimator' (the estimator's course or yaw rate, Fossen & Fossen 2021); in course mode on a "
+                 "course-unstable ship (Nomoto T < 0) 'gyro' (the rate gyro as read: the course rate from GNSS "
+                 "lags too much to hold the ship's own unstable pole)"),
     "wn": ("rad/s", "U/L, lowered in steps of 2^(1/4) (down to U/16L) until the loop on the linearised ship with the servo, the "
                     "sensor delay and the estimator (its steady-state Kalman filter) has PM >= 45 deg and upper GM "
                     ">= 6 dB within the steering-noise budget (else the best PM found, with a warning)"),
@@ -104,7 +111,12 @@ RULES: dict[str, tuple[str, str]] = {
     "wn_ref": ("rad/s", "wn, lowered in steps of 2^(1/4) until a 20 deg course change asks the linear loop for at "
                         "most half the steering limit and half its rate limit"),
     "zeta_ref": ("", "1"),
-    "r_max": ("rad/s", "0.3 U/L (a preset rate of turn)"),
+    "r_max": ("rad/s", "0.3 U/L (a preset rate of turn), at most the rate the ship turns steadily with half its "
+                       "steering limit at this speed (IMO A.342(IX) 3.2: within the ship's turning ability)"),
+    "feedforward": ("", "'nonlinear': m a_d + s(r_d) with s the steady steering of the nonlinear ship at this speed "
+                        "(a reverse spiral by trim); 'linear': m a_d + d r_d of the Nomoto model"),
+    "turn_rate_top": ("rad/s", "the rate of turn the ship reaches steadily with its full steering at this speed "
+                               "(reported; the check of r_max)"),
     "steer_max": ("rad or N m", "vessel.rudder_max; two-propeller craft: the yaw moment both propellers give at the "
                                 "trim surge force"),
     "steer_rate_max": ("rad/s or N m/s", "vessel.rudder_rate, else 2.32 deg/s (SOLAS II-1/29.3.2); two-propeller "
@@ -114,11 +126,12 @@ RULES: dict[str, tuple[str, str]] = {
     "dt": ("s", "the largest of 0.2, 0.1, 0.05, 0.02 s not above L/U / 200 and actuator_T / 5 (at least 0.02 s)"),
     "delay": ("s", "half the GNSS (course mode) or compass (heading mode) period plus one loop period, in the margins"),
     "gnss_rate": ("Hz", "5 (Fossen & Fossen 2021)"),
-    "gnss_std": ("m", "0.5"),
+    "gnss_std": ("m", "min(0.5, L/100): the course over ground from GNSS needs position noise small against the "
+                      "ship's length (RTK class, 2 cm, for a 2 m craft; 0.5 m for ships above 50 m)"),
     "compass_rate": ("Hz", "10"),
     "compass_std": ("rad", "0.5 deg"),
     "gyro_std": ("rad/s", "0.02 deg/s"),
-    "ekf_alpha": ("1/s", "speed: 1/T_surge of the linearisation; course rate: wn_ref"),
+    "ekf_alpha": ("1/s", "speed: 1/T_surge of the linearisation; course rate: wn"),
     "ekf_q": ("(m/s^2)^2, (rad/s^2)^2", "speed: 2 alpha1 (0.05 U)^2 / dt; course rate: the largest value up to "
                                          "2 alpha2 r_max^2 / dt (in steps of 10^(1/4)) for which the steady-state "
                                          "filter (control.dlqe) puts at most min(rate_max actuator_T / 2, "
@@ -126,7 +139,8 @@ RULES: dict[str, tuple[str, str]] = {
     "observer_q": ("spectral densities", "yaw acceleration: the largest value up to 2 (0.1 r_max)^2 / |T| (a yaw-rate "
                                          "disturbance of 10 % of the preset turn rate over the time constant) meeting the same "
                                          "noise budget; rudder bias: (0.05 steer_max)^2 / (10 L/U)"),
-    "segment": ("s", "40 / wn_ref per course change (scenario course-20 lasts two segments)"),
+    "segment": ("s", "40 / wn_ref per course change (scenario course-20 lasts two segments), at least the time a "
+                     "90 deg change takes at r_max plus 20 / wn_ref"),
     "lqr_weights": ("", "q_e = 1, q_int = (wn/10)^2, q_r = 1/wn^2, r_delta = (1/(m wn^2))^2 (Bryson's rule at the "
                         "pole-placement gains)"),
 }
@@ -223,13 +237,15 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     if method not in ("pid", "lqr"):
         raise ValueError(f"method must be 'pid' or 'lqr', got {method!r}")
     mode = rule("mode", lambda: "heading")
-    rule("rate", lambda: "estimator")
+    rule("rate", lambda: "gyro" if mode == "course" and nom.T < 0 else "estimator")
     zeta = rule("zeta", lambda: 1.0)
     integral = rule("integral", lambda: "fossen")
     if integral == "none":
         val["integral"] = integral = None
     rule("zeta_ref", lambda: 1.0)
-    rule("r_max", lambda: 0.3 / LU)
+    feedforward = rule("feedforward", lambda: "nonlinear")
+    if feedforward not in ("nonlinear", "linear"):
+        raise ValueError(f"feedforward must be 'nonlinear' or 'linear', got {feedforward!r}")
     if twin:
         t_n = float(plant.model.param_dict(plant.pvec).get("T_n", 0.1))
         steer_max = rule("steer_max", lambda: twin_propeller_yaw_limit(plant.model, plant.inputs["tau_X"], plant.pvec))
@@ -239,10 +255,27 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         rule("steer_max", lambda: float(_vessel(plant, "rudder_max") or np.radians(35.0)))
         rule("steer_rate_max", lambda: float(_vessel(plant, "rudder_rate") or _SOLAS_RATE))
         rule("actuator_T", lambda: 1.0)
+    steering = None
+    if "u" in m.state_names and "v" in m.state_names:
+        try:
+            steering = steering_feedforward(plant, val["steer_max"])
+        except ValueError as err:         # no steady turn reaches the limit: the linear feed-forward
+            if g.get("feedforward") == "nonlinear":
+                raise
+            src["feedforward"] = f"'linear' ({err})"
+            val["feedforward"] = feedforward = "linear"
+    rule("turn_rate_top", lambda: steering.r_top if steering is not None else float("nan"))
+    rule("r_max", lambda: min(0.3 / LU, steering.rate_for(0.5)) if steering is not None else 0.3 / LU)
+    if feedforward == "nonlinear" and steering is None and g.get("feedforward") != "nonlinear":
+        val["feedforward"] = feedforward = "linear"
+        src["feedforward"] = "'linear' (the model has no sway state for the steady turns)"
+    if feedforward == "nonlinear" and steering is None:
+        raise ValueError(f"model {m.name!r} has no sway/surge states for the nonlinear feed-forward; use "
+                         "feedforward='linear'")
     rule("filter_T", lambda: 0.0)
     rule("dt", lambda: _loop_period(LU, val["actuator_T"]))
     rule("gnss_rate", lambda: 5.0)
-    rule("gnss_std", lambda: 0.5)
+    rule("gnss_std", lambda: min(0.5, float(L) / 100.0) if L is not None else 0.5)
     rule("compass_rate", lambda: 10.0)
     rule("compass_std", lambda: float(np.radians(0.5)))
     rule("gyro_std", lambda: float(np.radians(0.02)))
@@ -329,10 +362,10 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     rule("ekf_q", lambda: (2 * a1 * (0.05 * speed) ** 2 / dt, 2 * wn * val["r_max"] ** 2 / dt))
     rule("observer_q", lambda: (2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T), q_b))
     rule("lqr_weights", lambda: default_lqr_weights(nom, wn) if method == "lqr" else {})
-    rule("segment", lambda: 40.0 / wr)
+    rule("segment", lambda: max(40.0 / wr, np.radians(90.0) / val["r_max"] + 20.0 / wr))
     for key in ("ekf_alpha", "ekf_q", "observer_q"):
         val[key] = tuple(float(v) for v in val[key])
-    return AutopilotSettings(**val, sources=src)
+    return AutopilotSettings(**val, sources=src, steering=steering)
 
 
 def _surge_pole(plant: SteeringPlant) -> float:

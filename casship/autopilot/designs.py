@@ -49,7 +49,10 @@ def pid_pole_placement(target, wn: float, zeta: float = 1.0, *, integral: str | 
     (the PD loop has its poles at ``s^2 + 2 zeta wn s + wn^2``; the slow integrator moves them
     slightly). ``integral="exact"``: the third-order loop ``m s^3 + (d + Kd) s^2 + Kp s + Ki``
     gets exactly the poles of ``(s^2 + 2 zeta wn s + wn^2)(s + wi)``, ``wi = wi_ratio wn``.
-    ``integral=None``: PD only.
+    ``integral=None``: PD only. The gains are positive by construction for the sign convention of
+    casship (steering turns the craft with the sign of ``K``, so ``m = T/K > 0``): where the ship's
+    own damping ``d`` exceeds ``2 zeta wn m`` the derivative gain is 0 (not negative) and the poles
+    returned are those of the resulting, better damped loop.
 
     Parameters
     ----------
@@ -78,18 +81,28 @@ def pid_pole_placement(target, wn: float, zeta: float = 1.0, *, integral: str | 
     _positive("zeta", zeta)
     nom = as_nomoto(target, steer=steer)
     m, d = nom.m, nom.d
+    if not m > 0:
+        raise ValueError(f"the Nomoto model has m = T/K = {m:.4g} <= 0 (K and T of opposite signs): no pole "
+                         "placement on it makes the gains positive; check the steering sign")
     pd_poles = tuple(np.roots([1, 2 * zeta * wn, wn**2]))
     if integral is None:
-        return PIDGains(m * wn**2, 2 * zeta * wn * m - d, 0.0, m, d, "pd-pole-placement", pd_poles)
-    if integral == "fossen":
-        Kp = m * wn**2
-        return PIDGains(Kp, 2 * zeta * wn * m - d, wn / 10 * Kp, m, d, "pid-pole-placement-fossen", pd_poles)
-    if integral == "exact":
+        Kp, Kd, Ki, method, poles = m * wn**2, 2 * zeta * wn * m - d, 0.0, "pd-pole-placement", pd_poles
+    elif integral == "fossen":
+        Kp, Kd, method, poles = m * wn**2, 2 * zeta * wn * m - d, "pid-pole-placement-fossen", pd_poles
+        Ki = wn / 10 * Kp
+    elif integral == "exact":
         _positive("wi_ratio", wi_ratio)
         wi = wi_ratio * wn
-        return PIDGains(m * (wn**2 + 2 * zeta * wn * wi), m * (2 * zeta * wn + wi) - d, m * wn**2 * wi, m, d,
-                        "pid-pole-placement-exact", pd_poles + (-wi,))
-    raise ValueError(f"integral must be 'fossen', 'exact' or None, got {integral!r}")
+        Kp, Kd, Ki = m * (wn**2 + 2 * zeta * wn * wi), m * (2 * zeta * wn + wi) - d, m * wn**2 * wi
+        method, poles = "pid-pole-placement-exact", pd_poles + (-wi,)
+    else:
+        raise ValueError(f"integral must be 'fossen', 'exact' or None, got {integral!r}")
+    if Kd < 0:
+        # the ship damps itself more than the placed poles ask: a negative derivative gain would take
+        # damping away (and feed the rate noise back); keep Kd = 0, the loop then better damped
+        Kd, method = 0.0, method + "-Kd0"
+        poles = tuple(np.roots([m, d, Kp, Ki]) if Ki else np.roots([m, d, Kp]))
+    return PIDGains(Kp, Kd, Ki, m, d, method, poles)
 
 
 def _integral_augmented(nom: Nomoto, steer: str) -> control.StateSpace:

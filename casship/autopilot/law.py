@@ -38,6 +38,10 @@ class PIDGains:
         How the gains were found.
     poles : tuple
         The closed-loop poles the design placed.
+    m_hf, T3 : float
+        With a second-order Nomoto model: ``T1 T2 / (K T3)`` (the inertia the ship shows to a quick
+        change of the steering) and ``T3``; the nonlinear law's feed-forward then inverts the
+        second-order model (see :func:`law_step`). NaN: the first-order ``m a_d``.
     """
 
     Kp: float
@@ -47,12 +51,16 @@ class PIDGains:
     d: float
     method: str = ""
     poles: tuple = ()
+    m_hf: float = float("nan")
+    T3: float = float("nan")
 
     def __post_init__(self):
         for name in ("Kp", "Kd", "Ki", "m", "d"):
             v = getattr(self, name)
             if not np.isfinite(v):
                 raise ValueError(f"gain {name} must be finite, got {v}")
+        if np.isfinite(self.T3) and not self.T3 > 0:
+            raise ValueError(f"T3 must be positive, got {self.T3}")
 
     def controller(self, *, steer: str = "delta", feedforward: bool = True, name: str = "autopilot"):
         """The linear control law as a labelled :class:`control.StateSpace`.
@@ -100,9 +108,14 @@ class Autopilot:
     anti_windup : bool
         Stop integrating while the command saturates in the direction the integrator pushes.
     feedforward : bool
-        Use ``m a_d + d r_d`` from the reference model.
+        Use the feed-forward ``m a_d + d r_d`` from the reference model (with ``steering``:
+        ``m a_d + s(r_d)``).
     filter_T : float
         Time constant [s] of a first-order low-pass on the command (0 = none).
+    steering : SteeringFeedforward, optional
+        The steady steering ``s(r)`` of the nonlinear ship (:func:`~casship.autopilot.plants.steering_feedforward`);
+        replaces the linear ``d r_d`` of the feed-forward, so that a large turn is asked of the ship
+        with the steering it needs (the yaw damping of most ships grows faster than linearly).
     """
 
     gains: PIDGains
@@ -111,9 +124,10 @@ class Autopilot:
     anti_windup: bool = True
     feedforward: bool = True
     filter_T: float = 0.0
+    steering: object = None
 
-    #: Names of the memory entries of :attr:`function`.
-    MEMORY = ("chi_d", "r_d", "a_d", "z", "filtered")
+    #: Names of the memory entries of :attr:`function` (``w``: ``a_d`` low-passed by ``T3``).
+    MEMORY = ("chi_d", "r_d", "a_d", "z", "filtered", "w")
 
     def __post_init__(self):
         if not self.steer_max > 0:
@@ -129,9 +143,28 @@ class Autopilot:
         chi0 : float
             Initial course (or heading) [rad].
         """
-        return np.array([chi0, 0.0, 0.0, 0.0, 0.0])
+        return np.array([chi0, 0.0, 0.0, 0.0, 0.0, 0.0])
 
-    def symbolic_step(self, mem, ref, chi, r, dt) -> dict:
+    def parameters(self, speed=None) -> dict:
+        """The numbers of the law by name: gains, feed-forward model, reference model and the
+        steady-steering table (what a gain schedule interpolates over the speed).
+
+        Parameters
+        ----------
+        speed : float or casadi.SX, optional
+            Ignored by a point design (used by :class:`~casship.autopilot.schedule.ScheduledAutopilot`).
+        """
+        g, ref = self.gains, self.reference
+        second = np.isfinite(g.m_hf) and np.isfinite(g.T3)
+        out = {"Kp": g.Kp, "Kd": g.Kd, "Ki": g.Ki, "m": g.m, "d": g.d, "m_hf": g.m_hf if second else g.m,
+               "T3": g.T3 if second else 1.0, "wn_ref": ref.wn, "zeta_ref": ref.zeta, "r_max": ref.r_max,
+               "steer_max": self.steer_max}
+        if self.steering is not None:
+            out["r_top"] = self.steering.r_top
+            out.update({f"ff_{i}": v for i, v in enumerate(self.steering.steer)})
+        return out
+
+    def symbolic_step(self, mem, ref, chi, r, dt, speed=None, steer=None, bias=None) -> dict:
         """One sample of the law on CasADi expressions; returns a dict of named expressions
         (``memory, steer, chi_d, r_d, a_d, e``).
 
@@ -145,40 +178,74 @@ class Autopilot:
             Measured course [rad] and rate [rad/s].
         dt : casadi.SX or float
             Sample period [s].
+        speed : casadi.SX, optional
+            Speed [m/s] (for a scheduled law; a point design ignores it).
+        steer : casadi.SX, optional
+            Present steering (unused by this law; the loop passes it to every law).
+        bias : casadi.SX, optional
+            The heading observer's steering-bias estimate (unused by this law).
         """
-        g = self.gains
-        chi_d, r_d, a_d, integ, filt = (mem[i] for i in range(5))
-        e = wrap_sym(chi - chi_d)
-        ff = (g.m * a_d + g.d * r_d) if self.feedforward else 0
-        raw = ff - (g.Kp * e + g.Kd * (r - r_d) + g.Ki * integ)
-        if self.filter_T > 0:
-            filt_next = filt + dt / (self.filter_T + dt) * (raw - filt)      # backward-Euler low-pass
-        else:
-            filt_next = raw
-        sat = filt_next
-        if np.isfinite(self.steer_max):
-            sat = ca.fmin(ca.fmax(filt_next, -self.steer_max), self.steer_max)
-        if self.anti_windup and np.isfinite(self.steer_max):
-            grow = g.Ki * e          # d(raw)/dt from the integrator is -Ki e
-            hold = ca.logic_or(ca.logic_and(filt_next > self.steer_max, grow < 0),
-                               ca.logic_and(filt_next < -self.steer_max, grow > 0))
-            integ_next = ca.if_else(hold, integ, integ + dt * e)
-        else:
-            integ_next = integ + dt * e
-        xd_next = self.reference.symbolic_step(mem[:3], ref, dt)
-        return {"memory": ca.vertcat(xd_next, integ_next, filt_next), "steer": sat, "chi_d": chi_d,
-                "r_d": r_d, "a_d": a_d, "e": e}
+        return law_step(self, self.parameters(speed), mem, ref, chi, r, dt)
 
     @property
     def function(self) -> ca.Function:
-        """``autopilot(memory, ref, chi, r, dt) -> (memory_next, steer, chi_d, r_d, a_d, e)`` with
-        ``memory`` as in :attr:`MEMORY`."""
-        mem, ref, chi, r, dt = (ca.SX.sym(n, k) for n, k in (("memory", 5), ("ref", 1), ("chi", 1), ("r", 1),
-                                                              ("dt", 1)))
-        out = self.symbolic_step(mem, ref, chi, r, dt)
+        """``autopilot(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d, r_d, a_d, e)``
+        with ``memory`` as in :attr:`MEMORY` (``speed`` used by a schedule, ``steering`` and ``bias`` by none)."""
+        mem, ref, chi, r, dt, U, st = (ca.SX.sym(n, k) for n, k in (("memory", 6), ("ref", 1), ("chi", 1), ("r", 1),
+                                                                     ("dt", 1), ("speed", 1), ("steering", 1)))
+        bias = ca.SX.sym("bias")
+        out = self.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
         names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
-        return ca.Function("autopilot", [mem, ref, chi, r, dt], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt"], ["memory_next"] + names[1:])
+        return ca.Function("autopilot", [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
+                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"],
+                           ["memory_next"] + names[1:])
+
+
+def law_step(law, P: dict, mem, ref, chi, r, dt) -> dict:
+    """The control law with its numbers ``P`` (:meth:`Autopilot.parameters`, numbers or CasADi
+    expressions) and its structure (feed-forward, filter, anti-windup, steering table) from ``law``.
+
+    One function for the point design and the gain schedule, so that both are the same law.
+
+    The feed-forward inverts the Nomoto model along the reference: ``delta = (1/K) (1 + T1 s)
+    (1 + T2 s) / (1 + T3 s) r_d``, written as ``s(r_d) + m w + m_hf (a_d - w)`` with ``w = a_d / (1 + T3
+    s)`` (a memory state), ``m = T/K``, ``m_hf = T1 T2 / (K T3)``, and the static part ``s(r_d)``
+    the nonlinear ship's steady steering (or the linear ``d r_d``). At low frequency it is the
+    first-order ``m a_d + d r_d``; a quick change of the reference sees the smaller inertia
+    ``m_hf`` the ship shows at once (the first-order ``m`` would overdrive the start of a large
+    turn and carry the ship past the preset rate).
+    """
+    from .plants import SteeringFeedforward, piecewise_linear
+    from .reference import reference_step
+
+    chi_d, r_d, a_d, integ, filt, w = (mem[i] for i in range(6))
+    e = wrap_sym(chi - chi_d)
+    ff = 0
+    if law.feedforward:
+        accel = P["m"] * w + P["m_hf"] * (a_d - w)
+        if law.steering is not None:
+            table = [P[f"ff_{i}"] for i in range(len(SteeringFeedforward.FRACTIONS))]
+            ff = accel + piecewise_linear(r_d / P["r_top"], SteeringFeedforward.FRACTIONS, table)
+        else:
+            ff = accel + P["d"] * r_d
+    w_next = w + (1 - ca.exp(-dt / P["T3"])) * (a_d - w)
+    raw = ff - (P["Kp"] * e + P["Kd"] * (r - r_d) + P["Ki"] * integ)
+    if law.filter_T > 0:
+        filt_next = filt + dt / (law.filter_T + dt) * (raw - filt)      # backward-Euler low-pass
+    else:
+        filt_next = raw
+    limit = P["steer_max"]
+    finite = not (isinstance(limit, float) and not np.isfinite(limit))
+    sat = ca.fmin(ca.fmax(filt_next, -limit), limit) if finite else filt_next
+    if law.anti_windup and finite:
+        grow = P["Ki"] * e          # d(raw)/dt from the integrator is -Ki e
+        hold = ca.logic_or(ca.logic_and(filt_next > limit, grow < 0), ca.logic_and(filt_next < -limit, grow > 0))
+        integ_next = ca.if_else(hold, integ, integ + dt * e)
+    else:
+        integ_next = integ + dt * e
+    xd_next = reference_step(mem[:3], ref, dt, P["wn_ref"], P["zeta_ref"], P["r_max"])
+    return {"memory": ca.vertcat(xd_next, integ_next, filt_next, w_next), "steer": sat, "chi_d": chi_d,
+            "r_d": r_d, "a_d": a_d, "e": e}
 
 
 @dataclass(frozen=True)

@@ -9,22 +9,20 @@ offset-free control in wind and current)::
 (the second-order model ``r/delta = K (1 + T3 s)/((1 + T1 s)(1 + T2 s))`` when it is known),
 discretised exactly (zero-order hold on ``u``) at the MPC period ``T_s``. Each solve minimises
 ``sum q_e e_k^2 + q_r r_k^2 + r_u u_k^2`` over ``N`` steps subject to ``|delta| <= delta_max``,
-``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn), as one quadratic program
-built with ``casadi.Opti`` (solver qpOASES; each plan is checked against the constraints and
-the model, and a failed solve raises), warm-started with the previous solution shifted by a
-step. Between solves the steering command ramps at the planned rate, so the steering gear is never
-asked for more than its rate limit.
+``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a soft limit). The quadratic program keeps
+the optimal-control structure (variables ``x0, u0, x1, u1, ..., xN``, the model as equality
+constraints stage by stage) and is solved by HPIPM (Frison & Diehl 2020), the structure-exploiting
+interior-point QP solver shipped with CasADi (``casadi.conic(..., "hpipm")``), whose cost grows
+linearly with the horizon. Between solves the steering command ramps at the planned rate, so the
+steering gear is never asked for more than its rate limit.
 
-The MPC runs in the step-by-step closed loop (:meth:`ClosedLoop.run_stepwise
-<casship.autopilot.closed_loop.ClosedLoop.run_stepwise>`), the QP solved from Python at every
-MPC period.
+The MPC runs inside the compiled closed loop (:meth:`MPCAutopilot.law`: the solve is a call node
+of the loop's step, taken once per ``replan`` interval through ``casadi.Function.conditional``), and from
+Python (:meth:`MPCAutopilot.update`, which checks each plan against the limits and the model and
+raises on a failed solve).
 """
 from __future__ import annotations
 
-import io
-import os
-import sys
-from contextlib import contextmanager, redirect_stdout
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -35,7 +33,7 @@ from ..angles import wrap
 from .nomoto import Nomoto
 from .reference import ReferenceModel
 
-__all__ = ["MPCAutopilot", "mpc_for_design"]
+__all__ = ["MPCAutopilot", "MPCLaw", "mpc_for_design"]
 
 
 @dataclass
@@ -56,6 +54,10 @@ class MPCAutopilot:
         Weights of the course error [1/rad^2], yaw rate [1/(rad/s)^2] and steering rate.
     reference : ReferenceModel, optional
         Reference model whose preview the plan tracks (None: the command itself).
+    replan : float, optional
+        Time between solves [s] (default: the period). Solving more often than the model's step
+        (the plan's first rate applied until the next solve) keeps the feedback of a long horizon
+        with a coarse step.
     """
 
     nomoto: Nomoto
@@ -68,6 +70,7 @@ class MPCAutopilot:
     q_r: float = 0.0
     r_u: float = 1.0
     reference: ReferenceModel | None = None
+    replan: float | None = None
     _solver: object = field(default=None, init=False, repr=False)
 
     MEMORY_LOG = ("chi_d", "r_d", "e")
@@ -77,10 +80,11 @@ class MPCAutopilot:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"MPC {name} must be positive and finite, got {v}")
+        if self.replan is not None and not (np.isfinite(self.replan) and 0 < self.replan <= self.period):
+            raise ValueError(f"MPC replan must be in (0, period], got {self.replan}")
         if int(self.horizon) != self.horizon or self.horizon < 2:
             raise ValueError(f"MPC horizon must be an integer >= 2, got {self.horizon}")
-        with _quiet_stdout():           # qpOASES prints its licence banner when its first solver is made
-            self._solver = self._build()
+        self._solver = self._build()
 
     @property
     def order(self) -> int:
@@ -101,42 +105,92 @@ class MPCAutopilot:
         return M[:n + 1, :n + 1], M[:n + 1, n + 1:n + 2], M[:n + 1, n + 2:n + 3]
 
     def _build(self) -> ca.Function:
-        """The QP in condensed form: the steering rates are the variables, the states linear
-        expressions of them (``casadi.Opti`` with qpOASES)."""
+        """The QP in optimal-control form for HPIPM (``casadi.qpsol``, the stage structure detected
+        from the variable and constraint order): variables ``[x0 u0 x1 u1 ... xN]`` with ``u_k`` the
+        steering rate and a slack ``s_k >= 0`` of the turn-rate limit, constraints stage by stage:
+        the model ``A x_k + B u_k + E b - x_{k+1} = 0``, then ``|r_k| <= r_max + s_k`` (soft: an
+        estimated rate a little above the limit must not make the problem infeasible; an exact
+        penalty on the slack makes the limit hard whenever it can be met), bounds on the steering
+        and its rate, ``x0`` fixed by its bounds. Returns ``mpc(x0, b, target, U_guess) -> (u0, X,
+        U)`` (an MX Function)."""
         A, B, E = (ca.DM(M) for M in self.model())
         N, nx = int(self.horizon), A.shape[0]
-        opti = ca.Opti("conic")
-        U = opti.variable(1, N)
-        x0, b, target = opti.parameter(nx), opti.parameter(), opti.parameter(2, N)
-        cols, x, cost = [x0], x0, 0
+        X = [ca.SX.sym(f"x{k}", nx) for k in range(N + 1)]
+        U = [ca.SX.sym(f"u{k}", 2) for k in range(N)]
+        b, target = ca.SX.sym("b"), ca.SX.sym("target", 2, N)
+        # exact (l1) penalty on the slack: the largest price the cost can put on the rate of turn of
+        # one step (a course error of pi on every later step, moved by the period) bounds the
+        # multiplier; a small quadratic term keeps the Hessian definite. (A larger weight only
+        # slows the interior point down.)
+        l_slack = 2 * (self.q_e * np.pi + 2 * self.q_r * self.r_max) * N * self.period
+        q_slack = l_slack / self.r_max
+        z, g, lbg, ubg, cost = [], [], [], [], 0
         for k in range(N):
-            x = A @ x + B * U[0, k] + E * b
-            cols.append(x)
-            cost += (self.q_e * (x[0] - target[0, k]) ** 2 + self.q_r * (x[1] - target[1, k]) ** 2
-                     + self.r_u * U[0, k] ** 2)
-        X = ca.horzcat(*cols)
-        opti.subject_to(opti.bounded(-self.rate_max, U, self.rate_max))
-        opti.subject_to(opti.bounded(-self.steer_max, X[nx - 1, 1:], self.steer_max))
-        opti.subject_to(opti.bounded(-self.r_max, X[1, 1:], self.r_max))
-        opti.minimize(cost)
-        opti.solver("qpoases", {"printLevel": "none", "error_on_fail": False})
-        return opti.to_function("mpc", [x0, b, target, U], [U[0, 0], X, U], ["x0", "b", "target", "U_guess"],
-                                ["u0", "X", "U"])
+            z += [X[k], U[k]]
+            g.append(ca.mtimes(A, X[k]) + B * U[k][0] + E * b - X[k + 1])
+            lbg += [0.0] * nx
+            ubg += [0.0] * nx
+            if k > 0:
+                g.append(ca.vertcat(X[k][1] - U[k][1], X[k][1] + U[k][1]))
+                lbg += [-np.inf, -self.r_max]
+                ubg += [self.r_max, np.inf]
+            cost += (self.q_e * (X[k + 1][0] - target[0, k]) ** 2 + self.q_r * (X[k + 1][1] - target[1, k]) ** 2
+                     + self.r_u * U[k][0] ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
+        z.append(X[N])
+        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "p": ca.vertcat(b, ca.vec(target)), "f": cost,
+                                          "g": ca.vertcat(*g)},
+                      {"error_on_fail": False, "print_time": False})
+        # bounds: x0 fixed; the steering limited from x1 on; course error, rate and the internal
+        # state of the second-order model far outside any plan (HPIPM wants finite bounds)
+        ix = [k * (nx + 2) for k in range(N + 1)]
+        iu = [k * (nx + 2) + nx for k in range(N)]
+        nv = N * (nx + 2) + nx
+        lo, hi = np.full(nv, -1e4), np.full(nv, 1e4)
+        for k in range(1, N + 1):
+            lo[ix[k] + nx - 1], hi[ix[k] + nx - 1] = -self.steer_max, self.steer_max
+        lo[iu], hi[iu] = -self.rate_max, self.rate_max
+        lo[[i + 1 for i in iu]] = 0.0
+        x0, bm = ca.MX.sym("x0", nx), ca.MX.sym("b")
+        tm, U_guess = ca.MX.sym("target", 2, N), ca.MX.sym("U_guess", 1, N)
+        lbx = ca.vertcat(x0, ca.DM(lo[nx:]))
+        ubx = ca.vertcat(x0, ca.DM(hi[nx:]))
+        guess = ca.MX.zeros(nv)
+        guess[iu] = U_guess.T
+        sol = qp(x0=guess, p=ca.vertcat(bm, ca.vec(tm)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg), ubg=ca.DM(ubg))
+        zs = sol["x"]
+        Xs = ca.horzcat(*[zs[ix[k]:ix[k] + nx] for k in range(N + 1)])
+        Us = ca.horzcat(*[zs[iu[k]] for k in range(N)])
+        return ca.Function("mpc", [x0, bm, tm, U_guess], [Us[0, 0], Xs, Us], ["x0", "b", "target", "U_guess"],
+                           ["u0", "X", "U"])
 
-    def _preview(self, xr: np.ndarray, ref: float) -> np.ndarray:
-        """Course error and rate of the reference model over the horizon (``2 x N``), relative to the
-        command: the linear reference model (no rate saturation) stepped exactly at ``period``."""
+    def preview_matrix(self) -> np.ndarray:
+        """``(2 N, 3)`` matrix taking the reference model's state relative to the command (a fixed
+        point) to its course error and rate over the horizon, column by column (the linear model,
+        no rate saturation, stepped exactly at ``period``)."""
         N = int(self.horizon)
         if self.reference is None:
-            return np.zeros((2, N))
-        sysr = self.reference.system()
-        Ad = expm(np.asarray(sysr.A) * self.period)
-        z = np.array([float(wrap(xr[0] - ref)), xr[1], xr[2]])     # deviation from the command (a fixed point)
-        out = np.empty((2, N))
-        for k in range(N):
-            z = Ad @ z
-            out[:, k] = z[:2]
-        return out
+            return np.zeros((2 * N, 3))
+        Ad = expm(np.asarray(self.reference.system().A) * self.period)
+        rows, M = [], np.eye(3)
+        for _ in range(N):
+            M = Ad @ M
+            rows.append(M[:2])
+        return np.vstack(rows)
+
+    def _preview(self, xr: np.ndarray, ref: float) -> np.ndarray:
+        """Course error and rate of the reference model over the horizon (``2 x N``)."""
+        z = np.array([float(wrap(xr[0] - ref)), xr[1], xr[2]])
+        return (self.preview_matrix() @ z).reshape(int(self.horizon), 2).T
+
+    def law(self, dt: float) -> "MPCLaw":
+        """This MPC as the law of the compiled closed loop at loop period ``dt`` (:class:`MPCLaw`).
+
+        Parameters
+        ----------
+        dt : float
+            Loop period [s].
+        """
+        return MPCLaw(self, dt)
 
     def memory0(self, chi0: float = 0.0) -> dict:
         """Initial controller memory: the command at rest, no plan.
@@ -173,7 +227,7 @@ class MPCAutopilot:
             Memory, steering command, and ``chi_d`` (reference), ``r_d`` (planned rate of turn),
             ``e`` (course error).
         """
-        every = max(1, int(round(self.period / dt)))
+        every = max(1, int(round((self.replan or self.period) / dt)))
         e = float(wrap(chi - ref))
         mem = dict(memory)
         if self.reference is not None:      # the reference model runs at the loop rate, as in the PID law
@@ -198,21 +252,8 @@ class MPCAutopilot:
         return mem, cmd, {"chi_d": chi_d, "r_d": float(mem["X"][1, 1]), "e": float(wrap(chi - chi_d))}
 
     def _solve(self, args: dict) -> dict:
-        """One QP solve with the C-level standard output closed (qpOASES prints its licence notice
-        whenever it builds a problem)."""
-        import os
-        import sys
-
-        sys.stdout.flush()
-        saved = os.dup(1)
-        try:
-            with open(os.devnull, "w") as null:
-                os.dup2(null.fileno(), 1)
-                out = self._solver.call(args)
-        finally:
-            os.dup2(saved, 1)
-            os.close(saved)
-        return out
+        """One QP solve (HPIPM)."""
+        return self._solver.call(args)
 
     def _check(self, X, U, x0, bias, tol: float = 1e-6) -> None:
         """Raise ``RuntimeError`` when the plan breaks a limit or the model (a failed QP solve)."""
@@ -223,8 +264,6 @@ class MPCAutopilot:
             bad.append("steering rate")
         if np.max(np.abs(X[n - 1, 1:])) > self.steer_max * (1 + tol) + 1e-12:
             bad.append("steering angle")
-        if np.max(np.abs(X[1, 1:])) > self.r_max * (1 + tol) + 1e-12:
-            bad.append("rate of turn")
         resid = X[:, 1:] - (A @ X[:, :-1] + B @ U + E * bias)
         scale = 1 + np.max(np.abs(X))
         if np.max(np.abs(resid)) > 1e-6 * scale or np.max(np.abs(X[:, 0] - x0)) > 1e-6 * scale:
@@ -232,7 +271,7 @@ class MPCAutopilot:
         if bad:
             from ..errors import SolverError
 
-            raise SolverError(f"the MPC's QP solve failed (qpOASES): the plan breaks {', '.join(bad)}")
+            raise SolverError(f"the MPC's QP solve failed (HPIPM): the plan breaks {', '.join(bad)}")
 
     def _ref_step(self) -> ca.Function:
         if getattr(self, "_ref_fun", None) is None:
@@ -241,13 +280,95 @@ class MPCAutopilot:
         return self._ref_fun
 
 
+class MPCLaw:
+    """The MPC as the law of the compiled closed loop (:meth:`MPCAutopilot.law`).
+
+    Memory: the reference model ``chi_d, r_d, a_d``, the steering command and the planned rate, a
+    sample counter, and the last plan of steering rates (the warm start). Once per MPC period
+    (``casadi.Function.conditional`` on the counter) the QP is solved from the present course
+    error, rate, steering command and the heading observer's bias, against the preview of the
+    reference model; in between the command ramps at the planned rate. The log's ``a_d`` is the
+    planned rate of change of the steering.
+
+    Parameters
+    ----------
+    mpc : MPCAutopilot
+    dt : float
+        Loop period [s].
+    """
+
+    mx_law = True
+
+    def __init__(self, mpc: "MPCAutopilot", dt: float):
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be positive, got {dt}")
+        self.mpc, self.dt = mpc, float(dt)
+        self.every = max(1, int(round((mpc.replan or mpc.period) / dt)))
+        N = int(mpc.horizon)
+        self.MEMORY = ("chi_d", "r_d", "a_d", "steer_cmd", "rate", "count") + tuple(f"plan{k}" for k in range(N))
+        self.reference = mpc.reference
+        self._function = None
+
+    def memory0(self, chi0: float = 0.0) -> np.ndarray:
+        """Reference model at rest at ``chi0``, no command, no plan.
+
+        Parameters
+        ----------
+        chi0 : float
+            Initial course (or heading) [rad].
+        """
+        return np.concatenate([[chi0, 0.0, 0.0, 0.0, 0.0, 0.0], np.zeros(int(self.mpc.horizon))])
+
+    @property
+    def function(self) -> ca.Function:
+        """``mpc_law(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d,
+        r_d, a_d, e)`` (an MX Function: the QP solve is a call node)."""
+        if self._function is None:
+            self._function = self._build()
+        return self._function
+
+    def _build(self) -> ca.Function:
+        mpc, N = self.mpc, int(self.mpc.horizon)
+        n = len(self.MEMORY)
+        mem, ref, chi, r = ca.MX.sym("memory", n), ca.MX.sym("ref"), ca.MX.sym("chi"), ca.MX.sym("r")
+        dt, U, st, bias = ca.MX.sym("dt"), ca.MX.sym("speed"), ca.MX.sym("steering"), ca.MX.sym("bias")
+        xr, cmd, rate, count, plan = mem[0:3], mem[3], mem[4], mem[5], mem[6:].T
+        xr_next = mpc._ref_step()(xr, ref, self.dt) if mpc.reference is not None else ca.vertcat(ref, 0, 0)
+        e = ca.atan2(ca.sin(chi - ref), ca.cos(chi - ref))
+        if mpc.order == 1:
+            x0 = ca.vertcat(e, r, cmd)
+        else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
+            sys2 = mpc.nomoto.system(2)
+            x0 = ca.vertcat(e, r, -float(sys2.A[1, 1]) * r - float(sys2.B[1, 0]) * (cmd + bias), cmd)
+        target = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix()), ca.vertcat(
+            ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])), 2, N)
+        a = [ca.MX.sym(k, *sh) for k, sh in (("x0", x0.shape), ("b", (1, 1)), ("target", (2, N)), ("plan", (1, N)),
+                                               ("rate", (1, 1)))]
+        shifted = ca.horzcat(a[3][:, 1:], a[3][:, -1:])
+        out = mpc._solver(a[0], a[1], a[2], shifted)
+        solve = ca.Function("mpc_solve", a, [out[0], out[2]])
+        hold = ca.Function("mpc_hold", a, [a[4], a[3]])
+        branch = ca.Function.conditional("mpc_period", [hold], solve)
+        due = ca.if_else(ca.fmod(count, self.every) == 0, 1, 0)
+        rate_next, plan_next = branch(due, x0, bias, target, plan, rate)
+        cmd_next = ca.fmin(ca.fmax(cmd + rate_next * self.dt, -mpc.steer_max), mpc.steer_max)
+        chi_d = xr_next[0]
+        return ca.Function("mpc_law", [mem, ref, chi, r, dt, U, st, bias],
+                           [ca.vertcat(xr_next, cmd_next, rate_next, count + 1, plan_next.T), cmd_next, chi_d,
+                            xr_next[1], rate_next, ca.atan2(ca.sin(chi - chi_d), ca.cos(chi - chi_d))],
+                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"],
+                           ["memory_next", "steer", "chi_d", "r_d", "a_d", "e"])
+
+
 def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60, q_r: float | None = None,
                    r_u: float | None = None) -> MPCAutopilot:
     """An MPC with the design's model, limits and reference model: horizon ``6 pi / wn_ref`` (three
     periods of the reference model's natural frequency) in ``steps`` steps (the period rounded to a
-    multiple of the loop period); weights: course error 1/(1 deg)^2, yaw rate ``1/r_max^2`` (both
-    against the reference model's preview), steering rate ``(100 / rate_max)^2`` (a steering rate
-    of 1 % of the limit costs as much as 1 deg of course error).
+    multiple of the loop period; on a course-unstable ship (``T < 0``) at most ``|T| / 10``, the
+    horizon then shorter), re-planned ten times per period; weights: course error 1/(1 deg)^2, yaw
+    rate ``1/r_max^2`` (both against the reference model's preview), steering rate
+    ``(100 / rate_max)^2`` (a steering rate of 1 % of the limit costs as much as 1 deg of course
+    error).
 
     Parameters
     ----------
@@ -261,36 +382,13 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     """
     s = design.settings
     horizon_time = horizon_time or 6 * np.pi / s.wn_ref
-    period = max(s.dt, round(horizon_time / steps / s.dt) * s.dt)
+    period = horizon_time / steps
+    nom = design.nomoto
+    if nom.T < 0:        # a course-unstable ship drifts off between solves: re-plan within a tenth of |T|
+        period = min(period, abs(nom.T) / 10)
+    period = max(s.dt, round(period / s.dt) * s.dt)
     return MPCAutopilot(design.nomoto, period, steps, s.steer_max, s.steer_rate_max, s.r_max,
+                        replan=max(s.dt, round(period / 10 / s.dt) * s.dt),
                         q_e=1.0 / np.radians(1.0) ** 2, q_r=(1.0 / s.r_max**2) if q_r is None else q_r,
                         r_u=(100.0 / s.steer_rate_max) ** 2 if r_u is None else r_u,
                         reference=design.autopilot.reference)
-
-
-@contextmanager
-def _quiet_stdout():
-    """Standard output discarded while the block runs (Python's and file descriptor 1 of compiled code)."""
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError, AttributeError):         # no real descriptor (an embedded interpreter)
-        yield
-        return
-    try:
-        with open(os.devnull, "w") as null, redirect_stdout(io.StringIO()):     # CasADi may print through Python
-            os.dup2(null.fileno(), 1)
-            yield
-    finally:
-        _flush_c_stdout()           # what compiled code buffered goes to the null device, not later to the user
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
-def _flush_c_stdout() -> None:
-    import ctypes
-
-    try:
-        ctypes.CDLL(None).fflush(None)
-    except (OSError, AttributeError):
-        pass

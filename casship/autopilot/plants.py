@@ -19,7 +19,8 @@ from ..discretize import discretize
 from ..linear import trim
 from ..model import Model, ModelBuilder
 
-__all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation",
+__all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation", "SteeringFeedforward",
+           "steering_feedforward", "piecewise_linear", "speed_profile",
            "twin_propeller_yaw_limit"]
 
 
@@ -139,7 +140,8 @@ class SteeringPlant:
                            ["x", "steer", "p", "dt"], ["x_next", "chi", "U"])
 
 
-def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable, name: str | None = None) -> Model:
+def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable, name: str | None = None, *,
+                   clock: str | None = None) -> Model:
     """A copy of ``model`` whose inputs are driven by ``new_inputs`` through an allocation.
 
     ``allocation(new, p)`` receives dicts of the new input symbols and the model's parameter
@@ -156,15 +158,22 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
         ``allocation(new, p) -> {old input: expression}``.
     name : str, optional
         Name of the new model.
+    clock : str, optional
+        Add a state of this name counting time (``clock' = 1``), given to the allocation among
+        the new inputs (an input that follows a schedule in time).
     """
     b = ModelBuilder(name or f"{model.name}+allocation", model.doc)
     xs = [b.state(v.name, unit=v.unit, angle=v.angle, doc=v.doc) for v in model.state_vars]
+    tick = b.state(clock, unit="s", doc="time") if clock else None
     ps = [b.param(v.name, v.value, bounds=(v.lower, v.upper), unit=v.unit, doc=v.doc, source=v.source)
           for v in model.param_vars]
     ws = [b.noise(v.name, unit=v.unit, doc=v.doc) for v in model.noise_vars]
     us = {n: b.input(n) for n in new_inputs}
+    if clock:
+        us[clock] = tick
     pd = dict(zip(model.param_names, ps))
     mapping = dict(allocation(us, pd))
+    replaced = set(mapping)
     unknown = [n for n in mapping if n not in model.input_names]
     if unknown:
         raise ValueError(f"allocation gives input(s) {unknown} that {model.name!r} does not have")
@@ -174,13 +183,65 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
     old = ca.vertcat(model.x, model.p, model.w, model.u)
     new = ca.vertcat(*xs, *ps, *ws, *[ca.SX(mapping[n]) for n in model.input_names])
     xdot, y = ca.substitute([model.xdot, model.y], [old], [new])
-    b.ode(**{n: xdot[i] for i, n in enumerate(model.state_names)})
+    b.ode(**{n: xdot[i] for i, n in enumerate(model.state_names)}, **({clock: ca.SX(1.0)} if clock else {}))
     for i, v in enumerate(model.output_vars):
         b.output(v.name, y[i], unit=v.unit, angle=v.angle, doc=v.doc)
     b.meta.update(dict(model.meta))
     if model.vessel is not None:      # the new inputs are generalised forces, not rudders or propellers
-        b.vessel = model.vessel.replace(rudders=(), propellers=())
+        kept = [n for n in model.input_names if n not in replaced]
+        b.vessel = model.vessel.replace(rudders=tuple(r for r in model.vessel.rudders if r in kept),
+                                        propellers=tuple(q for q in model.vessel.propellers if q in kept))
     return b.build()
+
+
+def speed_profile(plant: SteeringPlant, times: Sequence[float], speeds: Sequence[float], *,
+                  propulsion: str | None = None) -> SteeringPlant:
+    """The plant with its propulsion following a speed profile in time: a speed change in the
+    closed loop.
+
+    At each of ``times`` the propulsion input (a propeller rate, or the surge force of a craft
+    steered by a yaw moment) takes the value that holds ``speeds`` on a straight run (solved by
+    :func:`casship.trim`), linearly in between and held beyond; the ship's speed follows through
+    its own surge dynamics. The model gains a state ``t_clock`` (time, from 0).
+
+    Parameters
+    ----------
+    plant : SteeringPlant
+        The ship at its first operating point.
+    times : sequence of float
+        Increasing times [s].
+    speeds : sequence of float
+        Straight-run speeds [m/s] at those times.
+    propulsion : str, optional
+        The input that sets the speed (default: ``tau_X`` of a twin-propeller craft, else the
+        vessel's first propeller).
+    """
+    from ..linear import trim
+
+    m = plant.model
+    times, speeds = [float(t) for t in times], [float(v) for v in speeds]
+    if len(times) != len(speeds) or len(times) < 2 or np.any(np.diff(times) <= 0):
+        raise ValueError("speed_profile needs at least two increasing times and one speed for each")
+    if propulsion is None:
+        props = [n for n in ("tau_X",) + tuple(m.vessel.propellers if m.vessel else ()) if n in plant.inputs]
+        if not props:
+            raise ValueError(f"no propulsion input among {sorted(plant.inputs)} of {m.name!r}; give propulsion")
+        propulsion = props[0]
+    if propulsion not in plant.inputs:
+        raise ValueError(f"{propulsion!r} is not a bound input of the plant; inputs: {sorted(plant.inputs)}")
+    values = []
+    for v in speeds:
+        tr = trim(m, m.states(u=v), plant.input_vector(0.0), plant.pvec, free=[propulsion], zero=["u"])
+        values.append(float(tr.values[propulsion]))
+
+    def schedule(new, p):
+        return {propulsion: piecewise_linear(new["t_clock"], times, values)}
+
+    model = steering_model(m, [], schedule, name=f"{m.name}_profile", clock="t_clock")
+    x0 = np.concatenate([plant.x0, [0.0]])
+    others = {k: v for k, v in plant.inputs.items() if k != propulsion}
+    return SteeringPlant(model, plant.steer, others, plant.p, plant.north, plant.east, plant.heading, plant.yaw_rate,
+                         x0=x0)
 
 
 def twin_propeller_allocation(model: Model, names: tuple[str, str] = ("n1", "n2")):
@@ -314,3 +375,162 @@ def steering_plant(model: Model, speed: float | None = None, *, p=None, steer: s
         inputs[free] = tr.values[free]
     others = {n: float(u[model.index(n, "input")]) for n in model.input_names if n != steer}
     return SteeringPlant(model, steer, others, p, x0=x)
+
+
+@dataclass(frozen=True)
+class SteeringFeedforward:
+    """The steady steering that holds a rate of turn, from the nonlinear ship (a reverse spiral at
+    the design speed).
+
+    For each rate of turn ``r`` on the grid the steering and the sway velocity are solved
+    (:func:`casship.trim`) so that sway and yaw accelerate no more, the surge speed held at the
+    design speed: the quasi-steady turn of a course change, which is over before the speed has
+    dropped (a ship that keeps turning slows down and needs more steering than this). On a
+    course-unstable ship the curve is not monotonic near ``r = 0`` (the spiral loop): the steady
+    steering there has the opposite sign and the feedback keeps the turn stable.
+
+    Parameters
+    ----------
+    rates : tuple of float
+        Rates of turn [rad/s], increasing, symmetric about 0 (fractions :attr:`FRACTIONS` of
+        ``r_top``).
+    steer : tuple of float
+        Steady steering at each rate.
+    r_top : float
+        The rate of turn the ship reaches in this way with the full steering (the smaller of the
+        two sides) [rad/s].
+    steer_max : float
+        The steering limit the table was made for.
+    """
+
+    rates: tuple
+    steer: tuple
+    r_top: float
+    steer_max: float
+
+    #: Grid of the table as fractions of ``r_top``.
+    FRACTIONS = tuple(np.linspace(-1.0, 1.0, 17))
+
+    def __call__(self, r):
+        """Steady steering at rate ``r`` (numbers or CasADi expressions; clamped at the table's ends).
+
+        Parameters
+        ----------
+        r : float or casadi.SX
+        """
+        return piecewise_linear(r, self.rates, self.steer)
+
+    def rate_for(self, fraction: float) -> float:
+        """The smallest rate of turn [rad/s] (both sides) at which the steady steering reaches
+        ``fraction`` of the steering limit.
+
+        Parameters
+        ----------
+        fraction : float
+            Of the steering limit, in (0, 1].
+        """
+        r, s = np.asarray(self.rates), np.asarray(self.steer) / self.steer_max
+        out = []
+        for side in (1, -1):
+            sel = side * r >= 0
+            rr, ss = side * r[sel], side * s[sel]
+            order = np.argsort(rr)
+            rr, ss = rr[order], ss[order]
+            above = np.flatnonzero(ss >= fraction)
+            if above.size == 0:
+                out.append(rr[-1])
+                continue
+            k = int(above[-1])
+            while k > 0 and ss[k - 1] >= fraction:      # the last crossing from below (past the spiral loop)
+                k -= 1
+            if k == 0:
+                out.append(rr[0])
+                continue
+            out.append(rr[k - 1] + (fraction - ss[k - 1]) * (rr[k] - rr[k - 1]) / (ss[k] - ss[k - 1]))
+        return float(min(out))
+
+
+def piecewise_linear(x, xs, ys):
+    """Linear interpolation through ``(xs, ys)`` clamped at the ends, as a sum of clipped ramps
+    (works on numbers and CasADi expressions; ``ys`` may be expressions).
+
+    Parameters
+    ----------
+    x : float or casadi.SX
+    xs : sequence of float
+        Increasing breakpoints.
+    ys : sequence
+        Values at the breakpoints.
+    """
+    xs = [float(v) for v in xs]
+    if len(xs) != len(ys) or len(xs) < 2 or np.any(np.diff(xs) <= 0):
+        raise ValueError("piecewise_linear needs at least two increasing breakpoints and one value for each")
+    out = ys[0]
+    for i in range(len(xs) - 1):
+        w = (x - xs[i]) / (xs[i + 1] - xs[i])
+        w = ca.fmin(ca.fmax(w, 0), 1) if isinstance(w, (ca.SX, ca.MX, ca.DM)) else min(max(w, 0.0), 1.0)
+        out = out + (ys[i + 1] - ys[i]) * w
+    return out
+
+
+def steering_feedforward(plant: SteeringPlant, steer_max: float, *, x0=None) -> SteeringFeedforward:
+    """The :class:`SteeringFeedforward` of a ship at its operating point.
+
+    The rate of turn is raised from 0 in steps (each trim starting from the last) until the steady
+    steering passes ``steer_max`` on each side; ``r_top`` is where it reaches the limit, and the
+    table is then solved on :attr:`SteeringFeedforward.FRACTIONS` of ``r_top``.
+
+    Parameters
+    ----------
+    plant : SteeringPlant
+    steer_max : float
+        Steering limit.
+    x0 : array, optional
+        Straight-run state (default ``plant.x0``).
+
+    Raises
+    ------
+    ValueError
+        When no steady turn is found below 20 times ``0.3 U/L`` (or 2 rad/s).
+    """
+    from ..linear import trim
+
+    m = plant.model
+    x0 = np.asarray(x0 if x0 is not None else plant.x0, float)
+    js, ir = m.index(plant.steer, "input"), m.index(plant.yaw_rate)
+    sway = "v" if "v" in m.state_names else None
+    free = ([sway] if sway else []) + [plant.steer]
+    zero = ([sway] if sway else []) + [plant.yaw_rate]
+
+    def solve(r, x, u):
+        x = np.array(x, float)
+        x[ir] = r
+        tr = trim(m, x, u, plant.pvec, free=free, zero=zero, check_limits=False)
+        return tr.x, tr.u, float(tr.u[js])
+
+    vessel = m.vessel
+    U = float(np.hypot(x0[m.index("u")], x0[sway and m.index(sway)] if sway else 0.0)) if "u" in m.state_names else 1.0
+    step = (0.3 * U / vessel.L_pp if vessel is not None and vessel.L_pp else 0.1) / 8
+    tops = []
+    for side in (1.0, -1.0):
+        x, u, prev = x0.copy(), plant.input_vector(0.0), (0.0, 0.0)
+        for k in range(1, 161):
+            r = side * k * step
+            x, u, s = solve(r, x, u)
+            if side * s >= steer_max:
+                r0, s0 = prev
+                tops.append(abs(r0 + (side * steer_max - s0) * (r - r0) / (s - s0)))
+                break
+            prev = (r, s)
+        else:
+            raise ValueError(f"{m.name!r}: no steady turn reaches the steering limit {steer_max:.4g} below "
+                             f"{160 * step:.3g} rad/s")
+    r_top = float(min(tops))
+    rates = [f * r_top for f in SteeringFeedforward.FRACTIONS]
+    steer = [0.0] * len(rates)
+    mid = len(rates) // 2
+    for idx in (range(mid, len(rates)), range(mid, -1, -1)):     # from straight ahead outwards
+        x, u = x0.copy(), plant.input_vector(0.0)
+        for i in idx:
+            x, u, steer[i] = solve(rates[i], x, u)
+    return SteeringFeedforward(tuple(rates), tuple(steer), r_top, float(steer_max))

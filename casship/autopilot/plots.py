@@ -10,9 +10,6 @@ __all__ = ["plot_design", "plot_closed_loop", "bode_phase_deg"]
 
 
 def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     return plt
@@ -61,7 +58,9 @@ def plot_design(L, path, title: str = "", closed=None):
     fig = plt.figure(figsize=(7, 9))
     gs = fig.add_gridspec(3, 1)
     bode_axes = np.array([[fig.add_subplot(gs[0])], [fig.add_subplot(gs[1])]])
-    control.bode_plot(L, _omega(L), ax=bode_axes, display_margins=True, dB=True, title=title or "loop")
+    control.bode_plot(L, _omega(L), ax=bode_axes, display_margins=True, dB=True)
+    # python-control writes the margins into the axes title: the figure keeps the caller's title
+    fig.suptitle(title or "loop")
     ax = fig.add_subplot(gs[2])
     cl = control.ss(closed if closed is not None else control.feedback(L, 1))
     resp = control.step_response(cl[0, 0])          # first output (the course) from the first input

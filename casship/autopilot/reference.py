@@ -15,7 +15,37 @@ import numpy as np
 
 from ..angles import wrap_sym
 
-__all__ = ["ReferenceModel"]
+__all__ = ["ReferenceModel", "reference_step"]
+
+
+def reference_step(xd, ref, dt, wn, zeta, r_max):
+    """One Euler step of ``[chi_d, r_d, a_d]`` with numbers or CasADi expressions for ``wn, zeta,
+    r_max`` (``r_max = inf``: no rate saturation); see :class:`ReferenceModel`.
+
+    Parameters
+    ----------
+    xd : casadi.SX
+        ``[chi_d, r_d, a_d]``.
+    ref : casadi.SX
+        Command [rad].
+    dt : casadi.SX or float
+        Step [s].
+    wn, zeta, r_max : float or casadi.SX
+        Natural frequency [rad/s], relative damping, rate limit [rad/s].
+    """
+    e = wrap_sym(ref - xd[0])
+    jerk = wn**3 * e - (2 * zeta + 1) * wn**2 * xd[1] - (2 * zeta + 1) * wn * xd[2]
+    r_next = xd[1] + dt * xd[2]
+    a_next = xd[2] + dt * jerk
+    if not (isinstance(r_max, float) and not np.isfinite(r_max)):
+        # at the rate limit the acceleration pushing further out is held at 0: left to integrate (as
+        # in MSS refModel) it winds up and its feed-forward m a_d drives the ship past the preset rate
+        # and near the limit it is capped so that the rate approaches the limit smoothly (at the
+        # model's own rate (2 zeta + 1) wn) instead of hitting it with full acceleration
+        r_next = ca.fmin(ca.fmax(r_next, -r_max), r_max)
+        k = (2 * zeta + 1) * wn
+        a_next = ca.fmin(ca.fmax(a_next, -k * (r_max + r_next)), k * (r_max - r_next))
+    return ca.vertcat(wrap_sym(xd[0] + dt * xd[1]), r_next, a_next)
 
 
 @dataclass(frozen=True)
@@ -23,7 +53,10 @@ class ReferenceModel:
     """Third-order reference model with rate saturation.
 
     ``a_d' = wn^3 (ref - chi_d) - (2 zeta + 1) wn^2 r_d - (2 zeta + 1) wn a_d``, ``r_d`` saturated
-    at ``r_max`` (Euler steps, as MSS). ``r_max = inf`` gives the linear filter
+    at ``r_max`` (Euler steps, as MSS). Unlike MSS, ``a_d`` is capped at ``(2 zeta + 1) wn (r_max -
+    |r_d|)`` towards the limit, so the rate approaches the limit smoothly and ``a_d`` cannot wind up
+    while ``r_d`` sits there (with MSS's clipping of the rate alone the acceleration keeps growing,
+    and its feed-forward drives the ship past the preset rate). ``r_max = inf`` gives the linear filter
     ``wn^3 / ((s + wn)(s^2 + 2 zeta wn s + wn^2))``. The command error ``ref - chi_d`` is taken on
     the circle, so a command across +-180 deg turns the short way.
 
@@ -69,13 +102,7 @@ class ReferenceModel:
         dt : casadi.SX or float
             Step [s].
         """
-        wn, z = self.wn, self.zeta
-        e = wrap_sym(ref - xd[0])
-        jerk = wn**3 * e - (2 * z + 1) * wn**2 * xd[1] - (2 * z + 1) * wn * xd[2]
-        r_next = xd[1] + dt * xd[2]
-        if np.isfinite(self.r_max):
-            r_next = ca.fmin(ca.fmax(r_next, -self.r_max), self.r_max)
-        return ca.vertcat(wrap_sym(xd[0] + dt * xd[1]), r_next, xd[2] + dt * jerk)
+        return reference_step(xd, ref, dt, self.wn, self.zeta, self.r_max)
 
     def system(self, name: str = "reference") -> control.StateSpace:
         """The linear model (no rate saturation) as a labelled :class:`control.StateSpace`: input

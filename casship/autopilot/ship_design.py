@@ -5,7 +5,7 @@ gear, the settings and where each came from).
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping
 
 import control
@@ -23,6 +23,8 @@ from .nomoto import Nomoto, nomoto_from_linear
 from .performance import CRITERIA, course_change_metrics, course_scenario, performance_report
 from .plants import SteeringPlant, steering_plant
 from .reference import ReferenceModel
+from .slot import LinearController
+from .mpc import MPCAutopilot, MPCLaw
 
 __all__ = ["Design", "design_autopilot", "simulate_autopilot", "RateLimitWarning"]
 
@@ -58,6 +60,10 @@ class Design:
     actuator : Actuator
         The steering gear.
     settings : AutopilotSettings
+    schedule : tuple of Design
+        With a gain schedule: the point designs at the schedule's speeds (``autopilot`` is then a
+        :class:`~casship.autopilot.schedule.ScheduledAutopilot`; ``gains``, ``loop``, ``margins`` are
+        the schedule's at this design's speed).
     """
 
     plant: SteeringPlant
@@ -71,6 +77,7 @@ class Design:
     autopilot: Autopilot
     actuator: Actuator
     settings: AutopilotSettings
+    schedule: tuple = ()
 
     @property
     def x0(self) -> np.ndarray:
@@ -151,8 +158,10 @@ class Design:
             Path following: the course command comes from the guidance.
         mode, rate : str, optional
             Replace the settings' mode and rate source.
-        controller : MPCAutopilot, optional
-            Replaces the PID/LQR law (the loop then runs step by step).
+        controller : control.StateSpace, control.TransferFunction, LinearController or MPCAutopilot, optional
+            Replaces the PID/LQR law: a python-control controller runs in the compiled loop
+            (:meth:`linear_controller`), and so does an :class:`~casship.autopilot.mpc.MPCAutopilot`
+            (its QP solved by HPIPM as a call node of the loop's step).
         """
         s = self.settings
         mode, rate = mode or s.mode, rate or s.rate
@@ -162,8 +171,37 @@ class Design:
         if estimator == "ekf":
             estimator = self.estimator("course" if mode == "course" else "heading",
                                        wave=wave if wave_filter else None, x0=pl.x0)
-        return ClosedLoop(pl, self.autopilot, self.actuator, dt=s.dt, mode=mode, rate=rate, estimator=estimator,
-                          sensors=sensors or self.sensors(), wave=wave, guidance=guidance, controller=controller)
+        law = self.autopilot
+        if isinstance(controller, (control.StateSpace, control.TransferFunction)):
+            law = self.linear_controller(controller)
+        elif isinstance(controller, MPCAutopilot):
+            law = controller.law(s.dt)
+        elif controller is not None:
+            if not isinstance(controller, (LinearController, MPCLaw)):
+                raise TypeError(f"controller must be a python-control system, a LinearController or an "
+                                f"MPCAutopilot, got {type(controller).__name__}")
+            law = controller
+        return ClosedLoop(pl, law, self.actuator, dt=s.dt, mode=mode, rate=rate, estimator=estimator,
+                          sensors=sensors or self.sensors(), wave=wave, guidance=guidance)
+
+    def linear_controller(self, sys, **options) -> LinearController:
+        """A python-control controller in this design's loop: its reference model, loop period and
+        steering gear (:class:`~casship.autopilot.slot.LinearController`).
+
+        Parameters
+        ----------
+        sys : control.StateSpace or control.TransferFunction
+            Inputs named among ``chi_d, r_d, a_d, chi, r, psi_m, r_m, e``; one output.
+        **options
+            ``method`` (sampling of a continuous controller), ``anti_windup``.
+
+        Examples
+        --------
+        >>> lqg = lqg_design(d.nomoto, q_int=1e-6, q_e=1.0, heading_var=1e-5, rate_var=1e-9,
+        ...                  yaw_accel_var=1e-10)                          # doctest: +SKIP
+        >>> res = d.simulate(controller=lqg.controller, estimator="raw")   # doctest: +SKIP
+        """
+        return LinearController(sys, self.settings.dt, self.autopilot.reference, self.actuator, **options)
 
     def simulate(self, scenario: str = "course-20", t_end: float | None = None, *, seed=0, stepwise: bool = False,
                  warn: bool = True, **loop_options) -> ClosedLoopResult:
@@ -206,7 +244,8 @@ class Design:
         """
         controlled = "chi" if loop.mode == "course" else "psi"
         metrics = course_change_metrics(data, steps, controlled=controlled)
-        report = performance_report(data, metrics, steer_max=self.actuator.steer_max, controlled=controlled)
+        report = performance_report(data, metrics, steer_max=self.actuator.steer_max, controlled=controlled,
+                                    r_max=self.settings.r_max)
         limit = CRITERIA["rate_limited_fraction"][0]
         if warn and report["rate_limited_fraction"] >= limit:
             warnings.warn(f"{self.plant.model.name}: the steering gear ran at its rate limit "
@@ -218,7 +257,7 @@ class Design:
 
 def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer: str | None = None,
                      inputs: Mapping[str, float] | None = None, nomoto: Nomoto | None = None,
-                     **settings) -> Design:
+                     schedule=None, **settings) -> Design:
     """Design a course autopilot for ``model`` at a straight-run ``speed``.
 
     Steps: the operating point (:func:`~casship.autopilot.plants.steering_plant`: trim of the
@@ -242,6 +281,11 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
         Values of other inputs held fixed (a propeller rate given here is not trimmed).
     nomoto : Nomoto, optional
         Design on this model instead of the linearisation's.
+    schedule : sequence of float or "default", optional
+        Gain scheduling: design at each of these speeds [m/s] (``"default"``: 40 % to 100 % of the
+        approach speed, :func:`~casship.autopilot.schedule.default_schedule`) and run one law
+        interpolating them in the measured speed (:class:`~casship.autopilot.schedule.ScheduledAutopilot`);
+        the returned design is at ``speed``, with the schedule's gains there.
     **settings
         Any name of :data:`~casship.autopilot.defaults.RULES` (``wn``, ``wn_ref``, ``method``,
         ``mode``, ``dt``, ``gnss_std``, ...); an unknown name raises ``ValueError``.
@@ -252,6 +296,13 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
     >>> d = design_autopilot(get_model("kvlcc2"))       # doctest: +SKIP
     >>> control.margin(d.loop)                          # doctest: +SKIP
     """
+    if settings.get("speed") is not None:      # the speed setting is the operating point
+        if speed is not None and float(settings["speed"]) != float(speed):
+            raise ValueError(f"speed {speed} and the speed setting {settings['speed']} disagree")
+        speed = settings.pop("speed")
+    if schedule is not None:
+        return _scheduled_design(model, speed, schedule, p=p, steer=steer, inputs=inputs, nomoto=nomoto,
+                                 settings=settings)
     plant = steering_plant(model, speed, p=p, steer=steer, inputs=inputs)
     lin = course_linearization(plant)
     nom = nomoto if nomoto is not None else nomoto_from_linear(lin, steer=plant.steer)
@@ -260,14 +311,48 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
         gains = pid_pole_placement(nom, s.wn, s.zeta, integral=s.integral)
     else:
         gains = lqr_design(nom, **s.lqr_weights)
+    if nom.second_order and nom.T3 > 0:       # the inertia of a quick steering change, for the feed-forward
+        gains = replace(gains, m_hf=nom.T1 * nom.T2 / (nom.K * nom.T3), T3=nom.T3)
     reference = ReferenceModel(s.wn_ref, s.zeta_ref, s.r_max)
     actuator = Actuator(s.steer_max, s.steer_rate_max, s.actuator_T)
-    autopilot = Autopilot(gains, reference, s.steer_max, filter_T=s.filter_T)
+    autopilot = Autopilot(gains, reference, s.steer_max, filter_T=s.filter_T,
+                          steering=s.steering if s.feedforward == "nonlinear" else None)
     controlled = "chi" if s.mode == "course" else "psi"
     L, closed = loop_systems(lin, gains, actuator, delay=s.delay, reference=reference, controlled=controlled,
                              filter_T=s.filter_T, estimator=linear_estimator(s, nom, plant.steer), rate=s.rate)
     controller = gains.controller(steer=plant.steer)
     return Design(plant, lin, nom, gains, controller, L, closed, margins(L), autopilot, actuator, s)
+
+
+def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, settings) -> Design:
+    """The design at ``speed`` whose law is the gain schedule over the ``schedule`` speeds."""
+    from .schedule import ScheduledAutopilot, default_schedule
+
+    if nomoto is not None:
+        raise ValueError("a gain schedule designs on each speed's own linearisation; do not give nomoto")
+    point = design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
+    vessel = model.vessel
+    approach = vessel.U0 if vessel is not None and vessel.U0 else point.settings.speed
+    speeds = default_schedule(max(approach, point.settings.speed)) \
+        if isinstance(schedule, str) and schedule == "default" else schedule
+    try:
+        speeds = sorted(float(v) for v in speeds)
+    except (TypeError, ValueError):
+        raise ValueError(f"schedule must be a sequence of speeds [m/s] or 'default', got {schedule!r}") from None
+    designs = tuple(design_autopilot(model, v, p=p, steer=steer, inputs=inputs, **settings) for v in speeds)
+    law = ScheduledAutopilot(tuple(speeds), tuple(d.autopilot for d in designs))
+    s0 = point.settings
+    here = law.at(s0.speed)
+    src = {**s0.sources, **{k: f"gain schedule over {['%.3g' % v for v in speeds]} m/s" for k in
+                            ("wn_ref", "r_max", "steer_max")}}
+    s = replace(s0, wn_ref=here.reference.wn, r_max=here.reference.r_max, steer_max=here.steer_max,
+                segment=max(s0.segment, max(d.settings.segment for d in designs)), sources=src)
+    L, closed = loop_systems(point.linearization, here.gains, point.actuator, delay=s.delay, reference=here.reference,
+                             controlled="chi" if s.mode == "course" else "psi", filter_T=s.filter_T,
+                             estimator=linear_estimator(s, point.nomoto, point.plant.steer), rate=s.rate)
+    controller = here.gains.controller(steer=point.plant.steer)
+    return Design(point.plant, point.linearization, point.nomoto, here.gains, controller,
+                  L, closed, margins(L), law, point.actuator, s, designs)
 
 
 def simulate_autopilot(design: Design, command, t_end: float, *, step_times=(0.0,), seed=0, stepwise: bool = False,

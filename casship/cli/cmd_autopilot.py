@@ -10,6 +10,8 @@ Example::
     casship autopilot --model kvlcc2 --scenario course-60 --method lqr --wind 10 45 --plot out/
     casship autopilot --model otter --mode course --gnss-std 0.02 --show-defaults
     casship autopilot --model kvlcc2 --params fit.json           # on the ship identified by casship identify
+    casship autopilot --model kvlcc2 --speed 4 --schedule --scenario course-90 --json
+    casship autopilot --model kvlcc2 --controller mpc --scenario course-60
 """
 from __future__ import annotations
 
@@ -20,9 +22,10 @@ from ._common import add_model_option, add_overwrite_option, check_outputs, prin
 #: settings shown in degrees on the command line (name -> option suffix)
 _DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s"}
 _CHOICES = {"method": ("pid", "lqr"), "mode": ("heading", "course"), "rate": ("estimator", "gyro"),
+            "feedforward": ("nonlinear", "linear"),
             "integral": ("fossen", "exact", "none")}
 _PAIRS = {"ekf_alpha", "ekf_q", "observer_q"}
-_SKIP = {"lqr_weights"}
+_SKIP = {"lqr_weights", "turn_rate_top"}
 
 
 #: One-line description (the command list of ``casship --help``).
@@ -60,6 +63,12 @@ def register(sub) -> None:
         else:
             kw["type"] = float
         p.add_argument(_option(name), **kw)
+    p.add_argument("--controller", choices=("law", "mpc"), default="law",
+                   help="'law': the designed PID/LQR law; 'mpc': the design's MPC (HPIPM, 60-step horizon) in the "
+                        "compiled loop")
+    p.add_argument("--schedule", type=float, nargs="*", default=None, metavar="SPEED",
+                   help="gain scheduling over the speed: design at these speeds [m/s] (none given: 40, 55, 70, 85 and "
+                        "100 %% of the approach speed) and interpolate the law in the measured speed")
     p.add_argument("--current", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=None,
                    help="uniform current speed [m/s] and the direction it flows towards [deg]")
     p.add_argument("--wind", type=float, nargs=2, metavar=("SPEED", "DIR_DEG"), default=None,
@@ -72,6 +81,18 @@ def register(sub) -> None:
     p.add_argument("--plot", default=None, metavar="DIR", help="save Bode/step and closed-loop plots to the new folder DIR")
     add_overwrite_option(p)
     p.set_defaults(func=run, parser=p)
+
+
+def _course_changes(res, steer_unit: str) -> list:
+    """Per change: overshoot in % with degrees beside it, settling time, rate-limited fraction and
+    steering travel (degrees for a rudder, N m for a yaw moment)."""
+    import numpy as np
+
+    sc, unit = (float(np.degrees(1.0)), "deg") if steer_unit == "deg" else (1.0, "N_m")
+    return [{"change_deg": m["change_deg"], "overshoot_pct": m.get("overshoot_pct"),
+             "overshoot_deg": m.get("overshoot_deg"), "settling_time_s": m.get("settling_time_s"),
+             "rate_limited_fraction": m.get("rate_limited_fraction"), f"steer_travel_{unit}": sc * m["steer_travel"],
+             "turn_rate_max_deg_s": float(np.degrees(m["turn_rate_max"]))} for m in res.metrics]
 
 
 def settings_from_args(args) -> dict:
@@ -147,7 +168,8 @@ def run(args) -> int:
         ship, given = get_model(args.model), {}
     model, env = _environment(args, ship)
     p = model.params({k: v for k, v in given.items() if k in model.param_names}) if given else None
-    design = ap.design_autopilot(model, p=p, **settings_from_args(args))       # designed in calm water
+    schedule = None if args.schedule is None else (args.schedule or "default")
+    design = ap.design_autopilot(model, p=p, schedule=schedule, **settings_from_args(args))   # designed in calm water
     s = design.settings
     if args.show_defaults:
         rows = {k: {"value": v, "source": s.sources.get(k, "")} for k, v in s.as_dict().items()}
@@ -157,15 +179,21 @@ def run(args) -> int:
             for k, row in rows.items():
                 print(f"{k:>15} = {row['value']!s:<40} ({row['source']})")
         return 0
-    res = design.simulate(args.scenario, args.t_end, seed=args.seed, environment=env)
+    controller = ap.mpc_for_design(design) if args.controller == "mpc" else None
+    res = design.simulate(args.scenario, args.t_end, seed=args.seed, environment=env, controller=controller)
     steer_unit = "N m" if design.plant.steer == "tau_N" else "deg"
-    metrics, previous = [], 0.0
-    for m in res.metrics:          # overshoot in % of the course change, with degrees beside it
-        change = abs(m["target_deg"] - previous)
-        previous = m["target_deg"]
-        metrics.append({**m, "overshoot_deg": m.get("overshoot_pct", np.nan) / 100 * change})
+    metrics = [{"overshoot_deg": np.nan, **m} for m in res.metrics]   # overshoot in % with degrees beside it
     out = {"model": args.model, "scenario": args.scenario, "t_end_s": float(res.data.t[-1]), "environment": env,
-           **design.summary(), "metrics": metrics, "performance": res.performance}
+           **design.summary(), "metrics": metrics, "performance": res.performance,
+           "course_changes": _course_changes(res, steer_unit)}
+    perf = res.performance
+    travel_key = "steer_travel_deg_per_hour" if steer_unit == "deg" else "steer_travel_N_m_per_hour"
+    out[travel_key] = perf["steer_travel_per_hour"] * (float(np.degrees(1.0)) if steer_unit == "deg" else 1.0)
+    if design.schedule:
+        out["schedule_speeds_m_s"] = list(design.autopilot.speeds)
+    out["controller"] = args.controller
+    if controller is not None:
+        out["mpc"] = {"period_s": controller.period, "horizon": int(controller.horizon), "solver": "hpipm"}
     if args.plot:
         from ..outdir import output_folder
 
@@ -196,7 +224,12 @@ def run(args) -> int:
               f"{m.get('overshoot_pct', np.nan):>7.2f} {m['overshoot_deg']:>9.3f} {m.get('settling_time_s', np.nan):>9.1f} "
               f"{m['steady_state_error_deg']:>7.2f} {sc * m['steer_max_abs']:>10.2f} "
               f"{m.get('rate_limited_fraction', np.nan):>9.3f}")
+    travel = res.performance["steer_travel_per_hour"] * sc
+    print(f"steering travel {travel:.4g} {steer_unit}/h beside the rate limit active "
+          f"{res.performance['rate_limited_fraction']:.3f} of the time")
     for c in res.performance["checks"]:
+        if c["check"] == "steering travel per hour":        # printed above in the steering's units
+            continue
         flag = "" if c["ok"] is None else ("ok" if c["ok"] else "NOT MET")
         print(f"  {c['check']}: {c['value']:.4g} {c['unit']} {flag}")
     return 0

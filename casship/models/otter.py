@@ -1,5 +1,10 @@
 """Otter USV (Maritime Robotics), horizontal-plane dynamics after Fossen's MSS ``otter.m`` / PVS ``otter.py``.
 
+Source: Fossen, *Handbook of Marine Craft Hydrodynamics and Motion Control* (2nd ed., 2021), and
+the Otter models of the MSS toolbox (``VESSELS/models/otter.m``, revision 2024-06-05) and of the
+Python Vehicle Simulator (``vehicles/otter.py``), which both keep the Munk moment of the added-mass
+Coriolis matrix (they only suggest cancelling it "if stability problems" arise).
+
 Surge, sway and yaw of the 6-DOF model, with the constants of the project reference table (2.2):
 L = 2.0 m, B = 1.08 m, hull mass 55 kg plus a payload (25 kg at ``r_p = [0.05, 0, -0.35]`` m), hull
 CG ``r_g = [0.2, 0, -0.2]`` m, radii of gyration R66 = 0.25 L, pontoons (B_pont 0.25 m, y_pont
@@ -12,10 +17,13 @@ Equations (body origin CO at mid-length, ``nu = [u, v, r]``)::
 
 * ``M = M_RB + M_A`` with ``M_RB = [[m, 0, 0], [0, m, m x_g], [0, m x_g, I_z]]`` (m = hull + payload,
   ``x_g`` the combined CG, ``I_z = I_g + m x_g^2`` with ``I_g = m_hull R66^2 + m_hull x_g^2 + m_p x_p^2``,
-  as in MSS/PVS) and ``M_A = diag(-X_u', -Y_v', -N_r')``: ``X_u' = -2.7 rho nabla^(5/3)/L^2`` (MSS),
+  as in MSS/PVS) and ``M_A = diag(-X_u', -Y_v', -N_r')``: ``X_u' = -2.7 rho nabla^(5/3)/L^2`` with
+  ``nabla`` of the hull mass alone (MSS ``addedMassSurge(m, L, rho)`` with ``m`` = 55 kg),
   ``Y_v' = -1.5 m_hull``, ``N_r' = -1.7 I_g``;
-* ``C_RB``: 3-DOF rigid-body Coriolis at CO with the CG offset; ``C_A``: added-mass Coriolis with the
-  Munk yaw moment neglected (as in MSS/PVS);
+* ``C_RB``: 3-DOF rigid-body Coriolis at CO with the CG offset; ``C_A``: the added-mass Coriolis
+  matrix of ``M_A`` (Fossen 2021, Sec. 6.4, MSS ``m2c``), whose yaw row is the Munk moment
+  ``(Y_v' - X_u') u v`` (destabilising: it turns the bow away from the flow). ``munk_moment=False``
+  drops that yaw row as earlier MSS (2021-06-21) and PVS revisions did;
 * ``D = diag(-X_u, -Y_v, -N_r)``, ``X_u = -24.4 g / U_max``, ``Y_v = -M22 / T_sway``,
   ``N_r = -M66 / T_yaw``, plus the nonlinear yaw damping ``10 N_r |r| r``;
 * cross-flow drag ``Y = -rho/2 T C_D int |v + x r|(v + x r) dx``, ``N`` likewise with ``x``, evaluated in
@@ -85,7 +93,7 @@ def hoerner_cd(B: float, T: float) -> float:
 
 
 def otter(params: Mapping[str, float] | None = None, *, propeller_dynamics: bool = False,
-          T_n: float = 0.1) -> Model:
+          T_n: float = 0.1, munk_moment: bool = True) -> Model:
     """Otter USV, surge-sway-yaw (MSS ``otter.m``), two propeller speed inputs.
 
     Parameters
@@ -96,6 +104,9 @@ def otter(params: Mapping[str, float] | None = None, *, propeller_dynamics: bool
         Propeller speeds as states ``n1, n2`` with inputs ``n1_cmd, n2_cmd`` (lag ``T_n``).
     T_n : float
         Propeller time constant [s] (MSS: 0.1 s).
+    munk_moment : bool
+        Keep the Munk yaw moment of the added-mass Coriolis matrix (default, as current MSS and
+        PVS; without it the craft turns about a third slower at the same propeller commands).
 
     Returns
     -------
@@ -136,7 +147,7 @@ def otter(params: Mapping[str, float] | None = None, *, propeller_dynamics: bool
     Ig = m_h * P["R66"] ** 2 + m_h * x_g**2 + m_p * P["x_p"] ** 2
     nab = m / rho
     T = nab / (2 * P["Cb_pont"] * P["B_pont"] * L)
-    a11 = -P["Xudot_factor"] * rho * nab ** (5.0 / 3.0) / L**2
+    a11 = -P["Xudot_factor"] * rho * (m_h / rho) ** (5.0 / 3.0) / L**2     # MSS: hull mass only
     a22 = -P["Yvdot_over_m"] * m_h
     a66 = -P["Nrdot_over_Iz"] * Ig
     M11, M22, M23, M33 = m + a11, m + a22, m * x_g, Ig + m * x_g**2 + a66
@@ -153,9 +164,9 @@ def otter(params: Mapping[str, float] | None = None, *, propeller_dynamics: bool
     I0, I1 = crossflow_integrals(v, r * L)
     Y_cf = -0.5 * rho * T * C_D * L * I0
     N_cf = -0.5 * rho * T * C_D * L**2 * I1
-    # Coriolis: rigid body at CO (CG offset x_g) and added mass (Munk yaw moment neglected)
+    # Coriolis: rigid body at CO (CG offset x_g) and added mass, whose yaw row is the Munk moment
     C_rb = ca.vertcat(-m * (v + x_g * r) * r, m * u * r, m * x_g * u * r)
-    C_a = ca.vertcat(-a22 * v * r, a11 * u * r, 0)
+    C_a = ca.vertcat(-a22 * v * r, a11 * u * r, (a22 - a11) * u * v if munk_moment else 0)
     port = b.port("tau", 3)
     rhs = ca.vertcat(tau_X + X_u * u, Y_v * v + Y_cf, tau_N + N_r * r + P["N_r_nonlinear"] * N_r * ca.fabs(r) * r
                      + N_cf) - C_rb - C_a + port

@@ -49,7 +49,7 @@ from typing import Sequence
 
 import casadi as ca
 
-from ._compiler import (DEFAULT_FLAGS, ENV_FLAGS, PORTABLE_FLAGS, SUFFIX, CompileError, accepts_native,
+from ._compiler import (ENV_FLAGS, PORTABLE_FLAGS, SUFFIX, CompileError, accepts_native,
                         build_library, chosen_flags, compile_timeout, find_compiler)
 
 try:                                    # file locks: fcntl on POSIX, msvcrt on Windows

@@ -76,7 +76,9 @@ def figure_los():
     wp = ap.Waypoints([0.0, 150.0, 150.0], [0.0, 0.0, 150.0])
     env = {"current_speed": 0.2, "current_dir": np.radians(90.0)}
     fig, ax = plt.subplots(figsize=(5.5, 5))
-    ax.plot(wp.east, wp.north, "k--", lw=1, label="path")
+    ax.plot(wp.east, wp.north, "k:", lw=0.8, label="waypoints")
+    track = wp.track(ap.LOSGuidance.for_design(wp, d).turn_radius)
+    ax.plot(track[:, 1], track[:, 0], "k--", lw=1, label="track (turn at the wheel-over point)")
     for integral in (False, True):
         guidance = ap.LOSGuidance.for_design(wp, d, integral=integral)
         loop = d.closed_loop_system(environment=env, guidance=guidance)

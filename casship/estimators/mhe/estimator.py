@@ -29,7 +29,7 @@ from ..update import joseph_update
 from .options import MHEOptions, bound_pair
 from .problem import Window, build_window, params_vector, sqrt_factor
 from .arrival import inv_sqrt
-from .runner import ARRIVAL_OUTPUTS, WindowEngine
+from .runner import WindowEngine
 from .solvers import solve_window
 
 __all__ = ["MHE"]
