@@ -9,7 +9,8 @@ from .data import Dataset
 from .gaussian import Gaussian
 from .trajectory import Trajectory
 from .discretize import DiscreteModel, discretize, van_loan
-from .model import Model, ModelBuilder
+from .builder import ModelBuilder
+from .model import Model
 from .vessel import Limit, Vessel
 from .simulate import measure, simulate
 from .estimators import EKF, KF, FilterResult, persistence_model
