@@ -1,4 +1,4 @@
-"""Records: :class:`Dataset` (time stamps + named columns) and :func:`check_time`.
+"""Records: :class:`Dataset` (time stamps + named columns), :func:`check_time` and :func:`read_frame`.
 
 The Gaussian belief lives in :mod:`casship.gaussian`, simulated records in :mod:`casship.trajectory`.
 
@@ -13,7 +13,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Dataset", "check_time"]
+__all__ = ["Dataset", "check_time", "read_frame"]
 
 
 def check_time(t, name: str = "time") -> np.ndarray:
@@ -409,7 +409,7 @@ class Dataset:
         Parameters
         ----------
         path : str or Path
-            The file (errors name it; see :func:`casship.io.csv.read_frame`).
+            The file (errors name it; see :func:`read_frame`).
         time : str, optional
             Name of the time column; ``t`` or ``time`` by default.
         rename : mapping, optional
@@ -417,8 +417,6 @@ class Dataset:
         scale : mapping, optional
             New name -> factor applied after renaming (e.g. ``{"psi": np.pi / 180}``).
         """
-        from .io.csv import read_frame
-
         frame = read_frame(path)
         if time is None:
             time = next((c for c in ("t", "time") if c in frame.columns), None)
@@ -437,3 +435,44 @@ class Dataset:
             data = data.with_columns(**{name: data[name] * factor})
         data.meta["source"] = str(path)
         return data
+
+
+def read_frame(path, **read_options):
+    """A CSV file with a header row as a pandas DataFrame, with errors that name the file.
+
+    Parameters
+    ----------
+    path : str, Path or file object
+        The CSV file.
+    **read_options
+        Passed to :func:`pandas.read_csv` (e.g. ``sep=";"``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        At least one data row.
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError
+        The file does not exist or is a folder.
+    ValueError
+        An empty file, a file with a header but no data rows, or one pandas cannot parse.
+    """
+    import pandas as pd
+
+    name = str(path) if isinstance(path, (str, Path)) else "<csv>"
+    if isinstance(path, (str, Path)):
+        if Path(path).is_dir():
+            raise IsADirectoryError(f"{name}: is a folder, not a CSV file")
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"{name}: no such file")
+    try:
+        frame = pd.read_csv(path, **read_options)
+    except pd.errors.EmptyDataError:
+        raise ValueError(f"{name}: empty file (no header row with column names)") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{name}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
+    if frame.shape[0] == 0:
+        raise ValueError(f"{name}: no data rows below the header {list(frame.columns)}")
+    return frame
