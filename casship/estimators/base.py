@@ -275,7 +275,7 @@ class StepEstimator(Estimator):
         -------
         FilterResult
         """
-        self._check_prior(prior)
+        self.check_prior(prior)
         data = bridge_gaps(self, data, prior.mean, p)      # a gap too long for one prediction: raise or bridge
         arrays = self.prepare(data, p)
         n = len(data)
@@ -403,5 +403,5 @@ class StepEstimator(Estimator):
         """
         from .online import StepRun
 
-        self._check_prior(prior)
+        self.check_prior(prior)
         return StepRun(self, prior, p, u, np.random.default_rng(seed))
