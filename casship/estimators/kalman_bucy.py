@@ -1,4 +1,4 @@
-"""Continuous-time Kalman-Bucy filter (Kalman & Bucy 1961; Tomera 2011, seed 001).
+"""Continuous-time Kalman-Bucy filter (Kalman & Bucy 1961; Tomera 2011).
 
 Between two samples the estimate and the covariance follow
 
