@@ -209,8 +209,8 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
     (out / "rmse.md").write_text(md_table(rows, STATES, first="wind, filter") + "\n\n" + tuned + "\n")
     alt_won = wins(alt, strongest)
     deps = [
-        Departure("wind loads", "Koike et al. 2023 Eq. 34 (Fujiwara's Fourier form)", "Eq. 34, as in the filter-guidelines "
-                  "study (same ship, geometry and gust record)",
+        Departure("wind loads", "Koike et al. 2023, Eq. 34 (Fujiwara's Fourier form)",
+                  "Eq. 34, as in the filter-guidelines study (same ship, geometry and gust record)",
                   f"with Fujiwara's 2005 regression (one seed, {strongest:g} m/s, same tuning): the MHE beats both "
                   f"EKF and UKF in {sum(alt_won.values())}/6 states (Eq. 34, first seed: "
                   f"{sum(wins(aggregate([r for r in results if r['seed'] == seeds[0]], winds[-1:]), strongest).values())}/6)"),
@@ -231,7 +231,8 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
     rep.add(md_table(rows, STATES, first="wind, filter"), tuned, "![rmse](rmse.png)",
             f"At {strongest:g} m/s the MHE has the lowest RMSE of the three in {sum(won.values())}/6 states.",
             "![disturbance](disturbance.png)")
-    rep.departures(deps, "Departures from the scenario of Koike et al. (2023), whose modelling-error experiment this study extends.")
+    rep.departures(deps, "Departures from the scenario of Koike et al. (2023), whose modelling-error experiment "
+                         "this study extends.")
     rep.write(out)
     next(steps, None)
     return write_json(out / "summary.json", {

@@ -4,7 +4,7 @@ States ``u, v, r, x, y, psi`` (``v`` = ``v_m`` at midship), inputs ``n`` [1/s], 
 ``delta_p`` [rad] (starboard and port rudder; positive turns the ship to starboard), port ``tau``
 and noise ``w_u, w_v, w_r`` as for every casship ship (rigid body: :func:`casship.models.mmg.rigid_body_3dof`).
 
-Hull (Yoshimura; Koike et al. 2023 Eq. 22, with the added-mass terms on the left-hand side)::
+Hull (Yoshimura; Koike et al. 2023, Eq. 22, with the added-mass terms on the left-hand side)::
 
     X_H = rho/2 L d [ {X'_0F + (X'_0A - X'_0F) |beta|/pi} u U + X'_vr L v r ]
     Y_H = rho/2 L d [ Y'_v v |u| + Y'_r L r u - C_D I0(v, C_rY r L) ]
@@ -192,7 +192,8 @@ def yoshimura_twin_rudder(values: Mapping[str, float], *, name: str = "mmg-twin-
     if unknown:
         raise ValueError(f"unknown low-speed parameter(s) {sorted(unknown)}; known: {list(LOWSPEED_PARAMS)}")
     sources = dict(sources or {})
-    b = ModelBuilder(name, doc or "Yoshimura low-speed MMG model, single propeller, twin rudders (Koike et al. 2023 Eq. 20-22)")
+    b = ModelBuilder(name, doc or "Yoshimura low-speed MMG model, single propeller, twin rudders "
+                                  "(Koike et al. 2023, Eq. 20-22)")
     P = {k: _param(b, k, values, sources, LOWSPEED_PARAMS) for k in LOWSPEED_PARAMS}
     states = declare_ship_states(b)
     u, v, r = states[:3]
@@ -279,5 +280,5 @@ def esso_osaka_twin(params: Mapping[str, float] | None = None, *, smooth_speed: 
                      "source": "estimated above-water geometry of a 3 m tanker model (not published)"})
     return yoshimura_twin_rudder(values, name="mmg-twin-lowspeed",
                                  doc="Esso Osaka 3 m, Yoshimura low-speed hull, single propeller, twin rudders "
-                                     "(Koike et al. 2023 Eq. 20-22)",
+                                     "(Koike et al. 2023, Eq. 20-22)",
                                  sources=ESSO_OSAKA_SOURCES, vessel=vessel, smooth_speed=smooth_speed)

@@ -214,7 +214,7 @@ def wind_term_model(model: Model, geometry: Mapping[str, float] | None, names, u
                     rho_air: float, what: str, label: str, name: str) -> Model:
     """``model`` with wind loads ``loads(U_A, gamma, g, rho_air) -> (X, Y, N)`` fed into its ``tau`` port.
 
-    The shared body of :func:`add_wind` and of the other wind-load forms (Koike et al. 2023 Eq. 34 in
+    The shared body of :func:`add_wind` and of the other wind-load forms (Koike et al. 2023, Eq. 34 in
     :mod:`casship.models.wind_fourier`): checks the geometry (``names``; by default
     ``model.vessel.wind``), makes it parameters ``wind_<name>`` (the centroid offsets ``C`` and
     ``C_BR`` may be negative), adds the inputs ``wind_speed`` and ``wind_dir`` and the parameter

@@ -154,7 +154,7 @@ def noisy(tr, ship, std: float, seed: int) -> cs.Dataset:
 
 
 def prior(data: cs.Dataset, model) -> cs.Gaussian:
-    """x(0) = y(0), P(0) = I (Koike et al. 2023 Eq. 27, 31)."""
+    """x(0) = y(0), P(0) = I (Koike et al. 2023, Eq. 27, 31)."""
     return cs.Gaussian(np.array([data[s][0] for s in model.state_names]), np.eye(model.nx))
 
 
