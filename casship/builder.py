@@ -458,7 +458,7 @@ class ModelBuilder:
         self._output_expr[name] = expr
 
     def drop_outputs(self) -> None:
-        """Remove every declared output (to declare others, as :meth:`Model.with_outputs` does)."""
+        """Remove every declared output (to declare others, as :meth:`~casship.model.Model.with_outputs` does)."""
         self._outputs, self._output_expr = [], {}
 
     # -- lookup -------------------------------------------------------------------------------

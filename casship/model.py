@@ -142,6 +142,7 @@ class Model:
         self.param_upper = np.array([v.upper for v in self.param_vars], dtype=float)
         for arr in (self.angle_states, self.angle_outputs, self._nominal, self.param_lower, self.param_upper):
             arr.setflags(write=False)
+        self._derived: dict = {}   # numeric objects derived from the model (see derived); not its meaning
         self._freeze()
 
     # -- immutability ---------------------------------------------------------------------------
@@ -158,6 +159,26 @@ class Model:
         with ca.global_pickle_context():
             data = pickle.dumps(self._builder)
         return _model_from_pickle, (data,)
+
+    def derived(self, key, make: Callable[[], object]):
+        """A numeric object derived from this model (a discretisation, a mapped Function), built by
+        ``make()`` once per ``key`` and kept as long as the model.
+
+        Parameters
+        ----------
+        key : hashable
+            What the object is (e.g. ``("discretize", "rk4", 1)``); callers choose keys that say it all.
+        make : callable
+            Builds the object when ``key`` is new.
+
+        Returns
+        -------
+        object
+            The object built for ``key``.
+        """
+        if key not in self._derived:
+            self._derived[key] = make()
+        return self._derived[key]
 
     def __repr__(self) -> str:
         return (f"Model({self.name!r}, x={list(self.state_names)}, u={list(self.input_names)}, "
