@@ -257,11 +257,11 @@ def test_the_allowed_reaches_are_current_and_stay_inside_one_subpackage():
 
 def test_the_private_name_finder_sees_reaches(tmp_path):
     path = tmp_path / "m.py"
-    path.write_text("from casship.runtime._cache import x\nfrom casship.data import _hidden\n"
+    path.write_text("from casship.identify._solver import x\nfrom casship.data import _hidden\n"
                     "import casship.identify._engine as e\n\n\nclass A:\n    def f(self, other):\n"
                     "        self._mine = other._theirs\n        return getattr(other, '_x'), self._mine, o._mine\n")
     found = sorted((name, what.split()[0]) for _, name, what in _reaches("casship.elsewhere", path))
-    assert found == [("_cache", "imports"), ("_engine", "imports"), ("_hidden", "imports"),
+    assert found == [("_engine", "imports"), ("_hidden", "imports"), ("_solver", "imports"),
                      ("_theirs", "uses"), ("_x", "uses")]
 
 
