@@ -6,7 +6,7 @@ a simulated course manoeuvre with process noise. Peers get the same discrete mod
 a hand-written Jacobian (EKF), the same Joseph-form update, ``Q = G Q G'`` and the same prior.
 
 * EKF: identical algorithm, so the estimates must agree to round-off.
-* UKF: filterpy's ``JulierSigmaPoints(kappa=3)`` (seed 002's form) with the sigma points redrawn after
+* UKF: filterpy's ``JulierSigmaPoints(kappa=3)`` (the form of Koike et al. 2023) with the sigma points redrawn after
   the prediction (what casship does; filterpy otherwise reuses the propagated points), so the
   estimates must agree to round-off.
 * EnKF (N = 100): different random draws, so the check is the RMSE against the truth.
@@ -116,7 +116,7 @@ def _filterpy_ukf(Y, prior):
     f = UnscentedKalmanFilter(5, 2, DT, _hx, lambda x, dt: _fx(x, dt), pts)
     f.x, f.P, f.Q, f.R = prior.mean.copy(), prior.cov.copy(), _QX, R_SOG
     def update(y):
-        f.sigmas_f = pts.sigma_points(f.x, f.P)      # redraw (as casship and seed 002)
+        f.sigmas_f = pts.sigma_points(f.x, f.P)      # redraw (as casship and Koike et al. 2023)
         f.update(y)
 
     return _run_peer(f, Y, f.predict, update)

@@ -128,7 +128,7 @@ def filterpy_ukf(ship, U, Y, prior, Qx, R):
     f.x, f.P, f.Q, f.R = prior.mean.copy(), prior.cov.copy(), Qx, R
 
     def update(y):
-        f.sigmas_f = pts.sigma_points(f.x, f.P)      # redraw (as casship and seed 002)
+        f.sigmas_f = pts.sigma_points(f.x, f.P)      # redraw (as casship and Koike et al. 2023)
         f.update(y)
 
     return _run(f, U, Y, lambda u: f.predict(u=u), update)

@@ -20,7 +20,7 @@ __version__ = "0.1.0"
 _EXPORTS = {
     "wrap": "angles", "unwrap": "angles", "Dataset": "data", "Gaussian": "gaussian", "Trajectory": "trajectory",
     "DiscreteModel": "discretize", "discretize": "discretize", "van_loan": "discretize",
-    "Model": "model", "ModelBuilder": "model", "Vessel": "vessel", "Limit": "vessel",
+    "Model": "model", "ModelBuilder": "builder", "Vessel": "vessel", "Limit": "vessel",
     "measure": "simulate", "simulate": "simulate",
     "EKF": "estimators", "KF": "estimators", "FilterResult": "estimators", "persistence_model": "estimators",
     "UKF": "estimators", "EnKF": "estimators", "KalmanBucy": "estimators", "augment": "estimators",

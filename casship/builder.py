@@ -5,17 +5,16 @@ immutable :class:`~casship.model.Model`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Mapping
+from types import MappingProxyType
+from typing import Mapping
 
 import casadi as ca
 import numpy as np
 
+from .model import Model
 from .vessel import Limit, Vessel
 
-if TYPE_CHECKING:
-    from .model import Model
-
-__all__ = ["ModelBuilder", "Variable", "Parameter"]
+__all__ = ["ModelBuilder", "Variable", "Parameter", "Declarations"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +59,57 @@ class Parameter(Variable):
     lower: float = -np.inf
     upper: float = np.inf
     source: str = ""
+
+
+@dataclass(frozen=True)
+class Declarations:
+    """What a :class:`ModelBuilder` holds, as a read-only snapshot: what a :class:`~casship.model.Model`
+    is built from.
+
+    Parameters
+    ----------
+    name, doc : str
+        Name and one-line description of the model.
+    dt : float or None
+        Sampling period of a discrete-time model (``None``: continuous-time).
+    states, inputs, noises, outputs : tuple of Variable
+        The declared variables in the order of their vectors.
+    params : tuple of Parameter
+        The declared parameters in the order of the parameter vector.
+    symbols : mapping name -> casadi.SX
+        The symbol of every state, input, parameter and noise channel.
+    rates : mapping state name -> casadi.SX
+        The time derivative of each state (of a discrete-time model: ``(x[k+1] - x[k]) / dt``).
+    output_exprs : mapping output name -> casadi.SX
+        The expression of each output.
+    ports : mapping name -> casadi.SX
+        The symbol of each port.
+    port_terms : mapping name -> tuple of casadi.SX
+        The terms fed to each port (their sum replaces the port's symbol).
+    limits : mapping name -> Limit
+        Declared validity ranges of states and inputs.
+    vessel : Vessel or None
+        The ship the model describes.
+    meta : mapping
+        Free-form notes of the model.
+    """
+
+    name: str
+    doc: str
+    dt: float | None
+    states: tuple[Variable, ...]
+    inputs: tuple[Variable, ...]
+    params: tuple[Parameter, ...]
+    noises: tuple[Variable, ...]
+    outputs: tuple[Variable, ...]
+    symbols: Mapping[str, ca.SX]
+    rates: Mapping[str, ca.SX]
+    output_exprs: Mapping[str, ca.SX]
+    ports: Mapping[str, ca.SX]
+    port_terms: Mapping[str, tuple[ca.SX, ...]]
+    limits: Mapping[str, Limit]
+    vessel: Vessel | None
+    meta: Mapping
 
 
 RESERVED = ("t", "time")   # the time column of every Dataset
@@ -218,16 +268,20 @@ class ModelBuilder:
         par = Parameter(name, unit, False, doc, value, lower, upper, source)
         return self._declare("param", par, self._params)
 
-    def param_as_state(self, name: str, *, doc: str = "") -> ca.SX:
+    def param_as_state(self, name: str, *, doc: str = "", rate=None) -> ca.SX:
         """Turn the declared parameter ``name`` into a state (same symbol and unit; for augmented-state
-        estimation). Give it an equation with :meth:`ode`, e.g. a random walk ``b.noise(...)``.
+        estimation), e.g. a random walk with ``rate=b.noise("w_K")``.
 
         Parameters
         ----------
         name : str
             A declared parameter.
         doc : str
-            One-line description.
+            One-line description (default: the parameter's).
+        rate : casadi.SX, optional
+            Its rate: the time derivative, or in a discrete-time model the rate over a step
+            ``(x[k+1] - x[k]) / dt`` (as for :meth:`add_to_ode`). Without it, give the new state an
+            equation with :meth:`ode` or :meth:`next`.
 
         Returns
         -------
@@ -240,6 +294,8 @@ class ModelBuilder:
         self._params = [v for v in self._params if v.name != name]
         self._kinds[name] = "state"
         self._states.append(Variable(name, var.unit, False, doc or var.doc))
+        if rate is not None:
+            self._ode[name] = _as_sx(rate, f"rate of {name!r}")
         return self._symbols[name]
 
     def noise(self, name: str, *, unit: str = "", doc: str = "") -> ca.SX:
@@ -402,6 +458,10 @@ class ModelBuilder:
         self._outputs.append(Variable(name, unit, bool(angle), doc))
         self._output_expr[name] = expr
 
+    def drop_outputs(self) -> None:
+        """Remove every declared output (to declare others, as :meth:`~casship.model.Model.with_outputs` does)."""
+        self._outputs, self._output_expr = [], {}
+
     # -- lookup -------------------------------------------------------------------------------
     def sym(self, name: str) -> ca.SX:
         """The symbol of a declared state, input, parameter, noise channel or port.
@@ -448,9 +508,22 @@ class ModelBuilder:
             if not isinstance(self.vessel, Vessel):
                 raise TypeError(f"model {self.name!r}: vessel must be a casship.Vessel, got {type(self.vessel).__name__}")
             self.vessel.check_inputs([v.name for v in self._inputs])
-        from .model import Model      # the model module imports this one
-
         return Model(self)
+
+    def declarations(self) -> Declarations:
+        """A read-only snapshot of the declarations and equations (what :meth:`build` freezes).
+
+        Returns
+        -------
+        Declarations
+        """
+        ro = MappingProxyType
+        return Declarations(
+            name=self.name, doc=self.doc, dt=self.dt, states=tuple(self._states), inputs=tuple(self._inputs),
+            params=tuple(self._params), noises=tuple(self._noises), outputs=tuple(self._outputs),
+            symbols=ro(dict(self._symbols)), rates=ro(dict(self._ode)), output_exprs=ro(dict(self._output_expr)),
+            ports=ro(dict(self._ports)), port_terms=ro({k: tuple(v) for k, v in self._port_terms.items()}),
+            limits=ro(dict(self._limits)), vessel=self.vessel, meta=ro(dict(self.meta)))
 
     def copy(self, name: str | None = None) -> "ModelBuilder":
         """An independent copy of the builder (declarations and equations).

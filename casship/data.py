@@ -1,4 +1,4 @@
-"""Records: :class:`Dataset` (time stamps + named columns) and :func:`check_time`.
+"""Records: :class:`Dataset` (time stamps + named columns), :func:`check_time` and :func:`read_frame`.
 
 The Gaussian belief lives in :mod:`casship.gaussian`, simulated records in :mod:`casship.trajectory`.
 
@@ -13,7 +13,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Dataset", "check_time", "check_rows", "MAX_ROWS"]
+__all__ = ["Dataset", "check_time", "check_rows", "MAX_ROWS", "read_frame"]
 
 
 #: Largest number of rows casship creates in one record (a time grid, a resampled record): 20 million
@@ -444,7 +444,7 @@ class Dataset:
         Parameters
         ----------
         path : str or Path
-            The file (errors name it; see :func:`casship.io.csv.read_frame`).
+            The file (errors name it; see :func:`read_frame`).
         time : str, optional
             Name of the time column; ``t`` or ``time`` by default.
         rename : mapping, optional
@@ -452,8 +452,6 @@ class Dataset:
         scale : mapping, optional
             New name -> factor applied after renaming (e.g. ``{"psi": np.pi / 180}``).
         """
-        from .io.csv import read_frame
-
         frame = read_frame(path)
         if time is None:
             time = next((c for c in ("t", "time") if c in frame.columns), None)
@@ -472,3 +470,62 @@ class Dataset:
             data = data.with_columns(**{name: data[name] * factor})
         data.meta["source"] = str(path)
         return data
+
+
+def read_frame(path, **read_options):
+    """A CSV file with a header row as a pandas DataFrame, with errors that name the file.
+
+    Parameters
+    ----------
+    path : str, Path or file object
+        The CSV file.
+    **read_options
+        Passed to :func:`pandas.read_csv` (e.g. ``sep=";"``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        At least one data row.
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError
+        The file does not exist or is a folder.
+    ValueError
+        An empty file, a file with a header but no data rows, or one pandas cannot parse.
+    """
+    import pandas as pd
+
+    name = str(path) if isinstance(path, (str, Path)) else "<csv>"
+    if isinstance(path, (str, Path)):
+        if Path(path).is_dir():
+            raise IsADirectoryError(f"{name}: is a folder, not a CSV file")
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"{name}: no such file")
+    try:
+        frame = pd.read_csv(path, **read_options)
+    except pd.errors.EmptyDataError:
+        raise ValueError(f"{name}: empty file (no header row with column names)") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{name}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
+    if frame.shape[0] == 0:
+        raise ValueError(f"{name}: no data rows below the header {list(frame.columns)}")
+    header = _header(path, read_options)
+    twice = sorted({c for c in header if header.count(c) > 1})
+    if twice:
+        raise ValueError(f"{name}: column(s) {twice} appear more than once in the header; which one is meant "
+                         "cannot be told: rename or remove the copies")
+    return frame
+
+
+def _header(path, read_options) -> list[str]:
+    """The header row as written (pandas renames a repeated name ``psi`` to ``psi.1``)."""
+    import pandas as pd
+
+    options = {k: v for k, v in read_options.items() if k in ("sep", "delimiter", "comment", "skiprows", "encoding")}
+    if not isinstance(path, (str, Path)):
+        if not hasattr(path, "seek"):
+            return []
+        path.seek(0)
+    row = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False, **options)
+    return [str(v).strip() for v in row.iloc[0].tolist()] if len(row) else []

@@ -201,18 +201,16 @@ def _autopilot(ship, fit, cfg: DemoConfig, out: Path):
 
 
 # -- figures ---------------------------------------------------------------------------------------------
-def _plt():
-    import matplotlib
+def _subplots(nrows: int, ncols: int, figsize, **kwargs):
+    """A figure and its axes, made without pyplot (no backend chosen, nothing kept open)."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
 def _plot_filters(path: Path, truth, data, est) -> None:
-    plt = _plt()
-    fig, axes = plt.subplots(5, 1, figsize=(8, 10.5), sharex=True)
+    fig, axes = _subplots(5, 1, (8, 10.5), sharex=True)
     t = truth.t
     axes[0].plot(t, np.degrees(truth["delta"]), "k", lw=1)
     axes[0].set_ylabel("rudder angle [deg]")
@@ -231,12 +229,10 @@ def _plot_filters(path: Path, truth, data, est) -> None:
     fig.suptitle("20/20 zig-zag: u and v are not measured")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def _plot_validation(path: Path, runs, L: float) -> None:
-    plt = _plt()
-    fig, axes = plt.subplots(1, len(runs), figsize=(11, 5))
+    fig, axes = _subplots(1, len(runs), (11, 5))
     for ax, (man, variants) in zip(np.atleast_1d(axes), runs.items()):
         for (name, tr), style in zip(variants.items(), ("k-", "C0--", "C3:")):
             ax.plot(tr["y"] / L, tr["x"] / L, style, label=name)
@@ -247,7 +243,6 @@ def _plot_validation(path: Path, runs, L: float) -> None:
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 # -- the run -----------------------------------------------------------------------------------------------

@@ -273,8 +273,8 @@ def discretize(model: Model, dt: float | None = None, method: str | None = None,
         Nominal step [s]. The step Function also accepts other ``dt`` values. For a discrete-time
         model (``ModelBuilder(name, dt=...)``) it may be left out and must equal the model's.
     method : {"rk4", "euler", "cvodes"}
-        Classical RK4 with ``substeps`` sub-steps (default), explicit Euler (as in the seed papers),
-        or CasADi's adaptive CVODES integrator (tolerances 1e-10 unless ``options`` say otherwise).
+        Classical RK4 with ``substeps`` sub-steps (default), explicit Euler (as in Shi et al. 2009,
+        Koike et al. 2023 and Fossen & Fossen 2021) or CasADi's adaptive CVODES integrator (tolerances 1e-10 unless ``options`` say otherwise).
         A discrete-time model takes none (its method is ``"discrete"``).
     substeps : int
         Number of equal sub-steps for the explicit methods.

@@ -21,7 +21,7 @@ def _lib(*values):
 
 
 def body_to_ned(u, v, r, psi):
-    """Earth-fixed rates ``(x_dot, y_dot, psi_dot)`` from body velocities (Fossen; seed 001 Eq. 60).
+    """Earth-fixed rates ``(x_dot, y_dot, psi_dot)`` from body velocities (Fossen; Tomera 2011, Eq. 60).
 
     ``x_dot = u cos psi - v sin psi``, ``y_dot = u sin psi + v cos psi``, ``psi_dot = r``.
 
@@ -53,7 +53,7 @@ def body_to_ned(u, v, r, psi):
 
 
 def ned_to_body(x_dot, y_dot, psi_dot, psi):
-    """Body velocities ``(u, v, r)`` from earth-fixed rates (inverse rotation, seed 001 Eq. 60).
+    """Body velocities ``(u, v, r)`` from earth-fixed rates (inverse rotation, Tomera 2011, Eq. 60).
 
     ``u = x_dot cos psi + y_dot sin psi``, ``v = -x_dot sin psi + y_dot cos psi``, ``r = psi_dot``.
 

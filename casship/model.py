@@ -1,7 +1,7 @@
 """Symbolic model core: the immutable :class:`Model` built from named declarations.
 
-A :class:`~casship.builder.ModelBuilder` collects CasADi ``SX`` symbols and expressions; :meth:`ModelBuilder.build`
-freezes them into an immutable :class:`Model` holding named CasADi Functions
+A :class:`~casship.builder.ModelBuilder` collects CasADi ``SX`` symbols and expressions;
+:meth:`~casship.builder.ModelBuilder.build` freezes them into an immutable :class:`Model` holding named CasADi Functions
 
 * ``f(x, u, p, w) -> xdot``     continuous-time dynamics,
 * ``h(x, u, p) -> y``            outputs (measurement model),
@@ -13,17 +13,18 @@ Models compose through *ports*: named additive placeholders (for example a gener
 """
 from __future__ import annotations
 
+import pickle
 import re
 from types import MappingProxyType
-from typing import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Iterable, Mapping, Sequence
 
 import casadi as ca
 import numpy as np
 
-from .builder import ModelBuilder, Parameter, Variable
+if TYPE_CHECKING:       # the builder makes models (casship.builder imports this module)
+    from .builder import ModelBuilder
 
-# The declarations live in casship.builder; they are re-exported here.
-__all__ = ["Model", "ModelBuilder", "Variable", "Parameter"]
+__all__ = ["Model"]
 
 
 def _c_name(name: str) -> str:
@@ -81,39 +82,38 @@ class Model:
     """
 
     def __init__(self, builder: ModelBuilder):
+        # The model keeps its own copy of the builder: composition (builder, extend, with_outputs)
+        # starts from it, and it reads the declarations only through their public snapshot.
         self._builder = builder.copy()
-        b = self._builder
-        self.name = b.name
-        self.c_name = _c_name(b.name)
-        self.dt = getattr(b, "dt", None)
-        self.doc = b.doc
-        self.vessel = b.vessel
-        self.limits = MappingProxyType({n: b._limits[n] for n in (*(v.name for v in b._states),
-                                                                    *(v.name for v in b._inputs)) if n in b._limits})
-        self.meta = MappingProxyType(dict(b.meta))
-        self.state_vars = tuple(b._states)
-        self.input_vars = tuple(b._inputs)
-        self.param_vars = tuple(b._params)
-        self.noise_vars = tuple(b._noises)
-        self.output_vars = tuple(b._outputs)
-        self.state_names = tuple(v.name for v in b._states)
-        self.input_names = tuple(v.name for v in b._inputs)
-        self.param_names = tuple(v.name for v in b._params)
-        self.noise_names = tuple(v.name for v in b._noises)
-        self.output_names = tuple(v.name for v in b._outputs)
+        d = self._builder.declarations()
+        self.name = d.name
+        self.c_name = _c_name(d.name)
+        self.dt = d.dt
+        self.doc = d.doc
+        self.vessel = d.vessel
+        self.limits = MappingProxyType({v.name: d.limits[v.name] for v in (*d.states, *d.inputs)
+                                        if v.name in d.limits})
+        self.meta = MappingProxyType(dict(d.meta))
+        self.state_vars, self.input_vars, self.param_vars = d.states, d.inputs, d.params
+        self.noise_vars, self.output_vars = d.noises, d.outputs
+        self.state_names = tuple(v.name for v in d.states)
+        self.input_names = tuple(v.name for v in d.inputs)
+        self.param_names = tuple(v.name for v in d.params)
+        self.noise_names = tuple(v.name for v in d.noises)
+        self.output_names = tuple(v.name for v in d.outputs)
         self.nx, self.nu, self.np = len(self.state_names), len(self.input_names), len(self.param_names)
         self.nw, self.ny = len(self.noise_names), len(self.output_names)
-        self.angle_states = np.array([v.angle for v in b._states], dtype=bool)
-        self.angle_outputs = np.array([v.angle for v in b._outputs], dtype=bool)
+        self.angle_states = np.array([v.angle for v in d.states], dtype=bool)
+        self.angle_outputs = np.array([v.angle for v in d.outputs], dtype=bool)
 
-        x = _vec(b._symbols[n] for n in self.state_names)
-        u = _vec(b._symbols[n] for n in self.input_names)
-        p = _vec(b._symbols[n] for n in self.param_names)
-        w = _vec(b._symbols[n] for n in self.noise_names)
-        port_syms = [b._ports[k] for k in b._ports]
-        port_vals = [sum(b._port_terms[k], ca.SX.zeros(b._ports[k].shape)) for k in b._ports]
-        xdot = _vec(b._ode[n] for n in self.state_names)
-        y = _vec(b._output_expr[n] for n in self.output_names)
+        x = _vec(d.symbols[n] for n in self.state_names)
+        u = _vec(d.symbols[n] for n in self.input_names)
+        p = _vec(d.symbols[n] for n in self.param_names)
+        w = _vec(d.symbols[n] for n in self.noise_names)
+        port_syms = list(d.ports.values())
+        port_vals = [sum(d.port_terms[k], ca.SX.zeros(sym.shape)) for k, sym in d.ports.items()]
+        xdot = _vec(d.rates[n] for n in self.state_names)
+        y = _vec(d.output_exprs[n] for n in self.output_names)
         if port_syms:
             # Terms may themselves refer to ports of their own kind only through states, so one
             # substitution pass resolves them.
@@ -142,7 +142,7 @@ class Model:
         self.param_upper = np.array([v.upper for v in self.param_vars], dtype=float)
         for arr in (self.angle_states, self.angle_outputs, self._nominal, self.param_lower, self.param_upper):
             arr.setflags(write=False)
-        self._cache: dict = {}   # derived numeric Functions (folds, maps); never the model's meaning
+        self._derived: dict = {}   # numeric objects derived from the model (see derived); not its meaning
         self._freeze()
 
     # -- immutability ---------------------------------------------------------------------------
@@ -155,18 +155,30 @@ class Model:
         object.__setattr__(self, "_frozen", True)
 
     def __reduce__(self):
-        """Pickle through the builder's declarations (for process pools), rebuilt on loading."""
-        import pickle
-
+        """Pickle through the builder (for process pools), rebuilt on loading."""
         with ca.global_pickle_context():
-            data = pickle.dumps(vars(self._builder))
+            data = pickle.dumps(self._builder)
         return _model_from_pickle, (data,)
 
-    def _cached(self, key, make: Callable[[], object]):
-        """A derived object (e.g. a discretisation or a mapped Function) built once per key."""
-        if key not in self._cache:
-            self._cache[key] = make()
-        return self._cache[key]
+    def derived(self, key, make: Callable[[], object]):
+        """A numeric object derived from this model (a discretisation, a mapped Function), built by
+        ``make()`` once per ``key`` and kept as long as the model.
+
+        Parameters
+        ----------
+        key : hashable
+            What the object is (e.g. ``("discretize", "rk4", 1)``); callers choose keys that say it all.
+        make : callable
+            Builds the object when ``key`` is new.
+
+        Returns
+        -------
+        object
+            The object built for ``key``.
+        """
+        if key not in self._derived:
+            self._derived[key] = make()
+        return self._derived[key]
 
     def __repr__(self) -> str:
         return (f"Model({self.name!r}, x={list(self.state_names)}, u={list(self.input_names)}, "
@@ -369,7 +381,7 @@ class Model:
         Model
         """
         b = self.builder(name or self.name)
-        b._outputs, b._output_expr = [], {}
+        b.drop_outputs()
         items = outputs.items() if isinstance(outputs, Mapping) else ((n, n) for n in outputs)
         for out_name, spec in items:
             if isinstance(spec, str):
@@ -385,10 +397,6 @@ class Model:
 
 
 def _model_from_pickle(data: bytes) -> Model:
-    import pickle
-
     with ca.global_unpickle_context():
-        state = pickle.loads(data)
-    builder = ModelBuilder.__new__(ModelBuilder)
-    builder.__dict__.update(state)
+        builder = pickle.loads(data)
     return Model(builder)

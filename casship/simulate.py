@@ -199,11 +199,11 @@ def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
     n = X.shape[0]
     if model.ny == 0:
         return np.zeros((n, 0))
-    direct = model._cached(("output_selection",), lambda: _output_selection(model))
+    direct = model.derived(("output_selection",), lambda: _output_selection(model))
     if direct is not None:                      # every output is a state or an input: no evaluation
         return np.column_stack([(X if kind == "x" else U)[:, j] for kind, j in direct])
     size = _chunk(n)
-    hmap = model._cached(("h_map", size), lambda: model.h.map(size))
+    hmap = model.derived(("h_map", size), lambda: model.h.map(size))
     total = -(-n // size) * size
     Xc, Uc = _padded(X.T, total), _padded(U.T, total)
     Y = np.hstack([np.asarray(hmap(Xc[:, k:k + size], Uc[:, k:k + size], p)) for k in range(0, total, size)])
@@ -282,15 +282,15 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = N
         if method is not None or max_step is not None or options:
             raise ValueError(f"model {model.name!r} is discrete-time: it steps x[k+1] = F(x, u, p, w) itself "
                              "(no method, max_step or integrator options)")
-        dmodel = model._cached(("discretize", "discrete"), lambda: discretize(model))
+        dmodel = model.derived(("discretize", "discrete"), lambda: discretize(model))
         dmodel.check_steps(dt, t)
         method, substeps = "discrete", 1      # it steps itself: no integrator stability limit to check
     else:
         method = "rk4" if method is None else method
         substeps = 1 if max_step is None else max(1, int(np.ceil(dt.max(initial=0.0) / max_step)))
         key = ("discretize", method, substeps, tuple(sorted((options or {}).items())))
-        dmodel = model._cached(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
-                                                       substeps=substeps, options=options))
+        dmodel = model.derived(key, lambda: discretize(model, float(dt[0]) if dt.size else 1.0, method=method,
+                                                      substeps=substeps, options=options))
     W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
     if check_limits:

@@ -37,7 +37,7 @@ import numpy as np
 from .errors import InputError
 from .model import Model
 
-__all__ = ["ValidityError", "ValidityWarning", "OPT_IN", "MARGIN", "check_inputs", "is_stable_step", "check_states", "warn_states",
+__all__ = ["ValidityError", "ValidityWarning", "OPT_IN", "MARGIN", "check_inputs", "is_stable_step", "decaying_modes", "check_states", "warn_states",
            "stable_step", "check_step", "describe_limit", "check_start"]
 
 #: How a caller opts in to out-of-range use (appended to every validity message).
@@ -243,8 +243,15 @@ def _state_jacobian(model: Model, x, u, p) -> np.ndarray:
     return call.out("A").copy()
 
 
-def _decaying_modes(model: Model, x, u, p) -> np.ndarray | None:
-    """Eigenvalues with negative real part of ``A = df/dx`` at ``(x, u, p)`` (None: A not finite)."""
+def decaying_modes(model: Model, x, u, p) -> np.ndarray | None:
+    """Eigenvalues with negative real part of ``A = df/dx`` at ``(x, u, p)`` (None: A not finite).
+
+    Parameters
+    ----------
+    model : Model
+    x, u, p : array_like
+        The state, inputs and parameters.
+    """
     A = _state_jacobian(model, x, u, p)
     if not np.all(np.isfinite(A)):
         return None
@@ -276,7 +283,7 @@ def is_stable_step(model: Model, x, u, p, method: str, h: float) -> bool:
     """
     if method not in _STABILITY:
         return True
-    lam = _decaying_modes(model, np.asarray(x, dtype=float), np.asarray(u, dtype=float), p)
+    lam = decaying_modes(model, np.asarray(x, dtype=float), np.asarray(u, dtype=float), p)
     return lam is None or bool(np.all(_amplification(method, h * lam.astype(complex)) <= 1.0 + 1e-12))
 
 
@@ -304,7 +311,7 @@ def stable_step(model: Model, x, u, p, method: str) -> float:
     """
     if method not in _STABILITY:
         return np.inf
-    decaying = _decaying_modes(model, x, u, p)
+    decaying = decaying_modes(model, x, u, p)
     if decaying is None:
         return np.inf
     return float(_critical_steps(method, decaying).min(initial=np.inf))

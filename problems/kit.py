@@ -106,19 +106,15 @@ def md_table(rows: Mapping[str, Mapping] | Sequence[Mapping], columns: Sequence[
 # -- figures and JSON --------------------------------------------------------------------------------------
 @contextmanager
 def figure(path: str | os.PathLike, nrows: int = 1, ncols: int = 1, **kwargs) -> Iterator:
-    """``with figure(out / "x.png", 2, 1, figsize=(8, 5)) as (fig, axes):`` -- saved (110 dpi) and closed."""
-    import matplotlib
+    """``with figure(out / "x.png", 2, 1, figsize=(8, 5)) as (fig, axes):`` -- saved (110 dpi); made
+    without pyplot, so no backend is chosen and nothing stays open."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(nrows, ncols, **kwargs)
-    try:
-        yield fig, axes
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-    finally:
-        plt.close(fig)
+    fig = Figure(figsize=kwargs.pop("figsize", None))
+    axes = fig.subplots(nrows, ncols, **kwargs)
+    yield fig, axes
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 def json_ready(value):

@@ -54,12 +54,10 @@ def _metrics(data, kind, heading, t_exec):
 
 
 def _plot(path, name, records):
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 4.8))
+    fig = Figure(figsize=(12, 4.8))
+    ax1, ax2 = fig.subplots(1, 2)
     styles = {"measured": "k-", "simulated": "C0--", "replayed": "C1-."}
     for label, rec in records.items():
         ax1.plot(rec["y"] - rec["y"][0], rec["x"] - rec["x"][0], styles[label], label=label)
@@ -77,7 +75,6 @@ def _plot(path, name, records):
     fig.suptitle(f"KVLCC2 {name.replace('_', ' ')}: MMG standard method vs MARIN free-running")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
-    plt.close(fig)
 
 
 def _fmt(v):

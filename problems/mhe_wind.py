@@ -1,6 +1,6 @@
-"""MHE that estimates an unknown wind force, against EKF and UKF, in seed 002's modelling-error scenario.
+"""MHE that estimates an unknown wind force, against EKF and UKF, in Koike et al.'s (2023) modelling-error scenario.
 
-Seed 002 (UKF/EnKF guidelines for automatic berthing) generates data with a twin-rudder low-speed
+Koike et al. (2023; UKF/EnKF guidelines for automatic berthing) generate data with a twin-rudder low-speed
 MMG ship (Yoshimura's hull model) on which a gusty wind (its Eq. 34, Fujiwara's Fourier form) acts,
 and filters them with the same model *without* wind: the wind is pure modelling error. The ship,
 the wind loads and the gust record are those of the filter-guidelines study
@@ -16,7 +16,7 @@ the wind loads and the gust record are those of the filter-guidelines study
   its superstructure aft, a yaw moment worth estimating; with Fujiwara's 2005 regression it is
   small and a yaw disturbance mostly adds variance to ``r`` and ``psi``.)
 
-Scenario as in seed 002: Euler at dt = 0.1 s, every state measured (H = I6) with standard
+Scenario as in Koike et al. (2023): Euler at dt = 0.1 s, every state measured (H = I6) with standard
 deviation 0.05 (the filters use R = 0.05^2 I), x(0) = y(0), P(0) = I; a 20 deg twin-rudder zig-zag
 (period 30 s) at constant propeller rate; one gust record (mean direction 60 deg, 30 % gusts,
 direction wandering) scaled to mean speeds 0, 0.82 and 1.64 m/s. RMSE of the filtered states
@@ -35,7 +35,7 @@ from casship.maneuvers import propeller_rate_for_speed
 from casship.progress import progress
 
 from . import Study
-from .filter_guidelines.scenario import gust_record, ship_models as seed002_ship
+from .filter_guidelines.scenario import gust_record, ship_models as berthing_ship
 from .kit import Departure, Report, figure, md_table, run_cases, write_json
 
 DT = 0.1
@@ -55,8 +55,8 @@ UNITS = {"u": "m/s", "v": "m/s", "r": "rad/s", "x": "m", "y": "m", "psi": "rad"}
 
 # -- ship, wind, inputs ------------------------------------------------------------------------------------
 def ship_models(wind_form: str = "eq34"):
-    """``(truth, ship)``: seed 002's twin-rudder low-speed ship with wind (truth) and without."""
-    return seed002_ship(wind_form)
+    """``(truth, ship)``: Koike et al.'s (2023) twin-rudder low-speed ship with wind (truth) and without."""
+    return berthing_ship(wind_form)
 
 
 def propeller_rate(ship) -> float:
@@ -91,7 +91,7 @@ def noisy(tr, ship, seed: int) -> cs.Dataset:
 
 
 def prior(data: cs.Dataset, nx: int) -> cs.Gaussian:
-    """x(0) = y(0), P(0) = I (seed 002)."""
+    """x(0) = y(0), P(0) = I (Koike et al. 2023)."""
     return cs.Gaussian(np.array([data[s][0] for s in STATES]), np.eye(nx))
 
 
@@ -209,8 +209,8 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
     (out / "rmse.md").write_text(md_table(rows, STATES, first="wind, filter") + "\n\n" + tuned + "\n")
     alt_won = wins(alt, strongest)
     deps = [
-        Departure("wind loads", "seed 002's Eq. 34 (Fujiwara's Fourier form)", "Eq. 34, as in the filter-guidelines "
-                  "study (same ship, geometry and gust record)",
+        Departure("wind loads", "Koike et al. 2023, Eq. 34 (Fujiwara's Fourier form)",
+                  "Eq. 34, as in the filter-guidelines study (same ship, geometry and gust record)",
                   f"with Fujiwara's 2005 regression (one seed, {strongest:g} m/s, same tuning): the MHE beats both "
                   f"EKF and UKF in {sum(alt_won.values())}/6 states (Eq. 34, first seed: "
                   f"{sum(wins(aggregate([r for r in results if r['seed'] == seeds[0]], winds[-1:]), strongest).values())}/6)"),
@@ -225,13 +225,14 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
                   f"iteration, random-walk disturbances on {', '.join(q['disturbed'])} (chosen on the tuning record)",
                   "the study's subject"),
     ]
-    rep = Report("MHE estimating the wind against EKF and UKF (beyond seed 002)", quick=quick)
+    rep = Report("MHE estimating the wind against EKF and UKF (beyond Koike et al. 2023)", quick=quick)
     rep.add(__doc__.split("\n\n", 1)[1].split("Run:")[0].strip())
     rep.section("RMSE against the truth")
     rep.add(md_table(rows, STATES, first="wind, filter"), tuned, "![rmse](rmse.png)",
             f"At {strongest:g} m/s the MHE has the lowest RMSE of the three in {sum(won.values())}/6 states.",
             "![disturbance](disturbance.png)")
-    rep.departures(deps, "Departures from seed 002's scenario, whose modelling-error experiment this study extends.")
+    rep.departures(deps, "Departures from the scenario of Koike et al. (2023), whose modelling-error experiment "
+                         "this study extends.")
     rep.write(out)
     next(steps, None)
     return write_json(out / "summary.json", {
@@ -263,4 +264,4 @@ def _figures(out: Path, table: dict, winds, keep: dict, disturbed) -> None:
         fig.suptitle(f"Wind effect on the accelerations, mean wind {keep['wind']:g} m/s")
 
 
-STUDY = Study("mhe-wind", "MHE estimating a wind disturbance vs EKF and UKF (seed 002 modelling error)", run)
+STUDY = Study("mhe-wind", "MHE estimating a wind disturbance vs EKF and UKF (Koike et al. 2023 modelling error)", run)

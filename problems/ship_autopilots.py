@@ -32,7 +32,7 @@ from casship.parallel import run_cases
 from casship.progress import progress
 
 from . import Study
-from .kit import Departure, Report, write_json
+from .kit import Departure, Report, figure, write_json
 
 # Parameters perturbed by +-20 % in the robustness cases (those that set the Nomoto K and T).
 SHIPS = {
@@ -139,16 +139,15 @@ def _fmt(v, nd=3):
 
 
 def _plots(out: Path, ship: str, designs: dict, results: list):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     d = designs["pid"]
     ap.plot_design(d.loop, out / f"{ship}_loop_bode_step.png", f"{ship}: PID loop (identified Nomoto gains, "
                    "linearised ship)", d.closed_loop)
     kept = [r for r in results if "data" in r and r["ship"] == ship]
-    fig, axes = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    with figure(out / f"{ship}_course_changes.png", 2, 1, figsize=(9, 7), sharex=True) as (fig, axes):
+        _draw_course_changes(fig, axes, ship, kept)
+
+
+def _draw_course_changes(fig, axes, ship: str, kept: list) -> None:
     for r in kept:
         label = f"{r['case']}, {r['angle']:.0f} deg ({r['method']})"
         axes[0].plot(r["t"], np.degrees(np.unwrap(r["data"]["psi"])), label=label)
@@ -162,9 +161,6 @@ def _plots(out: Path, ship: str, designs: dict, results: list):
     for a in axes:
         a.grid(alpha=0.3)
     fig.suptitle(f"{ship}: heading changes on the nonlinear model with wind (compass, gyro, observer in the loop)")
-    fig.tight_layout()
-    fig.savefig(out / f"{ship}_course_changes.png", dpi=100)
-    plt.close(fig)
 
 
 def _design_rows(s: str, ident: dict, designs: dict) -> dict:

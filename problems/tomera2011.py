@@ -1,4 +1,4 @@
-"""Tomera (2011), "Kalman-Bucy filter design for multivariable ship motion control" (seed 001).
+"""Tomera (2011), "Kalman-Bucy filter design for multivariable ship motion control".
 
 Reproduction and extension:
 

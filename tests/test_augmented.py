@@ -42,3 +42,18 @@ def test_recovers_nomoto_parameters():
     assert out.final["T"] == pytest.approx(20.0, rel=0.05)
     assert out.final_std["T"] < 2.0
     assert out.trajectory("K").shape == (t.size,)
+
+
+def test_augment_a_discrete_time_model():
+    """A parameter of a discrete-time model becomes a random walk over one step: c[k+1] = c[k] + dt w_c."""
+    b = cs.ModelBuilder("decay", dt=0.25)
+    v = b.state("v")
+    c = b.param("c", 0.9, unit="-", doc="decay per step")
+    b.next(v=c * v + b.noise("w_v"))
+    b.output("v_m", v)
+    aug = cs.augment(b.build(), ["c"])
+    assert aug.state_names == ("v", "c") and aug.noise_names == ("w_v", "w_c") and aug.param_names == ()
+    assert aug.state_vars[1].unit == "-" and aug.state_vars[1].doc == "decay per step"
+    step = cs.discretize(aug).step
+    np.testing.assert_allclose(np.ravel(step([2.0, 0.8], [], [], [0.1, 0.3], 0.25)),
+                               [0.8 * 2.0 + 0.1, 0.8 + 0.25 * 0.3], rtol=1e-15)

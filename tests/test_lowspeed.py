@@ -89,14 +89,14 @@ def test_straight_run_and_no_propeller():
 
 
 def test_hovering_rudders_brake():
-    """VecTwin-style 105/-105 deg rudders brake the ship (seed 002 ranges)."""
+    """VecTwin-style 105/-105 deg rudders brake the ship (Koike et al. 2023 ranges)."""
     ship = esso_osaka_twin()
     f = np.asarray(ship.f(ship.states(u=0.3), ship.inputs(n=11.0, delta_s=np.radians(105), delta_p=-np.radians(105)),
                           ship.params(), np.zeros(3))).ravel()
     assert f[0] < 0 and abs(f[2]) < 1e-12
 
 
-def test_random_rudder_sequence_seed002_ranges():
+def test_random_rudder_sequence_koike2023_ranges():
     ship = esso_osaka_twin()
     t = np.arange(0, 300, 0.1)
     u = random_rudder_inputs(ship, t, 11.0, hold=10.0, seed=2)

@@ -338,3 +338,61 @@ def test_nan_or_inf_constants_are_rejected_at_build_naming_the_state():
     b.output("y", x + np.inf)
     with pytest.raises(ValueError, match=r"the output 'y' contains the constant inf"):
         b.build()
+
+
+def test_param_as_state_with_its_rate_in_continuous_and_discrete_time():
+    b = nomoto_builder().build().builder("nomoto_aug")
+    b.param_as_state("K", rate=b.noise("w_K"))
+    m = b.build()
+    xdot = np.array(m.f([0.0, 0.1, 0.08], [0.3], [25.0], [0.0, 0.01])).ravel()
+    np.testing.assert_allclose(xdot, [0.1, (0.08 * 0.3 - 0.1) / 25.0, 0.01], rtol=1e-15)
+    # discrete time: the rate over a step, so x[k+1] = x[k] + dt * rate (as add_to_ode)
+    d = cs.ModelBuilder("cv", dt=0.5)
+    x, v = d.state("x"), d.state("v")
+    c = d.param("c", 0.9)
+    d.next(x=x + 0.5 * v, v=c * v)
+    d.param_as_state("c", rate=d.noise("w_c"))
+    step = cs.discretize(d.build()).step
+    np.testing.assert_allclose(np.ravel(step([1.0, 2.0, 0.9], [], [], [0.4], 0.5)), [2.0, 1.8, 0.9 + 0.5 * 0.4],
+                               rtol=1e-15)
+
+
+def test_declarations_are_a_read_only_snapshot():
+    b = nomoto_builder()
+    snap = b.declarations()
+    b.param("extra", 1.0)
+    b.drop_outputs()
+    assert [v.name for v in snap.params] == ["K", "T"] and [v.name for v in snap.outputs] == ["psi"]
+    assert set(snap.symbols) == {"psi", "r", "delta", "K", "T", "w_r"} and set(snap.rates) == {"psi", "r"}
+    with pytest.raises(TypeError):
+        snap.rates["psi"] = 0
+    with pytest.raises(AttributeError):
+        snap.name = "other"
+    assert b.declarations().outputs == () and len(b.declarations().params) == 3
+
+
+def test_composition_leaves_the_model_as_it_was():
+    m = nomoto_builder().build()
+    m.with_outputs({"turn": lambda b: b.sym("r")})
+    b = m.builder("copy")
+    b.drop_outputs()
+    assert m.output_names == ("psi",) and m.builder().declarations().outputs[0].name == "psi"
+
+
+def test_derived_objects_are_built_once_and_go_with_the_model():
+    """What simulate derives from a model (discretisations, mapped outputs) is kept by the model: built
+    once per key, and freed with the model (nothing else holds the model alive)."""
+    import gc
+    import weakref
+
+    m = nomoto_builder().build()
+    made = []
+    assert m.derived(("k", 1), lambda: made.append(1) or "one") == "one"
+    assert m.derived(("k", 1), lambda: made.append(2) or "two") == "one" and made == [1]
+    t = np.arange(0.0, 5.0, 0.5)
+    first = cs.simulate(m, m.states(), t, {"delta": 0.1})
+    np.testing.assert_array_equal(cs.simulate(m, m.states(), t, {"delta": 0.1}).x, first.x)
+    ref = weakref.ref(m)
+    del m, first
+    gc.collect()
+    assert ref() is None

@@ -7,6 +7,7 @@ from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 import casship as cs
+from casship import maneuvers
 from casship.angles import unwrap, wrap, wrap_sym
 
 # derandomized: the same examples on every run (reproducible in CI), no example database on disk
@@ -168,7 +169,6 @@ def circle_track(radius, psi0, x0, y0, direction, speed=5.0, dt=0.5):
        st.floats(min_value=-1e4, max_value=1e4), st.floats(min_value=-1e4, max_value=1e4),
        st.sampled_from([1, -1]))
 def test_turning_metrics_are_those_of_the_circle_whatever_the_pose(radius, psi0, x0, y0, direction):
-    maneuvers = pytest.importorskip("casship.maneuvers")
     m = maneuvers.turning_metrics(circle_track(radius, psi0, x0, y0, direction), t_exec=20.0)
     assert m["turn_direction"] == direction
     # sampling and linear interpolation of the crossing: errors of order (speed dt)^2 / radius
@@ -187,7 +187,6 @@ def test_turning_metrics_are_those_of_the_circle_whatever_the_pose(radius, psi0,
 def test_zigzag_metrics_of_a_sinusoidal_heading(amplitude_deg, heading_deg, psi0, side, period):
     """Heading change A sin(2 pi t / T) after the execute: overshoots A - heading, period T, first side,
     whatever the initial heading (also across +-180 deg)."""
-    maneuvers = pytest.importorskip("casship.maneuvers")
     t = np.arange(0.0, 10.0 + 3.2 * period, 0.1)
     change = side * np.radians(amplitude_deg) * np.sin(2 * np.pi * np.maximum(t - 10.0, 0.0) / period)
     data = cs.Dataset(t, {"psi": wrap(psi0 + change)})

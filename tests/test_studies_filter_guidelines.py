@@ -1,4 +1,4 @@
-"""Seed 002 study (``casship study filter-guidelines --quick``) and its Monte Carlo machinery."""
+"""Koike et al. (2023) study (``casship study filter-guidelines --quick``) and its Monte Carlo machinery."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Seed 002's Eq. 34: Fujiwara's Fourier-form wind loads (1998 regression)."""
+"""Koike et al.'s (2023) Eq. 34: Fujiwara's Fourier-form wind loads (1998 regression)."""
 import numpy as np
 import pytest
 

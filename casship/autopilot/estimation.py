@@ -20,7 +20,8 @@ import numpy as np
 
 from ..gaussian import Gaussian
 from ..discretize import discretize
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 
 __all__ = ["WaveYaw", "course_ekf", "course_prior", "heading_observer", "heading_kf", "heading_prior"]
 

@@ -17,7 +17,8 @@ import numpy as np
 
 from ..discretize import discretize
 from ..linear import trim
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 
 __all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation", "SteeringFeedforward",
            "steering_feedforward", "piecewise_linear", "speed_profile",

@@ -157,7 +157,7 @@ class Approach:
     def __init__(self, model: Model, p, *, speed: float | None = None, dt: float | None = None,
                  n: float | None = None):
         from ..maneuvers import propeller_inputs, propeller_rate_for_speed, rudder_inputs, straight_run_state, vessel_of
-        from ..maneuvers.runners import _nice_step
+        from ..maneuvers.runners import nice_step
 
         vessel = vessel_of(model)
         self.rudders, self.propellers = rudder_inputs(model), propeller_inputs(model)
@@ -168,7 +168,7 @@ class Approach:
         self.p = np.asarray(model.params(p), dtype=float)
         self.L = float(vessel.L_pp)
         self.time_scale = self.L / self.speed
-        self.dt = float(dt) if dt is not None else _nice_step(self.time_scale / 40)
+        self.dt = float(dt) if dt is not None else nice_step(self.time_scale / 40)
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt must be a positive number [s], got {dt}")
         if n is not None and not (np.isfinite(n) and self.propellers):

@@ -1,4 +1,4 @@
-"""Augmented-state estimation: chosen parameters become random-walk states (seed 000's method).
+"""Augmented-state estimation: chosen parameters become random-walk states (the method of Shi et al. 2009).
 
 ``augment(model, ["K", "T"])`` rebuilds the same symbolic model with ``K`` and ``T`` moved from
 the parameter vector to the state vector, each with ``dK/dt = w_K`` (a random walk driven by a new
@@ -16,7 +16,7 @@ from ..data import Dataset
 
 from ..gaussian import Gaussian, as_cov
 from ..discretize import discretize
-from ..model import Model, Variable
+from ..model import Model
 from .result import FilterResult
 from .ekf import EKF
 
@@ -71,13 +71,10 @@ def augment(model: Model, params: Sequence[str] = (), *, disturbances: Sequence[
     if len(set(disturbances)) != len(disturbances):
         raise ValueError(f"disturbances repeat a state: {disturbances}")
     b = model.builder(name or f"{model.name}_aug")
-    by_name = {v.name: v for v in model.param_vars}
-    b._params = [v for v in b._params if v.name not in params]
+    docs = {v.name: v.doc for v in model.param_vars}
     for pname in params:
-        var = by_name[pname]
-        b._kinds[pname] = "state"
-        b._states.append(Variable(pname, var.unit, False, var.doc or "augmented parameter (random walk)"))
-        b._ode[pname] = b.noise(f"{noise_prefix}{pname}")
+        b.param_as_state(pname, doc=docs[pname] or "augmented parameter (random walk)",
+                         rate=b.noise(f"{noise_prefix}{pname}"))
     for state in disturbances:
         unit = model.state_vars[model.index(state)].unit
         d = b.state(f"d_{state}", unit=f"{unit}/s" if unit else "", doc=f"additive disturbance on d{state}/dt")
@@ -195,7 +192,7 @@ def augmented_ekf(model: Model, params: Sequence[str], data: Dataset, *, dt: flo
         Parameters to estimate (random-walk states).
     data : Dataset
     dt : float
-        Nominal step of the discretisation (``method``, Euler as in seed 000 by default).
+        Nominal step of the discretisation (``method``, Euler as in Shi et al. 2009 by default).
     Q : covariance of the model's own process noise.
     R : covariance of the measured outputs.
     q_params : float, sequence or mapping
@@ -203,9 +200,9 @@ def augmented_ekf(model: Model, params: Sequence[str], data: Dataset, *, dt: flo
     prior : Gaussian
         Belief about the model's own states.
     guess : mapping, optional
-        Initial parameter values (default: zero, as in seed 000).
+        Initial parameter values (default: zero, as in Shi et al. 2009).
     p0_params : float, sequence or mapping
-        Initial parameter variances (seed 000: ``1e5``).
+        Initial parameter variances (Shi et al. 2009: ``1e5``).
     p : array or mapping, optional
         Values of the parameters that are not estimated (nominal by default).
     measured : sequence of str, optional

@@ -275,7 +275,7 @@ class StepEstimator(Estimator):
         -------
         FilterResult
         """
-        self._check_prior(prior)
+        self.check_prior(prior)
         if isinstance(data, Dataset) and all(n in data for n in self.model.input_names):
             self._check_start(prior, data.matrix(self.model.input_names)[0] if self.model.nu else [], p)
         # a gap too long for one prediction from the estimate before it: raise or bridge
@@ -409,6 +409,6 @@ class StepEstimator(Estimator):
         """
         from .online import StepRun
 
-        self._check_prior(prior)
+        self.check_prior(prior)
         self._check_start(prior, self.model.inputs() if u is None else u, p)
         return StepRun(self, prior, p, u, np.random.default_rng(seed))

@@ -228,7 +228,20 @@ class Estimator(abc.ABC):
                 "mask": mask.T.astype(float), "dt": dt[None, :], "gate": gate[None, :],
                 "p": m.params() if p is None else m.params(p), "Q": self.Q, "R": self.R}
 
-    def _check_prior(self, prior: Gaussian) -> None:
+    def check_prior(self, prior: Gaussian) -> None:
+        """Check a prior belief of the state: a :class:`~casship.Gaussian` of the model's size, angles in radians.
+
+        Parameters
+        ----------
+        prior : Gaussian
+
+        Raises
+        ------
+        TypeError
+            Not a Gaussian.
+        ValueError
+            The wrong number of entries, or an angle's mean beyond 2 pi (degrees given?).
+        """
         if not isinstance(prior, Gaussian):
             raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
         if prior.mean.size != self.model.nx:

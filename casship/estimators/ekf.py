@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ..builder import ModelBuilder
 from ..discretize import rk4
 from .base import StepEstimator
 from .options import EstimatorOptions, check_int
@@ -210,7 +211,7 @@ class KF(EKF):
 def persistence_model(names, name: str = "persistence"):
     """A random-walk (persistence, ``A = I``) model measuring each named state directly.
 
-    The baseline of seed 002: ``x[k+1] = x[k] + w``; use it with :class:`KF`.
+    The baseline of Koike et al. (2023): ``x[k+1] = x[k] + w``; use it with :class:`KF`.
 
     Parameters
     ----------
@@ -219,8 +220,6 @@ def persistence_model(names, name: str = "persistence"):
     name : str
         Model name.
     """
-    from ..model import ModelBuilder
-
     b = ModelBuilder(name, "persistence (random-walk) model, A = I")
     for n in names:
         angle = n in ("psi", "chi", "heading")

@@ -1,4 +1,4 @@
-"""Ensemble Kalman filter with perturbed observations (Evensen 1994; Burgers et al. 1998; seed 002).
+"""Ensemble Kalman filter with perturbed observations (Evensen 1994; Burgers et al. 1998; Koike et al. 2023).
 
 The random draws are generated in numpy (from the ``seed``) and enter the compiled step as the
 per-step inputs ``z_w`` (nw x N) and ``z_v`` (ny x N), so a seeded run is reproducible and the
@@ -36,7 +36,7 @@ class EnKFOptions(EstimatorOptions):
     gate, jit, outputs, max_gap, on_gap
         The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     members : int
-        Ensemble size ``N`` (seed 002: 100).
+        Ensemble size ``N`` (Koike et al. 2023: 100).
     """
 
     members: int = 100
@@ -188,7 +188,7 @@ class EnKF(StepEstimator):
         prior : Gaussian
         seed : int or numpy.random.Generator, optional
         """
-        self._check_prior(prior)
+        self.check_prior(prior)
         return prior.sample(self.members, np.random.default_rng(seed)).T.copy()
 
     def _build(self, s: dict) -> dict:

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..data import Dataset
 from ..errors import InputError
-from ..validity import _decaying_modes, is_stable_step, stable_step
+from ..validity import decaying_modes, is_stable_step, stable_step
 
 __all__ = ["gap_threshold", "gap_limit", "gap_pieces", "checked_run", "bridge_gaps", "bridge_pieces", "GAP_FACTOR"]
 
@@ -102,7 +102,7 @@ def gap_limit(est, x, u, p=None) -> float:
     dm, m = est.dmodel, est.model
     pv = m.params() if p is None else m.params(p)
     x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
-    if dm.method in ("euler", "rk4") and _decaying_modes(m, x, u, pv) is None:
+    if dm.method in ("euler", "rk4") and decaying_modes(m, x, u, pv) is None:
         raise InputError(f"{est.name}: the model {m.name!r} is not finite at the estimate "
                          f"({', '.join(f'{n} = {v:.4g}' for n, v in zip(m.state_names, x))}), so no time gap can be "
                          "checked there")
@@ -148,7 +148,7 @@ def gap_pieces(est, x, u, p, dt: float, where: str) -> int:
         pv = m.params() if p is None else m.params(p)
         x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
         if is_stable_step(m, x, u, pv, dm.method, dt / getattr(dm, "substeps", 1)) \
-                and _decaying_modes(m, x, u, pv) is not None:
+                and decaying_modes(m, x, u, pv) is not None:
             return 1
     limit = gap_limit(est, x, u, p)
     if est.options.on_gap == "raise":

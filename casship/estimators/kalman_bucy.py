@@ -1,4 +1,4 @@
-"""Continuous-time Kalman-Bucy filter (Kalman & Bucy 1961; Tomera 2011, seed 001).
+"""Continuous-time Kalman-Bucy filter (Kalman & Bucy 1961; Tomera 2011).
 
 Between two samples the estimate and the covariance follow
 
@@ -8,7 +8,7 @@ Between two samples the estimate and the covariance follow
 with the latest sample ``y`` held over the interval that it ends, ``A, G, H`` the exact Jacobians
 (for a linear model the classical Kalman-Bucy filter ``A x + B u + L (y - C x)``) and the spectral
 densities ``Qc = Q dt``, ``Rc = R dt`` of the one meaning of ``Q`` and ``R``
-(``docs/architecture.md``; ``dt`` = ``dmodel.dt``, Tomera 2011 Eq. 31-35). The steady-state
+(``docs/architecture.md``; ``dt`` = ``dmodel.dt``, Tomera 2011, Eq. 31-35). The steady-state
 filter takes ``L`` and ``P`` from ``control.lqe``.
 """
 from __future__ import annotations

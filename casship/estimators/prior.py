@@ -29,7 +29,7 @@ from ..data import Dataset
 from ..errors import InputError
 from ..gaussian import Gaussian, as_cov
 
-__all__ = ["prior_from_data", "noise_from_data", "DataPrior", "TRACK_POSITIONS"]
+__all__ = ["prior_from_data", "noise_from_data", "DataPrior", "TRACK_POSITIONS", "second_difference_std"]
 
 #: Position columns a track is read from (North-like first), in order of preference.
 TRACK_POSITIONS = (("x", "y"), ("x_n", "y_n"), ("lat", "lon"))
@@ -196,11 +196,38 @@ def prior_from_data(model, data: Dataset, *, measured: Sequence[str] = (), R=Non
     return DataPrior(mean, cov, names=names, sources=sources)
 
 
+def second_difference_std(y, angle: bool = False) -> float | None:
+    """Standard deviation of the white noise on one channel sampled faster than its dynamics.
+
+    The second difference of a smooth signal sampled fast is small, that of white noise has variance
+    ``6 sigma^2``; the median absolute deviation of the second differences (robust to manoeuvres and
+    outliers) gives ``sigma = MAD / 0.6745 / sqrt(6)``.
+
+    Parameters
+    ----------
+    y : array_like
+        The samples (NaN: not measured, left out).
+    angle : bool
+        An angle (unwrapped first).
+
+    Returns
+    -------
+    float or None
+        The estimate; None with fewer than 5 finite samples.
+    """
+    y = np.asarray(y, dtype=float)
+    y = y[np.isfinite(y)]
+    if y.size < 5:
+        return None
+    d2 = np.diff(np.unwrap(y) if angle else y, 2)
+    return float(np.median(np.abs(d2 - np.median(d2))) / 0.6745 / np.sqrt(6.0))
+
+
 def noise_from_data(model, data: Dataset, measured: Sequence[str]) -> tuple[dict, dict]:
     """Measurement variance of each measured channel, estimated from the record, and how.
 
     The second differences of a channel sampled faster than its dynamics measure its noise
-    (:func:`casship.identify.noise_std`). A channel printed with few digits (trial files keep three
+    (:func:`second_difference_std`). A channel printed with few digits (trial files keep three
     significant digits) is quantised (it keeps its value between most samples): its error is at
     least the quantisation noise ``q^2 / 12`` of its typical jump ``q``; a record whose reader states
     the significant digits of its numbers (``meta["significant_digits"]``) gives the quantum of each
@@ -235,8 +262,6 @@ def noise_from_data(model, data: Dataset, measured: Sequence[str]) -> tuple[dict
     >>> round(float(np.sqrt(R["psi"])), 4), how["psi"]
     (0.001, 'second differences')
     """
-    from ..identify.records import noise_std
-
     R, how = {}, {}
     for n in measured:
         angle = bool(model.angle_outputs[model.index(n, "output")])
@@ -254,10 +279,9 @@ def noise_from_data(model, data: Dataset, measured: Sequence[str]) -> tuple[dict
             if v.size:
                 quanta = 10.0 ** (np.floor(np.log10(v)) - (int(digits) - 1))
                 found.append((float(np.mean(quanta**2)) / 12, f"{digits} significant digits: mean quantum^2/12"))
-        try:
-            found.append((noise_std(data, [n], [n] if angle else [])[n] ** 2, "second differences"))
-        except ValueError:
-            pass
+        std = second_difference_std(y, angle)
+        if std is not None and std > 0:
+            found.append((std**2, "second differences"))
         var, text = max(found)
         if not var > 0:
             raise InputError(f"the noise of {n!r} cannot be estimated from the record (a constant channel); give "

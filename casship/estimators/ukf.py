@@ -4,7 +4,7 @@ The sigma points follow the scaled unscented transform (Julier 2002; Wan & van d
 ``lambda = alpha^2 (n + kappa) - n``, points ``x`` and ``x +- sqrt(n + lambda) * S[:, i]`` with
 ``S S' = P``, mean weights ``W0 = lambda / (n + lambda)``, ``Wi = 1 / (2 (n + lambda))`` and the
 covariance weight ``W0c = W0 + 1 - alpha^2 + beta``. With ``alpha = 1, beta = 0`` this is the
-original form of Julier & Uhlmann that seed 002 uses (``W0 = kappa / (n + kappa)``, ``kappa = 3``),
+original form of Julier & Uhlmann that Koike et al. (2023) use (``W0 = kappa / (n + kappa)``, ``kappa = 3``),
 the default here.
 """
 from __future__ import annotations
@@ -130,7 +130,7 @@ class UKFOptions(EstimatorOptions):
         The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     alpha, beta, kappa : float
         Scaled unscented transform parameters. The default ``alpha = 1, beta = 0, kappa = 3`` is
-        the unscaled form of seed 002; ``alpha = 1e-3, beta = 2, kappa = 0`` is the common scaled form.
+        the unscaled form of Koike et al. (2023); ``alpha = 1e-3, beta = 2, kappa = 0`` is the common scaled form.
     """
 
     alpha: float = 1.0
@@ -153,7 +153,7 @@ class UKF(StepEstimator):
 
     The process noise enters additively through the exact noise Jacobian of the discretised step at
     the mean, ``P- = sum Wc (X_i - x-)(X_i - x-)' + G Q G'`` (exact for models linear in ``w``).
-    Sigma points are redrawn from the predicted belief before the update (as in seed 002).
+    Sigma points are redrawn from the predicted belief before the update (as in Koike et al. 2023).
 
     Parameters
     ----------

@@ -262,10 +262,7 @@ class CrossValidation:
         -------
         list of Path
         """
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure
 
         from ..angles import unwrap
 
@@ -275,7 +272,8 @@ class CrossValidation:
         for i, name in enumerate(records or list(self.replays)):
             rep = self.replays[name]
             data = rep["data"]
-            fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+            fig = Figure(figsize=(14, 4.2))
+            axes = fig.subplots(1, 3)
             styles = (("measured", data, dict(color="0.3", lw=1.6)),
                       ("reference", rep["reference"].trajectory, dict(color="C1", lw=1.0, ls="--")),
                       ("fit", rep["fit"].trajectory, dict(color="C0", lw=1.0)))
@@ -299,6 +297,5 @@ class CrossValidation:
             safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
             path = directory / f"cv_{i:02d}_{safe}.png"
             fig.savefig(path, dpi=100)
-            plt.close(fig)
             paths.append(path)
         return paths

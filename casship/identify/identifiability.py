@@ -243,13 +243,11 @@ class Identifiability:
         -------
         Path
         """
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure
 
         k = len(self.names)
-        fig, axes = plt.subplots(1, 3, figsize=(13, 0.35 * k + 2.5), gridspec_kw={"width_ratios": [1, 1, 1.4]})
+        fig = Figure(figsize=(13, 0.35 * k + 2.5))
+        axes = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1, 1.4]})
         lam = np.where(self.eigenvalues > 0, self.eigenvalues, np.nan)
         axes[0].barh(np.arange(k), 1 / np.sqrt(lam), color="C0")
         axes[0].set_xscale("log")
@@ -275,5 +273,4 @@ class Identifiability:
         fig.tight_layout()
         path = Path(path)
         fig.savefig(path, dpi=110)
-        plt.close(fig)
         return path

@@ -30,7 +30,8 @@ from ..data import Dataset
 from ..gaussian import Gaussian
 from ..discretize import discretize
 from ..frames import body_to_ned
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 from .result import FitResult
 from .records import record_label
 from .uncertainty import covariance_from_information, effective_samples, whiteness

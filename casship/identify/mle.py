@@ -178,7 +178,7 @@ class MLEProblem(IdentificationProblem):
         if len(priors) != n:
             raise ValueError(f"x0: {len(priors)} priors for {n} records")
         for g in priors:
-            est._check_prior(g)
+            est.check_prior(g)
         return priors
 
     def _noise_entries(self, noise):

@@ -13,6 +13,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..data import Dataset
+from ..estimators.prior import second_difference_std
 
 __all__ = ["check_gaps", "noise_std", "initial_states", "share_labels", "record_label", "as_records"]
 
@@ -98,13 +99,9 @@ def noise_std(records, names: Sequence[str], angles: Sequence[str] = ()) -> dict
         for d in as_records(records):
             if n not in d:
                 raise ValueError(f"no column {n!r} in record {record_label(d, 0)!r}; columns: {list(d.names)}")
-            y = np.asarray(d[n], dtype=float)
-            y = y[np.isfinite(y)]
-            if n in angles:
-                y = np.unwrap(y)
-            if y.size >= 5:
-                d2 = np.diff(y, 2)
-                per.append(np.median(np.abs(d2 - np.median(d2))) / 0.6745 / np.sqrt(6.0))
+            std = second_difference_std(d[n], n in angles)
+            if std is not None:
+                per.append(std)
         if not per:
             raise ValueError(f"channel {n!r}: fewer than 5 finite samples in every record; give its noise level")
         s = float(np.median(per))

@@ -330,15 +330,12 @@ class FitResult:
         """
         if not self.predictions:
             raise ValueError("this FitResult holds no predictions (read from JSON?); nothing to plot")
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure
 
         names = list(self.predictions[0]["measured"])
         nrec = len(self.predictions)
-        fig, axes = plt.subplots(nrec, len(names), figsize=(max(6.0, 3.4 * len(names) + 0.6), 1.9 * nrec + 0.8),
-                                 squeeze=False, sharex="row")
+        fig = Figure(figsize=(max(6.0, 3.4 * len(names) + 0.6), 1.9 * nrec + 0.8))
+        axes = fig.subplots(nrec, len(names), squeeze=False, sharex="row")
         for r, rec in enumerate(self.predictions):
             units, angle = rec.get("units", {}), rec.get("angle", {})
             for c, n in enumerate(names):
@@ -365,5 +362,4 @@ class FitResult:
         fig.tight_layout()
         path = Path(path)
         fig.savefig(path, dpi=100)
-        plt.close(fig)
         return path

@@ -19,10 +19,10 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..angles import wrap as _wrap
-from ..data import Dataset
+from ..data import Dataset, read_frame
 from .geodesy import geodetic_to_ne
 
-__all__ = ["read_csv", "read_frame", "from_frame", "UNITS"]
+__all__ = ["read_csv", "from_frame", "UNITS"]
 
 # unit -> (SI unit, factor, offset): value_SI = factor * value + offset
 UNITS: dict[str, tuple[str, float, float]] = {
@@ -136,65 +136,6 @@ def from_frame(frame, columns: Mapping[str, str] | None = None, *, time: str = "
         return Dataset(t, out, units, meta)
     except ValueError as exc:
         raise ValueError(f"{name}: {exc}") from None
-
-
-def read_frame(path, **read_options):
-    """A CSV file with a header row as a pandas DataFrame, with errors that name the file.
-
-    Parameters
-    ----------
-    path : str, Path or file object
-        The CSV file.
-    **read_options
-        Passed to :func:`pandas.read_csv` (e.g. ``sep=";"``).
-
-    Returns
-    -------
-    pandas.DataFrame
-        At least one data row.
-
-    Raises
-    ------
-    FileNotFoundError, IsADirectoryError
-        The file does not exist or is a folder.
-    ValueError
-        An empty file, a file with a header but no data rows, or one pandas cannot parse.
-    """
-    import pandas as pd
-
-    name = str(path) if isinstance(path, (str, Path)) else "<csv>"
-    if isinstance(path, (str, Path)):
-        if Path(path).is_dir():
-            raise IsADirectoryError(f"{name}: is a folder, not a CSV file")
-        if not Path(path).is_file():
-            raise FileNotFoundError(f"{name}: no such file")
-    try:
-        frame = pd.read_csv(path, **read_options)
-    except pd.errors.EmptyDataError:
-        raise ValueError(f"{name}: empty file (no header row with column names)") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{name}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
-    if frame.shape[0] == 0:
-        raise ValueError(f"{name}: no data rows below the header {list(frame.columns)}")
-    header = _header(path, read_options)
-    twice = sorted({c for c in header if header.count(c) > 1})
-    if twice:
-        raise ValueError(f"{name}: column(s) {twice} appear more than once in the header; which one is meant "
-                         "cannot be told: rename or remove the copies")
-    return frame
-
-
-def _header(path, read_options) -> list[str]:
-    """The header row as written (pandas renames a repeated name ``psi`` to ``psi.1``)."""
-    import pandas as pd
-
-    options = {k: v for k, v in read_options.items() if k in ("sep", "delimiter", "comment", "skiprows", "encoding")}
-    if not isinstance(path, (str, Path)):
-        if not hasattr(path, "seek"):
-            return []
-        path.seek(0)
-    row = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False, **options)
-    return [str(v).strip() for v in row.iloc[0].tolist()] if len(row) else []
 
 
 def read_csv(path, columns: Mapping[str, str] | None = None, *, time: str = "t:s", wrap: Sequence[str] = (),

@@ -5,7 +5,7 @@ format      files                                             reader
 =========== ================================================= ================================
 ``csv``     ``*.csv`` (header row, SI units, casship names)    :meth:`casship.Dataset.from_csv`
 ``marin``   ``*.dat`` MARIN free-running records               :func:`casship.io.read_marin`
-``hsva``    ``HSVA_*.dat`` HSVA free-running records          ``casship.io.read_hsva`` (when present)
+``hsva``    ``HSVA_*.dat`` HSVA free-running records          :func:`casship.io.read_hsva`
 ``nmea``    ``*.nmea``, ``*.nme``, ``*.log`` or text whose     :func:`casship.io.read_nmea`
             first line starts with ``$`` or ``!``
 =========== ================================================= ================================
@@ -15,16 +15,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..data import Dataset
+from .hsva import read_hsva
+from .marin import read_marin
+from .nmea import read_nmea
 
 __all__ = ["read_record", "RECORD_FORMATS"]
 
 RECORD_FORMATS = ("csv", "marin", "hsva", "nmea")
-
-
-def _hsva_reader():
-    from .. import io
-
-    return getattr(io, "read_hsva", None)
 
 
 def _sniff(path: Path) -> str:
@@ -85,18 +82,11 @@ def read_record(path, *, format: str | None = None) -> Dataset:
     if format == "csv":
         data = Dataset.from_csv(path)
     elif format == "marin":
-        from .marin import read_marin
-
         data = read_marin(path)
     elif format == "nmea":
-        from .nmea import read_nmea
-
         data = read_nmea(path)
     else:
-        reader = _hsva_reader()
-        if reader is None:
-            raise ValueError(f"record {path}: HSVA records need casship.io.read_hsva, which this version lacks")
-        data = reader(path)
+        data = read_hsva(path)
     data.meta.setdefault("source", str(path))
     data.meta["format"] = format
     return data

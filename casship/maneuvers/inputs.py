@@ -250,10 +250,10 @@ def spiral_inputs(model: Model, t, rudders: Sequence[float], n: float | None = N
 def random_rudder_inputs(model: Model, t, n: float | None = None, *, hold: float = 10.0, seed=None,
                          ranges_deg: Mapping[str, tuple[float, float]] | None = None,
                          rate: float | None | str = None, **extra) -> dict[str, np.ndarray]:
-    """Random rudder sequence: each rudder uniform in its range, held ``hold`` [s] (seed 002 Fig. 8).
+    """Random rudder sequence: each rudder uniform in its range, held ``hold`` [s] (Koike et al. 2023, Fig. 8).
 
     Default ranges: ``delta_s`` in [-35, 105] deg and ``delta_p`` in [-105, 35] deg for twin rudders
-    (seed 002), [-35, 35] deg for a single rudder. Seed 002 does not state the hold time; 10 s is
+    (Koike et al. 2023), [-35, 35] deg for a single rudder. Koike et al. (2023) do not state the hold time; 10 s is
     an assumption. Deterministic for a given ``seed``.
 
     Parameters

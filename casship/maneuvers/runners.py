@@ -209,7 +209,7 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
     if props and n is None:
         n = propeller_rate_for_speed(model, speed, pv, check_limits=check_limits)
     T = L / speed
-    dt = float(dt if dt is not None else _nice_step(T / 400))
+    dt = float(dt if dt is not None else nice_step(T / 400))
     t_exec = float(t_exec if t_exec is not None else round(T / 4 / dt) * dt)
     if duration is not None and dt >= duration:
         raise ValueError(f"dt = {dt:g} s must be shorter than the duration {duration:g} s")
@@ -302,7 +302,7 @@ def _check_settings(kind, rudder_deg, heading_deg, duration, dt, t_exec, hold) -
         raise ValueError(f"t_exec = {t_exec:g} s must lie in [0, duration)")
 
 
-def _nice_step(value: float) -> float:
+def nice_step(value: float) -> float:
     """The largest of 1, 2, 5 x 10^k not above ``value``."""
     base = 10.0 ** np.floor(np.log10(value))
     return float(max(m * base for m in (1.0, 2.0, 5.0) if m * base <= value * (1 + 1e-12)))

@@ -19,11 +19,11 @@ register("sog-cog-latlon", sog_cog_latlon, "five-state SOG/COG/course-rate model
 register("kvlcc2", kvlcc2, "KVLCC2 tanker, full scale 320 m, MMG standard method (Yasukawa & Yoshimura 2015)")
 register("kvlcc2-l7", kvlcc2_l7, "KVLCC2 model L7 (7 m, 1/45.7), MMG standard method (Yasukawa & Yoshimura 2015)")
 register("mmg-twin-lowspeed", esso_osaka_twin, "Yoshimura low-speed MMG, single propeller + twin rudders "
-         "(Esso Osaka 3 m; seed 002 Eq. 20-22; propeller/rudder constants assumed)")
+         "(Esso Osaka 3 m; Koike et al. 2023, Eq. 20-22; propeller/rudder constants assumed)")
 register("otter", otter, "Otter USV surge-sway-yaw, two propellers (Fossen, MSS otter.m)")
 register("mariner", mariner, "Mariner-class cargo ship, 3 DOF (Chislett & Strom-Tejsen 1965; MSS mariner.m)")
 register("tomera-kinematic", tomera_kinematic, "x, y, psi double integrators (Tomera 2011)")
-register("body-kinematics", body_kinematics, "3-DOF NED pose driven by body velocities u, v, r (Tomera 2011 Eq. 60)")
+register("body-kinematics", body_kinematics, "3-DOF NED pose driven by body velocities u, v, r (Tomera 2011, Eq. 60)")
 
 __all__ = ["constant_acceleration", "double_integrator", "sog_cog", "sog_cog_latlon", "tomera_kinematic",
            "nomoto_first_order", "nomoto_second_order", "shi_taylor", "SHI_DEFAULTS", "SHI_PARAM_NAMES",

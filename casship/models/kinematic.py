@@ -1,11 +1,12 @@
-"""Kinematic models: double integrator (seed 001), constant acceleration (seed 000) and the
+"""Kinematic models: double integrator (Tomera 2011), constant acceleration (Shi et al. 2009) and the
 five-state SOG/COG/course-rate model of Fossen & Fossen (2021) in North-East and lat/lon form."""
 from __future__ import annotations
 
 import casadi as ca
 
 from ..frames import body_to_ned, wgs84_radii
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 
 __all__ = ["double_integrator", "tomera_kinematic", "constant_acceleration", "sog_cog", "sog_cog_latlon",
            "body_kinematics"]

@@ -1,10 +1,10 @@
-"""Yoshimura's low-speed hull model for a single-propeller, twin-rudder ship (seed 002, Eq. 20-22).
+"""Yoshimura's low-speed hull model for a single-propeller, twin-rudder ship (Koike et al. 2023, Eq. 20-22).
 
 States ``u, v, r, x, y, psi`` (``v`` = ``v_m`` at midship), inputs ``n`` [1/s], ``delta_s`` and
 ``delta_p`` [rad] (starboard and port rudder; positive turns the ship to starboard), port ``tau``
 and noise ``w_u, w_v, w_r`` as for every casship ship (rigid body: :func:`casship.models.mmg.rigid_body_3dof`).
 
-Hull (Yoshimura; seed 002 Eq. 22, with the added-mass terms on the left-hand side)::
+Hull (Yoshimura; Koike et al. 2023, Eq. 22, with the added-mass terms on the left-hand side)::
 
     X_H = rho/2 L d [ {X'_0F + (X'_0A - X'_0F) |beta|/pi} u U + X'_vr L v r ]
     Y_H = rho/2 L d [ Y'_v v |u| + Y'_r L r u - C_D I0(v, C_rY r L) ]
@@ -14,12 +14,12 @@ with the cross-flow integrals over the hull, ``xi = x/L``,
 ``I0(a, b) = int_{-1/2}^{1/2} |a + b xi| (a + b xi) dxi`` and ``I1(a, b) = int |a + b xi| (a + b xi) xi dxi``,
 evaluated **in closed form** (:func:`crossflow_integrals`; exact, continuously differentiable,
 tested against a fine quadrature) and ``C_D = -0.0591 L/d + 1.848``, ``C_rY = 0.52 L/B - 1.062``,
-``C_rN = 0.0742 L/d - 0.297`` (the regressions of the reference table, section 5; seed 002 writes
+``C_rN = 0.0742 L/d - 0.297`` (the regressions of the reference table, section 5; Koike et al. 2023 write
 ``C_rY`` in the yaw integral, which we read as a misprint for ``C_rN``). To keep the model smooth at
 rest (berthing), ``U = sqrt(u^2 + v^2 + e^2)``, ``|u| = sqrt(u^2 + e^2)`` and
 ``|beta| = atan2(sqrt(v^2 + e^2), u)`` with ``e = smooth_speed`` (1e-4 m/s by default).
 
-Propeller and rudders (MMG-type, simplified for low speed — seed 002 does not give them):
+Propeller and rudders (MMG-type, simplified for low speed — Koike et al. 2023 do not give them):
 ``T = rho D^2 (k0 n|n| D^2 + k1 |n| D u_P + k2 u_P^2)``, ``u_P = (1 - w_P0) u`` (constant wake),
 ``X_P = (1 - t_P) T``; for each rudder ``i`` at ``(x_R, y_i)``, ``y_s = +y_R``, ``y_p = -y_R``:
 ``u_R = eps sqrt(eta (u_P + kappa (sqrt(u_P^2 + 8 n|n| D^2 K_T/pi) - u_P))^2 + (1 - eta) u_P^2)``,
@@ -27,7 +27,7 @@ Propeller and rudders (MMG-type, simplified for low speed — seed 002 does not 
 ``alpha_i = delta_i - atan2(v_R, u_R)``, ``F_i = rho/2 A_R (u_R^2 + v_R^2) f_alpha sin(alpha_i)``;
 ``X_R = -(1 - t_R) sum F_i sin delta_i``, ``Y_R = -(1 + a_H) sum F_i cos delta_i``,
 ``N_R = -(x_R + a_H x_H) sum F_i cos delta_i + sum y_i (1 - t_R) F_i sin delta_i``.
-The normal-force model has no stall: at the large angles of a VecTwin-type rudder (seed 002 uses
+The normal-force model has no stall: at the large angles of a VecTwin-type rudder (Koike et al. 2023 use
 ``delta_s`` in [-35, 105] deg) it is a crude approximation (at 105/-105 deg the rudders brake the ship).
 """
 from __future__ import annotations
@@ -37,7 +37,8 @@ from typing import Mapping
 import casadi as ca
 import numpy as np
 
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 from ..vessel import Vessel
 from .mmg import _param, declare_ship_limits, declare_ship_states, rigid_body_3dof
 
@@ -191,7 +192,8 @@ def yoshimura_twin_rudder(values: Mapping[str, float], *, name: str = "mmg-twin-
     if unknown:
         raise ValueError(f"unknown low-speed parameter(s) {sorted(unknown)}; known: {list(LOWSPEED_PARAMS)}")
     sources = dict(sources or {})
-    b = ModelBuilder(name, doc or "Yoshimura low-speed MMG model, single propeller, twin rudders (seed 002 Eq. 20-22)")
+    b = ModelBuilder(name, doc or "Yoshimura low-speed MMG model, single propeller, twin rudders "
+                                  "(Koike et al. 2023, Eq. 20-22)")
     P = {k: _param(b, k, values, sources, LOWSPEED_PARAMS) for k in LOWSPEED_PARAMS}
     states = declare_ship_states(b)
     u, v, r = states[:3]
@@ -244,7 +246,7 @@ def yoshimura_twin_rudder(values: Mapping[str, float], *, name: str = "mmg-twin-
 
 
 def esso_osaka_twin(params: Mapping[str, float] | None = None, *, smooth_speed: float = 1e-4) -> Model:
-    """Preset for seed 002's berthing study: Esso Osaka 3 m model, one propeller, twin rudders.
+    """Preset for Koike et al.'s (2023) berthing study: Esso Osaka 3 m model, one propeller, twin rudders.
 
     Hull: Yoshimura's low-speed coefficients of the Esso Osaka model (reference table section 5).
     Propeller and rudder constants are **assumed** (marked in each parameter's ``source``); treat
@@ -278,5 +280,5 @@ def esso_osaka_twin(params: Mapping[str, float] | None = None, *, smooth_speed: 
                      "source": "estimated above-water geometry of a 3 m tanker model (not published)"})
     return yoshimura_twin_rudder(values, name="mmg-twin-lowspeed",
                                  doc="Esso Osaka 3 m, Yoshimura low-speed hull, single propeller, twin rudders "
-                                     "(seed 002 Eq. 20-22)",
+                                     "(Koike et al. 2023, Eq. 20-22)",
                                  sources=ESSO_OSAKA_SOURCES, vessel=vessel, smooth_speed=smooth_speed)

@@ -19,7 +19,8 @@ from typing import Mapping
 import numpy as np
 
 from ..frames import body_to_ned
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 from ..vessel import Vessel
 from .mmg import add_rudder_actuator, declare_ship_limits, declare_ship_states
 

@@ -30,7 +30,8 @@ import casadi as ca
 import numpy as np
 
 from ..frames import body_to_ned
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 from ..vessel import Vessel
 
 __all__ = ["mmg_standard", "MMG_PARAMS", "MMG_ASYMMETRY_PARAMS", "MMG_BOUNDS", "SMOOTH_WIDTH", "rigid_body_3dof",

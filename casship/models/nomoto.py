@@ -1,7 +1,8 @@
 """Nomoto steering models (first and second order) with heading kinematics."""
 from __future__ import annotations
 
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 
 __all__ = ["nomoto_first_order", "nomoto_second_order"]
 

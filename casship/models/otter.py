@@ -42,7 +42,8 @@ import casadi as ca
 import numpy as np
 
 from ..frames import body_to_ned
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 from ..vessel import Vessel
 from .lowspeed import crossflow_integrals
 from .mmg import declare_ship_states

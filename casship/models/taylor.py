@@ -3,7 +3,8 @@ from __future__ import annotations
 
 
 from ..frames import body_to_ned
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 from ..vessel import Vessel
 
 __all__ = ["shi_taylor", "shi_taylor_preset", "SHI_PARAM_NAMES", "SHI_DEFAULTS", "SHI_ILLUSTRATIVE_VESSEL"]

@@ -34,7 +34,8 @@ from typing import Mapping
 import casadi as ca
 import numpy as np
 
-from ..model import Model, ModelBuilder
+from ..builder import ModelBuilder
+from ..model import Model
 
 __all__ = ["add_wind", "add_current", "fujiwara_coefficients", "fujiwara_loads", "relative_wind", "wind_term_model",
            "WIND_GEOMETRY_NAMES"]
@@ -213,7 +214,7 @@ def wind_term_model(model: Model, geometry: Mapping[str, float] | None, names, u
                     rho_air: float, what: str, label: str, name: str) -> Model:
     """``model`` with wind loads ``loads(U_A, gamma, g, rho_air) -> (X, Y, N)`` fed into its ``tau`` port.
 
-    The shared body of :func:`add_wind` and of the other wind-load forms (seed 002's Eq. 34 in
+    The shared body of :func:`add_wind` and of the other wind-load forms (Koike et al. 2023, Eq. 34 in
     :mod:`casship.models.wind_fourier`): checks the geometry (``names``; by default
     ``model.vessel.wind``), makes it parameters ``wind_<name>`` (the centroid offsets ``C`` and
     ``C_BR`` may be negative), adds the inputs ``wind_speed`` and ``wind_dir`` and the parameter

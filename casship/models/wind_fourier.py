@@ -1,6 +1,6 @@
-"""Wind loads in Fujiwara's Fourier form (seed 002, Eq. 34; Fujiwara, Ueno & Nimura 1998).
+"""Wind loads in Fujiwara's Fourier form (Koike et al. 2023, Eq. 34; Fujiwara, Ueno & Nimura 1998).
 
-Seed 002 (UKF/EnKF guidelines for automatic berthing) writes the wind loads as truncated Fourier
+Koike et al. (2023; UKF/EnKF guidelines for automatic berthing) write the wind loads as truncated Fourier
 series of the relative wind angle, with coefficients from Fujiwara's regression on wind-tunnel tests
 of many ship models (Fujiwara, Ueno & Nimura 1998, J. Soc. Naval Archit. Japan 183, 77-90)::
 
@@ -94,7 +94,7 @@ REGRESSION: dict[str, tuple[float, tuple[tuple[float, str], ...]]] = {
 
 #: Above-water geometry of the Esso Osaka 3 m model (Osaka University's berthing test ship), as given
 #: with a public MATLAB implementation of this regression (CGMRES_Autopilot_EssoOsaka, "values by
-#: MYO"): the ship of seed 002's kind, with its superstructure aft.
+#: MYO"): the ship of Koike et al.'s (2023) kind, with its superstructure aft.
 ESSO_OSAKA_3M_WIND = {"A_F": 0.1524, "A_L": 0.2917, "L_OA": 3.0, "B": 0.5, "A_OD": 0.1531, "H_BR": 0.3321,
                       "H_C": 0.04936, "C": 0.03339, "C_BR": -1.23339,
                       "source": "Esso Osaka 3 m model, public MATLAB wind model (values by MYO)"}
@@ -171,7 +171,7 @@ def fourier_wind_loads(U_A, gamma, g: Mapping, rho_air: float = 1.225):
 
 def add_fourier_wind(model: Model, geometry: Mapping[str, float] | None = None, *, rho_air: float = 1.225,
                      name: str | None = None) -> Model:
-    """The ship ``model`` with the wind loads of seed 002's Eq. 34 fed into its ``tau`` port.
+    """The ship ``model`` with the wind loads of Koike et al.'s (2023) Eq. 34 fed into its ``tau`` port.
 
     Same inputs as :func:`casship.models.wind.add_wind` (``wind_speed`` [m/s], ``wind_dir`` [rad, the
     direction the true wind comes from, clockwise from North]); the loads follow the Fourier form above.

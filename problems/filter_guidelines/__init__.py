@@ -1,7 +1,10 @@
-"""Seed 002: guidelines for UKF and EnKF in ship state estimation (automatic berthing), reproduced.
+"""Koike et al. (2023): guidelines for UKF and EnKF in ship state estimation (automatic berthing), reproduced.
+
+Koike, Dostal, Sawada, Miyauchi & Maki (2023), "A study on the implementation of nonlinear Kalman filter
+applying MMG model", Journal of Marine Science and Technology 28, 733-745.
 
 The system: a single-propeller, twin-rudder ship with Yoshimura's low-speed hull model (MMG form,
-seed 002 Eq. 20-22), Euler-discretised at dt = 0.1 s (Eq. 25), every state measured (H = I6).
+Koike et al. 2023, Eq. 20-22), Euler-discretised at dt = 0.1 s (Eq. 25), every state measured (H = I6).
 The filters: UKF (2n+1 sigma points, kappa = 3), EnKF (N = 100, perturbed observations) and the
 linear KF on the persistence model (A = I) as baseline, each with Q = 0 and with tuned Q
 (UKF diag(1e-4), EnKF diag(1e-2) as in the paper; the KF's Q tuned per state on a separate
@@ -95,7 +98,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
 
 def report(cfg, q_kf, table, tables, times, mhe, found, deps, seconds, quick) -> Report:
     """The report: scope, the four experiments with the paper's figure numbers, MHE, comparison, departures."""
-    rep = Report("Seed 002 reproduced: guidelines for UKF and EnKF in ship state estimation", quick=quick)
+    rep = Report("Koike et al. (2023) reproduced: guidelines for UKF and EnKF in ship state estimation", quick=quick)
     rep.add(_SCOPE)
     rep.add(f"Records of {cfg.duration:g} s at dt = {DT} s; {cfg.seeds} noise seeds per condition. Data noise in "
             f"experiments 1 and 3: std {DATA_STD:.3f} on every state (w ~ N(0, R), R = diag({R_FILTER})); the "
@@ -137,5 +140,5 @@ def report(cfg, q_kf, table, tables, times, mhe, found, deps, seconds, quick) ->
     return rep
 
 
-STUDY = Study("filter-guidelines", "Seed 002: UKF/EnKF/KF guidelines (modelling error, noise, manoeuvre, time)",
+STUDY = Study("filter-guidelines", "Koike et al. 2023: UKF/EnKF/KF guidelines (modelling error, noise, manoeuvre, time)",
               run)

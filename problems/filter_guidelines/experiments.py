@@ -1,4 +1,4 @@
-"""Seed 002's experiments: every filter on noisy records (Monte Carlo cases), timing and the MHE column.
+"""Koike et al.'s (2023) experiments: every filter on noisy records (Monte Carlo cases), timing and the MHE column.
 
 Every estimator is used through the one estimator contract (``filter(data, prior, seed=...)``,
 ``online(prior, seed=...).update(...)``): no case depends on which filter it is.

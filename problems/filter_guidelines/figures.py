@@ -1,4 +1,4 @@
-"""Seed 002's figures (the paper's Figs. 2-10, regenerated as PNG with units on every axis)."""
+"""Koike et al.'s (2023) figures (the paper's Figs. 2-10, regenerated as PNG with units on every axis)."""
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""Seed 002's claims measured on the study's numbers: tables, findings, verdicts and departures."""
+"""Koike et al.'s (2023) claims measured on the study's numbers: tables, findings, verdicts and departures."""
 from __future__ import annotations
 
 import numpy as np
@@ -94,7 +94,7 @@ def findings(table: dict, times: dict) -> dict:
 
 
 def verdicts(f: dict) -> list[tuple[str, str, bool, str]]:
-    """``(paper's claim, our numbers, agrees, why it differs)`` for each conclusion of seed 002."""
+    """``(paper's claim, our numbers, agrees, why it differs)`` for each conclusion of Koike et al. (2023)."""
     w = WIND_MEANS[-1]
     out = [
         ("RMSE grows with the wind modelling error for UKF and EnKF (Q = 0)",
@@ -164,7 +164,7 @@ def comparison(f: dict) -> str:
     rows = verdicts(f)
     lines = ["Ratios are geometric means over the six states of the mean RMSE over the noise seeds (states have "
              "different units), unless a state count is given.", "",
-             "| paper (seed 002) | ours | verdict |", "|---|---|---|"]
+             "| paper (Koike et al. 2023) | ours | verdict |", "|---|---|---|"]
     lines += [f"| {claim} | {ours} | {'agrees' if ok else 'differs'} |" for claim, ours, ok, _ in rows]
     lines += ["", "### Where ours differ, and why", ""]
     differ = [(claim, why) for claim, _, ok, why in rows if not ok]
@@ -173,7 +173,7 @@ def comparison(f: dict) -> str:
 
 
 def departures(table: dict) -> list[Departure]:
-    """The choices seed 002 leaves open or that this study makes differently, with measured effects."""
+    """The choices Koike et al. (2023) leave open or that this study makes differently, with measured effects."""
     W = table["wind"]
     main = headline(W[W0], W[W2])
     form = headline(W[W0], table[ALT_FORM][W2])

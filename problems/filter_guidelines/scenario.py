@@ -1,6 +1,6 @@
-"""Seed 002's scenario: the ship, the wind in the data, the manoeuvres and the noisy records.
+"""Koike et al.'s (2023) scenario: the ship, the wind in the data, the manoeuvres and the noisy records.
 
-The ship is casship's single-propeller, twin-rudder preset with Yoshimura's low-speed hull (seed 002
+The ship is casship's single-propeller, twin-rudder preset with Yoshimura's low-speed hull (Koike et al. 2023,
 Eq. 20-22), Euler-discretised at dt = 0.1 s (Eq. 25), every state measured (H = I6). The data carry a
 gusty wind that the filters' model lacks (the modelling error of Sect. 5.1), computed by the paper's
 Eq. 34 (Fujiwara's Fourier form) or, as the other reading, by Fujiwara's 2005 regression, both on the
@@ -18,15 +18,15 @@ from casship.models.wind import add_wind
 from casship.models.wind_fourier import ESSO_OSAKA_3M_WIND, add_fourier_wind
 
 DT = 0.1
-R_FILTER = 5e-2                     # seed 002 Eq. 30: R = diag(5e-2) (a variance), every state
-Q_TUNED = {"UKF": 1e-4, "EnKF": 1e-2, "EKF": 1e-4}   # seed 002 Sect. 5.1 (EKF: same as the UKF)
+R_FILTER = 5e-2                     # Koike et al. (2023) Eq. 30: R = diag(5e-2) (a variance), every state
+Q_TUNED = {"UKF": 1e-4, "EnKF": 1e-2, "EKF": 1e-4}   # Koike et al. (2023) Sect. 5.1 (EKF: same as the UKF)
 KAPPA, MEMBERS = 3.0, 100
 WIND_MEANS = (0.0, 0.82, 1.64)      # m/s
 NOISE_STDS = (0.05, 0.10, 0.20)     # data noise of experiment 2
 DATA_STD = float(np.sqrt(R_FILTER))  # data noise of experiments 1 and 3: w ~ N(0, R), the paper's text
 DATA_STD_ALT = 0.05                 # the other reading: the smallest level of experiment 2
 WIND_FORMS = ("eq34", "fujiwara2005")
-STATES = ("x", "u", "y", "v", "psi", "r")      # seed 002 order
+STATES = ("x", "u", "y", "v", "psi", "r")      # Koike et al. (2023) order
 UNITS = {"x": "m", "u": "m/s", "y": "m", "v": "m/s", "psi": "rad", "r": "rad/s"}
 FILTERS = ("UKF Q=0", "UKF tuned", "EnKF Q=0", "EnKF tuned", "KF", "EKF Q=0", "EKF tuned", "EnKF Q=1e-4")
 # "EnKF Q=1e-4": the EnKF with the UKF's tuned Q, to separate the filter from the choice of Q
@@ -120,7 +120,7 @@ def rudder_inputs(kind: str, t: np.ndarray, ship, n: float, seed: int = 7) -> di
     ``"zigzag"``: a 20/20 zig-zag (both rudders together, switched on the heading by
     :class:`casship.maneuvers.ZigZag`) run on the wind-free ship; the same rudder record is then
     used in every wind condition, so the conditions differ only in the wind. ``"random"``: a new
-    uniform draw every 5 s, delta_s in [-35, 105] deg and delta_p in [-105, 35] deg (seed 002).
+    uniform draw every 5 s, delta_s in [-35, 105] deg and delta_p in [-105, 35] deg (Koike et al. 2023).
     """
     if kind == "zigzag":
         from casship.maneuvers import ZigZag
@@ -131,7 +131,7 @@ def rudder_inputs(kind: str, t: np.ndarray, ship, n: float, seed: int = 7) -> di
     if kind == "random":
         from casship.maneuvers import random_rudder_inputs
 
-        u = random_rudder_inputs(ship, t, n, hold=5.0, seed=seed)       # seed 002 ranges by default
+        u = random_rudder_inputs(ship, t, n, hold=5.0, seed=seed)       # Koike et al. (2023) ranges by default
         return {"delta_s": u["delta_s"], "delta_p": u["delta_p"]}
     raise ValueError(f"unknown manoeuvre {kind!r}; use 'zigzag' or 'random'")
 
@@ -154,7 +154,7 @@ def noisy(tr, ship, std: float, seed: int) -> cs.Dataset:
 
 
 def prior(data: cs.Dataset, model) -> cs.Gaussian:
-    """x(0) = y(0), P(0) = I (seed 002 Eq. 27, 31): :func:`casship.prior_from_data` with unit variances."""
+    """x(0) = y(0), P(0) = I (Koike et al. 2023, Eq. 27, 31): :func:`casship.prior_from_data` with unit variances."""
     return cs.prior_from_data(model, data, var=1.0)
 
 

@@ -1,6 +1,6 @@
 """Shi, Zhao, Peng & Shen (2009): identification of a ship manoeuvring model with EKFs, end to end.
 
-Pipeline (seed 000), run twice, on two truths:
+Pipeline (Shi et al. 2009), run twice, on two truths:
 
 1. **Truth.** (a) The 16-parameter Taylor response model itself (:func:`casship.models.shi_taylor`),
    fitted by equation-error least squares to KVLCC2 MMG simulations (the paper's printed parameters

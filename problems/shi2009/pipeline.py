@@ -173,7 +173,7 @@ def measurement_var(pre: list, reading: Reading) -> np.ndarray:
 
 
 def augmented_identification(records, R, model, reading: Reading) -> tuple[dict, list]:
-    """Seed 000's augmented-state EKF, over the records one after the other (the estimates and
+    """Shi et al.'s (2009) augmented-state EKF, over the records one after the other (the estimates and
     their variances carried from one record to the next)."""
     names = list(SHI_PARAM_NAMES)
     guess, p0 = {n: 0.0 for n in names}, P0_PAPER

@@ -210,8 +210,14 @@ class MHE(Estimator):
                                np.zeros(len(self._extra_names) - len(self._est_names))])
         return augmented_prior(prior, mean, self._extra_std ** 2)
 
-    def _check_prior(self, prior: Gaussian) -> None:
-        super()._check_prior(self.augmented_prior(prior))
+    def check_prior(self, prior: Gaussian) -> None:
+        """Check a prior of the model's states or of the augmented states (see :meth:`augmented_prior`).
+
+        Parameters
+        ----------
+        prior : Gaussian
+        """
+        super().check_prior(self.augmented_prior(prior))
 
     def prepare(self, data: Dataset, p=None) -> dict:
         """The per-sample arrays of a record (``p`` of the original model; estimated parameters dropped).
@@ -244,7 +250,7 @@ class MHE(Estimator):
             predictions, innovations and likelihood terms from that EKF step. A gap bridged by
             prediction-only rows (``on_gap="bridge"``) adds those rows.
         """
-        self._check_prior(prior)
+        self.check_prior(prior)
         prior = self.augmented_prior(prior, p)
         data = bridge_gaps(self, data, prior, self._params(p), through=self.arrival_filter)
         arrays = self.prepare(data, p)
@@ -280,7 +286,7 @@ class MHE(Estimator):
             Inputs before the first update.
         seed : ignored (the MHE draws nothing)
         """
-        self._check_prior(prior)
+        self.check_prior(prior)
         return OnlineRun(WindowEngine(self, self.augmented_prior(prior, p), self._params(p), u,
                                       outputs=self.options.outputs))
 
@@ -321,7 +327,7 @@ class MHE(Estimator):
             ``x``: MAP states; ``P``: their covariances; predictions and innovations of the forward
             pass linearised at the MAP trajectory; ``estimator = "MHE-full"``.
         """
-        self._check_prior(prior)
+        self.check_prior(prior)
         prior = self.augmented_prior(prior, p)
         data = bridge_gaps(self, data, prior, self._params(p), through=self.arrival_filter)
         arrays = self.prepare(data, p)
