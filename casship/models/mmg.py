@@ -346,6 +346,8 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     if asymmetry:
         P.update({k: _param(b, k, values, sources, MMG_ASYMMETRY_PARAMS, default=0.0) for k in MMG_ASYMMETRY_PARAMS})
     b.meta.update(dict(meta or {}))
+    if asymmetry:          # port/starboard terms: identified only from mirrored evidence (casship.identify.asymmetry)
+        b.meta["asymmetric"] = list(MMG_ASYMMETRY_PARAMS)
     states = declare_ship_states(b)
     u, v, r = states[:3]
     if rudder_actuator:
