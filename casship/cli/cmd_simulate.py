@@ -46,6 +46,11 @@ def register(sub) -> None:
     p.add_argument("--inputs", default=None,
                    help="replay the measured inputs of a record (CSV, MARIN .dat, NMEA; see casship.io.read_record) "
                         "from its measured initial state")
+    p.add_argument("--samples", type=int, default=40,
+                   help="parameter draws for the index intervals when the --params file carries a covariance "
+                        "(0: none)")
+    p.add_argument("--level", type=float, default=0.95, help="coverage of the prediction bands and intervals")
+    p.add_argument("--no-bands", action="store_true", help="ignore the covariance of the --params file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--csv", default=None, help="save the trajectory as CSV")
     p.add_argument("--plot", default=None, help="save a plot (PNG)")
@@ -84,10 +89,13 @@ def run(args) -> int:
     for option, path in (("--csv", args.csv), ("--plot", args.plot)):
         if path:
             check_output_file(path, overwrite=args.overwrite, what=option)
+    unc = None
     if args.params:
         from ..identify import read_params
 
-        model, p = read_params(args.params, args.model)     # the fitted variant, checked against the file
+        # the fitted variant, checked against the file, and the file's parameter covariance
+        model, p, unc = read_params(args.params, args.model, uncertainty=True)
+        unc = None if args.no_bands else unc
     else:
         model = load_model(args.model)
         p = model.params()
@@ -96,34 +104,59 @@ def run(args) -> int:
     measured = None
     check = not args.allow_out_of_range
     if args.inputs:
-        from ..validation import replay
+        from ..validation import replay, replay_file
 
         measured = _load_record(args.inputs)
-        res = replay(model, measured, p, method=args.method, check_limits=check)
+        options = dict(method=args.method, check_limits=check, level=args.level, samples=args.samples)
+        res = (replay_file(args.params, measured, model, uncertainty=not args.no_bands, **options) if args.params
+               else replay(model, measured, p, **options))
         traj = res.trajectory
         out.update({"maneuver": f"replay ({res.kind})", "inputs": str(args.inputs), "replay": res.errors,
                     "metrics": res.metrics, "measured_metrics": res.measured_metrics})
+        if res.bands:
+            out.update({"bands": res.band_summary(), "metric_intervals": res.metric_intervals,
+                        "sampling": res.sampling})
     else:
         from ..maneuvers import run_maneuver
 
-        res = run_maneuver(model, args.maneuver, rudder_deg=args.rudder_deg, heading_deg=args.heading_deg,
-                           speed=args.speed, n=args.rps, duration=args.duration, dt=args.dt, p=p,
-                           hold=args.hold, seed=args.seed, method=args.method, check_limits=check)
+        def simulate_with(pk):
+            return run_maneuver(model, args.maneuver, rudder_deg=args.rudder_deg, heading_deg=args.heading_deg,
+                                speed=args.speed, n=args.rps, duration=args.duration, dt=args.dt, p=pk,
+                                hold=args.hold, seed=args.seed, method=args.method, check_limits=check)
+
+        res = simulate_with(p)
         traj = res.trajectory
         s = res.settings
         out.update({"maneuver": args.maneuver, "speed_mps": s["speed_mps"], "rps": s["n"],
                     "rudder_deg": args.rudder_deg, "metrics": res.metrics, "settings": s})
+        if unc is not None and args.samples:
+            out.update(_maneuver_intervals(simulate_with, model, p, unc, args))
     if args.csv:
         traj.to_csv(args.csv)
         out["csv"] = str(args.csv)
     if args.plot:
-        _plot(traj, measured, args.plot, title=f"{args.model}: {out['maneuver']}")
+        if getattr(res, "bands", None):
+            res.plot(args.plot)                  # the replay with its prediction bands
+        else:
+            _plot(traj, measured, args.plot, title=f"{args.model}: {out['maneuver']}")
         out["plot"] = str(args.plot)
     if args.json:
         print(json.dumps(_clean(out)))
     else:
         _print_text(out)
     return 0
+
+
+def _maneuver_intervals(simulate_with, model, p, unc, args) -> dict:
+    """Index intervals of a manoeuvre from parameter draws of the fit file's covariance."""
+    from ..prediction import sampled_metrics
+
+    def run(pk):
+        return {k: v for k, v in simulate_with(pk).metrics.items() if isinstance(v, (int, float))}, None
+
+    s = sampled_metrics(run, unc.sample(model, p, args.samples, args.seed), args.level)
+    return {"metric_intervals": s["intervals"], "sampling": {"samples": s["samples"], "failed": s["failed"],
+                                                             "level": args.level, "source": unc.source}}
 
 
 def _print_text(out) -> None:
@@ -137,12 +170,17 @@ def _print_text(out) -> None:
     metrics = out.get("metrics", {})
     measured = out.get("measured_metrics", {})
     keys = [k for k in _METRIC_ORDER if k in metrics or k in measured]
+    intervals = out.get("metric_intervals", {})
     if keys:
-        print(f"  {'metric':28s} {'simulated':>12s}" + (f" {'measured':>12s}" if measured else ""))
+        print(f"  {'metric':28s} {'simulated':>12s}" + (f" {'measured':>12s}" if measured else "")
+              + ("  interval" if intervals else ""))
         for k in keys:
             sim = f"{metrics[k]:12.2f}" if k in metrics else f"{'-':>12s}"
             meas = (f" {measured[k]:12.2f}" if k in measured else f" {'-':>12s}") if measured else ""
-            print(f"  {k:28s} {sim}{meas}")
+            iv = f"  [{intervals[k][0]:.2f}, {intervals[k][1]:.2f}]" if k in intervals else ""
+            print(f"  {k:28s} {sim}{meas}{iv}")
+    for k, v in out.get("bands", {}).items():
+        print(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
     if "spiral" in metrics:
         for row in metrics["spiral"]:
             print(f"  rudder {row['rudder_deg']:7.2f} deg  yaw rate {row['yaw_rate_deg_s']:8.4f} deg/s")

@@ -17,7 +17,8 @@ quantities in :attr:`~casship.identify.Identifiability.confounded`, and leaves t
   first to opposite sides (:func:`mirror_pairs`);
 * an asymmetry quantity is estimable only from records that contain a mirror pair: a copy per
   group (e.g. per facility) needs a pair within its group, a shared copy a pair among all records
-  (:func:`confounded_asymmetry`). Otherwise it stays at its prior (or the shared value).
+  (:func:`confounded_asymmetry`; ``within=`` a grouping such as the facility: only records of the
+  same group pair). Otherwise it stays at its prior (or the shared value).
 """
 from __future__ import annotations
 
@@ -93,13 +94,15 @@ def _same(a: dict, b: dict) -> bool:
     return a["kind"] != "zigzag" or abs(a["heading_deg"] - b["heading_deg"]) <= ANGLE_TOL_DEG
 
 
-def mirror_pairs(records: Sequence, rudder: str = "delta") -> list[tuple[int, int]]:
+def mirror_pairs(records: Sequence, rudder: str = "delta", within: Sequence | None = None) -> list[tuple[int, int]]:
     """Index pairs of records that are the same manoeuvre turning first to opposite sides.
 
     Parameters
     ----------
     records : sequence of Dataset
     rudder : str
+    within : sequence, optional
+        One label per record: only records with the same label pair.
 
     Returns
     -------
@@ -107,7 +110,8 @@ def mirror_pairs(records: Sequence, rudder: str = "delta") -> list[tuple[int, in
     """
     sig = [maneuver_signature(d, rudder) for d in records]
     return [(i, j) for i in range(len(sig)) for j in range(i + 1, len(sig))
-            if sig[i]["side"] != sig[j]["side"] and _same(sig[i], sig[j])]
+            if sig[i]["side"] != sig[j]["side"] and _same(sig[i], sig[j])
+            and (within is None or within[i] == within[j])]
 
 
 def asymmetric_quantities(model) -> list[str]:
@@ -127,7 +131,7 @@ def asymmetric_quantities(model) -> list[str]:
 
 
 def confounded_asymmetry(records: Sequence, quantities: Sequence[str], copies: Mapping[str, Sequence] | None = None,
-                         rudder: str = "delta") -> dict[str, str]:
+                         rudder: str = "delta", within: Sequence | None = None) -> dict[str, str]:
     """Free asymmetry quantities the records cannot tell from the turning dynamics, with the reason.
 
     Parameters
@@ -140,6 +144,9 @@ def confounded_asymmetry(records: Sequence, quantities: Sequence[str], copies: M
         For a quantity estimated per group, the group label of each record (``None``: the record
         does not use a copy), as from :func:`casship.identify.share_labels`.
     rudder : str
+    within : sequence, optional
+        One label per record (e.g. its facility): only records with the same label form a mirror
+        pair (a difference between facilities is not a port/starboard asymmetry).
 
     Returns
     -------
@@ -148,8 +155,9 @@ def confounded_asymmetry(records: Sequence, quantities: Sequence[str], copies: M
     """
     copies = dict(copies or {})
     sig = [maneuver_signature(d, rudder) for d in records]
+    same = (lambda i, j: True) if within is None else (lambda i, j: within[i] == within[j])  # noqa: E731
     pairs = {(i, j) for i in range(len(sig)) for j in range(i + 1, len(sig))
-             if sig[i]["side"] != sig[j]["side"] and _same(sig[i], sig[j])}
+             if sig[i]["side"] != sig[j]["side"] and _same(sig[i], sig[j]) and same(i, j)}
     out = {}
     for q in quantities:
         name, _, label = q.partition("@")

@@ -338,7 +338,8 @@ class IdentificationProblem:
 
     # -- analysis --------------------------------------------------------------------------------
     def identifiability(self, at: Mapping[str, float] | None = None, *, max_rel_std: float | None = None,
-                        max_corr: float | None = None, asymmetric: Sequence[str] | None = None) -> Identifiability:
+                        max_corr: float | None = None, asymmetric: Sequence[str] | None = None,
+                        pairs_within=None) -> Identifiability:
         """Fisher-information analysis of the free quantities at ``at`` (default: the starting values).
 
         Free port/starboard asymmetry quantities whose records hold no mirror pair (the same
@@ -354,6 +355,9 @@ class IdentificationProblem:
         asymmetric : sequence of str, optional
             Declared names of the asymmetry quantities (default: the model's
             ``meta["asymmetric"]`` parameters and the offsets of its rudder inputs).
+        pairs_within : str or sequence, optional
+            A grouping (name from ``groups``/``meta``, or one label per record) within which mirror
+            pairs must lie, e.g. ``"facility"``.
 
         Returns
         -------
@@ -377,7 +381,10 @@ class IdentificationProblem:
         confounded = {}
         if flagged and rudders[0] in self.records[0]:
             copies = share_labels(self.records, self._kwargs.get("share"), self._kwargs.get("groups"))
-            confounded = confounded_asymmetry(self.records, flagged, copies, rudder=rudders[0])
+            within = None
+            if pairs_within is not None:
+                within = share_labels(self.records, {"_": pairs_within}, self._kwargs.get("groups")).get("_")
+            confounded = confounded_asymmetry(self.records, flagged, copies, rudder=rudders[0], within=within)
         return Identifiability(self.free, dict(zip(self.free, theta.tolist())), mags, H, self._prec.copy(),
                                kinds=[e.kind for e in self.space.entries],
                                max_rel_std=MAX_REL_STD if max_rel_std is None else float(max_rel_std),
