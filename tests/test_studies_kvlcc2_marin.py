@@ -31,14 +31,18 @@ def test_held_out_run_is_predicted_better_than_by_the_published_constants(quick)
     out, summary = quick
     (row,) = summary["leave_one_run_out"]
     assert row["run"] == "MARIN zz_-20"
-    assert "MARIN zz_-20" not in summary["folds"]["MARIN zz_-20"]["train"]
+    assert "MARIN zz_-20" not in summary["folds"]["run:MARIN zz_-20"]["train"]
     assert row["psi_rmse_deg_fit"] < row["psi_rmse_deg_published"]
     assert row["position_rmse_m_fit"] < row["position_rmse_m_published"]
     for k in ("overshoot_1_deg", "overshoot_2_deg"):
         assert abs(row[f"{k}_fit"] - row[f"{k}_measured"]) < abs(row[f"{k}_published"] - row[f"{k}_measured"]), k
-    # propulsion: the propeller fitted to HSVA's measured thrust halves the thrust error or better
-    for name, p in summary["propulsion"]["thrust"].items():
-        assert (p["thrust RMS error, fitted propeller [%]"] < 0.75 * p["thrust RMS error, published propeller [%]"]), name
+    # propulsion: the propeller fitted to HSVA's measured thrust lowers the thrust error of every run,
+    # and of all runs together to about half
+    thrust = summary["propulsion"]["thrust"]
+    for name, p in thrust.items():
+        assert p["thrust RMS error, fitted propeller [%]"] < p["thrust RMS error, published propeller [%]"], name
+    fitted, published = ([p[f"thrust RMS error, {k} propeller [%]"] for p in thrust.values()] for k in ("fitted", "published"))
+    assert np.mean(fitted) < 0.6 * np.mean(published)
     # every parameter that moved has a standard error
     for name, m in summary["moved"].items():
         if not name.startswith("k_"):          # the thrust coefficients are the open-water curve's
@@ -86,7 +90,11 @@ def test_tutorial_runs_and_predicts_the_held_out_zigzag(data_dir, tmp_path, monk
     ns: dict = {}
     for block in re.findall(r"```python\n(.*?)```", (DOCS / "tutorial-kvlcc2-marin.md").read_text(), re.S):
         exec(compile(block, "tutorial-kvlcc2-marin.md", "exec"), ns)
-    assert ns["after"].errors["psi_rmse_deg"] < 0.6 * ns["before"].errors["psi_rmse_deg"]
+    # the tutorial's claim: 10.5 -> about 7 deg (only the chosen free set moves; no asymmetry from two runs
+    # without a mirror pair)
+    assert ns["after"].errors["psi_rmse_deg"] < 0.7 * ns["before"].errors["psi_rmse_deg"]
+    assert set(ns["idf"].confounded) == {"delta_0", "N_0_dash"}
+    assert (tmp_path / "kvlcc2_marin_heldout_bands.png").exists()
     assert 0.012 < ns["R_0"] < 0.017
     assert (tmp_path / "kvlcc2_marin_heldout.png").exists()
     assert np.isfinite(list(ns["fit"].estimates.values())).all()

@@ -35,7 +35,7 @@ from casship.progress import track
 from casship.studies import Study
 
 from ..kit import data_folder
-from .calibration import asymmetry_check, calibration_table, jackknife
+from .calibration import asymmetry_check, calibration_table, jackknife, mirror_check
 from .data import first_rudder_side, load_runs, regime
 from .propulsion import open_water
 from .report import slug, write_outputs
@@ -100,6 +100,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     in_sample = [evaluate(r, fit_path)["row"] for r in runs]
     model = study_model()
     asym = asymmetry_check(runs, everything.fit.params, model, kvlcc2())
+    asym["mirror"] = mirror_check(runs, fit_path, kvlcc2())
     return write_outputs(out, runs, everything, results, in_sample, calibration=calibration, jack=jack,
                          asymmetry=asym, quick=quick)
 

@@ -13,6 +13,11 @@
   measured overshoot differences (starboard-first minus port-first) against the fit's and the
   published constants' replays, and the fit's port/starboard ratio of the steady yaw rate in
   +-35 deg turning circles.
+* :func:`mirror_check` -- every run and its mirror image (rudder, heading, sway, yaw rate and
+  East position negated) replayed with the fit file and the published constants: a symmetric
+  ship would run the mirror image exactly so; a fit whose prediction of the mirror image is much
+  worse than of the run itself carries an asymmetry the data may not support. (The mirror image
+  of a measured run is not a measured run of the other direction: a diagnostic, not a validation.)
 """
 from __future__ import annotations
 
@@ -21,9 +26,9 @@ import numpy as np
 from casship.identify import ParameterUncertainty
 from casship.identify.asymmetry import mirror_pairs, turn_side
 from casship.maneuvers import run_maneuver
-from casship.validation import replay
+from casship.validation import replay, replay_file
 
-__all__ = ["jackknife", "calibration_table", "asymmetry_check", "Z95"]
+__all__ = ["jackknife", "calibration_table", "asymmetry_check", "mirror_check", "mirrored", "Z95"]
 
 Z95 = 1.959963984540054
 
@@ -91,3 +96,21 @@ def asymmetry_check(runs, fit_file_params, model, published) -> dict:
     out["steady_turn"] = rates
     return out
 
+
+
+def mirrored(data):
+    """The mirror image of a record: rudder, heading, sway speed, yaw rate and East position negated."""
+    return data.with_columns(**{c: -data[c] for c in ("delta", "psi", "v", "r", "y") if c in data})
+
+
+def mirror_check(runs, fit_file, published) -> dict:
+    """Heading RMSE and indices of each run and of its mirror image, published and fit."""
+    out = {}
+    for run in runs:
+        row = {}
+        for label, data in (("run", run.data), ("mirror image", mirrored(run.data))):
+            pub, fit = replay(published, data), replay_file(fit_file, data, "kvlcc2", samples=0)
+            row[f"{label}: psi RMSE published [deg]"] = pub.errors["psi_rmse_deg"]
+            row[f"{label}: psi RMSE fit [deg]"] = fit.errors["psi_rmse_deg"]
+        out[run.name] = row
+    return out

@@ -23,6 +23,7 @@ the fitted thrust on the training runs' approaches, :func:`resistance_for_run`).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -105,12 +106,13 @@ def _samples(runs, smoothed):
 
 
 def fit_propulsion(model: cs.Model, runs, smoothed: dict, curve: np.ndarray, *, max_iter: int = 30) -> PropulsionFit:
-    """Fit ``k`` (open water) and the wake (measured thrust of ``runs``) as in the module text."""
+    """Fit ``k`` (open water) and the wake (measured thrust of ``runs``) as in the module text; without a
+    run that measured the thrust, the published propeller is kept (an empty fit)."""
     from .workflow import select_free
 
     runs = [r for r in runs if "thrust" in r.data]
-    if not runs:
-        raise ValueError("fit_propulsion needs runs with a measured thrust")
+    if not runs:                 # nothing measured the thrust: the published propeller stays
+        return PropulsionFit({}, {}, [], [], math.nan, {}, {}, math.nan, [])
     k, kt_err = kt_for_diameter(curve, model.param_dict()["D_p"])
     fun = _thrust_function(model)
     data = _samples(runs, smoothed)

@@ -242,6 +242,11 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
             md_table(asym_rows, first="pair", spec=".3g") if asym_rows else "(none)",
             "Steady yaw rate in +-35 deg turning circles at 15.5 kn (simulated):",
             md_table(asymmetry["steady_turn"], first="model", spec=".4g"),
+            "Mirror check (a diagnostic, not a validation: the mirror image of a measured run is not a "
+            "measured run of the other direction): each run and its mirror image replayed with `fit.json` "
+            "and with the published constants (which are not symmetric themselves: `C_2`, `gamma_R` switch "
+            "on the sign of the drift):",
+            md_table(asymmetry.get("mirror", {}), first="run", spec=".3g"),
             "Asymmetry terms of the fit on all runs: " + (", ".join(
                 f"{n} = {everything.fit.params[n]:.4g}" for n in ("delta_0", "Y_0_dash", "N_0_dash")))
             + (f"; confounded (not estimated): {', '.join(everything.confounded)}" if everything.confounded else ""))
