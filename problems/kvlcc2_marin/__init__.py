@@ -62,6 +62,7 @@ def fold_specs(runs, quick: bool = False) -> list[tuple[str, str, tuple]]:
 
 def fold_file_name(kind: str, label: str) -> str:
     """The fit file of a fold: ``fit_without_<run>.json`` or ``fit_without_<kind>_<label>.json``."""
+    label = {"+": "positive", "-": "negative"}.get(label, label) if kind == "direction" else label
     return f"fit_without_{slug(label)}.json" if kind == "run" else f"fit_without_{kind}_{slug(label)}.json"
 
 

@@ -41,7 +41,7 @@ def _cv_table(rows, first: str = "held-out run") -> str:
 def _moved_table(everything) -> str:
     model = study_model()
     moved = everything.moved()
-    prior = prior_std(model, [n for n in moved if n in everything.fit.free])
+    prior = prior_std(model, [n for n in moved if n in everything.candidates])
     rows = {n: {"published": m["published"], "estimate": m["value"], "std error": m["std_error"],
                 "robust std error": m.get("std_error_robust", math.nan), "prior std": prior.get(n, math.nan),
                 "stage": m["stage"]} for n, m in moved.items()}
@@ -189,7 +189,8 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
                 writer.writerow({"validation": f"leave-one-{tag}-out", **r})
     rate_table, thrust_table, prop_rows = _propulsion(runs, everything)
     rep = Report("KVLCC2 MMG identified on the MARIN and HSVA runs, cross-validated", quick=quick)
-    rep.add(f"Model: `kvlcc2(asymmetry=True, smooth=True)` (full scale), fitted on {len(runs)} runs "
+    options = ", ".join(f"{k}={v}" for k, v in MODEL_OPTIONS.items())
+    rep.add(f"Model: `kvlcc2({options})` (full scale), fitted on {len(runs)} runs "
             f"({', '.join(r.name for r in runs)}). Workflow: propulsion from the measured thrust, EKF + RTS "
             f"smoothing, free set from the Fisher information, MAP output-error refinement of {', '.join(MEASURED)} "
             "with every run weighted the same (see `problems/kvlcc2_marin/workflow.py`). Every held-out run is "
@@ -213,14 +214,17 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     rep.add("What the model variant can do at best with this free set (not a prediction).",
             _cv_table(in_sample, "run (in training)"))
     rep.section("Every parameter that differs from the published constants")
-    rep.add("Nothing moves outside these two stages; each moved parameter has a standard error "
-            "(propulsion: posterior of the thrust fit; refinement: model-based and robust).",
+    rep.add("Nothing moves outside these stages; each moved parameter has a standard error (propulsion: "
+            "posterior of the thrust fit; asymmetry stage and refinement: model-based and robust; the thrust "
+            "coefficients are the open-water curve's, rewritten for the model's diameter).",
             _moved_table(everything))
     rep.section("Free set, prior and estimates (fit on all runs)")
     rep.add("Free set chosen by the rule of `workflow.select_free` from the Fisher information at the preset "
-            f"(start of the refinement: {everything.guess_from}):",
-            md_table({r["quantity"]: r for r in everything.selection}, first="candidate", spec=".3g",
-                     columns=["ratio_when_added", "max_corr", "ratio_alone", "confounded"],
+            f"(start of the refinement: {everything.guess_from}); the asymmetry terms in a first stage on the "
+            "mirror-pair runs only, the symmetric ones on all runs with the asymmetry held:",
+            md_table({f"{r['quantity']} ({'asymmetry' if r.get('stage', '').startswith('asym') else 'all runs'})": r
+                      for r in everything.selection}, first="candidate", spec=".3g",
+                     columns=["stage", "ratio_when_added", "max_corr", "ratio_alone", "confounded"],
                      headers={"ratio_when_added": "posterior/prior std when chosen", "max_corr": "max |corr| then",
                               "ratio_alone": "posterior/prior std if alone (not chosen)",
                               "confounded": "confounded with the turning dynamics"}),

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from casship.identify import ParameterUncertainty
 from casship.models import kvlcc2
 from casship.validation import replay, replay_file
 
@@ -29,11 +30,24 @@ SAMPLES = 40                       # parameter draws per replay for the index in
 
 
 def write_fold_file(fold, path: Path, uncertainty=None) -> Path:
-    """Write the fold's fit as the fit file a user gets (``uncertainty``: a
-    :class:`~casship.identify.ParameterUncertainty` replacing the fit's robust covariance)."""
+    """Write the fold's fit as the fit file a user gets.
+
+    Its covariance is ``uncertainty`` (a :class:`~casship.identify.ParameterUncertainty`) when
+    given, else the robust (sandwich) covariance of the refinement with that of the asymmetry
+    terms from the mirror-pair stage beside it (the two stages' estimates taken as independent).
+    """
     import dataclasses
 
+    from scipy.linalg import block_diag
+
     fit = fold.fit
+    if uncertainty is None and fold.asymmetry:
+        a, b = fold.asymmetry_fit.uncertainty("robust"), fit.uncertainty("robust")
+        ia = [a.names.index(n) for n in fold.asymmetry]
+        names = [*fold.asymmetry, *(b.names if b is not None else [])]
+        values = [*a.values[ia], *(b.values if b is not None else [])]
+        C = block_diag(a.covariance[np.ix_(ia, ia)], *([b.covariance] if b is not None else []))
+        uncertainty = ParameterUncertainty(names, values, C, "robust (sandwich), asymmetry stage and refinement")
     if uncertainty is not None:
         fit = dataclasses.replace(fit, param_covariance=uncertainty.to_dict())
     return fit.to_json(path)

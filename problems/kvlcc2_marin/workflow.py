@@ -23,18 +23,21 @@ cross-validation; the report lists the ones that changed after a cross-validatio
    fitted propeller), by a rule stated before any fit: greedy D-optimal forward selection among the
    candidates, adding a quantity only while every chosen one is determined by the data to at most
    half its prior standard deviation (``posterior std / prior std <= 0.5``) and no two chosen ones
-   are correlated beyond 0.95; at most 15. The asymmetry terms (rudder neutral angle,
-   propeller-induced side force and yaw moment) are one value for the ship, a candidate only when
-   the training runs hold a mirror pair of one facility (:mod:`casship.identify.asymmetry`: the same
-   manoeuvre turning first to both sides; a difference between facilities is no port/starboard
-   evidence); otherwise they are confounded with the turning dynamics and stay at zero.
-6. **MAP refinement** of the chosen set; every other parameter stays at the preset.
+   are correlated beyond 0.95; at most 15.
+6. **Asymmetry from the mirror pairs only**: the asymmetry terms (rudder neutral angle,
+   propeller-induced side force and yaw moment) are one value for the ship, estimated (free set by
+   the rule of step 5, MAP) on the training runs that form mirror pairs within one facility
+   (:mod:`casship.identify.asymmetry`: the same manoeuvre turning first to both sides; a
+   difference between facilities is no port/starboard evidence) and nothing else; without a pair
+   they are confounded with the turning dynamics and stay at zero.
+7. **MAP refinement** of the chosen symmetric set on all training runs, the asymmetry terms held at
+   step 6's values; every other parameter stays at the preset.
 
 Prior (standard deviations, relative to the published value unless stated): linear hull
 derivatives 20 %; cubic hull and surge derivatives 50 % (``X'_vr`` at least 0.01); straight-run
-resistance 30 %; rudder and interaction factors 20 % (``gamma_R`` 25 %, ``a_H``, ``t_R``, ``C_1`` 30 %);
-added masses 20 %; rudder neutral angle 1 deg; propeller-induced side force and yaw moment 0.05 and
-0.025 (what a 1 deg rudder gives at the approach).
+resistance 30 %; rudder and interaction factors 20 % (``gamma_R`` 25 %, ``a_H``, ``t_R`` 30 %); added
+masses 20 %; rudder neutral angle 1 deg; propeller-induced side force and yaw moment 0.05 and 0.025
+(what a 1 deg rudder gives at the approach).
 
 A run of any facility, direction or regime is replayed with the one parameter set of the fit (there
 are no per-facility copies): the fit file's ``params``, exactly what ``casship simulate --params``
@@ -50,6 +53,7 @@ import numpy as np
 
 import casship as cs
 from casship.identify import IdentificationWarning, Prior, inverse_dynamics, smooth_trial
+from casship.identify.asymmetry import confounded_asymmetry, mirror_pairs
 from casship.identify.uncertainty import effective_samples
 from casship.models import kvlcc2
 
@@ -139,6 +143,8 @@ class FoldFit:
     seconds: float
     inverse_dynamics: object = field(repr=False, default=None)
     identifiability: object = field(repr=False, default=None)
+    asymmetry_fit: object = field(repr=False, default=None)   # FitResult of the mirror-pair stage
+    asymmetry: list = field(default_factory=list)              # asymmetry terms taken from it
 
     def moved(self) -> dict:
         """Every parameter that differs from the published value, with its standard error and stage."""
@@ -147,6 +153,11 @@ class FoldFit:
         for n, v in self.propulsion.values.items():
             out[n] = {"value": v, "published": nominal[n], "std_error": self.propulsion.std_errors.get(n, np.nan),
                       "stage": "propulsion (open-water curve)" if n.startswith("k_") else "propulsion (measured thrust)"}
+        for n in self.asymmetry:
+            a = self.asymmetry_fit
+            out[n] = {"value": a.estimates[n], "published": nominal[n], "std_error": a.std_errors[n],
+                      "std_error_robust": a.std_errors_robust.get(n, np.nan),
+                      "stage": "asymmetry (MAP on the mirror-pair runs)"}
         for n in self.fit.free:
             out[n] = {"value": self.fit.estimates[n], "published": nominal[n], "std_error": self.fit.std_errors[n],
                       "std_error_robust": self.fit.std_errors_robust.get(n, np.nan), "stage": "MAP refinement"}
@@ -155,7 +166,8 @@ class FoldFit:
 
 def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float = 2.0, max_free: int = MAX_FREE,
              show: bool = False) -> FoldFit:
-    """Propulsion, free-set choice and MAP refinement on ``train`` (see the module text)."""
+    """Propulsion, asymmetry from the mirror pairs, free-set choice and MAP refinement on ``train``
+    (see the module text)."""
     t0 = time.perf_counter()
     model = study_model()
     prop = fit_propulsion(model, train, smoothed, curve)
@@ -167,7 +179,6 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
                              autocorrelation=True)
     start = {**idfit.estimates, "R_0_dash": r0}
     recs = [fit_record(r, dt, outputs=MEASURED) for r in train]
-    weights = record_weights(recs)
     at = {k: float(fixed[model.index(k, "param")]) for k in CANDIDATES}
     unit = cs.OutputErrorProblem(model, recs, list(CANDIDATES), measured=list(MEASURED),
                                  sigma={c: 1.0 for c in MEASURED}, params=fixed, scale=dict(PRIOR_ABS))
@@ -175,10 +186,35 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
     neff = effective_samples(res, list(MEASURED))
     sigma = {c: float(np.sqrt(sum(np.nansum(r[:, j] ** 2) for r in res) / neff[c]["n_eff"]))
              for j, c in enumerate(MEASURED)}
-    prob = cs.OutputErrorProblem(model, recs, list(CANDIDATES), measured=list(MEASURED), sigma=sigma, params=fixed,
-                                 scale=dict(PRIOR_ABS), prior=Prior(prior_std(model, CANDIDATES)),
-                                 record_weights=weights)
-    idf = prob.identifiability(at=at, pairs_within="facility")
+    facilities = [r.facility for r in train]
+    paired = sorted({i for pair in mirror_pairs(recs, within=facilities) for i in pair})
+    confounded = confounded_asymmetry(recs, ASYMMETRY, within=facilities)
+    asym, asym_stage, rows_a = {}, None, []
+    if paired:           # stage A: the asymmetry terms from the mirror-pair runs only
+        sub = [recs[i] for i in paired]
+        asym_stage, chosen_a, rows_a, _, _ = _select_and_refine(model, sub, list(CANDIDATES), sigma, fixed, at, start,
+                                                                max_free, show)
+        asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ASYMMETRY}
+        rows_a = [dict(r, stage=f"asymmetry: mirror-pair runs {', '.join(train[i].name for i in paired)}")
+                  for r in rows_a if r["quantity"] in ASYMMETRY]
+    fixed = model.params({**preset, **asym})
+    symmetric = [c for c in CANDIDATES if c not in ASYMMETRY]
+    fit, chosen, rows, idf, use_id = _select_and_refine(model, recs, symmetric, sigma, fixed, at, start, max_free, show)
+    rows = rows_a + [dict(r, stage="all runs") for r in rows]
+    rows += [{"quantity": q, "ratio_when_added": float("nan"), "confounded": why, "stage": "asymmetry"}
+             for q, why in confounded.items()]
+    return FoldFit([r.name for r in train], prop, preset, start, "inverse dynamics" if use_id else "preset", sigma,
+                   list(CANDIDATES), rows, confounded, chosen, fit, time.perf_counter() - t0, idfit, idf,
+                   asym_stage, sorted(asym))
+
+
+def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_free, show):
+    """Free set by :func:`select_free` from the information at ``at`` and the MAP refinement of it
+    (started from the inverse-dynamics values when they give a lower cost than the preset)."""
+    prob = cs.OutputErrorProblem(model, recs, candidates, measured=list(MEASURED), sigma=sigma, params=fixed,
+                                 scale={k: v for k, v in PRIOR_ABS.items() if k in candidates},
+                                 prior=Prior(prior_std(model, candidates)), record_weights=record_weights(recs))
+    idf = prob.identifiability(at={k: at[k] for k in candidates}, pairs_within="facility")
     chosen, rows = select_free(idf, max_count=max_free)
     refine = prob.replace(free=chosen, prior=Prior(prior_std(model, chosen)),
                           scale={k: v for k, v in PRIOR_ABS.items() if k in chosen})
@@ -187,8 +223,7 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
     with warnings.catch_warnings():        # coloured residuals are expected here; fit.warnings keeps them
         warnings.simplefilter("ignore", IdentificationWarning)
         fit = refine.solve(guess=guess_id if use_id else None, show=show)
-    return FoldFit([r.name for r in train], prop, preset, start, "inverse dynamics" if use_id else "preset", sigma,
-                   list(CANDIDATES), rows, dict(idf.confounded), chosen, fit, time.perf_counter() - t0, idfit, idf)
+    return fit, chosen, rows, idf, use_id
 
 
 def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR,
