@@ -29,7 +29,17 @@ _CHUNK = 512
 
 
 def band_z(level: float) -> float:
-    """Half-width of a two-sided normal interval of probability ``level`` in standard deviations."""
+    """Half-width of a two-sided normal interval of probability ``level`` in standard deviations.
+
+    Parameters
+    ----------
+    level : float
+        Coverage probability in (0, 1).
+
+    Returns
+    -------
+    float
+    """
     if not 0.0 < float(level) < 1.0:
         raise ValueError(f"level must be in (0, 1), got {level}")
     return float(stats.norm.ppf(0.5 + 0.5 * float(level)))

@@ -50,8 +50,10 @@ class ReplayResult:
         ``coverage``: the fraction of the measured heading inside the band.
     metric_intervals : dict
         With a parameter uncertainty: index -> ``[lo, hi]`` at ``bands["level"]`` from parameter
-        draws; ``sampling`` holds the number of draws, failures and the sampled/linearised ratio of
-        the heading spread (a check of the linearisation).
+        draws.
+    sampling : dict
+        The number of draws, failures and the sampled/linearised ratio of the heading spread (a
+        check of the linearisation).
     """
 
     trajectory: Trajectory

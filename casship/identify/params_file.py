@@ -36,6 +36,8 @@ class ParameterUncertainty:
     source : str
         Where the covariance comes from (e.g. ``"model-based"``, ``"robust (sandwich)"``,
         ``"run-level jackknife"``).
+    info : dict
+        Further facts about the covariance (e.g. the number of folds of a jackknife).
 
     Examples
     --------
@@ -100,7 +102,19 @@ class ParameterUncertainty:
 
     @classmethod
     def from_dict(cls, d, where: str = "the file") -> "ParameterUncertainty":
-        """Read the form of :meth:`to_dict`."""
+        """Read the form of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        d : mapping
+            With ``names``, ``values``, ``matrix`` (and optionally ``source``, ``info``).
+        where : str
+            What holds it (for the messages).
+
+        Returns
+        -------
+        ParameterUncertainty
+        """
         missing = [k for k in ("names", "matrix") if k not in d]
         if missing:
             raise ValueError(f"{where}: param_covariance lacks {missing}")

@@ -396,7 +396,23 @@ def mmg_propeller(P: Mapping[str, ca.SX], u, v, r, n, smooth: float | None = Non
 
     The wake ``1 - w_P = (1 - w_P0) [1 + (1 - exp(-C_1 |beta_P|)) (C_2 - 1)]`` with
     ``beta_P = beta - x'_P r'``, ``u_P = u (1 - w_P)``, ``T = rho n^2 D^4 K_T(J_P)`` (written to stay
-    finite at ``n = 0``); ``smooth`` as in :func:`mmg_forces`.
+    finite at ``n = 0``).
+
+    Parameters
+    ----------
+    P : mapping
+        Parameter name -> symbol or value (the names of :data:`MMG_PARAMS`).
+    u, v, r : SX, MX or float
+        Surge and sway velocity at midship [m/s], yaw rate [rad/s].
+    n : SX, MX or float
+        Propeller rate [1/s].
+    smooth : float, optional
+        Width of the smooth sign switches [rad] (``None``: the published ``if_else`` switches).
+
+    Returns
+    -------
+    (T, u_P, n2KT)
+        Thrust [N], propeller inflow speed [m/s] and ``n^2 D^2 K_T`` [m^2/s^2].
     """
     L = P["L_pp"]
     U = ca.sqrt(u**2 + v**2 + 1e-12)
