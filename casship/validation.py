@@ -4,6 +4,11 @@
 inputs (zero-order hold on the record's time stamps) and reports the root-mean-square errors of
 heading (wrapped differences), position and surge speed, plus the manoeuvre metrics of the
 replayed run and of the measurement, computed by the same functions of :mod:`casship.maneuvers`.
+Given the parameters' uncertainty, it also carries prediction bands on heading and track (exact
+sensitivities, :mod:`casship.prediction`) and intervals on the indices (parameter draws).
+
+:func:`casship.identify.replay_file` is *the* replay of a fit file (through :func:`replay`): what ``casship
+simulate --params FILE --inputs RUN`` prints, what the studies' cross-validation scores and what the tests check.
 """
 from __future__ import annotations
 
@@ -39,6 +44,16 @@ class ReplayResult:
         ``"turning"``, ``"zigzag"`` or ``"other"`` (from :func:`classify_maneuver`).
     measured : Dataset, optional
         The record replayed (for :meth:`plot`).
+    bands : dict
+        With a parameter uncertainty: per sample ``psi_std`` [rad], ``x_std``, ``y_std``,
+        ``cross_track_std`` [m] (linearised, exact sensitivities), ``level`` and ``z``; and
+        ``coverage``: the fraction of the measured heading inside the band.
+    metric_intervals : dict
+        With a parameter uncertainty: index -> ``[lo, hi]`` at ``bands["level"]`` from parameter
+        draws.
+    sampling : dict
+        The number of draws, failures and the sampled/linearised ratio of the heading spread (a
+        check of the linearisation).
     """
 
     trajectory: Trajectory
@@ -47,6 +62,26 @@ class ReplayResult:
     measured_metrics: dict = field(default_factory=dict)
     kind: str = "other"
     measured: Dataset | None = field(default=None, repr=False)
+    bands: dict = field(default_factory=dict, repr=False)
+    metric_intervals: dict = field(default_factory=dict)
+    sampling: dict = field(default_factory=dict)
+
+    def band_summary(self) -> dict:
+        """Scalar summary of the bands (JSON-friendly): level, largest and final half-widths of the
+        heading [deg] and cross-track [m] bands, and the measured heading's coverage."""
+        if not self.bands:
+            return {}
+        z = self.bands["z"]
+        out = {"level": self.bands["level"], "source": self.bands.get("source", "")}
+        if "psi_std" in self.bands:
+            w = np.degrees(z * self.bands["psi_std"])
+            out.update(psi_halfwidth_max_deg=float(w.max()), psi_halfwidth_end_deg=float(w[-1]))
+        if "cross_track_std" in self.bands:
+            w = z * self.bands["cross_track_std"]
+            out.update(cross_track_halfwidth_max_m=float(w.max()), cross_track_halfwidth_end_m=float(w[-1]))
+        if "coverage" in self.bands:
+            out["psi_coverage"] = self.bands["coverage"]
+        return out
 
     def __repr__(self) -> str:
         errors = ", ".join(f"{k}={v:.3g}" for k, v in self.errors.items())
@@ -66,8 +101,13 @@ class ReplayResult:
         lines += [f"  {k:28s} {v:12.4f}" for k, v in self.errors.items()]
         keys = [k for k in self.metrics if k in self.measured_metrics and isinstance(self.metrics[k], float)]
         if keys:
-            lines.append(f"  {'metric':28s} {'replayed':>12s} {'measured':>12s}")
-            lines += [f"  {k:28s} {self.metrics[k]:12.2f} {self.measured_metrics[k]:12.2f}" for k in keys]
+            iv = self.metric_intervals
+            lines.append(f"  {'metric':28s} {'replayed':>12s} {'measured':>12s}"
+                         + (f"  {100 * self.bands['level']:.0f} % interval" if iv else ""))
+            lines += [f"  {k:28s} {self.metrics[k]:12.2f} {self.measured_metrics[k]:12.2f}"
+                      + (f"  [{iv[k][0]:.2f}, {iv[k][1]:.2f}]" if k in iv else "") for k in keys]
+        for k, v in self.band_summary().items():
+            lines.append(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
         return "\n".join(lines)
 
     def plot(self, path=None):
@@ -89,6 +129,8 @@ class ReplayResult:
         track, heading, speed, rudder = axes.ravel()
         track.plot(tr["y"], tr["x"], label="replayed")
         heading.plot(tr.t, np.degrees(np.unwrap(tr["psi"])), label="replayed")
+        if self.bands:
+            self._draw_bands(track, heading)
         if "u" in tr:
             speed.plot(tr.t, tr["u"], label="replayed")
         if data is not None:
@@ -117,6 +159,20 @@ class ReplayResult:
         fig.savefig(path, dpi=110)
         plt.close(fig)
         return Path(path)
+
+
+    def _draw_bands(self, track, heading) -> None:
+        tr, b, z = self.trajectory, self.bands, self.bands["z"]
+        label = f"{100 * b['level']:.0f} % band"
+        if "psi_std" in b:
+            psi = np.degrees(np.unwrap(tr["psi"]))
+            w = np.degrees(z * b["psi_std"])
+            heading.fill_between(tr.t, psi - w, psi + w, color="C0", alpha=0.25, lw=0, label=label)
+        if "cross_track_std" in b:
+            w = z * b["cross_track_std"][:, None] * b["normal"]
+            for sign in (-1, 1):
+                track.plot(tr["y"] + sign * w[:, 1], tr["x"] + sign * w[:, 0], color="C0", lw=0.6, alpha=0.6,
+                           label=label if sign > 0 else None)
 
 
 def classify_maneuver(data: Dataset, rudder: str = "delta") -> tuple[str, dict]:
@@ -197,7 +253,8 @@ def maneuver_metrics(data: Dataset, kind: str, options: dict, *, t_exec: float, 
 
 
 def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step: float | None = None,
-           x0=None, check_limits: bool = True) -> ReplayResult:
+           x0=None, check_limits: bool = True, uncertainty=None, level: float = 0.95, samples: int = 40,
+           seed=0) -> ReplayResult:
     """Simulate ``model`` with the measured inputs of ``data`` from its measured initial state.
 
     Parameters
@@ -216,6 +273,15 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     check_limits : bool
         Check the measured inputs, the initial state and the time steps against the model's
         validity ranges (see :func:`casship.simulate`).
+    uncertainty : ParameterUncertainty, optional
+        Uncertainty of some of the parameters (e.g. from a fit file): the result then carries
+        prediction bands (exact sensitivities) and index intervals (``samples`` draws).
+    level : float
+        Coverage of the bands and intervals.
+    samples : int
+        Parameter draws for the index intervals and the check of the bands (0: none).
+    seed : int or numpy.random.Generator
+        Seed of the draws.
 
     Returns
     -------
@@ -248,9 +314,42 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
         errors["u_rmse_mps"] = float(np.sqrt(np.mean(e[ok] ** 2)))
     kind, options = classify_maneuver(data)
     metrics, measured = {}, {}
+    L = model.vessel.L_pp if model.vessel is not None else None
+    t_exec = execute_time(data) if kind != "other" else None
     if kind != "other":
-        L = model.vessel.L_pp if model.vessel is not None else None
-        t_exec = execute_time(data)
         metrics = maneuver_metrics(traj, kind, options, t_exec=t_exec, L=L)
         measured = maneuver_metrics(data, kind, options, t_exec=t_exec, L=L)
-    return ReplayResult(traj, errors, metrics, measured, kind, data)
+    result = ReplayResult(traj, errors, metrics, measured, kind, data)
+    if uncertainty is not None:
+        _add_uncertainty(result, model, traj, data, uncertainty, level, samples, seed, method, max_step,
+                         lambda tr: maneuver_metrics(tr, kind, options, t_exec=t_exec, L=L) if kind != "other" else {})
+    return result
+
+
+def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, method, max_step, metrics_of) -> None:
+    """Bands from exact sensitivities, index intervals from parameter draws (see :mod:`casship.prediction`)."""
+    from .prediction import prediction_bands, sampled_metrics, trajectory_sensitivities
+
+    p = model.params(traj.meta["params"])
+    U = np.column_stack([traj[n] for n in model.input_names])
+    x0 = np.array([traj[n][0] for n in model.state_names])
+    X, S = trajectory_sensitivities(model, x0, traj.t, U, p, unc.names, method=method, max_step=max_step)
+    bands = prediction_bands(model, X, S, unc.covariance, level)
+    bands["source"] = unc.source
+    if "psi" in data and "psi_std" in bands:
+        e = np.abs(wrap(traj["psi"] - data["psi"]))
+        ok = np.isfinite(e)
+        bands["coverage"] = float(np.mean(e[ok] <= bands["z"] * bands["psi_std"][ok] + 1e-12))
+    result.bands = bands
+    if samples:
+        def run(pk):
+            tr = simulate(model, x0, data.t, data, pk, method=method, max_step=max_step, check_limits=False)
+            return metrics_of(tr), tr["psi"]
+        draws = unc.sample(model, p, samples, seed)
+        s = sampled_metrics(run, draws, level)
+        result.metric_intervals = s["intervals"]
+        check = {"samples": s["samples"], "failed": s["failed"]}
+        if s["psi_std"] is not None and "psi_std" in bands:
+            lin = bands["psi_std"]
+            check["psi_std_ratio_sampled_to_linear"] = float(np.sqrt(np.sum(s["psi_std"] ** 2) / max(np.sum(lin ** 2), 1e-300)))
+        result.sampling = check

@@ -1,8 +1,9 @@
-"""Study kvlcc2-marin (quick: six runs, the 20/20 zig-zag held out) and its tutorial.
+"""Study kvlcc2-marin (quick: seven runs, the 20/20 zig-zag held out) and its tutorial.
 
-The quick study runs the whole workflow (propulsion trim, smoothing, inverse dynamics, free set from
-the Fisher information, MAP refinement) without the held-out run and replays it; its fit.json
-replays with ``casship simulate --model kvlcc2 --params`` on the fitted model variant.
+The quick study runs the whole workflow (propulsion from the measured thrust, smoothing, free set
+from the Fisher information, MAP refinement) without the held-out run, writes the fold's fit file
+and scores the held-out run by replaying that file; the file replays from the command line to the
+same numbers.
 """
 import json
 import re
@@ -30,24 +31,50 @@ def test_held_out_run_is_predicted_better_than_by_the_published_constants(quick)
     out, summary = quick
     (row,) = summary["leave_one_run_out"]
     assert row["run"] == "MARIN zz_-20"
-    assert "MARIN zz_-20" not in summary["folds"]["MARIN zz_-20"]["train"]
+    assert "MARIN zz_-20" not in summary["folds"]["run:MARIN zz_-20"]["train"]
     assert row["psi_rmse_deg_fit"] < row["psi_rmse_deg_published"]
     assert row["position_rmse_m_fit"] < row["position_rmse_m_published"]
     for k in ("overshoot_1_deg", "overshoot_2_deg"):
         assert abs(row[f"{k}_fit"] - row[f"{k}_measured"]) < abs(row[f"{k}_published"] - row[f"{k}_measured"]), k
-    # propulsion: the trimmed resistance holds each run's approach at its measured rate
-    assert 0.012 < summary["R_0_dash"] < 0.017
-    for name, p in summary["propulsion"].items():
-        assert abs(p["error published [%]"]) > 10.0, name
-        assert abs(p["error fit [%]"]) < 3.0, name
-    for name in ("report.md", "fit.json", "cross_validation.csv", "summary.json", "fig_heldout_MARIN_zz_-20.png"):
+    # propulsion: the propeller fitted to HSVA's measured thrust lowers the thrust error of every run,
+    # and of all runs together to about half
+    thrust = summary["propulsion"]["thrust"]
+    for name, p in thrust.items():
+        assert p["thrust RMS error, fitted propeller [%]"] < p["thrust RMS error, published propeller [%]"], name
+    fitted, published = ([p[f"thrust RMS error, {k} propeller [%]"] for p in thrust.values()] for k in ("fitted", "published"))
+    assert np.mean(fitted) < 0.6 * np.mean(published)
+    # every parameter that moved has a standard error
+    for name, m in summary["moved"].items():
+        if not name.startswith("k_"):          # the thrust coefficients are the open-water curve's
+            assert np.isfinite(m["std_error"]) and m["std_error"] > 0, name
+    for name in ("report.md", "fit.json", "fit_without_MARIN_zz_-20.json", "cross_validation.csv", "summary.json",
+                 "fig_heldout_MARIN_zz_-20.png"):
         assert (out / name).exists(), name
+
+
+def test_fold_file_replays_to_the_numbers_in_the_report(quick, data_dir, capsys):
+    out, summary = quick
+    (row,) = summary["leave_one_run_out"]
+    held = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_-20_m.dat"
+    capsys.readouterr()
+    assert main(["simulate", "--model", "kvlcc2", "--params", str(out / row["fit_file"]), "--inputs", str(held),
+                 "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    assert cli["replay"]["psi_rmse_deg"] == pytest.approx(row["psi_rmse_deg_fit"], rel=1e-9)
+    assert cli["replay"]["position_rmse_m"] == pytest.approx(row["position_rmse_m_fit"], rel=1e-9)
+    for k in ("overshoot_1_deg", "overshoot_2_deg"):
+        assert cli["metrics"][k] == pytest.approx(row[f"{k}_fit"], rel=1e-9)
+        assert cli["metric_intervals"][k] == pytest.approx([row[f"{k}_fit_lo"], row[f"{k}_fit_hi"]], rel=1e-9)
+    assert cli["bands"]["psi_coverage"] == pytest.approx(row["psi_band_coverage"], rel=1e-12)
+    report = (out / "report.md").read_text()
+    assert f"{row['psi_rmse_deg_published']:.3g} -> {row['psi_rmse_deg_fit']:.3g}" in report
 
 
 def test_fit_file_replays_the_fitted_variant_from_the_command_line(quick, data_dir, capsys):
     out, summary = quick
     fit = json.loads((out / "fit.json").read_text())
     assert fit["model"] == "kvlcc2" and fit["model_options"] == {"asymmetry": True, "smooth": True}
+    assert set(fit["param_covariance"]["names"]) >= {n for n in fit["free"] if "@" not in n}
     held = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_-20_m.dat"
     capsys.readouterr()
     assert main(["simulate", "--model", "kvlcc2", "--params", str(out / "fit.json"), "--inputs", str(held), "--json"]) == 0
@@ -63,7 +90,11 @@ def test_tutorial_runs_and_predicts_the_held_out_zigzag(data_dir, tmp_path, monk
     ns: dict = {}
     for block in re.findall(r"```python\n(.*?)```", (DOCS / "tutorial-kvlcc2-marin.md").read_text(), re.S):
         exec(compile(block, "tutorial-kvlcc2-marin.md", "exec"), ns)
-    assert ns["after"].errors["psi_rmse_deg"] < 0.6 * ns["before"].errors["psi_rmse_deg"]
+    # the tutorial's claim: 10.5 -> about 7 deg (only the chosen free set moves; no asymmetry from two runs
+    # without a mirror pair)
+    assert ns["after"].errors["psi_rmse_deg"] < 0.7 * ns["before"].errors["psi_rmse_deg"]
+    assert set(ns["idf"].confounded) == {"delta_0", "N_0_dash"}
+    assert (tmp_path / "kvlcc2_marin_heldout_bands.png").exists()
     assert 0.012 < ns["R_0"] < 0.017
     assert (tmp_path / "kvlcc2_marin_heldout.png").exists()
     assert np.isfinite(list(ns["fit"].estimates.values())).all()
@@ -81,5 +112,8 @@ def test_runs_are_split_by_the_side_of_their_first_rudder():
 
     assert first_rudder_side(run(+1)) == "+"
     assert first_rudder_side(run(-1)) == "-"
-    with pytest.raises(ValueError, match="never moves"):
+    with pytest.raises(ValueError, match="does not move"):
         first_rudder_side(Run("flat", "X", cs.Dataset(t, {"delta": np.zeros_like(t)}), "zigzag"))
+    # a 5/1 zig-zag from a 0.3 deg approach: the first swing (+5 deg) is less than 5 deg from the approach
+    delta = np.radians(np.where(t < 10, 0.3, np.where(t < 40, 5.0, -5.0)))
+    assert first_rudder_side(Run("5/1", "X", cs.Dataset(t, {"delta": delta}), "zigzag")) == "+"

@@ -83,6 +83,25 @@ def count(text: str) -> int:
     return value
 
 
+def whole(text: str) -> int:
+    """argparse type: a whole number >= 0 (a count that may be zero)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text}")
+    return value
+
+
+def level(text: str) -> float:
+    """argparse type: a coverage probability strictly between 0 and 1."""
+    value = finite(text)
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"a coverage level lies strictly between 0 and 1, got {text}")
+    return value
+
+
 def seed(text: str) -> int:
     """argparse type: a random seed, a whole number >= 0."""
     try:

@@ -9,7 +9,7 @@ Examples::
 from __future__ import annotations
 
 from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model, load_record,
-                      print_json, refuse_unused, require, seed, write_output)
+                      level, print_json, refuse_unused, require, seed, whole, write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
@@ -52,6 +52,11 @@ def register(sub) -> None:
     p.add_argument("--inputs", default=None,
                    help="replay the measured inputs of a record (CSV, MARIN .dat, NMEA; see casship.io.read_record) "
                         "from its measured initial state")
+    p.add_argument("--samples", type=whole, default=40,
+                   help="parameter draws for the index intervals when the --params file carries a covariance "
+                        "(0: none)")
+    p.add_argument("--level", type=level, default=0.95, help="coverage of the prediction bands and intervals")
+    p.add_argument("--no-bands", action="store_true", help="ignore the covariance of the --params file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--csv", default=None, help="save the trajectory as CSV")
     p.add_argument("--plot", default=None, help="save a plot (PNG)")
@@ -79,14 +84,17 @@ def run(args) -> int:
         refuse_unused(args.parser, {"--first": args.first is not None and args.maneuver != "zigzag",
                                     "--heading-deg": args.heading_deg is not None and args.maneuver != "zigzag",
                                     "--hold": args.hold is not None and args.maneuver not in ("pullout", "spiral", "random"),
-                                    "--seed": args.seed is not None and args.maneuver != "random"},
+                                    "--seed": args.seed is not None and args.maneuver != "random" and not args.params},
                       f"not used by a {args.maneuver} manoeuvre (--first, --heading-deg: zig-zag; --hold: pull-out, "
-                      "spiral, random; --seed: random)")
+                      "spiral, random; --seed: random, or the parameter draws of --params)")
     stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
+    unc = None
     if args.params:
         from ..identify import read_params
 
-        model, p = read_params(args.params, args.model)     # the fitted variant, checked against the file
+        # the fitted variant, checked against the file, and the file's parameter covariance
+        model, p, unc = read_params(args.params, args.model, uncertainty=True)
+        unc = None if args.no_bands else unc
     else:
         model = load_model(args.model)
         p = model.params()
@@ -95,31 +103,48 @@ def run(args) -> int:
     measured = None
     check = not args.allow_out_of_range
     if args.inputs:
+        from ..identify import replay_file
         from ..validation import replay
 
         measured = load_record(args.inputs)
-        res = replay(model, measured, p, method=args.method, check_limits=check)
+        options = dict(method=args.method, check_limits=check, level=args.level, samples=args.samples)
+        res = (replay_file(args.params, measured, model, uncertainty=not args.no_bands, **options) if args.params
+               else replay(model, measured, p, **options))
         traj = res.trajectory
         out.update({"maneuver": f"replay ({res.kind})", "inputs": str(args.inputs), "replay": res.errors,
                     "metrics": res.metrics, "measured_metrics": res.measured_metrics})
+        if res.bands:
+            out.update({"bands": res.band_summary(), "metric_intervals": res.metric_intervals,
+                        "sampling": res.sampling})
     else:
         from ..maneuvers import run_maneuver
 
-        res = run_maneuver(model, args.maneuver, rudder_deg=args.rudder_deg, heading_deg=args.heading_deg,
-                           speed=args.speed, n=args.rps, duration=args.duration, dt=args.dt, p=p,
-                           hold=args.hold, seed=0 if args.seed is None else args.seed, method=args.method, check_limits=check, first=args.first)
+        seed = 0 if args.seed is None else args.seed
+
+        def simulate_with(pk):
+            return run_maneuver(model, args.maneuver, rudder_deg=args.rudder_deg, heading_deg=args.heading_deg,
+                                speed=args.speed, n=args.rps, duration=args.duration, dt=args.dt, p=pk,
+                                hold=args.hold, seed=seed, method=args.method, check_limits=check, first=args.first)
+
+        res = simulate_with(p)
         traj = res.trajectory
         s = res.settings
         out.update({"maneuver": args.maneuver, "speed_mps": s["speed_mps"], "rps": s["n"],
                     "rudder_deg": args.rudder_deg, "metrics": _with_percent(res.metrics, s), "settings": s})
         if "first_side" in s:
             out["first_side"] = s["first_side"]
+        if unc is not None and args.samples:
+            out.update(_maneuver_intervals(simulate_with, model, p, unc, args.samples, seed, args.level))
     if args.csv:
         write_output(args.csv, traj.to_csv, option="--csv", overwrite=args.overwrite, stamps=stamps)
         out["csv"] = str(args.csv)
     if args.plot:
-        write_output(args.plot, lambda tmp: _plot(traj, measured, tmp, title=f"{args.model}: {out['maneuver']}"),
-                     option="--plot", overwrite=args.overwrite, stamps=stamps)
+        if getattr(res, "bands", None):              # the replay with its prediction bands
+            draw = res.plot
+        else:
+            def draw(tmp):
+                _plot(traj, measured, tmp, title=f"{args.model}: {out['maneuver']}")
+        write_output(args.plot, draw, option="--plot", overwrite=args.overwrite, stamps=stamps)
         out["plot"] = str(args.plot)
     if args.json:
         print_json(out)
@@ -139,6 +164,18 @@ def _with_percent(metrics: dict, settings: dict) -> dict:
     return out
 
 
+def _maneuver_intervals(simulate_with, model, p, unc, samples: int, seed: int, level: float) -> dict:
+    """Index intervals of a manoeuvre from parameter draws of the fit file's covariance."""
+    from ..prediction import sampled_metrics
+
+    def run(pk):
+        return {k: v for k, v in simulate_with(pk).metrics.items() if isinstance(v, (int, float))}, None
+
+    s = sampled_metrics(run, unc.sample(model, p, samples, seed), level)
+    return {"metric_intervals": s["intervals"], "sampling": {"samples": s["samples"], "failed": s["failed"],
+                                                             "level": level, "source": unc.source}}
+
+
 def _print_text(out) -> None:
     print(f"model {out['model']} (L_pp = {out['L_pp_m']} m), manoeuvre {out['maneuver']}")
     if "first_side" in out:
@@ -152,12 +189,17 @@ def _print_text(out) -> None:
     metrics = out.get("metrics", {})
     measured = out.get("measured_metrics", {})
     keys = [k for k in _METRIC_ORDER if k in metrics or k in measured]
+    intervals = out.get("metric_intervals", {})
     if keys:
-        print(f"  {'metric':28s} {'simulated':>12s}" + (f" {'measured':>12s}" if measured else ""))
+        print(f"  {'metric':28s} {'simulated':>12s}" + (f" {'measured':>12s}" if measured else "")
+              + ("  interval" if intervals else ""))
         for k in keys:
             sim = f"{metrics[k]:12.2f}" if k in metrics else f"{'-':>12s}"
             meas = (f" {measured[k]:12.2f}" if k in measured else f" {'-':>12s}") if measured else ""
-            print(f"  {k:28s} {sim}{meas}")
+            iv = f"  [{intervals[k][0]:.2f}, {intervals[k][1]:.2f}]" if k in intervals else ""
+            print(f"  {k:28s} {sim}{meas}{iv}")
+    for k, v in out.get("bands", {}).items():
+        print(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
     if "spiral" in metrics:
         for row in metrics["spiral"]:
             print(f"  rudder {row['rudder_deg']:7.2f} deg  yaw rate {row['yaw_rate_deg_s']:8.4f} deg/s")

@@ -12,12 +12,15 @@ filter, priors, identifiability and the fit result.
 * :func:`cross_validate` -- leave-one-run-out / leave-one-group-out replays against the published
   values, as a :class:`CrossValidation` value with a table and overlay figures.
 * :func:`noise_std`, :func:`decimate`, :func:`share_labels`, :func:`initial_states` -- record helpers.
+* :func:`read_params` and :class:`ParameterUncertainty` -- a fit file's parameters and their covariance;
+  :func:`replay_file` -- a record replayed with a fit file (the path of ``casship simulate --params``).
+* :mod:`casship.identify.asymmetry` -- port/starboard terms only from mirrored evidence.
 """
 from .crossval import CrossValidation, cross_validate
 from .identifiability import Identifiability
 from .mle import MLEProblem, default_prior
 from .output_error import OutputErrorProblem
-from .params_file import read_params
+from .params_file import ParameterUncertainty, read_params, replay_file
 from .prior import Prior
 from .problem import IdentificationProblem
 from .records import initial_states, noise_std, share_labels
@@ -26,5 +29,5 @@ from .result import FitResult, IdentificationError, IdentificationWarning
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
            "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std",
-           "share_labels", "initial_states", "read_params", "cross_validate", "CrossValidation"]
+           "share_labels", "initial_states", "read_params", "replay_file", "ParameterUncertainty", "cross_validate", "CrossValidation"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]

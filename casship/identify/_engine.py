@@ -218,14 +218,17 @@ class OutputErrorEngine(Engine):
     weights : (ny,) array
         ``1 / sigma`` per measured output.
     jit : bool or None
+    record_scale : (n_records,) array, optional
+        Factor of each record's residuals (the square root of its weight in the cost).
     """
 
-    def __init__(self, dmodel, space, arrays, meas_index, weights, jit=None):
+    def __init__(self, dmodel, space, arrays, meas_index, weights, jit=None, record_scale=None):
         super().__init__(space, jit)
         self.dmodel, self.model, self.arrays = dmodel, dmodel.model, arrays
         self.meas_index = list(meas_index)
         self.angle = self.model.angle_outputs[self.meas_index]
         self.weights = np.asarray(weights, dtype=float)
+        self.record_scale = np.ones(len(arrays)) if record_scale is None else np.asarray(record_scale, dtype=float)
 
     def _symbols(self):
         m, ny = self.model, len(self.meas_index)
@@ -271,7 +274,7 @@ class OutputErrorEngine(Engine):
         v = rm.values(theta)
         a = self.arrays[r]
         per = {"u": a["U"] + v["u"][:, None], "y": a["Y"] - v["y"][:, None], "mask": a["mask"], "dt": a["dt"]}
-        consts = {"p": v["p"], "w": self.weights}
+        consts = {"p": v["p"], "w": self.weights * self.record_scale[r]}
         if kind == "value":
             return Job(self._value_fold(), {"x": v["x0"]}, consts, per, a["U"].shape[1]), {"rm": rm}
         blocks = {"p": rm.E["p"], "u": rm.E["u"], "y": -rm.E["y"]}

@@ -58,6 +58,10 @@ class Identifiability:
     kinds : list of str, optional
         Kind of each quantity (``param``, ``x0``, ``bias_in``, ``bias_out``, ``Q``, ``R``): by
         default :meth:`propose` chooses among the parameters and keeps the others.
+    confounded : dict, optional
+        Port/starboard asymmetry quantities the records cannot tell from the turning dynamics (no
+        mirror pair, see :mod:`casship.identify.asymmetry`), with the reason; :meth:`propose` never
+        chooses or keeps them.
 
     Attributes
     ----------
@@ -87,6 +91,7 @@ class Identifiability:
     max_rel_std: float = MAX_REL_STD
     max_corr: float = MAX_CORR
     kinds: list = None
+    confounded: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.names = list(self.names)
@@ -181,6 +186,8 @@ class Identifiability:
             keep = [n for n, k in zip(self.names, self.kinds) if k != "param"]
         if candidates is None:
             candidates = [n for n, k in zip(self.names, self.kinds) if k == "param"]
+        keep = [n for n in keep if n not in self.confounded]
+        candidates = [n for n in candidates if n not in self.confounded]
         unknown = [n for n in (*keep, *candidates) if n not in index]
         if unknown:
             raise ValueError(f"unknown quantities {unknown}; free: {self.names}")
@@ -225,6 +232,8 @@ class Identifiability:
             lines.append(f"correlated: {a} and {b} (rho = {rho:+.3f})")
         if self.not_seen:
             lines.append(f"not seen by the data (relative std error > {self.max_rel_std:g}): {', '.join(self.not_seen)}")
+        for q, why in self.confounded.items():
+            lines.append(f"confounded: {q}: {why}")
         return "\n".join(lines)
 
     def __repr__(self) -> str:

@@ -25,6 +25,18 @@ from .result import FitResult
 __all__ = ["OutputErrorProblem"]
 
 
+def _record_weights(weights, records) -> np.ndarray:
+    if weights is None:
+        return np.ones(len(records))
+    w = np.asarray(weights, dtype=float).ravel()
+    if w.size != len(records):
+        raise ValueError(f"record_weights: {w.size} weight(s) for {len(records)} record(s)")
+    bad = [i for i, v in enumerate(w) if not (np.isfinite(v) and v > 0)]
+    if bad:
+        raise ValueError(f"record_weights must be positive and finite; record(s) {bad} have {w[bad].tolist()}")
+    return w
+
+
 class OutputErrorProblem(IdentificationProblem):
     """Output-error (simulation-error) identification over one or many records.
 
@@ -58,6 +70,10 @@ class OutputErrorProblem(IdentificationProblem):
         :func:`~casship.identify.share_labels`), e.g. ``{"bias[n]": "record", "N_0": "facility"}``.
     groups : mapping grouping -> labels, optional
         Group labels per record (else taken from each record's ``meta``).
+    record_weights : sequence of float, optional
+        One positive factor per record multiplying its squared residuals in the cost (default 1):
+        e.g. ``1 / N_r`` so that every record counts the same however long it is. The weights are
+        a design choice of the cost, stated with the fit (``fit.noise["record_weights"]``).
     prior : Prior or mapping name -> std, optional
         Gaussian prior (MAP), centred on the published values by default.
     shooting : {"single", "multiple"}
@@ -89,12 +105,13 @@ class OutputErrorProblem(IdentificationProblem):
     def __init__(self, model, datasets, free: Sequence[str] = (), *, measured: Sequence[str] | None = None,
                  sigma: Mapping[str, float] | str | None = "estimate", params=None, x0=None,
                  estimate_x0: Sequence[str] = (), share: Mapping | None = None, groups: Mapping | None = None,
-                 prior=None, shooting: str = "single", segment: int = 50, method: str = "rk4", bounds=None,
-                 scale=None, jit: bool | None = None):
+                 record_weights: Sequence[float] | None = None, prior=None, shooting: str = "single",
+                 segment: int = 50, method: str = "rk4", bounds=None, scale=None, jit: bool | None = None):
         kwargs = dict(model=model, datasets=datasets, free=free, measured=measured, sigma=sigma, params=params, x0=x0,
-                      estimate_x0=estimate_x0, share=share, groups=groups, prior=prior, shooting=shooting,
-                      segment=segment, method=method, bounds=bounds, scale=scale, jit=jit)
+                      estimate_x0=estimate_x0, share=share, groups=groups, record_weights=record_weights, prior=prior,
+                      shooting=shooting, segment=segment, method=method, bounds=bounds, scale=scale, jit=jit)
         records = as_records(datasets)
+        self.record_weights = _record_weights(record_weights, records)
         if isinstance(model, Model):          # a discrete-time model has its own step
             model = discretize(model) if model.dt is not None else discretize(
                 model, float(np.median(np.diff(records[0].t))), method=method)
@@ -120,7 +137,10 @@ class OutputErrorProblem(IdentificationProblem):
                     estimate_x0=estimate_x0, bounds=bounds, scale=scale, measured=measured)
         check_gaps(self.dmodel, self.records, self.x0, self.space.base, self.labels)
         self._arrays = [self._arrays_of(d) for d in self.records]
-        self.engine = OutputErrorEngine(self.dmodel, self.space, self._arrays, self.meas_index, 1.0 / self.sigma, jit)
+        if shooting == "multiple" and np.any(self.record_weights != 1.0):
+            raise ValueError("record_weights are supported with single shooting only")
+        self.engine = OutputErrorEngine(self.dmodel, self.space, self._arrays, self.meas_index, 1.0 / self.sigma, jit,
+                                        record_scale=np.sqrt(self.record_weights))
         self._check_data_amount()
 
     def _sigma(self, records, measured, sigma) -> np.ndarray:
@@ -159,14 +179,20 @@ class OutputErrorProblem(IdentificationProblem):
         return 2 * f_data / max(n_obs - len(self.space), 1)
 
     def _loglik(self, f_data, s2, n_obs) -> float:
-        sig = np.sqrt(s2) * self.sigma
-        n_per = np.array([sum(a["mask"][j].sum() for a in self._arrays) for j in range(len(self.measured))])
-        return float(-0.5 * n_obs * (1 + np.log(2 * np.pi)) - np.sum(n_per * np.log(sig)))
+        # record r's residuals have the standard deviation sigma / sqrt(weight_r)
+        log_sig = 0.0
+        for a, w in zip(self._arrays, self.record_weights):
+            n_per = a["mask"].sum(axis=1)
+            log_sig += float(np.sum(n_per * np.log(np.sqrt(s2) * self.sigma / np.sqrt(w))))
+        return float(-0.5 * n_obs * (1 + np.log(2 * np.pi)) - log_sig)
 
     def _noise_report(self, theta) -> dict:
         s2 = self._residual_scale(self.engine.cost(theta)[0], self._n_obs())
-        return {"sigma": dict(zip(self.measured, self.sigma.tolist())),
-                "sigma_estimated": dict(self.sigma_estimated), "weight_scale": float(np.sqrt(s2))}
+        out = {"sigma": dict(zip(self.measured, self.sigma.tolist())),
+               "sigma_estimated": dict(self.sigma_estimated), "weight_scale": float(np.sqrt(s2))}
+        if np.any(self.record_weights != 1.0):
+            out["record_weights"] = dict(zip(self.labels, self.record_weights.tolist()))
+        return out
 
     def _first_nonfinite(self, r, theta) -> str:
         res = self.engine.residuals(r, theta)

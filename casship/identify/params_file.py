@@ -4,19 +4,128 @@ A fit file written by :meth:`~casship.identify.FitResult.to_json` records the mo
 options it was built with (``model.meta["options"]``, e.g. a variant with extra asymmetry terms)
 and the vessel's parameter-set identity. :func:`read_params` rebuilds that model and returns the
 parameter vector, or refuses a model or parameter set other than the fitted one, naming both.
+
+A fit file also carries the uncertainty of the parameters a new run is replayed with
+(``"param_covariance"``: names, covariance matrix and where it comes from);
+``read_params(..., uncertainty=True)`` returns it as a :class:`ParameterUncertainty`, from which
+replays and manoeuvre simulations draw their prediction bands.
 """
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_params", "check_model"]
+__all__ = ["read_params", "replay_file", "check_model", "ParameterUncertainty"]
 
 
-def read_params(path, model=None):
-    """The model a parameter file belongs to and its parameter vector.
+@dataclass
+class ParameterUncertainty:
+    """Gaussian uncertainty of some model parameters: their values and covariance.
+
+    Parameters
+    ----------
+    names : list of str
+        Model parameter names, in the order of ``covariance``.
+    values : (k,) array
+        Their values (the estimates).
+    covariance : (k, k) array
+        Covariance [units of the parameters squared].
+    source : str
+        Where the covariance comes from (e.g. ``"model-based"``, ``"robust (sandwich)"``,
+        ``"run-level jackknife"``).
+    info : dict
+        Further facts about the covariance (e.g. the number of folds of a jackknife).
+
+    Examples
+    --------
+    >>> u = ParameterUncertainty(["K", "T"], [0.1, 20.0], [[1e-4, 0.0], [0.0, 4.0]])
+    >>> [round(float(s), 3) for s in u.std]
+    [0.01, 2.0]
+    """
+
+    names: list
+    values: np.ndarray
+    covariance: np.ndarray
+    source: str = ""
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.names = [str(n) for n in self.names]
+        self.values = np.asarray(self.values, dtype=float).reshape(-1)
+        self.covariance = np.asarray(self.covariance, dtype=float).reshape(len(self.names), len(self.names))
+        if self.values.size != len(self.names):
+            raise ValueError(f"ParameterUncertainty: {self.values.size} values for {len(self.names)} names")
+        if not np.all(np.isfinite(self.covariance)):
+            bad = [n for n, d in zip(self.names, np.diag(self.covariance)) if not np.isfinite(d)]
+            raise ValueError(f"ParameterUncertainty: covariance not finite for {bad or self.names}")
+        self.covariance = 0.5 * (self.covariance + self.covariance.T)
+        if np.linalg.eigvalsh(self.covariance).min(initial=0.0) < -1e-9 * max(1.0, np.abs(self.covariance).max()):
+            raise ValueError("ParameterUncertainty: covariance is not positive semi-definite")
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviation of each parameter."""
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    def sample(self, model, p, n: int, seed=0) -> np.ndarray:
+        """``n`` parameter vectors of ``model``: ``p`` with these parameters drawn from the Gaussian.
+
+        Parameters
+        ----------
+        model : Model
+        p : array_like
+            The full parameter vector (the other parameters keep these values).
+        n : int
+            Number of draws.
+        seed : int or numpy.random.Generator
+
+        Returns
+        -------
+        (n, np) array
+        """
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        idx = model.indices(self.names, "param")
+        w, V = np.linalg.eigh(self.covariance)
+        L = V * np.sqrt(np.clip(w, 0.0, None))
+        draws = self.values + rng.standard_normal((int(n), len(self.names))) @ L.T
+        out = np.tile(np.asarray(p, dtype=float), (int(n), 1))
+        out[:, idx] = draws
+        return out
+
+    def to_dict(self) -> dict:
+        """JSON-friendly form (``names``, ``values``, ``matrix``, ``source``, ``info``)."""
+        return {"names": list(self.names), "values": self.values.tolist(), "matrix": self.covariance.tolist(),
+                "source": self.source, "info": dict(self.info)}
+
+    @classmethod
+    def from_dict(cls, d, where: str = "the file") -> "ParameterUncertainty":
+        """Read the form of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        d : mapping
+            With ``names``, ``values``, ``matrix`` (and optionally ``source``, ``info``).
+        where : str
+            What holds it (for the messages).
+
+        Returns
+        -------
+        ParameterUncertainty
+        """
+        missing = [k for k in ("names", "matrix") if k not in d]
+        if missing:
+            raise ValueError(f"{where}: param_covariance lacks {missing}")
+        values = d.get("values")
+        if values is None:
+            raise ValueError(f"{where}: param_covariance lacks the values of {d['names']}")
+        return cls(d["names"], values, d["matrix"], str(d.get("source", "")), dict(d.get("info") or {}))
+
+
+def read_params(path, model=None, *, uncertainty: bool = False):
+    """The model a parameter file belongs to and its parameter vector (and their uncertainty).
 
     Parameters
     ----------
@@ -27,10 +136,12 @@ def read_params(path, model=None):
         The model to apply the parameters to: a built model (checked against the file), a registered
         name (built with the file's ``model_options`` when the file names the same model), or None
         (the file's own model).
+    uncertainty : bool
+        Also return the file's :class:`ParameterUncertainty` (``None`` when it carries none).
 
     Returns
     -------
-    (Model, ndarray)
+    (Model, ndarray) or (Model, ndarray, ParameterUncertainty or None)
         The model and its parameter vector with the file's values.
 
     Raises
@@ -42,6 +153,7 @@ def read_params(path, model=None):
     Examples
     --------
     >>> model, p = read_params("fit.json", "kvlcc2")      # doctest: +SKIP
+    >>> model, p, unc = read_params("fit.json", "kvlcc2", uncertainty=True)   # doctest: +SKIP
     """
     from ..model import Model
     from ..models import get_model
@@ -64,7 +176,19 @@ def read_params(path, model=None):
         model = get_model(wanted, **(options if wanted == name else {}))
     elif not isinstance(model, Model):
         raise TypeError(f"model must be a casship Model, a registered name or None, got {type(model).__name__}")
-    return model, check_model(model, params, name=name, options=options, param_set=pset, source=str(path))
+    p = check_model(model, params, name=name, options=options, param_set=pset, source=str(path))
+    if not uncertainty:
+        return model, p
+    cov = obj.get("param_covariance")
+    if not cov:
+        return model, p, None
+    unc = ParameterUncertainty.from_dict(cov, str(path))
+    check_model(model, dict(zip(unc.names, unc.values)), name=name, options=options, param_set=pset,
+                source=f"{path} (param_covariance)")
+    mismatch = [n for n, v in zip(unc.names, unc.values) if not np.isclose(v, params.get(n, np.nan), rtol=1e-12)]
+    if mismatch:
+        raise ValueError(f"{path}: param_covariance values of {mismatch} differ from the file's params")
+    return model, p, unc
 
 
 def check_model(model, params: dict, *, name=None, options=None, param_set: str = "", source: str = "the fit"):
@@ -106,3 +230,39 @@ def check_model(model, params: dict, *, name=None, options=None, param_set: str 
         raise ValueError(f"{source} has parameter(s) {unknown} that model {model.name!r} lacks"
                          + (f" (it was fitted on {name!r}{built})" if name else ""))
     return np.asarray(model.params(params))
+
+
+def replay_file(path, data, model=None, *, uncertainty: bool = True, **options):
+    """Replay a record with a parameter (fit) file: the one path of ``casship simulate --params``.
+
+    The file's model variant is rebuilt (or ``model`` checked against it), the record replayed with
+    the file's parameters (every run, from any facility or direction, gets the same parameters: the
+    file's), and, when the file carries a covariance and ``uncertainty`` is true, with prediction
+    bands and index intervals.
+
+    Parameters
+    ----------
+    path : str or Path
+        A JSON file with ``"params"`` (a fit file from :meth:`~casship.identify.FitResult.to_json`).
+    data : Dataset
+        The record.
+    model : Model, str or None
+        See :func:`casship.identify.read_params`.
+    uncertainty : bool
+        Use the file's covariance for bands and intervals.
+    **options
+        Further arguments of :func:`casship.validation.replay` (``method``, ``check_limits``, ``level``, ``samples``,
+        ``seed``).
+
+    Returns
+    -------
+    casship.validation.ReplayResult
+
+    Examples
+    --------
+    >>> res = replay_file("fit.json", read_record("run.dat"), "kvlcc2")     # doctest: +SKIP
+    """
+    from ..validation import replay
+
+    model, p, unc = read_params(path, model, uncertainty=True)
+    return replay(model, data, p, uncertainty=unc if uncertainty else None, **options)

@@ -41,7 +41,7 @@ class IdentificationProblem:
 
     method = "identification"
     #: constructor arguments that hold one item per record (subset by :meth:`subset`)
-    _PER_RECORD = ("x0",)
+    _PER_RECORD = ("x0", "record_weights")
 
     # -- set-up (called by the subclasses) ---------------------------------------------------------
     def _setup(self, model, records, free, *, kwargs: dict, share, groups, prior, params, x0, estimate_x0,
@@ -314,6 +314,7 @@ class IdentificationProblem:
             x0=[dict(zip(m.state_names, sp.record_map(r).values(theta)["x0"].tolist())) for r in range(len(self.records))],
             predictions=[self._free_run(r, theta) for r in range(len(self.records))],
             message=rep.message, std_errors_robust={n: float(s) for n, s in zip(names, std_r)},
+            covariance_robust=np.where(np.isfinite(robust), robust, np.nan),
             effective_samples=neff, channel_share={"start": start_shares, "optimum": self._shares(det)},
             prior=self.prior.describe(sp, m) if np.any(self._prec > 0) else {},
             records=list(self.labels), record_params=record_params,
@@ -340,8 +341,13 @@ class IdentificationProblem:
 
     # -- analysis --------------------------------------------------------------------------------
     def identifiability(self, at: Mapping[str, float] | None = None, *, max_rel_std: float | None = None,
-                        max_corr: float | None = None) -> Identifiability:
+                        max_corr: float | None = None, asymmetric: Sequence[str] | None = None,
+                        pairs_within=None) -> Identifiability:
         """Fisher-information analysis of the free quantities at ``at`` (default: the starting values).
+
+        Free port/starboard asymmetry quantities whose records hold no mirror pair (the same
+        manoeuvre turning first to both sides, see :mod:`casship.identify.asymmetry`) are flagged in
+        ``confounded`` and left out of ``propose()``.
 
         Parameters
         ----------
@@ -349,6 +355,12 @@ class IdentificationProblem:
             The point (e.g. the published values, or a previous fit's estimates).
         max_rel_std, max_corr : float, optional
             Report thresholds (relative standard error, correlation).
+        asymmetric : sequence of str, optional
+            Declared names of the asymmetry quantities (default: the model's
+            ``meta["asymmetric"]`` parameters and the offsets of its rudder inputs).
+        pairs_within : str or sequence, optional
+            A grouping (name from ``groups``/``meta``, or one label per record) within which mirror
+            pairs must lie, e.g. ``"facility"``.
 
         Returns
         -------
@@ -360,15 +372,26 @@ class IdentificationProblem:
         >>> idf = problem.identifiability()       # doctest: +SKIP
         >>> print(idf.summary())                   # doctest: +SKIP
         """
+        from .asymmetry import asymmetric_quantities, confounded_asymmetry
         from .identifiability import MAX_CORR, MAX_REL_STD
 
         theta = self.space.theta(at)
         H = self.engine.derivatives(theta)[2]
         mags = np.array([(abs(v) or e.scale) if e.kind == "param" else 1.0 for e, v in zip(self.space.entries, theta)])
+        names = set(asymmetric_quantities(self.model) if asymmetric is None else asymmetric)
+        rudders = [n[5:-1] for n in names if n.startswith("bias[")] or ["delta"]
+        flagged = [q for q in self.free if q.split("@")[0] in names]
+        confounded = {}
+        if flagged and rudders[0] in self.records[0]:
+            copies = share_labels(self.records, self._kwargs.get("share"), self._kwargs.get("groups"))
+            within = None
+            if pairs_within is not None:
+                within = share_labels(self.records, {"_": pairs_within}, self._kwargs.get("groups")).get("_")
+            confounded = confounded_asymmetry(self.records, flagged, copies, rudder=rudders[0], within=within)
         return Identifiability(self.free, dict(zip(self.free, theta.tolist())), mags, H, self._prec.copy(),
                                kinds=[e.kind for e in self.space.entries],
                                max_rel_std=MAX_REL_STD if max_rel_std is None else float(max_rel_std),
-                               max_corr=MAX_CORR if max_corr is None else float(max_corr))
+                               max_corr=MAX_CORR if max_corr is None else float(max_corr), confounded=confounded)
 
     # -- variants --------------------------------------------------------------------------------
     def replace(self, **changes) -> "IdentificationProblem":

@@ -118,6 +118,12 @@ class FitResult:
         The vessel's parameter-set identity (``model.vessel.param_set``).
     param_names : list of str
         The model's parameter names.
+    covariance_robust : (k, k) array
+        The robust (sandwich) covariance of the free quantities, ordered like ``free``.
+    param_covariance : dict
+        The uncertainty a fit file carries for replays (see :meth:`uncertainty`), when it was set
+        explicitly (e.g. a run-level jackknife); empty: the robust covariance of the shared free
+        model parameters.
     """
 
     model: str
@@ -151,6 +157,8 @@ class FitResult:
     model_options: dict = field(default_factory=dict)
     param_set: str = ""
     param_names: list = field(default_factory=list)
+    covariance_robust: np.ndarray = None
+    param_covariance: dict = field(default_factory=dict)
 
     # -- queries -----------------------------------------------------------------------------------
     @property
@@ -179,6 +187,37 @@ class FitResult:
         se = (self.std_errors_robust if robust else self.std_errors)[name]
         z = stats.norm.ppf(0.5 + level / 2)
         return self.estimates[name] - z * se, self.estimates[name] + z * se
+
+    def uncertainty(self, kind: str | None = None):
+        """The uncertainty of the model parameters a new run is replayed with.
+
+        Parameters
+        ----------
+        kind : {None, "model", "robust"}
+            ``None``: :attr:`param_covariance` when set, else the robust covariance; ``"model"``,
+            ``"robust"``: the model-based or robust (sandwich) covariance of the free model
+            parameters shared by all records (per-record and per-group copies and biases are not
+            part of a new run's parameters).
+
+        Returns
+        -------
+        ParameterUncertainty or None
+            None when no shared model parameter is free.
+        """
+        from .params_file import ParameterUncertainty
+
+        if kind is None and self.param_covariance:
+            return ParameterUncertainty.from_dict(self.param_covariance, "this fit")
+        if kind not in (None, "model", "robust"):
+            raise ValueError(f"kind must be None, 'model' or 'robust', got {kind!r}")
+        robust = kind != "model" and self.covariance_robust is not None
+        C = np.asarray(self.covariance_robust if robust else self.covariance, dtype=float)
+        idx = [i for i, n in enumerate(self.free) if n in self.params and "@" not in n]
+        if not idx:
+            return None
+        names = [self.free[i] for i in idx]
+        return ParameterUncertainty(names, [self.estimates[n] for n in names], C[np.ix_(idx, idx)],
+                                    "robust (sandwich)" if robust else "model-based")
 
     def record_parameters(self, record: int) -> dict:
         """All model parameters of one fitted record (its own per-record and per-group copies applied).
@@ -252,7 +291,14 @@ class FitResult:
         """The fit as a JSON-friendly dict (everything but the predictions)."""
         d = {"model": self.model, "params": self.params, "free": list(self.free), "estimates": self.estimates,
              "std_errors": self.std_errors, "correlation": self.correlation, "covariance": self.covariance}
+        if self.covariance_robust is not None:
+            d["covariance_robust"] = self.covariance_robust
         d.update({k: getattr(self, k) for k in (*self._SCALARS, *self._DICTS, *self._LISTS)})
+        try:
+            unc = self.uncertainty()
+        except ValueError:          # a covariance that is not finite is not carried
+            unc = None
+        d["param_covariance"] = unc.to_dict() if unc is not None else {}
         return _clean(d)
 
     def to_json(self, path) -> Path:
@@ -289,6 +335,10 @@ class FitResult:
         k = len(d["free"])
         mat = lambda key: np.asarray(d.get(key, np.full((k, k), np.nan)), dtype=float).reshape(k, k)  # noqa: E731
         kw = {key: d[key] for key in (*cls._SCALARS, *cls._DICTS, *cls._LISTS) if key in d}
+        if "covariance_robust" in d:
+            kw["covariance_robust"] = mat("covariance_robust")
+        if d.get("param_covariance"):
+            kw["param_covariance"] = dict(d["param_covariance"])
         return cls(model=d["model"], params={n: float(v) for n, v in d["params"].items()}, free=list(d["free"]),
                    estimates={n: float(v) for n, v in d["estimates"].items()},
                    std_errors={n: float(v) for n, v in d["std_errors"].items()},

@@ -35,7 +35,7 @@ from ..model import Model
 from ..vessel import Vessel
 
 __all__ = ["mmg_standard", "MMG_PARAMS", "MMG_ASYMMETRY_PARAMS", "MMG_BOUNDS", "SMOOTH_WIDTH", "rigid_body_3dof",
-           "declare_ship_states", "declare_ship_limits", "add_rudder_actuator", "smooth_saturation",
+           "declare_ship_states", "declare_ship_limits", "add_rudder_actuator", "smooth_saturation", "mmg_propeller",
            "smooth_abs", "smooth_step"]
 
 # name -> (unit, description). The numeric values come from a preset (see casship.models.kvlcc2).
@@ -347,6 +347,8 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     if asymmetry:
         P.update({k: _param(b, k, values, sources, MMG_ASYMMETRY_PARAMS, default=0.0) for k in MMG_ASYMMETRY_PARAMS})
     b.meta.update(dict(meta or {}))
+    if asymmetry:          # port/starboard terms: identified only from mirrored evidence (casship.identify.asymmetry)
+        b.meta["asymmetric"] = list(MMG_ASYMMETRY_PARAMS)
     states = declare_ship_states(b)
     u, v, r = states[:3]
     if rudder_actuator:
@@ -390,6 +392,45 @@ def declare_ship_limits(b: ModelBuilder, vessel: Vessel) -> None:
         b.limit("u", 0.0, 2.0 * vessel.U0, why="ahead motion up to twice the approach speed")
 
 
+def mmg_propeller(P: Mapping[str, ca.SX], u, v, r, n, smooth: float | None = None):
+    """Propeller thrust ``T`` [N] of the MMG standard method, its inflow ``u_P`` and ``n^2 D^2 K_T``.
+
+    The wake ``1 - w_P = (1 - w_P0) [1 + (1 - exp(-C_1 |beta_P|)) (C_2 - 1)]`` with
+    ``beta_P = beta - x'_P r'``, ``u_P = u (1 - w_P)``, ``T = rho n^2 D^4 K_T(J_P)`` (written to stay
+    finite at ``n = 0``).
+
+    Parameters
+    ----------
+    P : mapping
+        Parameter name -> symbol or value (the names of :data:`MMG_PARAMS`).
+    u, v, r : SX, MX or float
+        Surge and sway velocity at midship [m/s], yaw rate [rad/s].
+    n : SX, MX or float
+        Propeller rate [1/s].
+    smooth : float, optional
+        Width of the smooth sign switches [rad] (``None``: the published ``if_else`` switches).
+
+    Returns
+    -------
+    (T, u_P, n2KT)
+        Thrust [N], propeller inflow speed [m/s] and ``n^2 D^2 K_T`` [m^2/s^2].
+    """
+    L = P["L_pp"]
+    U = ca.sqrt(u**2 + v**2 + 1e-12)
+    beta_P = ca.atan2(-v, u) - P["x_P_dash"] * r * L / U
+    if smooth is None:
+        C_2 = ca.if_else(beta_P > 0, P["C_2_plus"], P["C_2_minus"])
+        abs_beta_P = ca.fabs(beta_P)
+    else:
+        C_2 = P["C_2_minus"] + (P["C_2_plus"] - P["C_2_minus"]) * smooth_step(beta_P, smooth)
+        abs_beta_P = smooth_abs(beta_P, smooth)
+    one_minus_wP = (1 - P["w_P0"]) * (1 + (1 - ca.exp(-P["C_1"] * abs_beta_P)) * (C_2 - 1))
+    u_P = u * one_minus_wP
+    D = P["D_p"]
+    n2KT = P["k_0"] * n**2 * D**2 + P["k_1"] * n * D * u_P + P["k_2"] * u_P**2   # n^2 D^2 K_T
+    return P["rho"] * D**2 * n2KT, u_P, n2KT
+
+
 def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None = None):
     """Hull + propeller + rudder force ``(X, Y, N)`` at midship of the MMG standard method.
 
@@ -411,18 +452,8 @@ def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None =
     # propeller
     beta = ca.atan2(-v, u)
     r_dash = rL / U
-    beta_P = beta - P["x_P_dash"] * r_dash
-    if smooth is None:
-        C_2 = ca.if_else(beta_P > 0, P["C_2_plus"], P["C_2_minus"])
-        abs_beta_P = ca.fabs(beta_P)
-    else:
-        C_2 = P["C_2_minus"] + (P["C_2_plus"] - P["C_2_minus"]) * smooth_step(beta_P, smooth)
-        abs_beta_P = smooth_abs(beta_P, smooth)
-    one_minus_wP = (1 - P["w_P0"]) * (1 + (1 - ca.exp(-P["C_1"] * abs_beta_P)) * (C_2 - 1))
-    u_P = u * one_minus_wP
+    T, u_P, n2KT = mmg_propeller(P, u, v, r, n, smooth)
     D = P["D_p"]
-    n2KT = P["k_0"] * n**2 * D**2 + P["k_1"] * n * D * u_P + P["k_2"] * u_P**2   # n^2 D^2 K_T
-    T = rho * D**2 * n2KT
     X_P = (1 - P["t_P"]) * T
     # rudder
     eta = D / P["H_R"]

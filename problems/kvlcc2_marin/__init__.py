@@ -1,46 +1,83 @@
 """KVLCC2 MMG identification on all shared free-running runs, cross-validated on runs it has not seen.
 
 Data: the three MARIN runs (full scale: 35 deg turning circle, 10/10 and 20/20 zig-zags) and the
-thirteen HSVA zig-zags (model scale, Froude-scaled with ``lambda = 45.7``), see :mod:`.data`.
+thirteen HSVA zig-zags (model scale, Froude-scaled with ``lambda = 45.7``, with measured thrust and
+torque), see :mod:`.data`.
 
-Method (:mod:`.workflow`): propulsion trim (:mod:`.propulsion`), EKF + RTS smoothing, inverse
-dynamics, a free set chosen from the Fisher information by a stated rule, and a MAP output-error
-refinement of the full-scale :func:`casship.models.kvlcc2` with asymmetry terms and smooth sign
-switches (``kvlcc2(asymmetry=True, smooth=True)``), asymmetry per facility.
+Method (:mod:`.workflow`): propulsion from the measured thrust (:mod:`.propulsion`), EKF + RTS
+smoothing, a free set chosen from the Fisher information by a stated rule (asymmetry terms only
+from mirrored evidence), and a MAP output-error refinement of the full-scale
+:func:`casship.models.kvlcc2` with asymmetry terms and smooth sign switches
+(``kvlcc2(asymmetry=True, smooth=True)``): one parameter set for the ship.
 
-Validation (:mod:`.validate`): leave-one-run-out (every run held out once; the whole workflow,
-propulsion trim and free-set choice included, runs on the other fifteen), leave-one-facility-out
-(train on one facility, predict the other's runs) and leave-one-direction-out (train on the runs
-whose first rudder goes to one side, predict the runs that turn the other way first: the situation
-of a user who has trials in one direction only); each held-out run replayed with the published
-constants and with the fit that did not see it.
+Validation (:mod:`.validate`): every fold writes its fit file and every held-out run is scored by
+replaying that file through :func:`casship.identify.replay_file` (what ``casship simulate
+--params`` does). Folds: leave-one-run-out (every run held out once; the whole workflow, propulsion
+and free-set choice included, runs on the other fifteen), leave-one-regime-out (small-angle
+zig-zags, large-rudder zig-zags, turning circles), leave-one-facility-out and
+leave-one-direction-out (train on the runs that turn first to one side, predict the others).
 
-Outputs (:mod:`.report`): ``report.md``, ``fit.json`` (the fit on all runs for the full-scale model,
-with the MARIN facility's asymmetry terms; replays with ``casship simulate --model kvlcc2 --params
-fit.json``), ``fit_all_runs.json`` (with all per-facility copies), ``fit_without_<run>.json``,
-``cross_validation.csv``, ``fig_heldout_<run>.png``, ``fig_facility_<name>.png``,
-``fig_direction_<positive|negative>.png``, ``summary.json``.
+Uncertainty (:mod:`.calibration`): run-level jackknife over the leave-one-run-out folds, a
+calibration table (reported 95 % intervals against the fold estimates) and the port/starboard sign
+check against the HSVA mirror pairs.
+
+Outputs (:mod:`.report`): ``report.md``, ``fit.json`` (the fit on all runs, with the jackknife
+covariance; replays with ``casship simulate --model kvlcc2 --params fit.json``),
+``fit_without_<run>.json`` and ``fit_<kind>_<label>.json`` (the fold files, robust covariance),
+``cross_validation.csv``, figures, ``summary.json``.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
+from casship.models import kvlcc2
 from casship.progress import track
 from casship.studies import Study
 
 from ..kit import data_folder
-from .data import first_rudder_side, load_runs
-from .report import write_outputs
-from .validate import evaluate
-from .workflow import fit_fold, smooth_runs, with_smoothed_speed
+from .calibration import asymmetry_check, calibration_table, jackknife, mirror_check
+from .data import first_rudder_side, load_runs, regime
+from .propulsion import open_water
+from .report import slug, write_outputs
+from .validate import evaluate, write_fold_file
+from .workflow import fit_fold, smooth_runs, study_model, with_smoothed_speed
 
-QUICK = {"runs": ("MARIN tc_-35", "MARIN zz_-20", "MARIN zz_10", "HSVA Z_10_10_P", "HSVA Z_20_10_S",
-                  "HSVA Z_35_05"),
+QUICK = {"runs": ("MARIN tc_-35", "MARIN zz_-20", "MARIN zz_10", "HSVA Z_10_10_P", "HSVA Z_10_10_S",
+                  "HSVA Z_20_10_S", "HSVA Z_35_05"),
          "held_out": ("MARIN zz_-20",), "dt": 4.0, "max_free": 6}
+GROUPINGS = (("regime", regime), ("facility", lambda r: r.facility), ("direction", first_rudder_side))
+
+
+def fold_specs(runs, quick: bool = False) -> list[tuple[str, str, tuple]]:
+    """``(kind, label, held-out run names)`` of every fold."""
+    folds = [("run", name, (name,)) for name in (QUICK["held_out"] if quick else [r.name for r in runs])]
+    if not quick:
+        for kind, label_of in GROUPINGS:
+            labels = {r.name: label_of(r) for r in runs}
+            if len(set(labels.values())) > 1:
+                folds += [(kind, label, tuple(n for n, v in labels.items() if v == label))
+                          for label in sorted(set(labels.values()))]
+    return folds
+
+
+def fold_file_name(kind: str, label: str) -> str:
+    """The fit file of a fold: ``fit_without_<run>.json`` or ``fit_without_<kind>_<label>.json``."""
+    label = {"+": "positive", "-": "negative"}.get(label, label) if kind == "direction" else label
+    return f"fit_without_{slug(label)}.json" if kind == "run" else f"fit_without_{kind}_{slug(label)}.json"
+
+
+def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int) -> dict:
+    """One fold: fit on the runs not held out, write the fit file, replay it on the held-out runs.
+    Independent of every other fold (folds may run in any order or in parallel)."""
+    kind, label, held = spec
+    fold = fit_fold([r for r in runs if r.name not in held], smoothed, curve, dt=dt, max_free=max_free)
+    path = write_fold_file(fold, out / fold_file_name(kind, label))
+    rows = [evaluate(r, path) for r in runs if r.name in held]
+    return {"kind": kind, "label": label, "held": held, "fold": fold, "file": path.name, "evaluations": rows}
 
 
 def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None) -> dict:
-    """Fit, cross-validate and report (see the module text); ``quick``: six runs, one fold."""
+    """Fit, cross-validate and report (see the module text); ``quick``: seven runs, one fold."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     marin = data_folder(data_dir, "kvlcc2_marin_free", study="kvlcc2-marin", part="the whole study")
@@ -49,25 +86,24 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     runs = load_runs(marin.parent)
     if quick:
         runs = [r for r in runs if r.name in QUICK["runs"]]
+    curve = open_water(marin.parent / "kvlcc2_hsva_free")
     smoothed = smooth_runs(runs)
     runs = with_smoothed_speed(runs, smoothed)
     dt = QUICK["dt"] if quick else 2.0
     max_free = QUICK["max_free"] if quick else 15
-    folds = [("run", name, (name,)) for name in (QUICK["held_out"] if quick else [r.name for r in runs])]
-    if not quick:
-        for kind, label_of in (("facility", lambda r: r.facility), ("direction", first_rudder_side)):
-            labels = {r.name: label_of(r) for r in runs}
-            if len(set(labels.values())) > 1:
-                folds += [(kind, label, tuple(n for n, v in labels.items() if v == label))
-                          for label in sorted(set(labels.values()))]
-    everything = fit_fold(runs, smoothed, dt=dt, max_free=max_free)
-    in_sample = [evaluate(r, everything)["row"] for r in runs]
-    results = []
-    for kind, label, held in track(folds, "kvlcc2-marin folds", unit="fold"):
-        fold = fit_fold([r for r in runs if r.name not in held], smoothed, dt=dt, max_free=max_free)
-        rows = [evaluate(r, fold) for r in runs if r.name in held]
-        results.append({"kind": kind, "label": label, "held": held, "fold": fold, "evaluations": rows})
-    return write_outputs(out, runs, everything, results, in_sample, quick=quick)
+    everything = fit_fold(runs, smoothed, curve, dt=dt, max_free=max_free)
+    results = [run_fold(spec, runs, smoothed, curve, out, dt=dt, max_free=max_free)
+               for spec in track(fold_specs(runs, quick), "kvlcc2-marin folds", unit="fold")]
+    loro = [res["fold"] for res in results if res["kind"] == "run"]
+    jack = jackknife(everything, loro) if len(loro) > 2 else None
+    calibration = calibration_table(everything, loro, jack) if jack is not None else {}
+    fit_path = write_fold_file(everything, out / "fit.json", jack)
+    in_sample = [evaluate(r, fit_path)["row"] for r in runs]
+    model = study_model()
+    asym = asymmetry_check(runs, everything.fit.params, model, kvlcc2())
+    asym["mirror"] = mirror_check(runs, fit_path, kvlcc2())
+    return write_outputs(out, runs, everything, results, in_sample, calibration=calibration, jack=jack,
+                         asymmetry=asym, quick=quick)
 
 
 STUDY = Study("kvlcc2-marin", "KVLCC2 MMG identified on the MARIN and HSVA free-running runs, "

@@ -18,12 +18,14 @@ from pathlib import Path
 import numpy as np
 
 import casship as cs
+from casship.identify.asymmetry import turn_side
 from casship.io import hsva_runs, marin_runs, read_hsva, read_marin
 from casship.maneuvers import execute_time
 
-__all__ = ["Run", "load_runs", "fit_record", "approach", "first_rudder_side", "FIT_DT", "INPUTS"]
+__all__ = ["Run", "load_runs", "fit_record", "approach", "first_rudder_side", "regime", "FIT_DT", "INPUTS"]
 
 FIT_DT = 2.0                       # s, sampling period of the fit records (full scale)
+REGIME_DEG = 17.5                  # deg: zig-zags with a larger rudder angle are "large-rudder" runs
 INPUTS = ("delta", "n")
 
 
@@ -95,10 +97,15 @@ def approach(run: Run) -> dict:
 
 
 def first_rudder_side(run: Run) -> str:
-    """``"+"`` or ``"-"``: the sign of the first rudder deflection (5 deg from the approach angle), the
-    side the manoeuvre turns to first."""
+    """``"+"`` or ``"-"``: the side the manoeuvre turns to first (:func:`casship.identify.asymmetry.turn_side`:
+    the first deflection beyond half the largest one, so that a 5/1 zig-zag is classified right)."""
+    return turn_side(run.data)
+
+
+def regime(run: Run) -> str:
+    """The manoeuvre regime of a run: ``"turning circles"``, ``"large-rudder zig-zags"`` (rudder 20 deg
+    and more) or ``"small-angle zig-zags"``."""
+    if run.kind == "turning":
+        return "turning circles"
     d = np.asarray(run.data["delta"], dtype=float)
-    moved = np.flatnonzero(np.abs(d - d[0]) > np.radians(5.0))
-    if moved.size == 0:
-        raise ValueError(f"{run.name}: the rudder never moves by 5 deg")
-    return "+" if d[moved[0]] > d[0] else "-"
+    return "large-rudder zig-zags" if np.degrees(np.abs(d - d[0]).max()) >= REGIME_DEG else "small-angle zig-zags"

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import csv
-import dataclasses
 import math
 from pathlib import Path
 
@@ -11,61 +10,63 @@ import numpy as np
 from ..kit import Departure, Report, figure, fmt, md_table, write_json
 from .propulsion import mismatch
 from .validate import ERRORS, INDICES, plot_overlay
-from .workflow import MODEL_OPTIONS, params_for, prior_std, study_model
+from .workflow import MEASURED, MODEL_OPTIONS, prior_std, study_model
 
-__all__ = ["write_outputs"]
+__all__ = ["write_outputs", "slug"]
 
 _SHORT = {"psi_rmse_deg": "psi RMSE [deg]", "u_rmse_mps": "u RMSE [m/s]", "position_rmse_m": "track RMSE [m]",
           "advance_m": "advance [m]", "transfer_m": "transfer [m]", "tactical_diameter_m": "tactical dia. [m]",
           "overshoot_1_deg": "1st overshoot [deg]", "overshoot_2_deg": "2nd overshoot [deg]"}
 
 
-def _slug(name: str) -> str:
-    return name.replace(" ", "_")
+def slug(name: str) -> str:
+    """A file-name form of a run or group label."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name.replace(" ", "_"))
 
 
 def _cv_table(rows, first: str = "held-out run") -> str:
     lines = [f"| {first} | psi RMSE [deg] pub -> fit | u RMSE [m/s] pub -> fit | track RMSE [m] pub -> fit | "
-             "indices: published / fit / measured | psi better | indices closer |", "|---|---|---|---|---|---|---|"]
+             "indices: published / fit [95 % interval] / measured | psi better | indices closer |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         errs = [f"{fmt(r[f'{k}_published'], '.3g')} -> {fmt(r[f'{k}_fit'], '.3g')}" for k in ERRORS]
-        idx = "; ".join(f"{_SHORT[k]} {fmt(r[f'{k}_published'], '.4g')} / {fmt(r[f'{k}_fit'], '.4g')} / "
+        idx = "; ".join(f"{_SHORT[k]} {fmt(r[f'{k}_published'], '.4g')} / {fmt(r[f'{k}_fit'], '.4g')} "
+                        f"[{fmt(r[f'{k}_fit_lo'], '.4g')}, {fmt(r[f'{k}_fit_hi'], '.4g')}] / "
                         f"{fmt(r[f'{k}_measured'], '.4g')}" for k in INDICES[r["kind"]])
         lines.append(f"| {r['run']} | " + " | ".join(errs) + f" | {idx} | {'yes' if r['psi_better'] else 'NO'} | "
                      f"{'yes' if r['indices_closer'] else 'NO'} |")
     return "\n".join(lines)
 
 
-def _estimates_table(fold) -> str:
+
+def _moved_table(everything) -> str:
     model = study_model()
-    nominal = model.param_dict()
-    prior = prior_std(model, [q.split("@")[0] for q in fold.fit.free])
-    rows = {}
-    for q in fold.fit.free:
-        name = q.split("@")[0]
-        rows[q] = {"published": nominal[name], "start (inverse dynamics)": fold.start.get(name, nominal[name]),
-                   "estimate": fold.fit.estimates[q], "std error": fold.fit.std_errors[q],
-                   "robust std error": fold.fit.std_errors_robust.get(q, math.nan), "prior std": prior[name]}
-    return md_table(rows, first="quantity")
+    moved = everything.moved()
+    prior = prior_std(model, [n for n in moved if n in everything.candidates])
+    rows = {n: {"published": m["published"], "estimate": m["value"], "std error": m["std_error"],
+                "robust std error": m.get("std_error_robust", math.nan), "prior std": prior.get(n, math.nan),
+                "stage": m["stage"]} for n, m in moved.items()}
+    return md_table(rows, first="parameter")
 
 
-def _propulsion(runs, everything) -> tuple[str, dict]:
-    pub = study_model()
-    model = study_model()
-    p_fit = {r.name: model.params(params_for(everything, r.facility)) for r in runs}
+def _propulsion(runs, everything) -> tuple[str, str, dict]:
+    pub, model = study_model(), study_model()
+    p_fit = model.params(everything.fit.params)
     rows = {}
     for r in runs:
-        a, b = mismatch(pub, r), mismatch(model, r, p_fit[r.name])
+        a, b = mismatch(pub, r), mismatch(model, r, p_fit)
         rows[r.name] = {"u0 [m/s]": a["u0_mps"], "n measured [1/s]": a["n_measured"],
                         "n needed, published": a["n_needed"], "error published [%]": a["n_error_pct"],
-                        "n needed, fit": b["n_needed"], "error fit [%]": b["n_error_pct"],
-                        "du/dt at measured n, fit [m/s^2]": b["u_dot_model"],
-                        "du/dt measured [m/s^2]": b["u_dot_measured"],
-                        "R_0' of this run": everything.R_0_per_run[r.name]}
-    return md_table(rows, first="run", spec=".4g"), rows
+                        "n needed, fit": b["n_needed"], "error fit [%]": b["n_error_pct"]}
+    prop = everything.propulsion
+    thrust = {k: {"thrust RMS error, published propeller [%]": v["published_pct"],
+                  "thrust RMS error, fitted propeller [%]": v["fit_pct"],
+                  "torque RMS error, fitted inflow + open-water K_Q [%]": prop.torque_error[k],
+                  "mean measured thrust [MN]": v["mean_measured_N"] / 1e6} for k, v in prop.thrust_error.items()}
+    return md_table(rows, first="run", spec=".4g"), md_table(thrust, first="HSVA run", spec=".3g"), \
+        {"rate": rows, "thrust": thrust}
 
 
-_GROUP_TITLE = {"facility": lambda label: f"of {label}",
+_GROUP_TITLE = {"facility": lambda label: f"of {label}", "regime": lambda label: f"of the {label}",
                 "direction": lambda label: f"with the first rudder {'positive' if label == '+' else 'negative'}"}
 
 
@@ -77,14 +78,15 @@ def _figures(out: Path, runs, results) -> list[str]:
         if res["kind"] == "run":
             ev = evals[0]
             run = by_name[ev["row"]["run"]]
-            name = f"fig_heldout_{_slug(run.name)}.png"
+            name = f"fig_heldout_{slug(run.name)}.png"
             with figure(out / name, 1, 2, figsize=(13, 4.5)) as (fig, axes):
                 plot_overlay(axes, run, ev["published"], ev["fit"],
-                             f"{run.name} replayed; fit on the other {len(res['fold'].train)} runs")
+                             f"{run.name} replayed with {res['file']} (fit on the other {len(res['fold'].train)} runs)",
+                             ev["bands"])
             names.append(name)
         else:
             label = _GROUP_TITLE[res["kind"]](res["label"])
-            name = f"fig_{res['kind']}_{_slug(_GROUP_TITLE[res['kind']](res['label']).split()[-1])}.png"
+            name = f"fig_{res['kind']}_{slug(str(res['label']) if res['kind'] != 'direction' else label.split()[-1])}.png"
             ncol = 3
             nrow = int(math.ceil(len(evals) / ncol))
             with figure(out / name, nrow, ncol, figsize=(15, 3.2 * nrow), squeeze=False) as (fig, axes):
@@ -92,12 +94,15 @@ def _figures(out: Path, runs, results) -> list[str]:
                     run = by_name[ev["row"]["run"]]
                     ax.plot(run.data.t, np.degrees(np.unwrap(run.data["psi"])), "k-", lw=1.2, label="measured")
                     ax.plot(ev["published"].t, np.degrees(ev["published"]["psi"]), "C1--", lw=1, label="published")
-                    ax.plot(ev["fit"].t, np.degrees(ev["fit"]["psi"]), "C0-", lw=1, label=f"fit without the runs {label}")
+                    psi = np.degrees(np.unwrap(ev["fit"]["psi"]))
+                    ax.plot(ev["fit"].t, psi, "C0-", lw=1, label=f"fit without the runs {label}")
+                    if ev["bands"]:
+                        w = np.degrees(ev["bands"]["z"] * ev["bands"]["psi_std"])
+                        ax.fill_between(ev["fit"].t, psi - w, psi + w, color="C0", alpha=0.25, lw=0)
                     ax.set_title(run.name, fontsize=9)
                     ax.set_xlabel("t [s]")
                     ax.set_ylabel("heading [deg]")
-                ax0 = axes.ravel()[0]
-                ax0.legend(fontsize=7)
+                axes.ravel()[0].legend(fontsize=7)
                 for ax in axes.ravel()[len(evals):]:
                     ax.set_visible(False)
             names.append(name)
@@ -106,15 +111,28 @@ def _figures(out: Path, runs, results) -> list[str]:
 
 def _departures() -> list[Departure]:
     return [
+        Departure("propulsion", "thrust as a model input; propeller model regressed on the HSVA thrust",
+                  "thrust modelled (open-water K_T rewritten for the model's diameter, wake fitted to the HSVA "
+                  "thrust before the manoeuvring fit); the measured rate drives the replays, so runs without "
+                  "thrust (MARIN, new runs) replay the same way", "table 'Propulsion': thrust error per run"),
+        Departure("asymmetry", "thrust-dependent asymmetry terms",
+                  "rudder neutral angle and propeller-induced side force and yaw moment scaling with the thrust, "
+                  "one value for the ship, candidates only when the training runs hold a mirror pair; "
+                  "no per-facility copies", "section 'Port/starboard asymmetry'"),
         Departure("smoothing", "EKF + RTS with the manoeuvring model itself, iterated",
                   "EKF + RTS with a body-rates kinematic model (white jerk): no hydrodynamic model in the smoother",
-                  "not measured (the smoothed states only start the refinement)"),
-        Departure("final estimate", "inverse-dynamics regression is the result",
+                  "not measured (the smoothed states only give starting guesses, HSVA's u and v and the "
+                  "propeller fit's inflow)"),
+        Departure("final estimate", "inverse-dynamics regression with a derivative set chosen by cross-validation",
                   "inverse dynamics only starts a MAP output-error refinement of a free set chosen from the "
-                  "Fisher information", "tables 'Cross-validation': replayed psi RMSE of held-out runs"),
+                  "Fisher information by a stated rule; every other parameter stays at the published value",
+                  "tables 'Leave-one-run-out' and 'Leave-one-regime-out'"),
         Departure("data", "MARIN and HSVA KVLCC2 runs (model scale)",
-                  "the same runs, HSVA Froude-scaled to full scale (lambda 45.7), HSVA surge speed from positions",
-                  "not measured"),
+                  "the same runs, HSVA Froude-scaled to full scale (lambda 45.7), HSVA surge and sway speed from "
+                  "the smoothed positions", "not measured"),
+        Departure("training set", "13 HSVA zig-zags only, the MARIN circles predicted",
+                  "all 16 shared runs, each left out in turn; 'turning circles' left out = the anchor's situation",
+                  "table 'Leave-one-regime-out'"),
     ]
 
 
@@ -125,80 +143,132 @@ def _shortfalls(rows) -> str:
             f"{', '.join(farther) or 'none'}.")
 
 
-_PROCESS = ("How the method was fixed: the candidates, prior, weights and selection rule were set before any "
-            "cross-validation. One change was made after a first cross-validation run: the inverse-dynamics "
-            "regression had weighted its strongly autocorrelated equation errors as white, so it moved cubic hull "
-            "derivatives far on zig-zag data alone, and the turning circle held out was replayed with 28 deg psi "
-            "RMSE; its weights now count effective samples (`autocorrelation=True`). Nothing was tuned to the "
-            "numbers below after that.")
+_CHOICES = (
+    "Choices made after a cross-validation run. Fixed before the first cross-validation run of this workflow: "
+    "the candidates, the prior, the channel and record weighting rules, the selection rule, the mirror-pair rule, "
+    "the propulsion stage, the cost channels. After it:\n\n"
+    "* Asymmetry terms estimated on the mirror-pair runs only (then held in the refinement on all runs). First "
+    "run: gated on the existence of a pair but estimated on all runs, the rudder neutral angle was decided by "
+    "the unpaired small-angle zig-zags (all first to starboard, drifting) and made the 35/5 zig-zag drift; "
+    "leave-one-run-out mean heading RMSE 9.35 -> 7.99 deg, leave-one-regime-out 8.90 -> 7.25 deg.\n"
+    "* Tried and dropped, each on a full cross-validation run: a rudder-lift saturation term (`f_alpha (sin a - "
+    "c sin^3 a)`; the data put c at its bound 0: no change); the asymmetry terms kept out of the fit file as "
+    "facility-specific (leave-one-run-out mean 10.85 deg, leave-one-regime-out 16.31 deg: worse); the "
+    "flow-straightening `gamma_R` for either drift sign treated as port/starboard terms (16.92 deg, no index "
+    "closer on any run: worse).\n"
+    "* Earlier workflow (before this one): the inverse-dynamics regression counts effective samples "
+    "(`autocorrelation=True`); its per-facility asymmetry, kept inverse-dynamics values, resistance trim and "
+    "psi/r/u cost are replaced by the rules above.")
 
 
-def write_outputs(out: Path, runs, everything, results, in_sample, *, quick: bool) -> dict:
-    """Write the fit files, tables, figures and report; return the summary."""
+def _md(text_rows) -> str:
+    return md_table(text_rows, first="quantity", spec=".3g")
+
+
+def _calibration(calibration: dict) -> str:
+    cols = ["estimate", "published", "SE model-based", "SE robust", "SE jackknife", "fold spread (std)",
+            "in 95 % (model-based)", "in 95 % (robust)", "in 95 % (jackknife)"]
+    return md_table(calibration, first="parameter", spec=".3g", columns=cols)
+
+
+def _coverage(calibration: dict) -> dict:
+    out = {}
+    for kind in ("model-based", "robust", "jackknife"):
+        v = [r[f"in 95 % ({kind})"] for r in calibration.values() if np.isfinite(r[f"in 95 % ({kind})"])]
+        out[kind] = float(np.mean(v)) if v else math.nan
+    return out
+
+
+def write_outputs(out: Path, runs, everything, results, in_sample, *, calibration, jack, asymmetry,
+                  quick: bool) -> dict:
+    """Write the tables, figures and report (the fit files are written by the folds); return the summary."""
     out = Path(out)
-    fit_marin = dataclasses.replace(everything.fit, params=params_for(everything, "MARIN"))
-    fit_marin.to_json(out / "fit.json")
-    everything.fit.to_json(out / "fit_all_runs.json")
-    loro = [res for res in results if res["kind"] == "run"]
-    lofo = [res for res in results if res["kind"] == "facility"]
-    lodo = [res for res in results if res["kind"] == "direction"]
-    for res in loro:
-        res["fold"].fit.to_json(out / f"fit_without_{_slug(res['held'][0])}.json")
+    by_kind = {k: [ev["row"] for res in results if res["kind"] == k for ev in res["evaluations"]]
+               for k in ("run", "regime", "facility", "direction")}
     figs = _figures(out, runs, results)
-    rows_loro = [ev["row"] for res in loro for ev in res["evaluations"]]
-    rows_lofo = [ev["row"] for res in lofo for ev in res["evaluations"]]
-    rows_lodo = [ev["row"] for res in lodo for ev in res["evaluations"]]
     with open(out / "cross_validation.csv", "w", newline="") as fh:
-        keys = sorted({k for r in rows_loro + rows_lofo + rows_lodo for k in r})
+        keys = sorted({k for rows in by_kind.values() for r in rows for k in r})
         writer = csv.DictWriter(fh, fieldnames=["validation", *keys])
         writer.writeheader()
-        for tag, rows in (("leave-one-run-out", rows_loro), ("leave-one-facility-out", rows_lofo),
-                          ("leave-one-direction-out", rows_lodo)):
+        for tag, rows in by_kind.items():
             for r in rows:
-                writer.writerow({"validation": tag, **r})
-    prop_table, prop_rows = _propulsion(runs, everything)
+                writer.writerow({"validation": f"leave-one-{tag}-out", **r})
+    rate_table, thrust_table, prop_rows = _propulsion(runs, everything)
     rep = Report("KVLCC2 MMG identified on the MARIN and HSVA runs, cross-validated", quick=quick)
-    rep.add(f"Model: `kvlcc2(asymmetry=True, smooth=True)` (full scale), fitted on {len(runs)} runs "
-            f"({', '.join(r.name for r in runs)}). Workflow: propulsion trim, EKF + RTS smoothing, inverse "
-            "dynamics, free set from the Fisher information, MAP output-error refinement of psi, r and u "
-            "(see the module text of `problems/kvlcc2_marin/workflow.py`).")
-    rep.section("Leave-one-run-out: each run predicted by a fit that did not see it")
-    n_better = sum(r["psi_better"] for r in rows_loro)
-    n_closer = sum(r["indices_closer"] for r in rows_loro)
-    rep.add(f"psi RMSE lower than with the published constants on {n_better} of {len(rows_loro)} held-out runs; "
-            f"indices closer to the measured ones on {n_closer} of {len(rows_loro)}. " + _shortfalls(rows_loro),
-            _cv_table(rows_loro), _PROCESS)
-    if rows_lofo:
-        rep.section("Leave-one-facility-out: one facility's runs predicted by a fit on the other's")
-        rep.add(f"psi RMSE lower on {sum(r['psi_better'] for r in rows_lofo)} of {len(rows_lofo)}; indices "
-                f"closer on {sum(r['indices_closer'] for r in rows_lofo)} of {len(rows_lofo)}. "
-                + _shortfalls(rows_lofo), _cv_table(rows_lofo))
-    if rows_lodo:
-        rep.section("Leave-one-direction-out: runs that turn one way first predicted by a fit on the others")
-        rep.add("The runs are split by the side of their first rudder deflection; each side's runs are "
-                "replayed with a fit on the other side's (the situation of trials in one direction only). "
-                f"psi RMSE lower on {sum(r['psi_better'] for r in rows_lodo)} of {len(rows_lodo)}; indices "
-                f"closer on {sum(r['indices_closer'] for r in rows_lodo)} of {len(rows_lodo)}. "
-                + _shortfalls(rows_lodo), _cv_table(rows_lodo))
-    rep.section("In training: the fit on all runs replayed on each of them")
-    rep.add("What the model variant can do at best with this free set (not a prediction).", _cv_table(in_sample, "run (in training)"))
+    options = ", ".join(f"{k}={v}" for k, v in MODEL_OPTIONS.items())
+    rep.add(f"Model: `kvlcc2({options})` (full scale), fitted on {len(runs)} runs "
+            f"({', '.join(r.name for r in runs)}). Workflow: propulsion from the measured thrust, EKF + RTS "
+            f"smoothing, free set from the Fisher information, MAP output-error refinement of {', '.join(MEASURED)} "
+            "with every run weighted the same (see `problems/kvlcc2_marin/workflow.py`). Every held-out run is "
+            "scored by replaying its fold's fit file with `casship.identify.replay_file`, the function behind "
+            "`casship simulate --model kvlcc2 --params FILE --inputs RUN`; every run, of any facility or "
+            "direction, gets the file's one parameter set. Indices of the fit carry the 95 % interval of "
+            "parameter draws from the file's covariance.")
+    titles = {"run": "Leave-one-run-out: each run predicted by the fit file of a fold that did not see it",
+              "regime": "Leave-one-regime-out: small-angle zig-zags, large-rudder zig-zags, turning circles",
+              "facility": "Leave-one-facility-out: one facility's runs predicted by a fit on the other's",
+              "direction": "Leave-one-direction-out: runs that turn one way first predicted by a fit on the others"}
+    for kind, rows in by_kind.items():
+        if not rows:
+            continue
+        rep.section(titles[kind])
+        rep.add(f"psi RMSE lower than with the published constants on {sum(r['psi_better'] for r in rows)} of "
+                f"{len(rows)} held-out runs; indices closer to the measured ones on "
+                f"{sum(r['indices_closer'] for r in rows)} of {len(rows)}. " + _shortfalls(rows), _cv_table(rows))
+    rep.add(_CHOICES)
+    rep.section("In training: the fit on all runs (fit.json) replayed on each of them")
+    rep.add("What the model variant can do at best with this free set (not a prediction).",
+            _cv_table(in_sample, "run (in training)"))
+    rep.section("Every parameter that differs from the published constants")
+    rep.add("Nothing moves outside these stages; each moved parameter has a standard error (propulsion: "
+            "posterior of the thrust fit; asymmetry stage and refinement: model-based and robust; the thrust "
+            "coefficients are the open-water curve's, rewritten for the model's diameter).",
+            _moved_table(everything))
     rep.section("Free set, prior and estimates (fit on all runs)")
-    rep.add("Free set chosen by the rule of `workflow.select_free` from the Fisher information at the "
-            "inverse-dynamics start (not by trying sets against the runs):",
-            md_table({r["quantity"]: r for r in everything.selection}, first="candidate", spec=".3g",
-                     columns=["ratio_when_added", "max_corr", "ratio_alone"],
+    rep.add("Free set chosen by the rule of `workflow.select_free` from the Fisher information at the preset "
+            f"(start of the refinement: {everything.guess_from}); the asymmetry terms in a first stage on the "
+            "mirror-pair runs only, the symmetric ones on all runs with the asymmetry held:",
+            md_table({f"{r['quantity']} ({'asymmetry' if r.get('stage', '').startswith('asym') else 'all runs'})": r
+                      for r in everything.selection}, first="candidate", spec=".3g",
+                     columns=["stage", "ratio_when_added", "max_corr", "ratio_alone", "confounded"],
                      headers={"ratio_when_added": "posterior/prior std when chosen", "max_corr": "max |corr| then",
-                              "ratio_alone": "posterior/prior std if alone (not chosen)"}),
-            "Output sigmas (RMS error at the start times sqrt of the autocorrelation time): "
-            + ", ".join(f"{k} {v:.3g}" for k, v in everything.sigma.items()),
-            _estimates_table(everything))
+                              "ratio_alone": "posterior/prior std if alone (not chosen)",
+                              "confounded": "confounded with the turning dynamics"}),
+            "Output sigmas (RMS error at the preset times sqrt of the autocorrelation time): "
+            + ", ".join(f"{k} {v:.3g}" for k, v in everything.sigma.items()))
     rep.add("```", everything.fit.summary(), "```")
-    rep.section("Propulsion: propeller rate needed to hold each run's approach speed")
-    rep.add(f"Straight-run resistance trimmed to R_0' = {everything.R_0:.5f} (published 0.022).", prop_table)
+    if calibration:
+        cov = _coverage(calibration)
+        rep.section("Calibration: reported 95 % intervals against the leave-one-run-out estimates")
+        rep.add("For each moved parameter, the share of the 16 fold estimates inside estimate +- 1.96 SE "
+                f"(all-runs fit). Mean share: model-based {cov['model-based']:.0%}, robust {cov['robust']:.0%}, "
+                f"run-level jackknife {cov['jackknife']:.0%}. `fit.json` carries the jackknife covariance "
+                f"({jack.source}); the fold files carry their robust (sandwich) covariance.",
+                _calibration(calibration))
+    rep.section("Port/starboard asymmetry")
+    asym_rows = {f"{p['starboard first']} / {p['port first']}": p for p in asymmetry["pairs"]}
+    rep.add("Mirror pairs in the training data (same manoeuvre, first turn to opposite sides); the "
+            "differences starboard-first minus port-first, measured and replayed:",
+            md_table(asym_rows, first="pair", spec=".3g") if asym_rows else "(none)",
+            "Steady yaw rate in +-35 deg turning circles at 15.5 kn (simulated):",
+            md_table(asymmetry["steady_turn"], first="model", spec=".4g"),
+            "Mirror check (a diagnostic, not a validation: the mirror image of a measured run is not a "
+            "measured run of the other direction): each run and its mirror image replayed with `fit.json` "
+            "and with the published constants (which are not symmetric themselves: `C_2`, `gamma_R` switch "
+            "on the sign of the drift):",
+            md_table(asymmetry.get("mirror", {}), first="run", spec=".3g"),
+            "Asymmetry terms of the fit on all runs: " + (", ".join(
+                f"{n} = {everything.fit.params[n]:.4g}" for n in ("delta_0", "Y_0_dash", "N_0_dash")))
+            + (f"; confounded (not estimated): {', '.join(everything.confounded)}" if everything.confounded else ""))
+    rep.section("Propulsion: the propeller fitted to the measured thrust")
+    prop = everything.propulsion
+    rep.add(f"Open-water K_T rewritten for D_p = 9.86 m (quadratic, largest error {prop.kt_fit_error:.2g}); wake "
+            f"from the measured thrust of {len(prop.runs)} HSVA runs, free: {', '.join(prop.free) or 'none'}.",
+            thrust_table, "Propeller rate needed to hold each run's approach speed:", rate_table)
     rep.section("Folds")
-    fold_rows = {", ".join(res["held"]) if res["kind"] == "run" else
-                 f"all {len(res['held'])} runs {_GROUP_TITLE[res['kind']](res['label'])}": {
-                     "free": ", ".join(res["fold"].free), "fold time [s]": res["fold"].seconds,
+    fold_rows = {(", ".join(res["held"]) if res["kind"] == "run" else
+                  f"{res['kind']}: {res['label']} ({len(res['held'])} runs)"): {
+                     "file": res["file"], "free": ", ".join(res["fold"].free), "fold time [s]": res["fold"].seconds,
                      "refinement time [s]": res["fold"].fit.solve_time_s, "status": res["fold"].fit.status}
                  for res in results}
     rep.add(md_table(fold_rows, first="held out", spec=".3g"))
@@ -209,10 +279,13 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, quick: boo
     rep.departures(_departures(), "Reference approach: Alexandersson et al. (2022), Ocean Engineering.")
     rep.write(out)
     summary = {"study": "kvlcc2-marin", "quick": quick, "runs": [r.name for r in runs],
-               "model_options": MODEL_OPTIONS, "free": everything.free, "R_0_dash": everything.R_0,
+               "model_options": MODEL_OPTIONS, "free": everything.free, "moved": everything.moved(),
                "estimates": everything.fit.estimates, "fit_seconds": everything.fit.solve_time_s,
-               "workflow_seconds": everything.seconds, "leave_one_run_out": rows_loro,
-               "leave_one_facility_out": rows_lofo, "leave_one_direction_out": rows_lodo, "in_sample": in_sample, "propulsion": prop_rows, "fit_json": str(out / "fit.json"),
-               "folds": {", ".join(res["held"]): {"free": res["fold"].free, "seconds": res["fold"].seconds,
-                                                   "train": res["fold"].train} for res in results}}
+               "workflow_seconds": everything.seconds,
+               **{f"leave_one_{k}_out": rows for k, rows in by_kind.items()}, "in_sample": in_sample,
+               "calibration": calibration, "calibration_coverage": _coverage(calibration) if calibration else {},
+               "asymmetry": asymmetry, "propulsion": prop_rows, "fit_json": str(out / "fit.json"),
+               "folds": {f"{res['kind']}:{res['label']}": {"free": res["fold"].free, "seconds": res["fold"].seconds,
+                                                           "train": res["fold"].train, "file": res["file"]}
+                         for res in results}}
     return write_json(out / "summary.json", summary)

@@ -1,39 +1,64 @@
-"""Validation of a fold: replay a held-out run with the published constants and with the fit.
+"""Validation of a fold: the fold's fit file replayed on each held-out run, as a user replays it.
 
-Each held-out run is replayed at its full rate (:func:`casship.validation.replay`: measured rudder
-and propeller rate, measured initial state) with
-
-* the **published** constants: :func:`casship.models.kvlcc2` as published (no propulsion trim), and
-* the **fit** of the fold that did not see the run (its facility's asymmetry copies, or their mean
-  for a facility left out of training),
-
-and compared with the measurement: RMS errors of heading, surge speed and track, and the manoeuvre
-indices of the replayed and measured runs computed by the same functions (advance, transfer and
-tactical diameter of a turning circle; first and second overshoot of a zig-zag).
+Every fold writes the fit file a user gets (:func:`write_fold_file`) and every held-out run is
+scored by replaying *that file* with :func:`casship.identify.replay_file`, the function behind
+``casship simulate --model kvlcc2 --params FILE --inputs RUN``: the same parameters for every run,
+whatever its facility, direction or regime, with the file's covariance giving the prediction bands
+and the index intervals. The published constants (:func:`casship.models.kvlcc2`) are replayed
+alongside, and both are compared with the measurement: RMS errors of heading, surge speed and
+track, and the manoeuvre indices (advance, transfer, tactical diameter; first and second
+overshoot) computed by the same functions.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
+from casship.identify import ParameterUncertainty
 from casship.models import kvlcc2
+from casship.identify import replay_file
 from casship.validation import replay
 
 from .data import Run
-from .workflow import params_for, study_model
 
-__all__ = ["ERRORS", "INDICES", "evaluate", "closer", "plot_overlay"]
+__all__ = ["ERRORS", "INDICES", "evaluate", "closer", "plot_overlay", "write_fold_file", "SAMPLES"]
 
 ERRORS = ("psi_rmse_deg", "u_rmse_mps", "position_rmse_m")
 INDICES = {"turning": ("advance_m", "transfer_m", "tactical_diameter_m"),
            "zigzag": ("overshoot_1_deg", "overshoot_2_deg")}
+SAMPLES = 40                       # parameter draws per replay for the index intervals
 
 
-def evaluate(run: Run, fold, *, published=None) -> dict:
-    """Replay ``run`` with the published constants and with ``fold``'s fit; errors and indices."""
+def write_fold_file(fold, path: Path, uncertainty=None) -> Path:
+    """Write the fold's fit as the fit file a user gets.
+
+    Its covariance is ``uncertainty`` (a :class:`~casship.identify.ParameterUncertainty`) when
+    given, else the robust (sandwich) covariance of the refinement with that of the asymmetry
+    terms from the mirror-pair stage beside it (the two stages' estimates taken as independent).
+    """
+    import dataclasses
+
+    from scipy.linalg import block_diag
+
+    fit = fold.fit
+    if uncertainty is None and fold.asymmetry:
+        a, b = fold.asymmetry_fit.uncertainty("robust"), fit.uncertainty("robust")
+        ia = [a.names.index(n) for n in fold.asymmetry]
+        names = [*fold.asymmetry, *(b.names if b is not None else [])]
+        values = [*a.values[ia], *(b.values if b is not None else [])]
+        C = block_diag(a.covariance[np.ix_(ia, ia)], *([b.covariance] if b is not None else []))
+        uncertainty = ParameterUncertainty(names, values, C, "robust (sandwich), asymmetry stage and refinement")
+    if uncertainty is not None:
+        fit = dataclasses.replace(fit, param_covariance=uncertainty.to_dict())
+    return fit.to_json(path)
+
+
+def evaluate(run: Run, fit_file: Path, *, published=None, seed: int = 0) -> dict:
+    """Replay ``run`` with the published constants and with the fit file; errors, indices, bands."""
     pub = replay(published or kvlcc2(), run.data)
-    model = study_model()
-    fit = replay(model, run.data, model.params(params_for(fold, run.facility)))
-    row = {"run": run.name, "facility": run.facility, "kind": run.kind}
+    fit = replay_file(fit_file, run.data, "kvlcc2", samples=SAMPLES, seed=seed)
+    row = {"run": run.name, "facility": run.facility, "kind": run.kind, "fit_file": Path(fit_file).name}
     for key in ERRORS:
         row[f"{key}_published"] = pub.errors.get(key, np.nan)
         row[f"{key}_fit"] = fit.errors.get(key, np.nan)
@@ -41,9 +66,14 @@ def evaluate(run: Run, fold, *, published=None) -> dict:
         row[f"{key}_published"] = pub.metrics.get(key, np.nan)
         row[f"{key}_fit"] = fit.metrics.get(key, np.nan)
         row[f"{key}_measured"] = pub.measured_metrics.get(key, np.nan)
+        lo, hi = fit.metric_intervals.get(key, (np.nan, np.nan))
+        row[f"{key}_fit_lo"], row[f"{key}_fit_hi"] = lo, hi
+    band = fit.band_summary()
+    row["psi_band_coverage"] = band.get("psi_coverage", np.nan)
+    row["psi_band_halfwidth_max_deg"] = band.get("psi_halfwidth_max_deg", np.nan)
     row["psi_better"] = bool(row["psi_rmse_deg_fit"] < row["psi_rmse_deg_published"])
     row["indices_closer"] = closer(row, run.kind)
-    return {"row": row, "published": pub.trajectory, "fit": fit.trajectory}
+    return {"row": row, "published": pub.trajectory, "fit": fit.trajectory, "bands": fit.bands}
 
 
 def closer(row: dict, kind: str) -> bool:
@@ -60,8 +90,9 @@ def closer(row: dict, kind: str) -> bool:
     return True
 
 
-def plot_overlay(axes, run: Run, published, fit, title: str) -> None:
-    """Track and heading of the measured run, the published replay and the fit's replay."""
+def plot_overlay(axes, run: Run, published, fit, title: str, bands=None) -> None:
+    """Track and heading of the measured run, the published replay and the fit's replay (with its
+    prediction band when given)."""
     ax1, ax2 = axes
     d = run.data
     ax1.plot(d["y"], d["x"], "k-", lw=1.2, label=f"measured ({run.facility})")
@@ -70,10 +101,18 @@ def plot_overlay(axes, run: Run, published, fit, title: str) -> None:
     ax1.set_xlabel("East y [m]")
     ax1.set_ylabel("North x [m]")
     ax1.set_aspect("equal", adjustable="datalim")
-    ax1.legend(fontsize=7)
     ax2.plot(d.t, np.degrees(np.unwrap(d["psi"])), "k-", lw=1.2, label="measured")
     ax2.plot(published.t, np.degrees(published["psi"]), "C1--", lw=1, label="published")
     ax2.plot(fit.t, np.degrees(fit["psi"]), "C0-", lw=1, label="fit")
+    if bands:
+        z, psi = bands["z"], np.degrees(np.unwrap(fit["psi"]))
+        w = np.degrees(z * bands["psi_std"])
+        ax2.fill_between(fit.t, psi - w, psi + w, color="C0", alpha=0.25, lw=0,
+                         label=f"{100 * bands['level']:.0f} % band")
+        off = z * bands["cross_track_std"][:, None] * bands["normal"]
+        for sign in (-1, 1):
+            ax1.plot(fit["y"] + sign * off[:, 1], fit["x"] + sign * off[:, 0], "C0-", lw=0.5, alpha=0.6)
+    ax1.legend(fontsize=7)
     ax2.plot(d.t, np.degrees(d["delta"]), "k:", lw=0.8, label="rudder [deg]")
     ax2.set_xlabel("t [s]")
     ax2.set_ylabel("heading [deg]")

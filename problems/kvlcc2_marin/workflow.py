@@ -1,32 +1,47 @@
 """The identification workflow of the study, applied to a set of training runs.
 
-1. **Propulsion** (:mod:`.propulsion`): ``R_0'`` from the training runs' straight approaches.
+Every choice below (candidates, prior, weights, selection rule) is fixed before any
+cross-validation; the report lists the ones that changed after a cross-validation run.
+
+1. **Propulsion** (:mod:`.propulsion`): the propeller's thrust coefficients from the open-water
+   curve and its wake from the measured HSVA thrust of the training runs, before the manoeuvring
+   fit (each with a standard error, the wake's free set by the rule of step 5).
 2. **Smooth** every run (EKF + RTS, :func:`casship.identify.smooth_trial`) into ``u, v, r`` and their
    rates. HSVA: positions, heading and yaw rate (the files' surge column disagrees with the positions
-   by up to 4 % in the larger zig-zags, so the surge speed of the smoothed positions replaces it);
-   MARIN: positions, heading, surge speed and yaw rate.
-3. **Inverse dynamics** (:func:`casship.identify.inverse_dynamics`): the hull derivatives, the rudder
-   lift gradient and the propeller-induced side force and yaw moment (the coefficients the model is
-   linear in) by least squares with the prior below, equation weights corrected for the
-   autocorrelation of the residuals.
-4. **Output weights**: the output errors at that start are coloured (model-structure error), so each
-   channel's sigma is its RMS error times the square root of its integrated autocorrelation time:
-   ``N`` correlated samples weigh as their ``N / tau`` effective ones, which gives the prior its
-   proper weight and each channel the share of its effective samples.
-5. **Choose the free set** from the Fisher information at the start (:meth:`identifiability`), by a
-   rule stated before any fit: greedy D-optimal forward selection among the candidates, adding a
-   quantity only while every chosen one is determined by the data to at most half its prior
-   standard deviation (``posterior std / prior std <= 0.5``) and no two chosen ones are correlated
-   beyond 0.95; at most 15.
-6. **MAP refinement**: output error (``psi, r, u``) with the Gaussian prior centred on the published
-   values, the asymmetry terms per facility (the two facilities' models have different propellers).
+   by up to 4 % in the larger zig-zags, so the surge and sway speeds of the smoothed positions are
+   used); MARIN: positions, heading, surge speed and yaw rate (its sway column is measured).
+3. **Inverse dynamics** (:func:`casship.identify.inverse_dynamics`): the coefficients the model is
+   linear in, by regularised least squares on the smoothed accelerations: *only a starting guess*
+   for the quantities step 5 sets free (used when it lowers the cost); nothing else moves.
+4. **Cost**: output error of heading, yaw rate, surge and sway speed and the track (``psi, r, u, v,
+   x, y``). Channel weights: each channel's sigma is its RMS error at the preset times the square
+   root of its integrated autocorrelation time (``N`` correlated samples weigh as their ``N / tau``
+   effective ones). Record weights: every run counts the same however long it is (each record's
+   squared residuals are multiplied by ``N_mean / N_r``), so that a long circle or small-angle
+   zig-zag cannot swamp the large-rudder runs.
+5. **Choose the free set** from the Fisher information at the preset (published constants with the
+   fitted propeller), by a rule stated before any fit: greedy D-optimal forward selection among the
+   candidates, adding a quantity only while every chosen one is determined by the data to at most
+   half its prior standard deviation (``posterior std / prior std <= 0.5``) and no two chosen ones
+   are correlated beyond 0.95; at most 15.
+6. **Asymmetry from the mirror pairs only**: the asymmetry terms (rudder neutral angle,
+   propeller-induced side force and yaw moment) are one value for the ship, estimated (free set by
+   the rule of step 5, MAP) on the training runs that form mirror pairs within one facility
+   (:mod:`casship.identify.asymmetry`: the same manoeuvre turning first to both sides; a
+   difference between facilities is no port/starboard evidence) and nothing else; without a pair
+   they are confounded with the turning dynamics and stay at zero.
+7. **MAP refinement** of the chosen symmetric set on all training runs, the asymmetry terms held at
+   step 6's values; every other parameter stays at the preset.
 
 Prior (standard deviations, relative to the published value unless stated): linear hull
-derivatives 20 %; cubic hull and surge derivatives 50 % (``X'_vr`` at least 0.01); rudder and
-interaction factors 20 % (``gamma_R`` 25 %, ``a_H``, ``t_R``, ``C_1`` 30 %); added masses 20 %;
-rudder neutral angle 1 deg; propeller-induced side force and yaw moment 0.05 and 0.025 (what a
-1 deg rudder gives at the approach). ``t_P``, ``w_P0`` and ``R_0'`` are not candidates: the measured
-thrust confirms the propeller and the straight-run balance fixes the resistance.
+derivatives 20 %; cubic hull and surge derivatives 50 % (``X'_vr`` at least 0.01); straight-run
+resistance 30 %; rudder and interaction factors 20 % (``gamma_R`` 25 %, ``a_H``, ``t_R`` 30 %); added
+masses 20 %; rudder neutral angle 1 deg; propeller-induced side force and yaw moment 0.05 and 0.025
+(what a 1 deg rudder gives at the approach).
+
+A run of any facility, direction or regime is replayed with the one parameter set of the fit (there
+are no per-facility copies): the fit file's ``params``, exactly what ``casship simulate --params``
+uses.
 """
 from __future__ import annotations
 
@@ -38,17 +53,18 @@ import numpy as np
 
 import casship as cs
 from casship.identify import IdentificationWarning, Prior, inverse_dynamics, smooth_trial
+from casship.identify.asymmetry import confounded_asymmetry, mirror_pairs
 from casship.identify.uncertainty import effective_samples
 from casship.models import kvlcc2
 
 from .data import Run, fit_record
-from .propulsion import trim_resistance
+from .propulsion import PropulsionFit, fit_propulsion, resistance_for_run
 
-__all__ = ["MODEL_OPTIONS", "study_model", "MEASURED", "CANDIDATES", "REGRESSED", "BY_FACILITY", "prior_std",
-           "smooth_runs", "with_smoothed_speed", "FoldFit", "fit_fold", "select_free", "params_for"]
+__all__ = ["MODEL_OPTIONS", "study_model", "MEASURED", "CANDIDATES", "REGRESSED", "ASYMMETRY", "prior_std",
+           "smooth_runs", "with_smoothed_speed", "FoldFit", "fit_fold", "select_free", "record_weights"]
 
 MODEL_OPTIONS = {"asymmetry": True, "smooth": True}
-MEASURED = ("psi", "r", "u")
+MEASURED = ("psi", "r", "u", "v", "x", "y")
 SMOOTHER = {  # facility -> (channels, measurement standard deviations)
     "MARIN": (("x", "y", "psi", "u", "r"), {"x": 3.0, "y": 3.0, "psi": np.radians(0.3), "u": 0.01,
                                             "r": np.radians(0.002)}),   # 3-digit print: +-5 m, 1 deg late
@@ -58,15 +74,13 @@ JERK = {"u": 1e-3, "v": 1e-3, "r": 1e-5}
 HULL_LINEAR = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash")
 HULL_CUBIC = ("Y_vvv_dash", "Y_vvr_dash", "Y_vrr_dash", "Y_rrr_dash", "N_vvv_dash", "N_vvr_dash", "N_vrr_dash",
               "N_rrr_dash", "X_vv_dash", "X_vr_dash", "X_rr_dash", "X_vvvv_dash")
+ASYMMETRY = ("delta_0", "Y_0_dash", "N_0_dash")
 REGRESSED = (*HULL_LINEAR, *HULL_CUBIC, "f_alpha", "Y_0_dash", "N_0_dash")
-CANDIDATES = (*HULL_LINEAR, *HULL_CUBIC, "gamma_R_minus", "gamma_R_plus", "l_R_dash", "epsilon", "kappa", "f_alpha",
-              "a_H", "x_H_dash", "t_R", "C_1", "C_2_plus", "C_2_minus", "m_x_dash", "m_y_dash", "J_z_dash",
-              "delta_0", "Y_0_dash", "N_0_dash")
-BY_FACILITY = ("delta_0", "Y_0_dash", "N_0_dash")
-PRIOR_REL = {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "gamma_R_minus": 0.25,
+CANDIDATES = (*HULL_LINEAR, *HULL_CUBIC, "R_0_dash", "gamma_R_minus", "gamma_R_plus", "l_R_dash", "epsilon", "kappa",
+              "f_alpha", "a_H", "x_H_dash", "t_R", "m_x_dash", "m_y_dash", "J_z_dash", *ASYMMETRY)
+PRIOR_REL = {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "R_0_dash": 0.3, "gamma_R_minus": 0.25,
              "gamma_R_plus": 0.25, "l_R_dash": 0.2, "epsilon": 0.2, "kappa": 0.2, "f_alpha": 0.2, "a_H": 0.3,
-             "x_H_dash": 0.2, "t_R": 0.3, "C_1": 0.3, "C_2_plus": 0.2, "C_2_minus": 0.2, "m_x_dash": 0.2,
-             "m_y_dash": 0.2, "J_z_dash": 0.2}
+             "x_H_dash": 0.2, "t_R": 0.3, "m_x_dash": 0.2, "m_y_dash": 0.2, "J_z_dash": 0.2}
 PRIOR_ABS = {"delta_0": np.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025}
 PRIOR_FLOOR = {"X_vr_dash": 0.01}
 MAX_RATIO, MAX_CORR, MAX_FREE = 0.5, 0.95, 15
@@ -94,15 +108,21 @@ def smooth_runs(runs, dt: float = 1.0) -> dict[str, cs.Dataset]:
 
 
 def with_smoothed_speed(runs, smoothed) -> list[Run]:
-    """HSVA runs with ``u`` from the smoothed positions (the files' ``u`` kept as ``u_file``)."""
+    """HSVA runs with ``u`` and ``v`` from the smoothed positions (the files' ``u`` kept as ``u_file``)."""
     out = []
     for run in runs:
         if run.facility == "HSVA":
             d, s = run.data, smoothed[run.name]
-            data = d.with_columns(u=np.interp(d.t, s.t, s["u"]), u_file=d["u"])
+            data = d.with_columns(u=np.interp(d.t, s.t, s["u"]), v=np.interp(d.t, s.t, s["v"]), u_file=d["u"])
             run = Run(run.name, run.facility, data, run.kind)
         out.append(run)
     return out
+
+
+def record_weights(records) -> np.ndarray:
+    """Every record counts the same: its squared residuals weighted by ``N_mean / N_r``."""
+    n = np.array([len(r) for r in records], dtype=float)
+    return n.mean() / n
 
 
 @dataclass
@@ -110,69 +130,100 @@ class FoldFit:
     """The identification on one set of training runs."""
 
     train: list
-    R_0: float
-    R_0_per_run: dict
-    start: dict
+    propulsion: PropulsionFit
+    preset: dict                    # the parameters that differ from the published ones before the fit
+    start: dict                     # inverse-dynamics estimates (starting guesses only)
+    guess_from: str                 # "inverse dynamics" or "preset": the start of the refinement
     sigma: dict
     candidates: list
     selection: list                 # rows: quantity, posterior/prior std ratio when added
+    confounded: dict                # asymmetry quantity -> why it is not estimated
     free: list
     fit: object                     # FitResult of the MAP refinement
     seconds: float
     inverse_dynamics: object = field(repr=False, default=None)
     identifiability: object = field(repr=False, default=None)
+    asymmetry_fit: object = field(repr=False, default=None)   # FitResult of the mirror-pair stage
+    asymmetry: list = field(default_factory=list)              # asymmetry terms taken from it
+
+    def moved(self) -> dict:
+        """Every parameter that differs from the published value, with its standard error and stage."""
+        nominal = study_model().param_dict()
+        out = {}
+        for n, v in self.propulsion.values.items():
+            out[n] = {"value": v, "published": nominal[n], "std_error": self.propulsion.std_errors.get(n, np.nan),
+                      "stage": "propulsion (open-water curve)" if n.startswith("k_") else "propulsion (measured thrust)"}
+        for n in self.asymmetry:
+            a = self.asymmetry_fit
+            out[n] = {"value": a.estimates[n], "published": nominal[n], "std_error": a.std_errors[n],
+                      "std_error_robust": a.std_errors_robust.get(n, np.nan),
+                      "stage": "asymmetry (MAP on the mirror-pair runs)"}
+        for n in self.fit.free:
+            out[n] = {"value": self.fit.estimates[n], "published": nominal[n], "std_error": self.fit.std_errors[n],
+                      "std_error_robust": self.fit.std_errors_robust.get(n, np.nan), "stage": "MAP refinement"}
+        return out
 
 
-def _share(names):
-    return {k: "facility" for k in BY_FACILITY if k in names}
-
-
-def _scale(names):
-    return {k: PRIOR_ABS[k] for k in BY_FACILITY if k in names}
-
-
-def fit_fold(train: list[Run], smoothed: dict, *, dt: float = 2.0, max_free: int = MAX_FREE,
+def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float = 2.0, max_free: int = MAX_FREE,
              show: bool = False) -> FoldFit:
-    """Propulsion trim, inverse dynamics, free-set choice and MAP refinement on ``train``."""
+    """Propulsion, asymmetry from the mirror pairs, free-set choice and MAP refinement on ``train``
+    (see the module text)."""
     t0 = time.perf_counter()
     model = study_model()
-    R_0, per_run = trim_resistance(model, train)
-    base = {"R_0_dash": R_0}
-    idfit = inverse_dynamics(model, [smoothed[r.name] for r in train], list(REGRESSED), params=model.params(base),
-                             prior=prior_std(model, REGRESSED), autocorrelation=True)
-    start = {**base, **idfit.estimates}
-    fixed = model.params(start)
-    recs = [fit_record(r, dt) for r in train]
-    facilities = sorted({r.facility for r in train})
-    at = {k: v for k, v in start.items() if k in CANDIDATES and k not in BY_FACILITY}
-    for k in BY_FACILITY:
-        for fac in facilities:
-            at[f"{k}@{fac}"] = float(start.get(k, 0.0))
+    prop = fit_propulsion(model, train, smoothed, curve)
+    preset = dict(prop.values)
+    fixed = model.params(preset)
+    r0 = float(np.mean([resistance_for_run(model, r, fixed) for r in train]))
+    idfit = inverse_dynamics(model, [smoothed[r.name] for r in train], list(REGRESSED),
+                             params=model.params({**preset, "R_0_dash": r0}), prior=prior_std(model, REGRESSED),
+                             autocorrelation=True)
+    start = {**idfit.estimates, "R_0_dash": r0}
+    recs = [fit_record(r, dt, outputs=MEASURED) for r in train]
+    at = {k: float(fixed[model.index(k, "param")]) for k in CANDIDATES}
     unit = cs.OutputErrorProblem(model, recs, list(CANDIDATES), measured=list(MEASURED),
-                                 sigma={c: 1.0 for c in MEASURED}, params=fixed, share=_share(CANDIDATES),
-                                 scale=_scale(CANDIDATES))
+                                 sigma={c: 1.0 for c in MEASURED}, params=fixed, scale=dict(PRIOR_ABS))
     res = unit.residuals(at)
     neff = effective_samples(res, list(MEASURED))
     sigma = {c: float(np.sqrt(sum(np.nansum(r[:, j] ** 2) for r in res) / neff[c]["n_eff"]))
              for j, c in enumerate(MEASURED)}
-    prior = Prior(prior_std(model, CANDIDATES))
-    prob = cs.OutputErrorProblem(model, recs, list(CANDIDATES), measured=list(MEASURED), sigma=sigma, params=fixed,
-                                 share=_share(CANDIDATES), scale=_scale(CANDIDATES), prior=prior)
-    idf = prob.identifiability(at=at)
+    facilities = [r.facility for r in train]
+    paired = sorted({i for pair in mirror_pairs(recs, within=facilities) for i in pair})
+    confounded = confounded_asymmetry(recs, ASYMMETRY, within=facilities)
+    asym, asym_stage, rows_a = {}, None, []
+    if paired:           # stage A: the asymmetry terms from the mirror-pair runs only
+        sub = [recs[i] for i in paired]
+        asym_stage, chosen_a, rows_a, _, _ = _select_and_refine(model, sub, list(CANDIDATES), sigma, fixed, at, start,
+                                                                max_free, show)
+        asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ASYMMETRY}
+        rows_a = [dict(r, stage=f"asymmetry: mirror-pair runs {', '.join(train[i].name for i in paired)}")
+                  for r in rows_a if r["quantity"] in ASYMMETRY]
+    fixed = model.params({**preset, **asym})
+    symmetric = [c for c in CANDIDATES if c not in ASYMMETRY]
+    fit, chosen, rows, idf, use_id = _select_and_refine(model, recs, symmetric, sigma, fixed, at, start, max_free, show)
+    rows = rows_a + [dict(r, stage="all runs") for r in rows]
+    rows += [{"quantity": q, "ratio_when_added": float("nan"), "confounded": why, "stage": "asymmetry"}
+             for q, why in confounded.items()]
+    return FoldFit([r.name for r in train], prop, preset, start, "inverse dynamics" if use_id else "preset", sigma,
+                   list(CANDIDATES), rows, confounded, chosen, fit, time.perf_counter() - t0, idfit, idf,
+                   asym_stage, sorted(asym))
+
+
+def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_free, show):
+    """Free set by :func:`select_free` from the information at ``at`` and the MAP refinement of it
+    (started from the inverse-dynamics values when they give a lower cost than the preset)."""
+    prob = cs.OutputErrorProblem(model, recs, candidates, measured=list(MEASURED), sigma=sigma, params=fixed,
+                                 scale={k: v for k, v in PRIOR_ABS.items() if k in candidates},
+                                 prior=Prior(prior_std(model, candidates)), record_weights=record_weights(recs))
+    idf = prob.identifiability(at={k: at[k] for k in candidates}, pairs_within="facility")
     chosen, rows = select_free(idf, max_count=max_free)
-    declared = list(dict.fromkeys(q.split("@")[0] for q in chosen))
-    # a per-facility quantity is free only for the facilities whose copy was chosen
-    share = {k: [r.facility if f"{k}@{r.facility}" in chosen else None for r in train]
-             for k in BY_FACILITY if k in declared}
-    refine = cs.OutputErrorProblem(model, recs, declared, measured=list(MEASURED), sigma=sigma, params=fixed,
-                                   share=share, scale=_scale(declared),
-                                   prior=Prior(prior_std(model, declared)))
-    guess = {q: v for q, v in at.items() if q in chosen}
+    refine = prob.replace(free=chosen, prior=Prior(prior_std(model, chosen)),
+                          scale={k: v for k, v in PRIOR_ABS.items() if k in chosen})
+    guess_id = {q: start.get(q, at[q]) for q in chosen}
+    use_id = bool(chosen) and refine.cost(guess_id) < refine.cost({q: at[q] for q in chosen})
     with warnings.catch_warnings():        # coloured residuals are expected here; fit.warnings keeps them
         warnings.simplefilter("ignore", IdentificationWarning)
-        fit = refine.solve(guess=guess, show=show)
-    return FoldFit([r.name for r in train], R_0, per_run, start, sigma, list(CANDIDATES), rows, chosen, fit,
-                   time.perf_counter() - t0, idfit, idf)
+        fit = refine.solve(guess=guess_id if use_id else None, show=show)
+    return fit, chosen, rows, idf, use_id
 
 
 def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR,
@@ -182,7 +233,8 @@ def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR
     With ``F`` the data's Fisher information and ``P`` the prior covariance, a set ``S`` has the
     posterior-to-prior covariance ``C = (I + P^1/2 F P^1/2)^-1`` restricted to ``S``; candidates are
     added one at a time, each time the one that maximises ``log det (I + P^1/2 F P^1/2)_S`` among
-    those that keep every ``sqrt(C_ii) <= max_ratio`` and every ``|corr| <= max_corr``.
+    those that keep every ``sqrt(C_ii) <= max_ratio`` and every ``|corr| <= max_corr``. Quantities
+    flagged confounded (``idf.confounded``) are never chosen.
     """
     F = np.asarray(idf.information, dtype=float)
     prec = np.asarray(idf.prior_precision, dtype=float)
@@ -191,7 +243,9 @@ def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR
     s = 1.0 / np.sqrt(prec)
     Fs = F * np.outer(s, s)
     names = list(idf.names)
-    chosen, pool, rows = [], list(range(len(names))), []
+    confounded = dict(getattr(idf, "confounded", {}) or {})
+    chosen, rows = [], []
+    pool = [i for i in range(len(names)) if names[i] not in confounded]
     while pool and len(chosen) < max_count:
         best = None
         for c in pool:
@@ -213,15 +267,6 @@ def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR
     alone = 1.0 / np.sqrt(1.0 + np.diag(Fs))
     for i in pool:
         rows.append({"quantity": names[i], "ratio_when_added": float("nan"), "ratio_alone": float(alone[i])})
+    for q, why in confounded.items():
+        rows.append({"quantity": q, "ratio_when_added": float("nan"), "confounded": why})
     return [names[i] for i in chosen], rows
-
-
-def params_for(fold: FoldFit, facility: str) -> dict[str, float]:
-    """All model parameters of the fold's fit for a run of ``facility``: per-facility copies of that
-    facility, or for a facility without its own copy the mean of the fitted copies."""
-    fit = fold.fit
-    p = dict(fit.params)
-    for name in {q.split("@")[0] for q in fit.estimates if "@" in q}:
-        copies = {q.split("@")[1]: v for q, v in fit.estimates.items() if q.startswith(name + "@")}
-        p[name] = float(copies.get(facility, np.mean(list(copies.values()))))
-    return p

@@ -1,0 +1,114 @@
+"""Prediction bands (casship.prediction): exact sensitivities, coverage of a simulated truth, fit
+files carrying the covariance, and per-record cost weights."""
+import json
+
+import numpy as np
+import pytest
+
+import casship as cs
+from casship.identify import ParameterUncertainty, read_params
+from casship.models import kvlcc2, nomoto_first_order
+from casship.prediction import trajectory_sensitivities
+from casship.identify import replay_file
+from casship.validation import replay
+
+
+def test_trajectory_sensitivities_equal_central_differences():
+    ship = kvlcc2(asymmetry=True)
+    t = np.arange(0.0, 300.0, 1.0)
+    U = np.column_stack([np.radians(20.0) * np.sign(np.sin(t / 40.0) + 1e-9), np.full(t.size, 1.53)])
+    x0 = ship.states(u=7.97)
+    names = ["N_r_dash", "Y_v_dash", "delta_0"]
+    p = ship.params()
+    X, S = trajectory_sensitivities(ship, x0, t, U, p, names)
+    ref = cs.simulate(ship, x0, t, U, p)
+    assert np.allclose(X[:, ship.index("psi")], ref["psi"], atol=1e-12)
+    for j, name in enumerate(names):
+        h = 1e-6 * max(1.0, abs(p[ship.index(name, "param")]))
+        hi, lo = p.copy(), p.copy()
+        hi[ship.index(name, "param")] += h
+        lo[ship.index(name, "param")] -= h
+        Xh = np.column_stack([cs.simulate(ship, x0, t, U, q)[s] for q in (hi, lo) for s in ("psi", "y")])
+        fd_psi, fd_y = (Xh[:, 0] - Xh[:, 2]) / (2 * h), (Xh[:, 1] - Xh[:, 3]) / (2 * h)
+        assert np.allclose(S[:, ship.index("psi"), j], fd_psi, rtol=1e-5, atol=1e-6 * np.abs(fd_psi).max()), name
+        assert np.allclose(S[:, ship.index("y"), j], fd_y, rtol=1e-5, atol=1e-6 * np.abs(fd_y).max()), name
+
+
+def _nomoto_fit(seed, truth, t, rudder):
+    sim = cs.simulate(truth, truth.states(), t, {"delta": rudder})
+    data = cs.measure(sim, truth, {"psi": np.radians(0.5)}, seed=seed)
+    prob = cs.OutputErrorProblem(nomoto_first_order(), data, ["K", "T"], measured=["psi"],
+                                 sigma={"psi": np.radians(0.5)}, estimate_x0=["psi"])   # the first row is noisy
+    return prob.solve(guess={"K": 0.08, "T": 25.0}, show=False)
+
+
+def test_bands_cover_a_simulated_truth_at_about_their_nominal_rate():
+    truth = nomoto_first_order(K=0.1, T=20.0)
+    t = np.arange(0.0, 300.0, 1.0)
+    train = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 90.0) + 1e-9)
+    new = np.radians(15.0) * np.sign(np.sin(2 * np.pi * t / 130.0) + 1e-9)       # a run not trained on
+    true_run = cs.simulate(truth, truth.states(), t, {"delta": new})
+    record = cs.Dataset(t, {"psi": true_run["psi"], "delta": new})
+    inside, ratios = [], []
+    for seed in range(60):
+        fit = _nomoto_fit(seed, truth, t, train)
+        unc = fit.uncertainty("model")
+        res = replay(nomoto_first_order(), record, nomoto_first_order().params(fit.params), uncertainty=unc,
+                     samples=30 if seed < 5 else 0, seed=seed)
+        half = res.bands["z"] * res.bands["psi_std"]
+        err = np.abs(res.trajectory["psi"] - true_run["psi"])
+        inside.append([err[k] <= half[k] for k in (100, 200, 299)])
+        if res.sampling:
+            ratios.append(res.sampling["psi_std_ratio_sampled_to_linear"])
+    rate = np.mean(inside)
+    assert 0.88 <= rate <= 0.995, rate          # nominal 0.95; 180 checks (60 fits x 3 times)
+    assert np.all(np.abs(np.array(ratios) - 1.0) < 0.35), ratios      # sampling checks the linearisation
+
+
+def test_fit_files_carry_the_covariance_and_replay_with_bands(tmp_path):
+    truth = nomoto_first_order(K=0.1, T=20.0)
+    t = np.arange(0.0, 300.0, 1.0)
+    rudder = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 90.0) + 1e-9)
+    fit = _nomoto_fit(0, truth, t, rudder)
+    path = fit.to_json(tmp_path / "fit.json")
+    model, p, unc = read_params(path, uncertainty=True)
+    assert unc.names == ["K", "T"] and unc.source == "robust (sandwich)"
+    assert np.allclose(unc.covariance, fit.uncertainty().covariance)
+    assert read_params(path)[1] == pytest.approx(p)
+    record = cs.Dataset(t, {"psi": cs.simulate(truth, truth.states(), t, {"delta": rudder})["psi"], "delta": rudder})
+    res = replay_file(path, record, samples=10)
+    assert res.bands["psi_std"][-1] > 0 and res.band_summary()["level"] == 0.95
+    assert replay_file(path, record, uncertainty=False).bands == {}
+    # a covariance whose values disagree with the file's parameters is refused, naming them
+    doc = json.loads(path.read_text())
+    doc["param_covariance"]["values"][0] += 1.0
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match=r"\['K'\] differ"):
+        read_params(path, uncertainty=True)
+
+
+def test_parameter_uncertainty_checks_its_input():
+    with pytest.raises(ValueError, match="not positive semi-definite"):
+        ParameterUncertainty(["a", "b"], [0.0, 0.0], [[1.0, 2.0], [2.0, 1.0]])
+    with pytest.raises(ValueError, match="not finite for"):
+        ParameterUncertainty(["a"], [0.0], [[np.nan]])
+    u = ParameterUncertainty(["K", "T"], [0.1, 20.0], [[1e-4, 0.0], [0.0, 4.0]])
+    m = nomoto_first_order()
+    draws = u.sample(m, m.params(), 4000, seed=1)
+    assert np.std(draws[:, m.index("T", "param")]) == pytest.approx(2.0, rel=0.05)
+
+
+def test_record_weights_count_a_record_as_that_many_copies():
+    truth = nomoto_first_order(K=0.1, T=20.0)
+    t = np.arange(0.0, 200.0, 1.0)
+    runs = [cs.measure(cs.simulate(truth, truth.states(), t, {"delta": a * np.sign(np.sin(t / 20) + 1e-9)}), truth,
+                       {"psi": 0.01}, seed=i) for i, a in enumerate((0.1, -0.15))]
+    kw = dict(measured=["psi"], sigma={"psi": 0.01})
+    weighted = cs.OutputErrorProblem(nomoto_first_order(), runs, ["K", "T"], record_weights=[2.0, 1.0], **kw)
+    copies = cs.OutputErrorProblem(nomoto_first_order(), [runs[0], runs[0], runs[1]], ["K", "T"], **kw)
+    v = {"K": 0.09, "T": 18.0}
+    assert weighted.cost(v) == pytest.approx(copies.cost(v), rel=1e-12)
+    assert weighted.gradient(v) == pytest.approx(copies.gradient(v), rel=1e-10)
+    assert weighted.subset([1]).record_weights.tolist() == [1.0]
+    with pytest.raises(ValueError, match=r"record\(s\) \[1\]"):
+        cs.OutputErrorProblem(nomoto_first_order(), runs, ["K", "T"], record_weights=[1.0, -1.0], **kw)
