@@ -79,7 +79,8 @@ def _limits(approach: Approach) -> TrialLimits:
 def _fitted_ship(out: Path, data_dir, quick: bool, cfg: dict, rep: Report) -> dict | None:
     from .kvlcc2_marin import QUICK as MARIN_QUICK
     from .kvlcc2_marin.data import load_runs
-    from .kvlcc2_marin.workflow import CANDIDATES, fit_fold, params_for, prior_std as marin_prior
+    from .kvlcc2_marin.propulsion import open_water
+    from .kvlcc2_marin.workflow import CANDIDATES, fit_fold, prior_std as marin_prior
     from .kvlcc2_marin.workflow import smooth_runs, with_smoothed_speed
 
     marin = data_folder(data_dir, "kvlcc2_marin_free", study="trial-design", part="the design on the fitted KVLCC2")
@@ -92,9 +93,10 @@ def _fitted_ship(out: Path, data_dir, quick: bool, cfg: dict, rep: Report) -> di
         runs = [r for r in runs if r.name in MARIN_QUICK["runs"]]
     runs = with_smoothed_speed(runs, smoothed := smooth_runs(runs))
     dt = MARIN_QUICK["dt"] if quick else 2.0
-    fold = fit_fold(runs, smoothed, dt=dt, max_free=MARIN_QUICK["max_free"] if quick else 15)
+    curve = open_water(marin.parent / "kvlcc2_hsva_free")
+    fold = fit_fold(runs, smoothed, curve, dt=dt, max_free=MARIN_QUICK["max_free"] if quick else 15)
     fit, model = fold.fit, study_model()
-    params = params_for(fold, "MARIN")
+    params = dict(fit.params)            # one parameter set for every run (no per-facility copies)
     free = {q.split("@", 1)[0] for q in fit.free}
     extra = marin_prior(model, [c for c in CANDIDATES if c not in free])
     belief = ParameterBelief.from_fit(fit, extra_std=extra, params=params,
