@@ -11,6 +11,7 @@ overshoot) computed by the same functions.
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,9 @@ SAMPLES = 40                       # parameter draws per replay for the index in
 def write_fold_file(fold, path: Path, uncertainty=None) -> Path:
     """Write the fold's fit as the fit file a user gets.
 
+    Besides the fit (:meth:`~casship.identify.FitResult.to_dict`) the file says which asymmetry it
+    carries and from which evidence (key ``"asymmetry"``, :meth:`.workflow.FoldFit.asymmetry_record`).
+
     Its covariance is ``uncertainty`` (a :class:`~casship.identify.ParameterUncertainty`) when
     given, else the robust (sandwich) covariance of the refinement with that of the asymmetry
     terms from the mirror-pair stage beside it (the two stages' estimates taken as independent).
@@ -51,7 +55,11 @@ def write_fold_file(fold, path: Path, uncertainty=None) -> Path:
         uncertainty = ParameterUncertainty(names, values, C, "robust (sandwich), asymmetry stage and refinement")
     if uncertainty is not None:
         fit = dataclasses.replace(fit, param_covariance=uncertainty.to_dict())
-    return fit.to_json(path)
+    content = fit.to_dict()
+    content["asymmetry"] = fold.asymmetry_record()
+    path = Path(path)
+    path.write_text(json.dumps(content, indent=2))
+    return path
 
 
 def evaluate(run: Run, fit_file: Path, *, published=None, seed: int = 0) -> dict:

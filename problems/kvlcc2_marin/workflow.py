@@ -74,7 +74,9 @@ JERK = {"u": 1e-3, "v": 1e-3, "r": 1e-5}
 HULL_LINEAR = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash")
 HULL_CUBIC = ("Y_vvv_dash", "Y_vvr_dash", "Y_vrr_dash", "Y_rrr_dash", "N_vvv_dash", "N_vvr_dash", "N_vrr_dash",
               "N_rrr_dash", "X_vv_dash", "X_vr_dash", "X_rr_dash", "X_vvvv_dash")
-ASYMMETRY = ("delta_0", "Y_0_dash", "N_0_dash")
+ASYMMETRY_SHIP = ("Y_0_dash", "N_0_dash")      # propeller-induced, scale with the thrust: the ship's
+ASYMMETRY_RIG = ("delta_0",)                    # rudder neutral angle: one rig's (one copy per facility)
+ASYMMETRY = (*ASYMMETRY_RIG, *ASYMMETRY_SHIP)
 REGRESSED = (*HULL_LINEAR, *HULL_CUBIC, "f_alpha", "Y_0_dash", "N_0_dash")
 CANDIDATES = (*HULL_LINEAR, *HULL_CUBIC, "R_0_dash", "gamma_R_minus", "gamma_R_plus", "l_R_dash", "epsilon", "kappa",
               "f_alpha", "a_H", "x_H_dash", "t_R", "m_x_dash", "m_y_dash", "J_z_dash", *ASYMMETRY)
@@ -144,7 +146,25 @@ class FoldFit:
     inverse_dynamics: object = field(repr=False, default=None)
     identifiability: object = field(repr=False, default=None)
     asymmetry_fit: object = field(repr=False, default=None)   # FitResult of the mirror-pair stage
-    asymmetry: list = field(default_factory=list)              # asymmetry terms taken from it
+    asymmetry: list = field(default_factory=list)              # the ship's asymmetry terms taken from it
+    rig: dict = field(default_factory=dict)                    # per-facility neutral angles (not applied)
+
+    def asymmetry_record(self) -> dict:
+        """Which port/starboard terms the fit file applies, from which evidence, and which it does not."""
+        a = self.asymmetry_fit
+        pairs = next((r["stage"].split("runs ", 1)[1] for r in self.selection
+                      if r.get("stage", "").startswith("asymmetry: mirror-pair")), "")
+        return {"applied": {n: float(self.fit.params[n]) for n in ASYMMETRY},
+                "estimated": {n: {"value": float(a.estimates[n]), "std_error": float(a.std_errors[n])}
+                              for n in self.asymmetry},
+                "evidence": (f"MAP on the mirror-pair runs {pairs}" if pairs else
+                             "no mirror pair in the training runs: every asymmetry term at zero"),
+                "facility_specific_not_applied": {n: {"value": float(v), "std_error": float(a.std_errors[n])}
+                                                  for n, v in self.rig.items()},
+                "confounded": dict(self.confounded),
+                "rule": "the ship's propeller-induced terms (Y_0_dash, N_0_dash, scaling with the thrust) apply to "
+                        "every run; a rudder neutral angle belongs to one rig: estimated per facility from that "
+                        "facility's mirror pairs, never applied to a run of another or unknown rig (held at 0)"}
 
     def moved(self) -> dict:
         """Every parameter that differs from the published value, with its standard error and stage."""
@@ -188,15 +208,20 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
              for j, c in enumerate(MEASURED)}
     facilities = [r.facility for r in train]
     paired = sorted({i for pair in mirror_pairs(recs, within=facilities) for i in pair})
-    confounded = confounded_asymmetry(recs, ASYMMETRY, within=facilities)
-    asym, asym_stage, rows_a = {}, None, []
+    rig_names = [f"{q}@{f}" for q in ASYMMETRY_RIG for f in sorted(set(facilities))]
+    confounded = confounded_asymmetry(recs, [*ASYMMETRY_SHIP, *rig_names], {q: facilities for q in ASYMMETRY_RIG},
+                                      within=facilities)
+    asym, rig, asym_stage, rows_a = {}, {}, None, []
     if paired:           # stage A: the asymmetry terms from the mirror-pair runs only
         sub = [recs[i] for i in paired]
-        asym_stage, chosen_a, rows_a, _, _ = _select_and_refine(model, sub, list(CANDIDATES), sigma, fixed, at, start,
-                                                                max_free, show)
-        asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ASYMMETRY}
+        share = {q: [facilities[i] for i in paired] for q in ASYMMETRY_RIG}
+        asym_stage, chosen_a, rows_a, _, _ = _select_and_refine(
+            model, sub, [c for c in CANDIDATES if c not in ASYMMETRY_RIG] + list(ASYMMETRY_RIG), sigma, fixed, at,
+            start, max_free, show, share=share)
+        asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ASYMMETRY_SHIP}
+        rig = {n: asym_stage.estimates[n] for n in chosen_a if n.split("@")[0] in ASYMMETRY_RIG}
         rows_a = [dict(r, stage=f"asymmetry: mirror-pair runs {', '.join(train[i].name for i in paired)}")
-                  for r in rows_a if r["quantity"] in ASYMMETRY]
+                  for r in rows_a if r["quantity"].split("@")[0] in ASYMMETRY]
     fixed = model.params({**preset, **asym})
     symmetric = [c for c in CANDIDATES if c not in ASYMMETRY]
     fit, chosen, rows, idf, use_id = _select_and_refine(model, recs, symmetric, sigma, fixed, at, start, max_free, show)
@@ -205,21 +230,31 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
              for q, why in confounded.items()]
     return FoldFit([r.name for r in train], prop, preset, start, "inverse dynamics" if use_id else "preset", sigma,
                    list(CANDIDATES), rows, confounded, chosen, fit, time.perf_counter() - t0, idfit, idf,
-                   asym_stage, sorted(asym))
+                   asym_stage, sorted(asym), rig)
 
 
-def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_free, show):
+def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_free, show, share=None):
     """Free set by :func:`select_free` from the information at ``at`` and the MAP refinement of it
-    (started from the inverse-dynamics values when they give a lower cost than the preset)."""
+    (started from the inverse-dynamics values when they give a lower cost than the preset). The
+    quantities of ``share`` (name -> one group label per record) have one copy per group; the rig's
+    asymmetry terms are considered only after the others (:data:`ASYMMETRY_RIG`)."""
+    share = dict(share or {})
     prob = cs.OutputErrorProblem(model, recs, candidates, measured=list(MEASURED), sigma=sigma, params=fixed,
                                  scale={k: v for k, v in PRIOR_ABS.items() if k in candidates},
-                                 prior=Prior(prior_std(model, candidates)), record_weights=record_weights(recs))
-    idf = prob.identifiability(at={k: at[k] for k in candidates}, pairs_within="facility")
-    chosen, rows = select_free(idf, max_count=max_free)
-    refine = prob.replace(free=chosen, prior=Prior(prior_std(model, chosen)),
-                          scale={k: v for k, v in PRIOR_ABS.items() if k in chosen})
-    guess_id = {q: start.get(q, at[q]) for q in chosen}
-    use_id = bool(chosen) and refine.cost(guess_id) < refine.cost({q: at[q] for q in chosen})
+                                 prior=Prior(prior_std(model, candidates)), record_weights=record_weights(recs),
+                                 share=share or None)
+    names = prob.free
+    idf = prob.identifiability(at={k: at[k.split("@")[0]] for k in names}, pairs_within="facility")
+    ship = [k for k in names if k in ASYMMETRY_SHIP]
+    chosen, rows = select_free(idf, max_count=max_free,
+                               after={k: ship for k in names if k.split("@")[0] in ASYMMETRY_RIG})
+    declared = list(dict.fromkeys(k.split("@")[0] for k in chosen))
+    refine = prob.replace(free=declared, prior=Prior(prior_std(model, declared)),
+                          scale={k: v for k, v in PRIOR_ABS.items() if k in declared},
+                          share={k: [lab if f"{k}@{lab}" in chosen else None for lab in v]
+                                 for k, v in share.items() if k in declared} or None)
+    guess_id = {q: start.get(q, at[q.split("@")[0]]) for q in chosen}
+    use_id = bool(chosen) and refine.cost(guess_id) < refine.cost({q: at[q.split("@")[0]] for q in chosen})
     with warnings.catch_warnings():        # coloured residuals are expected here; fit.warnings keeps them
         warnings.simplefilter("ignore", IdentificationWarning)
         fit = refine.solve(guess=guess_id if use_id else None, show=show)
@@ -227,14 +262,17 @@ def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_fre
 
 
 def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR,
-                max_count: int = MAX_FREE) -> tuple[list[str], list[dict]]:
+                max_count: int = MAX_FREE, after=None) -> tuple[list[str], list[dict]]:
     """Greedy D-optimal forward selection in prior-normalised units (the rule in the module text).
 
     With ``F`` the data's Fisher information and ``P`` the prior covariance, a set ``S`` has the
     posterior-to-prior covariance ``C = (I + P^1/2 F P^1/2)^-1`` restricted to ``S``; candidates are
     added one at a time, each time the one that maximises ``log det (I + P^1/2 F P^1/2)_S`` among
     those that keep every ``sqrt(C_ii) <= max_ratio`` and every ``|corr| <= max_corr``. Quantities
-    flagged confounded (``idf.confounded``) are never chosen.
+    flagged confounded (``idf.confounded``) are never chosen. ``after`` maps a candidate to the
+    candidates it waits for: it is considered only when none of those can be added (a rig's
+    asymmetry term after the ship's: where both explain the same port/starboard difference, the one
+    that transfers to another rig is chosen).
     """
     F = np.asarray(idf.information, dtype=float)
     prec = np.asarray(idf.prior_precision, dtype=float)
@@ -246,19 +284,20 @@ def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR
     confounded = dict(getattr(idf, "confounded", {}) or {})
     chosen, rows = [], []
     pool = [i for i in range(len(names)) if names[i] not in confounded]
+    after = dict(after or {})
+    unknown = sorted({n for k, v in after.items() for n in (k, *v)} - set(names))
+    if unknown:
+        raise ValueError(f"select_free: {unknown} in 'after' are not candidates")
+    waits = {names.index(k): [names.index(n) for n in v] for k, v in after.items()}
     while pool and len(chosen) < max_count:
         best = None
         for c in pool:
-            S = chosen + [c]
-            M = np.eye(len(S)) + Fs[np.ix_(S, S)]
-            C = np.linalg.inv(M)
-            d = np.sqrt(np.diag(C))
-            corr = C / np.outer(d, d) - np.eye(len(S))
-            if d.max() > max_ratio or (len(S) > 1 and np.abs(corr).max() > max_corr):
+            logdet, ratio, corr = _trial(Fs, chosen, c, max_ratio, max_corr)
+            if logdet is None or any(f in pool and _trial(Fs, chosen, f, max_ratio, max_corr)[0] is not None
+                                     for f in waits.get(c, ())):
                 continue
-            logdet = np.linalg.slogdet(M)[1]
             if best is None or logdet > best[0]:
-                best = (logdet, c, float(d[-1]), float(np.abs(corr).max()) if len(S) > 1 else 0.0)
+                best = (logdet, c, ratio, corr)
         if best is None:
             break
         chosen.append(best[1])
@@ -270,3 +309,16 @@ def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR
     for q, why in confounded.items():
         rows.append({"quantity": q, "ratio_when_added": float("nan"), "confounded": why})
     return [names[i] for i in chosen], rows
+
+
+def _trial(Fs, chosen, c, max_ratio, max_corr):
+    """``(log det, posterior/prior std of c, largest |corr|)`` of ``chosen + [c]`` in prior-normalised
+    units, or ``(None, ...)`` when the set breaks the rule of :func:`select_free`."""
+    S = chosen + [c]
+    M = np.eye(len(S)) + Fs[np.ix_(S, S)]
+    C = np.linalg.inv(M)
+    d = np.sqrt(np.diag(C))
+    corr = float(np.abs(C / np.outer(d, d) - np.eye(len(S))).max()) if len(S) > 1 else 0.0
+    if d.max() > max_ratio or corr > max_corr:
+        return None, float(d[-1]), corr
+    return float(np.linalg.slogdet(M)[1]), float(d[-1]), corr
