@@ -215,3 +215,72 @@ def test_physical_bounds_on_interaction_factors():
     assert lo["epsilon"] == 0.0 and lo["R_0_dash"] == 0.0 and (lo["t_P"], hi["t_P"]) == (0.0, 1.0)
     with pytest.raises(ValueError, match="w_P0"):
         kvlcc2({"w_P0": 1.2})
+
+
+# -- rudder inflow: the race added to the wake (option rudder_inflow) -----------------------------
+def _rudder_force_by_hand(P, x, u, additive):
+    """``(X_R, Y_R, N_R)`` of Yasukawa & Yoshimura (2015) Eq. 17-27 written out, with the inflow
+    ``u_R`` in the published or the race-additive form (published if_else switches)."""
+    uu, v, r = x[0], x[1], x[2]
+    delta, n = u[0], u[1]
+    L, D = P["L_pp"], P["D_p"]
+    U = np.sqrt(uu**2 + v**2 + 1e-12)
+    beta = np.arctan2(-v, uu)
+    r_dash = r * L / U
+    beta_P = beta - P["x_P_dash"] * r_dash
+    C2 = P["C_2_plus"] if beta_P > 0 else P["C_2_minus"]
+    u_P = uu * (1 - P["w_P0"]) * (1 + (1 - np.exp(-P["C_1"] * abs(beta_P))) * (C2 - 1))
+    J = u_P / (n * D)
+    K_T = P["k_0"] + P["k_1"] * J + P["k_2"] * J**2
+    eta, eps, kap = D / P["H_R"], P["epsilon"], P["kappa"]
+    u_inf = u_P * np.sqrt(1 + 8 * K_T / (np.pi * J**2))          # momentum theory: the far race
+    if additive:
+        u_R = np.sqrt(eta * (eps * u_P + kap * (u_inf - u_P)) ** 2 + (1 - eta) * (eps * u_P) ** 2)
+    else:
+        u_R = eps * u_P * np.sqrt(eta * (1 + kap * (np.sqrt(1 + 8 * K_T / (np.pi * J**2)) - 1)) ** 2 + 1 - eta)
+    beta_R = beta - P["l_R_dash"] * r_dash
+    v_R = U * (P["gamma_R_minus"] if beta_R < 0 else P["gamma_R_plus"]) * beta_R
+    alpha_R = delta - np.arctan2(v_R, u_R)
+    F_N = 0.5 * P["rho"] * P["A_R"] * (u_R**2 + v_R**2) * P["f_alpha"] * np.sin(alpha_R)
+    return np.array([-(1 - P["t_R"]) * F_N * np.sin(delta), -(1 + P["a_H"]) * F_N * np.cos(delta),
+                     -(P["x_R_dash"] + P["a_H"] * P["x_H_dash"]) * L * F_N * np.cos(delta)])
+
+
+@pytest.mark.parametrize("inflow", ["published", "race-additive"])
+def test_rudder_force_matches_a_hand_computation(inflow):
+    from casship.models.mmg import mmg_forces
+
+    ship = kvlcc2(rudder_inflow=inflow)
+    P = ship.param_dict()
+    no_rudder = dict(P, f_alpha=0.0)
+    for x, u in _random_points(ship, 8, 21):
+        total = np.array([float(f) for f in mmg_forces(P, *x[:3], *u, rudder_inflow=inflow)])
+        rest = np.array([float(f) for f in mmg_forces(no_rudder, *x[:3], *u, rudder_inflow=inflow)])
+        np.testing.assert_allclose(total - rest, _rudder_force_by_hand(P, x, u, inflow != "published"),
+                                   rtol=1e-7, atol=1.0)
+
+
+def test_race_additive_inflow_is_an_option_that_leaves_the_published_model_alone():
+    pub, add = kvlcc2(), kvlcc2(rudder_inflow="race-additive")
+    assert pub.meta["options"] == {} and add.meta["options"] == {"rudder_inflow": "race-additive"}
+    assert add.vessel.param_set == "kvlcc2/YY2015-full-scale+race-additive"
+    again = get_model("kvlcc2", **add.meta["options"])
+    # the two forms agree where the wake ratio is one, and differ elsewhere
+    one = {"epsilon": 1.0}
+    pub1, add1 = kvlcc2(one), kvlcc2(one, rudder_inflow="race-additive")
+    for x, u in _random_points(pub, 6, 8):
+        np.testing.assert_allclose(np.asarray(add1.f(x, u, add1.params(), np.zeros(3))),
+                                   np.asarray(pub1.f(x, u, pub1.params(), np.zeros(3))), rtol=1e-12, atol=1e-15)
+        assert not np.allclose(np.asarray(again.f(x, u, again.params(), np.zeros(3))),
+                               np.asarray(pub.f(x, u, pub.params(), np.zeros(3))), rtol=1e-6, atol=0.0)
+    # a heavily loaded propeller (tight turn): a larger wake ratio raises the rudder force less
+    P = pub.param_dict()
+    turn = (np.array([3.0, -1.0, 0.0073]), np.array([np.radians(35.0), 1.53]))
+    ratio = {}
+    for additive in (False, True):
+        lo = _rudder_force_by_hand(P, *turn, additive)[1]
+        hi = _rudder_force_by_hand(dict(P, epsilon=1.2 * P["epsilon"]), *turn, additive)[1]
+        ratio[additive] = hi / lo
+    assert ratio[True] < ratio[False]
+    with pytest.raises(ValueError, match="rudder_inflow"):
+        kvlcc2(rudder_inflow="wake")

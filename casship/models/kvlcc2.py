@@ -96,9 +96,10 @@ SCALE_L7 = 45.7                          # MLA scale_factor; S2020 45.714
 RUDDER_RATE_FULL = math.radians(2.32)    # rad/s (S2020)
 
 
-def _variant(param_set: str, asymmetry: bool, smooth: bool) -> str:
+def _variant(param_set: str, asymmetry: bool, smooth: bool, rudder_inflow: str = "published") -> str:
     """Parameter-set identity of a model variant (the extended variants carry other parameters)."""
-    return param_set + ("+asymmetry" if asymmetry else "") + ("+smooth" if smooth else "")
+    return (param_set + ("+asymmetry" if asymmetry else "") + ("+smooth" if smooth else "")
+            + ("" if rudder_inflow == "published" else f"+{rudder_inflow}"))
 
 
 def _options(factory, given: Mapping) -> dict:
@@ -109,7 +110,8 @@ def _options(factory, given: Mapping) -> dict:
 
 
 def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | None, name: str, doc: str,
-           vessel: Vessel, *, asymmetry: bool, smooth: bool, options: Mapping, **actuator) -> Model:
+           vessel: Vessel, *, asymmetry: bool, smooth: bool, rudder_inflow: str, options: Mapping,
+           **actuator) -> Model:
     values = dict(KVLCC2_COMMON)
     values.update(particulars)
     known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {})}
@@ -118,14 +120,15 @@ def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | No
             hint = " (an asymmetry term: build with asymmetry=True)" if key in MMG_ASYMMETRY_PARAMS else ""
             raise ValueError(f"unknown KVLCC2 parameter {key!r}{hint}; known: {list(known)}")
         values[key] = float(val)
-    vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth))
+    vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth, rudder_inflow))
     return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, vessel=vessel, asymmetry=asymmetry,
-                        smooth=smooth, meta={"options": dict(options)}, **actuator)
+                        smooth=smooth, rudder_inflow=rudder_inflow, meta={"options": dict(options)}, **actuator)
 
 
 def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
            rudder_time_constant: float = 1.0, rudder_rate_max: float = RUDDER_RATE_FULL,
-           rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False) -> Model:
+           rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False,
+           rudder_inflow: str = "published") -> Model:
     """KVLCC2 at full scale (L_pp = 320 m), MMG standard method.
 
     Parameters
@@ -144,6 +147,9 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
     smooth : bool
         Smooth the sign switches of the wake and flow-straightening terms (for identification; see
         :func:`casship.models.mmg.mmg_standard`).
+    rudder_inflow : str
+        ``"published"`` or ``"race-additive"``: how the propeller race enters the rudder inflow
+        (see :func:`casship.models.mmg.mmg_standard`).
 
     Returns
     -------
@@ -172,14 +178,16 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
     return _build(KVLCC2_FULL, params, "kvlcc2", "KVLCC2 full scale, MMG standard method (Yasukawa & "
                   "Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
-                  asymmetry=asymmetry, smooth=smooth, options=_options(kvlcc2, dict(
+                  asymmetry=asymmetry, smooth=smooth, rudder_inflow=rudder_inflow, options=_options(kvlcc2, dict(
                       rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
-                      rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth)))
+                      rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth,
+                      rudder_inflow=rudder_inflow)))
 
 
 def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
               rudder_time_constant: float = 0.1, rudder_rate_max: float = RUDDER_RATE_FULL * np.sqrt(SCALE_L7),
-              rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False) -> Model:
+              rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False,
+              rudder_inflow: str = "published") -> Model:
     """KVLCC2 model L7 (L_pp = 7 m, scale 1/45.7), MMG standard method.
 
     ``vessel.U0`` is 1.18 m/s (Fn 0.142, S2020); ``vessel.n0`` is not given (sources disagree); the
@@ -195,6 +203,8 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
         Actuator settings [s, rad/s, rad]; the default rate is the Froude-scaled 15.68 deg/s.
     asymmetry, smooth : bool
         The extended variant and the smooth sign switches (as in :func:`kvlcc2`).
+    rudder_inflow : str
+        Form of the rudder inflow (as in :func:`kvlcc2`).
 
     Returns
     -------
@@ -208,6 +218,7 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
     return _build(KVLCC2_L7, params, "kvlcc2-l7", "KVLCC2 model L7 (1/45.7), MMG standard method "
                   "(Yasukawa & Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
-                  asymmetry=asymmetry, smooth=smooth, options=_options(kvlcc2_l7, dict(
+                  asymmetry=asymmetry, smooth=smooth, rudder_inflow=rudder_inflow, options=_options(kvlcc2_l7, dict(
                       rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
-                      rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth)))
+                      rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth,
+                      rudder_inflow=rudder_inflow)))

@@ -34,7 +34,8 @@ from ..builder import ModelBuilder
 from ..model import Model
 from ..vessel import Vessel
 
-__all__ = ["mmg_standard", "MMG_PARAMS", "MMG_ASYMMETRY_PARAMS", "MMG_BOUNDS", "SMOOTH_WIDTH", "rigid_body_3dof",
+__all__ = ["mmg_standard", "MMG_PARAMS", "MMG_ASYMMETRY_PARAMS", "MMG_BOUNDS", "SMOOTH_WIDTH", "RUDDER_INFLOWS",
+           "rigid_body_3dof",
            "declare_ship_states", "declare_ship_limits", "add_rudder_actuator", "smooth_saturation", "mmg_propeller",
            "smooth_abs", "smooth_step"]
 
@@ -100,6 +101,9 @@ MMG_BOUNDS: dict[str, tuple[float, float]] = {
     "kappa": (0.0, 1.0),       # between the propeller disk (about 0.5) and the far race (1.0)
     "delta_0": (-np.radians(10.0), np.radians(10.0)),
 }
+
+#: Forms of the rudder inflow speed ``u_R`` (see :func:`mmg_standard`, option ``rudder_inflow``).
+RUDDER_INFLOWS = ("published", "race-additive")
 
 #: Width [rad] of the smooth sign switches of ``smooth=True`` (see :func:`mmg_standard`).
 SMOOTH_WIDTH = 0.01
@@ -268,7 +272,8 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
                  sources: Mapping[str, str] | None = None, vessel: Vessel | None = None,
                  rudder_actuator: bool = False, rudder_time_constant: float = 1.0,
                  rudder_rate_max: float = np.radians(2.32), rudder_max: float | None = None,
-                 asymmetry: bool = False, smooth: bool = False, meta: Mapping | None = None) -> Model:
+                 asymmetry: bool = False, smooth: bool = False, rudder_inflow: str = "published",
+                 meta: Mapping | None = None) -> Model:
     """MMG standard-method model (Yasukawa & Yoshimura 2015) with the given parameter values.
 
     Hull (Eq. 8): ``X_H = 0.5 rho L d U^2 (-R0' + X'vv v'^2 + X'vr v' r' + X'rr r'^2 + X'vvvv v'^4)``,
@@ -294,6 +299,16 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     delta_0 - atan(v_R / u_R)``; the propeller swirl at the rudder) and a propeller-induced side force
     and yaw moment that scale with the propeller loading, ``Y_P = Y'_0 T``, ``N_P = N'_0 L T`` with
     the thrust ``T = rho n^2 D^4 K_T(J_P)``.
+
+    **Rudder inflow** (``rudder_inflow``): ``"published"`` is Eq. 24 above, where the wake ratio
+    ``epsilon`` multiplies the propeller race as well as the wake. With ``"race-additive"`` it
+    scales the wake only and the race adds the increment of momentum theory, ``u_inf - u_P`` with
+    ``u_inf = sqrt(u_P^2 + 8 n^2 D^2 K_T / pi)`` (the far-race speed, a function of the thrust
+    loading alone): ``u_R = sqrt(eta (epsilon u_P + kappa (u_inf - u_P))^2 + (1 - eta) (epsilon u_P)^2)``.
+    The two agree for ``epsilon = 1``; they differ in how a change of the wake (``w_P0``,
+    ``epsilon``) carries over to a heavily loaded propeller (a tight turn, where the race
+    dominates): with the published form the race at the rudder follows the wake ratio, with the
+    additive one it follows the thrust.
 
     **Smooth sign switches** (``smooth=True``): the published wake and flow-straightening terms switch
     on the signs of ``beta_P`` and ``beta_R`` (``C_2``, ``gamma_R``) and use ``|beta_P|``; their
@@ -328,6 +343,8 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
         gives them).
     smooth : bool
         Smooth sign switches of ``C_2`` and ``gamma_R`` (see above).
+    rudder_inflow : str
+        ``"published"`` (Yasukawa & Yoshimura 2015, Eq. 24) or ``"race-additive"`` (see above).
     meta : mapping, optional
         Entries for ``model.meta`` (a preset records its build options under ``"options"`` there,
         so that a fit file rebuilds the same variant).
@@ -336,6 +353,8 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     -------
     Model
     """
+    if rudder_inflow not in RUDDER_INFLOWS:
+        raise ValueError(f"rudder_inflow must be one of {RUDDER_INFLOWS}, got {rudder_inflow!r}")
     sources = dict(sources or {})
     known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {})}
     unknown = set(values) - set(known)
@@ -356,7 +375,7 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     else:
         delta = b.input("delta", unit="rad", doc="rudder angle, positive turns to starboard")
     n = b.input("n", unit="1/s", doc="propeller revolutions per second")
-    force = mmg_forces(P, u, v, r, delta, n, smooth=SMOOTH_WIDTH if smooth else None)
+    force = mmg_forces(P, u, v, r, delta, n, smooth=SMOOTH_WIDTH if smooth else None, rudder_inflow=rudder_inflow)
     rho, L, d = P["rho"], P["L_pp"], P["d"]
     m = rho * P["nabla"]
     m_x = P["m_x_dash"] * 0.5 * rho * L**2 * d
@@ -431,11 +450,13 @@ def mmg_propeller(P: Mapping[str, ca.SX], u, v, r, n, smooth: float | None = Non
     return P["rho"] * D**2 * n2KT, u_P, n2KT
 
 
-def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None = None):
+def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None = None,
+               rudder_inflow: str = "published"):
     """Hull + propeller + rudder force ``(X, Y, N)`` at midship of the MMG standard method.
 
     ``P`` may hold the asymmetry terms of :data:`MMG_ASYMMETRY_PARAMS`; ``smooth`` is the width of
-    the smooth sign switches (``None``: the published ``if_else`` switches).
+    the smooth sign switches (``None``: the published ``if_else`` switches); ``rudder_inflow`` one of
+    :data:`RUDDER_INFLOWS` (see :func:`mmg_standard`).
     """
     rho, L, d = P["rho"], P["L_pp"], P["d"]
     U = ca.sqrt(u**2 + v**2 + 1e-12)
@@ -458,7 +479,11 @@ def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None =
     # rudder
     eta = D / P["H_R"]
     race = ca.sqrt(ca.fmax(u_P**2 + 8 * n2KT / np.pi, 0.0))                        # u_P sqrt(1 + 8KT/(pi J^2))
-    u_R = P["epsilon"] * ca.sqrt(eta * (u_P + P["kappa"] * (race - u_P)) ** 2 + (1 - eta) * u_P**2 + 1e-12)
+    if rudder_inflow == "published":
+        u_R = P["epsilon"] * ca.sqrt(eta * (u_P + P["kappa"] * (race - u_P)) ** 2 + (1 - eta) * u_P**2 + 1e-12)
+    else:                       # the wake ratio scales the wake, the race adds its momentum-theory increment
+        wake = P["epsilon"] * u_P
+        u_R = ca.sqrt(eta * (wake + P["kappa"] * (race - u_P)) ** 2 + (1 - eta) * wake**2 + 1e-12)
     beta_R = beta - P["l_R_dash"] * r_dash
     if smooth is None:
         gamma_R = ca.if_else(beta_R < 0, P["gamma_R_minus"], P["gamma_R_plus"])

@@ -18,8 +18,9 @@ zig-zags, large-rudder zig-zags, turning circles), leave-one-facility-out and
 leave-one-direction-out (train on the runs that turn first to one side, predict the others).
 
 Uncertainty (:mod:`.calibration`): run-level jackknife over the leave-one-run-out folds, a
-calibration table (reported 95 % intervals against the fold estimates) and the port/starboard sign
-check against the HSVA mirror pairs.
+calibration table (reported 95 % intervals against the fold estimates), the coverage of each
+held-out run by its fold's prediction band (parameter-only, and with a discrepancy term from the
+other folds) and the port/starboard check against the HSVA mirror pairs.
 
 Outputs (:mod:`.report`): ``report.md``, ``fit.json`` (the fit on all runs, with the jackknife
 covariance; replays with ``casship simulate --model kvlcc2 --params fit.json``),
@@ -35,7 +36,7 @@ from casship.progress import track
 from casship.studies import Study
 
 from ..kit import data_folder
-from .calibration import asymmetry_check, calibration_table, jackknife, mirror_check
+from .calibration import asymmetry_check, band_check, calibration_table, jackknife, mirror_check
 from .data import first_rudder_side, load_runs, regime
 from .propulsion import open_water
 from .report import slug, write_outputs
@@ -97,13 +98,14 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     loro = [res["fold"] for res in results if res["kind"] == "run"]
     jack = jackknife(everything, loro) if len(loro) > 2 else None
     calibration = calibration_table(everything, loro, jack) if jack is not None else {}
+    bands = band_check(runs, [res for res in results if res["kind"] == "run"]) if len(loro) > 2 else {}
     fit_path = write_fold_file(everything, out / "fit.json", jack)
     in_sample = [evaluate(r, fit_path)["row"] for r in runs]
     model = study_model()
     asym = asymmetry_check(runs, everything.fit.params, model, kvlcc2())
     asym["mirror"] = mirror_check(runs, fit_path, kvlcc2())
     return write_outputs(out, runs, everything, results, in_sample, calibration=calibration, jack=jack,
-                         asymmetry=asym, quick=quick)
+                         asymmetry=asym, bands=bands, quick=quick)
 
 
 STUDY = Study("kvlcc2-marin", "KVLCC2 MMG identified on the MARIN and HSVA free-running runs, "

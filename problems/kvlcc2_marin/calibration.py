@@ -9,6 +9,11 @@
 * :func:`calibration_table` -- for every quantity, the fraction of the fold estimates inside the
   reported 95 % interval (estimate +- 1.96 standard errors) for the model-based, robust and
   jackknife standard errors.
+* :func:`band_check` -- a check that is not automatic: does each leave-one-run-out fold's
+  prediction band (parameter covariance of its fit file) cover the held-out run's measured heading
+  and indices at the nominal rate? And with a model-discrepancy term estimated from the *other*
+  folds' held-out errors only (heading: a variance growing linearly with time, ``q t``; overshoots:
+  the RMS error of the other held-out runs)?
 * :func:`asymmetry_check` -- the sign of the port/starboard asymmetry: the HSVA mirror pairs'
   measured overshoot differences (starboard-first minus port-first) against the fit's and the
   published constants' replays, and the fit's port/starboard ratio of the steady yaw rate in
@@ -29,7 +34,9 @@ from casship.maneuvers import run_maneuver
 from casship.identify import replay_file
 from casship.validation import replay
 
-__all__ = ["jackknife", "calibration_table", "asymmetry_check", "mirror_check", "mirrored", "Z95"]
+from .validate import INDICES
+
+__all__ = ["jackknife", "calibration_table", "band_check", "asymmetry_check", "mirror_check", "mirrored", "Z95"]
 
 Z95 = 1.959963984540054
 
@@ -64,6 +71,68 @@ def calibration_table(everything, folds, jack: ParameterUncertainty) -> dict:
                                         if np.isfinite(se) else np.nan)
         rows[name] = row
     return rows
+
+
+def _heading_errors(run, ev):
+    """Time since the start [s], heading error [rad] and parameter-band std [rad] of one replay."""
+    fit, data = ev["fit"], run.data
+    e = np.angle(np.exp(1j * (np.asarray(fit["psi"]) - np.asarray(data["psi"]))))
+    return fit.t - fit.t[0], e, np.asarray(ev["bands"]["psi_std"])
+
+
+def _growth(t, e, s) -> float:
+    """Least-squares ``q`` of ``e^2 - s^2 = q t``: the heading variance the parameter band misses [rad^2/s]."""
+    return float(np.sum((e**2 - s**2) * t) / np.sum(t**2))
+
+
+def band_check(runs, loro_results, *, z: float = Z95) -> dict:
+    """Coverage of the held-out runs by their folds' 95 % bands, parameter-only and with a
+    discrepancy term from the other folds only (see the module text).
+
+    Returns ``{"runs": {run: row}, "summary": {...}}``; a row holds the heading coverage (share of
+    samples inside the band) without and with the discrepancy, the ``q`` used, and for each index
+    whether the measured value lies in the interval without and with the discrepancy (``None``
+    where no other held-out run has that index).
+    """
+    by_name = {r.name: r for r in runs}
+    evs = [res["evaluations"][0] for res in loro_results]
+    series = {ev["row"]["run"]: _heading_errors(by_name[ev["row"]["run"]], ev) for ev in evs if ev["bands"]}
+    q = {name: max(_growth(*ser), 0.0) for name, ser in series.items()}
+    rows = {}
+    for ev in evs:
+        row, name = ev["row"], ev["row"]["run"]
+        if name not in series:
+            continue
+        t, e, s = series[name]
+        q_other = float(np.mean([v for k, v in q.items() if k != name]))
+        out = {"psi coverage, parameter band": float(np.mean(np.abs(e) <= z * s)),
+               "psi coverage, with discrepancy": float(np.mean(np.abs(e) <= z * np.sqrt(s**2 + q_other * t))),
+               "q from the other folds [deg^2/s]": float(np.degrees(np.degrees(q_other))),
+               "psi half-width at the end, with discrepancy [deg]": float(np.degrees(z * np.sqrt(s[-1]**2 + q_other * t[-1])))}
+        for key in INDICES[row["kind"]]:
+            meas, fit, lo, hi = (row[f"{key}_{k}"] for k in ("measured", "fit", "fit_lo", "fit_hi"))
+            if not np.isfinite(meas):
+                continue
+            out[f"{key} in interval, parameter"] = bool(lo <= meas <= hi)
+            others = [ev2["row"] for ev2 in evs if ev2["row"]["run"] != name and np.isfinite(ev2["row"].get(f"{key}_measured", np.nan))]
+            if others:
+                d = float(np.sqrt(np.mean([(o[f"{key}_fit"] - o[f"{key}_measured"]) ** 2 for o in others])))
+                half = np.sqrt((0.5 * (hi - lo)) ** 2 + (z * d) ** 2)
+                out[f"{key} in interval, with discrepancy"] = bool(abs(meas - fit) <= half)
+            else:
+                out[f"{key} in interval, with discrepancy"] = None
+        rows[name] = out
+    def share(col):
+        v = [r[col] for r in rows.values() if r.get(col) is not None]
+        return float(np.mean(v)) if v else np.nan
+    summary = {"psi coverage, parameter band (mean)": share("psi coverage, parameter band"),
+               "psi coverage, with discrepancy (mean)": share("psi coverage, with discrepancy")}
+    idx_cols = sorted({c for r in rows.values() for c in r if " in interval, " in c})
+    for how in ("parameter", "with discrepancy"):
+        v = [r[c] for r in rows.values() for c in idx_cols if c.endswith(how) and r[c] is not None]
+        summary[f"indices in interval, {how}"] = float(np.mean(v)) if v else np.nan
+        summary[f"indices checked, {how}"] = len(v)
+    return {"runs": rows, "summary": summary, "q_all_folds_deg2_per_s": float(np.degrees(np.degrees(np.mean(list(q.values())))))}
 
 
 def asymmetry_check(runs, fit_file_params, model, published) -> dict:

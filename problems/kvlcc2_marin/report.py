@@ -180,7 +180,7 @@ def _coverage(calibration: dict) -> dict:
 
 
 def write_outputs(out: Path, runs, everything, results, in_sample, *, calibration, jack, asymmetry,
-                  quick: bool) -> dict:
+                  quick: bool, bands=None) -> dict:
     """Write the tables, figures and report (the fit files are written by the folds); return the summary."""
     out = Path(out)
     by_kind = {k: [ev["row"] for res in results if res["kind"] == k for ev in res["evaluations"]]
@@ -245,6 +245,24 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
                 f"run-level jackknife {cov['jackknife']:.0%}. `fit.json` carries the jackknife covariance "
                 f"({jack.source}); the fold files carry their robust (sandwich) covariance.",
                 _calibration(calibration))
+    if bands:
+        sm = bands["summary"]
+        rep.section("Calibration of the prediction bands: held-out runs against their folds' bands")
+        rep.add("Not automatic: each held-out run's measured heading and indices against the 95 % band of the fold "
+                "that did not see it. The fit files' bands carry the parameter covariance only (the fold files: "
+                "robust; `fit.json`: jackknife) and are labelled so. The discrepancy column adds a model-"
+                "discrepancy term estimated from the *other* folds' held-out errors only: a heading variance "
+                "growing linearly with time (`q t`, least squares of `e^2 - s^2` on `t` per run, averaged over "
+                "the other runs, floored at 0) and, for the overshoots, the RMS error of the other held-out runs "
+                "(none for the turning indices: one circle). "
+                f"Mean heading coverage: parameter band {sm['psi coverage, parameter band (mean)']:.0%}, with "
+                f"discrepancy {sm['psi coverage, with discrepancy (mean)']:.0%} (nominal 95 %). Indices inside "
+                f"their interval: parameter {sm['indices in interval, parameter']:.0%} of "
+                f"{sm['indices checked, parameter']}, with discrepancy {sm['indices in interval, with discrepancy']:.0%} "
+                f"of {sm['indices checked, with discrepancy']}. q over all folds: "
+                f"{bands['q_all_folds_deg2_per_s']:.3g} deg^2/s.",
+                md_table(bands["runs"], list(dict.fromkeys(c for r in bands["runs"].values() for c in r)),
+                         first="held-out run", spec=".3g"))
     rep.section("Port/starboard asymmetry")
     asym_rows = {f"{p['starboard first']} / {p['port first']}": p for p in asymmetry["pairs"]}
     rep.add("Mirror pairs in the training data (same manoeuvre, first turn to opposite sides); the "
@@ -284,6 +302,7 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
                "workflow_seconds": everything.seconds,
                **{f"leave_one_{k}_out": rows for k, rows in by_kind.items()}, "in_sample": in_sample,
                "calibration": calibration, "calibration_coverage": _coverage(calibration) if calibration else {},
+               "band_calibration": bands or {},
                "asymmetry": asymmetry, "propulsion": prop_rows, "fit_json": str(out / "fit.json"),
                "folds": {f"{res['kind']}:{res['label']}": {"free": res["fold"].free, "seconds": res["fold"].seconds,
                                                            "train": res["fold"].train, "file": res["file"]}

@@ -45,6 +45,7 @@ uses.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -86,6 +87,7 @@ PRIOR_REL = {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "R
 PRIOR_ABS = {"delta_0": np.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025}
 PRIOR_FLOOR = {"X_vr_dash": 0.01}
 MAX_RATIO, MAX_CORR, MAX_FREE = 0.5, 0.95, 15
+ASYMMETRY_GIVEN_REFINEMENT = True
 
 
 def study_model() -> cs.Model:
@@ -225,12 +227,27 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
     fixed = model.params({**preset, **asym})
     symmetric = [c for c in CANDIDATES if c not in ASYMMETRY]
     fit, chosen, rows, idf, use_id = _select_and_refine(model, recs, symmetric, sigma, fixed, at, start, max_free, show)
+    if asym and ASYMMETRY_GIVEN_REFINEMENT:   # stage C: the ship's terms again, given the refined symmetric set
+        asym_stage = _refit_asymmetry(model, [recs[i] for i in paired], sorted(asym), sigma,
+                                      model.params({**fit.params, **asym}), show)
+        asym = {n: asym_stage.estimates[n] for n in asym}
+        fit = dataclasses.replace(fit, params={**fit.params, **asym})
     rows = rows_a + [dict(r, stage="all runs") for r in rows]
     rows += [{"quantity": q, "ratio_when_added": float("nan"), "confounded": why, "stage": "asymmetry"}
              for q, why in confounded.items()]
     return FoldFit([r.name for r in train], prop, preset, start, "inverse dynamics" if use_id else "preset", sigma,
                    list(CANDIDATES), rows, confounded, chosen, fit, time.perf_counter() - t0, idfit, idf,
                    asym_stage, sorted(asym), rig)
+
+
+def _refit_asymmetry(model, recs, names, sigma, fixed, show):
+    """MAP of the ship's asymmetry terms on the mirror-pair records, everything else held at ``fixed``."""
+    prob = cs.OutputErrorProblem(model, recs, names, measured=list(MEASURED), sigma=sigma, params=fixed,
+                                 scale={k: PRIOR_ABS[k] for k in names}, prior=Prior(prior_std(model, names)),
+                                 record_weights=record_weights(recs))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdentificationWarning)
+        return prob.solve(show=show)
 
 
 def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_free, show, share=None):
