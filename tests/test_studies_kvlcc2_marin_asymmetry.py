@@ -90,3 +90,35 @@ def test_after_names_must_be_candidates(runs):
     idf, *_ = _choose(ship, starboard + port)
     with pytest.raises(ValueError, match="bias"):
         select_free(idf, after={"bias[delta]": ["N_0_dash"]})
+
+
+def test_band_check_discrepancy_from_the_other_folds_reaches_the_nominal_coverage():
+    """Held-out heading errors that grow like a random walk (variance ``q t``) with a parameter band
+    far too narrow: the parameter-only band covers little, the band with the discrepancy term
+    estimated from the other runs only covers about 95 %."""
+    from problems.kvlcc2_marin.calibration import band_check
+    from problems.kvlcc2_marin.data import Run
+
+    rng = np.random.default_rng(4)
+    q = np.radians(0.3) ** 2            # rad^2/s
+    t = np.arange(0.0, 600.0, 1.0)
+    runs, results = [], []
+    for i in range(12):
+        e = np.cumsum(np.sqrt(q) * rng.standard_normal(t.size))        # variance q t
+        psi = np.radians(10.0) * np.sin(t / 50.0)
+        data = cs.Dataset(t, {"psi": psi})
+        runs.append(Run(f"run {i}", "X", data, "zigzag"))
+        row = {"run": f"run {i}", "kind": "zigzag"}
+        for k, meas in (("overshoot_1_deg", 10.0), ("overshoot_2_deg", 12.0)):
+            err = 2.0 * rng.standard_normal()
+            row.update({f"{k}_measured": meas, f"{k}_fit": meas + err, f"{k}_fit_lo": meas + err - 0.1,
+                        f"{k}_fit_hi": meas + err + 0.1})
+        ev = {"row": row, "fit": cs.Dataset(t, {"psi": psi + e}), "bands": {"psi_std": np.full(t.size, 1e-4)}}
+        results.append({"kind": "run", "evaluations": [ev]})
+    out = band_check(runs, results)
+    sm = out["summary"]
+    assert sm["psi coverage, parameter band (mean)"] < 0.2
+    assert 0.88 < sm["psi coverage, with discrepancy (mean)"] < 0.99
+    assert out["q_all_folds_deg2_per_s"] == pytest.approx(0.09, rel=0.3)
+    assert sm["indices in interval, parameter"] < 0.2
+    assert 0.8 < sm["indices in interval, with discrepancy"] <= 1.0

@@ -87,7 +87,8 @@ PRIOR_REL = {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "R
 PRIOR_ABS = {"delta_0": np.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025}
 PRIOR_FLOOR = {"X_vr_dash": 0.01}
 MAX_RATIO, MAX_CORR, MAX_FREE = 0.5, 0.95, 15
-ASYMMETRY_GIVEN_REFINEMENT = True
+ASYMMETRY_GIVEN_REFINEMENT = False
+APPLY_SHIP_ASYMMETRY = True
 
 
 def study_model() -> cs.Model:
@@ -149,7 +150,7 @@ class FoldFit:
     identifiability: object = field(repr=False, default=None)
     asymmetry_fit: object = field(repr=False, default=None)   # FitResult of the mirror-pair stage
     asymmetry: list = field(default_factory=list)              # the ship's asymmetry terms taken from it
-    rig: dict = field(default_factory=dict)                    # per-facility neutral angles (not applied)
+    rig: dict = field(default_factory=dict)                    # estimated asymmetry terms not applied
 
     def asymmetry_record(self) -> dict:
         """Which port/starboard terms the fit file applies, from which evidence, and which it does not."""
@@ -220,8 +221,8 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
         asym_stage, chosen_a, rows_a, _, _ = _select_and_refine(
             model, sub, [c for c in CANDIDATES if c not in ASYMMETRY_RIG] + list(ASYMMETRY_RIG), sigma, fixed, at,
             start, max_free, show, share=share)
-        asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ASYMMETRY_SHIP}
-        rig = {n: asym_stage.estimates[n] for n in chosen_a if n.split("@")[0] in ASYMMETRY_RIG}
+        asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ASYMMETRY_SHIP and APPLY_SHIP_ASYMMETRY}
+        rig = {n: asym_stage.estimates[n] for n in chosen_a if n not in asym and n.split("@")[0] in ASYMMETRY}
         rows_a = [dict(r, stage=f"asymmetry: mirror-pair runs {', '.join(train[i].name for i in paired)}")
                   for r in rows_a if r["quantity"].split("@")[0] in ASYMMETRY]
     fixed = model.params({**preset, **asym})
