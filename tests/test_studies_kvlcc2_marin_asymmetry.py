@@ -115,7 +115,16 @@ def test_band_check_discrepancy_from_the_other_folds_reaches_the_nominal_coverag
                         f"{k}_fit_hi": meas + err + 0.1})
         ev = {"row": row, "fit": cs.Dataset(t, {"psi": psi + e}), "bands": {"psi_std": np.full(t.size, 1e-4)}}
         results.append({"kind": "run", "evaluations": [ev]})
+    circle = {"run": "circle", "kind": "turning", "advance_m_measured": 1000.0, "advance_m_fit": 990.0,
+              "advance_m_fit_lo": 980.0, "advance_m_fit_hi": 1000.0}
+    runs.append(Run("circle", "X", cs.Dataset(t, {"psi": 0.01 * t}), "turning"))
+    results.append({"kind": "run", "evaluations": [{"row": {**circle, **{f"{k}_{s}": np.nan for k in
+                    ("transfer_m", "tactical_diameter_m") for s in ("measured", "fit", "fit_lo", "fit_hi")}},
+                    "fit": cs.Dataset(t, {"psi": 0.01 * t + np.cumsum(np.sqrt(q) * rng.standard_normal(t.size))}),
+                    "bands": {"psi_std": np.full(t.size, 1e-4)}}]})
     out = band_check(runs, results)
+    assert out["runs"]["circle"]["advance_m in interval, parameter"] is True
+    assert out["runs"]["circle"]["advance_m in interval, with discrepancy"] is None     # no other circle
     sm = out["summary"]
     assert sm["psi coverage, parameter band (mean)"] < 0.2
     assert 0.88 < sm["psi coverage, with discrepancy (mean)"] < 0.99

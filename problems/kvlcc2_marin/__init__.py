@@ -99,7 +99,12 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     jack = jackknife(everything, loro) if len(loro) > 2 else None
     calibration = calibration_table(everything, loro, jack) if jack is not None else {}
     bands = band_check(runs, [res for res in results if res["kind"] == "run"]) if len(loro) > 2 else {}
-    fit_path = write_fold_file(everything, out / "fit.json", jack)
+    discrepancy = {"model_discrepancy": {
+        "psi_variance_growth_deg2_per_s": bands["q_all_folds_deg2_per_s"],
+        "meaning": "heading variance the parameter band misses, growing linearly with time (q t), least squares "
+                   "over the leave-one-run-out held-out errors; the file's bands (param_covariance) do not "
+                   "include it: they are parameter-only"}} if bands else {}
+    fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
     in_sample = [evaluate(r, fit_path)["row"] for r in runs]
     model = study_model()
     asym = asymmetry_check(runs, everything.fit.params, model, kvlcc2())

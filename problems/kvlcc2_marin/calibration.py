@@ -129,7 +129,7 @@ def band_check(runs, loro_results, *, z: float = Z95) -> dict:
                "psi coverage, with discrepancy (mean)": share("psi coverage, with discrepancy")}
     idx_cols = sorted({c for r in rows.values() for c in r if " in interval, " in c})
     for how in ("parameter", "with discrepancy"):
-        v = [r[c] for r in rows.values() for c in idx_cols if c.endswith(how) and r[c] is not None]
+        v = [r[c] for r in rows.values() for c in idx_cols if c.endswith(how) and r.get(c) is not None]
         summary[f"indices in interval, {how}"] = float(np.mean(v)) if v else np.nan
         summary[f"indices checked, {how}"] = len(v)
     return {"runs": rows, "summary": summary, "q_all_folds_deg2_per_s": float(np.degrees(np.degrees(np.mean(list(q.values())))))}

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 from pathlib import Path
 
@@ -12,7 +13,7 @@ from .propulsion import mismatch
 from .validate import ERRORS, INDICES, plot_overlay
 from .workflow import MEASURED, MODEL_OPTIONS, prior_std, study_model
 
-__all__ = ["write_outputs", "slug"]
+__all__ = ["write_outputs", "slug", "pair_error"]
 
 _SHORT = {"psi_rmse_deg": "psi RMSE [deg]", "u_rmse_mps": "u RMSE [m/s]", "position_rmse_m": "track RMSE [m]",
           "advance_m": "advance [m]", "transfer_m": "transfer [m]", "tactical_diameter_m": "tactical dia. [m]",
@@ -22,6 +23,14 @@ _SHORT = {"psi_rmse_deg": "psi RMSE [deg]", "u_rmse_mps": "u RMSE [m/s]", "posit
 def slug(name: str) -> str:
     """A file-name form of a run or group label."""
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in name.replace(" ", "_"))
+
+
+def pair_error(pairs, who: str = "fit") -> float:
+    """RMS over the mirror pairs and the first and second overshoots of the replayed minus the measured
+    starboard-first minus port-first overshoot difference [deg] (NaN without pairs)."""
+    e = [p[f"{who}: {k} overshoot S - P [deg]"] - p[f"measured: {k} overshoot S - P [deg]"]
+         for p in pairs for k in ("1st", "2nd")]
+    return float(np.sqrt(np.mean(np.square(e)))) if e else math.nan
 
 
 def _cv_table(rows, first: str = "held-out run") -> str:
@@ -277,7 +286,13 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
             md_table(asymmetry.get("mirror", {}), first="run", spec=".3g"),
             "Asymmetry terms of the fit on all runs: " + (", ".join(
                 f"{n} = {everything.fit.params[n]:.4g}" for n in ("delta_0", "Y_0_dash", "N_0_dash")))
-            + (f"; confounded (not estimated): {', '.join(everything.confounded)}" if everything.confounded else ""))
+            + (f"; confounded (not estimated): {', '.join(everything.confounded)}" if everything.confounded else ""),
+            f"Pair criterion (stated before the cross-validation of the asymmetry forms): RMS over the pairs and "
+            f"the first and second overshoots of (fit - measured) starboard-first minus port-first difference: "
+            f"{pair_error(asymmetry['pairs']):.3g} deg (published constants: "
+            f"{pair_error(asymmetry['pairs'], 'published'):.3g} deg).",
+            "What `fit.json` says about its asymmetry (key `asymmetry`):",
+            "```", json.dumps(everything.asymmetry_record(), indent=1), "```")
     rep.section("Propulsion: the propeller fitted to the measured thrust")
     prop = everything.propulsion
     rep.add(f"Open-water K_T rewritten for D_p = 9.86 m (quadratic, largest error {prop.kt_fit_error:.2g}); wake "

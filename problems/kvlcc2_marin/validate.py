@@ -31,11 +31,12 @@ INDICES = {"turning": ("advance_m", "transfer_m", "tactical_diameter_m"),
 SAMPLES = 40                       # parameter draws per replay for the index intervals
 
 
-def write_fold_file(fold, path: Path, uncertainty=None) -> Path:
+def write_fold_file(fold, path: Path, uncertainty=None, extra=None) -> Path:
     """Write the fold's fit as the fit file a user gets.
 
     Besides the fit (:meth:`~casship.identify.FitResult.to_dict`) the file says which asymmetry it
-    carries and from which evidence (key ``"asymmetry"``, :meth:`.workflow.FoldFit.asymmetry_record`).
+    carries and from which evidence (key ``"asymmetry"``, :meth:`.workflow.FoldFit.asymmetry_record`),
+    and the entries of ``extra`` (e.g. the study's model-discrepancy estimate).
 
     Its covariance is ``uncertainty`` (a :class:`~casship.identify.ParameterUncertainty`) when
     given, else the robust (sandwich) covariance of the refinement with that of the asymmetry
@@ -57,6 +58,7 @@ def write_fold_file(fold, path: Path, uncertainty=None) -> Path:
         fit = dataclasses.replace(fit, param_covariance=uncertainty.to_dict())
     content = fit.to_dict()
     content["asymmetry"] = fold.asymmetry_record()
+    content.update(extra or {})
     path = Path(path)
     path.write_text(json.dumps(content, indent=2))
     return path

@@ -45,7 +45,6 @@ uses.
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -75,9 +74,22 @@ JERK = {"u": 1e-3, "v": 1e-3, "r": 1e-5}
 HULL_LINEAR = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash")
 HULL_CUBIC = ("Y_vvv_dash", "Y_vvr_dash", "Y_vrr_dash", "Y_rrr_dash", "N_vvv_dash", "N_vvr_dash", "N_vrr_dash",
               "N_rrr_dash", "X_vv_dash", "X_vr_dash", "X_rr_dash", "X_vvvv_dash")
-ASYMMETRY_SHIP = ("Y_0_dash", "N_0_dash")      # propeller-induced, scale with the thrust: the ship's
-ASYMMETRY_RIG = ("delta_0",)                    # rudder neutral angle: one rig's (one copy per facility)
-ASYMMETRY = (*ASYMMETRY_RIG, *ASYMMETRY_SHIP)
+ASYMMETRY = ("delta_0", "Y_0_dash", "N_0_dash")
+#: How the asymmetry terms are treated: ``"ship"``, one value for the ship applied to every run (the
+#: file's ``params``), ``"rig"``, one copy per facility from that facility's mirror pairs, considered only
+#: when no ship term can be added and never applied to a run (held at 0 in the fit file).
+ASYMMETRY_FORMS = {
+    "neutral angle": {"ship": ("delta_0", "Y_0_dash", "N_0_dash"), "rig": ()},
+    "thrust": {"ship": ("Y_0_dash", "N_0_dash"), "rig": ("delta_0",)},
+}
+ASYMMETRY_FORM = "neutral angle"          # chosen by cross-validation (the report's choices)
+ASYMMETRY_RULES = {
+    "neutral angle": "one value for the ship, estimated on the mirror-pair runs (MAP, free set by the selection "
+                     "rule among delta_0, Y_0_dash, N_0_dash) and applied to every run of any facility or direction",
+    "thrust": "the ship's propeller-induced terms (Y_0_dash, N_0_dash, scaling with the thrust) apply to every run; "
+              "a rudder neutral angle is taken as one rig's: estimated per facility from that facility's mirror "
+              "pairs after the ship's terms, never applied to a run (held at 0 in the file)",
+}
 REGRESSED = (*HULL_LINEAR, *HULL_CUBIC, "f_alpha", "Y_0_dash", "N_0_dash")
 CANDIDATES = (*HULL_LINEAR, *HULL_CUBIC, "R_0_dash", "gamma_R_minus", "gamma_R_plus", "l_R_dash", "epsilon", "kappa",
               "f_alpha", "a_H", "x_H_dash", "t_R", "m_x_dash", "m_y_dash", "J_z_dash", *ASYMMETRY)
@@ -87,8 +99,6 @@ PRIOR_REL = {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "R
 PRIOR_ABS = {"delta_0": np.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025}
 PRIOR_FLOOR = {"X_vr_dash": 0.01}
 MAX_RATIO, MAX_CORR, MAX_FREE = 0.5, 0.95, 15
-ASYMMETRY_GIVEN_REFINEMENT = False
-APPLY_SHIP_ASYMMETRY = True
 
 
 def study_model() -> cs.Model:
@@ -162,12 +172,11 @@ class FoldFit:
                               for n in self.asymmetry},
                 "evidence": (f"MAP on the mirror-pair runs {pairs}" if pairs else
                              "no mirror pair in the training runs: every asymmetry term at zero"),
-                "facility_specific_not_applied": {n: {"value": float(v), "std_error": float(a.std_errors[n])}
+                "estimated_not_applied": {n: {"value": float(v), "std_error": float(a.std_errors[n])}
                                                   for n, v in self.rig.items()},
                 "confounded": dict(self.confounded),
-                "rule": "the ship's propeller-induced terms (Y_0_dash, N_0_dash, scaling with the thrust) apply to "
-                        "every run; a rudder neutral angle belongs to one rig: estimated per facility from that "
-                        "facility's mirror pairs, never applied to a run of another or unknown rig (held at 0)"}
+                "form": ASYMMETRY_FORM,
+                "rule": ASYMMETRY_RULES[ASYMMETRY_FORM]}
 
     def moved(self) -> dict:
         """Every parameter that differs from the published value, with its standard error and stage."""
@@ -211,28 +220,24 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
              for j, c in enumerate(MEASURED)}
     facilities = [r.facility for r in train]
     paired = sorted({i for pair in mirror_pairs(recs, within=facilities) for i in pair})
-    rig_names = [f"{q}@{f}" for q in ASYMMETRY_RIG for f in sorted(set(facilities))]
-    confounded = confounded_asymmetry(recs, [*ASYMMETRY_SHIP, *rig_names], {q: facilities for q in ASYMMETRY_RIG},
+    ship, rig_terms = ASYMMETRY_FORMS[ASYMMETRY_FORM]["ship"], ASYMMETRY_FORMS[ASYMMETRY_FORM]["rig"]
+    rig_names = [f"{q}@{f}" for q in rig_terms for f in sorted(set(facilities))]
+    confounded = confounded_asymmetry(recs, [*ship, *rig_names], {q: facilities for q in rig_terms},
                                       within=facilities)
     asym, rig, asym_stage, rows_a = {}, {}, None, []
     if paired:           # stage A: the asymmetry terms from the mirror-pair runs only
         sub = [recs[i] for i in paired]
-        share = {q: [facilities[i] for i in paired] for q in ASYMMETRY_RIG}
+        share = {q: [facilities[i] for i in paired] for q in rig_terms}
         asym_stage, chosen_a, rows_a, _, _ = _select_and_refine(
-            model, sub, [c for c in CANDIDATES if c not in ASYMMETRY_RIG] + list(ASYMMETRY_RIG), sigma, fixed, at,
+            model, sub, [c for c in CANDIDATES if c not in rig_terms] + list(rig_terms), sigma, fixed, at,
             start, max_free, show, share=share)
-        asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ASYMMETRY_SHIP and APPLY_SHIP_ASYMMETRY}
+        asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ship}
         rig = {n: asym_stage.estimates[n] for n in chosen_a if n not in asym and n.split("@")[0] in ASYMMETRY}
         rows_a = [dict(r, stage=f"asymmetry: mirror-pair runs {', '.join(train[i].name for i in paired)}")
                   for r in rows_a if r["quantity"].split("@")[0] in ASYMMETRY]
     fixed = model.params({**preset, **asym})
     symmetric = [c for c in CANDIDATES if c not in ASYMMETRY]
     fit, chosen, rows, idf, use_id = _select_and_refine(model, recs, symmetric, sigma, fixed, at, start, max_free, show)
-    if asym and ASYMMETRY_GIVEN_REFINEMENT:   # stage C: the ship's terms again, given the refined symmetric set
-        asym_stage = _refit_asymmetry(model, [recs[i] for i in paired], sorted(asym), sigma,
-                                      model.params({**fit.params, **asym}), show)
-        asym = {n: asym_stage.estimates[n] for n in asym}
-        fit = dataclasses.replace(fit, params={**fit.params, **asym})
     rows = rows_a + [dict(r, stage="all runs") for r in rows]
     rows += [{"quantity": q, "ratio_when_added": float("nan"), "confounded": why, "stage": "asymmetry"}
              for q, why in confounded.items()]
@@ -241,21 +246,11 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
                    asym_stage, sorted(asym), rig)
 
 
-def _refit_asymmetry(model, recs, names, sigma, fixed, show):
-    """MAP of the ship's asymmetry terms on the mirror-pair records, everything else held at ``fixed``."""
-    prob = cs.OutputErrorProblem(model, recs, names, measured=list(MEASURED), sigma=sigma, params=fixed,
-                                 scale={k: PRIOR_ABS[k] for k in names}, prior=Prior(prior_std(model, names)),
-                                 record_weights=record_weights(recs))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", IdentificationWarning)
-        return prob.solve(show=show)
-
-
 def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_free, show, share=None):
     """Free set by :func:`select_free` from the information at ``at`` and the MAP refinement of it
     (started from the inverse-dynamics values when they give a lower cost than the preset). The
-    quantities of ``share`` (name -> one group label per record) have one copy per group; the rig's
-    asymmetry terms are considered only after the others (:data:`ASYMMETRY_RIG`)."""
+    quantities of ``share`` (name -> one group label per record) have one copy per group; a rig's
+    asymmetry terms are considered only when none of the ship's can be added (:data:`ASYMMETRY_FORMS`)."""
     share = dict(share or {})
     prob = cs.OutputErrorProblem(model, recs, candidates, measured=list(MEASURED), sigma=sigma, params=fixed,
                                  scale={k: v for k, v in PRIOR_ABS.items() if k in candidates},
@@ -263,9 +258,10 @@ def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_fre
                                  share=share or None)
     names = prob.free
     idf = prob.identifiability(at={k: at[k.split("@")[0]] for k in names}, pairs_within="facility")
-    ship = [k for k in names if k in ASYMMETRY_SHIP]
+    form = ASYMMETRY_FORMS[ASYMMETRY_FORM]
+    ship = [k for k in names if k in form["ship"]]
     chosen, rows = select_free(idf, max_count=max_free,
-                               after={k: ship for k in names if k.split("@")[0] in ASYMMETRY_RIG})
+                               after={k: ship for k in names if k.split("@")[0] in form["rig"]})
     declared = list(dict.fromkeys(k.split("@")[0] for k in chosen))
     refine = prob.replace(free=declared, prior=Prior(prior_std(model, declared)),
                           scale={k: v for k, v in PRIOR_ABS.items() if k in declared},
