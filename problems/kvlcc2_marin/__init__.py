@@ -38,6 +38,7 @@ from casship.studies import Study
 from ..kit import data_folder
 from .calibration import asymmetry_check, band_check, calibration_table, jackknife, mirror_check
 from .data import first_rudder_side, load_runs, regime
+from .diagnose import steady_turn_balance, through_the_turn
 from .propulsion import open_water
 from .report import slug, write_outputs
 from .validate import evaluate, write_fold_file
@@ -109,8 +110,15 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     model = study_model()
     asym = asymmetry_check(runs, everything.fit.params, model, kvlcc2())
     asym["mirror"] = mirror_check(runs, fit_path, kvlcc2())
+    turns = {}
+    for circle in (r for r in runs if r.kind == "turning"):
+        files = {"fit.json (in training)": fit_path}
+        if (out / fold_file_name("run", circle.name)).exists():
+            files[fold_file_name("run", circle.name)] = out / fold_file_name("run", circle.name)
+        turns[circle.name] = {"turn": through_the_turn(circle, files, kvlcc2()),
+                              "balance": steady_turn_balance(circle, files, kvlcc2())}
     return write_outputs(out, runs, everything, results, in_sample, calibration=calibration, jack=jack,
-                         asymmetry=asym, bands=bands, quick=quick)
+                         asymmetry=asym, bands=bands, turns=turns, quick=quick)
 
 
 STUDY = Study("kvlcc2-marin", "KVLCC2 MMG identified on the MARIN and HSVA free-running runs, "

@@ -189,7 +189,7 @@ def _coverage(calibration: dict) -> dict:
 
 
 def write_outputs(out: Path, runs, everything, results, in_sample, *, calibration, jack, asymmetry,
-                  quick: bool, bands=None) -> dict:
+                  quick: bool, bands=None, turns=None) -> dict:
     """Write the tables, figures and report (the fit files are written by the folds); return the summary."""
     out = Path(out)
     by_kind = {k: [ev["row"] for res in results if res["kind"] == k for ev in res["evaluations"]]
@@ -293,6 +293,16 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
             f"{pair_error(asymmetry['pairs'], 'published'):.3g} deg).",
             "What `fit.json` says about its asymmetry (key `asymmetry`):",
             "```", json.dumps(everything.asymmetry_record(), indent=1), "```")
+    for name, diag in (turns or {}).items():
+        bal = diag["balance"]
+        rep.section(f"Large-rudder regime: {name} through the turn")
+        rep.add("Speed, drift angle and r' = r L / U when the heading has changed by the given angle, measured and "
+                "replayed:", md_table(diag["turn"], list(dict.fromkeys(c for r in diag["turn"].values() for c in r)),
+                                     first="", spec=".3g"),
+                f"Force balance of the model at the measured mean state of the steady turn ({bal['span_s'][0]:.0f}-"
+                f"{bal['span_s'][1]:.0f} s: " + ", ".join(f"{k} {v:.4g}" for k, v in bal["state"].items())
+                + "; SI units, rad): at a steady state both the surge acceleration and the yaw moment left should "
+                "be near zero.", md_table(bal["rows"], first="model", spec=".4g"))
     rep.section("Propulsion: the propeller fitted to the measured thrust")
     prop = everything.propulsion
     rep.add(f"Open-water K_T rewritten for D_p = 9.86 m (quadratic, largest error {prop.kt_fit_error:.2g}); wake "
@@ -317,7 +327,7 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
                "workflow_seconds": everything.seconds,
                **{f"leave_one_{k}_out": rows for k, rows in by_kind.items()}, "in_sample": in_sample,
                "calibration": calibration, "calibration_coverage": _coverage(calibration) if calibration else {},
-               "band_calibration": bands or {},
+               "band_calibration": bands or {}, "turns": turns or {},
                "asymmetry": asymmetry, "propulsion": prop_rows, "fit_json": str(out / "fit.json"),
                "folds": {f"{res['kind']}:{res['label']}": {"free": res["fold"].free, "seconds": res["fold"].seconds,
                                                            "train": res["fold"].train, "file": res["file"]}
