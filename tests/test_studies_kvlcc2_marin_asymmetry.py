@@ -113,6 +113,8 @@ def test_band_check_discrepancy_from_the_other_folds_reaches_the_nominal_coverag
             err = 2.0 * rng.standard_normal()
             row.update({f"{k}_measured": meas, f"{k}_fit": meas + err, f"{k}_fit_lo": meas + err - 0.1,
                         f"{k}_fit_hi": meas + err + 0.1})
+        if i == 0:                        # a replay that never reaches its second overshoot
+            row.update({f"overshoot_2_deg_{k}": np.nan for k in ("fit", "fit_lo", "fit_hi")})
         ev = {"row": row, "fit": cs.Dataset(t, {"psi": psi + e}), "bands": {"psi_std": np.full(t.size, 1e-4)}}
         results.append({"kind": "run", "evaluations": [ev]})
     circle = {"run": "circle", "kind": "turning", "advance_m_measured": 1000.0, "advance_m_fit": 990.0,
@@ -124,6 +126,7 @@ def test_band_check_discrepancy_from_the_other_folds_reaches_the_nominal_coverag
                     "bands": {"psi_std": np.full(t.size, 1e-4)}}]})
     out = band_check(runs, results)
     assert out["runs"]["circle"]["advance_m in interval, parameter"] is True
+    assert out["runs"]["run 0"]["overshoot_2_deg in interval, with discrepancy"] is False
     assert out["runs"]["circle"]["advance_m in interval, with discrepancy"] is None     # no other circle
     sm = out["summary"]
     assert sm["psi coverage, parameter band (mean)"] < 0.2

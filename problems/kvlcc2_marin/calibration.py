@@ -114,7 +114,8 @@ def band_check(runs, loro_results, *, z: float = Z95) -> dict:
             if not np.isfinite(meas):
                 continue
             out[f"{key} in interval, parameter"] = bool(lo <= meas <= hi)
-            others = [ev2["row"] for ev2 in evs if ev2["row"]["run"] != name and np.isfinite(ev2["row"].get(f"{key}_measured", np.nan))]
+            others = [o for o in (ev2["row"] for ev2 in evs if ev2["row"]["run"] != name)   # replays that reach it
+                      if np.isfinite(o.get(f"{key}_measured", np.nan)) and np.isfinite(o.get(f"{key}_fit", np.nan))]
             if others:
                 d = float(np.sqrt(np.mean([(o[f"{key}_fit"] - o[f"{key}_measured"]) ** 2 for o in others])))
                 half = np.sqrt((0.5 * (hi - lo)) ** 2 + (z * d) ** 2)

@@ -126,8 +126,9 @@ def _departures() -> list[Departure]:
                   "thrust (MARIN, new runs) replay the same way", "table 'Propulsion': thrust error per run"),
         Departure("asymmetry", "thrust-dependent asymmetry terms",
                   "rudder neutral angle and propeller-induced side force and yaw moment scaling with the thrust, "
-                  "one value for the ship, candidates only when the training runs hold a mirror pair; "
-                  "no per-facility copies", "section 'Port/starboard asymmetry'"),
+                  "one value for the ship, estimated on the mirror pairs only; the thrust form (neutral angle per "
+                  "facility, not applied) was cross-validated and lost (choices above)",
+                  "section 'Port/starboard asymmetry'; choices made after cross-validation"),
         Departure("smoothing", "EKF + RTS with the manoeuvring model itself, iterated",
                   "EKF + RTS with a body-rates kinematic model (white jerk): no hydrodynamic model in the smoother",
                   "not measured (the smoothed states only give starting guesses, HSVA's u and v and the "
@@ -160,11 +161,27 @@ _CHOICES = (
     "run: gated on the existence of a pair but estimated on all runs, the rudder neutral angle was decided by "
     "the unpaired small-angle zig-zags (all first to starboard, drifting) and made the 35/5 zig-zag drift; "
     "leave-one-run-out mean heading RMSE 9.35 -> 7.99 deg, leave-one-regime-out 8.90 -> 7.25 deg.\n"
-    "* Tried and dropped, each on a full cross-validation run: a rudder-lift saturation term (`f_alpha (sin a - "
-    "c sin^3 a)`; the data put c at its bound 0: no change); the asymmetry terms kept out of the fit file as "
-    "facility-specific (leave-one-run-out mean 10.85 deg, leave-one-regime-out 16.31 deg: worse); the "
-    "flow-straightening `gamma_R` for either drift sign treated as port/starboard terms (16.92 deg, no index "
-    "closer on any run: worse).\n"
+    "* **Asymmetry form** (`workflow.ASYMMETRY_FORM`), decided by a criterion stated before the runs: the "
+    "thrust form replaces the neutral angle if it reproduces the HSVA pairs' port/starboard overshoot "
+    "differences better (pair error: RMS of fit minus measured S - P difference over the two pairs and two "
+    "overshoots) and neither cross-validation mean heading RMSE is worse by more than 10 %. Full runs (mean "
+    "heading RMSE leave-one-run-out / leave-one-regime-out, runs better than published, pair error): neutral "
+    "angle (shared, applied to every run) 7.99 / 7.25 deg, 14 and 14 of 16, 1.87 deg; thrust (`Y'_0 T`, "
+    "`N'_0 L T` applied, `delta_0` per facility not applied; `N'_0` = 0.038 chosen, no neutral angle "
+    "after it) 10.35 / 11.23 deg, 13 and 13, 0.68 deg. The thrust form reproduces the pairs 2.7 times better "
+    "but fails the cross-validation: it drifts the 35/5 and 30/5 zig-zags (25.7 and 16.0 deg) and the circle "
+    "(36.0 deg, tactical diameter -8.7 %). The neutral angle stays; the thrust form is kept as the documented "
+    "alternative.\n"
+    "* Tried and dropped, each on a full cross-validation run: the estimated asymmetry recorded but not applied "
+    "(10.85 / 16.31 deg; without it `gamma_R_plus`, the flow straightening of one drift sign, takes the "
+    "port/starboard difference and the 35/5 zig-zag drifts, 23.8 deg); the same with the race-additive "
+    "rudder inflow (`kvlcc2(rudder_inflow=\"race-additive\")`: 11.09 / 16.21 deg, though the circle left out "
+    "came closest: advance +0.9 %, tactical diameter -4.2 %, and the regime indices closer on 13 of 16); the "
+    "neutral-angle form with the race-additive inflow (10.27 / 9.09 deg, circle 41.5 deg, tactical diameter "
+    "-9.6 %); earlier: a rudder-lift saturation term (`f_alpha (sin a - c sin^3 a)`; the data put c at its "
+    "bound 0), `gamma_R` for either drift sign as port/starboard terms (16.92 deg).\n"
+    "* Checked on the fit on all runs only (no cross-validation run): the thrust terms re-estimated on the pairs "
+    "given the refined symmetric set (pair error 1.34 deg, 35/5 zig-zag in training 22.6 deg): dropped.\n"
     "* Earlier workflow (before this one): the inverse-dynamics regression counts effective samples "
     "(`autocorrelation=True`); its per-facility asymmetry, kept inverse-dynamics values, resistance trim and "
     "psi/r/u cost are replaced by the rules above.")

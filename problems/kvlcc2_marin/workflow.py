@@ -29,7 +29,10 @@ cross-validation; the report lists the ones that changed after a cross-validatio
    the rule of step 5, MAP) on the training runs that form mirror pairs within one facility
    (:mod:`casship.identify.asymmetry`: the same manoeuvre turning first to both sides; a
    difference between facilities is no port/starboard evidence) and nothing else; without a pair
-   they are confounded with the turning dynamics and stay at zero.
+   they are confounded with the turning dynamics and stay at zero. That is the ``"neutral angle"``
+   form of :data:`ASYMMETRY_FORMS`; the ``"thrust"`` form applies only the propeller-induced terms
+   and takes a neutral angle as one facility's (estimated after them, never applied). Chosen by
+   cross-validation (the report's choices); the fit file records the form and its evidence.
 7. **MAP refinement** of the chosen symmetric set on all training runs, the asymmetry terms held at
    step 6's values; every other parameter stays at the preset.
 
