@@ -336,6 +336,30 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     return (loaded, _library(lib)) if library else loaded
 
 
+def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None) -> ca.Function | None:
+    """``fun`` compiled, if this process or the cache already holds its library; else None, at once.
+
+    Never compiles and never waits for a compile running in another thread (then None).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+    flags : sequence of str or str, optional
+        As for :func:`compile_function`.
+    """
+    try:
+        cc = find_compiler(None)
+    except CompileError:
+        return None
+    flags, _ = chosen_flags(flags)
+    if not _LOCK.acquire(blocking=False):
+        return None
+    try:
+        return _compiled(fun, cc, flags, _usable_folder(None), "")[0]
+    finally:
+        _LOCK.release()
+
+
 def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
     """``(Function, library path)`` already loaded by this process or in the cache, else ``(None, None)``."""
     key = cache_key(fun, cc, flags, extra_source)
