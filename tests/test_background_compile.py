@@ -94,3 +94,15 @@ def test_first_fit_on_an_empty_cache_runs_while_compiling_and_equals_the_interpr
     again = MLEProblem(ekf, data, free=["K", "T"], x0=prior)
     assert again.solve(guess=guess).estimates["K"] == ref.estimates["K"]
     assert not any(isinstance(f, Compiling) for f in again.engine._funs.values())   # loaded from the cache
+
+
+def test_output_error_interpreted_and_compiled_agree_to_the_last_bit():
+    from casship.identify import OutputErrorProblem
+
+    m, data = _records()
+    at = {"K": 0.06, "T": 14.0}
+    probs = [OutputErrorProblem(m, data, free=["K", "T"], sigma={"psi": 0.01}, jit=jit) for jit in (False, True)]
+    (f0, g0, H0, _), (f1, g1, H1, _) = (p.engine.derivatives(p.space.theta(at)) for p in probs)
+    assert f0 == f1
+    np.testing.assert_array_equal(g0, g1)
+    np.testing.assert_array_equal(H0, H1)
