@@ -106,3 +106,31 @@ def test_output_error_interpreted_and_compiled_agree_to_the_last_bit():
     assert f0 == f1
     np.testing.assert_array_equal(g0, g1)
     np.testing.assert_array_equal(H0, H1)
+
+
+def _child_compiles(conn):
+    """In a forked child: a compile must not wait for a lock the parent's compiling thread held."""
+    from casship.runtime import compile_function
+
+    f = compile_function(_function("bg_in_child"))
+    conn.send(float(np.array(f([1.0, 2.0, 3.0]))[0, 0]))
+    conn.close()
+
+
+def test_a_child_forked_during_a_background_compile_can_compile(tmp_path, monkeypatch):
+    import multiprocessing as mp
+
+    monkeypatch.setenv("CASSHIP_CACHE_DIR", str(tmp_path / "cache"))
+    import time
+
+    handle = compile_in_background(_function("bg_parent_slow"))
+    time.sleep(0.05)                         # the parent's worker now holds the cache's lock, compiling
+    ctx = mp.get_context("fork")
+    here, there = ctx.Pipe()
+    child = ctx.Process(target=_child_compiles, args=(there,))
+    child.start()
+    assert here.poll(120), "the forked child hung waiting for the parent's compile lock"
+    assert here.recv() == pytest.approx(2 * np.sin(1.0) + 1.0)
+    child.join(30)
+    assert child.exitcode == 0
+    handle.wait(timeout=120)

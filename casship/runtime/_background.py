@@ -12,6 +12,7 @@ while a compile runs finishes it first, so the library is in the cache for the n
 """
 from __future__ import annotations
 
+import os
 import queue
 import threading
 from typing import Callable, Sequence
@@ -25,6 +26,18 @@ __all__ = ["Compiling", "compile_in_background"]
 _JOBS: "queue.Queue[Compiling]" = queue.Queue()
 _WORKER: list[threading.Thread] = []
 _WORKER_LOCK = threading.Lock()
+
+
+def _fresh_after_fork() -> None:
+    """A forked child starts with no worker and no queue: the parent's worker thread does not exist
+    there (the parent's pending handles stay interpreted in the child)."""
+    global _JOBS, _WORKER_LOCK
+    _JOBS, _WORKER_LOCK = queue.Queue(), threading.Lock()
+    _WORKER.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_fresh_after_fork)
 
 
 class Compiling:

@@ -73,6 +73,17 @@ _REFUSED: dict[Path, str] = {}              # folders not used by this process, 
 _LOCK = threading.RLock()
 
 
+def _new_lock_after_fork() -> None:
+    """A forked child gets a lock of its own: one held by a compiling thread of the parent would
+    never be released there (that thread does not exist in the child)."""
+    global _LOCK
+    _LOCK = threading.RLock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_new_lock_after_fork)
+
+
 # -- where ----------------------------------------------------------------------------------------------
 def cache_dir(path: str | os.PathLike | None = None) -> Path | None:
     """The cache folder: ``path``, else ``$CASSHIP_CACHE_DIR``, else the user cache folder (absolute).
