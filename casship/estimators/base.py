@@ -86,6 +86,7 @@ class StepEstimator(Estimator):
         self._folds: dict[tuple, ca.Function] = {}
         self._fold_calls: dict[tuple, BufferedCall] = {}
         self._compiled: dict[tuple, ca.Function] = {}
+        self._names: dict[tuple, tuple] = {}
         self._build_expressions()
 
     # -- what subclasses provide ------------------------------------------------------------------
@@ -138,12 +139,19 @@ class StepEstimator(Estimator):
     def _output_names(self, outputs) -> tuple:
         if outputs is None:
             outputs = self.options.outputs
-        elif outputs == "all":
+        elif isinstance(outputs, str) and outputs == "all":
             outputs = DIAGNOSTICS
-        unknown = [o for o in outputs if o not in DIAGNOSTICS and o not in self.memory]
+        key = outputs if isinstance(outputs, tuple) else None
+        if key in self._names:                      # asked once per run: not worked out again
+            return self._names[key]
+        memory = self.memory
+        unknown = [o for o in outputs if o not in DIAGNOSTICS and o not in memory]
         if unknown:
             raise ValueError(f"unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)}")
-        return (*self.memory, *(o for o in DIAGNOSTICS if o in outputs and o not in self.memory))
+        names = (*memory, *(o for o in DIAGNOSTICS if o in outputs and o not in memory))
+        if key is not None:
+            self._names[key] = names
+        return names
 
     def step_function(self, outputs=None) -> ca.Function:
         """The step Function returning the memory and the diagnostics ``outputs``.
@@ -285,9 +293,10 @@ class StepEstimator(Estimator):
         """One run over the record as it is (the gaps checked by :meth:`filter`)."""
         arrays = self.prepare(data, p)
         n = len(data)
-        rng = np.random.default_rng(seed)
+        stochastic = bool(self._draw_shapes())
+        rng = np.random.default_rng(seed) if stochastic or seed is not None else None   # a fresh one costs
         memory = self.memory_from(prior, rng)
-        draws = self.sample_draws(n, rng)
+        draws = self.sample_draws(n, rng) if stochastic else {}
         outputs = self._output_names("all")
         constants = {k: arrays[k] for k in CONSTANT_INPUTS}
         if self.options.jit:                             # one C loop over the record

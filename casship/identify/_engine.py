@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap_sym
-from ._compile import compiled
+from ._compile import compiled, resolve
 
 __all__ = ["CHUNK", "OutputErrorEngine", "Job", "run_jobs"]
 
@@ -133,10 +133,10 @@ class Engine:
         self._funs: dict = {}
 
     def _fun(self, key, make):
-        """The Function ``make()``, built once per key."""
+        """The Function ``make()``, built once per key (its compiled form once a background compile is done)."""
         if key not in self._funs:
             self._funs[key] = make()
-        return self._funs[key]
+        return resolve(self._funs[key])
 
     def _value_fold(self):
         return self._fun("value_c", lambda: compiled(self._value_raw(), jit=self.jit))

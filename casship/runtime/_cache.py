@@ -73,6 +73,17 @@ _REFUSED: dict[Path, str] = {}              # folders not used by this process, 
 _LOCK = threading.RLock()
 
 
+def _new_lock_after_fork() -> None:
+    """A forked child gets a lock of its own: one held by a compiling thread of the parent would
+    never be released there (that thread does not exist in the child)."""
+    global _LOCK
+    _LOCK = threading.RLock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_new_lock_after_fork)
+
+
 # -- where ----------------------------------------------------------------------------------------------
 def cache_dir(path: str | os.PathLike | None = None) -> Path | None:
     """The cache folder: ``path``, else ``$CASSHIP_CACHE_DIR``, else the user cache folder (absolute).
@@ -334,6 +345,30 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
         if lib is None:
             loaded, lib = _compile(fun, cc, flags, folder, extra_source)
     return (loaded, _library(lib)) if library else loaded
+
+
+def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None) -> ca.Function | None:
+    """``fun`` compiled, if this process or the cache already holds its library; else None, at once.
+
+    Never compiles and never waits for a compile running in another thread (then None).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+    flags : sequence of str or str, optional
+        As for :func:`compile_function`.
+    """
+    try:
+        cc = find_compiler(None)
+    except CompileError:
+        return None
+    flags, _ = chosen_flags(flags)
+    if not _LOCK.acquire(blocking=False):
+        return None
+    try:
+        return _compiled(fun, cc, flags, _usable_folder(None), "")[0]
+    finally:
+        _LOCK.release()
 
 
 def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
