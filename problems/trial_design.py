@@ -120,10 +120,12 @@ def design_on_fit(fit_file: Path, out: Path, rep: Report, *, dt: float, max_iter
                   covariance: str | None = None) -> dict:
     """Part 1 on a fit file: the standard manoeuvres (and, with ``free``, a free trial) ranked for the
     tactical diameter and for the port/starboard difference."""
+    fit_file, out = Path(fit_file), Path(out)
     model, p, belief, noise = fit_belief(fit_file, covariance)
     approach = Approach(model, p, dt=dt)
     out_rows = {}
-    rep.add(f"Fit file: `{fit_file}`. Belief: {belief.source}; {len(belief.names)} uncertain parameters. "
+    shown = fit_file.relative_to(out) if fit_file.is_relative_to(out) else fit_file
+    rep.add(f"Fit file: `{shown}`. Belief: {belief.source}; {len(belief.names)} uncertain parameters. "
             f"Noise of one {dt:g} s sample, as the fit weighs it: "
             + ", ".join(f"{k} {v:.3g}" for k, v in noise.items()) + " (SI, rad).")
     for target in ("tactical_diameter", TARGET):
@@ -136,7 +138,7 @@ def design_on_fit(fit_file: Path, out: Path, rep: Report, *, dt: float, max_iter
         rep.image(f"fig_fit_{target}.png", f"ranking for {target} on the fitted ship, the best trial")
         out_rows[target] = {"value": res.target.value, "best": res.best.name, "ranking": res.rows,
                             "free": res.free}
-    return {"fit_file": str(fit_file), "noise": noise, "belief": belief.source, "covariance": belief.kind,
+    return {"fit_file": str(shown), "noise": noise, "belief": belief.source, "covariance": belief.kind,
             "uncertain": list(belief.names), "designs": out_rows}
 
 
