@@ -240,14 +240,14 @@ class ParameterBelief:
             belief = cls.from_uncertainty(carried)
         elif covariance == "jackknife":
             has = f"it carries a {kind} one ({carried.source})" if carried is not None else "it carries none"
-            raise ValueError(f"{where} has no calibrated (jackknife) covariance: {has}; use covariance='robust' or "
-                             "'model'")
+            raise ValueError(f"{where} has no calibrated (jackknife) covariance: {has}; ask for the robust or the "
+                             "model-based one")
         else:
             belief = cls._free_block(fit, values, robust={None: None, "robust": True, "model": False}[covariance])
             if belief is None:
                 if not extra_std:
-                    raise ValueError(f"{where} has no free model parameter among {list(fit.free)}; give prior standard "
-                                 "deviations (extra_std)")
+                    raise ValueError(f"{where} has no free model parameter among {list(fit.free)}; give prior "
+                                     "standard deviations (extra_std)")
                 return cls.from_std(extra_std, values, source=source or f"prior around the values of {where}")
         belief = ParameterBelief(belief.names, belief.gaussian, f"{where}: {belief.source}", belief.kind)
         return belief._with_extra(extra_std, values, source, clash="the fit estimated")
