@@ -7,12 +7,13 @@ Examples::
         --target port_starboard_difference --duration 900 --corridor 1500 --speed-min 4 --csv next.csv --plot next.png
     casship design-trial --model kvlcc2 --prior-std N_r_dash=0.01,N_v_dash=0.03 --sigma psi=0.0035,r=0.0002 --no-free
 
-What is known now comes from ``--params`` (a fit file: its covariance over the free parameters,
-its noise standard deviations) and/or ``--prior-std`` (standard deviations of more parameters,
-around the file's or the published values). The ranked list gives, for each candidate trial, the
-target's expected standard deviation before and after it; the optimised free rudder sequence is
-written as a CSV a tank can run (time, rudder in degrees, propeller rate). Every option maps onto
-:func:`casship.design.design_trials`.
+What is known now comes from ``--params`` (a fit file: the covariance it carries -- calibrated by a
+run-level jackknife when the fit was -- or, with ``--covariance robust|model``, another of its
+covariances; its noise standard deviations) and/or ``--prior-std`` (standard deviations of more
+parameters, around the file's or the published values); the command says which covariance it used.
+The ranked list gives, for each candidate trial, the target's expected standard deviation before
+and after it; the optimised free rudder sequence is written as a CSV a tank can run (time, rudder in
+degrees, propeller rate). Every option maps onto :func:`casship.design.design_trials`.
 """
 from __future__ import annotations
 
@@ -28,6 +29,10 @@ TARGET_NAMES = ("tactical_diameter", "tactical_diameter_port", "advance", "advan
                 "first_overshoot_port", "port_starboard_difference")
 
 
+#: The covariances of :data:`casship.design.COVARIANCES` (listed here for the same reason).
+COVARIANCES = ("jackknife", "robust", "model")
+
+
 HELP = "rank the trials that would most reduce a prediction's uncertainty, and optimise a free rudder sequence"
 
 
@@ -36,6 +41,9 @@ def register(sub) -> None:
     p.add_argument("--model", required=True, metavar="NAME", help="registered model name")
     p.add_argument("--params", default=None, help="fit file (JSON from casship identify or a study): parameters, "
                                                   "covariance, noise")
+    p.add_argument("--covariance", default=None, choices=COVARIANCES,
+                   help="which covariance of the fit file is the belief (default: the one the file carries, "
+                        "calibrated by a jackknife when present)")
     p.add_argument("--prior-std", dest="prior_std", default=None,
                    help="standard deviations name=std,... of uncertain parameters the fit holds fixed (or all, "
                         "without --params)")
@@ -92,29 +100,20 @@ def _angles(text, what: str) -> list[float]:
 
 
 def _belief_and_noise(args, model):
-    """The belief and the noise from ``--params`` / ``--prior-std`` / ``--sigma``."""
-    from ..design import ParameterBelief
-    from ..identify import FitResult, read_params
+    """The belief and the noise from ``--params`` (with ``--covariance``) / ``--prior-std`` / ``--sigma``."""
+    from ..design import ParameterBelief, fit_noise
+    from ..identify import read_params
 
     extra = _pairs(args.prior_std, "--prior-std")
     sigma = _pairs(args.sigma, "--sigma")
     if args.params:
         model, p = read_params(args.params, args.model)
-        fit = FitResult.from_json(args.params)
-        has_free = any(q.split("@", 1)[0] in model.param_names for q in fit.free)
-        if has_free:
-            belief = ParameterBelief.from_fit(fit, extra_std=extra, params=model.param_dict(p))
-        elif extra:
-            belief = ParameterBelief.from_std(extra, model.param_dict(p), source=f"prior around {args.params}")
-        else:
-            raise ValueError(f"--params {args.params} estimates no model parameter; give --prior-std")
-        if not sigma:
-            noise = fit.noise.get("sigma") or {}
-            scale = float(fit.noise.get("weight_scale", 1.0))
-            sigma = {k: float(v) * scale for k, v in noise.items()}
-            if not sigma:
-                raise ValueError(f"--params {args.params} holds no output noise (an output-error fit's sigma); give --sigma")
+        belief = ParameterBelief.from_fit(args.params, covariance=args.covariance, extra_std=extra,
+                                          params=model.param_dict(p))
+        sigma = sigma or fit_noise(args.params)
     else:
+        if args.covariance:
+            raise ValueError("--covariance chooses among a fit file's covariances: give --params")
         if not extra:
             raise ValueError("give --params (a fit file) or --prior-std (what is uncertain now)")
         if not sigma:
@@ -136,6 +135,8 @@ def run(args) -> int:
         check_output_file(args.plot, overwrite=args.overwrite, what="--plot")
     model = get_model(args.model)
     model, p, belief, sigma = _belief_and_noise(args, model)
+    if not args.json:
+        print(f"belief: {belief.kind} ({belief.source}); {len(belief.names)} uncertain parameters")
     approach = Approach(model, p, speed=args.speed, dt=args.dt)
     limits = None
     if free:

@@ -125,7 +125,7 @@ class DesignResult:
         return {"target": {"name": self.target.name, "value": self.target.value, "unit": self.target.unit,
                            "gradient": dict(zip(self.belief.names, self.target.gradient.tolist()))},
                 "belief": {"names": list(self.belief.names), "mean": self.belief.mean, "std": self.belief.std,
-                           "source": self.belief.source},
+                           "source": self.belief.source, "covariance": self.belief.kind},
                 "noise": dict(self.noise), "criterion": self.criterion, "approach": dict(self.approach),
                 "ranking": [dict(r) for r in self.rows], "free": dict(self.free),
                 "trials": {n: {"kind": t.kind, "dt_s": t.dt, "rudder_deg": np.degrees(t.rudder).tolist()}
