@@ -83,3 +83,63 @@ def test_filter_bridges_a_gap_when_asked(tmp_path, capsys):
     assert main([*base, "--options", "on_gap=bridge"]) == 0
     out = capsys.readouterr()
     assert "bridged by 4 prediction-only row(s)" in out.err and '"loglik"' in out.out
+
+
+# -- casship design-trial ---------------------------------------------------------------------------------------
+DESIGN = ["design-trial", "--model", "kvlcc2", "--sigma", "psi=0.0035", "--dt", "4", "--zigzag", "20", "--pullout", "",
+          "--no-spiral"]
+
+
+def test_design_trial_refuses_what_it_misread_or_crashed_on(tmp_path, capsys):
+    """Before: ``--prior-std N_r_dash=0.01,N_r_dash=0.02`` used the second value (its own pair parser);
+    no candidate at all crashed with an IndexError (exit 1); ``--max-iter 0`` ran and wrote a sequence
+    "Maximum_Iterations_Exceeded, 0 iterations"; ``--csv`` with ``--no-free`` was ignored, so was one
+    path for ``--csv`` and ``--plot``."""
+    base = [*DESIGN, "--prior-std", "N_r_dash=0.01"]
+    _error(capsys, [*DESIGN, "--prior-std", "N_r_dash=0.01,N_r_dash=0.02", "--no-free"],
+           "--prior-std: 'N_r_dash' given more than once")
+    _error(capsys, [*base, "--no-free", "--turning", "", "--zigzag", ""], "no candidate trials and no free trial")
+    _error(capsys, [*base, "--max-iter", "0"], "--max-iter: must be a whole number >= 1, got 0")
+    _error(capsys, [*base, "--no-free", "--csv", str(tmp_path / "a.csv")], "--csv would have no effect: --no-free")
+    same = str(tmp_path / "b.png")
+    _error(capsys, [*base, "--csv", same, "--plot", same], "--csv and --plot name the same path")
+    assert not list(tmp_path.iterdir())
+
+
+def test_design_trial_writes_no_file_unasked_and_reads_a_likelihood_fit(tmp_path, capsys, monkeypatch):
+    """Before: every run wrote ``free_trial.csv`` into the working folder, so the second run there
+    failed ("file exists"); a fit file of ``casship identify`` (maximum likelihood: its noise is
+    ``R``) was refused as holding no output noise, so the documented ``--params fit.json`` failed on
+    the getting-started fit. Now the CSV is written with ``--csv`` only, and a likelihood fit's R
+    gives the noise of one sample (sqrt of its diagonal)."""
+    from casship.cli.cmd_design_trial import _fit_noise
+    from casship.identify import FitResult
+
+    monkeypatch.chdir(tmp_path)
+    run = [*DESIGN, "--prior-std", "N_r_dash=0.01", "--duration", "200", "--max-iter", "3"]
+    for _ in range(2):
+        assert main(run) == 0
+        assert "--csv FILE writes its rudder sequence" in capsys.readouterr().out
+    assert not list(tmp_path.iterdir())
+    fit = FitResult.from_dict({"model": "kvlcc2", "params": {}, "free": [], "estimates": {}, "std_errors": {},
+                               "noise": {"R": {"psi": 4e-6, "r": 1e-10}}})
+    assert _fit_noise(fit) == pytest.approx({"psi": 2e-3, "r": 1e-5})
+
+
+def test_solver_failures_of_the_free_trial_are_one_line_errors():
+    """Before: ``--corridor 1`` ended after a minute as "internal error (a bug in casship):
+    FreeTrialError" (a bare RuntimeError). Now it is casship's SolverError: one line, exit code 2."""
+    from casship.cli import is_user_error
+    from casship.design import FreeTrialError
+    from casship.errors import SolverError
+
+    assert issubclass(FreeTrialError, SolverError) and is_user_error(FreeTrialError("IPOPT failed"))
+
+
+def test_help_shows_no_default_for_a_flag(capsys):
+    """Before: ``--no-spiral  leave the spiral out (default: True)`` read as if the spiral were left
+    out by default."""
+    with pytest.raises(SystemExit):
+        main(["design-trial", "--help"])
+    out = capsys.readouterr().out
+    assert "--no-spiral           leave the spiral out\n" in out and "(default: True)" not in out

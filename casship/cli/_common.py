@@ -38,7 +38,8 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefau
     """Descriptions kept as written (examples), defaults shown unless there is none to show."""
 
     def _get_help_string(self, action):
-        if action.default in (None, False, argparse.SUPPRESS) or action.default == [] \
+        # a flag (store_true/store_false) has no value to show: "--no-free (default: True)" misleads
+        if action.default in (None, False, argparse.SUPPRESS) or action.default == [] or action.nargs == 0 \
                 or "%(default)" in (action.help or ""):
             return action.help
         return super()._get_help_string(action)
