@@ -8,7 +8,7 @@ import numpy as np
 from .runtime import BufferedCall
 from .angles import wrap
 from .data import Dataset, check_time
-from .errors import SolverError
+from .errors import DivergenceError, SolverError
 from .trajectory import Trajectory
 from .discretize import DiscreteModel, discretize
 from .model import Model
@@ -312,7 +312,8 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = N
             check_inputs(model, U, t)
     if not np.all(np.isfinite(X)):
         row = int(np.argwhere(~np.isfinite(X))[0, 0])
-        raise FloatingPointError(f"simulation of {model.name!r} diverged at t = {t[row]:g} s")
+        raise DivergenceError(f"simulation of {model.name!r} diverged at t = {t[row]:g} s (a step too long for its "
+                              "dynamics, or inputs far outside its range?)")
     if check_limits:
         warn_states(model, X, t)
     Y = eval_outputs(model, X, U, p)

@@ -143,3 +143,33 @@ def test_help_shows_no_default_for_a_flag(capsys):
         main(["design-trial", "--help"])
     out = capsys.readouterr().out
     assert "--no-spiral           leave the spiral out\n" in out and "(default: True)" not in out
+
+
+# -- divergence, sizes and settings of the closed loop and the simulator ----------------------------------------
+def test_a_diverging_run_is_a_one_line_error(capsys):
+    """Before: ``casship simulate --dt 100 --allow-out-of-range`` and ``casship autopilot --dt 1000``
+    (or ``--wind 1e6 0``) ended as "internal error (a bug in casship): FloatingPointError". Now the
+    divergence is casship's DivergenceError (a SolverError, still a FloatingPointError), one line
+    naming the time and what to check."""
+    from casship.errors import DivergenceError, SolverError
+
+    assert issubclass(DivergenceError, SolverError) and issubclass(DivergenceError, FloatingPointError)
+    _error(capsys, ["simulate", "--model", "kvlcc2", "--dt", "100", "--allow-out-of-range"],
+           "simulation of 'kvlcc2' diverged at t = 400 s")
+    _error(capsys, ["autopilot", "--model", "kvlcc2", "--wind", "1e6", "0"],
+           "closed loop of 'kvlcc2+wind' diverged at t = 0.2 s", "check dt, wind and current")
+
+
+@pytest.mark.parametrize("option", [["--t-end", "1e9"], ["--segment", "1e9"], ["--dt", "1e-6"]])
+def test_a_closed_loop_too_long_for_memory_is_refused(capsys, option):
+    """Before: MemoryError ("Unable to allocate 37.3 GiB"), reported as an internal error."""
+    _error(capsys, ["autopilot", "--model", "kvlcc2", *option], "closed loop: ", "casship.data.MAX_ROWS")
+
+
+def test_autopilot_settings_beyond_the_ship(capsys):
+    """Before: ``--steer-max 100`` (rad: 5730 deg) ran with the rudder allowed far past its stop;
+    ``--scenario rot-1e6`` ran a turn the reference model silently held to r_max (25.7 deg/min)."""
+    _error(capsys, ["autopilot", "--model", "kvlcc2", "--steer-max", "100"],
+           "steer_max = 100 rad (5730 deg) is beyond the valid range [-35, 35] deg (rudder stop) of 'delta'")
+    _error(capsys, ["autopilot", "--model", "kvlcc2", "--scenario", "rot-1e6"],
+           "the rate of turn 1e+06 deg/min is above the preset rate of turn r_max = 25.7 deg/min")
