@@ -173,3 +173,17 @@ def test_autopilot_settings_beyond_the_ship(capsys):
            "steer_max = 100 rad (5730 deg) is beyond the valid range [-35, 35] deg (rudder stop) of 'delta'")
     _error(capsys, ["autopilot", "--model", "kvlcc2", "--scenario", "rot-1e6"],
            "the rate of turn 1e+06 deg/min is above the preset rate of turn r_max = 25.7 deg/min")
+
+
+@pytest.mark.parametrize("argv, text", [
+    (["simulate", "--model", "nomoto1"], "--model nomoto1: has no vessel"),
+    (["simulate", "--model", "otter"], "--model otter: steers with its propellers ['n1', 'n2'], not a rudder"),
+    (["design-trial", "--model", "sog-cog", "--prior-std", "K=0.1", "--sigma", "chi=0.1"], "--model sog-cog: has no vessel"),
+    (["autopilot", "--model", "nomoto2"], "--model nomoto2: has no vessel"),
+])
+def test_a_model_the_command_cannot_run_names_those_it_can(capsys, argv, text):
+    """Before: "model 'nomoto1' has no vessel ...; build it with ModelBuilder.vessel = casship.Vessel(...)"
+    (simulate, design-trial) and "give steer" (autopilot): advice a command-line user cannot follow,
+    for models that ``casship simulate --list`` lists. Now the error names the registered ships."""
+    err = _error(capsys, argv, text, "registered: ['kvlcc2', 'kvlcc2-l7', 'mariner', 'mmg-twin-lowspeed'")
+    assert ("'otter'" in err) == (argv[0] == "autopilot")      # a twin-propeller craft has an autopilot

@@ -14,7 +14,7 @@ import sys
 from ..errors import InputError
 
 __all__ = ["Parser", "UsageError", "HelpFormatter", "add_model_option", "require", "load_model", "add_overwrite_option",
-           "add_limits_option", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
+           "add_limits_option", "check_ship", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
            "check_outputs", "write_output", "print_json", "refuse_unused"]
 
 
@@ -217,6 +217,39 @@ def load_model(name: str):
     from ..models import get_model
 
     return get_model(name)
+
+
+def check_ship(model, name: str, what: str, *, rudder: bool = True) -> None:
+    """Refuse a model the command cannot run (no vessel, or no rudder where manoeuvres need one),
+    naming the registered models it can run.
+
+    Parameters
+    ----------
+    model : Model
+    name : str
+        The ``--model`` as given.
+    what : str
+        What the command does, for the message (e.g. ``"a manoeuvre"``).
+    rudder : bool
+        Whether a rudder is needed (manoeuvres), or a vessel is enough (an autopilot also steers
+        a craft with two propellers).
+
+    Raises
+    ------
+    InputError
+    """
+    from ..models import get_model, model_names
+
+    def fits(m) -> bool:
+        return m.vessel is not None and (bool(m.vessel.rudders) or not rudder)
+
+    if fits(model):
+        return
+    why = ("has no vessel (particulars, rudder, propellers): it is not a ship model" if model.vessel is None else
+           f"steers with its propellers {list(model.vessel.propellers)}, not a rudder")
+    ships = [n for n in model_names() if fits(get_model(n))]
+    raise InputError(f"--model {name}: {why}; {what} needs a ship with {'a rudder' if rudder else 'a vessel'}, "
+                     f"registered: {ships} (in Python, a model of your own gets one with ModelBuilder.vessel)")
 
 
 def add_overwrite_option(parser: argparse.ArgumentParser) -> None:

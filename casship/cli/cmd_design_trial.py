@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import add_overwrite_option, check_outputs, count, parse_pairs, print_json, refuse_unused, write_output
+from ._common import add_overwrite_option, check_outputs, check_ship, count, parse_pairs, print_json, refuse_unused, write_output
 
 
 #: The targets of :data:`casship.design.TARGETS` (listed here so that the command line starts without CasADi).
@@ -127,6 +127,7 @@ def run(args) -> int:
     # before minutes of work: distinct paths, the --overwrite rule
     stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
     model = get_model(args.model)
+    check_ship(model, args.model, "a trial design")
     model, p, belief, sigma = _belief_and_noise(args, model)
     approach = Approach(model, p, speed=args.speed, dt=args.dt)
     limits = None

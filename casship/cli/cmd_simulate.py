@@ -8,8 +8,8 @@ Examples::
 """
 from __future__ import annotations
 
-from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model, load_record,
-                      print_json, refuse_unused, require, seed, write_output)
+from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, check_ship, load_model,
+                      load_record, print_json, refuse_unused, require, seed, write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
@@ -90,6 +90,8 @@ def run(args) -> int:
     else:
         model = load_model(args.model)
         p = model.params()
+    if not args.inputs:
+        check_ship(model, args.model, "a manoeuvre")
     L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
     measured = None
