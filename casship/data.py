@@ -37,6 +37,8 @@ def check_rows(n: float, what: str) -> int:
     """
     from .errors import InputError
 
+    if np.isnan(n):
+        raise InputError(f"{what}: the number of rows is not a number (a NaN duration or step)")
     if not n <= MAX_ROWS:
         raise InputError(f"{what} would make {n:.3g} rows, more than casship creates in one record "
                          f"({MAX_ROWS:.3g}, casship.data.MAX_ROWS); use a longer step or a shorter span")

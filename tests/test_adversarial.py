@@ -187,3 +187,72 @@ def test_a_model_the_command_cannot_run_names_those_it_can(capsys, argv, text):
     for models that ``casship simulate --list`` lists. Now the error names the registered ships."""
     err = _error(capsys, argv, text, "registered: ['kvlcc2', 'kvlcc2-l7', 'mariner', 'mmg-twin-lowspeed'")
     assert ("'otter'" in err) == (argv[0] == "autopilot")      # a twin-propeller craft has an autopilot
+
+
+# -- manoeuvres -------------------------------------------------------------------------------------------------
+def test_manoeuvres_whose_hold_outlasts_the_record(capsys):
+    """Before: ``--maneuver random --hold 1e9`` ran one constant rudder angle (9.6 deg) for the whole
+    run and called it random; ``--maneuver pullout --hold 1e9`` never released the rudder and printed
+    no metric, exit 0."""
+    _error(capsys, ["simulate", "--model", "kvlcc2", "--maneuver", "random", "--hold", "1e9"],
+           "hold 1e+09 s is not shorter than the record")
+    _error(capsys, ["simulate", "--model", "kvlcc2", "--maneuver", "pullout", "--hold", "1e9"],
+           "pull-out: the rudder would return at t = 1e+09 s, not before the end of the record")
+
+
+def test_pullout_metrics_are_printed_as_text(capsys):
+    """Before: the text output of a pull-out printed the approach and no metric (the JSON had two)."""
+    assert main(["simulate", "--model", "kvlcc2-l7", "--maneuver", "pullout", "--dt", "0.05"]) == 0
+    out = capsys.readouterr().out
+    assert "yaw_rate_at_release_deg_s" in out and "residual_yaw_rate_deg_s" in out
+
+
+def test_masked_inputs_are_refused_by_simulate():
+    """Before: a masked rudder entry was simulated with the value hidden under the mask."""
+    m = cs.models.nomoto_first_order()
+    t = np.arange(0.0, 10.0, 0.5)
+    delta = np.ma.array(np.full(t.size, 0.1), mask=t == 1.5)
+    with pytest.raises(ValueError, match=r"input 'delta' is masked at row 3 \(t = 1.5 s\)"):
+        cs.simulate(m, m.states(), t, {"delta": delta})
+    unmasked = cs.simulate(m, m.states(), t, {"delta": np.ma.array(np.full(t.size, 0.1))})
+    np.testing.assert_array_equal(unmasked["r"], cs.simulate(m, m.states(), t, {"delta": 0.1})["r"])
+
+
+# -- estimators: sizes and shapes -----------------------------------------------------------------------------------
+def _nomoto_result():
+    m = cs.models.nomoto_first_order()
+    t = np.arange(0.0, 20.0, 0.5)
+    data = cs.measure(cs.simulate(m, m.states(), t, {"delta": 0.1}), m, {"psi": 0.01}, seed=1)
+    ekf = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4)
+    return m, data, ekf, ekf.filter(data, cs.Gaussian(m.states(), [1e-2, 1e-4]))
+
+
+def test_prediction_and_nees_check_their_sizes():
+    """Before: ``ekf.predict(result, 1e9)`` allocated until the kernel killed the process (24 GB);
+    ``result.nees`` of a wrong shape raised numpy's "operands could not be broadcast"."""
+    from casship.errors import InputError
+
+    m, data, ekf, res = _nomoto_result()
+    with pytest.raises(InputError, match=r"EKF prediction: 1e\+09 s at steps of 0.5 s would make 2e\+09 rows"):
+        ekf.predict(res, 1e9)
+    with pytest.raises(InputError, match="the number of rows is not a number"):
+        ekf.predict(res, float("nan"))
+    assert ekf.predict(res, 5.0).t[-1] == pytest.approx(res.t[-1] + 5.0)
+    with pytest.raises(ValueError, match=r"nees: x_true has shape \(3, 2\), the estimates \(40, 2\)"):
+        res.nees(np.zeros((3, 2)))
+
+
+def test_an_ensemble_too_large_for_memory_is_refused(monkeypatch):
+    """Before: ``--estimator enkf --options members=10000000`` ran for two minutes and was killed by
+    the kernel (out of memory)."""
+    from casship.errors import InputError
+    from casship.estimators import base
+
+    m, data, _, _ = _nomoto_result()
+    dm = cs.discretize(m, 0.5, "rk4")
+    with pytest.raises(ValueError, match=r"option 'members' = 10000000 is more than 100000"):
+        cs.EnKF(dm, Q=1e-8, R=1e-4, options={"members": 10_000_000})
+    enkf = cs.EnKF(dm, Q=1e-8, R=1e-4, options={"members": 50})
+    monkeypatch.setattr(base, "MAX_DRAWS", 1000)         # 40 steps x 100 draws
+    with pytest.raises(InputError, match=r"EnKF: 40 steps x 100 random draws per step would need"):
+        enkf.filter(data, cs.Gaussian(m.states(), [1e-2, 1e-4]), seed=1)

@@ -14,7 +14,8 @@ from ._common import (add_limits_option, add_model_option, add_overwrite_option,
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
                  "overshoot_2_pct", "overshoot_3_deg", "overshoot_3_pct",
-                 "initial_turning_time_s", "period_s", "initial_turning_distance_m")
+                 "initial_turning_time_s", "period_s", "initial_turning_distance_m", "yaw_rate_at_release_deg_s",
+                 "residual_yaw_rate_deg_s")
 
 
 #: One-line description (the command list of ``casship --help``).

@@ -23,7 +23,8 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from ..data import Dataset
+from ..data import Dataset, check_rows
+from ..errors import InputError
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, compile_function, run_fold
@@ -52,6 +53,10 @@ def per_sample(a: np.ndarray, n: int) -> np.ndarray:
     if c == 1:
         return a.T.copy() if r > 1 else a.reshape(n).copy()
     return a.reshape(r, n, c).transpose(1, 0, 2).copy()
+
+
+#: The most random numbers a stochastic estimator draws up front for one record (2 GB of float64).
+MAX_DRAWS = 250_000_000
 
 
 class StepEstimator(Estimator):
@@ -231,6 +236,10 @@ class StepEstimator(Estimator):
         if not shapes:
             return {}
         sizes = [r * c for r, c in shapes.values()]
+        if n * sum(sizes) > MAX_DRAWS:
+            raise InputError(f"{self.name}: {n} steps x {sum(sizes)} random draws per step would need "
+                             f"{8 * n * sum(sizes) / 1e9:.3g} GB at once (more than {8 * MAX_DRAWS / 1e9:g} GB, "
+                             "casship.estimators.base.MAX_DRAWS): fewer members or a shorter record")
         z = rng.standard_normal((n, sum(sizes)))
         out, start = {}, 0
         for (name, (r, c)), size in zip(shapes.items(), sizes):
@@ -356,7 +365,8 @@ class StepEstimator(Estimator):
                              f"{list(m.state_names)}")
         t_last = float(result.t[-1])
         if np.ndim(t) == 0:
-            steps = int(np.floor(float(t) / self.dmodel.dt + 1e-9))
+            steps = check_rows(np.floor(float(t) / self.dmodel.dt + 1e-9),
+                               f"{self.name} prediction: {float(t):g} s at steps of {self.dmodel.dt:g} s")
             if steps < 1:
                 raise ValueError(f"prediction horizon {t} s is shorter than one step ({self.dmodel.dt:g} s)")
             times = t_last + self.dmodel.dt * np.arange(1, steps + 1)

@@ -237,7 +237,11 @@ class FilterResult:
         ----------
         x_true : (N, nx) array
         """
-        err = np.asarray(x_true, dtype=float) - self.x
+        x_true = np.asarray(x_true, dtype=float)
+        if x_true.shape != self.x.shape:
+            raise ValueError(f"nees: x_true has shape {x_true.shape}, the estimates {self.x.shape} (rows, states "
+                             f"{list(self.state_names)})")
+        err = x_true - self.x
         if self.angle_states.any():
             err[:, self.angle_states] = wrap(err[:, self.angle_states])
         return np.einsum("ki,ki->k", err, np.linalg.solve(self.P, err[..., None])[..., 0])
