@@ -512,12 +512,26 @@ def read_frame(path, **read_options):
         raise ValueError(f"{name}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
     if frame.shape[0] == 0:
         raise ValueError(f"{name}: no data rows below the header {list(frame.columns)}")
+    if isinstance(path, (str, Path)) and not read_options:
+        _refuse_short_rows(Path(path), frame.shape[1])
     header = _header(path, read_options)
     twice = sorted({c for c in header if header.count(c) > 1})
     if twice:
         raise ValueError(f"{name}: column(s) {twice} appear more than once in the header; which one is meant "
                          "cannot be told: rename or remove the copies")
     return frame
+
+
+def _refuse_short_rows(path: Path, width: int) -> None:
+    """A row with fewer fields than the header (a truncated line) is an error: pandas would fill the
+    missing fields with NaN, which a measured column reads as "not measured"."""
+    import csv
+
+    with path.open(newline="") as f:
+        for number, row in enumerate(csv.reader(f), start=1):
+            if row and len(row) < width:
+                raise ValueError(f"{path}: line {number} has {len(row)} field(s), the header {width}: a truncated "
+                                 "row (write an empty field, a,,c, where a value is missing)")
 
 
 def _header(path, read_options) -> list[str]:

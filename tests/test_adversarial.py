@@ -256,3 +256,40 @@ def test_an_ensemble_too_large_for_memory_is_refused(monkeypatch):
     monkeypatch.setattr(base, "MAX_DRAWS", 1000)         # 40 steps x 100 draws
     with pytest.raises(InputError, match=r"EnKF: 40 steps x 100 random draws per step would need"):
         enkf.filter(data, cs.Gaussian(m.states(), [1e-2, 1e-4]), seed=1)
+
+
+# -- records --------------------------------------------------------------------------------------------------------
+def test_a_truncated_csv_row_is_refused(tmp_path):
+    """Before: a row with fewer fields than the header was filled with NaN by pandas: a truncated
+    heading read as "not measured", silently. An empty field (``a,,c``) still means not measured."""
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,psi,delta\n0,0.1,0\n1,0.2\n2,0.3,0\n")
+    with pytest.raises(ValueError, match="bad.csv: line 3 has 2 field.s., the header 3: a truncated row"):
+        cs.Dataset.from_csv(bad)
+    good = tmp_path / "good.csv"
+    good.write_text("t,psi,delta\n0,0.1,0\n1,,0\n2,0.3,0\n")
+    assert np.isnan(cs.Dataset.from_csv(good)["psi"][1])
+
+
+def test_too_few_samples_for_a_noise_estimate_say_so():
+    """Before: "the noise of 'x' cannot be estimated from the record (a constant channel)" for a
+    two-row record whose x was not constant."""
+    m = cs.models.nomoto_first_order()
+    data = cs.Dataset([0.0, 1.0], {"psi": [0.0, 0.5], "delta": [0.1, 0.1]})
+    with pytest.raises(ValueError, match=r"noise of 'psi' .* \(only 2 measured sample\(s\), too few\)"):
+        cs.noise_from_data(m, data, ["psi"])
+
+
+def test_a_closed_pipe_is_not_an_error():
+    """Before: ``casship cache info | head -1`` ended with "casship cache: error: [Errno 32] Broken pipe"."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from casship.cli import main; sys.stdout.close = lambda: None\n"
+            "class Closed:\n"
+            "    def write(self, s): raise BrokenPipeError(32, 'Broken pipe')\n"
+            "    def flush(self): pass\n"
+            "    def fileno(self): return sys.__stdout__.fileno()\n"
+            "sys.stdout = Closed(); sys.exit(main(['cache', 'info']))")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 141 and "error" not in run.stderr, run.stderr
