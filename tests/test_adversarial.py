@@ -293,3 +293,24 @@ def test_a_closed_pipe_is_not_an_error():
             "sys.stdout = Closed(); sys.exit(main(['cache', 'info']))")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert run.returncode == 141 and "error" not in run.stderr, run.stderr
+
+
+def test_filter_plot_shows_rates_in_degrees_and_is_not_flattened_by_the_prior(tmp_path, monkeypatch):
+    """Before: the yaw rate was drawn in rad/s beside a heading in degrees, and the +-2 std band of a
+    vague prior (+-2 rad/s on the first row) set the vertical range: the estimate of r looked like a
+    flat zero line. Now rates are in deg/s and the range follows the estimate after the first rows."""
+    from matplotlib.figure import Figure
+
+    m, data, _, _ = _nomoto_result()
+    ekf = cs.EKF(cs.discretize(m, 0.5, "rk4"), Q=1e-8, R=1e-4)
+    res = ekf.filter(data, cs.Gaussian(m.states(), [1.0, 1.0]))
+    figures = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: figures.append(fig))
+    res.plot(tmp_path / "r.png", measured={"psi": data["psi"]})
+    ax_psi, ax_r = figures[0].axes
+    assert ax_r.get_ylabel() == "r [deg/s]" and ax_psi.get_ylabel() == "psi [deg]"
+    r_deg = np.degrees(res["r"])
+    lo, hi = ax_r.get_ylim()
+    assert lo <= r_deg[5:].min() and hi >= r_deg[5:].max()
+    assert hi - lo < 0.1 * 4 * np.degrees(res.std[0, 1])      # far narrower than the prior's band
+    assert "measured" in [t.get_text() for t in ax_psi.get_legend().get_texts()]
