@@ -8,15 +8,7 @@ import pytest
 import casship as cs
 from casship.cli import main
 
-
-def _error(capsys, argv, *texts):
-    """The command ends with exit code 2 and one error line holding every one of ``texts``."""
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and len([x for x in err.splitlines() if ": error: " in x]) == 1, err
-    for text in texts:
-        assert text in err, (text, err)
-    return err
+from cli_checks import one_line_error as _error
 
 
 def _kvlcc2_record(tmp_path, n=120, **change):
