@@ -24,7 +24,7 @@ import control
 import numpy as np
 
 from ..angles import wrap_sym
-from .law import Actuator
+from .law import Actuator, law_function
 from .reference import ReferenceModel
 
 __all__ = ["LinearController", "SIGNALS"]
@@ -164,8 +164,7 @@ class LinearController:
         y = ca.vertcat(*[values[n] for n in self.inputs])
         u = ca.mtimes(ca.DM(self.C), x) + ca.mtimes(ca.DM(self.D), y) if x.numel() else ca.mtimes(ca.DM(self.D), y)
         sat = self.gear_command(u, steer, self.dt) if np.isfinite(self.actuator.steer_max) else u
-        cmd = ca.fmin(ca.fmax(u, -self.actuator.steer_max), self.actuator.steer_max) \
-            if np.isfinite(self.actuator.steer_max) else u
+        cmd = self.gear_command(u, None, self.dt)          # the command clipped at the angle limit
         if x.numel():
             x_next = ca.mtimes(ca.DM(self.A), x) + ca.mtimes(ca.DM(self.B), y)
             if self.anti_windup:
@@ -180,12 +179,4 @@ class LinearController:
     def function(self) -> ca.Function:
         """``controller(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d, r_d,
         a_d, e)``."""
-        n = len(self.MEMORY)
-        mem, ref, chi, r, dt, U, st = (ca.SX.sym(k, s) for k, s in (("memory", n), ("ref", 1), ("chi", 1), ("r", 1),
-                                                                     ("dt", 1), ("speed", 1), ("steering", 1)))
-        bias = ca.SX.sym("bias")
-        out = self.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
-        names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
-        return ca.Function("controller", [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"],
-                           ["memory_next"] + names[1:])
+        return law_function(self, "controller")
