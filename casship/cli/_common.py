@@ -73,26 +73,24 @@ def positive(text: str) -> float:
     return value
 
 
-def count(text: str) -> int:
-    """argparse type: a whole number >= 1 (workers, iterations, a decimation factor)."""
+def _whole(text: str, low: int, what: str) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text}")
+    if value < low:
+        raise argparse.ArgumentTypeError(f"{what} a whole number >= {low}, got {text}")
     return value
+
+
+def count(text: str) -> int:
+    """argparse type: a whole number >= 1 (workers, iterations, a decimation factor)."""
+    return _whole(text, 1, "must be")
 
 
 def seed(text: str) -> int:
     """argparse type: a random seed, a whole number >= 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text}")
-    return value
+    return _whole(text, 0, "a seed is")
 
 
 def parse_items(text: str | None, what: str = "list", *, unique: bool = True) -> list[str]:

@@ -64,15 +64,8 @@ class StepEstimator(Estimator):
 
     Parameters
     ----------
-    dmodel : DiscreteModel
-    Q : covariance of the process noise ``w`` (nw x nw; scalar, variances, matrix or name mapping),
-        with the one meaning stated in ``docs/architecture.md``: the covariance of ``w`` held over
-        a sampling interval; estimators in continuous time use the spectral density ``Q * dt``
-    R : covariance of one sampled measurement of the measured outputs (same forms)
-    measured : sequence of str, optional
-        Output names that are measured (default: all outputs of the model).
-    options : EstimatorOptions subclass or mapping, optional
-        The estimator's typed options (``Est.Options``); an unknown key raises ``ValueError``.
+    dmodel, Q, R, measured, options
+        As for :class:`~casship.estimators.contract.Estimator` (the contract).
 
     Attributes
     ----------
@@ -271,14 +264,8 @@ class StepEstimator(Estimator):
 
         Parameters
         ----------
-        data : Dataset
-            Columns named like the model inputs (finite) and measured outputs (NaN = missing).
-        prior : Gaussian
-            Belief about the state at the first time stamp, before its measurement.
-        p : array or mapping, optional
-            Model parameters (nominal by default).
-        seed : int or Generator, optional
-            For stochastic estimators (EnKF): fixes every draw.
+        data, prior, p, seed
+            As for :meth:`Estimator.filter <casship.estimators.contract.Estimator.filter>`.
 
         Returns
         -------
@@ -404,14 +391,8 @@ class StepEstimator(Estimator):
 
         Parameters
         ----------
-        prior : Gaussian
-            Belief about the state at the first sample.
-        p : array or mapping, optional
-            Model parameters (nominal by default).
-        u : array, optional
-            Inputs before the first update (zeros by default).
-        seed : int or numpy.random.Generator, optional
-            For stochastic estimators.
+        prior, p, u, seed
+            As for :meth:`Estimator.online <casship.estimators.contract.Estimator.online>`.
 
         Returns
         -------
