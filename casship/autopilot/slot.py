@@ -141,20 +141,10 @@ class LinearController:
 
         Parameters
         ----------
-        mem : casadi.SX
-            Memory (:attr:`MEMORY`).
-        ref : casadi.SX
-            Course command [rad].
-        chi, r : casadi.SX
-            Fed-back angle [rad] and rate [rad/s].
-        dt : float
-            Loop period [s] (must be the controller's).
-        speed : casadi.SX, optional
-            Unused.
-        steer : casadi.SX, optional
-            Present steering (for the anti-windup against the rate limit).
-        bias : casadi.SX, optional
-            Unused.
+        mem, ref, chi, r, dt, speed, steer, bias
+            As for :meth:`Autopilot.symbolic_step <casship.autopilot.law.Autopilot.symbolic_step>`, with
+            ``mem`` as in :attr:`MEMORY`, ``dt`` the controller's period, ``steer`` driving the
+            anti-windup against the rate limit; ``speed`` and ``bias`` are unused.
         """
         chi_d, r_d, a_d = mem[0], mem[1], mem[2]
         x = mem[3:]
