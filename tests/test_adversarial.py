@@ -306,3 +306,36 @@ def test_filter_plot_shows_rates_in_degrees_and_is_not_flattened_by_the_prior(tm
     assert lo <= r_deg[5:].min() and hi >= r_deg[5:].max()
     assert hi - lo < 0.1 * 4 * np.degrees(res.std[0, 1])      # far narrower than the prior's band
     assert "measured" in [t.get_text() for t in ax_psi.get_legend().get_texts()]
+
+
+# -- outputs ----------------------------------------------------------------------------------------------------
+def _unwritable_folder(tmp_path):
+    """A folder nothing can be written into: read-only for a normal user; /proc for root (which
+    permission bits do not stop)."""
+    import os
+    from pathlib import Path
+
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        if not Path("/proc").is_dir():
+            pytest.skip("running as root without /proc: no folder root cannot write into")
+        return Path("/proc")
+    folder = tmp_path / "read-only"
+    folder.mkdir()
+    folder.chmod(0o500)
+    return folder
+
+
+def test_an_unwritable_output_folder_is_named_before_any_work(tmp_path, capsys):
+    """Before: ``casship filter ... --out /proc/x.csv`` ran the filter and then failed with
+    "[Errno 2] No such file or directory: '/proc/.x.partial-22137.csv'", naming a temporary file
+    the user never gave (the same for demo --out and autopilot --plot). Now the option and the
+    folder are named at the start."""
+    from casship.outdir import check_output_file, check_output_folder
+
+    folder = _unwritable_folder(tmp_path)
+    with pytest.raises(PermissionError, match=f"--out {folder}/x.csv: cannot write into the folder {folder}"):
+        check_output_file(folder / "x.csv")
+    with pytest.raises(PermissionError, match=f"--plot {folder}/ap: cannot write into the folder {folder}"):
+        check_output_folder(folder / "ap", what="--plot")
+    _error(capsys, ["demo", "--quick", "--out", str(folder / "demo")], "cannot write into the folder")
+    assert not [p for p in tmp_path.rglob(".casship-probe-*")]
