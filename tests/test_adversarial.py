@@ -339,3 +339,19 @@ def test_an_unwritable_output_folder_is_named_before_any_work(tmp_path, capsys):
         check_output_folder(folder / "ap", what="--plot")
     _error(capsys, ["demo", "--quick", "--out", str(folder / "demo")], "cannot write into the folder")
     assert not [p for p in tmp_path.rglob(".casship-probe-*")]
+
+
+def test_a_plot_is_written_in_the_format_its_name_says(tmp_path, capsys):
+    """Before: ``--plot est.pdf`` wrote PNG data under the .pdf name (filter, simulate), and
+    ``design-trial --plot o.xyz`` ended, after the work, as "internal error: ValueError: Format 'xyz'
+    is not supported". Now .png, .pdf and .svg are written as such and any other name is refused first."""
+    pdf = tmp_path / "turn.pdf"
+    assert main(["simulate", "--model", "kvlcc2-l7", "--dt", "0.2", "--plot", str(pdf)]) == 0
+    assert pdf.read_bytes()[:5] == b"%PDF-"
+    capsys.readouterr()
+    _error(capsys, ["simulate", "--model", "kvlcc2-l7", "--plot", str(tmp_path / "turn.xyz")],
+           "a figure is written as .png, .pdf, .svg")
+    _error(capsys, [*DESIGN, "--prior-std", "N_r_dash=0.01", "--no-free", "--plot", str(tmp_path / "o.xyz")],
+           "--plot", "a figure is written as")
+    m, data, ekf, res = _nomoto_result()
+    assert res.plot(tmp_path / "est.svg").read_text().lstrip().startswith("<?xml")

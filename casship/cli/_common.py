@@ -296,6 +296,10 @@ def load_record(path, model=None, *, wrap_angles: bool = False):
 
 
 # -- outputs ---------------------------------------------------------------------------------------------
+#: The figure formats of ``--plot`` (chosen by the file name's suffix).
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
 def check_outputs(outputs: dict[str, object], *, overwrite: bool, folders: tuple[str, ...] = ()) -> dict:
     """Check every output of a command before any work: distinct paths, the ``--overwrite`` rule.
 
@@ -317,7 +321,8 @@ def check_outputs(outputs: dict[str, object], *, overwrite: bool, folders: tuple
     Raises
     ------
     InputError
-        Two options naming the same path.
+        Two options naming the same path, or a ``--plot`` file whose suffix is not a figure format
+        (:data:`PLOT_SUFFIXES`).
     FileExistsError, PermissionError, ...
         As :func:`casship.outdir.check_output_file` and :func:`~casship.outdir.check_output_folder`.
     """
@@ -326,6 +331,10 @@ def check_outputs(outputs: dict[str, object], *, overwrite: bool, folders: tuple
     from ..outdir import check_output_file, check_output_folder, stamp
 
     given = {k: Path(v) for k, v in outputs.items() if v}
+    for option, path in given.items():
+        if option == "--plot" and option not in folders and path.suffix.lower() not in PLOT_SUFFIXES:
+            raise InputError(f"--plot {path}: a figure is written as {', '.join(PLOT_SUFFIXES)}; give a file name "
+                             "ending so")
     seen = {}
     for option, path in given.items():
         key = path.absolute().resolve()

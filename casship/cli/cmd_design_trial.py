@@ -59,7 +59,7 @@ def register(sub) -> None:
     p.add_argument("--knot", type=float, default=None, help="free trial: time between rudder knots [s] (default L/U/4)")
     p.add_argument("--max-iter", dest="max_iter", type=count, default=150, help="free trial: iteration limit")
     p.add_argument("--csv", default=None, help="write the free rudder sequence as CSV (t_s, rudder_deg, n)")
-    p.add_argument("--plot", default=None, help="PNG: ranking, the best trial's rudder, track and speed")
+    p.add_argument("--plot", default=None, help="figure (.png, .pdf or .svg): ranking, the best trial's rudder, track and speed")
     p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
     add_overwrite_option(p)
     p.set_defaults(func=run, parser=p)

@@ -82,7 +82,7 @@ def register(sub) -> None:
     p.add_argument("--options", default=None, help="estimator options key=value,... (e.g. gate=0.999,members=100)")
     p.add_argument("--seed", type=seed, default=0, help="seed of stochastic estimators (EnKF)")
     p.add_argument("--out", default=None, help="CSV of estimates and standard deviations")
-    p.add_argument("--plot", default=None, help="PNG plot of the estimates with 2-sigma bands")
+    p.add_argument("--plot", default=None, help="figure (.png, .pdf or .svg) of the estimates with 2-sigma bands")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     add_overwrite_option(p)
     add_limits_option(p)

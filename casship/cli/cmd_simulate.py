@@ -55,7 +55,7 @@ def register(sub) -> None:
                         "from its measured initial state")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--csv", default=None, help="save the trajectory as CSV")
-    p.add_argument("--plot", default=None, help="save a plot (PNG)")
+    p.add_argument("--plot", default=None, help="save a figure (.png, .pdf or .svg)")
     add_overwrite_option(p)
     add_limits_option(p)
     p.set_defaults(func=run, parser=p)
@@ -170,6 +170,8 @@ def _print_text(out) -> None:
 
 
 def _plot(traj, measured, path, title="") -> None:
+    from pathlib import Path
+
     import numpy as np
     from matplotlib.figure import Figure
 
@@ -196,4 +198,4 @@ def _plot(traj, measured, path, title="") -> None:
     ax2.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
+    fig.savefig(path, dpi=110, format=Path(path).suffix[1:].lower() or "png")

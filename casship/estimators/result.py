@@ -292,7 +292,7 @@ class FilterResult:
         return "\n".join(lines)
 
     def plot(self, path, states=None, *, measured=None, t_measured=None) -> Path:
-        """Estimates with +-2 standard deviations over time, one panel per state (PNG at ``path``).
+        """Estimates with +-2 standard deviations over time, one panel per state.
 
         Angles and angular rates (states in rad, rad/s, ...) are drawn in degrees; axes carry the
         units. The vertical range covers the estimate, the measurements and the band wherever it is
@@ -302,7 +302,8 @@ class FilterResult:
         Parameters
         ----------
         path : path
-            The PNG file to write.
+            The figure file to write (its suffix chooses the format: ``.png``, ``.pdf``, ``.svg``...;
+            PNG without one).
         states : sequence of str, optional
             The states to draw (all by default).
         measured : mapping state -> array, optional
@@ -358,7 +359,7 @@ class FilterResult:
         axes[-1, 0].set_xlabel("t [s]")
         fig.tight_layout()
         path = Path(path)
-        fig.savefig(path, dpi=120, format="png")
+        fig.savefig(path, dpi=120, format=path.suffix[1:].lower() or "png")
         return path
 
     def to_dataset(self) -> Dataset:
