@@ -395,14 +395,14 @@ class Dataset:
 
     @classmethod
     def from_pandas(cls, frame, time: str = "t", units: Mapping[str, str] | None = None) -> "Dataset":
-        """A dataset from a pandas DataFrame with a time column.
+        """A dataset from a pandas DataFrame with a time column (or an index of that name).
 
         Parameters
         ----------
         frame : pandas.DataFrame
             Numeric columns.
         time : str
-            Name of the time column.
+            Name of the time column, or of the frame's index (``frame.set_index("t")``) [s].
         units : mapping, optional
             Column -> unit (default: ``frame.attrs["units"]``).
 
@@ -410,8 +410,14 @@ class Dataset:
         -------
         Dataset
         """
+        twice = sorted({str(c) for c in frame.columns if list(frame.columns).count(c) > 1})
+        if twice:
+            raise ValueError(f"column(s) {twice} appear more than once in the frame; which one is meant cannot be told")
+        if time not in frame.columns and frame.index.name == time:
+            frame = frame.reset_index()
         if time not in frame.columns:
-            raise ValueError(f"no time column {time!r}; columns: {list(frame.columns)}")
+            raise ValueError(f"no time column {time!r} (nor an index of that name); columns: {list(frame.columns)}, "
+                             f"index: {frame.index.name!r}; give time=NAME")
         from pandas.api.types import is_numeric_dtype
 
         non_numeric = [str(c) for c in frame.columns if not is_numeric_dtype(frame[c])]

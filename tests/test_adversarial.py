@@ -355,3 +355,24 @@ def test_a_plot_is_written_in_the_format_its_name_says(tmp_path, capsys):
            "--plot", "a figure is written as")
     m, data, ekf, res = _nomoto_result()
     assert res.plot(tmp_path / "est.svg").read_text().lstrip().startswith("<?xml")
+
+
+def test_a_pandas_frame_indexed_by_time_and_a_file_that_is_no_result():
+    """Before: ``Dataset.from_pandas(frame.set_index("t"))`` said "no time column 't'" (the index was
+    never looked at); a frame with two ``psi`` columns failed further on without naming them."""
+    import pandas as pd
+
+    frame = pd.DataFrame({"t": [0.0, 1.0, 2.0], "psi": [0.1, 0.2, 0.3]})
+    np.testing.assert_array_equal(cs.Dataset.from_pandas(frame.set_index("t"))["psi"], frame["psi"])
+    with pytest.raises(ValueError, match=r"column\(s\) \['psi'\] appear more than once in the frame"):
+        cs.Dataset.from_pandas(pd.DataFrame(np.ones((2, 3)), columns=["t", "psi", "psi"]))
+    with pytest.raises(ValueError, match="no time column 'time' .nor an index of that name."):
+        cs.Dataset.from_pandas(frame, time="time")
+
+
+def test_loading_a_file_that_is_no_saved_result(tmp_path):
+    """Before: ``FilterResult.load("run.csv")`` said "This file contains pickled (object) data..."."""
+    path = tmp_path / "run.csv"
+    path.write_text("t,psi\n0,1\n")
+    with pytest.raises(ValueError, match=r"run.csv: not a saved FilterResult \(not a numpy .npz file\)"):
+        cs.FilterResult.load(path)

@@ -394,7 +394,13 @@ class FilterResult:
         ----------
         path : path
         """
-        with np.load(Path(path), allow_pickle=False) as f:
+        try:
+            f = np.load(Path(path), allow_pickle=False)
+        except ValueError:          # numpy's answer to a file that is not .npy/.npz speaks of pickles
+            raise ValueError(f"{path}: not a saved FilterResult (not a numpy .npz file)") from None
+        if not hasattr(f, "files"):
+            raise ValueError(f"{path}: not a saved FilterResult (a single .npy array, not an .npz archive)")
+        with f:
             missing = [k for k in (*_ARRAYS, "meta") if k not in f.files]
             if missing:
                 raise ValueError(f"{path}: not a saved FilterResult (missing {missing})")
