@@ -260,7 +260,7 @@ def filter_file(args, model=None):
         check_states(model, prior.mean, what="starting state (--x0 or the record)")
         # the record's own step; a longer interval (a gap) is the estimator's to refuse or bridge
         # (option on_gap), checked at the state where it happens
-        check_step(model, dt, prior.mean, U[0] if model.nu else np.zeros(0), model.params(),
+        check_step(model, float(np.median(data.dt)), prior.mean, U[0] if model.nu else np.zeros(0), model.params(),
                    args.method, where=" (the median step of the record)")
     _check_start(est, prior, data)
     result = (est.smooth if args.smooth else est.filter)(data, prior, seed=args.seed)
