@@ -53,8 +53,9 @@ def check_noise(model, noise: Mapping[str, float]) -> dict:
 
 
 def fit_noise(fit) -> dict:
-    """The noise of one sample per measured channel as a fit weighs it: its output standard deviations
-    times its fitted residual scale.
+    """The noise of one sample per measured channel as a fit weighs it: an output-error fit's output
+    standard deviations times its fitted residual scale, or the square roots of the diagonal of a
+    likelihood fit's ``R``.
 
     A new trial's record enters the likelihood with weight 1 (per-record weights of the fit are a
     choice of its cost over its own records). These deviations include the model-structure error of
@@ -63,7 +64,7 @@ def fit_noise(fit) -> dict:
     Parameters
     ----------
     fit : FitResult, str or Path
-        An output-error fit or its file.
+        An output-error or likelihood fit, or its file.
 
     Returns
     -------
@@ -73,18 +74,21 @@ def fit_noise(fit) -> dict:
     Raises
     ------
     ValueError
-        A fit without output standard deviations (not an output-error fit).
+        A fit without output noise (neither ``sigma`` nor ``R``).
     """
     from ..identify import FitResult
 
     where = "the fit"
     if not isinstance(fit, FitResult):
         where, fit = str(fit), FitResult.from_json(fit)
-    sigma = (fit.noise or {}).get("sigma") or {}
-    if not sigma:
-        raise ValueError(f"{where} holds no output noise (an output-error fit's sigma); give the noise explicitly")
-    scale = float((fit.noise or {}).get("weight_scale", 1.0))
-    return {str(k): float(v) * scale for k, v in sigma.items()}
+    noise = fit.noise or {}
+    if noise.get("sigma"):
+        scale = float(noise.get("weight_scale", 1.0))
+        return {str(k): float(v) * scale for k, v in noise["sigma"].items()}
+    if noise.get("R"):
+        return {str(k): float(np.sqrt(v)) for k, v in noise["R"].items()}
+    raise ValueError(f"{where} holds no output noise (an output-error fit's sigma or a likelihood fit's R); give the "
+                     "noise explicitly")
 
 
 def trial_information(approach: Approach, trial: Trial, names: Sequence[str], noise: Mapping[str, float], *,
