@@ -61,7 +61,7 @@ try:
 except ImportError:
     msvcrt = None
 
-__all__ = ["compile_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo"]
+__all__ = ["compile_function", "cached_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo"]
 
 _ENV_DIR = "CASSHIP_CACHE_DIR"
 _OFF = ("off", "0", "no", "false", "none")
@@ -331,9 +331,40 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
         if default and lib is None and not accepts_native(cc):     # only a refused flag is dropped
             flags = PORTABLE_FLAGS
             loaded, lib = _compiled(fun, cc, flags, folder, extra_source)
-        if lib is None:
-            loaded, lib = _compile(fun, cc, flags, folder, extra_source)
+    if lib is None:         # not under the process lock: other threads look up and load meanwhile
+        loaded, lib = _compile(fun, cc, flags, folder, extra_source)
     return (loaded, _library(lib)) if library else loaded
+
+
+def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None, compiler: str | None = None,
+                    cache_dir: str | os.PathLike | None = None):
+    """``fun`` compiled, if this process or the on-disk cache already has it; else ``None``.
+
+    Never compiles (so it returns at once): a caller can run ``fun`` interpreted meanwhile and
+    compile it in the background with :func:`compile_function`. Arguments as there.
+
+    Parameters
+    ----------
+    fun : casadi.Function
+    flags : sequence of str or str, optional
+    compiler : str, optional
+    cache_dir : str or path, optional
+
+    Returns
+    -------
+    casadi.Function or None
+    """
+    try:
+        cc = find_compiler(compiler)
+    except CompileError:
+        return None
+    flags, default = chosen_flags(flags)
+    with _LOCK:
+        folder = _usable_folder(cache_dir)
+        loaded, lib = _compiled(fun, cc, flags, folder, "")
+        if default and lib is None and not accepts_native(cc):
+            loaded, lib = _compiled(fun, cc, PORTABLE_FLAGS, folder, "")
+    return loaded
 
 
 def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
@@ -355,7 +386,8 @@ def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
 
 def _remember(hit: tuple, key: str, folder) -> tuple:
     loaded, lib = hit
-    _LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
+    with _LOCK:
+        _LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
     return loaded, lib
 
 
