@@ -38,7 +38,7 @@ from ..kit import data_folder
 from .calibration import asymmetry_check, calibration_table, jackknife, mirror_check
 from .data import first_rudder_side, load_runs, regime
 from .propulsion import open_water
-from .report import slug, write_outputs
+from .report import fold_figure, slug, write_outputs
 from .validate import evaluate, write_fold_file
 from .workflow import fit_fold, smooth_runs, study_model, with_smoothed_speed
 
@@ -67,13 +67,15 @@ def fold_file_name(kind: str, label: str) -> str:
 
 
 def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int) -> dict:
-    """One fold: fit on the runs not held out, write the fit file, replay it on the held-out runs.
-    Independent of every other fold (folds may run in any order or in parallel)."""
+    """One fold: fit on the runs not held out, write the fit file, replay it on the held-out runs and
+    draw their figure. Independent of every other fold (folds may run in any order or in parallel)."""
     kind, label, held = spec
     fold = fit_fold([r for r in runs if r.name not in held], smoothed, curve, dt=dt, max_free=max_free)
     path = write_fold_file(fold, out / fold_file_name(kind, label))
     rows = [evaluate(r, path) for r in runs if r.name in held]
-    return {"kind": kind, "label": label, "held": held, "fold": fold, "file": path.name, "evaluations": rows}
+    res = {"kind": kind, "label": label, "held": held, "fold": fold, "file": path.name, "evaluations": rows}
+    res["figure"] = fold_figure(out, runs, res)
+    return res
 
 
 def in_sample(run, fit_path: Path) -> tuple[dict, dict]:
