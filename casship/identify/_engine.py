@@ -350,12 +350,14 @@ class OutputErrorEngine(Engine):
     def _details(self, r, ctx, run) -> dict:
         rm, k = ctx["rm"], ctx["rm"].k
         R = np.vstack([out["r"][:, :take].T for _, out, take in run])                    # (N, ny)
-        ny = R.shape[1]
-        # a chunk's J is (ny, CHUNK * k), sample s in columns s*k:(s+1)*k: as (ny, CHUNK, k) without a copy
-        J = [out["J"].reshape(ny, CHUNK, k)[:, :take] for _, out, take in run]
-        scores = np.concatenate([np.einsum("ysk,ys->sk", Jc, out["r"][:, :take])
-                                 for Jc, (_, out, take) in zip(J, run)])
-        H = sum(np.tensordot(Jc, Jc, axes=([0, 1], [0, 1])) for Jc in J)
+        scores, H = [], np.zeros((k, k))
+        for _, out, take in run:
+            # a chunk's J (ny, CHUNK * k) holds sample s in columns s*k:(s+1)*k; stored column-major it
+            # is a (CHUNK, k, ny) array without a copy. Small products by einsum: no BLAS threads
+            A = np.asarray(out["J"]).T.reshape(CHUNK, k, -1)[:take]
+            scores.append(np.einsum("sjy,sy->sj", A, out["r"][:, :take].T))
+            H += np.einsum("sjy,sly->jl", A, A)
+        scores = np.concatenate(scores)
         return {"f": 0.5 * float(np.sum(R**2)), "g": scores.sum(axis=0), "H": H, "cols": rm.cols,
                 "scores": scores, "residuals": np.where(ctx["mask"].T > 0, R, np.nan)}
 
