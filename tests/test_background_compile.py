@@ -7,6 +7,7 @@ import pytest
 
 import casship as cs
 from casship.identify import MLEProblem
+from casship.identify import _engine
 from casship.runtime import Compiling, cached_function, compile_in_background
 
 
@@ -86,14 +87,16 @@ def test_first_fit_on_an_empty_cache_runs_while_compiling_and_equals_the_interpr
     for name in ("K", "T"):
         assert fit.estimates[name] == ref.estimates[name]
         assert fit.std_errors[name] == ref.std_errors[name]
-    handles = [f for f in prob.engine._funs.values() if isinstance(f, Compiling)]
+    handles = [f for f in prob.engine.functions().values() if isinstance(f, Compiling)]
     assert handles, "an empty cache compiles in the background"
     for h in handles:
         h.wait(timeout=300)
         assert h.ready, h.error
+    _engine._SHARED.clear()                                           # as a new process would start
     again = MLEProblem(ekf, data, free=["K", "T"], x0=prior)
     assert again.solve(guess=guess).estimates["K"] == ref.estimates["K"]
-    assert not any(isinstance(f, Compiling) for f in again.engine._funs.values())   # loaded from the cache
+    assert again.engine.functions()
+    assert not any(isinstance(f, Compiling) for f in again.engine.functions().values())   # loaded from the cache
 
 
 def test_output_error_interpreted_and_compiled_agree_to_the_last_bit():

@@ -13,7 +13,8 @@ Compiled record loop
     a whole record in one call (option ``jit`` of the estimators).
 Compile cache
     :func:`compile_function` (C compiler, flags, on-disk cache, time limit; failures raise
-    :class:`CompileError`), :func:`cache_dir`, :func:`cache_info`, :func:`clear_cache`,
+    :class:`CompileError`), :func:`cached_function` (only what is compiled already),
+    :func:`cache_dir`, :func:`cache_info`, :func:`clear_cache`,
     :func:`cache_key`, :func:`find_compiler`, :data:`DEFAULT_FLAGS`, :data:`PORTABLE_FLAGS`;
     ``casship cache info|clear`` on the command line. :func:`cached_function` looks a library up
     without compiling; :func:`compile_in_background` compiles in a worker thread and hands out

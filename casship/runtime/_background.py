@@ -30,7 +30,8 @@ _WORKER_LOCK = threading.Lock()
 
 def _fresh_after_fork() -> None:
     """A forked child starts with no worker and no queue: the parent's worker thread does not exist
-    there (the parent's pending handles stay interpreted in the child)."""
+    there (a pending handle of the parent compiles again in the child when the child first reads it,
+    and finds the parent's library in the cache once the parent has written it)."""
     global _JOBS, _WORKER_LOCK
     _JOBS, _WORKER_LOCK = queue.Queue(), threading.Lock()
     _WORKER.clear()
@@ -68,11 +69,19 @@ class Compiling:
         self._compiled: ca.Function | None = None
         self._done = threading.Event()
         self._on_done = on_done
+        self._pid = os.getpid()
 
     @property
     def function(self) -> ca.Function:
         """The compiled Function once it is loaded, the interpreted one until then."""
+        if self._compiled is None and self._pid != os.getpid():
+            self._adopt()
         return self._compiled if self._compiled is not None else self.interpreted
+
+    def _adopt(self) -> None:
+        """In a process forked while this compile was pending: start it again here."""
+        self._pid, self._done, self.error = os.getpid(), threading.Event(), None
+        _submit(self)
 
     @property
     def ready(self) -> bool:
@@ -147,7 +156,11 @@ def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = Non
     >>> float(h.function(3.0))                                          # doctest: +SKIP
     6.0
     """
-    job = Compiling(fun, flags, on_done)
+    return _submit(Compiling(fun, flags, on_done))
+
+
+def _submit(job: Compiling) -> Compiling:
+    """Queue ``job`` and make sure a worker thread runs."""
     _JOBS.put(job)
     with _WORKER_LOCK:
         if not _WORKER:

@@ -61,7 +61,7 @@ try:
 except ImportError:
     msvcrt = None
 
-__all__ = ["compile_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo"]
+__all__ = ["compile_function", "cached_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo"]
 
 _ENV_DIR = "CASSHIP_CACHE_DIR"
 _OFF = ("off", "0", "no", "false", "none")
@@ -342,8 +342,8 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
         if default and lib is None and not accepts_native(cc):     # only a refused flag is dropped
             flags = PORTABLE_FLAGS
             loaded, lib = _compiled(fun, cc, flags, folder, extra_source)
-        if lib is None:
-            loaded, lib = _compile(fun, cc, flags, folder, extra_source)
+    if lib is None:         # not under the process lock: other threads look up and load meanwhile
+        loaded, lib = _compile(fun, cc, flags, folder, extra_source)
     return (loaded, _library(lib)) if library else loaded
 
 
@@ -390,7 +390,8 @@ def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
 
 def _remember(hit: tuple, key: str, folder) -> tuple:
     loaded, lib = hit
-    _LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
+    with _LOCK:
+        _LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
     return loaded, lib
 
 
