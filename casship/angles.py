@@ -13,7 +13,9 @@ def wrap(angle):
     Parameters
     ----------
     angle : float or array_like
-        Angle(s) [rad], any magnitude. NaN stays NaN.
+        Angle(s) [rad], any magnitude. NaN stays NaN and an infinite value stays infinite (it
+        has no place on the circle: the checks downstream name it instead of taking it for a
+        missing sample).
 
     Returns
     -------
@@ -33,9 +35,11 @@ def wrap(angle):
     array([3.14159265, 0.71681469])
     """
     a = np.asarray(angle, dtype=float)
-    out = np.pi - np.mod(np.pi - a, 2.0 * np.pi)
+    with np.errstate(invalid="ignore"):           # np.mod(inf) is NaN: kept infinite below
+        out = np.pi - np.mod(np.pi - a, 2.0 * np.pi)
     # np.mod may round up to exactly 2 pi for arguments just above pi; keep the interval half-open.
     out = np.where(out <= -np.pi, out + 2.0 * np.pi, out)
+    out = np.where(np.isinf(a), a, out)
     return out if out.ndim else float(out)
 
 

@@ -37,6 +37,8 @@ def check_rows(n: float, what: str) -> int:
     """
     from .errors import InputError
 
+    if np.isnan(n):
+        raise InputError(f"{what}: the number of rows is not a number (a NaN duration or step)")
     if not n <= MAX_ROWS:
         raise InputError(f"{what} would make {n:.3g} rows, more than casship creates in one record "
                          f"({MAX_ROWS:.3g}, casship.data.MAX_ROWS); use a longer step or a shorter span")
@@ -393,14 +395,14 @@ class Dataset:
 
     @classmethod
     def from_pandas(cls, frame, time: str = "t", units: Mapping[str, str] | None = None) -> "Dataset":
-        """A dataset from a pandas DataFrame with a time column.
+        """A dataset from a pandas DataFrame with a time column (or an index of that name).
 
         Parameters
         ----------
         frame : pandas.DataFrame
             Numeric columns.
         time : str
-            Name of the time column.
+            Name of the time column, or of the frame's index (``frame.set_index("t")``) [s].
         units : mapping, optional
             Column -> unit (default: ``frame.attrs["units"]``).
 
@@ -408,8 +410,14 @@ class Dataset:
         -------
         Dataset
         """
+        twice = sorted({str(c) for c in frame.columns if list(frame.columns).count(c) > 1})
+        if twice:
+            raise ValueError(f"column(s) {twice} appear more than once in the frame; which one is meant cannot be told")
+        if time not in frame.columns and frame.index.name == time:
+            frame = frame.reset_index()
         if time not in frame.columns:
-            raise ValueError(f"no time column {time!r}; columns: {list(frame.columns)}")
+            raise ValueError(f"no time column {time!r} (nor an index of that name); columns: {list(frame.columns)}, "
+                             f"index: {frame.index.name!r}; give time=NAME")
         from pandas.api.types import is_numeric_dtype
 
         non_numeric = [str(c) for c in frame.columns if not is_numeric_dtype(frame[c])]
@@ -510,12 +518,26 @@ def read_frame(path, **read_options):
         raise ValueError(f"{name}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
     if frame.shape[0] == 0:
         raise ValueError(f"{name}: no data rows below the header {list(frame.columns)}")
+    if isinstance(path, (str, Path)) and not read_options:
+        _refuse_short_rows(Path(path), frame.shape[1])
     header = _header(path, read_options)
     twice = sorted({c for c in header if header.count(c) > 1})
     if twice:
         raise ValueError(f"{name}: column(s) {twice} appear more than once in the header; which one is meant "
                          "cannot be told: rename or remove the copies")
     return frame
+
+
+def _refuse_short_rows(path: Path, width: int) -> None:
+    """A row with fewer fields than the header (a truncated line) is an error: pandas would fill the
+    missing fields with NaN, which a measured column reads as "not measured"."""
+    import csv
+
+    with path.open(newline="") as f:
+        for number, row in enumerate(csv.reader(f), start=1):
+            if row and len(row) < width:
+                raise ValueError(f"{path}: line {number} has {len(row)} field(s), the header {width}: a truncated "
+                                 "row (write an empty field, a,,c, where a value is missing)")
 
 
 def _header(path, read_options) -> list[str]:

@@ -20,7 +20,7 @@ True
 """
 from __future__ import annotations
 
-__all__ = ["CasshipError", "InputError", "SolverError", "SetupError"]
+__all__ = ["CasshipError", "InputError", "SolverError", "DivergenceError", "SetupError"]
 
 
 class CasshipError(Exception):
@@ -33,6 +33,11 @@ class InputError(CasshipError, ValueError):
 
 class SolverError(CasshipError, RuntimeError):
     """A numerical method that failed (an integrator, an optimiser, a filter that diverged), with its status."""
+
+
+class DivergenceError(SolverError, FloatingPointError):
+    """A simulation or closed loop whose state left the finite numbers (a step too long for the
+    dynamics, a load far beyond the model's range), naming the time; also a ``FloatingPointError``."""
 
 
 class SetupError(CasshipError, RuntimeError):

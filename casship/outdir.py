@@ -84,6 +84,23 @@ def _protected(path: Path) -> str | None:
     return None
 
 
+def _check_writable(path: Path, what: str) -> None:
+    """Raise ``PermissionError`` naming ``what`` if nothing can be created beside ``path`` (a
+    read-only or special folder), before any work is done. The test is the honest one: a file is
+    created there and removed (permission bits say nothing of a read-only mount or of root)."""
+    import tempfile
+
+    folder = path.absolute().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent                  # an output folder's missing parents are made later
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".casship-probe-", dir=folder)
+    except OSError as exc:
+        raise PermissionError(f"{what} {path}: cannot write into the folder {folder} ({exc.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
 def check_output_folder(path, *, overwrite: bool = False, what: str = "--out") -> Path:
     """Check that the report folder ``path`` may be written; raise with the reason if not.
 
@@ -106,7 +123,8 @@ def check_output_folder(path, *, overwrite: bool = False, what: str = "--out") -
     FileExistsError
         ``path`` is a non-empty folder and ``overwrite`` is false, or it is a file.
     PermissionError
-        ``overwrite`` is true but the folder was not written by casship or is protected.
+        ``overwrite`` is true but the folder was not written by casship or is protected, or nothing
+        can be written beside it.
     """
     path = Path(path)
     if path.exists() and not path.is_dir():
@@ -120,6 +138,7 @@ def check_output_folder(path, *, overwrite: bool = False, what: str = "--out") -
             reason = f"it was not written by casship (no {MARKER} file in it)"
         if reason:
             raise PermissionError(f"{what} {path}: will not replace this folder: {reason}; choose another folder")
+    _check_writable(path, what)
     return path
 
 
@@ -195,6 +214,8 @@ def check_output_file(path, *, overwrite: bool = False, what: str = "--out") -> 
         ``path`` is a folder.
     FileNotFoundError
         The folder ``path`` would go into does not exist.
+    PermissionError
+        Nothing can be written into that folder.
     """
     path = Path(path)
     if path.is_dir():
@@ -203,6 +224,7 @@ def check_output_file(path, *, overwrite: bool = False, what: str = "--out") -> 
         raise FileExistsError(f"{what} {path}: file exists; pass --overwrite to replace it or choose another name")
     if not path.absolute().parent.is_dir():
         raise FileNotFoundError(f"{what} {path}: folder {path.absolute().parent} does not exist")
+    _check_writable(path, what)
     return path
 
 

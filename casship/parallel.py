@@ -1,16 +1,19 @@
 """Run independent study cases in parallel: a local process pool by default, or a Dask cluster.
 
-Cases carry their own seeds, so a parallel run returns exactly what a serial run returns.
+Cases carry their own seeds, so a parallel run returns exactly what a serial run returns. Local
+workers are forked from the calling process on POSIX, so they start with everything it has built
+(models, compiled Functions in memory) and find the rest in the on-disk compile cache.
 """
 from __future__ import annotations
 
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Callable, Iterable, Sequence
 
-__all__ = ["run_cases"]
+__all__ = ["run_cases", "call"]
 
 
-def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, scheduler: str | None = None) -> list:
+def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, scheduler: str | None = None,
+              label: str | None = None, unit: str = "case") -> list:
     """``[func(case) for case in cases]``, in parallel, results in the order of ``cases``.
 
     Parameters
@@ -23,19 +26,88 @@ def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, sc
         Local processes; ``1`` runs serially in this process, ``None`` uses the CPU count.
     scheduler : str, optional
         Address of a ``dask.distributed`` scheduler (``tcp://host:8786``); needs the ``dask`` extra.
+    label : str, optional
+        Show a progress bar with this text, advanced as cases finish (see :mod:`casship.progress`).
+    unit : str
+        Name of one case on the bar.
+
+    Returns
+    -------
+    list
+        ``func(case)`` for each case, in the order of ``cases``; the first case that raises stops
+        the run with its exception.
+
+    Examples
+    --------
+    >>> run_cases(abs, [-1, 2, -3], workers=1)
+    [1, 2, 3]
     """
     cases: Sequence = list(cases)
     if scheduler is not None:
         try:
             from dask.distributed import Client
+            from dask.distributed import as_completed as dask_completed
         except ImportError as exc:  # pragma: no cover - optional extra
             from .errors import SetupError
 
             raise SetupError("a Dask scheduler was given but dask.distributed is not installed "
                                "(pip install 'casship[dask]')") from exc
         with Client(scheduler) as client:
-            return client.gather(client.map(func, cases, pure=False))
+            futures = client.map(func, cases, pure=False)
+            _wait(dask_completed(futures), len(cases), label, unit)
+            return client.gather(futures)
     if workers == 1 or len(cases) <= 1:
-        return [func(c) for c in cases]
+        return [func(c) for c in _track(cases, label, unit)]
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(func, cases))
+        futures = [pool.submit(func, c) for c in cases]
+        try:
+            _wait(as_completed(futures), len(cases), label, unit)
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise
+        return [f.result() for f in futures]
+
+
+def call(case: tuple):
+    """``func(*args, **kwargs)`` of a case ``(func, args, kwargs)``: any module-level function as a case.
+
+    Parameters
+    ----------
+    case : tuple
+        ``(func, args)`` or ``(func, args, kwargs)``, all picklable.
+
+    Returns
+    -------
+    object
+        What ``func`` returns.
+
+    Examples
+    --------
+    >>> run_cases(call, [(divmod, (7, 2)), (max, (1, 5))], workers=1)
+    [(3, 1), 5]
+    """
+    func, args, *rest = case
+    return func(*args, **(rest[0] if rest else {}))
+
+
+def _track(cases, label, unit):
+    if label is None:
+        return cases
+    from .progress import track
+
+    return track(cases, label, unit=unit)
+
+
+def _wait(done, total: int, label, unit) -> None:
+    """Go through the finished futures ``done`` (raising the first failure), advancing a bar."""
+    if label is None:
+        for f in done:
+            f.result()
+        return
+    from .progress import bar
+
+    with bar(total, label, unit=unit) as b:
+        for f in done:
+            f.result()
+            b.update(1)

@@ -8,7 +8,7 @@ import numpy as np
 from .runtime import BufferedCall
 from .angles import wrap
 from .data import Dataset, check_time
-from .errors import SolverError
+from .errors import DivergenceError, SolverError
 from .trajectory import Trajectory
 from .discretize import DiscreteModel, discretize
 from .model import Model
@@ -96,6 +96,7 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
             raise ValueError(f"no value given for input(s) {missing}")
         cols = []
         for name in model.input_names:
+            _refuse_masked(inputs[name], f"input {name!r}", t)
             v = np.broadcast_to(np.asarray(inputs[name], dtype=float), (n,)) if np.ndim(inputs[name]) == 0 \
                 else np.asarray(inputs[name], dtype=float)
             if v.shape != (n,):
@@ -103,6 +104,7 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
             cols.append(v)
         U = np.column_stack(cols) if cols else np.zeros((n, 0))
     else:
+        _refuse_masked(inputs, "inputs", t)
         U = np.asarray(inputs, dtype=float)
         if U.ndim == 1 and model.nu == 1:
             U = U[:, None]
@@ -114,6 +116,14 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
         raise ValueError(f"input {model.input_names[col]!r} is not finite at row {row} (t = {t[row]:g} s)")
     check_radians(model, U)
     return U
+
+
+def _refuse_masked(values, what: str, t) -> None:
+    """An input needs a value at every row: a masked entry is refused (its hidden value would be used)."""
+    mask = np.ma.getmaskarray(values) if np.ma.isMaskedArray(values) else None
+    if mask is not None and mask.any():
+        row = int(np.flatnonzero(mask.reshape(mask.shape[0], -1).any(axis=1))[0]) if mask.ndim else 0
+        raise ValueError(f"{what} is masked at row {row} (t = {t[row]:g} s); an input needs a value at every row")
 
 
 def check_radians(model: Model, U: np.ndarray) -> None:
@@ -312,7 +322,8 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = N
             check_inputs(model, U, t)
     if not np.all(np.isfinite(X)):
         row = int(np.argwhere(~np.isfinite(X))[0, 0])
-        raise FloatingPointError(f"simulation of {model.name!r} diverged at t = {t[row]:g} s")
+        raise DivergenceError(f"simulation of {model.name!r} diverged at t = {t[row]:g} s (a step too long for its "
+                              "dynamics, or inputs far outside its range?)")
     if check_limits:
         warn_states(model, X, t)
     Y = eval_outputs(model, X, U, p)

@@ -1,11 +1,14 @@
 """Trial design for the KVLCC2: which manoeuvre to run next, and a closed check by simulation.
 
-Part 1 (measured data): the KVLCC2 identified on the shared free-running runs by the workflow of
-the ``kvlcc2-marin`` study; the belief is the fit's covariance over its free parameters (the MARIN
-copies of the asymmetry terms) and that workflow's prior for the candidates the fit held fixed, the
-noise is the fit's (its output weights times the fitted scale). The standard manoeuvres in both
-directions and a free rudder sequence (limits below) are ranked for the tactical diameter and for
-the port/starboard difference of the tactical diameter.
+Part 1 (measured data): the KVLCC2 identified on the shared free-running runs by the registered
+``kvlcc2-marin`` study, run here into a subfolder (or any fit file a user has, ``params``); this
+study reads only its ``fit.json``, as a user would (:func:`casship.identify.read_params`). The
+belief is the covariance the file carries -- the run-level jackknife of the parameters the fit
+moved, when the study calibrated it -- and this study's stated prior (:data:`HELD_PRIOR`) for the
+manoeuvring coefficients the file does not cover; the noise is the fit's (its output weights times
+the fitted scale). The standard manoeuvres in both directions and a free rudder sequence (limits
+below) are ranked for the tactical diameter and for the port/starboard difference of the tactical
+diameter.
 
 Part 2 (no data needed), the closed check: a known "true" ship, the KVLCC2 with its hull
 derivatives moved by one seeded draw from the prior and a port/starboard asymmetry like the one
@@ -24,21 +27,31 @@ from pathlib import Path
 import numpy as np
 
 import casship as cs
-from casship.design import (Approach, ParameterBelief, TrialLimits, design_trials, get_target, standard_trials,
-                            trial_information)
-from casship.identify import Prior
+from casship.design import (Approach, ParameterBelief, TrialLimits, design_trials, fit_noise, get_target,
+                            standard_trials, trial_information)
+from casship.identify import Prior, read_params
 from casship.models import kvlcc2
-from casship.studies import Study
+from casship.studies import Study, run_study
 
 from .kit import Departure, Report, announce, data_folder, figure, md_table, run_cases, write_json
 
-__all__ = ["PRIOR_REL", "PRIOR_ABS", "ASYMMETRY", "NOISE", "TRUTH_SEED", "prior_std", "true_params", "run", "STUDY"]
+__all__ = ["PRIOR_REL", "PRIOR_ABS", "HELD_PRIOR", "ASYMMETRY", "NOISE", "TRUTH_SEED", "prior_std", "true_params",
+           "kvlcc2_marin_fit", "fit_belief", "design_on_fit", "run", "STUDY"]
 
-#: Prior of part 2, as in the kvlcc2-marin study: relative to the published value ...
+#: Prior of part 2: relative to the published value ...
 PRIOR_REL = {"Y_v_dash": 0.2, "Y_r_dash": 0.2, "N_v_dash": 0.2, "N_r_dash": 0.2, "Y_vvr_dash": 0.5,
              "Y_vrr_dash": 0.5, "N_vvr_dash": 0.5, "N_vrr_dash": 0.5}
 #: ... and absolute for the asymmetry terms (rudder neutral angle 1 deg).
 PRIOR_ABS = {"delta_0": np.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025}
+#: Part 1: what this study believes of the manoeuvring coefficients a fit file does not cover (a stated
+#: prior, as ``casship design-trial --prior-std`` states one), relative to the published value, with
+#: :data:`PRIOR_ABS` for the asymmetry terms: hull derivatives 20 % (linear) and 50 % (cubic), resistance,
+#: hull-rudder interaction and thrust deduction at the rudder 30 %, the rest of the rudder model and the
+#: added masses 20 to 25 %.
+HELD_PRIOR = {**PRIOR_REL, "Y_vvv_dash": 0.5, "Y_rrr_dash": 0.5, "N_vvv_dash": 0.5, "N_rrr_dash": 0.5,
+              "R_0_dash": 0.3, "gamma_R_minus": 0.25, "gamma_R_plus": 0.25, "l_R_dash": 0.2, "epsilon": 0.2,
+              "kappa": 0.2, "f_alpha": 0.2, "a_H": 0.3, "x_H_dash": 0.2, "t_R": 0.3, "m_x_dash": 0.2,
+              "m_y_dash": 0.2, "J_z_dash": 0.2}
 #: The true ship's asymmetry (close to the MARIN fit's: -0.44 deg, -0.031, 0.021 with the other sign of delta_0).
 ASYMMETRY = {"delta_0": np.radians(0.5), "Y_0_dash": -0.03, "N_0_dash": 0.02}
 #: Sensor noise of one sample: heading 0.2 deg, yaw rate 0.02 deg/s, surge speed 0.02 m/s.
@@ -54,10 +67,12 @@ def study_model() -> cs.Model:
     return kvlcc2(asymmetry=True, smooth=True)
 
 
-def prior_std(model: cs.Model) -> dict:
-    """Part 2's prior standard deviation of each uncertain parameter."""
+def prior_std(model: cs.Model, relative: dict = PRIOR_REL) -> dict:
+    """Prior standard deviation of each uncertain parameter of ``model`` (part 2's by default; part 1
+    passes :data:`HELD_PRIOR`): ``relative`` times the published value, :data:`PRIOR_ABS` absolute."""
     nominal = model.param_dict()
-    return {**{k: r * abs(nominal[k]) for k, r in PRIOR_REL.items()}, **PRIOR_ABS}
+    return {k: v for k, v in {**{k: r * abs(nominal[k]) for k, r in relative.items()}, **PRIOR_ABS}.items()
+            if k in nominal}
 
 
 def true_params(model: cs.Model) -> dict:
@@ -76,43 +91,46 @@ def _limits(approach: Approach) -> TrialLimits:
 
 
 # -- part 1: the fit on the shared runs -------------------------------------------------------------------
-def _fitted_ship(out: Path, data_dir, quick: bool, cfg: dict, rep: Report) -> dict | None:
-    from .kvlcc2_marin import QUICK as MARIN_QUICK
-    from .kvlcc2_marin.data import load_runs
-    from .kvlcc2_marin.propulsion import open_water
-    from .kvlcc2_marin.workflow import CANDIDATES, fit_fold, prior_std as marin_prior
-    from .kvlcc2_marin.workflow import smooth_runs, with_smoothed_speed
-
+def kvlcc2_marin_fit(out: Path, data_dir, quick: bool, workers=None, scheduler=None) -> Path | None:
+    """Run the registered ``kvlcc2-marin`` study into ``out`` (as ``casship study kvlcc2-marin`` would) and
+    return its ``fit.json``; None, said on the console, without the measured runs."""
     marin = data_folder(data_dir, "kvlcc2_marin_free", study="trial-design", part="the design on the fitted KVLCC2")
     if marin is None:
-        rep.section("Part 1: the KVLCC2 fitted on the shared runs")
-        rep.add("Skipped: no measured data (give --data DIR or set CASSHIP_DATA).")
         return None
-    runs = load_runs(marin.parent)
-    if quick:
-        runs = [r for r in runs if r.name in MARIN_QUICK["runs"]]
-    runs = with_smoothed_speed(runs, smoothed := smooth_runs(runs))
-    dt = MARIN_QUICK["dt"] if quick else 2.0
-    curve = open_water(marin.parent / "kvlcc2_hsva_free")
-    fold = fit_fold(runs, smoothed, curve, dt=dt, max_free=MARIN_QUICK["max_free"] if quick else 15)
-    fit, model = fold.fit, study_model()
-    params = dict(fit.params)            # one parameter set for every run (no per-facility copies)
-    free = {q.split("@", 1)[0] for q in fit.free}
-    extra = marin_prior(model, [c for c in CANDIDATES if c not in free])
-    belief = ParameterBelief.from_fit(fit, extra_std=extra, params=params,
-                                      source=f"the fit on {len(runs)} runs ({len(free)} free) and the prior of "
-                                             f"{len(extra)} more")
-    noise = {k: v * fit.noise["weight_scale"] for k, v in fit.noise["sigma"].items()}
-    fit.to_json(out / "fit.json")
-    approach = Approach(model, model.params(params), dt=dt)
+    announce("trial-design", f"part 1: the kvlcc2-marin study{' (quick)' if quick else ''} into {out}")
+    run_study("kvlcc2-marin", out, quick=quick, workers=workers, scheduler=scheduler, data=marin.parent)
+    return Path(out) / "fit.json"
+
+
+def fit_belief(fit_file: Path, covariance: str | None = None):
+    """The model, parameters, belief and noise a fit file gives the design.
+
+    The belief is the covariance the file carries (calibrated by the run-level jackknife when the
+    fit was; ``covariance`` chooses another) and :data:`HELD_PRIOR` for the parameters it does not
+    cover; the noise is the fit's own (:func:`casship.design.fit_noise`).
+    """
+    model, p, _ = read_params(fit_file, "kvlcc2", uncertainty=True)     # the file's covariance checked too
+    values = model.param_dict(p)
+    belief = ParameterBelief.from_fit(fit_file, covariance=covariance, params=values)
+    held = {n: s for n, s in prior_std(model, HELD_PRIOR).items() if n not in belief.names}
+    return model, p, belief.extended(held, values), fit_noise(fit_file)
+
+
+def design_on_fit(fit_file: Path, out: Path, rep: Report, *, dt: float, max_iter: int, free: bool,
+                  covariance: str | None = None) -> dict:
+    """Part 1 on a fit file: the standard manoeuvres (and, with ``free``, a free trial) ranked for the
+    tactical diameter and for the port/starboard difference."""
+    fit_file, out = Path(fit_file), Path(out)
+    model, p, belief, noise = fit_belief(fit_file, covariance)
+    approach = Approach(model, p, dt=dt)
     out_rows = {}
-    rep.section("Part 1: the KVLCC2 fitted on the shared runs")
-    rep.add(f"Fit: {len(runs)} runs, free {', '.join(fit.free)} (`fit.json`). Belief: {belief.source}; "
-            f"{len(belief.names)} uncertain parameters. Noise of one {dt:g} s sample, as the fit weighs it: "
+    shown = fit_file.relative_to(out) if fit_file.is_relative_to(out) else fit_file
+    rep.add(f"Fit file: `{shown}`. Belief: {belief.source}; {len(belief.names)} uncertain parameters. "
+            f"Noise of one {dt:g} s sample, as the fit weighs it: "
             + ", ".join(f"{k} {v:.3g}" for k, v in noise.items()) + " (SI, rad).")
     for target in ("tactical_diameter", TARGET):
-        res = design_trials(model, belief, noise, target, p=approach.p, dt=dt, max_iter=cfg.get("max_iter_fitted", 0),
-                            limits=None if quick else _limits(approach))
+        res = design_trials(model, belief, noise, target, p=p, dt=dt, max_iter=max_iter,
+                            limits=_limits(approach) if free else None)
         (out / f"ranking_fit_{target}.md").write_text(res.table() + "\n")
         res.plot(out / f"fig_fit_{target}.png", approach)
         rep.section(f"Target: {res.target.name}", 3)
@@ -120,7 +138,8 @@ def _fitted_ship(out: Path, data_dir, quick: bool, cfg: dict, rep: Report) -> di
         rep.image(f"fig_fit_{target}.png", f"ranking for {target} on the fitted ship, the best trial")
         out_rows[target] = {"value": res.target.value, "best": res.best.name, "ranking": res.rows,
                             "free": res.free}
-    return {"fit_free": list(fit.free), "noise": noise, "belief": belief.source, "designs": out_rows}
+    return {"fit_file": str(shown), "noise": noise, "belief": belief.source, "covariance": belief.kind,
+            "uncertain": list(belief.names), "designs": out_rows}
 
 
 # -- part 2: the closed check --------------------------------------------------------------------------------
@@ -242,9 +261,14 @@ def _closed_check(out: Path, quick: bool, cfg: dict, workers, scheduler, rep: Re
             "verdict": verdict, "ranking": res.rows, "free": res.free}
 
 
-def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None) -> dict:
-    """Part 1 on the fitted ship (with data), part 2's closed check; ``quick``: the quick fit, no free
-    trial in part 1, a coarser step, two trials and 3 seeds in part 2."""
+def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None,
+        params: Path | None = None) -> dict:
+    """Part 1 on the fitted ship, part 2's closed check.
+
+    Part 1 runs the registered ``kvlcc2-marin`` study into ``out/kvlcc2-marin`` and designs on its
+    ``fit.json``, or on the fit file ``params`` when given (no data needed then). ``quick``: the
+    quick fit and no free trial in part 1, a coarser step, two trials and 3 seeds in part 2.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cfg = QUICK if quick else FULL
@@ -253,7 +277,19 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     rep.add("The expected information of each trial comes from the exact sensitivities of its simulated outputs "
             "through the output-error likelihood; added to the current belief, it gives the target's standard "
             "deviation after the trial by the delta method (see docs/trial-design.md).")
-    part1 = _fitted_ship(out, data_dir, quick, cfg, rep)
+    rep.section("Part 1: the next trial for the fitted KVLCC2")
+    fit_file = Path(params) if params is not None else kvlcc2_marin_fit(out / "kvlcc2-marin", data_dir, quick,
+                                                                          workers, scheduler)
+    t_fit = time.perf_counter() - t0
+    if fit_file is None:
+        rep.add("Skipped: no measured data (give --data DIR or set CASSHIP_DATA).")
+        part1 = None
+    else:
+        if params is None:
+            rep.add(f"The fit is the `kvlcc2-marin` study's on the shared runs, run here into `kvlcc2-marin/` "
+                    f"({t_fit:.0f} s; its report is there).")
+        part1 = design_on_fit(fit_file, out, rep, dt=cfg["dt"], max_iter=cfg.get("max_iter_fitted", 0),
+                              free=not quick)
     t1 = time.perf_counter()
     part2 = _closed_check(out, quick, cfg, workers, scheduler, rep)
     seconds = time.perf_counter() - t0
@@ -263,14 +299,14 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
                   "not applicable"),
         Departure("true ship", "-", "one seeded draw from the prior for 8 hull derivatives, a stated asymmetry",
                   "another draw changes the true target and the prior's error; the ranking does not depend on it"),
-        Departure("belief of part 1", "-", "the fit's covariance over its free parameters and the workflow's prior "
-                  "for the candidates it held fixed (their covariance with the free ones is dropped)",
-                  "not measured"),
+        Departure("belief of part 1", "-", "the covariance the fit file carries (the kvlcc2-marin study's run-level "
+                  "jackknife when it has one) and this study's prior for the parameters it does not cover "
+                  "(independent of them)", "not measured"),
         Departure("trial record", "-", f"rudder sampled at mid-step and held over each {cfg['dt']:g} s step, the "
                   "same discretisation in truth and fit", "not measured"),
     ])
     rep.write(out)
-    summary = {"study": "trial-design", "quick": quick, "seconds": seconds, "fitted_ship": part1,
+    summary = {"study": "trial-design", "quick": quick, "seconds": seconds, "seconds_fit": t_fit, "fitted_ship": part1,
                "closed_check": part2}
     return write_json(out / "summary.json", summary)
 

@@ -59,23 +59,31 @@ def test_trial_design_quick(tmp_path):
     assert all(r["sd_after"] < r["sd_before"] for r in asym)
     turns = [r["trial"] for r in designs["tactical_diameter"]["ranking"] if r["kind"] == "turning"]
     assert turns[0] == "turning 35 starboard"       # the target's own side teaches more about it
-    assert (out / "fit.json").is_file()
+    # the fit is the registered kvlcc2-marin study's, run into a subfolder; the report names its covariance
+    fitted = summary["fitted_ship"]
+    assert (out / "kvlcc2-marin" / "fit.json").is_file() and fitted["fit_file"] == "kvlcc2-marin/fit.json"
+    assert fitted["covariance"] in ("calibrated", "robust", "model-based")
+    assert f"Belief: fit.json: {fitted['covariance']} covariance" in report
 
 
 @pytest.mark.slow
 def test_trial_design_full(tmp_path, data_dir):
-    summary = get_study("trial-design").run(tmp_path, quick=False, workers=2, data_dir=data_dir)
     """The factors stated in docs/trial-design.md: realised RMSE within a factor 3 of the design's prediction
     (the free trial's is optimistic, being linearised at the prior mean), within 1.6 of the prediction
     linearised at the true ship."""
+    summary = get_study("trial-design").run(tmp_path, quick=False, workers=2, data_dir=data_dir)
     verdict = summary["closed_check"]["verdict"]
     assert verdict["recommended_beats_best_standard"] and verdict["predicted_vs_realised_factor"] < 3.0
+    assert summary["fitted_ship"]["covariance"] == "calibrated"      # the study's fit.json carries its jackknife
     for row in summary["closed_check"]["rows"].values():
         assert 1 / 1.6 < row["realised_rmse_m"] / row["predicted_at_truth_m"] < 1.6
 
 
 def test_trial_design_page_example_runs(tmp_path, monkeypatch):
+    from test_design_fit import write_fit
+
     monkeypatch.chdir(tmp_path)
+    write_fit(tmp_path / "fit.json")           # the blocks marked "needs fit.json" read a fit file of kvlcc2
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "trial-design.md").read_text(), re.S)
     assert blocks
     namespace: dict = {}

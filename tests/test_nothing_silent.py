@@ -15,20 +15,14 @@ from casship.cli import is_user_error, main
 from casship.errors import CasshipError, InputError, SolverError
 from casship.outdir import output_file, output_folder
 
+from cli_checks import one_line_error as _error
+
 
 def _nomoto_record(n=120):
     m = cs.models.nomoto_first_order()
     t = np.arange(0.0, n * 0.5, 0.5)
     tr = cs.simulate(m, m.states(), t, {"delta": 0.1 * np.sign(np.sin(t / 10))})
     return m, cs.measure(tr, m, {"psi": 0.01}, seed=2)
-
-
-def _error(capsys, argv, *texts):
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and len([x for x in err.splitlines() if ": error: " in x]) == 1, err
-    for text in texts:
-        assert text in err, (text, err)
 
 
 # -- inputs ignored or misread ----------------------------------------------------------------------------------

@@ -23,13 +23,18 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap
-from ..data import Dataset
+from ..data import Dataset, check_rows
+from ..errors import DivergenceError
 from .components import DRAWS, MASKS, Layout, LoopEstimator, Sensors
 from .estimation import WaveYaw
 from .law import Actuator, Autopilot
 from .plants import SteeringPlant
 
 __all__ = ["ClosedLoop"]
+
+#: What a diverged run says about why.
+_WHY = " (the loop period too long for the ship, or a load far beyond its range: check dt, wind and current)"
+
 
 class ClosedLoop:
     """Ship, sensors, estimator, autopilot and steering gear composed into one CasADi step.
@@ -331,7 +336,7 @@ class ClosedLoop:
         return np.random.default_rng(seed).standard_normal((len(DRAWS), n))
 
     def _inputs(self, command, t_end, seed):
-        n = int(round(t_end / self.dt)) + 1
+        n = check_rows(round(t_end / self.dt) + 1, f"closed loop: {t_end:g} s at steps of {self.dt:g} s")
         t = np.arange(n) * self.dt
         if callable(command):
             refs = np.array([float(command(tk)) for tk in t])
@@ -381,7 +386,7 @@ class ClosedLoop:
             s = S[:, -1]
             if not np.all(np.isfinite(s)):
                 bad = start + int(np.argmax(~np.all(np.isfinite(S), axis=0)))
-                raise FloatingPointError(f"closed loop of {self.plant.model.name!r} diverged at t = {t[bad]:g} s")
+                raise DivergenceError(f"closed loop of {self.plant.model.name!r} diverged at t = {t[bad]:g} s{_WHY}")
             start += size
         return self._dataset(t, np.hstack(logs), x0)
 
@@ -491,7 +496,7 @@ class ClosedLoop:
             x = np.asarray(plant_f.call({"x": x, "steer": steer_avg, "p": pl.pvec, "dt": self.dt})["x_next"]).ravel()
             steer, steer_prev, chi_prev = steer_next, steer_avg, chi
             if not np.all(np.isfinite(x)):
-                raise FloatingPointError(f"closed loop of {m.name!r} diverged at t = {t[k]:g} s")
+                raise DivergenceError(f"closed loop of {m.name!r} diverged at t = {t[k]:g} s{_WHY}")
         return self._dataset(t, np.array(rows).T, x_start)
 
     def _dataset(self, t, log, x0) -> Dataset:

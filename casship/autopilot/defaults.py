@@ -255,6 +255,14 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         rule("steer_max", lambda: float(_vessel(plant, "rudder_max") or np.radians(35.0)))
         rule("steer_rate_max", lambda: float(_vessel(plant, "rudder_rate") or _SOLAS_RATE))
         rule("actuator_T", lambda: 1.0)
+    limit = m.limits.get(plant.steer)
+    if limit is not None and val["steer_max"] > max(abs(limit.lower), abs(limit.upper)) * (1 + 1e-9):
+        from ..validity import describe_limit
+
+        v = val["steer_max"]
+        shown = f"{v:g} N m" if twin else f"{v:g} rad ({np.degrees(v):.4g} deg)"
+        raise ValueError(f"autopilot setting steer_max = {shown} is beyond the valid range "
+                         f"{describe_limit(m, plant.steer)} of {plant.steer!r} of model {m.name!r}")
     steering = None
     if "u" in m.state_names and "v" in m.state_names:
         try:

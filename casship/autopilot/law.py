@@ -191,14 +191,30 @@ class Autopilot:
     def function(self) -> ca.Function:
         """``autopilot(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d, r_d, a_d, e)``
         with ``memory`` as in :attr:`MEMORY` (``speed`` used by a schedule, ``steering`` and ``bias`` by none)."""
-        mem, ref, chi, r, dt, U, st = (ca.SX.sym(n, k) for n, k in (("memory", 6), ("ref", 1), ("chi", 1), ("r", 1),
-                                                                     ("dt", 1), ("speed", 1), ("steering", 1)))
-        bias = ca.SX.sym("bias")
-        out = self.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
-        names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
-        return ca.Function("autopilot", [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"],
-                           ["memory_next"] + names[1:])
+        return law_function(self, "autopilot")
+
+
+def law_function(law, name: str) -> ca.Function:
+    """A law's ``symbolic_step`` as the Function ``name(memory, ref, chi, r, dt, speed, steering, bias)
+    -> (memory_next, steer, chi_d, r_d, a_d, e)``: the one signature every law in the loop has.
+
+    Parameters
+    ----------
+    law : Autopilot, LinearController or another law with ``MEMORY`` and ``symbolic_step``
+    name : str
+        The Function's name.
+
+    Returns
+    -------
+    casadi.Function
+    """
+    mem, ref, chi, r, dt, U, st, bias = (ca.SX.sym(k, s) for k, s in (
+        ("memory", len(law.MEMORY)), ("ref", 1), ("chi", 1), ("r", 1), ("dt", 1), ("speed", 1), ("steering", 1),
+        ("bias", 1)))
+    out = law.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
+    names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
+    return ca.Function(name, [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
+                       ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"], ["memory_next"] + names[1:])
 
 
 def law_step(law, P: dict, mem, ref, chi, r, dt) -> dict:

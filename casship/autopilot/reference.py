@@ -91,16 +91,12 @@ class ReferenceModel:
             raise ValueError(f"r_max must be positive, got {self.r_max}")
 
     def symbolic_step(self, xd, ref, dt):
-        """One Euler step of ``[chi_d, r_d, a_d]`` (CasADi expressions).
+        """One Euler step of ``[chi_d, r_d, a_d]`` (CasADi expressions) with this model's numbers.
 
         Parameters
         ----------
-        xd : casadi.SX
-            ``[chi_d, r_d, a_d]``.
-        ref : casadi.SX
-            Command [rad].
-        dt : casadi.SX or float
-            Step [s].
+        xd, ref, dt
+            As for :func:`reference_step`.
         """
         return reference_step(xd, ref, dt, self.wn, self.zeta, self.r_max)
 

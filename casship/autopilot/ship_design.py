@@ -210,8 +210,9 @@ class Design:
         Parameters
         ----------
         scenario : str
-            ``course-A`` or ``step-A`` (:func:`~casship.autopilot.performance.course_scenario`); the
-            segment length is ``settings.segment`` unless ``t_end`` is given.
+            ``course-A``, ``step-A`` or ``rot-R`` (:func:`~casship.autopilot.performance.course_scenario`;
+            a rate of turn R above the preset ``settings.r_max`` is refused); the segment length is
+            ``settings.segment`` unless ``t_end`` is given.
         t_end : float, optional
             Duration [s].
         seed : int
@@ -226,6 +227,14 @@ class Design:
             ``wave_filter``, ``mode``, ``rate``, ``sensors``).
         """
         command, t_end, steps = course_scenario(scenario, t_end, segment=self.settings.segment)
+        if scenario.startswith("rot-"):
+            rate = abs(np.radians(float(scenario.rsplit("-", 1)[1])) / 60.0)
+            if rate > self.settings.r_max * (1 + 1e-9):
+                raise ValueError(f"scenario {scenario!r}: the rate of turn {np.degrees(rate) * 60:g} deg/min is above "
+                                 f"the preset rate of turn r_max = {np.degrees(self.settings.r_max) * 60:.4g} deg/min "
+                                 "the reference model holds the turn to (give a lower rate, or r_max within what "
+                                 f"the ship turns: {np.degrees(self.settings.turn_rate_top) * 60:.4g} deg/min at its "
+                                 "steering limit)")
         return simulate_autopilot(self, command, t_end, step_times=steps, seed=seed, stepwise=stepwise, warn=warn,
                                   **loop_options)
 

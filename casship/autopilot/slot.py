@@ -24,7 +24,7 @@ import control
 import numpy as np
 
 from ..angles import wrap_sym
-from .law import Actuator
+from .law import Actuator, law_function
 from .reference import ReferenceModel
 
 __all__ = ["LinearController", "SIGNALS"]
@@ -141,20 +141,10 @@ class LinearController:
 
         Parameters
         ----------
-        mem : casadi.SX
-            Memory (:attr:`MEMORY`).
-        ref : casadi.SX
-            Course command [rad].
-        chi, r : casadi.SX
-            Fed-back angle [rad] and rate [rad/s].
-        dt : float
-            Loop period [s] (must be the controller's).
-        speed : casadi.SX, optional
-            Unused.
-        steer : casadi.SX, optional
-            Present steering (for the anti-windup against the rate limit).
-        bias : casadi.SX, optional
-            Unused.
+        mem, ref, chi, r, dt, speed, steer, bias
+            As for :meth:`Autopilot.symbolic_step <casship.autopilot.law.Autopilot.symbolic_step>`, with
+            ``mem`` as in :attr:`MEMORY`, ``dt`` the controller's period, ``steer`` driving the
+            anti-windup against the rate limit; ``speed`` and ``bias`` are unused.
         """
         chi_d, r_d, a_d = mem[0], mem[1], mem[2]
         x = mem[3:]
@@ -164,8 +154,7 @@ class LinearController:
         y = ca.vertcat(*[values[n] for n in self.inputs])
         u = ca.mtimes(ca.DM(self.C), x) + ca.mtimes(ca.DM(self.D), y) if x.numel() else ca.mtimes(ca.DM(self.D), y)
         sat = self.gear_command(u, steer, self.dt) if np.isfinite(self.actuator.steer_max) else u
-        cmd = ca.fmin(ca.fmax(u, -self.actuator.steer_max), self.actuator.steer_max) \
-            if np.isfinite(self.actuator.steer_max) else u
+        cmd = self.gear_command(u, None, self.dt)          # the command clipped at the angle limit
         if x.numel():
             x_next = ca.mtimes(ca.DM(self.A), x) + ca.mtimes(ca.DM(self.B), y)
             if self.anti_windup:
@@ -180,12 +169,4 @@ class LinearController:
     def function(self) -> ca.Function:
         """``controller(memory, ref, chi, r, dt, speed, steering, bias) -> (memory_next, steer, chi_d, r_d,
         a_d, e)``."""
-        n = len(self.MEMORY)
-        mem, ref, chi, r, dt, U, st = (ca.SX.sym(k, s) for k, s in (("memory", n), ("ref", 1), ("chi", 1), ("r", 1),
-                                                                     ("dt", 1), ("speed", 1), ("steering", 1)))
-        bias = ca.SX.sym("bias")
-        out = self.symbolic_step(mem, ref, chi, r, dt, U, st, bias)
-        names = ["memory", "steer", "chi_d", "r_d", "a_d", "e"]
-        return ca.Function("controller", [mem, ref, chi, r, dt, U, st, bias], [out[k] for k in names],
-                           ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"],
-                           ["memory_next"] + names[1:])
+        return law_function(self, "controller")

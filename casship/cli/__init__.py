@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     -------
     int
         Exit code: 0 success, 2 user error (one line on standard error), 1 a bug in casship,
-        130 interrupted.
+        130 interrupted, 141 the reader of the output went away (a closed pipe).
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     command = _selected(argv)
@@ -165,6 +165,13 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             print(f"casship {command}: interrupted", file=sys.stderr)
             return 130
+        except BrokenPipeError:
+            # the reader of the output went away (casship ... | head): nothing to report, as a tool
+            # that SIGPIPE stops; standard output is pointed at devnull so that its flush at exit is quiet
+            import os
+
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141
         except Exception as exc:
             if getattr(args, "debug", False):
                 raise

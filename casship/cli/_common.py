@@ -14,7 +14,7 @@ import sys
 from ..errors import InputError
 
 __all__ = ["Parser", "UsageError", "HelpFormatter", "add_model_option", "require", "load_model", "add_overwrite_option",
-           "add_limits_option", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
+           "add_limits_option", "check_ship", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
            "check_outputs", "write_output", "print_json", "refuse_unused"]
 
 
@@ -38,7 +38,8 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefau
     """Descriptions kept as written (examples), defaults shown unless there is none to show."""
 
     def _get_help_string(self, action):
-        if action.default in (None, False, argparse.SUPPRESS) or action.default == [] \
+        # a flag (store_true/store_false) has no value to show: "--no-free (default: True)" misleads
+        if action.default in (None, False, argparse.SUPPRESS) or action.default == [] or action.nargs == 0 \
                 or "%(default)" in (action.help or ""):
             return action.help
         return super()._get_help_string(action)
@@ -72,26 +73,24 @@ def positive(text: str) -> float:
     return value
 
 
-def count(text: str) -> int:
-    """argparse type: a whole number >= 1 (workers, iterations, a decimation factor)."""
+def _whole(text: str, low: int, what: str) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text}")
+    if value < low:
+        raise argparse.ArgumentTypeError(f"{what} a whole number >= {low}, got {text}")
     return value
+
+
+def count(text: str) -> int:
+    """argparse type: a whole number >= 1 (workers, iterations, a decimation factor)."""
+    return _whole(text, 1, "must be")
 
 
 def whole(text: str) -> int:
     """argparse type: a whole number >= 0 (a count that may be zero)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text}")
-    return value
+    return _whole(text, 0, "must be")
 
 
 def level(text: str) -> float:
@@ -104,13 +103,7 @@ def level(text: str) -> float:
 
 def seed(text: str) -> int:
     """argparse type: a random seed, a whole number >= 0."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"a seed is a whole number >= 0, got {text}")
-    return value
+    return _whole(text, 0, "a seed is")
 
 
 def parse_items(text: str | None, what: str = "list", *, unique: bool = True) -> list[str]:
@@ -237,6 +230,39 @@ def load_model(name: str):
     return get_model(name)
 
 
+def check_ship(model, name: str, what: str, *, rudder: bool = True) -> None:
+    """Refuse a model the command cannot run (no vessel, or no rudder where manoeuvres need one),
+    naming the registered models it can run.
+
+    Parameters
+    ----------
+    model : Model
+    name : str
+        The ``--model`` as given.
+    what : str
+        What the command does, for the message (e.g. ``"a manoeuvre"``).
+    rudder : bool
+        Whether a rudder is needed (manoeuvres), or a vessel is enough (an autopilot also steers
+        a craft with two propellers).
+
+    Raises
+    ------
+    InputError
+    """
+    from ..models import get_model, model_names
+
+    def fits(m) -> bool:
+        return m.vessel is not None and (bool(m.vessel.rudders) or not rudder)
+
+    if fits(model):
+        return
+    why = ("has no vessel (particulars, rudder, propellers): it is not a ship model" if model.vessel is None else
+           f"steers with its propellers {list(model.vessel.propellers)}, not a rudder")
+    ships = [n for n in model_names() if fits(get_model(n))]
+    raise InputError(f"--model {name}: {why}; {what} needs a ship with {'a rudder' if rudder else 'a vessel'}, "
+                     f"registered: {ships} (in Python, a model of your own gets one with ModelBuilder.vessel)")
+
+
 def add_overwrite_option(parser: argparse.ArgumentParser) -> None:
     """``--overwrite``: allow replacing existing result files / folders (see :mod:`casship.outdir`)."""
     parser.add_argument("--overwrite", action="store_true",
@@ -283,6 +309,10 @@ def load_record(path, model=None, *, wrap_angles: bool = False):
 
 
 # -- outputs ---------------------------------------------------------------------------------------------
+#: The figure formats of ``--plot`` (chosen by the file name's suffix).
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
 def check_outputs(outputs: dict[str, object], *, overwrite: bool, folders: tuple[str, ...] = ()) -> dict:
     """Check every output of a command before any work: distinct paths, the ``--overwrite`` rule.
 
@@ -304,7 +334,8 @@ def check_outputs(outputs: dict[str, object], *, overwrite: bool, folders: tuple
     Raises
     ------
     InputError
-        Two options naming the same path.
+        Two options naming the same path, or a ``--plot`` file whose suffix is not a figure format
+        (:data:`PLOT_SUFFIXES`).
     FileExistsError, PermissionError, ...
         As :func:`casship.outdir.check_output_file` and :func:`~casship.outdir.check_output_folder`.
     """
@@ -313,6 +344,10 @@ def check_outputs(outputs: dict[str, object], *, overwrite: bool, folders: tuple
     from ..outdir import check_output_file, check_output_folder, stamp
 
     given = {k: Path(v) for k, v in outputs.items() if v}
+    for option, path in given.items():
+        if option == "--plot" and option not in folders and path.suffix.lower() not in PLOT_SUFFIXES:
+            raise InputError(f"--plot {path}: a figure is written as {', '.join(PLOT_SUFFIXES)}; give a file name "
+                             "ending so")
     seen = {}
     for option, path in given.items():
         key = path.absolute().resolve()

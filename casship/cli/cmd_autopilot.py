@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import add_model_option, add_overwrite_option, check_outputs, print_json, require, seed
+from ._common import add_model_option, add_overwrite_option, check_outputs, check_ship, print_json, require, seed
 
 #: settings shown in degrees on the command line (name -> option suffix)
 _DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s"}
@@ -166,6 +166,7 @@ def run(args) -> int:
         given = ship.param_dict(p)
     else:
         ship, given = get_model(args.model), {}
+    check_ship(ship, args.model, "an autopilot design", rudder=False)
     model, env = _environment(args, ship)
     p = model.params({k: v for k, v in given.items() if k in model.param_names}) if given else None
     schedule = None if args.schedule is None else (args.schedule or "default")

@@ -7,25 +7,28 @@ Examples::
         --target port_starboard_difference --duration 900 --corridor 1500 --speed-min 4 --csv next.csv --plot next.png
     casship design-trial --model kvlcc2 --prior-std N_r_dash=0.01,N_v_dash=0.03 --sigma psi=0.0035,r=0.0002 --no-free
 
-What is known now comes from ``--params`` (a fit file: its covariance over the free parameters,
-its noise standard deviations) and/or ``--prior-std`` (standard deviations of more parameters,
-around the file's or the published values). The ranked list gives, for each candidate trial, the
-target's expected standard deviation before and after it; the optimised free rudder sequence is
-written as a CSV a tank can run (time, rudder in degrees, propeller rate). Every option maps onto
-:func:`casship.design.design_trials`.
+What is known now comes from ``--params`` (a fit file: the covariance it carries -- calibrated by a
+run-level jackknife when the fit was -- or, with ``--covariance robust|model``, another of its
+covariances; its noise standard deviations) and/or ``--prior-std`` (standard deviations of more
+parameters, around the file's or the published values); the command says which covariance it used.
+The ranked list gives, for each candidate trial, the target's expected standard deviation before
+and after it; ``--csv FILE`` writes the optimised free rudder sequence as a CSV a tank can run (time,
+rudder in degrees, propeller rate). Every option maps onto :func:`casship.design.design_trials`.
 """
 from __future__ import annotations
 
-import json
-
 import numpy as np
 
-from ._common import add_overwrite_option
+from ._common import add_overwrite_option, check_outputs, check_ship, count, parse_pairs, print_json, refuse_unused, write_output
 
 
 #: The targets of :data:`casship.design.TARGETS` (listed here so that the command line starts without CasADi).
 TARGET_NAMES = ("tactical_diameter", "tactical_diameter_port", "advance", "advance_port", "transfer", "first_overshoot",
                 "first_overshoot_port", "port_starboard_difference")
+
+
+#: The covariances of :data:`casship.design.COVARIANCES` (listed here for the same reason).
+COVARIANCES = ("jackknife", "robust", "model")
 
 
 HELP = "rank the trials that would most reduce a prediction's uncertainty, and optimise a free rudder sequence"
@@ -36,6 +39,9 @@ def register(sub) -> None:
     p.add_argument("--model", required=True, metavar="NAME", help="registered model name")
     p.add_argument("--params", default=None, help="fit file (JSON from casship identify or a study): parameters, "
                                                   "covariance, noise")
+    p.add_argument("--covariance", default=None, choices=COVARIANCES,
+                   help="which covariance of the fit file is the belief (default: the one the file carries, "
+                        "calibrated by a jackknife when present)")
     p.add_argument("--prior-std", dest="prior_std", default=None,
                    help="standard deviations name=std,... of uncertain parameters the fit holds fixed (or all, "
                         "without --params)")
@@ -59,25 +65,12 @@ def register(sub) -> None:
     p.add_argument("--corridor", type=float, default=None, help="free trial: half width of the track corridor [m]")
     p.add_argument("--speed-min", dest="speed_min", type=float, default=None, help="free trial: speed floor [m/s]")
     p.add_argument("--knot", type=float, default=None, help="free trial: time between rudder knots [s] (default L/U/4)")
-    p.add_argument("--max-iter", dest="max_iter", type=int, default=150, help="free trial: iteration limit")
-    p.add_argument("--csv", default="free_trial.csv", help="the free rudder sequence as CSV")
-    p.add_argument("--plot", default=None, help="PNG: ranking, the best trial's rudder, track and speed")
+    p.add_argument("--max-iter", dest="max_iter", type=count, default=150, help="free trial: iteration limit")
+    p.add_argument("--csv", default=None, help="write the free rudder sequence as CSV (t_s, rudder_deg, n)")
+    p.add_argument("--plot", default=None, help="figure (.png, .pdf or .svg): ranking, the best trial's rudder, track and speed")
     p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
     add_overwrite_option(p)
-    p.set_defaults(func=run)
-
-
-def _pairs(text, what: str) -> dict[str, float]:
-    out = {}
-    for item in [s.strip() for s in (text or "").split(",") if s.strip()]:
-        name, sep, value = item.partition("=")
-        if not sep:
-            raise ValueError(f"{what}: expected name=value, got {item!r}")
-        try:
-            out[name.strip()] = float(value)
-        except ValueError:
-            raise ValueError(f"{what}: value of {name.strip()!r} is not a number ({value!r})") from None
-    return out
+    p.set_defaults(func=run, parser=p)
 
 
 def _angles(text, what: str) -> list[float]:
@@ -92,29 +85,26 @@ def _angles(text, what: str) -> list[float]:
 
 
 def _belief_and_noise(args, model):
-    """The belief and the noise from ``--params`` / ``--prior-std`` / ``--sigma``."""
-    from ..design import ParameterBelief
+    """The belief and the noise from ``--params`` (with ``--covariance``) / ``--prior-std`` / ``--sigma``."""
+    from ..design import ParameterBelief, fit_noise
     from ..identify import FitResult, read_params
 
-    extra = _pairs(args.prior_std, "--prior-std")
-    sigma = _pairs(args.sigma, "--sigma")
+    extra = parse_pairs(args.prior_std, "--prior-std")
+    sigma = parse_pairs(args.sigma, "--sigma")
     if args.params:
         model, p = read_params(args.params, args.model)
         fit = FitResult.from_json(args.params)
-        has_free = any(q.split("@", 1)[0] in model.param_names for q in fit.free)
-        if has_free:
-            belief = ParameterBelief.from_fit(fit, extra_std=extra, params=model.param_dict(p))
-        elif extra:
+        if any(q.split("@", 1)[0] in model.param_names for q in fit.free):
+            belief = ParameterBelief.from_fit(args.params, covariance=args.covariance, extra_std=extra,
+                                              params=model.param_dict(p))
+        elif extra and not args.covariance:
             belief = ParameterBelief.from_std(extra, model.param_dict(p), source=f"prior around {args.params}")
         else:
             raise ValueError(f"--params {args.params} estimates no model parameter; give --prior-std")
-        if not sigma:
-            noise = fit.noise.get("sigma") or {}
-            scale = float(fit.noise.get("weight_scale", 1.0))
-            sigma = {k: float(v) * scale for k, v in noise.items()}
-            if not sigma:
-                raise ValueError(f"--params {args.params} holds no output noise (an output-error fit's sigma); give --sigma")
+        sigma = sigma or fit_noise(fit)
     else:
+        if args.covariance:
+            raise ValueError("--covariance chooses among a fit file's covariances: give --params")
         if not extra:
             raise ValueError("give --params (a fit file) or --prior-std (what is uncertain now)")
         if not sigma:
@@ -127,15 +117,17 @@ def _belief_and_noise(args, model):
 def run(args) -> int:
     from ..design import Approach, TrialLimits, design_trials, standard_trials
     from ..models import get_model
-    from ..outdir import check_output_file, output_file
 
     free = args.free
-    if free:
-        check_output_file(args.csv, overwrite=args.overwrite, what="--csv")      # before minutes of work
-    if args.plot:
-        check_output_file(args.plot, overwrite=args.overwrite, what="--plot")
+    if not free:
+        refuse_unused(args.parser, {"--csv": args.csv is not None}, "--no-free optimises no free rudder sequence")
+    # before minutes of work: distinct paths, the --overwrite rule
+    stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
     model = get_model(args.model)
+    check_ship(model, args.model, "a trial design")
     model, p, belief, sigma = _belief_and_noise(args, model)
+    if not args.json:
+        print(f"belief: {belief.kind} ({belief.source}); {len(belief.names)} uncertain parameters")
     approach = Approach(model, p, speed=args.speed, dt=args.dt)
     limits = None
     if free:
@@ -149,17 +141,18 @@ def run(args) -> int:
                                  spiral=args.spiral)
     res = design_trials(model, belief, sigma, args.target, criterion=args.criterion, p=p, speed=args.speed,
                         dt=approach.dt, candidates=candidates, limits=limits, max_iter=args.max_iter)
-    if free:
-        with output_file(args.csv, overwrite=args.overwrite, what="--csv") as tmp:
-            res.trials["free"].to_csv(tmp, approach)
+    if args.csv:
+        write_output(args.csv, lambda tmp: res.trials["free"].to_csv(tmp, approach), option="--csv",
+                     overwrite=args.overwrite, stamps=stamps)
     if args.plot:
-        with output_file(args.plot, overwrite=args.overwrite, what="--plot") as tmp:
-            res.plot(tmp, approach)
+        write_output(args.plot, lambda tmp: res.plot(tmp, approach), option="--plot", overwrite=args.overwrite,
+                     stamps=stamps)
     if args.json:
-        print(json.dumps(res.to_dict(), default=float))
+        print_json(res.to_dict())
     else:
         print(res.summary())
         print(res.table())
         if free:
-            print(f"free trial ({res.free['status']}, {res.free['iterations']} iterations) written to {args.csv}")
+            where = f"written to {args.csv}" if args.csv else "--csv FILE writes its rudder sequence"
+            print(f"free trial ({res.free['status']}, {res.free['iterations']} iterations): {where}")
     return 0

@@ -82,7 +82,7 @@ def register(sub) -> None:
     p.add_argument("--options", default=None, help="estimator options key=value,... (e.g. gate=0.999,members=100)")
     p.add_argument("--seed", type=seed, default=0, help="seed of stochastic estimators (EnKF)")
     p.add_argument("--out", default=None, help="CSV of estimates and standard deviations")
-    p.add_argument("--plot", default=None, help="PNG plot of the estimates with 2-sigma bands")
+    p.add_argument("--plot", default=None, help="figure (.png, .pdf or .svg) of the estimates with 2-sigma bands")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     add_overwrite_option(p)
     add_limits_option(p)
@@ -192,12 +192,14 @@ def filter_file(args, model=None):
     from ..discretize import discretize
     from ..errors import InputError
     from ..estimators import ESTIMATORS, noise_from_data, prior_from_data
-    from ..validity import check_inputs, check_step
+    from ..validity import check_inputs, check_states, check_step
 
     model = model if model is not None else load_model(args.model)
     data = load_data(args, model)
-    if args.measured:
+    if args.measured is not None:
         meas = tuple(parse_items(args.measured, "--measured"))
+        if not meas:
+            raise InputError("--measured: no output named (give a,b or leave the option out for the outputs in the data)")
     else:
         meas = tuple(n for n in model.output_names if n in data)
         if not meas:
@@ -223,6 +225,9 @@ def filter_file(args, model=None):
     sources["R"] = "given (--R)"
     if args.R_std is not None:
         std = _variances(args.R_std, meas, "--R-std")
+        bad = {k: v for k, v in (std.items() if isinstance(std, dict) else [("all", std)]) if v <= 0}
+        if bad:
+            raise InputError(f"--R-std: a standard deviation must be positive, got {bad}")
         R = {k: v**2 for k, v in std.items()} if isinstance(std, dict) else std**2
         sources["R"] = "given (--R-std)"
     if R is None:
@@ -252,9 +257,11 @@ def filter_file(args, model=None):
     if not args.allow_out_of_range:
         U = data.matrix(model.input_names, finite=True, what="input")
         check_inputs(model, U, data.t)
-        k = int(np.argmax(data.dt))
-        check_step(model, float(data.dt[k]), prior.mean, U[0] if model.nu else np.zeros(0), model.params(),
-                   args.method, where=f" (the data step from t = {data.t[k]:g} to {data.t[k + 1]:g} s)")
+        check_states(model, prior.mean, what="starting state (--x0 or the record)")
+        # the record's own step; a longer interval (a gap) is the estimator's to refuse or bridge
+        # (option on_gap), checked at the state where it happens
+        check_step(model, float(np.median(data.dt)), prior.mean, U[0] if model.nu else np.zeros(0), model.params(),
+                   args.method, where=" (the median step of the record)")
     _check_start(est, prior, data)
     result = (est.smooth if args.smooth else est.filter)(data, prior, seed=args.seed)
     _check_finite(result)

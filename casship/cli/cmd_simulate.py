@@ -8,13 +8,14 @@ Examples::
 """
 from __future__ import annotations
 
-from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model, load_record,
-                      level, print_json, refuse_unused, require, seed, whole, write_output)
+from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, check_ship, level,
+                      load_model, load_record, print_json, refuse_unused, require, seed, whole, write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
                  "overshoot_2_pct", "overshoot_3_deg", "overshoot_3_pct",
-                 "initial_turning_time_s", "period_s", "initial_turning_distance_m")
+                 "initial_turning_time_s", "period_s", "initial_turning_distance_m", "yaw_rate_at_release_deg_s",
+                 "residual_yaw_rate_deg_s")
 
 
 #: One-line description (the command list of ``casship --help``).
@@ -59,7 +60,7 @@ def register(sub) -> None:
     p.add_argument("--no-bands", action="store_true", help="ignore the covariance of the --params file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--csv", default=None, help="save the trajectory as CSV")
-    p.add_argument("--plot", default=None, help="save a plot (PNG)")
+    p.add_argument("--plot", default=None, help="save a figure (.png, .pdf or .svg)")
     add_overwrite_option(p)
     add_limits_option(p)
     p.set_defaults(func=run, parser=p)
@@ -98,6 +99,8 @@ def run(args) -> int:
     else:
         model = load_model(args.model)
         p = model.params()
+    if not args.inputs:
+        check_ship(model, args.model, "a manoeuvre")
     L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
     measured = None
@@ -209,6 +212,8 @@ def _print_text(out) -> None:
 
 
 def _plot(traj, measured, path, title="") -> None:
+    from pathlib import Path
+
     import numpy as np
     from matplotlib.figure import Figure
 
@@ -235,4 +240,4 @@ def _plot(traj, measured, path, title="") -> None:
     ax2.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
+    fig.savefig(path, dpi=110, format=Path(path).suffix[1:].lower() or "png")

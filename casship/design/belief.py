@@ -1,22 +1,61 @@
 """What a user knows about a ship's parameters before the next trial: a Gaussian over named parameters.
 
 :class:`ParameterBelief` is the prior (or posterior) a trial design starts from: the mean and the
-covariance of named model parameters. It comes from a fit (:meth:`ParameterBelief.from_fit`: the
-fit's covariance over its free parameters, optionally widened by prior standard deviations for
-parameters the fit held fixed) or from standard deviations around chosen values
-(:meth:`ParameterBelief.from_std`). Adding a trial's information gives the belief after it
+covariance of named model parameters. It comes from a fit or its file
+(:meth:`ParameterBelief.from_fit`: the covariance the file carries -- calibrated by a run-level
+jackknife when the fit was -- or the fit's robust or model-based one, optionally widened by prior
+standard deviations for parameters the fit held fixed), from a file's
+:class:`~casship.identify.ParameterUncertainty` (:meth:`ParameterBelief.from_uncertainty`) or from
+standard deviations around chosen values (:meth:`ParameterBelief.from_std`); its :attr:`kind`
+names which covariance it is, for reports. Adding a trial's information gives the belief after it
 (:meth:`ParameterBelief.after`).
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from ..gaussian import Gaussian
 
-__all__ = ["ParameterBelief"]
+__all__ = ["ParameterBelief", "COVARIANCES", "covariance_kind"]
+
+#: The covariances of a fit file a belief can be built from (:meth:`ParameterBelief.from_fit`).
+COVARIANCES = ("jackknife", "robust", "model")
+
+
+def covariance_kind(source: str) -> str:
+    """The kind of a parameter covariance from its stated source, for reports.
+
+    Parameters
+    ----------
+    source : str
+        A :class:`~casship.identify.ParameterUncertainty`'s ``source``.
+
+    Returns
+    -------
+    str
+        ``"calibrated"`` (a jackknife or another calibration over runs), ``"robust"`` (sandwich),
+        ``"model-based"``, or ``"stated"`` (a source that says none of these).
+
+    Examples
+    --------
+    >>> covariance_kind("run-level jackknife over 16 leave-one-run-out folds")
+    'calibrated'
+    >>> covariance_kind("robust (sandwich)")
+    'robust'
+    """
+    text = str(source).lower()
+    if "jackknife" in text or "calibrat" in text:
+        return "calibrated"
+    if "robust" in text or "sandwich" in text:
+        return "robust"
+    if "model-based" in text or "model based" in text:
+        return "model-based"
+    return "stated"
 
 
 @dataclass(frozen=True)
@@ -31,6 +70,9 @@ class ParameterBelief:
         Mean and covariance (natural units of the parameters).
     source : str
         Where the belief comes from (for reports).
+    kind : str
+        Which covariance it is: ``"prior"``, ``"calibrated"``, ``"robust"``, ``"model-based"``,
+        ``"standard errors"`` or ``"stated"`` (see :meth:`from_fit`).
 
     Examples
     --------
@@ -43,6 +85,7 @@ class ParameterBelief:
     names: tuple
     gaussian: Gaussian
     source: str = ""
+    kind: str = ""
 
     def __post_init__(self):
         names = tuple(str(n) for n in self.names)
@@ -87,42 +130,132 @@ class ParameterBelief:
         if missing:
             raise ValueError(f"no mean value for parameter(s) {missing}")
         s = np.array([float(std[n]) for n in names])
-        return cls(tuple(names), Gaussian([float(mean[n]) for n in names], np.diag(s**2)), source)
+        return cls(tuple(names), Gaussian([float(mean[n]) for n in names], np.diag(s**2)), source, "prior")
 
     @classmethod
-    def from_fit(cls, fit, *, extra_std: Mapping[str, float] | None = None, params: Mapping[str, float] | None = None,
-                 source: str | None = None) -> "ParameterBelief":
-        """The belief a fit leaves: its covariance over the free model parameters.
-
-        Free quantities that are not model parameters (initial states, biases, noise variances) and
-        per-record or per-group copies other than the one the fit's ``params`` apply (the copy whose
-        estimate equals ``fit.params[name]``) are marginalised out: the belief keeps the block of
-        the covariance of the copies that describe the ship of ``fit.params``. A fit file without a
-        covariance falls back to its standard errors (independent).
+    def from_uncertainty(cls, uncertainty, *, extra_std: Mapping[str, float] | None = None,
+                         params: Mapping[str, float] | None = None, source: str | None = None) -> "ParameterBelief":
+        """The belief a parameter file's uncertainty states: its parameters, values and covariance.
 
         Parameters
         ----------
-        fit : FitResult
-            The fit (e.g. ``FitResult.from_json("fit.json")``).
+        uncertainty : casship.identify.ParameterUncertainty
+            E.g. the third value of ``read_params(path, model, uncertainty=True)``.
         extra_std : mapping name -> float, optional
-            Prior standard deviations of parameters the fit held fixed (independent of the rest,
-            centred on ``fit.params``); a name that is free in the fit is an error.
+            Prior standard deviations of further parameters (independent of the rest, centred on
+            ``params``); a name the uncertainty covers is an error.
         params : mapping, optional
-            Parameter values (default ``fit.params``).
+            Values of the model's parameters (needed with ``extra_std``: the means of those).
         source : str, optional
-            Description for reports.
+            Description for reports (default: the kind of covariance and its source).
 
         Returns
         -------
         ParameterBelief
+            With :attr:`kind` ``"calibrated"`` (a jackknife), ``"robust"``, ``"model-based"`` or
+            ``"stated"`` (read from the uncertainty's source).
+
+        Examples
+        --------
+        >>> from casship.identify import ParameterUncertainty
+        >>> u = ParameterUncertainty(["K", "T"], [0.1, 20.0], [[1e-4, 0.0], [0.0, 4.0]], "run-level jackknife")
+        >>> ParameterBelief.from_uncertainty(u).kind
+        'calibrated'
+        """
+        kind = covariance_kind(uncertainty.source)
+        text = source or (f"{kind} covariance ({uncertainty.source or 'source not stated'}) of "
+                          f"{len(uncertainty.names)} parameter(s)")
+        belief = cls(tuple(uncertainty.names), Gaussian(uncertainty.values, uncertainty.covariance), text, kind)
+        return belief._with_extra(extra_std, params, source)
+
+    @classmethod
+    def from_fit(cls, fit, *, covariance: str | None = None, extra_std: Mapping[str, float] | None = None,
+                 params: Mapping[str, float] | None = None, source: str | None = None) -> "ParameterBelief":
+        """The belief a fit leaves: the covariance its file carries, or its robust or model-based one.
+
+        A fit file carries the uncertainty a new run is replayed with (``param_covariance``): a
+        calibrated one when the fit was calibrated (the kvlcc2-marin study's run-level jackknife),
+        else the robust (sandwich) covariance of its shared free model parameters. By default that
+        one is taken; ``covariance`` asks for a kind and refuses a file that lacks it.
+
+        For the robust and model-based covariances of the fit itself, free quantities that are not
+        model parameters (initial states, biases, noise variances) and per-record or per-group copies
+        other than the one the fit's ``params`` apply (the copy whose estimate equals
+        ``fit.params[name]``) are marginalised out: the belief keeps the block of the copies that
+        describe the ship of ``fit.params``. A model-based covariance that is not finite falls back
+        to the standard errors (independent).
+
+        Parameters
+        ----------
+        fit : FitResult, str or Path
+            The fit, or its file (``FitResult.to_json``).
+        covariance : {None, "jackknife", "robust", "model"}
+            None: the file's own (calibrated when present); ``"jackknife"``: the calibrated one
+            (an error when the file has none); ``"robust"``: the robust one the file carries, else
+            the fit's sandwich covariance; ``"model"``: the fit's model-based covariance.
+        extra_std : mapping name -> float, optional
+            Prior standard deviations of parameters the fit held fixed (independent of the rest,
+            centred on ``fit.params``); a name the covariance covers is an error.
+        params : mapping, optional
+            Parameter values (default ``fit.params``).
+        source : str, optional
+            Description for reports (default: where the covariance comes from and what it covers).
+
+        Returns
+        -------
+        ParameterBelief
+            Its :attr:`kind` says which covariance was used (``"calibrated"``, ``"robust"``,
+            ``"model-based"``, ``"standard errors"``).
 
         Raises
         ------
         ValueError
-            A free parameter with an infinite or undefined standard error, no model parameter among
-            the free quantities and no ``extra_std``, or an ``extra_std`` name that is free.
+            An unknown ``covariance``, a kind the fit lacks (naming what it has), a free parameter
+            with an infinite or undefined standard error, no model parameter among the free
+            quantities and no ``extra_std``, or an ``extra_std`` name the covariance covers.
+
+        Examples
+        --------
+        >>> belief = ParameterBelief.from_fit("fit.json")                         # doctest: +SKIP
+        >>> belief.kind, belief.source                                            # doctest: +SKIP
+        ('calibrated', 'fit.json: calibrated covariance (run-level jackknife over 16 ...) of 10 parameter(s)')
         """
+        from ..identify import FitResult, ParameterUncertainty
+
+        where = "the fit"
+        if isinstance(fit, (str, os.PathLike)):
+            where = Path(fit).name
+            fit = FitResult.from_json(fit)
+        if covariance not in (None, *COVARIANCES):
+            raise ValueError(f"unknown covariance {covariance!r}; use one of {COVARIANCES} (or None: the file's own)")
         values = dict(params or fit.params)
+        carried = ParameterUncertainty.from_dict(fit.param_covariance, where) if fit.param_covariance else None
+        kind = covariance_kind(carried.source) if carried is not None else None
+        wanted = {None: kind, "jackknife": "calibrated", "robust": "robust", "model": "model-based"}[covariance]
+        if carried is not None and kind == wanted:
+            bad = [n for n, v in zip(carried.names, carried.values)
+                   if not np.isclose(v, values.get(n, np.nan), rtol=1e-12, atol=0.0)]
+            if bad:
+                raise ValueError(f"{where}: the values of {bad} in its covariance differ from its parameters")
+            belief = cls.from_uncertainty(carried)
+        elif covariance == "jackknife":
+            has = f"it carries a {kind} one ({carried.source})" if carried is not None else "it carries none"
+            raise ValueError(f"{where} has no calibrated (jackknife) covariance: {has}; ask for the robust or the "
+                             "model-based one")
+        else:
+            belief = cls._free_block(fit, values, robust={None: None, "robust": True, "model": False}[covariance])
+            if belief is None:
+                if not extra_std:
+                    raise ValueError(f"{where} has no free model parameter among {list(fit.free)}; give prior "
+                                     "standard deviations (extra_std)")
+                return cls.from_std(extra_std, values, source=source or f"prior around the values of {where}")
+        belief = ParameterBelief(belief.names, belief.gaussian, f"{where}: {belief.source}", belief.kind)
+        return belief._with_extra(extra_std, values, source, clash="the fit estimated")
+
+    @classmethod
+    def _free_block(cls, fit, values: dict, *, robust: bool | None) -> "ParameterBelief | None":
+        """The robust (``robust=None``: when the fit has a finite one) or model-based covariance of the
+        fit's free model parameters (see from_fit); None when no free quantity is a model parameter."""
         pick, names = [], []
         for i, q in enumerate(fit.free):
             base = q.split("@", 1)[0]
@@ -132,38 +265,66 @@ class ParameterBelief:
                 continue                                   # another record's / group's copy
             pick.append(i)
             names.append(base)
-        cov_full = np.asarray(fit.covariance, dtype=float)
-        if pick and np.all(np.isfinite(cov_full[np.ix_(pick, pick)])):
-            cov = cov_full[np.ix_(pick, pick)]
-            how = "covariance"
-        else:
+        if not names:
+            return None
+        if robust is None:
+            robust = (fit.covariance_robust is not None
+                      and bool(np.all(np.isfinite(np.asarray(fit.covariance_robust)[np.ix_(pick, pick)]))))
+        if robust and fit.covariance_robust is None:
+            raise ValueError("the fit has no robust covariance; use covariance='model'")
+        full = np.asarray(fit.covariance_robust if robust else fit.covariance, dtype=float)
+        block = full[np.ix_(pick, pick)]
+        kind = "robust" if robust else "model-based"
+        if not np.all(np.isfinite(block)):
+            if robust:
+                raise ValueError(f"the fit's robust covariance is not finite for {names}; use covariance='model'")
             se = np.array([fit.std_errors[fit.free[i]] for i in pick])
             bad = [n for n, s in zip(names, se) if not (np.isfinite(s) and s > 0)]
             if bad:
                 raise ValueError(f"the fit does not determine {bad} (standard error not finite); give them a "
                                  "prior standard deviation instead")
-            cov = np.diag(se**2)
-            how = "standard errors (no covariance in the fit)"
+            block, kind = np.diag(se**2), "standard errors"
+        how = {"robust": "robust (sandwich) covariance", "model-based": "model-based covariance",
+               "standard errors": "standard errors (no covariance in the fit)"}[kind]
+        return cls(tuple(names), Gaussian([values[n] for n in names], 0.5 * (block + block.T)),
+                   f"{how} of {len(names)} free parameter(s)", kind)
+
+    def extended(self, std: Mapping[str, float], mean: Mapping[str, float], *,
+                 source: str | None = None) -> "ParameterBelief":
+        """This belief with more parameters, independent of the others, with standard deviations ``std``.
+
+        Parameters
+        ----------
+        std : mapping name -> float
+            Standard deviation of each added parameter (positive, finite; not already in the belief).
+        mean : mapping name -> float
+            Their values (a model's ``param_dict()`` may be given whole).
+        source : str, optional
+            Description for reports (default: this one's and the added prior's).
+
+        Returns
+        -------
+        ParameterBelief
+            Same :attr:`kind` as this one.
+        """
+        return self._with_extra(std, mean, source)
+
+    def _with_extra(self, extra_std, values, source, clash: str = "the belief covers") -> "ParameterBelief":
         extra = dict(extra_std or {})
-        clash = sorted(set(extra) & set(names))
-        if clash:
-            raise ValueError(f"extra_std given for {clash}, which the fit estimated (their covariance comes from it)")
-        missing = [n for n in extra if n not in values]
-        if missing:
-            raise ValueError(f"extra_std names parameter(s) {missing} that the fit's model lacks")
-        e = cls.from_std(extra, values) if extra else None
-        if not names and e is None:
-            raise ValueError(f"the fit has no free model parameter among {list(fit.free)}; give extra_std")
-        k = len(names)
-        n = k + (len(e.names) if e else 0)
+        if not extra:
+            return self if source is None else ParameterBelief(self.names, self.gaussian, source, self.kind)
+        both = sorted(set(extra) & set(self.names))
+        if both:
+            raise ValueError(f"extra_std given for {both}, which {clash} (their covariance comes from it)")
+        if values is None:
+            raise ValueError("extra_std needs the parameters' values (params)")
+        e = ParameterBelief.from_std(extra, values)
+        k, n = len(self.names), len(self.names) + len(e.names)
         big = np.zeros((n, n))
-        big[:k, :k] = cov
-        if e:
-            big[k:, k:] = e.gaussian.cov
-        mean = [values[q] for q in names] + ([values[q] for q in e.names] if e else [])
-        text = source or (f"fit of {fit.model} ({how} of {k} free parameter(s)"
-                          + (f", prior std of {len(extra)} more)" if extra else ")"))
-        return cls(tuple(names) + (e.names if e else ()), Gaussian(mean, 0.5 * (big + big.T)), text)
+        big[:k, :k], big[k:, k:] = self.cov, e.cov
+        text = source or f"{self.source}, and the prior std of {len(e.names)} more"
+        return ParameterBelief(self.names + e.names, Gaussian(np.r_[self.gaussian.mean, e.gaussian.mean], big), text,
+                               self.kind)
 
     # -- queries -----------------------------------------------------------------------------------
     @property
@@ -224,7 +385,7 @@ class ParameterBelief:
         S = v * np.sqrt(np.clip(w, 0.0, None))
         inner = np.eye(k) + S.T @ (0.5 * (info + info.T)) @ S
         cov = S @ np.linalg.solve(inner, S.T)
-        return ParameterBelief(self.names, Gaussian(self.gaussian.mean, 0.5 * (cov + cov.T)), self.source)
+        return ParameterBelief(self.names, Gaussian(self.gaussian.mean, 0.5 * (cov + cov.T)), self.source, self.kind)
 
     def __repr__(self) -> str:
         return f"ParameterBelief({len(self.names)} parameters: {', '.join(self.names)}; {self.source})"

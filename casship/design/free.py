@@ -18,6 +18,7 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
+from ..errors import SolverError
 from .belief import ParameterBelief
 from .information import CRITERIA, check_noise
 from .sensitivity import Approach
@@ -26,7 +27,7 @@ from .trials import Trial
 __all__ = ["TrialLimits", "optimise_free_trial", "FreeTrialError"]
 
 
-class FreeTrialError(RuntimeError):
+class FreeTrialError(SolverError):
     """The optimiser found no rudder sequence within the limits (its status is given)."""
 
 

@@ -17,7 +17,7 @@ from .belief import ParameterBelief
 from .sensitivity import Approach
 from .trials import Trial
 
-__all__ = ["trial_information", "criterion_value", "CRITERIA", "check_noise"]
+__all__ = ["trial_information", "criterion_value", "CRITERIA", "check_noise", "fit_noise"]
 
 #: Classical criteria on the posterior covariance (smaller is better).
 CRITERIA = ("D", "A")
@@ -50,6 +50,45 @@ def check_noise(model, noise: Mapping[str, float]) -> dict:
     if bad:
         raise ValueError(f"noise standard deviations must be positive and finite: {bad}")
     return noise
+
+
+def fit_noise(fit) -> dict:
+    """The noise of one sample per measured channel as a fit weighs it: an output-error fit's output
+    standard deviations times its fitted residual scale, or the square roots of the diagonal of a
+    likelihood fit's ``R``.
+
+    A new trial's record enters the likelihood with weight 1 (per-record weights of the fit are a
+    choice of its cost over its own records). These deviations include the model-structure error of
+    the runs fitted, not only sensor noise.
+
+    Parameters
+    ----------
+    fit : FitResult, str or Path
+        An output-error or likelihood fit, or its file.
+
+    Returns
+    -------
+    dict
+        Output name -> standard deviation (SI units, radians).
+
+    Raises
+    ------
+    ValueError
+        A fit without output noise (neither ``sigma`` nor ``R``).
+    """
+    from ..identify import FitResult
+
+    where = "the fit"
+    if not isinstance(fit, FitResult):
+        where, fit = str(fit), FitResult.from_json(fit)
+    noise = fit.noise or {}
+    if noise.get("sigma"):
+        scale = float(noise.get("weight_scale", 1.0))
+        return {str(k): float(v) * scale for k, v in noise["sigma"].items()}
+    if noise.get("R"):
+        return {str(k): float(np.sqrt(v)) for k, v in noise["R"].items()}
+    raise ValueError(f"{where} holds no output noise (an output-error fit's sigma or a likelihood fit's R); give the "
+                     "noise explicitly")
 
 
 def trial_information(approach: Approach, trial: Trial, names: Sequence[str], noise: Mapping[str, float], *,

@@ -9,13 +9,13 @@ and ranked with the others.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..errors import InputError
 from .belief import ParameterBelief
 from .free import FreeTrialError, TrialLimits, optimise_free_trial
 from .information import CRITERIA, check_noise, criterion_value, trial_information
@@ -125,14 +125,15 @@ class DesignResult:
         return {"target": {"name": self.target.name, "value": self.target.value, "unit": self.target.unit,
                            "gradient": dict(zip(self.belief.names, self.target.gradient.tolist()))},
                 "belief": {"names": list(self.belief.names), "mean": self.belief.mean, "std": self.belief.std,
-                           "source": self.belief.source},
+                           "source": self.belief.source, "covariance": self.belief.kind},
                 "noise": dict(self.noise), "criterion": self.criterion, "approach": dict(self.approach),
                 "ranking": [dict(r) for r in self.rows], "free": dict(self.free),
                 "trials": {n: {"kind": t.kind, "dt_s": t.dt, "rudder_deg": np.degrees(t.rudder).tolist()}
                            for n, t in self.trials.items()}}
 
     def to_json(self, path) -> Path:
-        """Write :meth:`to_dict` as JSON.
+        """Write :meth:`to_dict` as JSON (:func:`casship.io.jsonfile.write_json`: atomic, non-finite
+        numbers as text).
 
         Parameters
         ----------
@@ -142,9 +143,10 @@ class DesignResult:
         -------
         Path
         """
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2, default=float))
-        return path
+        from ..io.jsonfile import write_json
+
+        write_json(path, self.to_dict(), what="design result")
+        return Path(path)
 
     def plot(self, path, approach: Approach | None = None) -> Path:
         """Bar chart of the target's standard deviation after each trial; with ``approach``, also the
@@ -271,6 +273,8 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
     tv = tgt.evaluate(approach, belief.names)
     next(steps)
     trials = list(candidates) if candidates is not None else standard_trials(approach)
+    if not trials and limits is None:
+        raise InputError("no candidate trials and no free trial (limits): nothing to rank")
     names = [t.name for t in trials]
     if len(set(names)) != len(names):
         raise ValueError(f"candidate trials need distinct names, got {names}")

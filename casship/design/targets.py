@@ -101,6 +101,21 @@ def _steps_to(approach: Approach, rudder_row, level: float, start_frac: float = 
     return int(min(reached[0] + extra, n))
 
 
+def _check_side(side) -> None:
+    if side not in (1, -1):
+        raise ValueError(f"side must be +1 (starboard) or -1 (port), got {side}")
+
+
+def _to_heading(approach: Approach, names: Sequence[str], law, level: float, side: int, what: str, extra: int = 3):
+    """Simulate ``law`` (``t -> rudder``) with its sensitivities until the heading change ``side * psi``
+    reaches ``level`` (plus ``extra`` steps); returns ``X, dX``, the crossing ``k, frac, dfrac`` and the steps ``n``."""
+    n = _steps_to(approach, law, level, extra=extra)
+    U = approach.inputs(law(approach.midpoints(n)))
+    X, dX = approach.fold(names, n).sensitivities(lambda tau: ca.MX(ca.DM(U)))
+    ipsi = approach.model.index("psi")
+    return (X, dX, *_crossing(side * X[:, ipsi], side * dX[:, ipsi], level, 1, what), n)
+
+
 @dataclass(frozen=True)
 class Turning(Target):
     """Advance, transfer or tactical diameter of a turning circle from the approach.
@@ -126,8 +141,7 @@ class Turning(Target):
     def __post_init__(self):
         if self.quantity not in ("advance", "transfer", "tactical_diameter"):
             raise ValueError(f"unknown turning quantity {self.quantity!r}; use advance, transfer or tactical_diameter")
-        if self.side not in (1, -1):
-            raise ValueError(f"side must be +1 (starboard) or -1 (port), got {self.side}")
+        _check_side(self.side)
         if not (0 < self.rudder_deg <= 90):
             raise ValueError(f"rudder_deg must be in (0, 90], got {self.rudder_deg}")
 
@@ -154,28 +168,9 @@ class Turning(Target):
         return lambda t: delta * (np.minimum(1.0, rate * np.asarray(t) / abs(delta)) if rate else np.ones_like(t))
 
     def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
-        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
-
-        Parameters
-        ----------
-        approach : Approach
-            Model, parameters, approach speed, propeller rate and step.
-        names : sequence of str
-            The uncertain parameters (the gradient's order).
-
-        Returns
-        -------
-        TargetValue
-        """
         level = np.radians(90.0 if self.quantity != "tactical_diameter" else 180.0)
-        law = self.rudder(approach)
-        n = _steps_to(approach, law, level)
-        fold = approach.fold(names, n)
-        U = approach.inputs(law(approach.midpoints(n)))
-        X, dX = fold.sensitivities(lambda tau: ca.MX(ca.DM(U)))
-        m = approach.model
-        ipsi, ix, iy = m.index("psi"), m.index("x"), m.index("y")
-        k, frac, dfrac = _crossing(self.side * X[:, ipsi], self.side * dX[:, ipsi], level, 1, self.name)
+        X, dX, k, frac, dfrac, _ = _to_heading(approach, names, self.rudder(approach), level, self.side, self.name)
+        ix, iy = approach.model.index("x"), approach.model.index("y")
         if self.quantity == "advance":
             v, dv = _interp(X[:, ix], dX[:, ix], k, frac, dfrac)
         else:
@@ -208,8 +203,7 @@ class FirstOvershoot(Target):
     unit = "rad"
 
     def __post_init__(self):
-        if self.side not in (1, -1):
-            raise ValueError(f"side must be +1 (starboard) or -1 (port), got {self.side}")
+        _check_side(self.side)
         if not (0 < self.rudder_deg <= 90 and 0 < self.heading_deg < 180):
             raise ValueError(f"zig-zag angles must be positive degrees, got {self.rudder_deg}/{self.heading_deg}")
 
@@ -242,30 +236,13 @@ class FirstOvershoot(Target):
         return rudder
 
     def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
-        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
-
-        Parameters
-        ----------
-        approach : Approach
-            Model, parameters, approach speed, propeller rate and step.
-        names : sequence of str
-            The uncertain parameters (the gradient's order).
-
-        Returns
-        -------
-        TargetValue
-        """
         level = np.radians(self.heading_deg)
         law = self.law(approach)
-        n_switch = _steps_to(approach, lambda t: law(t, np.inf), level, extra=1)
-        t_grid = np.arange(n_switch + 1) * approach.dt
         # the switch: heading change reaches the switch angle (nothing before it depends on t1)
-        pre = approach.fold(names, n_switch)
-        U = approach.inputs(law(approach.midpoints(n_switch), np.inf))
-        X, dX = pre.sensitivities(lambda tau: ca.MX(ca.DM(U)))
+        X, dX, k, frac, dfrac, n_switch = _to_heading(approach, names, lambda t: law(t, np.inf), level, self.side,
+                                                      self.name, extra=1)
         ipsi = approach.model.index("psi")
-        k, frac, dfrac = _crossing(self.side * X[:, ipsi], self.side * dX[:, ipsi], level, 1, self.name)
-        t1 = float(t_grid[k - 1] + frac * approach.dt)
+        t1 = float((k - 1) * approach.dt + frac * approach.dt)
         dt1 = approach.dt * dfrac
         rate = approach.rudder_rate
         if rate and rate * t1 < np.radians(self.rudder_deg):
@@ -313,19 +290,6 @@ class Difference(Target):
         return self.first.unit
 
     def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
-        """Value and exact gradient with respect to the parameters ``names`` at ``approach.p``.
-
-        Parameters
-        ----------
-        approach : Approach
-            Model, parameters, approach speed, propeller rate and step.
-        names : sequence of str
-            The uncertain parameters (the gradient's order).
-
-        Returns
-        -------
-        TargetValue
-        """
         a, b = self.first.evaluate(approach, names), self.second.evaluate(approach, names)
         return TargetValue(self.name, a.value - b.value, a.gradient - b.gradient, a.unit)
 

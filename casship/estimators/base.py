@@ -23,7 +23,8 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from ..data import Dataset
+from ..data import Dataset, check_rows
+from ..errors import InputError
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, compile_function, run_fold
@@ -54,20 +55,17 @@ def per_sample(a: np.ndarray, n: int) -> np.ndarray:
     return a.reshape(r, n, c).transpose(1, 0, 2).copy()
 
 
+#: The most random numbers a stochastic estimator draws up front for one record (2 GB of float64).
+MAX_DRAWS = 250_000_000
+
+
 class StepEstimator(Estimator):
     """Base class of the recursive estimators (not used directly): the contract through one step Function.
 
     Parameters
     ----------
-    dmodel : DiscreteModel
-    Q : covariance of the process noise ``w`` (nw x nw; scalar, variances, matrix or name mapping),
-        with the one meaning stated in ``docs/architecture.md``: the covariance of ``w`` held over
-        a sampling interval; estimators in continuous time use the spectral density ``Q * dt``
-    R : covariance of one sampled measurement of the measured outputs (same forms)
-    measured : sequence of str, optional
-        Output names that are measured (default: all outputs of the model).
-    options : EstimatorOptions subclass or mapping, optional
-        The estimator's typed options (``Est.Options``); an unknown key raises ``ValueError``.
+    dmodel, Q, R, measured, options
+        As for :class:`~casship.estimators.contract.Estimator` (the contract).
 
     Attributes
     ----------
@@ -86,6 +84,7 @@ class StepEstimator(Estimator):
         self._folds: dict[tuple, ca.Function] = {}
         self._fold_calls: dict[tuple, BufferedCall] = {}
         self._compiled: dict[tuple, ca.Function] = {}
+        self._names: dict[tuple, tuple] = {}
         self._build_expressions()
 
     # -- what subclasses provide ------------------------------------------------------------------
@@ -138,12 +137,19 @@ class StepEstimator(Estimator):
     def _output_names(self, outputs) -> tuple:
         if outputs is None:
             outputs = self.options.outputs
-        elif outputs == "all":
+        elif isinstance(outputs, str) and outputs == "all":
             outputs = DIAGNOSTICS
-        unknown = [o for o in outputs if o not in DIAGNOSTICS and o not in self.memory]
+        key = outputs if isinstance(outputs, tuple) else None
+        if key in self._names:                      # asked once per run: not worked out again
+            return self._names[key]
+        memory = self.memory
+        unknown = [o for o in outputs if o not in DIAGNOSTICS and o not in memory]
         if unknown:
             raise ValueError(f"unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)}")
-        return (*self.memory, *(o for o in DIAGNOSTICS if o in outputs and o not in self.memory))
+        names = (*memory, *(o for o in DIAGNOSTICS if o in outputs and o not in memory))
+        if key is not None:
+            self._names[key] = names
+        return names
 
     def step_function(self, outputs=None) -> ca.Function:
         """The step Function returning the memory and the diagnostics ``outputs``.
@@ -231,6 +237,10 @@ class StepEstimator(Estimator):
         if not shapes:
             return {}
         sizes = [r * c for r, c in shapes.values()]
+        if n * sum(sizes) > MAX_DRAWS:
+            raise InputError(f"{self.name}: {n} steps x {sum(sizes)} random draws per step would need "
+                             f"{8 * n * sum(sizes) / 1e9:.3g} GB at once (more than {8 * MAX_DRAWS / 1e9:g} GB, "
+                             "casship.estimators.base.MAX_DRAWS): fewer members or a shorter record")
         z = rng.standard_normal((n, sum(sizes)))
         out, start = {}, 0
         for (name, (r, c)), size in zip(shapes.items(), sizes):
@@ -262,14 +272,8 @@ class StepEstimator(Estimator):
 
         Parameters
         ----------
-        data : Dataset
-            Columns named like the model inputs (finite) and measured outputs (NaN = missing).
-        prior : Gaussian
-            Belief about the state at the first time stamp, before its measurement.
-        p : array or mapping, optional
-            Model parameters (nominal by default).
-        seed : int or Generator, optional
-            For stochastic estimators (EnKF): fixes every draw.
+        data, prior, p, seed
+            As for :meth:`Estimator.filter <casship.estimators.contract.Estimator.filter>`.
 
         Returns
         -------
@@ -285,9 +289,10 @@ class StepEstimator(Estimator):
         """One run over the record as it is (the gaps checked by :meth:`filter`)."""
         arrays = self.prepare(data, p)
         n = len(data)
-        rng = np.random.default_rng(seed)
+        stochastic = bool(self._draw_shapes())
+        rng = np.random.default_rng(seed) if stochastic or seed is not None else None   # a fresh one costs
         memory = self.memory_from(prior, rng)
-        draws = self.sample_draws(n, rng)
+        draws = self.sample_draws(n, rng) if stochastic else {}
         outputs = self._output_names("all")
         constants = {k: arrays[k] for k in CONSTANT_INPUTS}
         if self.options.jit:                             # one C loop over the record
@@ -356,7 +361,8 @@ class StepEstimator(Estimator):
                              f"{list(m.state_names)}")
         t_last = float(result.t[-1])
         if np.ndim(t) == 0:
-            steps = int(np.floor(float(t) / self.dmodel.dt + 1e-9))
+            steps = check_rows(np.floor(float(t) / self.dmodel.dt + 1e-9),
+                               f"{self.name} prediction: {float(t):g} s at steps of {self.dmodel.dt:g} s")
             if steps < 1:
                 raise ValueError(f"prediction horizon {t} s is shorter than one step ({self.dmodel.dt:g} s)")
             times = t_last + self.dmodel.dt * np.arange(1, steps + 1)
@@ -394,14 +400,8 @@ class StepEstimator(Estimator):
 
         Parameters
         ----------
-        prior : Gaussian
-            Belief about the state at the first sample.
-        p : array or mapping, optional
-            Model parameters (nominal by default).
-        u : array, optional
-            Inputs before the first update (zeros by default).
-        seed : int or numpy.random.Generator, optional
-            For stochastic estimators.
+        prior, p, u, seed
+            As for :meth:`Estimator.online <casship.estimators.contract.Estimator.online>`.
 
         Returns
         -------

@@ -222,10 +222,14 @@ class Estimator(abc.ABC):
         dt = np.concatenate([[0.0], np.diff(data.t)])
         self.dmodel.check_steps(dt[1:], data.t)
         mask = np.isfinite(Y)
-        counts = mask.sum(axis=1)
-        gate = np.array([self.gate_threshold(int(c)) for c in counts]) if self.options.gate else np.full(len(data), np.inf)
-        return {"u_prev": np.vstack([U[:1], U[:-1]]).T, "u": U.T, "y": np.nan_to_num(Y, nan=0.0).T,
-                "mask": mask.T.astype(float), "dt": dt[None, :], "gate": gate[None, :],
+        maskf = mask.astype(float)
+        if self.options.gate:                  # the threshold per number of measured channels
+            thresholds = np.array([self.gate_threshold(c) for c in range(self.ny + 1)])
+            gate = thresholds[(maskf @ np.ones(self.ny)).astype(np.intp)]
+        else:
+            gate = np.full(len(data), np.inf)
+        return {"u_prev": np.vstack([U[:1], U[:-1]]).T, "u": U.T, "y": np.where(mask, Y, 0.0).T,
+                "mask": maskf.T, "dt": dt[None, :], "gate": gate[None, :],
                 "p": m.params() if p is None else m.params(p), "Q": self.Q, "R": self.R}
 
     def check_prior(self, prior: Gaussian) -> None:
@@ -269,14 +273,14 @@ class Estimator(abc.ABC):
         """
         m, n = self.model, len(data)
         mask = arrays["mask"].T
-        e = np.array(out["e"], dtype=float).reshape(n, self.ny)
-        e[mask == 0] = np.nan
+        e = np.where(mask > 0, np.reshape(out["e"], (n, self.ny)), np.nan)
+        e.setflags(write=False)                  # the result's own array: kept without a copy
         mat = lambda k, r, c: np.reshape(out[k], (n, r, c))  # noqa: E731
         nx, ny = m.nx, self.ny
         return FilterResult(
             t=data.t, x=np.reshape(out["x"], (n, nx)), P=mat("P", nx, nx), x_pred=np.reshape(out["x_pred"], (n, nx)),
             P_pred=mat("P_pred", nx, nx), C=mat("C", nx, nx), K=mat("K", nx, ny), innovations=e, S=mat("S", ny, ny),
-            nis=np.reshape(out["nis"], n), n_measured=mask.sum(axis=1), loglik_terms=np.reshape(out["ll"], n),
+            nis=np.reshape(out["nis"], n), n_measured=(mask @ np.ones(ny)).astype(int), loglik_terms=np.reshape(out["ll"], n),
             rejected=np.reshape(out["accepted"], n) < 0.5, inputs=arrays["u"].T, state_names=m.state_names,
             state_units=tuple(v.unit for v in m.state_vars), output_names=self.measured, input_names=m.input_names,
             estimator=estimator or self.name, angle_states=m.angle_states)

@@ -36,7 +36,7 @@ class EnKFOptions(EstimatorOptions):
     gate, jit, outputs, max_gap, on_gap
         The options of every estimator (see :class:`~casship.estimators.EstimatorOptions`).
     members : int
-        Ensemble size ``N`` (Koike et al. 2023: 100).
+        Ensemble size ``N`` (Koike et al. 2023: 100), at most :data:`MAX_MEMBERS`.
     """
 
     members: int = 100
@@ -44,6 +44,13 @@ class EnKFOptions(EstimatorOptions):
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "members", check_int(self.members, "members", 2))
+        if self.members > MAX_MEMBERS:
+            raise ValueError(f"option 'members' = {self.members} is more than {MAX_MEMBERS} "
+                             "(casship.estimators.enkf.MAX_MEMBERS), refused before it exhausts the memory")
+
+
+#: The largest ensemble (a thousand times Koike et al.'s 100; ten million members exhausted 24 GB).
+MAX_MEMBERS = 100_000
 
 
 def _wrapped(d, angles):

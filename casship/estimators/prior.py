@@ -284,7 +284,8 @@ def noise_from_data(model, data: Dataset, measured: Sequence[str]) -> tuple[dict
             found.append((std**2, "second differences"))
         var, text = max(found)
         if not var > 0:
-            raise InputError(f"the noise of {n!r} cannot be estimated from the record (a constant channel); give "
-                             "its variance")
+            count = int(np.isfinite(y).sum())
+            why = f"only {count} measured sample(s), too few" if count < 5 else "a constant channel"
+            raise InputError(f"the noise of {n!r} cannot be estimated from the record ({why}); give its variance")
         R[n], how[n] = var, text
     return R, how

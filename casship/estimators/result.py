@@ -237,7 +237,11 @@ class FilterResult:
         ----------
         x_true : (N, nx) array
         """
-        err = np.asarray(x_true, dtype=float) - self.x
+        x_true = np.asarray(x_true, dtype=float)
+        if x_true.shape != self.x.shape:
+            raise ValueError(f"nees: x_true has shape {x_true.shape}, the estimates {self.x.shape} (rows, states "
+                             f"{list(self.state_names)})")
+        err = x_true - self.x
         if self.angle_states.any():
             err[:, self.angle_states] = wrap(err[:, self.angle_states])
         return np.einsum("ki,ki->k", err, np.linalg.solve(self.P, err[..., None])[..., 0])
@@ -288,14 +292,18 @@ class FilterResult:
         return "\n".join(lines)
 
     def plot(self, path, states=None, *, measured=None, t_measured=None) -> Path:
-        """Estimates with +-2 standard deviations over time, one panel per state (PNG at ``path``).
+        """Estimates with +-2 standard deviations over time, one panel per state.
 
-        Angle states are drawn in degrees; axes carry the state units.
+        Angles and angular rates (states in rad, rad/s, ...) are drawn in degrees; axes carry the
+        units. The vertical range covers the estimate, the measurements and the band wherever it is
+        at most ten times its median width, so that a vague prior's band at the start does not
+        flatten the rest of the record (the band is drawn whole).
 
         Parameters
         ----------
         path : path
-            The PNG file to write.
+            The figure file to write (its suffix chooses the format: ``.png``, ``.pdf``, ``.svg``...;
+            PNG without one).
         states : sequence of str, optional
             The states to draw (all by default).
         measured : mapping state -> array, optional
@@ -320,22 +328,38 @@ class FilterResult:
         axes = fig.subplots(len(names), 1, sharex=True, squeeze=False)
         for ax, name, i in zip(axes[:, 0], names, idx):
             angle = self.angle_states is not None and self.angle_states[i]
-            scale, unit = (180 / np.pi, "deg") if angle else (1.0, self.state_units[i] or "-")
+            unit = self.state_units[i] or "-"
+            in_rad = angle or unit.split("/")[0] == "rad"
+            scale, unit = (180 / np.pi, "deg" if angle else "deg" + unit[3:]) if in_rad else (1.0, unit)
             xv = np.unwrap(self.x[:, i]) if angle else self.x[:, i]
             xv, sv = scale * xv, scale * std[:, i]
             ax.fill_between(self.t, xv - 2 * sv, xv + 2 * sv, alpha=0.3, lw=0, label="+-2 std")
             ax.plot(self.t, xv, lw=1.0, label=self.estimator)
+            shown = [xv]
             if name in measured:
                 ym = np.asarray(measured[name], dtype=float)
                 if angle:        # drawn on the branch of the estimate
                     ym = ym + 2 * np.pi * np.round((np.interp(t_meas, self.t, xv / scale) - ym) / (2 * np.pi))
                 ax.plot(t_meas, scale * ym, ".", ms=2, label="measured")
+                shown.append(scale * ym)
+            narrow = sv <= 10 * np.nanmedian(sv)
+            shown += [(xv - 2 * sv)[narrow], (xv + 2 * sv)[narrow]]
+            values = np.concatenate(shown)
+            values = values[np.isfinite(values)]
+            if values.size:
+                lo, hi = values.min(), values.max()
+                pad = 0.05 * (hi - lo) or 0.05 * max(abs(hi), 1e-12)
+                ax.set_ylim(lo - pad, hi + pad)
             ax.set_ylabel(f"{name} [{unit}]")
-        axes[0, 0].legend(loc="best", fontsize=8)
+        labels = {}
+        for ax in axes[:, 0]:
+            for handle, label in zip(*ax.get_legend_handles_labels()):
+                labels.setdefault(label, handle)
+        axes[0, 0].legend(list(labels.values()), list(labels), loc="best", fontsize=8)
         axes[-1, 0].set_xlabel("t [s]")
         fig.tight_layout()
         path = Path(path)
-        fig.savefig(path, dpi=120, format="png")
+        fig.savefig(path, dpi=120, format=path.suffix[1:].lower() or "png")
         return path
 
     def to_dataset(self) -> Dataset:
@@ -370,7 +394,13 @@ class FilterResult:
         ----------
         path : path
         """
-        with np.load(Path(path), allow_pickle=False) as f:
+        try:
+            f = np.load(Path(path), allow_pickle=False)
+        except ValueError:          # numpy's answer to a file that is not .npy/.npz speaks of pickles
+            raise ValueError(f"{path}: not a saved FilterResult (not a numpy .npz file)") from None
+        if not hasattr(f, "files"):
+            raise ValueError(f"{path}: not a saved FilterResult (a single .npy array, not an .npz archive)")
+        with f:
             missing = [k for k in (*_ARRAYS, "meta") if k not in f.files]
             if missing:
                 raise ValueError(f"{path}: not a saved FilterResult (missing {missing})")

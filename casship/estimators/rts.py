@@ -22,9 +22,8 @@ import casadi as ca
 import numpy as np
 
 from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, run_fold
-from ..angles import wrap_sym
 from .result import FilterResult
-from .update import from_lower, sandwich, spd_solve
+from .update import from_lower, sandwich, spd_solve, wrap_residual
 
 __all__ = ["rts_smooth", "backward_step"]
 
@@ -40,7 +39,7 @@ def backward_step(nx: int, angles: tuple) -> ca.Function:
     xp1, Pp1, C = ca.SX.sym("x_pred", nx), ca.SX.sym("P_pred", nx, nx), ca.SX.sym("C", nx, nx)
     d = xs1 - xp1
     if any(angles):
-        d = ca.vertcat(*[wrap_sym(d[i]) if angles[i] else d[i] for i in range(nx)])
+        d = ca.vertcat(*[wrap_residual(d[i]) if angles[i] else d[i] for i in range(nx)])
     J = spd_solve(Pp1, C.T, exact=True).T        # the filters' covariances are exactly symmetric
     JDJ = sandwich(J, from_lower(lambda i, j: Ps1[i, j] - Pp1[i, j], nx))
     Ps = from_lower(lambda i, j: P[i, j] + JDJ[i, j], nx)

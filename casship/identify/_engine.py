@@ -11,7 +11,13 @@ neither predict (``dt = 0``) nor measure (``mask = 0``), which leave the memory 
 
 Records run chunk by chunk in step: the records at the same chunk position that use the same
 Function are evaluated in one call of its ``map`` over records (threads), so a many-record fit uses
-the cores the machine has.
+the cores the machine has. The calls go through preallocated buffers (no conversion of CasADi
+matrices), one set per Function and number of records.
+
+Build once, run many: the Functions are kept per process under the *structure* of the problem
+(the model's step and output Functions, which outputs are measured, the kind and size of the
+fold), so a problem of the same structure (another fold of a cross-validation, another free set
+of the same size, ``replace``, ``subset``) neither builds nor compiles them again.
 
 * Output error (:class:`OutputErrorEngine`): per sample the weighted residual ``r_k`` and its
   Jacobian ``J_k``; cost ``0.5 sum r'r``, gradient ``J'r``, Gauss-Newton matrix ``J'J``.
@@ -24,20 +30,36 @@ of free values).
 """
 from __future__ import annotations
 
+import hashlib
 import os
+import threading
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
 from ..angles import wrap_sym
-from ._compile import compiled
+from ..runtime import BufferedCall
+from ._compile import compiled, resolve
 
 __all__ = ["CHUNK", "OutputErrorEngine", "Job", "run_jobs"]
 
 CHUNK = 256
 THREADS = max(1, min(os.cpu_count() or 1, 8))
-_MAPS: dict = {}
+KEEP = 256                  # Functions and buffer sets kept per process (the oldest go first)
+_SHARED: dict = {}          # (structure, jit, what) -> Function or Background compile
+_BUFFERS: dict = {}         # (id(Function), records) -> (Function, BufferedCall, lock)
+_LOCK = threading.Lock()
+COUNTS = {"built": 0, "reused": 0}    # Functions built and found again (for profiles and tests)
+
+
+def _keep(table: dict, key, value):
+    """``table[key] = value``, dropping the oldest entries beyond :data:`KEEP`."""
+    with _LOCK:
+        table[key] = value
+        while len(table) > KEEP:
+            del table[next(iter(table))]
+    return value
 
 
 def fold(fun: ca.Function, accumulate: dict, constants) -> ca.Function:
@@ -86,18 +108,28 @@ class Job:
 
 
 def _call(fun: ca.Function, args: list[dict]) -> list[dict]:
-    """Evaluate ``fun`` on each argument set: one mapped call (threads) for several."""
-    if len(args) == 1:
-        (only,) = args
-        return [{k: np.asarray(v) for k, v in fun.call(only).items()}]
-    key = (id(fun), len(args))
-    if key not in _MAPS:
-        _MAPS[key] = (fun, fun.map(len(args), "thread" if THREADS > 1 else "serial", min(THREADS, len(args))))
-    mapped = _MAPS[key][1]
-    stacked = {n: np.hstack([np.asarray(a[n], dtype=float).reshape(fun.size_in(n), order="F") for a in args])
-               for n in fun.name_in()}
-    out = {k: np.asarray(v) for k, v in mapped.call(stacked).items()}
-    return [{k: v[:, i * fun.size2_out(k):(i + 1) * fun.size2_out(k)] for k, v in out.items()} for i in range(len(args))]
+    """Evaluate ``fun`` on each argument set (inputs by name, missing ones 0): one call of its
+    ``map`` over the sets (threads) for several, through buffers kept for the next call."""
+    n = len(args)
+    entry = _BUFFERS.get((id(fun), n))
+    if entry is None:
+        mapped = fun if n == 1 else fun.map(n, "thread" if THREADS > 1 else "serial", min(THREADS, n))
+        entry = _keep(_BUFFERS, (id(fun), n), (fun, BufferedCall(mapped), threading.Lock()))
+    _, call, lock = entry
+    with lock:                      # one evaluation at a time on these buffers
+        for name in fun.name_in():
+            rows, cols = fun.size_in(name)
+            view = call.arg(name)
+            for i, a in enumerate(args):
+                v = a.get(name)
+                view[:, i * cols:(i + 1) * cols] = 0.0 if v is None else np.reshape(v, (rows, cols), order="F")
+        call()
+        block = call.block.copy()
+    outs = {}
+    for j, name in enumerate(fun.name_out()):
+        rows, cols = fun.size_out(name)
+        outs[name] = block[call.offsets[j]:call.offsets[j + 1]].reshape((rows, cols * n), order="F")
+    return [{k: v[:, i * fun.size2_out(k):(i + 1) * fun.size2_out(k)] for k, v in outs.items()} for i in range(n)]
 
 
 def run_jobs(jobs: list[Job]) -> list[list[tuple[dict, dict, int]]]:
@@ -130,13 +162,37 @@ class Engine:
 
     def __init__(self, space, jit):
         self.space, self.jit = space, jit
-        self._funs: dict = {}
+        self._signature = None
+
+    def _structure(self) -> tuple:
+        """What the Functions of this engine depend on: Functions and plain values (subclasses)."""
+        raise NotImplementedError
+
+    def signature(self) -> str:
+        """A digest of :meth:`_structure`: engines with equal signatures share their Functions."""
+        if self._signature is None:
+            h = hashlib.sha256(type(self).__name__.encode())
+            for part in self._structure():
+                h.update(b"\0" + (part.serialize() if isinstance(part, ca.Function) else repr(part)).encode())
+            self._signature = h.hexdigest()
+        return self._signature
 
     def _fun(self, key, make):
-        """The Function ``make()``, built once per key."""
-        if key not in self._funs:
-            self._funs[key] = make()
-        return self._funs[key]
+        """The Function ``make()``, built once per process for every engine of the same structure
+        (a compile still running in the background gives the interpreted Function meanwhile)."""
+        full = (self.signature(), self.jit, key)
+        fun = _SHARED.get(full)
+        if fun is None:
+            fun = _keep(_SHARED, full, make())
+            COUNTS["built"] += 1
+        else:
+            COUNTS["reused"] += 1
+        return resolve(fun)
+
+    def functions(self) -> dict:
+        """This engine's Functions as built so far (a background compile still as its handle)."""
+        sig = self.signature()
+        return {k[2]: f for k, f in list(_SHARED.items()) if k[0] == sig and k[1] == self.jit}
 
     def _value_fold(self):
         return self._fun("value_c", lambda: compiled(self._value_raw(), jit=self.jit))
@@ -230,6 +286,10 @@ class OutputErrorEngine(Engine):
         self.weights = np.asarray(weights, dtype=float)
         self.record_scale = np.ones(len(arrays)) if record_scale is None else np.asarray(record_scale, dtype=float)
 
+    def _structure(self) -> tuple:
+        return (self.dmodel.F, self.model.h, tuple(self.meas_index), tuple(bool(a) for a in self.angle),
+                self.model.nw, self.dmodel.symbolic.__name__)
+
     def _symbols(self):
         m, ny = self.model, len(self.meas_index)
         sym = self.dmodel.symbolic
@@ -295,11 +355,16 @@ class OutputErrorEngine(Engine):
     def _details(self, r, ctx, run) -> dict:
         rm, k = ctx["rm"], ctx["rm"].k
         R = np.vstack([out["r"][:, :take].T for _, out, take in run])                    # (N, ny)
-        J = np.concatenate([per_sample(out["J"], R.shape[1], k, take) for _, out, take in run])  # (N, ny, k)
-        scores = np.einsum("nyk,ny->nk", J, R)
-        Jf = J.reshape(-1, k)
-        return {"f": 0.5 * float(np.sum(R**2)), "g": scores.sum(axis=0), "H": Jf.T @ Jf, "cols": rm.cols,
-                "scores": scores, "residuals": np.where(ctx["mask"].T > 0, R, np.nan), "J": J}
+        scores, H = [], np.zeros((k, k))
+        for _, out, take in run:
+            # a chunk's J (ny, CHUNK * k) holds sample s in columns s*k:(s+1)*k; stored column-major it
+            # is a (CHUNK, k, ny) array without a copy. Small products by einsum: no BLAS threads
+            A = np.asarray(out["J"]).T.reshape(CHUNK, k, -1)[:take]
+            scores.append(np.einsum("sjy,sy->sj", A, out["r"][:, :take].T))
+            H += np.einsum("sjy,sly->jl", A, A)
+        scores = np.concatenate(scores)
+        return {"f": 0.5 * float(np.sum(R**2)), "g": scores.sum(axis=0), "H": H, "cols": rm.cols,
+                "scores": scores, "residuals": np.where(ctx["mask"].T > 0, R, np.nan)}
 
     def _record_gradient(self, rm, ctx, run) -> np.ndarray:
         adj_x, sums = self._sweep(run, lambda out, take: {"adj_r": out["r"]}, ("x",))

@@ -72,6 +72,9 @@ class LikelihoodEngine(Engine):
         self.Q, self.R = np.asarray(Q, dtype=float), np.asarray(R, dtype=float)
         self.ny = slots.step.size1_in("y")
 
+    def _structure(self) -> tuple:
+        return (self.slots.step, self.slots.memory, self.slots.draw_names, self.slots.mean)
+
     # -- symbolic --------------------------------------------------------------------------------
     def _symbols(self):
         step = self.slots.step

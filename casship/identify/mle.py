@@ -105,8 +105,10 @@ class MLEProblem(IdentificationProblem):
     seed : int
         For stochastic estimators (EnKF): fixes the draws (common random numbers across evaluations).
     jit : bool or None
-        Compile the likelihood and its derivatives to C (``None``: when a compiler works). The compiled
-        code does not depend on the data or on which quantities are free, and is kept in memory.
+        Compile the likelihood and its derivatives to C (``None``: when a compiler works; code not in
+        the cache yet is compiled in the background while the fit runs interpreted, with the same
+        numbers). The compiled code does not depend on the data or on which quantities are free, and
+        is kept in memory and on disk.
 
     Examples
     --------

@@ -85,7 +85,8 @@ class OutputErrorProblem(IdentificationProblem):
         For any free quantity (a declared name applies to all its copies); the model's parameter
         bounds apply too.
     jit : bool or None
-        Compile the cost and its derivatives to C (``None``: when a compiler works).
+        Compile the cost and its derivatives to C (``None``: when a compiler works; code not in the
+        cache yet is compiled in the background while the fit runs interpreted, with the same numbers).
 
     Examples
     --------

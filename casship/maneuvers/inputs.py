@@ -293,6 +293,9 @@ def random_rudder_inputs(model: Model, t, n: float | None = None, *, hold: float
         ranges[key] = tuple(val)
     if hold <= 0:
         raise ValueError(f"hold must be positive, got {hold}")
+    if hold >= t[-1] - t[0]:
+        raise ValueError(f"hold {hold:g} s is not shorter than the record ({t[-1] - t[0]:g} s): the random sequence "
+                         "would be one rudder angle held throughout")
     segment = np.floor((t - t[0]) / hold).astype(int)
     count = segment[-1] + 1
     values = {}

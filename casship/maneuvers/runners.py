@@ -242,6 +242,9 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
         if kind == "turning":
             inputs = turning_inputs(model, t, rudder, n, t_exec=t_exec, rate=rate)
         elif kind == "pullout":
+            if t_exec + float(hold or 20 * T) >= t[-1]:
+                raise ValueError(f"pull-out: the rudder would return at t = {t_exec + float(hold or 20 * T):g} s, not "
+                                 f"before the end of the record ({t[-1]:g} s): a shorter hold or a longer duration")
             inputs = pullout_inputs(model, t, rudder, n, t_exec=t_exec, hold=float(hold or 20 * T), rate=rate)
         else:
             inputs = random_rudder_inputs(model, t, n, hold=float(hold or 1.25 * T), seed=seed)

@@ -61,7 +61,7 @@ try:
 except ImportError:
     msvcrt = None
 
-__all__ = ["compile_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo"]
+__all__ = ["compile_function", "cached_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo"]
 
 _ENV_DIR = "CASSHIP_CACHE_DIR"
 _OFF = ("off", "0", "no", "false", "none")
@@ -71,6 +71,17 @@ _LIBRARY_OF: dict[tuple, Path] = {}        # the library file of each of them
 _LIBRARIES: dict[str, ctypes.CDLL] = {}     # ctypes handles of libraries with extra source (never closed)
 _REFUSED: dict[Path, str] = {}              # folders not used by this process, and why (warned once)
 _LOCK = threading.RLock()
+
+
+def _new_lock_after_fork() -> None:
+    """A forked child gets a lock of its own: one held by a compiling thread of the parent would
+    never be released there (that thread does not exist in the child)."""
+    global _LOCK
+    _LOCK = threading.RLock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_new_lock_after_fork)
 
 
 # -- where ----------------------------------------------------------------------------------------------
@@ -331,9 +342,33 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
         if default and lib is None and not accepts_native(cc):     # only a refused flag is dropped
             flags = PORTABLE_FLAGS
             loaded, lib = _compiled(fun, cc, flags, folder, extra_source)
-        if lib is None:
-            loaded, lib = _compile(fun, cc, flags, folder, extra_source)
+    if lib is None:         # not under the process lock: other threads look up and load meanwhile
+        loaded, lib = _compile(fun, cc, flags, folder, extra_source)
     return (loaded, _library(lib)) if library else loaded
+
+
+def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None) -> ca.Function | None:
+    """``fun`` compiled, if this process or the cache already holds its library; else None, at once.
+
+    Never compiles and never waits for a compile running in another thread (then None).
+
+    Parameters
+    ----------
+    fun : casadi.Function
+    flags : sequence of str or str, optional
+        As for :func:`compile_function`.
+    """
+    try:
+        cc = find_compiler(None)
+    except CompileError:
+        return None
+    flags, _ = chosen_flags(flags)
+    if not _LOCK.acquire(blocking=False):
+        return None
+    try:
+        return _compiled(fun, cc, flags, _usable_folder(None), "")[0]
+    finally:
+        _LOCK.release()
 
 
 def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
@@ -355,7 +390,8 @@ def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
 
 def _remember(hit: tuple, key: str, folder) -> tuple:
     loaded, lib = hit
-    _LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
+    with _LOCK:
+        _LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
     return loaded, lib
 
 

@@ -51,21 +51,32 @@ def driver_source(name: str, n_in: int, n_out: int) -> str:
 CASADI_SYMBOL_EXPORT int casship_fold_{name}(casadi_int n, const casadi_real* const* in0,
     const casadi_int* in_step, const casadi_int* feed, casadi_real* const* out0, const casadi_int* out_step,
     const casadi_int* out_period, const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w) {{
-  casadi_int k, i, slot, j;
+  /* per sample only the pointers that move are updated (the memory, the inputs with a stride, the outputs
+     kept per sample), in copies of their own: the step may use arg and res as workspace */
+  casadi_int k, i, t, n_fed = 0, n_moving = 0, n_written = 0;
+  casadi_int fed[{max(n_in, 1)}], moving[{max(n_in, 1)}], written[{max(n_out, 1)}];
+  const casadi_real* a[{max(n_in, 1)}];
+  casadi_real* r[{max(n_out, 1)}];
+  for (i = 0; i < {n_in}; ++i) {{
+    a[i] = in0[i];
+    if (feed[i] >= 0) fed[n_fed++] = i;
+    else if (in_step[i]) moving[n_moving++] = i;
+  }}
+  for (i = 0; i < {n_out}; ++i) {{
+    r[i] = out0[i];
+    if (out0[i] && (out_step[i] || out_period[i])) written[n_written++] = i;
+  }}
   for (k = 0; k < n; ++k) {{
-    for (i = 0; i < {n_in}; ++i) {{
-      j = feed[i];
-      if (k > 0 && j >= 0) {{
-        slot = out_period[j] ? (k - 1) % out_period[j] : k - 1;
-        arg[i] = out0[j] + slot * out_step[j];
-      }} else {{
-        arg[i] = in0[i] + k * in_step[i];
+    if (k > 0) {{
+      for (t = 0; t < n_fed; ++t) a[fed[t]] = r[feed[fed[t]]];    /* where sample k - 1 wrote it */
+      for (t = 0; t < n_moving; ++t) a[moving[t]] += in_step[moving[t]];
+      for (t = 0; t < n_written; ++t) {{
+        i = written[t];
+        r[i] = out_period[i] ? out0[i] + (k % out_period[i]) * out_step[i] : r[i] + out_step[i];
       }}
     }}
-    for (i = 0; i < {n_out}; ++i) {{
-      slot = out_period[i] ? k % out_period[i] : k;
-      res[i] = out0[i] ? out0[i] + slot * out_step[i] : 0;
-    }}
+    for (i = 0; i < {n_in}; ++i) arg[i] = a[i];
+    for (i = 0; i < {n_out}; ++i) res[i] = r[i];
     if ({name}(arg, res, iw, w, 0)) return (int)(k + 1);
   }}
   return 0;

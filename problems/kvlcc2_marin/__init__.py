@@ -32,7 +32,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from casship.models import kvlcc2
-from casship.progress import track
+from casship.parallel import call, run_cases
 from casship.studies import Study
 
 from ..kit import data_folder
@@ -40,7 +40,7 @@ from .calibration import asymmetry_check, band_check, calibration_table, jackkni
 from .data import first_rudder_side, load_runs, regime
 from .diagnose import steady_turn_balance, through_the_turn
 from .propulsion import open_water
-from .report import slug, write_outputs
+from .report import fold_figure, slug, write_outputs
 from .validate import evaluate, write_fold_file
 from .workflow import fit_fold, smooth_runs, study_model, with_smoothed_speed
 
@@ -69,17 +69,29 @@ def fold_file_name(kind: str, label: str) -> str:
 
 
 def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int) -> dict:
-    """One fold: fit on the runs not held out, write the fit file, replay it on the held-out runs.
-    Independent of every other fold (folds may run in any order or in parallel)."""
+    """One fold: fit on the runs not held out, write the fit file, replay it on the held-out runs and
+    draw their figure. Independent of every other fold (folds may run in any order or in parallel)."""
     kind, label, held = spec
     fold = fit_fold([r for r in runs if r.name not in held], smoothed, curve, dt=dt, max_free=max_free)
     path = write_fold_file(fold, out / fold_file_name(kind, label))
     rows = [evaluate(r, path) for r in runs if r.name in held]
-    return {"kind": kind, "label": label, "held": held, "fold": fold, "file": path.name, "evaluations": rows}
+    res = {"kind": kind, "label": label, "held": held, "fold": fold, "file": path.name, "evaluations": rows}
+    res["figure"] = fold_figure(out, runs, res)
+    return res
+
+
+def in_sample(run, fit_path: Path) -> tuple[dict, dict]:
+    """A run replayed with the fit on all runs, and its mirror-image check (a case of the loop)."""
+    return evaluate(run, fit_path)["row"], mirror_check([run], fit_path, kvlcc2())[run.name]
 
 
 def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None) -> dict:
-    """Fit, cross-validate and report (see the module text); ``quick``: seven runs, one fold."""
+    """Fit, cross-validate and report (see the module text); ``quick``: seven runs, one fold.
+
+    The fit on all runs and the folds are independent cases, run by :func:`casship.parallel.run_cases`
+    (``workers`` local processes, or the Dask cluster at ``scheduler``); every case is
+    deterministic, so the numbers do not depend on how they are spread.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     marin = data_folder(data_dir, "kvlcc2_marin_free", study="kvlcc2-marin", part="the whole study")
@@ -93,9 +105,12 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     runs = with_smoothed_speed(runs, smoothed)
     dt = QUICK["dt"] if quick else 2.0
     max_free = QUICK["max_free"] if quick else 15
-    everything = fit_fold(runs, smoothed, curve, dt=dt, max_free=max_free)
-    results = [run_fold(spec, runs, smoothed, curve, out, dt=dt, max_free=max_free)
-               for spec in track(fold_specs(runs, quick), "kvlcc2-marin folds", unit="fold")]
+    opts = {"dt": dt, "max_free": max_free}
+    # the fit on all runs first: the longest case starts at once
+    cases = [(fit_fold, (runs, smoothed, curve), opts)]
+    cases += [(run_fold, (spec, runs, smoothed, curve, out), opts) for spec in fold_specs(runs, quick)]
+    everything, *results = run_cases(call, cases, workers=workers, scheduler=scheduler,
+                                     label="kvlcc2-marin fits", unit="fit")
     loro = [res["fold"] for res in results if res["kind"] == "run"]
     jack = jackknife(everything, loro) if len(loro) > 2 else None
     calibration = calibration_table(everything, loro, jack) if jack is not None else {}
@@ -106,10 +121,10 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
                    "over the leave-one-run-out held-out errors; the file's bands (param_covariance) do not "
                    "include it: they are parameter-only"}} if bands else {}
     fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
-    in_sample = [evaluate(r, fit_path)["row"] for r in runs]
+    replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler)
     model = study_model()
     asym = asymmetry_check(runs, everything.fit.params, model, kvlcc2())
-    asym["mirror"] = mirror_check(runs, fit_path, kvlcc2())
+    asym["mirror"] = {r.name: mirror for r, (_, mirror) in zip(runs, replays)}
     turns = {}
     for circle in (r for r in runs if r.kind == "turning"):
         files = {"fit.json (in training)": fit_path}
@@ -117,8 +132,8 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
             files[fold_file_name("run", circle.name)] = out / fold_file_name("run", circle.name)
         turns[circle.name] = {"turn": through_the_turn(circle, files, kvlcc2()),
                               "balance": steady_turn_balance(circle, files, kvlcc2())}
-    return write_outputs(out, runs, everything, results, in_sample, calibration=calibration, jack=jack,
-                         asymmetry=asym, bands=bands, turns=turns, quick=quick)
+    return write_outputs(out, runs, everything, results, [row for row, _ in replays], calibration=calibration,
+                         jack=jack, asymmetry=asym, bands=bands, turns=turns, quick=quick)
 
 
 STUDY = Study("kvlcc2-marin", "KVLCC2 MMG identified on the MARIN and HSVA free-running runs, "

@@ -79,43 +79,41 @@ _GROUP_TITLE = {"facility": lambda label: f"of {label}", "regime": lambda label:
                 "direction": lambda label: f"with the first rudder {'positive' if label == '+' else 'negative'}"}
 
 
-def _figures(out: Path, runs, results) -> list[str]:
-    names = []
+def fold_figure(out: Path, runs, res: dict) -> str:
+    """Draw the figure of one fold's held-out replays (``res`` from the study's ``run_fold``) into
+    ``out``; returns its file name."""
     by_name = {r.name: r for r in runs}
-    for res in results:
-        evals = res["evaluations"]
-        if res["kind"] == "run":
-            ev = evals[0]
+    evals = res["evaluations"]
+    if res["kind"] == "run":
+        ev = evals[0]
+        run = by_name[ev["row"]["run"]]
+        name = f"fig_heldout_{slug(run.name)}.png"
+        with figure(out / name, 1, 2, figsize=(13, 4.5)) as (fig, axes):
+            plot_overlay(axes, run, ev["published"], ev["fit"],
+                         f"{run.name} replayed with {res['file']} (fit on the other {len(res['fold'].train)} runs)",
+                         ev["bands"])
+        return name
+    label = _GROUP_TITLE[res["kind"]](res["label"])
+    name = f"fig_{res['kind']}_{slug(str(res['label']) if res['kind'] != 'direction' else label.split()[-1])}.png"
+    ncol = 3
+    nrow = int(math.ceil(len(evals) / ncol))
+    with figure(out / name, nrow, ncol, figsize=(15, 3.2 * nrow), squeeze=False) as (fig, axes):
+        for ax, ev in zip(axes.ravel(), evals):
             run = by_name[ev["row"]["run"]]
-            name = f"fig_heldout_{slug(run.name)}.png"
-            with figure(out / name, 1, 2, figsize=(13, 4.5)) as (fig, axes):
-                plot_overlay(axes, run, ev["published"], ev["fit"],
-                             f"{run.name} replayed with {res['file']} (fit on the other {len(res['fold'].train)} runs)",
-                             ev["bands"])
-            names.append(name)
-        else:
-            label = _GROUP_TITLE[res["kind"]](res["label"])
-            name = f"fig_{res['kind']}_{slug(str(res['label']) if res['kind'] != 'direction' else label.split()[-1])}.png"
-            ncol = 3
-            nrow = int(math.ceil(len(evals) / ncol))
-            with figure(out / name, nrow, ncol, figsize=(15, 3.2 * nrow), squeeze=False) as (fig, axes):
-                for ax, ev in zip(axes.ravel(), evals):
-                    run = by_name[ev["row"]["run"]]
-                    ax.plot(run.data.t, np.degrees(np.unwrap(run.data["psi"])), "k-", lw=1.2, label="measured")
-                    ax.plot(ev["published"].t, np.degrees(ev["published"]["psi"]), "C1--", lw=1, label="published")
-                    psi = np.degrees(np.unwrap(ev["fit"]["psi"]))
-                    ax.plot(ev["fit"].t, psi, "C0-", lw=1, label=f"fit without the runs {label}")
-                    if ev["bands"]:
-                        w = np.degrees(ev["bands"]["z"] * ev["bands"]["psi_std"])
-                        ax.fill_between(ev["fit"].t, psi - w, psi + w, color="C0", alpha=0.25, lw=0)
-                    ax.set_title(run.name, fontsize=9)
-                    ax.set_xlabel("t [s]")
-                    ax.set_ylabel("heading [deg]")
-                axes.ravel()[0].legend(fontsize=7)
-                for ax in axes.ravel()[len(evals):]:
-                    ax.set_visible(False)
-            names.append(name)
-    return names
+            ax.plot(run.data.t, np.degrees(np.unwrap(run.data["psi"])), "k-", lw=1.2, label="measured")
+            ax.plot(ev["published"].t, np.degrees(ev["published"]["psi"]), "C1--", lw=1, label="published")
+            psi = np.degrees(np.unwrap(ev["fit"]["psi"]))
+            ax.plot(ev["fit"].t, psi, "C0-", lw=1, label=f"fit without the runs {label}")
+            if ev["bands"]:
+                w = np.degrees(ev["bands"]["z"] * ev["bands"]["psi_std"])
+                ax.fill_between(ev["fit"].t, psi - w, psi + w, color="C0", alpha=0.25, lw=0)
+            ax.set_title(run.name, fontsize=9)
+            ax.set_xlabel("t [s]")
+            ax.set_ylabel("heading [deg]")
+        axes.ravel()[0].legend(fontsize=7)
+        for ax in axes.ravel()[len(evals):]:
+            ax.set_visible(False)
+    return name
 
 
 def _departures() -> list[Departure]:
@@ -211,7 +209,7 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     out = Path(out)
     by_kind = {k: [ev["row"] for res in results if res["kind"] == k for ev in res["evaluations"]]
                for k in ("run", "regime", "facility", "direction")}
-    figs = _figures(out, runs, results)
+    figs = [res["figure"] for res in results]      # drawn by each fold
     with open(out / "cross_validation.csv", "w", newline="") as fh:
         keys = sorted({k for rows in by_kind.values() for r in rows for k in r})
         writer = csv.DictWriter(fh, fieldnames=["validation", *keys])
