@@ -47,7 +47,9 @@ class ReplayResult:
     bands : dict
         With a parameter uncertainty: per sample ``psi_std`` [rad], ``x_std``, ``y_std``,
         ``cross_track_std`` [m] (linearised, exact sensitivities), ``level`` and ``z``; and
-        ``coverage``: the fraction of the measured heading inside the band.
+        ``coverage``: the fraction of the measured heading inside the band. With a model-discrepancy
+        term (:attr:`ParameterUncertainty.psi_variance_rate` ``q``) also the predictive heading band
+        ``psi_std_predictive = sqrt(psi_std^2 + q t)`` and its ``coverage_predictive``.
     metric_intervals : dict
         With a parameter uncertainty: index -> ``[lo, hi]`` at ``bands["level"]`` from parameter
         draws.
@@ -81,6 +83,11 @@ class ReplayResult:
             out.update(cross_track_halfwidth_max_m=float(w.max()), cross_track_halfwidth_end_m=float(w[-1]))
         if "coverage" in self.bands:
             out["psi_coverage"] = self.bands["coverage"]
+        if "psi_std_predictive" in self.bands:
+            w = np.degrees(z * self.bands["psi_std_predictive"])
+            out.update(psi_predictive_halfwidth_max_deg=float(w.max()), psi_predictive_halfwidth_end_deg=float(w[-1]))
+            if "coverage_predictive" in self.bands:
+                out["psi_predictive_coverage"] = self.bands["coverage_predictive"]
         return out
 
     def __repr__(self) -> str:
@@ -166,8 +173,13 @@ class ReplayResult:
         label = f"{100 * b['level']:.0f} % band"
         if "psi_std" in b:
             psi = np.degrees(np.unwrap(tr["psi"]))
+            if "psi_std_predictive" in b:
+                w = np.degrees(z * b["psi_std_predictive"])
+                heading.fill_between(tr.t, psi - w, psi + w, color="C0", alpha=0.1, lw=0,
+                                     label=f"{100 * b['level']:.0f} % band with model discrepancy")
             w = np.degrees(z * b["psi_std"])
-            heading.fill_between(tr.t, psi - w, psi + w, color="C0", alpha=0.25, lw=0, label=label)
+            heading.fill_between(tr.t, psi - w, psi + w, color="C0", alpha=0.25, lw=0,
+                                 label=label + (" (parameters)" if "psi_std_predictive" in b else ""))
         if "cross_track_std" in b:
             w = z * b["cross_track_std"][:, None] * b["normal"]
             for sign in (-1, 1):
@@ -336,10 +348,15 @@ def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, metho
     X, S = trajectory_sensitivities(model, x0, traj.t, U, p, unc.names, method=method, max_step=max_step)
     bands = prediction_bands(model, X, S, unc.covariance, level)
     bands["source"] = unc.source
+    if unc.psi_variance_rate > 0 and "psi_std" in bands:
+        # the model discrepancy the file carries: a heading variance growing with time (see ParameterUncertainty)
+        bands["psi_std_predictive"] = np.sqrt(bands["psi_std"] ** 2 + unc.psi_variance_rate * (traj.t - traj.t[0]))
     if "psi" in data and "psi_std" in bands:
         e = np.abs(wrap(traj["psi"] - data["psi"]))
         ok = np.isfinite(e)
         bands["coverage"] = float(np.mean(e[ok] <= bands["z"] * bands["psi_std"][ok] + 1e-12))
+        if "psi_std_predictive" in bands:
+            bands["coverage_predictive"] = float(np.mean(e[ok] <= bands["z"] * bands["psi_std_predictive"][ok] + 1e-12))
     result.bands = bands
     if samples:
         def run(pk):

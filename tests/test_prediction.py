@@ -112,3 +112,36 @@ def test_record_weights_count_a_record_as_that_many_copies():
     assert weighted.subset([1]).record_weights.tolist() == [1.0]
     with pytest.raises(ValueError, match=r"record\(s\) \[1\]"):
         cs.OutputErrorProblem(nomoto_first_order(), runs, ["K", "T"], record_weights=[1.0, -1.0], **kw)
+
+
+def test_a_files_model_discrepancy_gives_a_predictive_band_that_covers_a_drifting_truth(tmp_path):
+    # truth = the model's replay + a heading random walk of variance q t (a discrepancy the parameters
+    # cannot explain); the file carries q [deg^2/s]: the predictive band covers at the nominal rate,
+    # the parameter band does not
+    truth = nomoto_first_order(K=0.1, T=20.0)
+    t = np.arange(0.0, 300.0, 1.0)
+    rudder = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 90.0) + 1e-9)
+    path = _nomoto_fit(0, truth, t, rudder).to_json(tmp_path / "fit.json")
+    q_deg2 = 0.02
+    doc = json.loads(path.read_text())
+    doc["model_discrepancy"] = {"psi_variance_growth_deg2_per_s": q_deg2}
+    path.write_text(json.dumps(doc))
+    assert read_params(path, uncertainty=True)[2].psi_variance_rate == pytest.approx(np.radians(np.radians(q_deg2)))
+    new = np.radians(15.0) * np.sign(np.sin(2 * np.pi * t / 130.0) + 1e-9)
+    clean = cs.simulate(truth, truth.states(), t, {"delta": new})["psi"]
+    rng = np.random.default_rng(3)
+    param, predictive = [], []
+    for _ in range(40):
+        walk = np.concatenate([[0.0], np.cumsum(rng.standard_normal(t.size - 1) * np.sqrt(np.radians(np.radians(q_deg2))))])
+        res = replay_file(path, cs.Dataset(t, {"psi": clean + walk, "delta": new}), samples=0)
+        param.append(res.bands["coverage"])
+        predictive.append(res.bands["coverage_predictive"])
+    assert 0.9 <= np.mean(predictive) <= 0.99, np.mean(predictive)
+    assert np.mean(param) < 0.6, np.mean(param)
+    summary = res.band_summary()
+    assert summary["psi_predictive_halfwidth_end_deg"] == pytest.approx(
+        1.959964 * np.sqrt(np.degrees(res.bands["psi_std"][-1]) ** 2 + q_deg2 * 299.0), rel=1e-5)
+    doc["model_discrepancy"] = {"psi_variance_growth_deg2_per_s": -1.0}
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="psi_variance_growth_deg2_per_s"):
+        read_params(path, uncertainty=True)

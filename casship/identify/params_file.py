@@ -8,7 +8,11 @@ parameter vector, or refuses a model or parameter set other than the fitted one,
 A fit file also carries the uncertainty of the parameters a new run is replayed with
 (``"param_covariance"``: names, covariance matrix and where it comes from);
 ``read_params(..., uncertainty=True)`` returns it as a :class:`ParameterUncertainty`, from which
-replays and manoeuvre simulations draw their prediction bands.
+replays and manoeuvre simulations draw their prediction bands. A file may also carry a
+model-discrepancy estimate (``"model_discrepancy"``: ``psi_variance_growth_deg2_per_s``, a heading
+variance ``q t`` that the parameter band misses, growing with the time since the start, estimated
+from held-out runs); the replays then give a second, predictive heading band ``sqrt(s^2 + q t)``
+beside the parameter-only one.
 """
 from __future__ import annotations
 
@@ -38,6 +42,9 @@ class ParameterUncertainty:
         ``"run-level jackknife"``).
     info : dict
         Further facts about the covariance (e.g. the number of folds of a jackknife).
+    psi_variance_rate : float
+        Model discrepancy: a heading variance growing linearly with the time since the start of a
+        replay [rad^2/s], added to the parameter band's variance in the predictive band (0: none).
 
     Examples
     --------
@@ -51,8 +58,13 @@ class ParameterUncertainty:
     covariance: np.ndarray
     source: str = ""
     info: dict = field(default_factory=dict)
+    psi_variance_rate: float = 0.0
 
     def __post_init__(self):
+        self.psi_variance_rate = float(self.psi_variance_rate)
+        if not (np.isfinite(self.psi_variance_rate) and self.psi_variance_rate >= 0.0):
+            raise ValueError(f"ParameterUncertainty: psi_variance_rate must be finite and >= 0, "
+                             f"got {self.psi_variance_rate}")
         self.names = [str(n) for n in self.names]
         self.values = np.asarray(self.values, dtype=float).reshape(-1)
         self.covariance = np.asarray(self.covariance, dtype=float).reshape(len(self.names), len(self.names))
@@ -188,6 +200,12 @@ def read_params(path, model=None, *, uncertainty: bool = False):
     mismatch = [n for n, v in zip(unc.names, unc.values) if not np.isclose(v, params.get(n, np.nan), rtol=1e-12)]
     if mismatch:
         raise ValueError(f"{path}: param_covariance values of {mismatch} differ from the file's params")
+    discrepancy = obj.get("model_discrepancy") or {}
+    if discrepancy:
+        q = discrepancy.get("psi_variance_growth_deg2_per_s")
+        if not isinstance(q, (int, float)) or isinstance(q, bool) or not np.isfinite(q) or q < 0:
+            raise ValueError(f"{path}: model_discrepancy.psi_variance_growth_deg2_per_s must be a number >= 0, got {q!r}")
+        unc.psi_variance_rate = float(np.radians(np.radians(q)))
     return model, p, unc
 
 

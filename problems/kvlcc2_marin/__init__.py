@@ -118,8 +118,8 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     discrepancy = {"model_discrepancy": {
         "psi_variance_growth_deg2_per_s": bands["q_all_folds_deg2_per_s"],
         "meaning": "heading variance the parameter band misses, growing linearly with time (q t), least squares "
-                   "over the leave-one-run-out held-out errors; the file's bands (param_covariance) do not "
-                   "include it: they are parameter-only"}} if bands else {}
+                   "over the leave-one-run-out held-out errors; replays of this file give the parameter band "
+                   "(param_covariance) and beside it the predictive band sqrt(s^2 + q t)"}} if bands else {}
     fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
     replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler)
     model = study_model()
