@@ -119,7 +119,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
         "psi_variance_growth_deg2_per_s": bands["q_all_folds_deg2_per_s"],
         "meaning": "heading variance the parameter band misses, growing linearly with time (q t), least squares "
                    "over the leave-one-run-out held-out errors; replays of this file give the parameter band "
-                   "(param_covariance) and beside it the predictive band sqrt(s^2 + q t)"}} if bands else {}
+                   "(param_covariance) and beside it the predictive band sqrt(s^2 + q t)",
+        "estimated_against": "the fold files' robust (sandwich) parameter bands; this file's covariance is the "
+                             "run-level jackknife, wider, so its predictive band is conservative"}} if bands else {}
     fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
     replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler)
     model = study_model()

@@ -273,8 +273,8 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
         sm = bands["summary"]
         rep.section("Calibration of the prediction bands: held-out runs against their folds' bands")
         rep.add("Not automatic: each held-out run's measured heading and indices against the 95 % band of the fold "
-                "that did not see it. The fit files' bands carry the parameter covariance only (the fold files: "
-                "robust; `fit.json`: jackknife) and are labelled so. The discrepancy column adds a model-"
+                "that did not see it. The fold files' bands carry the parameter covariance only (robust). The "
+                "discrepancy column adds a model-"
                 "discrepancy term estimated from the *other* folds' held-out errors only: a heading variance "
                 "growing linearly with time (`q t`, least squares of `e^2 - s^2` on `t` per run, averaged over "
                 "the other runs, floored at 0) and, for the overshoots, the RMS error of the other held-out runs "
@@ -284,7 +284,9 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
                 f"their interval: parameter {sm['indices in interval, parameter']:.0%} of "
                 f"{sm['indices checked, parameter']}, with discrepancy {sm['indices in interval, with discrepancy']:.0%} "
                 f"of {sm['indices checked, with discrepancy']}. q over all folds: "
-                f"{bands['q_all_folds_deg2_per_s']:.3g} deg^2/s.",
+                f"{bands['q_all_folds_deg2_per_s']:.3g} deg^2/s; `fit.json` carries it (`model_discrepancy`) with "
+                "the jackknife covariance, so its replays (`casship simulate --params fit.json`) give the "
+                "parameter band and, beside it, the predictive band `sqrt(s^2 + q t)`.",
                 md_table(bands["runs"], list(dict.fromkeys(c for r in bands["runs"].values() for c in r)),
                          first="held-out run", spec=".3g"))
     rep.section("Port/starboard asymmetry")
