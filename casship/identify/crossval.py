@@ -9,7 +9,6 @@ overlay figures (:meth:`~CrossValidation.plot`).
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -237,14 +236,14 @@ class CrossValidation:
         -------
         Path
         """
-        from .result import _clean
+        from ..io.jsonfile import write_json
 
         doc = {"model": self.model, "by": self.by, "free": self.free, "rows": self.rows,
                "folds": [{"label": f["label"], "held_out": f["held_out"], "train": f["train"],
                           "estimates": f["fit"].estimates, "std_errors": f["fit"].std_errors,
                           "status": f["fit"].status} for f in self.folds]}
         path = Path(path)
-        path.write_text(json.dumps(_clean(doc), indent=2))
+        write_json(path, doc, what="cross-validation file")
         return path
 
     def plot(self, directory, records: Sequence[str] | None = None) -> list[Path]:

@@ -312,8 +312,10 @@ class FitResult:
         -------
         Path
         """
+        from ..io.jsonfile import write_json
+
         path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
+        write_json(path, self.to_dict(), what="fit file")
         return path
 
     @classmethod

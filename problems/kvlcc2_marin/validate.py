@@ -11,12 +11,12 @@ overshoot) computed by the same functions.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from casship.identify import ParameterUncertainty
+from casship.io.jsonfile import write_json
 from casship.models import kvlcc2
 from casship.identify import replay_file
 from casship.validation import replay
@@ -60,7 +60,7 @@ def write_fold_file(fold, path: Path, uncertainty=None, extra=None) -> Path:
     content["asymmetry"] = fold.asymmetry_record()
     content.update(extra or {})
     path = Path(path)
-    path.write_text(json.dumps(content, indent=2))
+    write_json(path, content, what="fit file")
     return path
 
 
