@@ -42,7 +42,6 @@ PACKAGE_INTERNAL = {
         "StepRun fills the draw slots of a stochastic estimator's step",
     ("casship.identify.crossval", "_kwargs"):
         "cross-validation rebuilds a problem of the same class with the same settings on other records",
-    ("casship.identify.crossval", "_clean"): "the fit files' JSON cleaner of identify.result",
     ("casship.identify.mle", "_value_raw"): "the likelihood engine's unscaled value for the MLE problem",
     ("casship.identify.mle", "_chunk"): "the record folds' chunk size of identify._engine",
     ("casship.identify.mle", "_pieces"): "the record folds' pieces of identify._engine",
