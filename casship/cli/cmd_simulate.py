@@ -8,8 +8,9 @@ Examples::
 """
 from __future__ import annotations
 
-from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, check_ship, level,
-                      load_model, load_record, print_json, refuse_unused, require, seed, whole, write_output)
+from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_input_files, check_outputs,
+                      check_ship, level, load_model, load_record, print_json, refuse_unused, require, seed, whole,
+                      write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
@@ -88,6 +89,7 @@ def run(args) -> int:
                                     "--seed": args.seed is not None and args.maneuver != "random" and not args.params},
                       f"not used by a {args.maneuver} manoeuvre (--first, --heading-deg: zig-zag; --hold: pull-out, "
                       "spiral, random; --seed: random, or the parameter draws of --params)")
+    check_input_files({"--params": args.params, "--inputs": args.inputs})
     stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
     unc = None
     if args.params:

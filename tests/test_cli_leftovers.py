@@ -1,0 +1,105 @@
+"""The last silently wrong and unclear cases of the command line a probe found (each docstring says
+what happened before, and what happens now)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import casship as cs
+from casship.cli import main
+
+from cli_checks import one_line_error as _error
+
+
+def _nomoto_record(tmp_path, columns=("delta", "psi")):
+    """A simulated Nomoto zig-zag-like record (0.5 s steps) holding ``columns`` of the replay."""
+    model = cs.models.get_model("nomoto1")
+    t = np.arange(0.0, 100.0, 0.5)
+    delta = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 60.0) + 1e-9)
+    tr = cs.simulate(model, model.states(), t, {"delta": delta})
+    path = tmp_path / "nomoto.csv"
+    cs.Dataset(t, {n: np.array(tr[n]) for n in columns}).to_csv(path)
+    return path
+
+
+# -- empty values ------------------------------------------------------------------------------------------
+def test_an_empty_measured_list_is_refused_by_identify(tmp_path, capsys):
+    """Before: ``identify --measured ""`` fitted to every output of the records, as if the option were
+    left out. Now it is refused, naming the option."""
+    path = str(_nomoto_record(tmp_path))
+    _error(capsys, ["identify", path, "--model", "nomoto1", "--free", "K", "--measured", "",
+                    "--out", str(tmp_path / "fit.json")], "--measured: an empty value names nothing")
+    assert not (tmp_path / "fit.json").exists()
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["simulate", "--model", "nomoto1", "--inputs", ""], "--inputs"),         # was: a turning circle
+    (["simulate", "--model", "kvlcc2", "--params", ""], "--params"),          # was: the nominal parameters
+    (["identify", "run.csv", "--model", "nomoto1", "--free", "K", "--R", ""], "--R"),   # was: R estimated
+    (["identify", "", "--model", "nomoto1", "--free", "K"], "data"),
+])
+def test_an_empty_value_is_not_taken_for_a_left_out_option(capsys, argv, option):
+    """Before: an empty value of an option whose default means "left out" chose that default silently
+    (``simulate --inputs ""`` ran a turning circle instead of a replay). Now it is a usage error."""
+    _error(capsys, argv, f"{option}: an empty value names nothing")
+
+
+def test_an_empty_value_still_means_none_where_the_default_is_a_list(capsys):
+    """An option whose default is a non-empty list keeps ``""`` as "none" (``design-trial --pullout ""``)."""
+    from casship.cli import build_parser
+
+    args = build_parser("design-trial").parse_args(["design-trial", "--model", "kvlcc2", "--pullout", ""])
+    assert args.pullout == ""
+
+
+# -- files the options name ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--model", "kvlcc2", "--params", "{missing}"],
+    ["identify", "{record}", "--model", "nomoto1", "--free", "K", "--params", "{missing}"],
+    ["autopilot", "--model", "kvlcc2", "--params", "{missing}"],
+    ["design-trial", "--model", "kvlcc2", "--params", "{missing}"],
+])
+def test_a_missing_params_file_names_the_option_and_the_path(tmp_path, capsys, argv):
+    """Before: "[Errno 2] No such file or directory: 'nosuch.json'" (no option named). Now the option
+    and the path are named, before any work."""
+    missing = tmp_path / "nosuch.json"
+    argv = [a.format(missing=missing, record=_nomoto_record(tmp_path)) for a in argv]
+    _error(capsys, argv, f"--params {missing}: no such file")
+
+
+def test_a_folder_given_as_params_file_is_named(tmp_path, capsys):
+    _error(capsys, ["simulate", "--model", "kvlcc2", "--params", str(tmp_path)], f"--params {tmp_path}: is a folder")
+
+
+def test_a_missing_inputs_record_names_the_option(tmp_path, capsys):
+    _error(capsys, ["simulate", "--model", "nomoto1", "--inputs", str(tmp_path / "run.csv")],
+           f"--inputs {tmp_path / 'run.csv'}: no such file")
+
+
+# -- version -----------------------------------------------------------------------------------------------
+def test_version_is_the_installed_metadata(capsys):
+    """Before: ``casship --version`` said 0.1.0, written in two places. Now one place (pyproject.toml),
+    read from the installed metadata."""
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code in (0, None)
+    assert capsys.readouterr().out.strip() == f"casship {version('casship')}"
+    assert cs.__version__ == version("casship")
+
+
+def test_version_in_a_source_checkout_that_is_not_installed(monkeypatch):
+    """Without installed metadata the version is the one in the checkout's pyproject.toml."""
+    tomllib = pytest.importorskip("tomllib")
+    import importlib.metadata
+    from pathlib import Path
+
+    def not_installed(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", not_installed)
+    pyproject = Path(cs.__file__).resolve().parents[1] / "pyproject.toml"
+    if not pyproject.is_file():
+        pytest.skip("casship is not run from a source checkout")
+    assert cs._version() == tomllib.loads(pyproject.read_text())["project"]["version"]
