@@ -103,3 +103,17 @@ def test_version_in_a_source_checkout_that_is_not_installed(monkeypatch):
     if not pyproject.is_file():
         pytest.skip("casship is not run from a source checkout")
     assert cs._version() == tomllib.loads(pyproject.read_text())["project"]["version"]
+
+
+# -- casship bench ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("only, text", [
+    (["nosuch"], "--only: unknown benchmark(s) ['nosuch']; known: ["),
+    (["ek"], "--only: unknown benchmark(s) ['ek']"),                   # no prefix matching (ekf, ...)
+    (["simulate", "bench_simulate"], "--only: benchmark(s) ['simulate'] named more than once"),
+])
+def test_bench_only_names_whole_known_topics(capsys, only, text):
+    """Before: ``casship bench --only nosuch`` ended with the usage and error of ``python -m benchmarks``
+    (another program's name) by a SystemExit out of ``main``. Now the option, the name and the known
+    topics are named, and the known ones are the topics as typed (``simulate``, not ``bench_simulate``)."""
+    err = _error(capsys, ["bench", "--only", *only], text)
+    assert "'simulate'" in err and "python -m benchmarks" not in err
