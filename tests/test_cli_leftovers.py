@@ -117,3 +117,47 @@ def test_bench_only_names_whole_known_topics(capsys, only, text):
     topics are named, and the known ones are the topics as typed (``simulate``, not ``bench_simulate``)."""
     err = _error(capsys, ["bench", "--only", *only], text)
     assert "'simulate'" in err and "python -m benchmarks" not in err
+
+
+# -- the whiteness warning ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("ratio, reading, span", [
+    ([0.996, 1.004], "hold nonetheless", "are 1 times the model-based"),      # was: "do not hold ... 1-1 times"
+    ([1.8, 1.84], "are optimistic", "are 1.8 times the model-based"),          # was: "1.8-1.8 times"
+    ([1.8, 1.9, np.nan], "are optimistic", "are 1.8-1.9 times the model-based"),
+    ([0.5, 0.71], "are conservative", "are 0.5-0.71 times the model-based"),
+    ([0.78, 1.9], "do not hold as they are", "are 0.78-1.9 times the model-based"),
+    ([np.nan], "do not hold as they are", "are unlike the model-based"),
+])
+def test_the_whiteness_warning_prints_one_number_for_a_degenerate_range(ratio, reading, span):
+    """Before: "the robust ones ... are 1-1 times the model-based ones", and "do not hold as they are"
+    for ratios that all print as 1. Now one number, and words that agree with it."""
+    from casship.identify.problem import whiteness_warning
+
+    text = whiteness_warning(["psi"], ratio)
+    assert text.startswith("residuals of ['psi'] are not white (Ljung-Box): the model-based standard errors ")
+    assert reading in text and span in text
+
+
+def test_one_fit_issues_its_whiteness_warning_once(tmp_path):
+    """One fit with coloured residuals (a 37 s heading oscillation the Nomoto model cannot follow):
+    one IdentificationWarning, whose text is the fit's own warning, read from its standard errors."""
+    import warnings
+
+    from casship.identify import IdentificationWarning, MLEProblem
+    from casship.identify.problem import whiteness_warning
+
+    model = cs.models.get_model("nomoto1")
+    t = np.arange(0.0, 300.0, 0.5)
+    delta = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 60.0) + 1e-9)
+    tr = cs.simulate(model, model.states(), t, {"delta": delta}, model.params(K=0.1, T=20.0))
+    noise = 1e-3 * np.random.default_rng(1).standard_normal(t.size)
+    data = cs.Dataset(t, {"delta": delta, "psi": np.array(tr["psi"]) + 0.02 * np.sin(2 * np.pi * t / 37.0) + noise})
+    ekf = cs.EKF(cs.discretize(model, 0.5), 1e-6, {"psi": 1e-4}, measured=["psi"])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit = MLEProblem(ekf, [data], ["K", "T"]).solve(show=False)
+    white = [w for w in caught if issubclass(w.category, IdentificationWarning) and "not white" in str(w.message)]
+    assert len(white) == 1 and not fit.whiteness["psi"]["white"]
+    ratio = [fit.std_errors_robust[n] / fit.std_errors[n] for n in ("K", "T")]
+    assert str(white[0].message) == f"mle-ekf: {whiteness_warning(['psi'], ratio)}"
+    assert fit.warnings == [whiteness_warning(["psi"], ratio)]
