@@ -161,3 +161,51 @@ def test_one_fit_issues_its_whiteness_warning_once(tmp_path):
     ratio = [fit.std_errors_robust[n] / fit.std_errors[n] for n in ("K", "T")]
     assert str(white[0].message) == f"mle-ekf: {whiteness_warning(['psi'], ratio)}"
     assert fit.warnings == [whiteness_warning(["psi"], ratio)]
+
+
+# -- a replay with a model that has fewer states than the record ----------------------------------------------
+def _ship_record(tmp_path):
+    """A simulated KVLCC2 zig-zag record (1 s steps, 200 s) with columns delta, n, x, y, psi."""
+    ship = cs.models.get_model("kvlcc2")
+    t = np.arange(0.0, 200.0)
+    delta = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 200.0) + 1e-9)
+    tr = cs.simulate(ship, ship.states(u=ship.vessel.U0), t, {"delta": delta, "n": np.full(t.size, 1.7785)})
+    data = cs.measure(tr, ship, {"x": 1.0, "y": 1.0, "psi": 1e-3}, seed=3)
+    path = tmp_path / "ship.csv"
+    data.to_csv(path)
+    return path, data
+
+
+def test_a_heading_model_replays_a_ship_record(tmp_path, capsys):
+    """Before: ``simulate --model nomoto1 --inputs RUN`` stopped with "unknown column 'x'": the replay
+    compared the record's track with the replayed model's, which a Nomoto model does not have. Now it
+    replays from the record's heading (yaw rate at zero: no column), says so, and names the columns
+    it does not compare; the heading error is the one of an independent simulation."""
+    import json
+
+    path, data = _ship_record(tmp_path)
+    assert {"x", "y", "psi", "delta"} <= set(data.names) and "r" not in data.names
+    assert main(["simulate", "--model", "nomoto1", "--inputs", str(path), "--json",
+                 "--plot", str(tmp_path / "replay.png")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["start"] == {"psi": "record", "r": "zero"} and out["not_compared"] == ["x", "y"]
+    assert set(out["replay"]) == {"psi_rmse_deg"} and (tmp_path / "replay.png").stat().st_size > 0
+    model = cs.models.get_model("nomoto1")
+    tr = cs.simulate(model, model.states(psi=data["psi"][0]), data.t, {"delta": data["delta"]})
+    e = cs.wrap(np.array(tr["psi"]) - data["psi"])
+    assert out["replay"]["psi_rmse_deg"] == pytest.approx(np.degrees(np.sqrt(np.mean(e ** 2))), rel=1e-9)
+    assert main(["simulate", "--model", "nomoto1", "--inputs", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert "initial psi from the record's first row" in text and "initial r at zero (no column)" in text
+    assert "not compared (the model has no such state or output): x, y" in text and "L_pp = None" not in text
+
+
+def test_a_replay_given_its_start_says_so():
+    model = cs.models.get_model("nomoto1")
+    t = np.arange(0.0, 20.0, 0.5)
+    data = cs.Dataset(t, {"delta": np.full(t.size, 0.1), "psi": np.zeros(t.size), "x": t})
+    from casship.validation import replay
+
+    res = replay(model, data, x0=model.states(r=0.01))
+    assert res.start == {"psi": "x0", "r": "x0"} and res.not_compared == ["x"]
+    assert "initial psi, r given" in res.summary()
