@@ -138,26 +138,35 @@ def test_the_whiteness_warning_prints_one_number_for_a_degenerate_range(ratio, r
     assert reading in text and span in text
 
 
-def test_one_fit_issues_its_whiteness_warning_once(tmp_path):
-    """One fit with coloured residuals (a 37 s heading oscillation the Nomoto model cannot follow):
-    one IdentificationWarning, whose text is the fit's own warning, read from its standard errors."""
-    import warnings
-
-    from casship.identify import IdentificationWarning, MLEProblem
-    from casship.identify.problem import whiteness_warning
-
+def _coloured_nomoto_record():
+    """A Nomoto record whose heading carries a 37 s oscillation the model cannot follow (coloured residuals)."""
     model = cs.models.get_model("nomoto1")
     t = np.arange(0.0, 300.0, 0.5)
     delta = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 60.0) + 1e-9)
     tr = cs.simulate(model, model.states(), t, {"delta": delta}, model.params(K=0.1, T=20.0))
     noise = 1e-3 * np.random.default_rng(1).standard_normal(t.size)
-    data = cs.Dataset(t, {"delta": delta, "psi": np.array(tr["psi"]) + 0.02 * np.sin(2 * np.pi * t / 37.0) + noise})
+    return model, cs.Dataset(t, {"delta": delta,
+                                 "psi": np.array(tr["psi"]) + 0.02 * np.sin(2 * np.pi * t / 37.0) + noise})
+
+
+def test_one_fit_issues_its_whiteness_warning_once(tmp_path):
+    """One fit with coloured residuals (a 37 s heading oscillation the Nomoto model cannot follow):
+    one IdentificationWarning, whose text is the fit's own warning, read from its standard errors.
+    Before: shown at a line inside casship (``fit = super().solve(...)`` of mle.py) instead of the
+    caller's; with ``print(fit.summary())`` the text appears a second time, as the summary's report."""
+    import warnings
+
+    from casship.identify import IdentificationWarning, MLEProblem
+    from casship.identify.problem import whiteness_warning
+
+    model, data = _coloured_nomoto_record()
     ekf = cs.EKF(cs.discretize(model, 0.5), 1e-6, {"psi": 1e-4}, measured=["psi"])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         fit = MLEProblem(ekf, [data], ["K", "T"]).solve(show=False)
     white = [w for w in caught if issubclass(w.category, IdentificationWarning) and "not white" in str(w.message)]
     assert len(white) == 1 and not fit.whiteness["psi"]["white"]
+    assert white[0].filename == __file__        # the caller's line (was: casship/identify/mle.py)
     ratio = [fit.std_errors_robust[n] / fit.std_errors[n] for n in ("K", "T")]
     assert str(white[0].message) == f"mle-ekf: {whiteness_warning(['psi'], ratio)}"
     assert fit.warnings == [whiteness_warning(["psi"], ratio)]
@@ -209,3 +218,22 @@ def test_a_replay_given_its_start_says_so():
     res = replay(model, data, x0=model.states(r=0.01))
     assert res.start == {"psi": "x0", "r": "x0"} and res.not_compared == ["x"]
     assert "initial psi, r given" in res.summary()
+
+
+@pytest.mark.parametrize("how", ["mle-exact", "oe-single", "oe-multiple"])
+def test_the_whiteness_warning_points_at_the_callers_line(how):
+    """Every solver path issues the fit's warning once, at the line that called ``solve``."""
+    import warnings
+
+    from casship.identify import IdentificationWarning, MLEProblem, OutputErrorProblem
+
+    model, data = _coloured_nomoto_record()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if how == "mle-exact":
+            ekf = cs.EKF(cs.discretize(model, 0.5), 1e-6, {"psi": 1e-4}, measured=["psi"])
+            MLEProblem(ekf, [data], ["K", "T"]).solve(show=False, hessian="exact")
+        else:
+            OutputErrorProblem(model, [data], ["K", "T"], shooting=how[3:]).solve(show=False)
+    white = [w for w in caught if issubclass(w.category, IdentificationWarning) and "not white" in str(w.message)]
+    assert len(white) == 1 and white[0].filename == __file__

@@ -316,9 +316,11 @@ class IdentificationProblem:
         if coloured:
             with np.errstate(invalid="ignore", divide="ignore"):
                 out.append(whiteness_warning(coloured, std_r / std))
+        # issued once per fit, at the caller's line: _result <- the solver <- MLEProblem/OutputErrorProblem.solve
+        # <- the caller (FitResult.summary lists them again, as the report of the fit)
         for w in out:
             if w.startswith(("solver stopped", "residuals of")):
-                warnings.warn(f"{self.method}: {w}", IdentificationWarning, stacklevel=3)
+                warnings.warn(f"{self.method}: {w}", IdentificationWarning, stacklevel=4)
         record_params = []
         for r in range(len(self.records)):
             p_r = sp.params(theta, r)
