@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import (add_overwrite_option, check_input_files, check_outputs, check_ship, count, parse_pairs, print_json,
-                      refuse_unused, write_output)
+from ._common import (add_overwrite_option, check_input_files, check_outputs, check_ship, count, parse_pairs,
+                      print_json, refuse_unused, write_output)
 
 
 #: The targets of :data:`casship.design.TARGETS` (listed here so that the command line starts without CasADi).

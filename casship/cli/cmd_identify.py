@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import warnings
 
-from ._common import (check_input_files, check_outputs, count, load_record, number, parse_items, parse_pairs, positive, print_json,
-                      refuse_unused, write_output)
+from ._common import (check_input_files, check_outputs, count, load_record, number, parse_items, parse_pairs, positive,
+                      print_json, refuse_unused, write_output)
 from .cmd_filter import DEFAULT_Q
 
 
