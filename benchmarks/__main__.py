@@ -24,15 +24,23 @@ __all__ = ["discover", "run_all", "machine_info", "main"]
 
 
 def discover(only: list[str] | None = None) -> list[str]:
-    """Names of the benchmark modules (``bench_<topic>``), sorted; ``only`` filters by topic."""
+    """Names of the benchmark modules (``bench_<topic>``), sorted; ``only`` keeps the named topics.
+
+    A topic is named whole (``simulate`` or ``bench_simulate``): there is no prefix matching, so that
+    ``ek`` runs nothing unexpected; an unknown or repeated name is refused, listing the topics.
+    """
     here = Path(__file__).resolve().parent
     names = sorted(i.name for i in pkgutil.iter_modules([str(here)]) if i.name.startswith("bench_"))
     if only:
-        wanted = {o if o.startswith("bench_") else f"bench_{o}" for o in only}
-        unknown = wanted - set(names)
+        topics = [n.removeprefix("bench_") for n in names]
+        wanted = [o.removeprefix("bench_") for o in only]
+        unknown = [o for o, w in zip(only, wanted) if w not in topics]
         if unknown:
-            raise ValueError(f"unknown benchmark(s) {sorted(unknown)}; known: {names}")
-        names = [n for n in names if n in wanted]
+            raise ValueError(f"unknown benchmark(s) {unknown}; known: {topics} (whole names, no prefix matching)")
+        twice = sorted({w for w in wanted if wanted.count(w) > 1})
+        if twice:
+            raise ValueError(f"benchmark(s) {twice} named more than once")
+        names = [n for n in names if n.removeprefix("bench_") in wanted]
     return names
 
 
@@ -133,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
     parser.add_argument("--json", default=None, help="write rows and machine description to this file")
-    parser.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")
+    parser.add_argument("--only", nargs="+", default=None,
+                        help="run only these topics, named whole (e.g. simulate ship_filters)")
     parser.add_argument("--markdown", default=None,
                         help="write the table and machine into the results section of this Markdown page "
                              "(and the figures, benchmarks-<topic>.png, beside it)")

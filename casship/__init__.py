@@ -14,8 +14,6 @@ import importlib.util
 import sys
 import types
 
-__version__ = "0.1.0"
-
 # public name -> the module that defines it
 _EXPORTS = {
     "wrap": "angles", "unwrap": "angles", "Dataset": "data", "Gaussian": "gaussian", "Trajectory": "trajectory",
@@ -52,8 +50,36 @@ class _Package(types.ModuleType):
 sys.modules[__name__].__class__ = _Package
 
 
+def _version() -> str:
+    """The installed distribution's version; in a source checkout that is not installed, the version
+    in its ``pyproject.toml`` (the one place where the version is written)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(__name__)
+    except PackageNotFoundError:
+        import re
+        from pathlib import Path
+
+        try:
+            lines = (Path(__file__).resolve().parents[1] / "pyproject.toml").read_text().splitlines()
+        except OSError:
+            return "0+unknown"
+        section = None
+        for line in lines:                      # the 'version = "..."' line of the [project] table
+            header = re.match(r"\s*\[([^\]]+)\]\s*$", line)
+            if header:
+                section = header.group(1).strip()
+            found = re.match(r'\s*version\s*=\s*"([^"]+)"', line)
+            if found and section == "project":
+                return found.group(1)
+        return "0+unknown"
+
+
 def __getattr__(name: str):
-    if name in _EXPORTS:
+    if name == "__version__":           # read once, when asked (importlib.metadata is not free at start-up)
+        value = _version()
+    elif name in _EXPORTS:
         value = getattr(importlib.import_module(f".{_EXPORTS[name]}", __name__), name)
     elif name in _SUBMODULES or (not name.startswith("__") and importlib.util.find_spec(f"{__name__}.{name}")):
         value = importlib.import_module(f".{name}", __name__)        # any submodule, as after an import

@@ -56,6 +56,12 @@ class ReplayResult:
     sampling : dict
         The number of draws, failures and the sampled/linearised ratio of the heading spread (a
         check of the linearisation).
+    start : dict
+        Where each state's initial value came from: ``"record"`` (its column's first row),
+        ``"zero"`` (no such column) or ``"x0"`` (given).
+    not_compared : list of str
+        Columns of the record that the replay cannot be compared with, the model having no such
+        state or output (``x, y, u`` of a Nomoto model).
     """
 
     trajectory: Trajectory
@@ -67,6 +73,8 @@ class ReplayResult:
     bands: dict = field(default_factory=dict, repr=False)
     metric_intervals: dict = field(default_factory=dict)
     sampling: dict = field(default_factory=dict)
+    start: dict = field(default_factory=dict)
+    not_compared: list = field(default_factory=list)
 
     def band_summary(self) -> dict:
         """Scalar summary of the bands (JSON-friendly): level, largest and final half-widths of the
@@ -95,6 +103,18 @@ class ReplayResult:
         return (f"ReplayResult({self.trajectory.model_name!r}, {self.kind}, N={len(self.trajectory)}, "
                 f"{errors})")
 
+    def start_notes(self) -> list[str]:
+        """Where the replay started from, and the record's columns it is not compared with, as text."""
+        notes = []
+        for source, words in (("record", "from the record's first row"), ("zero", "at zero (no column)"),
+                              ("x0", "given")):
+            names = [n for n, s in self.start.items() if s == source]
+            if names:
+                notes.append(f"initial {', '.join(names)} {words}")
+        if self.not_compared:
+            notes.append(f"not compared (the model has no such state or output): {', '.join(self.not_compared)}")
+        return notes
+
     def summary(self) -> str:
         """The replay errors and the metrics of replay and record side by side, as text.
 
@@ -106,6 +126,7 @@ class ReplayResult:
         lines = [f"replay of {self.measured.meta.get('source', 'a record') if self.measured is not None else 'a record'}"
                  f" with {tr.model_name!r}: {self.kind}, {len(tr)} samples over {tr.t[-1] - tr.t[0]:.4g} s"]
         lines += [f"  {k:28s} {v:12.4f}" for k, v in self.errors.items()]
+        lines += [f"  {line}" for line in self.start_notes()]
         keys = [k for k in self.metrics if k in self.measured_metrics and isinstance(self.metrics[k], float)]
         if keys:
             iv = self.metric_intervals
@@ -134,7 +155,8 @@ class ReplayResult:
         tr, data = self.trajectory, self.measured
         fig, axes = plt.subplots(2, 2, figsize=(11, 7))
         track, heading, speed, rudder = axes.ravel()
-        track.plot(tr["y"], tr["x"], label="replayed")
+        if "x" in tr and "y" in tr:
+            track.plot(tr["y"], tr["x"], label="replayed")
         heading.plot(tr.t, np.degrees(np.unwrap(tr["psi"])), label="replayed")
         if self.bands:
             self._draw_bands(track, heading)
@@ -310,17 +332,22 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
                     raise ValueError(f"initial value of state {name!r} is missing (NaN) in the first row")
                 values[name] = v
         x0 = model.states(**values)
+        start = {n: "record" if n in values else "zero" for n in model.state_names}
+    else:
+        start = dict.fromkeys(model.state_names, "x0")
     traj = simulate(model, x0, data.t, data, p, method=method, max_step=max_step, check_limits=check_limits)
     errors = {}
-    if "psi" in data:
+    # compared where both the record and the replayed model have the quantity
+    not_compared = [n for n in ("psi", "x", "y", "u") if n in data and n not in traj]
+    if "psi" in data and "psi" in traj:
         e = wrap(traj["psi"] - data["psi"])
         ok = np.isfinite(e)
         errors["psi_rmse_deg"] = float(np.degrees(np.sqrt(np.mean(e[ok] ** 2))))
-    if "x" in data and "y" in data:
+    if all(n in data and n in traj for n in ("x", "y")):
         d2 = (traj["x"] - data["x"]) ** 2 + (traj["y"] - data["y"]) ** 2
         ok = np.isfinite(d2)
         errors["position_rmse_m"] = float(np.sqrt(np.mean(d2[ok])))
-    if "u" in data:
+    if "u" in data and "u" in traj:
         e = traj["u"] - data["u"]
         ok = np.isfinite(e)
         errors["u_rmse_mps"] = float(np.sqrt(np.mean(e[ok] ** 2)))
@@ -331,7 +358,7 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     if kind != "other":
         metrics = maneuver_metrics(traj, kind, options, t_exec=t_exec, L=L)
         measured = maneuver_metrics(data, kind, options, t_exec=t_exec, L=L)
-    result = ReplayResult(traj, errors, metrics, measured, kind, data)
+    result = ReplayResult(traj, errors, metrics, measured, kind, data, start=start, not_compared=not_compared)
     if uncertainty is not None:
         _add_uncertainty(result, model, traj, data, uncertainty, level, samples, seed, method, max_step,
                          lambda tr: maneuver_metrics(tr, kind, options, t_exec=t_exec, L=L) if kind != "other" else {})

@@ -54,7 +54,7 @@ def test_filter_option_values_that_were_misread(tmp_path, capsys):
     variance of 1; ``--x0 u=-5`` started a KVLCC2 astern, outside its range [0, 15.95] m/s."""
     path = str(_kvlcc2_record(tmp_path))
     base = ["filter", path, "--model", "kvlcc2"]
-    _error(capsys, [*base, "--measured", ""], "--measured: no output named")
+    _error(capsys, [*base, "--measured", ""], "--measured: an empty value names nothing")
     _error(capsys, [*base, "--measured", "x,y,psi", "--R-std", "x=-1,y=1,psi=1"],
            "--R-std: a standard deviation must be positive, got {'x': -1.0}")
     _error(capsys, [*base, "--measured", "x,y,psi", "--x0", "u=-5"],

@@ -34,6 +34,19 @@ def _commands() -> dict[str, str]:
             if info.name.startswith("cmd_")}
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed version, read only when asked (see ``casship.__version__``)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from .. import __version__
+
+        print(f"casship {__version__}")
+        parser.exit()
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``casship`` argument parser.
 
@@ -51,9 +64,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         prog="casship", formatter_class=HelpFormatter,
         description="Ship manoeuvring models, state estimation and identification on CasADi.",
         epilog="casship COMMAND --help shows the options of a command.")
-    from .. import __version__
-
-    parser.add_argument("--version", action="version", version=f"casship {__version__}")
+    parser.add_argument("--version", action=_Version, help="show the version of casship and exit")
     parser.add_argument("--debug", action="store_true", help="show the Python traceback of an error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module_name in _commands().items():

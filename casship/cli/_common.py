@@ -1,7 +1,8 @@
 """Shared pieces of the sub-commands: parsing, the model option, required options, records and outputs.
 
 One way each: :func:`parse_items` / :func:`parse_pairs` for every ``a,b`` and ``name=value,...``
-option, :func:`load_record` for every record a command reads, :func:`check_outputs` and
+option, :func:`load_record` for every record a command reads, :func:`check_input_files` for the other files
+it reads (named by their option), :func:`check_outputs` and
 :func:`write_output` for every file a command writes (distinct paths, the ``--overwrite`` rule,
 atomic writes), :func:`print_json` for every ``--json`` answer.
 """
@@ -15,7 +16,7 @@ from ..errors import InputError
 
 __all__ = ["Parser", "UsageError", "HelpFormatter", "add_model_option", "require", "load_model", "add_overwrite_option",
            "add_limits_option", "check_ship", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
-           "check_outputs", "write_output", "print_json", "refuse_unused"]
+           "check_input_files", "check_outputs", "write_output", "print_json", "refuse_unused"]
 
 
 class UsageError(Exception):
@@ -32,6 +33,20 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message):
         raise UsageError(self, message)
+
+    def parse_known_args(self, args=None, namespace=None):
+        """As argparse's, refusing an empty value (``--measured ""``) of an option whose default is None:
+        that default means "left out" (every output, the model's values, no file), which an empty value
+        would otherwise silently choose. An option with a non-empty default (a list of angles) keeps
+        ``""`` as "none"."""
+        namespace, rest = super().parse_known_args(args, namespace)
+        for action in self._actions:
+            value = getattr(namespace, action.dest, None)
+            if action.default is None and (value == "" or (isinstance(value, list) and "" in value)):
+                name = action.option_strings[0] if action.option_strings else action.metavar or action.dest
+                self.error(f"{name}: an empty value names nothing"
+                           + ("; give one, or leave the option out for its default" if action.option_strings else ""))
+        return namespace, rest
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -306,6 +321,30 @@ def load_record(path, model=None, *, wrap_angles: bool = False):
             data = data.with_columns(**angles)
     data.meta.setdefault("name", Path(path).name)
     return data
+
+
+def check_input_files(inputs: dict[str, object]) -> None:
+    """Check that every input file a command's options name exists, naming the option and the path.
+
+    Parameters
+    ----------
+    inputs : dict
+        Option (``"--params"``) -> path (None: not given).
+
+    Raises
+    ------
+    FileNotFoundError, IsADirectoryError
+        A path that does not exist, or is a folder.
+    """
+    from pathlib import Path
+
+    for option, path in inputs.items():
+        if path is None:
+            continue
+        if Path(path).is_dir():
+            raise IsADirectoryError(f"{option} {path}: is a folder; give a file")
+        if not Path(path).exists():
+            raise FileNotFoundError(f"{option} {path}: no such file")
 
 
 # -- outputs ---------------------------------------------------------------------------------------------

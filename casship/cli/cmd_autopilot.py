@@ -17,7 +17,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._common import add_model_option, add_overwrite_option, check_outputs, check_ship, print_json, require, seed
+from ._common import (add_model_option, add_overwrite_option, check_input_files, check_outputs, check_ship, print_json,
+                      require, seed)
 
 #: settings shown in degrees on the command line (name -> option suffix)
 _DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s"}
@@ -158,6 +159,7 @@ def run(args) -> int:
     from ..models import get_model
 
     require(args.parser, args, {"--model": args.model})
+    check_input_files({"--params": args.params})
     check_outputs({"--plot": args.plot}, overwrite=args.overwrite, folders=("--plot",))
     if args.params:
         from ..identify import read_params

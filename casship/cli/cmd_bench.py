@@ -13,7 +13,8 @@ def register(sub) -> None:
     p = sub.add_parser("bench", help=HELP)
     p.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
     p.add_argument("--json", default=None, help="write rows and machine description to this JSON file")
-    p.add_argument("--only", nargs="*", default=None, help="run only these topics (e.g. simulate)")
+    p.add_argument("--only", nargs="+", default=None,
+                   help="run only these topics, named whole: no prefix matching (e.g. simulate ship_filters)")
     p.add_argument("--markdown", default=None, help="write the results section of this Markdown page (an existing "
                                                     "page: only its results section is replaced)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
@@ -45,6 +46,13 @@ def run(args) -> int:
         raise FileNotFoundError(f"--markdown {args.markdown}: no such page (the results section of an existing "
                                 "page is replaced)")
     runner = _import_runner()
+    if args.only:
+        from ..errors import InputError
+
+        try:
+            runner.discover(args.only)
+        except ValueError as exc:
+            raise InputError(f"--only: {exc}") from None
     argv = (["--quick"] if args.quick else []) + (["--json", args.json] if args.json else [])
     if args.only:
         argv += ["--only", *args.only]

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import add_overwrite_option, check_outputs, check_ship, count, parse_pairs, print_json, refuse_unused, write_output
+from ._common import (add_overwrite_option, check_input_files, check_outputs, check_ship, count, parse_pairs,
+                      print_json, refuse_unused, write_output)
 
 
 #: The targets of :data:`casship.design.TARGETS` (listed here so that the command line starts without CasADi).
@@ -92,6 +93,7 @@ def _belief_and_noise(args, model):
     extra = parse_pairs(args.prior_std, "--prior-std")
     sigma = parse_pairs(args.sigma, "--sigma")
     if args.params:
+        check_input_files({"--params": args.params})
         model, p = read_params(args.params, args.model)
         fit = FitResult.from_json(args.params)
         if any(q.split("@", 1)[0] in model.param_names for q in fit.free):

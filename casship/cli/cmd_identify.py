@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import warnings
 
-from ._common import (check_outputs, count, load_record, number, parse_items, parse_pairs, positive, print_json,
-                      refuse_unused, write_output)
+from ._common import (check_input_files, check_outputs, count, load_record, number, parse_items, parse_pairs, positive,
+                      print_json, refuse_unused, write_output)
 from .cmd_filter import DEFAULT_Q
 
 
@@ -142,14 +142,15 @@ def run(args) -> int:
     refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
                                 "--group": bool(args.group) and "=group" not in (args.share or "")},
                   "--prior-weight weighs a --prior; --group labels the records for --share NAME=group")
+    check_input_files({"--params": args.params})
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
     records = [load_record(p, model, wrap_angles=True).decimate(args.decimate) for p in args.data]
     free = parse_items(args.free, "--free")
     if not free:
         raise InputError("--free: give at least one quantity")
-    measured = parse_items(args.measured, "--measured") or [n for n in model.output_names
-                                                               if all(n in d for d in records)]
+    measured = (parse_items(args.measured, "--measured") if args.measured is not None
+                else [n for n in model.output_names if all(n in d for d in records)])
     if not measured:
         raise InputError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
     prob = _problem(args, model, records, free, measured)

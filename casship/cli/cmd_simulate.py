@@ -8,8 +8,9 @@ Examples::
 """
 from __future__ import annotations
 
-from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, check_ship, level,
-                      load_model, load_record, print_json, refuse_unused, require, seed, whole, write_output)
+from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_input_files, check_outputs,
+                      check_ship, level, load_model, load_record, print_json, refuse_unused, require, seed, whole,
+                      write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
@@ -88,6 +89,7 @@ def run(args) -> int:
                                     "--seed": args.seed is not None and args.maneuver != "random" and not args.params},
                       f"not used by a {args.maneuver} manoeuvre (--first, --heading-deg: zig-zag; --hold: pull-out, "
                       "spiral, random; --seed: random, or the parameter draws of --params)")
+    check_input_files({"--params": args.params, "--inputs": args.inputs})
     stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
     unc = None
     if args.params:
@@ -103,7 +105,7 @@ def run(args) -> int:
         check_ship(model, args.model, "a manoeuvre")
     L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
-    measured = None
+    measured, notes = None, []
     check = not args.allow_out_of_range
     if args.inputs:
         from ..identify import replay_file
@@ -115,7 +117,9 @@ def run(args) -> int:
                else replay(model, measured, p, **options))
         traj = res.trajectory
         out.update({"maneuver": f"replay ({res.kind})", "inputs": str(args.inputs), "replay": res.errors,
+                    "start": res.start, "not_compared": res.not_compared,
                     "metrics": res.metrics, "measured_metrics": res.measured_metrics})
+        notes = res.start_notes()
         if res.bands:
             out.update({"bands": res.band_summary(), "metric_intervals": res.metric_intervals,
                         "sampling": res.sampling})
@@ -152,7 +156,7 @@ def run(args) -> int:
     if args.json:
         print_json(out)
     else:
-        _print_text(out)
+        _print_text(out, notes)
     return 0
 
 
@@ -179,8 +183,9 @@ def _maneuver_intervals(simulate_with, model, p, unc, samples: int, seed: int, l
                                                              "level": level, "source": unc.source}}
 
 
-def _print_text(out) -> None:
-    print(f"model {out['model']} (L_pp = {out['L_pp_m']} m), manoeuvre {out['maneuver']}")
+def _print_text(out, notes=()) -> None:
+    length = f" (L_pp = {out['L_pp_m']} m)" if out["L_pp_m"] is not None else ""
+    print(f"model {out['model']}{length}, manoeuvre {out['maneuver']}")
     if "first_side" in out:
         print(f"first rudder to {out['first_side']}")
     if out.get("speed_mps") is not None:
@@ -189,6 +194,8 @@ def _print_text(out) -> None:
     if "replay" in out:
         for k, v in out["replay"].items():
             print(f"  {k:28s} {v:12.4f}")
+    for note in notes:
+        print(f"  {note}")
     metrics = out.get("metrics", {})
     measured = out.get("measured_metrics", {})
     keys = [k for k in _METRIC_ORDER if k in metrics or k in measured]
@@ -219,15 +226,16 @@ def _plot(traj, measured, path, title="") -> None:
 
     fig = Figure(figsize=(11, 4.5))
     ax1, ax2 = fig.subplots(1, 2)
-    ax1.plot(traj["y"], traj["x"], label="simulated")
-    if measured is not None:
+    if "x" in traj and "y" in traj:             # a heading-only model (Nomoto) has no track
+        ax1.plot(traj["y"], traj["x"], label="simulated")
+    if measured is not None and "x" in measured and "y" in measured:
         ax1.plot(measured["y"], measured["x"], "--", label="measured")
     ax1.set_xlabel("East y [m]")
     ax1.set_ylabel("North x [m]")
     ax1.set_aspect("equal", adjustable="datalim")
     ax1.legend()
     ax2.plot(traj.t, np.degrees(traj["psi"]), label="heading (sim)")
-    if measured is not None:
+    if measured is not None and "psi" in measured:
         ax2.plot(measured.t, np.degrees(np.unwrap(measured["psi"])), "--", label="heading (meas)")
     for name in traj.input_names:
         if name.startswith("delta"):

@@ -36,6 +36,38 @@ def _as_prior(prior) -> Prior:
     raise TypeError(f"prior must be a casship.identify.Prior or a mapping name -> std, got {type(prior).__name__}")
 
 
+def whiteness_warning(coloured, ratio) -> str:
+    """The warning for residuals that are not white, reading the robust / model-based standard errors.
+
+    Parameters
+    ----------
+    coloured : list of str
+        The outputs whose residuals failed the Ljung-Box test.
+    ratio : array_like
+        Robust (HAC sandwich) over model-based standard error, per free quantity (non-finite: left out).
+
+    Returns
+    -------
+    str
+        Which way the model-based standard errors err, and the range of the ratio as printed (one
+        number when both ends print alike, so never "1-1 times").
+    """
+    ratio = np.asarray(ratio, dtype=float)
+    ratio = ratio[np.isfinite(ratio)]
+    if not ratio.size:
+        reading, span = "the model-based standard errors do not hold as they are", "unlike"
+    else:
+        lo, hi = f"{ratio.min():.2g}", f"{ratio.max():.2g}"
+        span = f"{lo} times" if lo == hi else f"{lo}-{hi} times"
+        # read on the printed numbers, so that the words never contradict them ("optimistic ... 1 times")
+        reading = ("the model-based standard errors hold nonetheless" if lo == hi == "1" else
+                   "the model-based standard errors are optimistic" if float(lo) >= 1 else
+                   "the model-based standard errors are conservative" if float(hi) <= 1 else
+                   "the model-based standard errors do not hold as they are")
+    return (f"residuals of {coloured} are not white (Ljung-Box): {reading}; the robust ones "
+            f"(std_errors_robust, HAC sandwich) are {span} the model-based ones")
+
+
 class IdentificationProblem:
     """Base class of the identification problems (not used directly)."""
 
@@ -283,17 +315,12 @@ class IdentificationProblem:
         coloured = [n for n, w in white.items() if not w["white"]]
         if coloured:
             with np.errstate(invalid="ignore", divide="ignore"):
-                ratio = std_r / std
-            ratio = ratio[np.isfinite(ratio)]
-            span = f"{ratio.min():.2g}-{ratio.max():.2g} times" if ratio.size else "unlike"
-            reading = ("the model-based standard errors are optimistic" if ratio.size and ratio.min() > 1 else
-                       "the model-based standard errors are conservative" if ratio.size and ratio.max() < 1 else
-                       "the model-based standard errors do not hold as they are")
-            out.append(f"residuals of {coloured} are not white (Ljung-Box): {reading}; the robust ones "
-                       f"(std_errors_robust, HAC sandwich) are {span} the model-based ones")
+                out.append(whiteness_warning(coloured, std_r / std))
+        # issued once per fit, at the caller's line: _result <- the solver <- MLEProblem/OutputErrorProblem.solve
+        # <- the caller (FitResult.summary lists them again, as the report of the fit)
         for w in out:
             if w.startswith(("solver stopped", "residuals of")):
-                warnings.warn(f"{self.method}: {w}", IdentificationWarning, stacklevel=3)
+                warnings.warn(f"{self.method}: {w}", IdentificationWarning, stacklevel=4)
         record_params = []
         for r in range(len(self.records)):
             p_r = sp.params(theta, r)
