@@ -155,12 +155,12 @@ def test_only_casships_own_errors_are_one_line_user_errors(monkeypatch, capsys):
         main(["cache", "info", "--debug"])
 
 
-def test_help_and_argument_errors_do_not_load_casadi():
+def test_help_and_argument_errors_do_not_load_numpy_or_casadi():
     """Before: every command took 3-5 s before it did anything, --help included (imports)."""
     code = ("import sys\nfrom casship.cli import main\n"
             "for argv in (['--help'], ['filter', '--help'], ['simulate', '--bogus']):\n"
             "    try:\n        main(argv)\n    except SystemExit:\n        pass\n"
-            "print(sorted(m for m in ('casadi', 'scipy', 'matplotlib', 'pandas') if m in sys.modules))")
+            "print(sorted(m for m in ('numpy', 'casadi', 'scipy', 'matplotlib', 'pandas') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]"
 

@@ -17,7 +17,7 @@ rudder in degrees, propeller rate). Every option maps onto :func:`casship.design
 """
 from __future__ import annotations
 
-import numpy as np
+import math
 
 from ._common import (add_overwrite_option, check_input_files, check_outputs, check_ship, count, parse_pairs,
                       print_json, refuse_unused, write_output)
@@ -134,8 +134,8 @@ def run(args) -> int:
     limits = None
     if free:
         duration = args.duration if args.duration is not None else round(25 * approach.time_scale / approach.dt) * approach.dt
-        limits = TrialLimits(duration, rudder_max=None if args.rudder_max_deg is None else np.radians(args.rudder_max_deg),
-                             rudder_rate=None if args.rudder_rate_deg is None else np.radians(args.rudder_rate_deg),
+        limits = TrialLimits(duration, rudder_max=None if args.rudder_max_deg is None else math.radians(args.rudder_max_deg),
+                             rudder_rate=None if args.rudder_rate_deg is None else math.radians(args.rudder_rate_deg),
                              corridor=args.corridor, speed_min=args.speed_min, knot=args.knot)
         limits.resolved(approach)
     candidates = standard_trials(approach, turning=_angles(args.turning, "--turning"),
