@@ -45,7 +45,7 @@ CHUNK = 256
 KEEP = 128                  # Functions kept per process (the oldest go first)
 _SHARED: dict = {}          # (signature, what, sizes..., jit) -> Function or background compile
 _MAPPED: dict = {}          # (id(fold), n) -> (fold, fold mapped over n parameter vectors)
-_SIGNATURES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_SIGNATURES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _LOCK = threading.Lock()
 COUNTS = {"built": 0, "reused": 0}    # Functions built and found again (for profiles and tests)
 

@@ -11,7 +11,7 @@ from .data import Dataset, check_time
 from .errors import DivergenceError, SolverError
 from .folds import IntegrationError, fold_steps, padded, solver_status
 from .trajectory import Trajectory
-from .discretize import DiscreteModel, discretize
+from .discretize import discretize
 from .model import Model
 from .validity import ValidityError, check_inputs, check_states, check_step, warn_states
 

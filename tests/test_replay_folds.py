@@ -35,7 +35,8 @@ def _zigzag(seconds=400.0, dt=0.5):
 def _steering(name: str, c: float) -> cs.Model:
     """A first-order steering model with track, a structure of its own for each ``c``."""
     b = cs.ModelBuilder(name)
-    x, y, psi, r = b.state("x"), b.state("y"), b.state("psi", angle=True), b.state("r")
+    b.state("x"), b.state("y")
+    psi, r = b.state("psi", angle=True), b.state("r")
     delta = b.input("delta")
     K, T, U = b.param("K", 0.1), b.param("T", 20.0), b.param("U", 5.0)
     b.ode(x=U * ca.cos(psi), y=U * ca.sin(psi), psi=r, r=(K * delta - r) / T + c * r * r + b.noise("w_r"))
