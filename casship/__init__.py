@@ -19,7 +19,7 @@ _EXPORTS = {
     "wrap": "angles", "unwrap": "angles", "Dataset": "data", "Gaussian": "gaussian", "Trajectory": "trajectory",
     "DiscreteModel": "discretize", "discretize": "discretize", "van_loan": "discretize",
     "Model": "model", "ModelBuilder": "builder", "Vessel": "vessel", "Limit": "vessel",
-    "measure": "simulate", "simulate": "simulate",
+    "measure": "simulate", "simulate": "simulate", "simulate_many": "simulate",
     "EKF": "estimators", "KF": "estimators", "FilterResult": "estimators", "persistence_model": "estimators",
     "UKF": "estimators", "EnKF": "estimators", "KalmanBucy": "estimators", "augment": "estimators",
     "MHE": "estimators", "prior_from_data": "estimators", "noise_from_data": "estimators",
@@ -31,7 +31,7 @@ _SUBMODULES = ("frames", "identify", "models", "io")
 
 __all__ = ["ModelBuilder", "Model", "Vessel", "Limit", "DiscreteModel", "discretize", "van_loan", "Dataset", "Gaussian",
            "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "EnKF", "KalmanBucy", "augment",
-           "simulate", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
+           "simulate", "simulate_many", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
            "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE", "prior_from_data", "noise_from_data",
            "CasshipError",
            "InputError", "SolverError", "SetupError", "io"]

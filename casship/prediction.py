@@ -17,16 +17,14 @@ from __future__ import annotations
 
 from typing import Callable
 
-import casadi as ca
 import numpy as np
 from scipy import stats
 
+from .folds import CHUNK, sensitivity_fold
+from .runtime import BufferedCall
 from .model import Model
 
 __all__ = ["trajectory_sensitivities", "prediction_bands", "sampled_metrics", "band_z"]
-
-_CHUNK = 512
-
 
 def band_z(level: float) -> float:
     """Half-width of a two-sided normal interval of probability ``level`` in standard deviations.
@@ -45,20 +43,8 @@ def band_z(level: float) -> float:
     return float(stats.norm.ppf(0.5 + 0.5 * float(level)))
 
 
-def _sens_fold(dmodel, k: int, n: int) -> ca.Function:
-    def make():
-        m = dmodel.model
-        x, S = ca.SX.sym("x", m.nx), ca.SX.sym("S", m.nx, k)
-        u, p, dt = ca.SX.sym("u", m.nu), ca.SX.sym("p", m.np), ca.SX.sym("dt")
-        E = ca.SX.sym("E", m.np, k)                       # d p / d theta (selection of the parameters)
-        xn = dmodel.F(x, u, p, ca.SX.zeros(m.nw), dt)
-        Sn = ca.jtimes(xn, ca.vertcat(x, p), ca.vertcat(S, E))
-        step = ca.Function("sens_step", [x, S, u, p, E, dt], [xn, Sn], ["x", "S", "u", "p", "E", "dt"], ["xn", "Sn"])
-        return step.mapaccum("sens_fold", n, [0, 1], [0, 1])
-    return dmodel.model.derived(("sensitivity_fold", dmodel.method, dmodel.substeps, k, n), make)
-
-
-def trajectory_sensitivities(model: Model, x0, t, U, p, names, *, method: str = "rk4", max_step: float | None = None):
+def trajectory_sensitivities(model: Model, x0, t, U, p, names, *, method: str = "rk4", max_step: float | None = None,
+                             jit: bool | None = False):
     """States of a simulation and their exact sensitivities to some parameters.
 
     Parameters
@@ -77,6 +63,10 @@ def trajectory_sensitivities(model: Model, x0, t, U, p, names, *, method: str = 
         The parameters ``theta`` to differentiate with respect to.
     method, max_step
         Discretisation as in :func:`casship.simulate` (the same sub-steps).
+    jit : bool or None
+        The sensitivity fold interpreted (``False``), compiled (``True``), or compiled from the cache,
+        else in the background while it runs interpreted (``None``); shared per process by the
+        model's structure (:func:`casship.folds.sensitivity_fold`). The same numbers either way.
 
     Returns
     -------
@@ -98,23 +88,28 @@ def trajectory_sensitivities(model: Model, x0, t, U, p, names, *, method: str = 
     E = np.zeros((model.np, k))
     E[idx, np.arange(k)] = 1.0
     p = np.asarray(p, dtype=float)
-    fold = _sens_fold(dmodel, k, _CHUNK)
     steps = dt.size
-    total = -(-steps // _CHUNK) * _CHUNK
+    fold = sensitivity_fold(dmodel, k, CHUNK, jit=jit)
+    total = -(-steps // CHUNK) * CHUNK
     Uc = np.zeros((model.nu, total))
     Uc[:, :steps] = np.asarray(U, dtype=float)[:steps].T
     dtc = np.zeros((1, total))
     dtc[0, :steps] = dt
-    x, S = np.asarray(x0, dtype=float).reshape(-1), np.zeros((model.nx, k))
-    X, SS = [x], [S]
-    for start in range(0, total, _CHUNK):
-        cols = slice(start, start + _CHUNK)
-        Xb, Sb = fold(x, S, Uc[:, cols], p, E, dtc[:, cols])
-        Xb, Sb = np.asarray(Xb), np.asarray(Sb).reshape(model.nx, _CHUNK, k)   # blocks side by side
-        X += list(Xb.T)
-        SS += [Sb[:, j, :] for j in range(_CHUNK)]
-        x, S = Xb[:, -1], Sb[:, -1, :]
-    return np.array(X[:steps + 1]), np.array(SS[:steps + 1])
+    X, S = np.empty((steps + 1, model.nx)), np.zeros((steps + 1, model.nx, k))
+    X[0] = np.asarray(x0, dtype=float).reshape(-1)
+    call = BufferedCall(fold)
+    call["x"], call["S"], call["p"], call["E"] = X[0], S[0], p, E
+    for start in range(0, total, CHUNK):
+        cols = slice(start, start + CHUNK)
+        call["u"], call["dt"] = Uc[:, cols], dtc[:, cols]
+        call()
+        take = min(CHUNK, steps - start)
+        Xb, Sb = call.out("xn"), call.out("Sn")
+        X[start + 1:start + 1 + take] = Xb.T[:take]
+        # a chunk's Sn (nx, CHUNK k) holds sample j in columns j k:(j + 1) k
+        S[start + 1:start + 1 + take] = Sb.reshape(model.nx, CHUNK, k).transpose(1, 0, 2)[:take]
+        call["x"], call["S"] = Xb[:, -1], Sb[:, -k:]
+    return X, S
 
 
 def prediction_bands(model: Model, X: np.ndarray, S: np.ndarray, covariance: np.ndarray, level: float = 0.95) -> dict:
@@ -154,19 +149,23 @@ def prediction_bands(model: Model, X: np.ndarray, S: np.ndarray, covariance: np.
     return out
 
 
-def sampled_metrics(run: Callable[[np.ndarray], tuple[dict, np.ndarray | None]], draws: np.ndarray,
-                    level: float = 0.95) -> dict:
+def sampled_metrics(run: Callable, draws: np.ndarray, level: float = 0.95, *, batch: bool = False) -> dict:
     """Intervals of manoeuvre indices (and the heading spread) from parameter draws.
 
     Parameters
     ----------
     run : callable
         ``run(p) -> (metrics, psi)``: the indices of one simulation with parameter vector ``p`` and
-        its heading (or None); a draw whose simulation fails raises and is counted as failed.
+        its heading (or None); a draw whose simulation fails raises and is counted as failed. With
+        ``batch=True``, ``run(draws)`` simulates all draws at once (e.g. through
+        :func:`casship.simulate_many`) and returns one entry per draw: ``(metrics, psi)``, or the
+        exception its simulation failed with (counted as failed).
     draws : (n, np) array
         Parameter vectors (e.g. :meth:`~casship.identify.ParameterUncertainty.sample`).
     level : float
         Coverage of the intervals (equal-tailed percentiles).
+    batch : bool
+        Whether ``run`` takes all draws at once.
 
     Returns
     -------
@@ -176,13 +175,24 @@ def sampled_metrics(run: Callable[[np.ndarray], tuple[dict, np.ndarray | None]],
     """
     from .angles import wrap
 
+    failures = (ValueError, RuntimeError, FloatingPointError)
+    if batch:
+        outcomes = list(run(draws))
+        if len(outcomes) != len(draws):
+            raise ValueError(f"sampled_metrics: run gave {len(outcomes)} outcome(s) for {len(draws)} draws")
+    else:
+        outcomes = []
+        for p in draws:
+            try:
+                outcomes.append(run(p))
+            except failures as exc:
+                outcomes.append(exc)
     values, psis, failed = {}, [], 0
-    for p in draws:
-        try:
-            metrics, psi = run(p)
-        except (ValueError, RuntimeError, FloatingPointError):
+    for outcome in outcomes:
+        if isinstance(outcome, failures):
             failed += 1
             continue
+        metrics, psi = outcome
         for key, v in metrics.items():
             if isinstance(v, (int, float)) and np.isfinite(v):
                 values.setdefault(key, []).append(float(v))

@@ -9,38 +9,13 @@ from .runtime import BufferedCall
 from .angles import wrap
 from .data import Dataset, check_time
 from .errors import DivergenceError, SolverError
+from .folds import IntegrationError, fold_steps, padded, solver_status
 from .trajectory import Trajectory
-from .discretize import DiscreteModel, discretize
+from .discretize import discretize
 from .model import Model
-from .validity import check_inputs, check_states, check_step, warn_states
+from .validity import ValidityError, check_inputs, check_states, check_step, warn_states
 
-__all__ = ["simulate", "measure", "input_matrix", "fold_steps", "IntegrationError"]
-
-
-class IntegrationError(SolverError):
-    """An integrator (CVODES) failed; ``status`` is its return flag, ``step`` the first step of the
-    block of steps in which it failed.
-
-    Parameters
-    ----------
-    message : str
-        What failed, where.
-    status : str
-        The integrator's return flag (e.g. ``CV_TOO_MUCH_WORK``).
-    step : int
-        First step of the failing block.
-    """
-
-    def __init__(self, message: str, status: str, step: int):
-        super().__init__(message)
-        self.status, self.step = status, step
-
-
-def _status(exc: Exception) -> str:
-    import re
-
-    found = re.findall(r'returned "?([A-Za-z_]+)"?', str(exc))
-    return found[-1] if found else "unknown"
+__all__ = ["simulate", "simulate_many", "measure", "input_matrix", "fold_steps", "IntegrationError"]
 
 
 def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | None:
@@ -142,68 +117,6 @@ def _chunk(steps: int) -> int:
     return min(FOLD_CHUNK, 1 << max(0, int(steps - 1).bit_length()))
 
 
-def _padded(a: np.ndarray, total: int) -> np.ndarray:
-    """Columns of ``a`` (k, n) repeated from the last one up to ``total`` columns."""
-    extra = total - a.shape[1]
-    if extra <= 0:
-        return a
-    last = a[:, -1:] if a.shape[1] else np.zeros((a.shape[0], 1))
-    return np.hstack([a, np.repeat(last, extra, axis=1)])
-
-
-def fold_steps(dmodel: DiscreteModel, x0, U, p, W, dt) -> np.ndarray:
-    """Run ``x[k+1] = F(x[k], U[k], p, W[k], dt[k])`` over all steps through a compiled fold.
-
-    The record is processed in blocks by one cached ``mapaccum`` of the step Function (building a
-    fold of the full length would cost more than evaluating it); the state is carried from block
-    to block, so the result is identical to a single fold.
-
-    Parameters
-    ----------
-    dmodel : DiscreteModel
-        The discretisation.
-    x0 : array_like (nx,)
-        Initial state.
-    U : array (n, nu)
-        Inputs per step.
-    p : array_like (np,)
-        Parameters.
-    W : array (n, nw)
-        Process noise per step.
-    dt : array_like (n,)
-        Step lengths [s].
-
-    Returns
-    -------
-    numpy.ndarray
-        The (len(dt) + 1, nx) states, the first row being ``x0``.
-    """
-    x0 = np.asarray(x0, dtype=float).reshape(-1)
-    dt = np.asarray(dt, dtype=float).reshape(-1)
-    steps = dt.size
-    if steps == 0:
-        return x0[None, :]
-    size = _chunk(steps)
-    fold = dmodel.fold(size)
-    total = -(-steps // size) * size
-    Uc = _padded(np.asarray(U, dtype=float)[:steps].T, total)
-    Wc = _padded(np.asarray(W, dtype=float)[:steps].T, total)
-    dtc = _padded(dt[None, :], total)
-    blocks, x = [], x0
-    for start in range(0, total, size):
-        cols = slice(start, start + size)
-        try:
-            X = np.asarray(fold(x, Uc[:, cols], p, Wc[:, cols], dtc[:, cols]))
-        except RuntimeError as exc:
-            status = _status(exc)
-            raise IntegrationError(f"integration of {dmodel.model.name!r} ({dmodel.method}) failed in steps "
-                                   f"{start}..{min(start + size, steps) - 1}: solver status {status}",
-                                   status, start) from exc
-        blocks.append(X)
-        x = X[:, -1]
-    return np.vstack([x0[None, :], np.hstack(blocks)[:, :steps].T])
-
-
 def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
     """Outputs ``h(x, u, p)`` of every row of ``X`` (N, nx) and ``U`` (N, nu) as an (N, ny) array."""
     n = X.shape[0]
@@ -215,13 +128,13 @@ def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:
     size = _chunk(n)
     hmap = model.derived(("h_map", size), lambda: model.h.map(size))
     total = -(-n // size) * size
-    Xc, Uc = _padded(X.T, total), _padded(U.T, total)
+    Xc, Uc = padded(X.T, total), padded(U.T, total)
     Y = np.hstack([np.asarray(hmap(Xc[:, k:k + size], Uc[:, k:k + size], p)) for k in range(0, total, size)])
     return Y[:, :n].T.reshape(n, model.ny)
 
 
 def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = None, max_step: float | None = None,
-             w=None, options: dict | None = None, check_limits: bool = True) -> Trajectory:
+             w=None, options: dict | None = None, check_limits: bool = True, jit: bool | None = False) -> Trajectory:
     """Simulate ``model`` from ``x0`` on the time grid ``t``.
 
     Parameters
@@ -254,6 +167,11 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = N
         :mod:`casship.validity`); both raise :class:`~casship.validity.ValidityError`. A state
         leaving its range during the run gives a :class:`~casship.validity.ValidityWarning`.
         ``False`` is the explicit opt-in for a deliberate out-of-range study.
+    jit : bool or None
+        How the fold over the record runs (see :mod:`casship.folds`): interpreted (``False``, the
+        default: a one-off simulation does not pay for a compile), compiled (``True``), or compiled
+        from the cache, else in the background while it runs interpreted (``None``: for repeated
+        simulations of one model, as replays make). The same numbers either way.
 
     Returns
     -------
@@ -278,6 +196,115 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = N
     >>> round(float(tr["r"][-1]), 4) > 0
     True
     """
+    t, x0, p, dt, dmodel, method, substeps, W, U = _setup(model, x0, t, inputs, p, method, max_step, w, options)
+    if check_limits:
+        check_states(model, x0, "initial state")
+        if U is not None:
+            check_inputs(model, U, t)
+            _check_steps(model, dt, substeps, x0, U[0], p, method)
+    if U is not None and method == "cvodes" and t.size > 2 and _constant_rows(U) and _constant_rows(W):
+        X = _adaptive_on_grid(model, x0, t, U[0], p, W[0], options)
+    elif U is not None:
+        X = _steps(dmodel, x0, U, p, W, dt, t, jit)
+    else:
+        first = (lambda u: _check_steps(model, dt, substeps, x0, u, p, method)) if check_limits else None
+        X, U = _closed_loop(model, dmodel, x0, t, inputs, p, W, dt, first)
+        if check_limits:
+            check_inputs(model, U, t)
+    return _trajectory(model, t, X, U, p, method, check_limits)
+
+
+def simulate_many(model: Model, x0, t, inputs, params, *, method: str | None = None, max_step: float | None = None,
+                  w=None, check_limits: bool = True, jit: bool | None = None) -> list:
+    """Simulate ``model`` once per parameter vector, all of them in one mapped call of the fold per chunk.
+
+    What :func:`simulate` gives for each row of ``params`` (the same numbers), for many parameter
+    vectors at once (e.g. draws from a fit's covariance): the record's inputs, noise and steps are
+    shared, and the step fold is mapped over the parameter vectors (``Function.map``), so the
+    simulations cost one call per chunk of the record instead of one simulation each.
+
+    Parameters
+    ----------
+    model : Model
+    x0 : array_like (nx,) or mapping state name -> value
+        Initial state, the same for every simulation.
+    t : array_like (N,)
+        Strictly increasing time grid [s].
+    inputs : array (N, nu), mapping name -> array or constant, or Dataset
+        As for :func:`simulate` (a callable runs one closed loop per parameter vector).
+    params : array_like (m, np)
+        One parameter vector per row.
+    method, max_step, w
+        As for :func:`simulate`.
+    check_limits : bool
+        As for :func:`simulate`: the initial state and the inputs are checked once (raising), the
+        fixed step's stability limit per parameter vector (its simulation then fails with the
+        :class:`~casship.validity.ValidityError`).
+    jit : bool or None
+        The fold interpreted (``False``), compiled (``True``), or compiled from the cache, else in the
+        background while it runs interpreted (``None``); the same numbers either way (see
+        :mod:`casship.folds`).
+
+    Returns
+    -------
+    list
+        Per row of ``params``: its :class:`~casship.trajectory.Trajectory`, or the exception its
+        simulation failed with (:class:`~casship.validity.ValidityError`,
+        :class:`~casship.errors.DivergenceError`, :class:`IntegrationError`), as :func:`simulate`
+        would raise it for that row.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from casship.models import nomoto_first_order
+    >>> m = nomoto_first_order()
+    >>> P = np.array([m.params(K=k) for k in (0.05, 0.1)])
+    >>> runs = simulate_many(m, m.states(), np.arange(0, 10, 0.1), {"delta": 0.1}, P, jit=False)
+    >>> [round(float(tr["r"][-1]), 5) for tr in runs] == [round(float(simulate(m, m.states(), np.arange(0, 10, 0.1),
+    ...     {"delta": 0.1}, p)["r"][-1]), 5) for p in P]
+    True
+    """
+    P = np.atleast_2d(np.asarray(params, dtype=float))
+    if P.ndim != 2 or P.shape[1] != model.np:
+        raise ValueError(f"params has shape {np.shape(params)}, expected (m, {model.np}) for model {model.name!r}")
+    asked = method
+    t, x0, _, dt, dmodel, method, substeps, W, U = _setup(model, x0, t, inputs, None, method, max_step, w, None)
+    if check_limits:
+        check_states(model, x0, "initial state")
+        if U is not None:
+            check_inputs(model, U, t)
+    if U is None or (method == "cvodes" and t.size > 2 and _constant_rows(U) and _constant_rows(W)):
+        # a closed loop, or one adaptive integration over the record: one simulation per parameter vector
+        return [_attempt(lambda p=p: simulate(model, x0, t, inputs, p, method=asked, max_step=max_step, w=w,
+                                               check_limits=check_limits)) for p in P]
+    out: list = [None] * len(P)
+    rows = []
+    for i, p in enumerate(P):
+        failed = _attempt(lambda p=p: _check_steps(model, dt, substeps, x0, U[0], p, method)) if check_limits else None
+        if failed is not None:
+            out[i] = failed
+        else:
+            rows.append(i)
+    try:
+        states = list(_steps(dmodel, x0, U, P[rows], W, dt, t, jit)) if rows else []
+    except IntegrationError:            # which simulation failed: each alone
+        states = [_attempt(lambda p=P[i]: _steps(dmodel, x0, U, p, W, dt, t, jit)) for i in rows]
+    for i, X in zip(rows, states):
+        out[i] = X if isinstance(X, Exception) else _attempt(lambda X=X, p=P[i]: _trajectory(model, t, X, U, p, method,
+                                                                                                 check_limits))
+    return out
+
+
+def _attempt(run):
+    """``run()``, or the error of a simulation that failed (a bad step, divergence, a solver failure)."""
+    try:
+        return run()
+    except (ValidityError, SolverError) as exc:
+        return exc
+
+
+def _setup(model: Model, x0, t, inputs, p, method, max_step, w, options):
+    """The checked time grid, initial state, parameters, steps, discretisation, noise and inputs."""
     t = check_time(t, "t")
     x0 = model.states(**x0) if isinstance(x0, Mapping) else np.asarray(x0, dtype=float).reshape(-1)
     if x0.shape != (model.nx,):
@@ -303,23 +330,19 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = N
                                                       substeps=substeps, options=options))
     W = _noise_matrix(model, t, w)
     U = input_matrix(model, t, inputs)
-    if check_limits:
-        check_states(model, x0, "initial state")
-        if U is not None:
-            check_inputs(model, U, t)
-            _check_steps(model, dt, substeps, x0, U[0], p, method)
-    if U is not None and method == "cvodes" and t.size > 2 and _constant_rows(U) and _constant_rows(W):
-        X = _adaptive_on_grid(model, x0, t, U[0], p, W[0], options)
-    elif U is not None:
-        try:
-            X = fold_steps(dmodel, x0, U, p, W, dt)
-        except IntegrationError as exc:
-            raise IntegrationError(f"{exc} (from t = {t[exc.step]:g} s)", exc.status, exc.step) from exc
-    else:
-        first = (lambda u: _check_steps(model, dt, substeps, x0, u, p, method)) if check_limits else None
-        X, U = _closed_loop(model, dmodel, x0, t, inputs, p, W, dt, first)
-        if check_limits:
-            check_inputs(model, U, t)
+    return t, x0, p, dt, dmodel, method, substeps, W, U
+
+
+def _steps(dmodel, x0, U, p, W, dt, t, jit):
+    """The fold over the record (:func:`fold_steps`), a failure located in time."""
+    try:
+        return fold_steps(dmodel, x0, U, p, W, dt, jit=jit)
+    except IntegrationError as exc:
+        raise IntegrationError(f"{exc} (from t = {t[exc.step]:g} s)", exc.status, exc.step) from exc
+
+
+def _trajectory(model: Model, t, X, U, p, method: str, check_limits: bool) -> Trajectory:
+    """The simulated states as a :class:`Trajectory` with inputs and outputs (divergence refused)."""
     if not np.all(np.isfinite(X)):
         row = int(np.argwhere(~np.isfinite(X))[0, 0])
         raise DivergenceError(f"simulation of {model.name!r} diverged at t = {t[row]:g} s (a step too long for its "
@@ -380,7 +403,7 @@ def _adaptive_on_grid(model: Model, x0, t, u, p, w, options) -> np.ndarray:
     try:
         xf = integ(x0=x0, p=np.concatenate([u, p, w]))["xf"]
     except RuntimeError as exc:
-        status = _status(exc)
+        status = solver_status(exc)
         raise IntegrationError(f"integration of {model.name!r} (cvodes) failed between t = {t[0]:g} and "
                                f"{t[-1]:g} s: solver status {status}", status, 0) from exc
     return np.vstack([x0[None, :], np.asarray(xf).T])

@@ -22,7 +22,7 @@ from .data import Dataset
 from .trajectory import Trajectory
 from .maneuvers import execute_time, turning_metrics, zigzag_metrics
 from .model import Model
-from .simulate import simulate
+from .simulate import simulate, simulate_many
 
 __all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics"]
 
@@ -288,7 +288,7 @@ def maneuver_metrics(data: Dataset, kind: str, options: dict, *, t_exec: float, 
 
 def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step: float | None = None,
            x0=None, check_limits: bool = True, uncertainty=None, level: float = 0.95, samples: int = 40,
-           seed=0) -> ReplayResult:
+           seed=0, jit: bool | None = None) -> ReplayResult:
     """Simulate ``model`` with the measured inputs of ``data`` from its measured initial state.
 
     Parameters
@@ -316,6 +316,11 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
         Parameter draws for the index intervals and the check of the bands (0: none).
     seed : int or numpy.random.Generator
         Seed of the draws.
+    jit : bool or None
+        How the simulation folds run (see :mod:`casship.folds`): compiled from the cache, else
+        compiled in the background while they run interpreted (``None``, the default), compiled
+        now (``True``) or interpreted (``False``). The numbers are the same either way. The draws
+        run as one mapped call per chunk of the record (:func:`casship.simulate_many`).
 
     Returns
     -------
@@ -335,7 +340,8 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
         start = {n: "record" if n in values else "zero" for n in model.state_names}
     else:
         start = dict.fromkeys(model.state_names, "x0")
-    traj = simulate(model, x0, data.t, data, p, method=method, max_step=max_step, check_limits=check_limits)
+    traj = simulate(model, x0, data.t, data, p, method=method, max_step=max_step, check_limits=check_limits,
+                    jit=jit)
     errors = {}
     # compared where both the record and the replayed model have the quantity
     not_compared = [n for n in ("psi", "x", "y", "u") if n in data and n not in traj]
@@ -360,19 +366,19 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
         measured = maneuver_metrics(data, kind, options, t_exec=t_exec, L=L)
     result = ReplayResult(traj, errors, metrics, measured, kind, data, start=start, not_compared=not_compared)
     if uncertainty is not None:
-        _add_uncertainty(result, model, traj, data, uncertainty, level, samples, seed, method, max_step,
+        _add_uncertainty(result, model, traj, data, uncertainty, level, samples, seed, method, max_step, jit,
                          lambda tr: maneuver_metrics(tr, kind, options, t_exec=t_exec, L=L) if kind != "other" else {})
     return result
 
 
-def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, method, max_step, metrics_of) -> None:
+def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, method, max_step, jit, metrics_of) -> None:
     """Bands from exact sensitivities, index intervals from parameter draws (see :mod:`casship.prediction`)."""
     from .prediction import prediction_bands, sampled_metrics, trajectory_sensitivities
 
     p = model.params(traj.meta["params"])
     U = np.column_stack([traj[n] for n in model.input_names])
     x0 = np.array([traj[n][0] for n in model.state_names])
-    X, S = trajectory_sensitivities(model, x0, traj.t, U, p, unc.names, method=method, max_step=max_step)
+    X, S = trajectory_sensitivities(model, x0, traj.t, U, p, unc.names, method=method, max_step=max_step, jit=jit)
     bands = prediction_bands(model, X, S, unc.covariance, level)
     bands["source"] = unc.source
     if unc.psi_variance_rate > 0 and "psi_std" in bands:
@@ -386,14 +392,22 @@ def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, metho
             bands["coverage_predictive"] = float(np.mean(e[ok] <= bands["z"] * bands["psi_std_predictive"][ok] + 1e-12))
     result.bands = bands
     if samples:
-        def run(pk):
-            tr = simulate(model, x0, data.t, data, pk, method=method, max_step=max_step, check_limits=False)
-            return metrics_of(tr), tr["psi"]
-        draws = unc.sample(model, p, samples, seed)
-        s = sampled_metrics(run, draws, level)
+        def run(draws):
+            runs = simulate_many(model, x0, data.t, data, draws, method=method, max_step=max_step, check_limits=False,
+                                 jit=jit)
+            return [tr if isinstance(tr, Exception) else _outcome(metrics_of, tr) for tr in runs]
+        s = sampled_metrics(run, unc.sample(model, p, samples, seed), level, batch=True)
         result.metric_intervals = s["intervals"]
         check = {"samples": s["samples"], "failed": s["failed"]}
         if s["psi_std"] is not None and "psi_std" in bands:
             lin = bands["psi_std"]
             check["psi_std_ratio_sampled_to_linear"] = float(np.sqrt(np.sum(s["psi_std"] ** 2) / max(np.sum(lin ** 2), 1e-300)))
         result.sampling = check
+
+
+def _outcome(metrics_of, tr):
+    """``(metrics, psi)`` of a drawn simulation, or the error its indices failed with (a failed draw)."""
+    try:
+        return metrics_of(tr), tr["psi"]
+    except (ValueError, RuntimeError, FloatingPointError) as exc:
+        return exc

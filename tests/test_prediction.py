@@ -13,14 +13,15 @@ from casship.identify import replay_file
 from casship.validation import replay
 
 
-def test_trajectory_sensitivities_equal_central_differences():
+@pytest.mark.parametrize("jit", [False, True])
+def test_trajectory_sensitivities_equal_central_differences(jit):
     ship = kvlcc2(asymmetry=True)
     t = np.arange(0.0, 300.0, 1.0)
     U = np.column_stack([np.radians(20.0) * np.sign(np.sin(t / 40.0) + 1e-9), np.full(t.size, 1.53)])
     x0 = ship.states(u=7.97)
     names = ["N_r_dash", "Y_v_dash", "delta_0"]
     p = ship.params()
-    X, S = trajectory_sensitivities(ship, x0, t, U, p, names)
+    X, S = trajectory_sensitivities(ship, x0, t, U, p, names, jit=jit)
     ref = cs.simulate(ship, x0, t, U, p)
     assert np.allclose(X[:, ship.index("psi")], ref["psi"], atol=1e-12)
     for j, name in enumerate(names):

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..angles import wrap_sym
 from ..runtime import BufferedCall
-from ._compile import compiled, resolve
+from ..compiling import compiled, resolve
 
 __all__ = ["CHUNK", "OutputErrorEngine", "Job", "run_jobs"]
 

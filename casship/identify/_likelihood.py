@@ -11,7 +11,7 @@ import numpy as np
 
 from ..gaussian import Gaussian
 from ..estimators.base import CONSTANT_INPUTS, SAMPLE_INPUTS
-from ._compile import compiled
+from ..compiling import compiled
 from ._engine import CHUNK, Engine, Job, fold, per_sample, run_jobs
 
 __all__ = ["StepSlots", "LikelihoodEngine"]

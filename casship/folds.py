@@ -1,0 +1,324 @@
+"""Simulation folds, built once per process and shared by structure, compiled where they pay.
+
+A simulation of a record runs a fold (``mapaccum``) of the discretised step ``F(x, u, p, w, dt)``
+over chunks of samples, carrying the state from chunk to chunk. A replay with prediction bands runs
+it once, then once more for every parameter draw of its index intervals, and propagates the exact
+sensitivities of the states to the uncertain parameters. Three Functions do that work:
+
+* :func:`simulation_fold`: ``(x, U, p, W, dt) -> X``, the states after each step of a chunk;
+* the same fold mapped over parameter vectors (``Function.map``; inputs, noise and steps shared):
+  every draw of a chunk in one call (:func:`fold_steps` with several parameter vectors);
+* :func:`sensitivity_fold`: the step with its forward sensitivities
+  ``S_{k+1} = F_x S_k + F_p E`` (``E`` selects the parameters), as used by
+  :func:`casship.prediction.trajectory_sensitivities`.
+
+They depend only on the step Function (the model's equations, the integration method and its
+sub-steps) and their sizes, never on the model object, the record or the parameter values. So they
+are kept per process under a digest of the step, as the identification keeps its folds: the replays
+of many fit files (each file rebuilds its model) build them once.
+
+``jit`` chooses how they run (see :mod:`casship.compiling`): ``False`` interpreted, ``True`` compiled
+now, ``None`` compiled if the compile cache holds the library, else compiled in the background while
+evaluated interpreted. The flags keep the numbers: interpreted and compiled folds give the same
+states to the last bit (tested), so where the switch happens does not change a result. A step with an
+adaptive integrator (``cvodes``) always runs interpreted: CasADi generates no C code for it.
+"""
+from __future__ import annotations
+
+import hashlib
+import threading
+import weakref
+
+import casadi as ca
+import numpy as np
+
+from .compiling import compiled, resolve
+from .errors import SolverError
+from .runtime import BufferedCall
+
+__all__ = ["CHUNK", "simulation_fold", "sensitivity_fold", "fold_steps", "padded", "signature",
+           "IntegrationError", "solver_status", "COUNTS"]
+
+#: Samples per chunk of a compiled fold (one size: one library per structure). Interpreted folds of
+#: short records take the next power of two below it (less padding; building them costs nothing to compile).
+CHUNK = 256
+KEEP = 128                  # Functions kept per process (the oldest go first)
+_SHARED: dict = {}          # (signature, what, sizes..., jit) -> Function or background compile
+_MAPPED: dict = {}          # (id(fold), n) -> (fold, fold mapped over n parameter vectors)
+_SIGNATURES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_LOCK = threading.Lock()
+COUNTS = {"built": 0, "reused": 0}    # Functions built and found again (for profiles and tests)
+
+
+class IntegrationError(SolverError):
+    """An integrator (CVODES) failed; ``status`` is its return flag, ``step`` the first step of the
+    block of steps in which it failed.
+
+    Parameters
+    ----------
+    message : str
+        What failed, where.
+    status : str
+        The integrator's return flag (e.g. ``CV_TOO_MUCH_WORK``).
+    step : int
+        First step of the failing block.
+    """
+
+    def __init__(self, message: str, status: str, step: int):
+        super().__init__(message)
+        self.status, self.step = status, step
+
+
+def solver_status(exc: Exception) -> str:
+    """The return flag a CasADi solver error names (e.g. ``CV_TOO_MUCH_WORK``), else ``"unknown"``.
+
+    Parameters
+    ----------
+    exc : Exception
+    """
+    import re
+
+    found = re.findall(r'returned "?([A-Za-z_]+)"?', str(exc))
+    return found[-1] if found else "unknown"
+
+
+def _keep(table: dict, key, value):
+    with _LOCK:
+        table[key] = value
+        while len(table) > KEEP:
+            del table[next(iter(table))]
+    return value
+
+
+def signature(dmodel) -> str:
+    """A digest of the step Function of ``dmodel``: discretisations with equal digests share their folds.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    """
+    sig = _SIGNATURES.get(dmodel)
+    if sig is None:
+        sig = hashlib.sha256(dmodel.F.serialize().encode()).hexdigest()
+        _SIGNATURES[dmodel] = sig
+    return sig
+
+
+def _jit(dmodel, jit):
+    """An integrator's step is not generated as C: interpreted whatever ``jit`` says."""
+    return jit if dmodel.symbolic is ca.SX else False
+
+
+def _shared(dmodel, key: tuple, make, jit):
+    """The Function ``make()`` (compiled per ``jit``), built once per process for every
+    discretisation of the same step."""
+    jit = _jit(dmodel, jit)
+    full = (signature(dmodel), *key, jit)
+    fun = _SHARED.get(full)
+    if fun is None:
+        fun = _keep(_SHARED, full, compiled(make(), jit=jit))
+        COUNTS["built"] += 1
+    else:
+        COUNTS["reused"] += 1
+    return resolve(fun)
+
+
+def _size(steps: int, jit) -> int:
+    """Chunk length: :data:`CHUNK` compiled; interpreted, a power of two up to it (short records)."""
+    if jit is not False:
+        return CHUNK
+    return min(CHUNK, 1 << max(0, int(steps - 1).bit_length()))
+
+
+def simulation_fold(dmodel, n: int = CHUNK, *, jit=False) -> ca.Function:
+    """``F`` folded over ``n`` steps: ``fold(x, U, p, W, dt) -> X`` with ``U`` (nu, n), ``W`` (nw, n),
+    ``dt`` (1, n) and ``X`` the (nx, n) states after each step; shared per process by structure.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    n : int
+        Steps per call.
+    jit : bool or None
+        Interpreted (``False``), compiled now (``True``) or compiled from the cache / in the background
+        (``None``).
+
+    Returns
+    -------
+    casadi.Function
+    """
+    def make():
+        m, n_ = dmodel.model, int(n)
+        acc = dmodel.F.mapaccum(f"simulate_steps{n_}", n_)
+        x, U, p = ca.MX.sym("x", m.nx), ca.MX.sym("u", m.nu, n_), ca.MX.sym("p", m.np)
+        W, dt = ca.MX.sym("w", m.nw, n_), ca.MX.sym("dt", 1, n_)
+        # one parameter vector for the chunk (so that a map over parameter vectors maps one column each)
+        X = acc(x, U, ca.repmat(p, 1, n_), W, dt)
+        return ca.Function(f"simulate_fold{n_}", [x, U, p, W, dt], [X], ["x", "u", "p", "w", "dt"], ["xf"])
+    return _shared(dmodel, ("simulate", int(n)), make, jit)
+
+
+def sensitivity_fold(dmodel, k: int, n: int = CHUNK, *, jit=False) -> ca.Function:
+    """The step with forward sensitivities to ``k`` parameters, folded over ``n`` steps.
+
+    ``fold(x, S, u, p, E, dt) -> (xn, Sn)``: ``x`` (nx, 1) and ``S`` (nx, k) the state and its sensitivities at
+    the start, ``p`` (np, 1) and ``E`` (np, k) the parameter vector and its derivative with respect to
+    the ``k`` parameters (a selection), the same for every step, ``u`` (nu, n), ``dt`` (1, n);
+    ``xn`` (nx, n) and ``Sn`` (nx, n k) the states and sensitivities after each step, side by side.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    k : int
+        Number of parameters.
+    n : int
+        Steps per call.
+    jit : bool or None
+        As for :func:`simulation_fold`.
+
+    Returns
+    -------
+    casadi.Function
+    """
+    def make():
+        m, sym = dmodel.model, dmodel.symbolic
+        x, S = sym.sym("x", m.nx), sym.sym("S", m.nx, k)
+        u, p, dt = sym.sym("u", m.nu), sym.sym("p", m.np), sym.sym("dt")
+        E = sym.sym("E", m.np, k)
+        xn = dmodel.F(x, u, p, sym.zeros(m.nw), dt)
+        Sn = ca.jtimes(xn, ca.vertcat(x, p), ca.vertcat(S, E))
+        step = ca.Function("sens_step", [x, S, u, p, E, dt], [xn, Sn], ["x", "S", "u", "p", "E", "dt"], ["xn", "Sn"])
+        acc = step.mapaccum(f"sens_steps{k}_{int(n)}", int(n), [0, 1], [0, 1])
+        ins = [ca.MX.sym(name, *shape) for name, shape in (("x", (m.nx, 1)), ("S", (m.nx, k)), ("u", (m.nu, int(n))),
+                                                           ("p", (m.np, 1)), ("E", (m.np, k)), ("dt", (1, int(n))))]
+        x_, S_, u_, p_, E_, dt_ = ins
+        # the parameters and their selection the same for every step of the chunk
+        outs = acc(x_, S_, u_, ca.repmat(p_, 1, int(n)), ca.repmat(E_, 1, int(n)), dt_)
+        return ca.Function(f"sens_fold{k}_{int(n)}", ins, list(outs), ["x", "S", "u", "p", "E", "dt"], ["xn", "Sn"])
+    return _shared(dmodel, ("sensitivity", int(k), int(n)), make, jit)
+
+
+def _mapped(fold: ca.Function, n: int) -> ca.Function:
+    """``fold`` mapped over ``n`` parameter vectors (and states), the inputs, noise and steps shared."""
+    if n == 1:
+        return fold
+    entry = _MAPPED.get((id(fold), n))
+    if entry is None:
+        shared = [fold.index_in(name) for name in ("u", "w", "dt")]
+        entry = _keep(_MAPPED, (id(fold), n), (fold, fold.map(f"{fold.name()}_map{n}", "serial", n, shared, [])))
+    return entry[1]
+
+
+def padded(a: np.ndarray, total: int) -> np.ndarray:
+    """Columns of ``a`` (k, n) repeated from the last one up to ``total`` columns (a chunk's padding).
+
+    Parameters
+    ----------
+    a : (k, n) array
+    total : int
+    """
+    extra = total - a.shape[1]
+    if extra <= 0:
+        return a
+    last = a[:, -1:] if a.shape[1] else np.zeros((a.shape[0], 1))
+    return np.hstack([a, np.repeat(last, extra, axis=1)])
+
+
+def fold_steps(dmodel, x0, U, P, W, dt, *, jit=False) -> np.ndarray:
+    """Run ``x[k+1] = F(x[k], U[k], p, W[k], dt[k])`` over all steps for one or several parameter vectors.
+
+    The record runs in chunks through one shared fold (:func:`simulation_fold`), the state carried from
+    chunk to chunk, so the result is that of a single fold; several parameter vectors run as one call
+    of the fold mapped over them per chunk.
+
+    Parameters
+    ----------
+    dmodel : DiscreteModel
+    x0 : array_like (nx,)
+        Initial state (the same for every parameter vector).
+    U : array (n, nu)
+        Inputs per step.
+    P : array_like (np,) or (m, np)
+        One parameter vector, or one per row.
+    W : array (n, nw)
+        Process noise per step.
+    dt : array_like (n,)
+        Step lengths [s].
+    jit : bool or None
+        See :func:`simulation_fold`.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(len(dt) + 1, nx)`` states for one parameter vector, ``(m, len(dt) + 1, nx)`` for ``m`` rows
+        of ``P``; the first row is ``x0``.
+
+    Raises
+    ------
+    IntegrationError
+        An integrator step failed (naming the block of steps and the solver's status).
+    """
+    x0 = np.asarray(x0, dtype=float).reshape(-1)
+    dt = np.asarray(dt, dtype=float).reshape(-1)
+    P = np.asarray(P, dtype=float)
+    single = P.ndim == 1
+    P = np.atleast_2d(P)
+    m, nx, steps = P.shape[0], x0.size, dt.size
+    X = np.empty((m, steps + 1, nx))
+    X[:, 0] = x0
+    if steps == 0:
+        return X[0] if single else X
+    size = _size(steps, _jit(dmodel, jit))
+    fun = _mapped(simulation_fold(dmodel, size, jit=jit), m)
+    total = -(-steps // size) * size
+    Uc = padded(np.asarray(U, dtype=float)[:steps].T, total)
+    Wc = padded(np.asarray(W, dtype=float)[:steps].T, total)
+    dtc = padded(dt[None, :], total)
+    call = BufferedCall(fun)            # no conversion of CasADi matrices per chunk
+    call["x"], call["p"] = np.repeat(x0[:, None], m, axis=1), P.T
+    for start in range(0, total, size):
+        cols = slice(start, start + size)
+        call["u"], call["w"], call["dt"] = Uc[:, cols], Wc[:, cols], dtc[:, cols]
+        try:
+            call()
+        except RuntimeError:
+            _failure(dmodel, fun, call, start, min(start + size, steps) - 1)
+        block = call.out("xf").reshape(nx, m, size)           # the parameter vectors' chunks side by side
+        take = min(size, steps - start)
+        X[:, start + 1:start + 1 + take] = block[:, :, :take].transpose(1, 2, 0)
+        call["x"] = block[:, :, -1]
+    return X[0] if single else X
+    size = _size(steps, _jit(dmodel, jit))
+    fun = _mapped(simulation_fold(dmodel, size, jit=jit), m)
+    total = -(-steps // size) * size
+    Uc = padded(np.asarray(U, dtype=float)[:steps].T, total)
+    Wc = padded(np.asarray(W, dtype=float)[:steps].T, total)
+    dtc = padded(dt[None, :], total)
+    x, pt = np.repeat(x0[:, None], m, axis=1), np.ascontiguousarray(P.T)
+    for start in range(0, total, size):
+        cols = slice(start, start + size)
+        try:
+            block = np.asarray(fun(x, Uc[:, cols], pt, Wc[:, cols], dtc[:, cols]))
+        except RuntimeError as exc:
+            status = solver_status(exc)
+            raise IntegrationError(f"integration of {dmodel.model.name!r} ({dmodel.method}) failed in steps "
+                                   f"{start}..{min(start + size, steps) - 1}: solver status {status}",
+                                   status, start) from exc
+        block = block.reshape(nx, m, size)                # the parameter vectors' chunks side by side
+        take = min(size, steps - start)
+        X[:, start + 1:start + 1 + take] = block[:, :, :take].transpose(1, 2, 0)
+        x = block[:, :, -1]
+    return X[0] if single else X
+
+
+def _failure(dmodel, fun, call, first: int, last: int):
+    """Raise :class:`IntegrationError` for a failed chunk, with the solver's status (which only the
+    exception of a plain call of the Function carries)."""
+    try:
+        fun(*(call.arg(name) for name in fun.name_in()))
+    except RuntimeError as exc:
+        status = solver_status(exc)
+        raise IntegrationError(f"integration of {dmodel.model.name!r} ({dmodel.method}) failed in steps "
+                               f"{first}..{last}: solver status {status}", status, first) from exc
+    raise IntegrationError(f"integration of {dmodel.model.name!r} ({dmodel.method}) failed in steps {first}..{last}",
+                           "unknown", first)
