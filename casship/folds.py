@@ -26,7 +26,6 @@ adaptive integrator (``cvodes``) always runs interpreted: CasADi generates no C 
 from __future__ import annotations
 
 import hashlib
-import threading
 import weakref
 
 import casadi as ca
@@ -34,7 +33,7 @@ import numpy as np
 
 from .compiling import compiled, resolve
 from .errors import SolverError
-from .runtime import BufferedCall
+from .runtime import BoundedTable, BufferedCall
 
 __all__ = ["CHUNK", "simulation_fold", "sensitivity_fold", "fold_steps", "padded", "signature",
            "IntegrationError", "solver_status", "COUNTS"]
@@ -43,10 +42,9 @@ __all__ = ["CHUNK", "simulation_fold", "sensitivity_fold", "fold_steps", "padded
 #: short records take the next power of two below it (less padding; building them costs nothing to compile).
 CHUNK = 256
 KEEP = 128                  # Functions kept per process (the oldest go first)
-_SHARED: dict = {}          # (signature, what, sizes..., jit) -> Function or background compile
-_MAPPED: dict = {}          # (id(fold), n) -> (fold, fold mapped over n parameter vectors)
+_SHARED = BoundedTable(KEEP)          # (signature, what, sizes..., jit) -> Function or background compile
+_MAPPED = BoundedTable(KEEP)          # (id(fold), n) -> (fold, fold mapped over n parameter vectors)
 _SIGNATURES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-_LOCK = threading.Lock()
 COUNTS = {"built": 0, "reused": 0}    # Functions built and found again (for profiles and tests)
 
 
@@ -82,13 +80,6 @@ def solver_status(exc: Exception) -> str:
     return found[-1] if found else "unknown"
 
 
-def _keep(table: dict, key, value):
-    with _LOCK:
-        table[key] = value
-        while len(table) > KEEP:
-            del table[next(iter(table))]
-    return value
-
 
 def signature(dmodel) -> str:
     """A digest of the step Function of ``dmodel``: discretisations with equal digests share their folds.
@@ -116,7 +107,7 @@ def _shared(dmodel, key: tuple, make, jit):
     full = (signature(dmodel), *key, jit)
     fun = _SHARED.get(full)
     if fun is None:
-        fun = _keep(_SHARED, full, compiled(make(), jit=jit))
+        fun = _SHARED.keep(full, compiled(make(), jit=jit))
         COUNTS["built"] += 1
     else:
         COUNTS["reused"] += 1
@@ -205,7 +196,7 @@ def _mapped(fold: ca.Function, n: int) -> ca.Function:
     entry = _MAPPED.get((id(fold), n))
     if entry is None:
         shared = [fold.index_in(name) for name in ("u", "w", "dt")]
-        entry = _keep(_MAPPED, (id(fold), n), (fold, fold.map(f"{fold.name()}_map{n}", "serial", n, shared, [])))
+        entry = _MAPPED.keep((id(fold), n), (fold, fold.map(f"{fold.name()}_map{n}", "serial", n, shared, [])))
     return entry[1]
 
 
@@ -287,27 +278,6 @@ def fold_steps(dmodel, x0, U, P, W, dt, *, jit=False) -> np.ndarray:
         take = min(size, steps - start)
         X[:, start + 1:start + 1 + take] = block[:, :, :take].transpose(1, 2, 0)
         call["x"] = block[:, :, -1]
-    return X[0] if single else X
-    size = _size(steps, _jit(dmodel, jit))
-    fun = _mapped(simulation_fold(dmodel, size, jit=jit), m)
-    total = -(-steps // size) * size
-    Uc = padded(np.asarray(U, dtype=float)[:steps].T, total)
-    Wc = padded(np.asarray(W, dtype=float)[:steps].T, total)
-    dtc = padded(dt[None, :], total)
-    x, pt = np.repeat(x0[:, None], m, axis=1), np.ascontiguousarray(P.T)
-    for start in range(0, total, size):
-        cols = slice(start, start + size)
-        try:
-            block = np.asarray(fun(x, Uc[:, cols], pt, Wc[:, cols], dtc[:, cols]))
-        except RuntimeError as exc:
-            status = solver_status(exc)
-            raise IntegrationError(f"integration of {dmodel.model.name!r} ({dmodel.method}) failed in steps "
-                                   f"{start}..{min(start + size, steps) - 1}: solver status {status}",
-                                   status, start) from exc
-        block = block.reshape(nx, m, size)                # the parameter vectors' chunks side by side
-        take = min(size, steps - start)
-        X[:, start + 1:start + 1 + take] = block[:, :, :take].transpose(1, 2, 0)
-        x = block[:, :, -1]
     return X[0] if single else X
 
 

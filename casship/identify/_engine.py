@@ -39,7 +39,7 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap_sym
-from ..runtime import BufferedCall
+from ..runtime import BoundedTable, BufferedCall
 from ..compiling import compiled, resolve
 
 __all__ = ["CHUNK", "OutputErrorEngine", "Job", "run_jobs"]
@@ -47,19 +47,10 @@ __all__ = ["CHUNK", "OutputErrorEngine", "Job", "run_jobs"]
 CHUNK = 256
 THREADS = max(1, min(os.cpu_count() or 1, 8))
 KEEP = 256                  # Functions and buffer sets kept per process (the oldest go first)
-_SHARED: dict = {}          # (structure, jit, what) -> Function or Background compile
-_BUFFERS: dict = {}         # (id(Function), records) -> (Function, BufferedCall, lock)
-_LOCK = threading.Lock()
+_SHARED = BoundedTable(KEEP)          # (structure, jit, what) -> Function or Background compile
+_BUFFERS = BoundedTable(KEEP)         # (id(Function), records) -> (Function, BufferedCall, lock)
 COUNTS = {"built": 0, "reused": 0}    # Functions built and found again (for profiles and tests)
 
-
-def _keep(table: dict, key, value):
-    """``table[key] = value``, dropping the oldest entries beyond :data:`KEEP`."""
-    with _LOCK:
-        table[key] = value
-        while len(table) > KEEP:
-            del table[next(iter(table))]
-    return value
 
 
 def fold(fun: ca.Function, accumulate: dict, constants) -> ca.Function:
@@ -114,7 +105,7 @@ def _call(fun: ca.Function, args: list[dict]) -> list[dict]:
     entry = _BUFFERS.get((id(fun), n))
     if entry is None:
         mapped = fun if n == 1 else fun.map(n, "thread" if THREADS > 1 else "serial", min(THREADS, n))
-        entry = _keep(_BUFFERS, (id(fun), n), (fun, BufferedCall(mapped), threading.Lock()))
+        entry = _BUFFERS.keep((id(fun), n), (fun, BufferedCall(mapped), threading.Lock()))
     _, call, lock = entry
     with lock:                      # one evaluation at a time on these buffers
         for name in fun.name_in():
@@ -183,7 +174,7 @@ class Engine:
         full = (self.signature(), self.jit, key)
         fun = _SHARED.get(full)
         if fun is None:
-            fun = _keep(_SHARED, full, make())
+            fun = _SHARED.keep(full, make())
             COUNTS["built"] += 1
         else:
             COUNTS["reused"] += 1

@@ -28,13 +28,13 @@ No hand-written CPython C API code is compiled or loaded: compiled code is calle
 CasADi's ``external`` and buffer mechanisms, and the record loop's C driver through ``ctypes``.
 """
 from ._background import Compiling, compile_in_background
-from ._buffers import DUPLICATE_NAMES, BufferedCall, run_fold
+from ._buffers import DUPLICATE_NAMES, BoundedTable, BufferedCall, run_fold
 from ._cache import CacheInfo, cache_dir, cache_info, cache_key, cached_function, clear_cache, compile_function
 from ._codegen import CFiles, compile_c, export_estimator, export_mhe_rti, generate_c, read_harness_output, write_harness
 from ._compiler import DEFAULT_FLAGS, DEFAULT_TIMEOUT, PORTABLE_FLAGS, CompileError, find_compiler
 from ._loop import NativeFold
 
-__all__ = ["BufferedCall", "run_fold", "DUPLICATE_NAMES", "NativeFold",
+__all__ = ["BufferedCall", "BoundedTable", "run_fold", "DUPLICATE_NAMES", "NativeFold",
            "compile_function", "cached_function", "compile_in_background", "Compiling", "CompileError", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo",
            "find_compiler", "DEFAULT_FLAGS", "PORTABLE_FLAGS", "DEFAULT_TIMEOUT",
            "CFiles", "export_estimator", "generate_c", "export_mhe_rti", "write_harness", "compile_c",

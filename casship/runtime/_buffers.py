@@ -4,19 +4,54 @@ Calling a Function with numpy arrays converts every argument to ``DM`` and every
 which costs tens of microseconds per call. :class:`BufferedCall` instead binds preallocated numpy
 arrays once through CasADi's own buffer API (``Function.buffer``), addressed by the Function's
 input and output *names*; a call only triggers the evaluation. :func:`run_fold` runs a folded step
-Function (``mapaccum``) over a long record in pieces through such buffers.
+Function (``mapaccum``) over a long record in pieces through such buffers. :class:`BoundedTable`
+keeps such Functions and buffers for reuse within a process, up to a limit.
 """
 from __future__ import annotations
 
+import threading
 from typing import Callable, Mapping
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["BufferedCall", "run_fold", "DUPLICATE_NAMES"]
+__all__ = ["BufferedCall", "run_fold", "DUPLICATE_NAMES", "BoundedTable"]
 
 # Step Functions name their memory slots alike on both sides (input ``x``, output ``x``).
 DUPLICATE_NAMES = {"allow_duplicate_io_names": True}
+
+
+class BoundedTable(dict):
+    """A dict of things built once per process and found again (Functions, buffer sets), holding at
+    most ``limit`` entries: :meth:`keep` adds one and drops the oldest beyond the limit, under a lock
+    (threads may build at the same time).
+
+    Parameters
+    ----------
+    limit : int
+        Entries kept.
+
+    Examples
+    --------
+    >>> t = BoundedTable(2)
+    >>> for k in "abc":
+    ...     _ = t.keep(k, k.upper())
+    >>> sorted(t)
+    ['b', 'c']
+    """
+
+    def __init__(self, limit: int):
+        super().__init__()
+        self.limit = int(limit)
+        self._lock = threading.Lock()
+
+    def keep(self, key, value):
+        """``self[key] = value``, the oldest entries beyond the limit dropped; returns ``value``."""
+        with self._lock:
+            self[key] = value
+            while len(self) > self.limit:
+                del self[next(iter(self))]
+        return value
 
 
 class BufferedCall:
