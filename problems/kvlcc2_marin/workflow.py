@@ -34,7 +34,12 @@ cross-validation; the report lists the ones that changed after a cross-validatio
    and takes a neutral angle as one facility's (estimated after them, never applied). Chosen by
    cross-validation (the report's choices); the fit file records the form and its evidence.
 7. **MAP refinement** of the chosen symmetric set on all training runs, the asymmetry terms held at
-   step 6's values; every other parameter stays at the preset.
+   step 6's values; every other parameter stays at the preset. Then the free set is **chosen again**
+   by the rule of step 5 from the Fisher information at that estimate, and the set chosen there is
+   refined (started from the estimate): at the preset many runs drift far from the measurement
+   (heading errors of 20-60 deg), and sensitivities along trajectories that far off rank the
+   candidates poorly; at the estimate the trajectories follow the runs. (Chosen by cross-validation:
+   the report's choices.)
 
 Prior (standard deviations, relative to the published value unless stated): linear hull
 derivatives 20 %; cubic hull and surge derivatives 50 % (``X'_vr`` at least 0.01); straight-run
@@ -151,7 +156,7 @@ class FoldFit:
     propulsion: PropulsionFit
     preset: dict                    # the parameters that differ from the published ones before the fit
     start: dict                     # inverse-dynamics estimates (starting guesses only)
-    guess_from: str                 # "inverse dynamics" or "preset": the start of the refinement
+    guess_from: str                 # "first estimate" or "preset": the start of the second refinement
     sigma: dict
     candidates: list
     selection: list                 # rows: quantity, posterior/prior std ratio when added
@@ -164,6 +169,7 @@ class FoldFit:
     asymmetry_fit: object = field(repr=False, default=None)   # FitResult of the mirror-pair stage
     asymmetry: list = field(default_factory=list)              # the ship's asymmetry terms taken from it
     rig: dict = field(default_factory=dict)                    # estimated asymmetry terms not applied
+    first_free: list = field(default_factory=list)             # the free set chosen at the preset (first pass)
 
     def asymmetry_record(self) -> dict:
         """Which port/starboard terms the fit file applies, from which evidence, and which it does not."""
@@ -240,13 +246,17 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
                   for r in rows_a if r["quantity"].split("@")[0] in ASYMMETRY]
     fixed = model.params({**preset, **asym})
     symmetric = [c for c in CANDIDATES if c not in ASYMMETRY]
-    fit, chosen, rows, idf, use_id = _select_and_refine(model, recs, symmetric, sigma, fixed, at, start, max_free, show)
+    fit, first, _, _, _ = _select_and_refine(model, recs, symmetric, sigma, fixed, at, start, max_free, show)
+    # the free set chosen again by the same rule, from the information at this estimate, and refined
+    est = {k: float(v) for k, v in fit.estimates.items()}
+    fit, chosen, rows, idf, use_id = _select_and_refine(model, recs, symmetric, sigma, fixed, {**at, **est},
+                                                        {**start, **est}, max_free, show)
     rows = rows_a + [dict(r, stage="all runs") for r in rows]
     rows += [{"quantity": q, "ratio_when_added": float("nan"), "confounded": why, "stage": "asymmetry"}
              for q, why in confounded.items()]
-    return FoldFit([r.name for r in train], prop, preset, start, "inverse dynamics" if use_id else "preset", sigma,
+    return FoldFit([r.name for r in train], prop, preset, start, "first estimate" if use_id else "preset", sigma,
                    list(CANDIDATES), rows, confounded, chosen, fit, time.perf_counter() - t0, idfit, idf,
-                   asym_stage, sorted(asym), rig)
+                   asym_stage, sorted(asym), rig, first)
 
 
 def _select_and_refine(model, recs, candidates, sigma, fixed, at, start, max_free, show, share=None):
