@@ -345,8 +345,8 @@ class MPCLaw:
         a = [ca.MX.sym(k, *sh) for k, sh in (("x0", x0.shape), ("b", (1, 1)), ("target", (2, N)), ("plan", (1, N)),
                                                ("rate", (1, 1)))]
         shifted = ca.horzcat(a[3][:, 1:], a[3][:, -1:])
-        out = mpc._solver(a[0], a[1], a[2], shifted)
-        solve = ca.Function("mpc_solve", a, [out[0], out[2]])
+        out = mpc._solver.call({"x0": a[0], "b": a[1], "target": a[2], "U_guess": shifted})
+        solve = ca.Function("mpc_solve", a, [out["u0"], out["U"]])
         hold = ca.Function("mpc_hold", a, [a[4], a[3]])
         branch = ca.Function.conditional("mpc_period", [hold], solve)
         due = ca.if_else(ca.fmod(count, self.every) == 0, 1, 0)
