@@ -10,36 +10,20 @@ import pytest
 import casship as cs
 from casship.identify import Prior
 from casship.identify.asymmetry import confounded_asymmetry, mirror_pairs, turn_side
-from casship.maneuvers import run_maneuver
-from casship.models import kvlcc2
+
+from asymmetry_records import SIGMA, both_directions
 
 TRUTH = {"delta_0": np.radians(1.5)}
 
 
-def _run(ship, p, rudder_deg, heading_deg, seed):
-    res = run_maneuver(ship, "zigzag", rudder_deg=rudder_deg, heading_deg=heading_deg, p=p, dt=2.0, duration=700.0)
-    tr = res.trajectory
-    rng = np.random.default_rng(seed)
-    d = cs.Dataset(tr.t, {"psi": tr["psi"] + np.radians(0.05) * rng.standard_normal(len(tr)),
-                          "r": tr["r"] + np.radians(0.002) * rng.standard_normal(len(tr)),
-                          "u": tr["u"], "v": tr["v"], "x": tr["x"], "y": tr["y"],
-                          "delta": tr["delta"], "n": tr["n"]})
-    d.meta.update(name=f"zz {rudder_deg:g}/{heading_deg:+g}", facility="A")
-    return d
-
-
 @pytest.fixture(scope="module")
 def runs():
-    ship = kvlcc2(asymmetry=True, smooth=True)
-    p = ship.params(TRUTH)
-    starboard = [_run(ship, p, a, a, i) for i, a in enumerate((10.0, 20.0))]
-    port = [_run(ship, p, a, -a, 10 + i) for i, a in enumerate((10.0, 20.0))]     # first to port
-    return ship, starboard, port
+    return both_directions(TRUTH)
 
 
 def _problem(ship, records):
     return cs.OutputErrorProblem(ship, records, ["delta_0", "N_r_dash"], measured=["psi", "r"],
-                                 sigma={"psi": np.radians(0.05), "r": np.radians(0.002)},
+                                 sigma=SIGMA,
                                  share={"delta_0": "facility"}, scale={"delta_0": np.radians(1.0)},
                                  prior=Prior({"delta_0": np.radians(1.0), "N_r_dash": 0.01}))
 

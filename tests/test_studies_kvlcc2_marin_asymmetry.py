@@ -12,33 +12,17 @@ import pytest
 
 import casship as cs
 from casship.identify import Prior
-from casship.maneuvers import run_maneuver
-from casship.models import kvlcc2
 from problems.kvlcc2_marin.workflow import select_free
+
+from asymmetry_records import SIGMA, both_directions
 
 TRUTH = {"N_0_dash": 0.02}
 PRIOR = {"N_0_dash": 0.025, "delta_0": np.radians(1.0), "N_r_dash": 0.01}
-SIGMA = {"psi": np.radians(0.05), "r": np.radians(0.002)}
-
-
-def _record(ship, p, rudder_deg, heading_deg, seed):
-    tr = run_maneuver(ship, "zigzag", rudder_deg=rudder_deg, heading_deg=heading_deg, p=p, dt=2.0,
-                      duration=700.0).trajectory
-    rng = np.random.default_rng(seed)
-    d = cs.Dataset(tr.t, {"psi": tr["psi"] + SIGMA["psi"] * rng.standard_normal(len(tr)),
-                          "r": tr["r"] + SIGMA["r"] * rng.standard_normal(len(tr)),
-                          **{c: tr[c] for c in ("u", "v", "x", "y", "delta", "n")}})
-    d.meta.update(name=f"zz {rudder_deg:g}/{heading_deg:+g}", facility="A")
-    return d
 
 
 @pytest.fixture(scope="module")
 def runs():
-    ship = kvlcc2(asymmetry=True, smooth=True)
-    p = ship.params(TRUTH)
-    starboard = [_record(ship, p, a, a, i) for i, a in enumerate((10.0, 20.0))]
-    port = [_record(ship, p, a, -a, 10 + i) for i, a in enumerate((10.0, 20.0))]
-    return ship, starboard, port
+    return both_directions(TRUTH)
 
 
 def _problem(ship, records, free=("N_0_dash", "delta_0", "N_r_dash")):
