@@ -46,19 +46,16 @@ def count_updates(update, Y, U, start: int = 1, n: int = 50) -> dict:
         if event == "c_call":
             builtins[getattr(arg, "__qualname__", repr(arg))] += 1
 
-    ks = range(start, start + n)
-    sys.settrace(trace)
-    try:
-        for k in ks:
-            update(Y[k], DT, U[k - 1], U[k])
-    finally:
-        sys.settrace(None)
-    sys.setprofile(profile)
-    try:
-        for k in ks:
-            update(Y[k], DT, U[k - 1], U[k])
-    finally:
-        sys.setprofile(None)
+    def loop_under(install, hook):
+        install(hook)
+        try:
+            for k in range(start, start + n):
+                update(Y[k], DT, U[k - 1], U[k])
+        finally:
+            install(None)
+
+    loop_under(sys.settrace, trace)
+    loop_under(sys.setprofile, profile)
     builtins.pop("setprofile", None)
     return {"bytecodes": opcodes / n, "frames": sum(frames.values()) / n,
             "builtin_calls": sum(builtins.values()) / n,
