@@ -105,6 +105,11 @@ class StepEstimator(Estimator):
         """Symbolic step: from the input symbols ``s`` the next memory and every diagnostic."""
         raise NotImplementedError
 
+    def _expressions(self, names) -> list:
+        """The expressions of the outputs ``names`` (an estimator may build them differently for a
+        step that returns more)."""
+        return [self._exprs[k] for k in names]
+
     def memory_from(self, prior: Gaussian, rng=None) -> dict:
         """The initial memory for the belief ``prior`` (name -> array).
 
@@ -163,7 +168,7 @@ class StepEstimator(Estimator):
         names = self._output_names(outputs)
         if names not in self._steps:
             self._steps[names] = ca.Function(f"{self.name.lower()}_step", list(self._inputs.values()),
-                                             [self._exprs[k] for k in names], list(self._inputs), list(names),
+                                             self._expressions(names), list(self._inputs), list(names),
                                              DUPLICATE_NAMES)
         return self._steps[names]
 
@@ -281,7 +286,7 @@ class StepEstimator(Estimator):
         """
         self.check_prior(prior)
         if isinstance(data, Dataset) and all(n in data for n in self.model.input_names):
-            self._check_start(prior, data.matrix(self.model.input_names)[0] if self.model.nu else [], p)
+            self._check_start(prior, [data[n][0] for n in self.model.input_names], p)
         # a gap too long for one prediction from the estimate before it: raise or bridge
         return checked_run(self, data, lambda d: self._run(d, prior, p, seed), p)[1]
 

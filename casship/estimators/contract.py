@@ -19,6 +19,7 @@ and, having no step Function, refuses :attr:`step` with :class:`NoStepFunction`.
 from __future__ import annotations
 
 import abc
+import weakref
 from typing import Sequence
 
 import numpy as np
@@ -96,6 +97,10 @@ class Estimator(abc.ABC):
         self.R = as_cov(R, self.ny, "R", measured, allow_zero=False)
         self.options = self.Options.from_value(options, type(self).__name__)
         self._gate_cache: dict[int, float] = {}
+        # the last record prepared (a Dataset is immutable: its arrays are reused while it lives) and the
+        # starts already found finite: a filter run again on the same record skips both checks' work
+        self._record: tuple | None = None
+        self._finite_starts: dict[bytes, None] = {}
         self._check_options()
 
     def _check_options(self) -> None:
@@ -201,9 +206,20 @@ class Estimator(abc.ABC):
         dict
             ``u_prev, u, y, mask, dt, gate`` with one column per sample, and ``p, Q, R``.
         """
-        m = self.model
         if not isinstance(data, Dataset):
             raise TypeError(f"data must be a casship.Dataset, got {type(data).__name__}")
+        cached = self._record
+        if cached is not None and cached[0]() is data:
+            arrays = cached[1]
+        else:
+            arrays = self._record_arrays(data)
+            self._record = (weakref.ref(data), arrays)
+        m = self.model
+        return {**arrays, "p": m.params() if p is None else m.params(p), "Q": self.Q, "R": self.R}
+
+    def _record_arrays(self, data: Dataset) -> dict:
+        """The checks and per-sample arrays of :meth:`prepare` that depend on the record alone (read-only)."""
+        m = self.model
         missing = [n for n in (*m.input_names, *self.measured) if n not in data]
         if missing:
             raise ValueError(f"data has no column(s) {missing} needed by {self.name} on {m.name!r}; "
@@ -228,9 +244,11 @@ class Estimator(abc.ABC):
             gate = thresholds[(maskf @ np.ones(self.ny)).astype(np.intp)]
         else:
             gate = np.full(len(data), np.inf)
-        return {"u_prev": np.vstack([U[:1], U[:-1]]).T, "u": U.T, "y": np.where(mask, Y, 0.0).T,
-                "mask": maskf.T, "dt": dt[None, :], "gate": gate[None, :],
-                "p": m.params() if p is None else m.params(p), "Q": self.Q, "R": self.R}
+        arrays = {"u_prev": np.vstack([U[:1], U[:-1]]).T, "u": U.T, "y": np.where(mask, Y, 0.0).T,
+                  "mask": maskf.T, "dt": dt[None, :], "gate": gate[None, :]}
+        for a in arrays.values():
+            a.setflags(write=False)
+        return arrays
 
     def check_prior(self, prior: Gaussian) -> None:
         """Check a prior belief of the state: a :class:`~casship.Gaussian` of the model's size, angles in radians.
@@ -294,8 +312,15 @@ class Estimator(abc.ABC):
         u = np.asarray(u, dtype=float).reshape(-1)
         if u.size != m.nu or not np.all(np.isfinite(u)):
             return                                          # the callers name bad inputs
+        p = m.params() if p is None else m.params(p)
+        key = b"".join(np.ascontiguousarray(a, dtype=float).tobytes() for a in (prior.mean, u, p))
+        if key in self._finite_starts:
+            return
         unset = prior.defaulted() if hasattr(prior, "defaulted") else None
-        check_start(m, prior.mean, u, m.params() if p is None else m.params(p), what="the prior mean", unset=unset)
+        check_start(m, prior.mean, u, p, what="the prior mean", unset=unset)
+        if len(self._finite_starts) >= 16:                 # a few recent starts are enough
+            self._finite_starts.clear()
+        self._finite_starts[key] = None
 
     def residual(self, y, yhat, mask):
         """Masked residual of the measured outputs, angle channels wrapped.

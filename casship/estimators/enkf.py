@@ -217,23 +217,37 @@ class EnKF(StepEstimator):
                            {"u_prev": (u_prev, s["u_prev"]), "u": (u, s["u"]), "p": (p, s["p"]), "LQ": (Lq, LQ),
                             "dt": (dt, s["dt"])}, {"xf": xf, "yf": self.h_meas(xf, u, p)}, N)
         Xf, Yf = fc["xf"], fc["yf"]
-        means, covs = _moments("enkf_forecast_moments", {"x": Xf, "y": Yf}, {"x": ang, "y": angy},
-                               [("x", "y"), ("y", "y")], N)
-        xp, yhat = means["x"], means["y"]
-        # analysis with perturbed observations (unmeasured channels carry no spread)
-        M = ca.diag(mask)
-        Sm = masked_innovation_cov(M @ covs["y", "y"] @ M, s["R"], mask)
-        e = residual(s["y"], yhat, mask, angy)
-        K, nis, ll, acc = self._gain_function()(Sm, covs["x", "y"] @ M, e, mask, s["gate"])
-        xa = x + K_s @ residual(y + Lr @ z_v, yf, mk, angy, wrap_fast)
-        Xa = _over_members("enkf_analysis", {"xf": (x, Xf), "yf": (yf, Yf), "z_v": (z_v, s["z_v"])},
-                           {"y": (y, s["y"]), "mask": (mk, mask), "K": (K_s, K), "LR": (Lr, LR)}, {"xa": xa}, N)["xa"]
-        post, post_cov = _moments("enkf_analysis_moments", {"x": Xa}, {"x": ang}, [("x", "x")], N)
-        # diagnostics (built only when asked for: a step returning x and P leaves them out)
+        ens, angles = {"x": Xf, "y": Yf}, {"x": ang, "y": angy}
+
+        def analysis(means, covs) -> dict:
+            """The analysis from the forecast moments (unmeasured channels carry no spread)."""
+            M = ca.diag(mask)
+            Sm = masked_innovation_cov(M @ covs["y", "y"] @ M, s["R"], mask)
+            e = residual(s["y"], means["y"], mask, angy)
+            K, nis, ll, acc = self._gain_function()(Sm, covs["x", "y"] @ M, e, mask, s["gate"])
+            xa = x + K_s @ residual(y + Lr @ z_v, yf, mk, angy, wrap_fast)
+            Xa = _over_members("enkf_analysis", {"xf": (x, Xf), "yf": (yf, Yf), "z_v": (z_v, s["z_v"])},
+                               {"y": (y, s["y"]), "mask": (mk, mask), "K": (K_s, K), "LR": (Lr, LR)},
+                               {"xa": xa}, N)["xa"]
+            post, post_cov = _moments("enkf_analysis_moments", {"x": Xa}, {"x": ang}, [("x", "x")], N)
+            return {"X": Xa, "x": post["x"], "P": post_cov["x", "x"], "x_pred": means["x"], "e": e, "S": Sm, "K": K,
+                    "nis": nis, "ll": ll, "accepted": acc}
+
+        lean = analysis(*_moments("enkf_forecast_moments", ens, angles, [("x", "y"), ("y", "y")], N))
+        # the smoothing diagnostics P_pred and C: in passes of their own for a step that leaves them out, ...
         _, pred_cov = _moments("enkf_forecast_spread", {"x": Xf}, {"x": ang}, [("x", "x")], N)
         _, step_cov = _moments("enkf_step_spread", {"x0": X, "x": Xf}, {"x0": ang, "x": ang}, [("x0", "x")], N)
-        return {"X": Xa, "x": post["x"], "P": post_cov["x", "x"], "x_pred": xp, "P_pred": pred_cov["x", "x"],
-                "C": step_cov["x0", "x"], "e": e, "S": Sm, "K": K, "nis": nis, "ll": ll, "accepted": acc}
+        lean.update(P_pred=pred_cov["x", "x"], C=step_cov["x0", "x"])
+        # ... and in the forecast's own pass for a step that returns them (a pass costs more than its sums;
+        # the forecast moments are the same sums in the same order, so every other output is identical)
+        means, covs = _moments("enkf_forecast_moments", {"x0": X, **ens}, {"x0": ang, **angles},
+                               [("x", "y"), ("y", "y"), ("x", "x"), ("x0", "x")], N)
+        self._with_spreads = {**analysis(means, covs), "P_pred": covs["x", "x"], "C": covs["x0", "x"]}
+        return lean
+
+    def _expressions(self, names) -> list:
+        exprs = self._with_spreads if "P_pred" in names or "C" in names else self._exprs
+        return [exprs[k] for k in names]
 
     def _gain_function(self) -> ca.Function:
         """Gain (zero when gated out), NIS, log-likelihood and acceptance from ``S`` and ``Pxy`` (SX)."""
