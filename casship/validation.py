@@ -49,7 +49,9 @@ class ReplayResult:
         ``cross_track_std`` [m] (linearised, exact sensitivities), ``level`` and ``z``; and
         ``coverage``: the fraction of the measured heading inside the band. With a model-discrepancy
         term (:attr:`ParameterUncertainty.psi_variance_rate` ``q``) also the predictive heading band
-        ``psi_std_predictive = sqrt(psi_std^2 + q t)`` and its ``coverage_predictive``.
+        ``psi_std_predictive = sqrt(s^2 + q t)`` and its ``coverage_predictive``, where ``s`` is the
+        heading band of the covariance ``q`` was estimated beside
+        (:attr:`ParameterUncertainty.discrepancy_covariance`; ``psi_std`` when the file names none).
     metric_intervals : dict
         With a parameter uncertainty: index -> ``[lo, hi]`` at ``bands["level"]`` from parameter
         draws.
@@ -195,13 +197,15 @@ class ReplayResult:
         label = f"{100 * b['level']:.0f} % band"
         if "psi_std" in b:
             psi = np.degrees(np.unwrap(tr["psi"]))
-            if "psi_std_predictive" in b:
-                w = np.degrees(z * b["psi_std_predictive"])
-                heading.fill_between(tr.t, psi - w, psi + w, color="C0", alpha=0.1, lw=0,
-                                     label=f"{100 * b['level']:.0f} % band with model discrepancy")
             w = np.degrees(z * b["psi_std"])
             heading.fill_between(tr.t, psi - w, psi + w, color="C0", alpha=0.25, lw=0,
                                  label=label + (" (parameters)" if "psi_std_predictive" in b else ""))
+            if "psi_std_predictive" in b:       # edges: visible whichever band is the wider
+                w = np.degrees(z * b["psi_std_predictive"])
+                for sign in (-1, 1):
+                    heading.plot(tr.t, psi + sign * w, color="C0", lw=0.8, ls="--",
+                                 label=f"{100 * b['level']:.0f} % predictive band (with model discrepancy)"
+                                 if sign > 0 else None)
         if "cross_track_std" in b:
             w = z * b["cross_track_std"][:, None] * b["normal"]
             for sign in (-1, 1):
@@ -382,8 +386,11 @@ def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, metho
     bands = prediction_bands(model, X, S, unc.covariance, level)
     bands["source"] = unc.source
     if unc.psi_variance_rate > 0 and "psi_std" in bands:
-        # the model discrepancy the file carries: a heading variance growing with time (see ParameterUncertainty)
-        bands["psi_std_predictive"] = np.sqrt(bands["psi_std"] ** 2 + unc.psi_variance_rate * (traj.t - traj.t[0]))
+        # the model discrepancy the file carries: a heading variance growing with time, added to the band
+        # of the covariance it was estimated beside (see ParameterUncertainty)
+        base = bands["psi_std"] if unc.discrepancy_covariance is None else \
+            prediction_bands(model, X, S, unc.discrepancy_covariance, level)["psi_std"]
+        bands["psi_std_predictive"] = np.sqrt(base ** 2 + unc.psi_variance_rate * (traj.t - traj.t[0]))
     if "psi" in data and "psi_std" in bands:
         e = np.abs(wrap(traj["psi"] - data["psi"]))
         ok = np.isfinite(e)

@@ -146,3 +146,36 @@ def test_a_files_model_discrepancy_gives_a_predictive_band_that_covers_a_driftin
     path.write_text(json.dumps(doc))
     with pytest.raises(ValueError, match="psi_variance_growth_deg2_per_s"):
         read_params(path, uncertainty=True)
+
+
+def test_the_predictive_band_completes_the_band_its_discrepancy_was_estimated_beside(tmp_path):
+    # q is the heading variance one covariance's band missed on held-out runs: the predictive band adds
+    # it to that band, not to a wider one the file carries for the parameter intervals
+    truth = nomoto_first_order(K=0.1, T=20.0)
+    t = np.arange(0.0, 200.0, 1.0)
+    rudder = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 90.0) + 1e-9)
+    path = _nomoto_fit(0, truth, t, rudder).to_json(tmp_path / "fit.json")
+    doc = json.loads(path.read_text())
+    names = doc["param_covariance"]["names"]
+    wide = (np.asarray(doc["param_covariance"]["matrix"]) * 100.0).tolist()
+    narrow = doc["param_covariance"]
+    q_deg2 = 0.01
+    doc["param_covariance"] = {**narrow, "matrix": wide, "source": "wide"}
+    doc["model_discrepancy"] = {"psi_variance_growth_deg2_per_s": q_deg2, "estimated_with": narrow}
+    path.write_text(json.dumps(doc))
+    data = cs.Dataset(t, {"psi": cs.simulate(truth, truth.states(), t, {"delta": rudder})["psi"], "delta": rudder})
+    res = replay_file(path, data, samples=0)
+    doc.pop("model_discrepancy")
+    narrow_only = tmp_path / "narrow.json"
+    narrow_only.write_text(json.dumps({**doc, "param_covariance": narrow}))
+    s_narrow = replay_file(narrow_only, data, samples=0).bands["psi_std"]
+    np.testing.assert_allclose(res.bands["psi_std"], 10.0 * s_narrow, rtol=1e-9)   # the parameter band: the wide one
+    expected = np.sqrt(s_narrow ** 2 + np.radians(np.radians(q_deg2)) * (t - t[0]))
+    np.testing.assert_allclose(res.bands["psi_std_predictive"], expected, rtol=1e-9)
+    # the covariance must be of the same parameters, in the same order
+    bad = json.loads(path.read_text())
+    bad["model_discrepancy"]["estimated_with"] = {**narrow, "names": names[::-1]}
+    path.write_text(json.dumps(bad))
+    if len(names) > 1:
+        with pytest.raises(ValueError, match="estimated_with has parameters"):
+            read_params(path, uncertainty=True)

@@ -45,6 +45,10 @@ class ParameterUncertainty:
     psi_variance_rate : float
         Model discrepancy: a heading variance growing linearly with the time since the start of a
         replay [rad^2/s], added to the parameter band's variance in the predictive band (0: none).
+    discrepancy_covariance : (k, k) array, optional
+        The covariance of the same parameters that ``psi_variance_rate`` was estimated beside (the
+        predictive band adds ``q t`` to the band of this covariance, as in its estimation); None:
+        ``covariance``.
 
     Examples
     --------
@@ -59,23 +63,21 @@ class ParameterUncertainty:
     source: str = ""
     info: dict = field(default_factory=dict)
     psi_variance_rate: float = 0.0
+    discrepancy_covariance: np.ndarray | None = None
 
     def __post_init__(self):
         self.psi_variance_rate = float(self.psi_variance_rate)
+        if self.discrepancy_covariance is not None:
+            self.discrepancy_covariance = _checked_covariance(self.discrepancy_covariance, self.names,
+                                                              "discrepancy_covariance")
         if not (np.isfinite(self.psi_variance_rate) and self.psi_variance_rate >= 0.0):
             raise ValueError(f"ParameterUncertainty: psi_variance_rate must be finite and >= 0, "
                              f"got {self.psi_variance_rate}")
         self.names = [str(n) for n in self.names]
         self.values = np.asarray(self.values, dtype=float).reshape(-1)
-        self.covariance = np.asarray(self.covariance, dtype=float).reshape(len(self.names), len(self.names))
         if self.values.size != len(self.names):
             raise ValueError(f"ParameterUncertainty: {self.values.size} values for {len(self.names)} names")
-        if not np.all(np.isfinite(self.covariance)):
-            bad = [n for n, d in zip(self.names, np.diag(self.covariance)) if not np.isfinite(d)]
-            raise ValueError(f"ParameterUncertainty: covariance not finite for {bad or self.names}")
-        self.covariance = 0.5 * (self.covariance + self.covariance.T)
-        if np.linalg.eigvalsh(self.covariance).min(initial=0.0) < -1e-9 * max(1.0, np.abs(self.covariance).max()):
-            raise ValueError("ParameterUncertainty: covariance is not positive semi-definite")
+        self.covariance = _checked_covariance(self.covariance, self.names, "covariance")
 
     @property
     def std(self) -> np.ndarray:
@@ -134,6 +136,22 @@ class ParameterUncertainty:
         if values is None:
             raise ValueError(f"{where}: param_covariance lacks the values of {d['names']}")
         return cls(d["names"], values, d["matrix"], str(d.get("source", "")), dict(d.get("info") or {}))
+
+
+def _checked_covariance(matrix, names, what: str) -> np.ndarray:
+    """``matrix`` as a symmetric positive semi-definite covariance of ``names``, or ``ValueError``."""
+    k = len(names)
+    a = np.asarray(matrix, dtype=float)
+    if a.size != k * k:
+        raise ValueError(f"ParameterUncertainty: {what} has {a.size} entries, {k} x {k} wanted for {list(names)}")
+    a = a.reshape(k, k)
+    if not np.all(np.isfinite(a)):
+        bad = [n for n, d in zip(names, np.diag(a)) if not np.isfinite(d)]
+        raise ValueError(f"ParameterUncertainty: {what} not finite for {bad or list(names)}")
+    a = 0.5 * (a + a.T)
+    if np.linalg.eigvalsh(a).min(initial=0.0) < -1e-9 * max(1.0, np.abs(a).max()):
+        raise ValueError(f"ParameterUncertainty: {what} is not positive semi-definite")
+    return a
 
 
 def read_params(path, model=None, *, uncertainty: bool = False):
@@ -206,6 +224,14 @@ def read_params(path, model=None, *, uncertainty: bool = False):
         if not isinstance(q, (int, float)) or isinstance(q, bool) or not np.isfinite(q) or q < 0:
             raise ValueError(f"{path}: model_discrepancy.psi_variance_growth_deg2_per_s must be a number >= 0, got {q!r}")
         unc.psi_variance_rate = float(np.radians(np.radians(q)))
+        beside = discrepancy.get("estimated_with")
+        if beside is not None:      # the covariance whose band q completes (same parameters, same order)
+            base = ParameterUncertainty.from_dict(beside, f"{path} (model_discrepancy.estimated_with)")
+            if base.names != unc.names:
+                raise ValueError(f"{path}: model_discrepancy.estimated_with has parameters {base.names}, "
+                                 f"param_covariance {unc.names}; they must be the same, in the same order")
+            unc.discrepancy_covariance = _checked_covariance(base.covariance, unc.names,
+                                                             "model_discrepancy.estimated_with")
     return model, p, unc
 
 

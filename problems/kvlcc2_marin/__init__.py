@@ -31,6 +31,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
+from casship.identify import ParameterUncertainty
 from casship.models import kvlcc2
 from casship.parallel import call, run_cases
 from casship.studies import Study
@@ -41,7 +44,7 @@ from .data import first_rudder_side, load_runs, regime
 from .diagnose import steady_turn_balance, through_the_turn
 from .propulsion import open_water
 from .report import fold_figure, slug, write_outputs
-from .validate import evaluate, write_fold_file
+from .validate import evaluate, robust_uncertainty, write_fold_file
 from .workflow import fit_fold, smooth_runs, study_model, with_smoothed_speed
 
 QUICK = {"runs": ("MARIN tc_-35", "MARIN zz_-20", "MARIN zz_10", "HSVA Z_10_10_P", "HSVA Z_10_10_S",
@@ -78,6 +81,20 @@ def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int
     res = {"kind": kind, "label": label, "held": held, "fold": fold, "file": path.name, "evaluations": rows}
     res["figure"] = fold_figure(out, runs, res)
     return res
+
+
+def beside_discrepancy(everything, jack):
+    """The covariance the discrepancy ``q`` completes, over the parameters of ``jack``: the fit's robust
+    covariance as the fold files carry it (their bands are those ``q`` was estimated beside), zero for
+    the parameters they carry none of."""
+    robust = robust_uncertainty(everything) or everything.fit.uncertainty("robust")
+    C = np.zeros((len(jack.names),) * 2)
+    if robust is not None:
+        ours = [i for i, n in enumerate(jack.names) if n in robust.names]
+        theirs = [robust.names.index(jack.names[i]) for i in ours]
+        C[np.ix_(ours, ours)] = robust.covariance[np.ix_(theirs, theirs)]
+    return ParameterUncertainty(jack.names, jack.values, C, "robust (sandwich), as the fold files carry it "
+                                "(zero for parameters they carry no uncertainty of)")
 
 
 def in_sample(run, fit_path: Path) -> tuple[dict, dict]:
@@ -119,9 +136,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
         "psi_variance_growth_deg2_per_s": bands["q_all_folds_deg2_per_s"],
         "meaning": "heading variance the parameter band misses, growing linearly with time (q t), least squares "
                    "over the leave-one-run-out held-out errors; replays of this file give the parameter band "
-                   "(param_covariance) and beside it the predictive band sqrt(s^2 + q t)",
-        "estimated_against": "the fold files' robust (sandwich) parameter bands; this file's covariance is the "
-                             "run-level jackknife, wider, so its predictive band is conservative"}} if bands else {}
+                   "(param_covariance) and beside it the predictive band sqrt(s^2 + q t), s the heading band of "
+                   "estimated_with",
+        "estimated_with": beside_discrepancy(everything, jack).to_dict()}} if bands else {}
     fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
     replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler)
     model = study_model()

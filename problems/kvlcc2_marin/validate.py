@@ -31,6 +31,22 @@ INDICES = {"turning": ("advance_m", "transfer_m", "tactical_diameter_m"),
 SAMPLES = 40                       # parameter draws per replay for the index intervals
 
 
+def robust_uncertainty(fold):
+    """The fold's robust (sandwich) covariance: the refinement's, with that of the asymmetry terms from
+    the mirror-pair stage beside it (the two stages' estimates taken as independent); None without
+    asymmetry terms (the fit file then carries the refinement's own)."""
+    from scipy.linalg import block_diag
+
+    if not fold.asymmetry:
+        return None
+    a, b = fold.asymmetry_fit.uncertainty("robust"), fold.fit.uncertainty("robust")
+    ia = [a.names.index(n) for n in fold.asymmetry]
+    names = [*fold.asymmetry, *(b.names if b is not None else [])]
+    values = [*a.values[ia], *(b.values if b is not None else [])]
+    C = block_diag(a.covariance[np.ix_(ia, ia)], *([b.covariance] if b is not None else []))
+    return ParameterUncertainty(names, values, C, "robust (sandwich), asymmetry stage and refinement")
+
+
 def write_fold_file(fold, path: Path, uncertainty=None, extra=None) -> Path:
     """Write the fold's fit as the fit file a user gets.
 
@@ -44,16 +60,9 @@ def write_fold_file(fold, path: Path, uncertainty=None, extra=None) -> Path:
     """
     import dataclasses
 
-    from scipy.linalg import block_diag
-
     fit = fold.fit
-    if uncertainty is None and fold.asymmetry:
-        a, b = fold.asymmetry_fit.uncertainty("robust"), fit.uncertainty("robust")
-        ia = [a.names.index(n) for n in fold.asymmetry]
-        names = [*fold.asymmetry, *(b.names if b is not None else [])]
-        values = [*a.values[ia], *(b.values if b is not None else [])]
-        C = block_diag(a.covariance[np.ix_(ia, ia)], *([b.covariance] if b is not None else []))
-        uncertainty = ParameterUncertainty(names, values, C, "robust (sandwich), asymmetry stage and refinement")
+    if uncertainty is None:
+        uncertainty = robust_uncertainty(fold)
     if uncertainty is not None:
         fit = dataclasses.replace(fit, param_covariance=uncertainty.to_dict())
     content = fit.to_dict()
