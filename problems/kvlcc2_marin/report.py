@@ -11,7 +11,8 @@ import numpy as np
 from ..kit import Departure, Report, figure, fmt, md_table, write_json
 from .propulsion import mismatch
 from .validate import ERRORS, INDICES, plot_overlay
-from .workflow import MEASURED, MODEL_OPTIONS, prior_std, study_model
+from . import workflow
+from .workflow import MEASURED, prior_std, study_model
 
 __all__ = ["write_outputs", "slug", "pair_error"]
 
@@ -260,7 +261,7 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
                 writer.writerow({"validation": f"leave-one-{tag}-out", **r})
     rate_table, thrust_table, prop_rows = _propulsion(runs, everything)
     rep = Report("KVLCC2 MMG identified on the MARIN and HSVA runs, cross-validated", quick=quick)
-    options = ", ".join(f"{k}={v}" for k, v in MODEL_OPTIONS.items())
+    options = ", ".join(f"{k}={v}" for k, v in workflow.MODEL_OPTIONS.items())   # read when written
     rep.add(f"Model: `kvlcc2({options})` (full scale), fitted on {len(runs)} runs "
             f"({', '.join(r.name for r in runs)}). Workflow: propulsion from the measured thrust, EKF + RTS "
             f"smoothing, free set from the Fisher information, MAP output-error refinement of {', '.join(MEASURED)} "
@@ -384,7 +385,7 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     rep.departures(_departures(), "Reference approach: Alexandersson et al. (2022), Ocean Engineering.")
     rep.write(out)
     summary = {"study": "kvlcc2-marin", "quick": quick, "runs": [r.name for r in runs],
-               "model_options": MODEL_OPTIONS, "free": everything.free, "free_at_preset": everything.first_free,
+               "model_options": workflow.MODEL_OPTIONS, "free": everything.free, "free_at_preset": everything.first_free,
                "moved": everything.moved(),
                "estimates": everything.fit.estimates, "fit_seconds": everything.fit.solve_time_s,
                "workflow_seconds": everything.seconds,
