@@ -385,7 +385,8 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     rep.departures(_departures(), "Reference approach: Alexandersson et al. (2022), Ocean Engineering.")
     rep.write(out)
     summary = {"study": "kvlcc2-marin", "quick": quick, "runs": [r.name for r in runs],
-               "model_options": workflow.MODEL_OPTIONS, "free": everything.free, "free_at_preset": everything.first_free,
+               "model_options": workflow.MODEL_OPTIONS, "free": everything.free,
+               "free_at_preset": everything.first_free,
                "moved": everything.moved(),
                "estimates": everything.fit.estimates, "fit_seconds": everything.fit.solve_time_s,
                "workflow_seconds": everything.seconds,
