@@ -218,9 +218,10 @@ def test_physical_bounds_on_interaction_factors():
 
 
 # -- rudder inflow: the race added to the wake (option rudder_inflow) -----------------------------
-def _rudder_force_by_hand(P, x, u, additive):
+def _rudder_force_by_hand(P, x, u, additive, c3=0.0):
     """``(X_R, Y_R, N_R)`` of Yasukawa & Yoshimura (2015) Eq. 17-27 written out, with the inflow
-    ``u_R`` in the published or the race-additive form (published if_else switches)."""
+    ``u_R`` in the published or the race-additive form (published if_else switches) and the normal
+    force ``f_alpha (sin a - c3 sin^3 a)`` (``c3 = 0``: the published sine)."""
     uu, v, r = x[0], x[1], x[2]
     delta, n = u[0], u[1]
     L, D = P["L_pp"], P["D_p"]
@@ -241,7 +242,7 @@ def _rudder_force_by_hand(P, x, u, additive):
     beta_R = beta - P["l_R_dash"] * r_dash
     v_R = U * (P["gamma_R_minus"] if beta_R < 0 else P["gamma_R_plus"]) * beta_R
     alpha_R = delta - np.arctan2(v_R, u_R)
-    F_N = 0.5 * P["rho"] * P["A_R"] * (u_R**2 + v_R**2) * P["f_alpha"] * np.sin(alpha_R)
+    F_N = 0.5 * P["rho"] * P["A_R"] * (u_R**2 + v_R**2) * P["f_alpha"] * (np.sin(alpha_R) - c3 * np.sin(alpha_R) ** 3)
     return np.array([-(1 - P["t_R"]) * F_N * np.sin(delta), -(1 + P["a_H"]) * F_N * np.cos(delta),
                      -(P["x_R_dash"] + P["a_H"] * P["x_H_dash"]) * L * F_N * np.cos(delta)])
 
@@ -284,3 +285,56 @@ def test_race_additive_inflow_is_an_option_that_leaves_the_published_model_alone
     assert ratio[True] < ratio[False]
     with pytest.raises(ValueError, match="rudder_inflow"):
         kvlcc2(rudder_inflow="wake")
+
+
+# -- rudder lift: loss of lift slope at large effective angle (option rudder_lift) -----------------
+@pytest.mark.parametrize("inflow", ["published", "race-additive"])
+def test_cubic_rudder_lift_matches_a_hand_computation(inflow):
+    from casship.models.mmg import mmg_forces
+
+    ship = kvlcc2({"c_alpha3": 0.4}, rudder_lift="cubic", rudder_inflow=inflow)
+    P = ship.param_dict()
+    assert P["c_alpha3"] == 0.4
+    no_rudder = dict(P, f_alpha=0.0)
+    for x, u in _random_points(ship, 8, 23):
+        total = np.array([float(f) for f in mmg_forces(P, *x[:3], *u, rudder_inflow=inflow)])
+        rest = np.array([float(f) for f in mmg_forces(no_rudder, *x[:3], *u, rudder_inflow=inflow)])
+        np.testing.assert_allclose(total - rest, _rudder_force_by_hand(P, x, u, inflow != "published", c3=0.4),
+                                   rtol=1e-7, atol=1.0)
+
+
+def test_cubic_rudder_lift_in_straight_run_scales_the_force_by_one_minus_c_sin_squared():
+    """Straight ahead (v = r = 0) the effective angle is the rudder angle: at 35 deg, c_alpha3 = 0.5
+    leaves 1 - 0.5 sin^2(35 deg) = 0.835505 of the published rudder force, at 10 deg 0.984923."""
+    from casship.models.mmg import mmg_forces
+
+    pub = kvlcc2().param_dict()
+    cubic = kvlcc2({"c_alpha3": 0.5}, rudder_lift="cubic").param_dict()
+    for delta_deg, kept in ((35.0, 0.835505), (10.0, 0.984923), (-35.0, 0.835505)):
+        delta = np.radians(delta_deg)
+        f = [np.array([float(v) for v in mmg_forces(P, 7.97, 0.0, 0.0, delta, 1.53)])
+             - np.array([float(v) for v in mmg_forces(dict(P, f_alpha=0.0), 7.97, 0.0, 0.0, delta, 1.53)])
+             for P in (pub, cubic)]
+        np.testing.assert_allclose(f[1], kept * f[0], rtol=1e-6)
+
+
+def test_cubic_rudder_lift_is_an_option_that_leaves_the_published_model_alone():
+    pub, cubic = kvlcc2(), kvlcc2(rudder_lift="cubic")
+    assert cubic.param_dict()["c_alpha3"] == 0.0 and "c_alpha3" not in pub.param_names
+    assert cubic.meta["options"] == {"rudder_lift": "cubic"}
+    assert cubic.vessel.param_set == "kvlcc2/YY2015-full-scale+cubic-lift"
+    assert get_model("kvlcc2", **cubic.meta["options"]).vessel.param_set == cubic.vessel.param_set
+    weaker = kvlcc2({"c_alpha3": 0.5}, rudder_lift="cubic")
+    for x, u in _random_points(pub, 10, 9):       # at its preset the variant is the published model, exactly
+        np.testing.assert_array_equal(np.asarray(cubic.f(x, u, cubic.params(), np.zeros(3))),
+                                      np.asarray(pub.f(x, u, pub.params(), np.zeros(3))))
+        assert not np.allclose(np.asarray(weaker.f(x, u, weaker.params(), np.zeros(3))),
+                               np.asarray(pub.f(x, u, pub.params(), np.zeros(3))), rtol=1e-6, atol=0.0)
+    assert_jacobians(weaker, *next(_random_points(weaker, 1, 4)))
+    assert kvlcc2_l7(rudder_lift="cubic").vessel.param_set == "kvlcc2/YY2015-L7+cubic-lift"
+    with pytest.raises(ValueError, match="rudder_lift='cubic'"):
+        kvlcc2({"c_alpha3": 0.1})
+    with pytest.raises(ValueError, match="rudder_lift"):
+        kvlcc2(rudder_lift="stall")
+    with pytest.raises(ValueError, match="c_alpha3"):
+        kvlcc2({"c_alpha3": 1.5}, rudder_lift="cubic")      # beyond the bound: the force would peak below 35 deg

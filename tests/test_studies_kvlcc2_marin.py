@@ -122,3 +122,15 @@ def test_runs_are_split_by_the_side_of_their_first_rudder():
     # a 5/1 zig-zag from a 0.3 deg approach: the first swing (+5 deg) is less than 5 deg from the approach
     delta = np.radians(np.where(t < 10, 0.3, np.where(t < 40, 5.0, -5.0)))
     assert first_rudder_side(Run("5/1", "X", cs.Dataset(t, {"delta": delta}), "zigzag")) == "+"
+
+
+def test_rudder_lift_term_is_a_candidate_only_of_the_variant_that_has_it():
+    from casship.models import kvlcc2
+    from problems.kvlcc2_marin import workflow
+
+    plain = kvlcc2(asymmetry=True, smooth=True)
+    lift = kvlcc2(asymmetry=True, smooth=True, rudder_lift="cubic")
+    assert "c_alpha3" not in workflow.candidates(plain)
+    assert workflow.candidates(lift) == [*workflow.CANDIDATES, "c_alpha3"]
+    assert workflow.prior_std(lift, ["c_alpha3"]) == {"c_alpha3": 0.5}     # absolute: its published value is 0
+    assert workflow.MODEL_OPTIONS.get("rudder_lift", "sine") == "sine"      # lost its cross-validation: off

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..model import Model
 from ..vessel import Vessel
-from .mmg import MMG_ASYMMETRY_PARAMS, MMG_PARAMS, mmg_standard
+from .mmg import MMG_ASYMMETRY_PARAMS, MMG_PARAMS, MMG_RUDDER_LIFT_PARAMS, mmg_standard
 
 __all__ = ["kvlcc2", "kvlcc2_l7", "KVLCC2_COMMON", "KVLCC2_FULL", "KVLCC2_L7", "KVLCC2_SOURCES"]
 
@@ -96,10 +96,12 @@ SCALE_L7 = 45.7                          # MLA scale_factor; S2020 45.714
 RUDDER_RATE_FULL = math.radians(2.32)    # rad/s (S2020)
 
 
-def _variant(param_set: str, asymmetry: bool, smooth: bool, rudder_inflow: str = "published") -> str:
+def _variant(param_set: str, asymmetry: bool, smooth: bool, rudder_inflow: str = "published",
+             rudder_lift: str = "sine") -> str:
     """Parameter-set identity of a model variant (the extended variants carry other parameters)."""
     return (param_set + ("+asymmetry" if asymmetry else "") + ("+smooth" if smooth else "")
-            + ("" if rudder_inflow == "published" else f"+{rudder_inflow}"))
+            + ("" if rudder_inflow == "published" else f"+{rudder_inflow}")
+            + ("" if rudder_lift == "sine" else f"+{rudder_lift}-lift"))
 
 
 def _options(factory, given: Mapping) -> dict:
@@ -110,25 +112,28 @@ def _options(factory, given: Mapping) -> dict:
 
 
 def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | None, name: str, doc: str,
-           vessel: Vessel, *, asymmetry: bool, smooth: bool, rudder_inflow: str, options: Mapping,
-           **actuator) -> Model:
+           vessel: Vessel, *, asymmetry: bool, smooth: bool, rudder_inflow: str, rudder_lift: str,
+           options: Mapping, **actuator) -> Model:
     values = dict(KVLCC2_COMMON)
     values.update(particulars)
-    known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {})}
+    known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {}),
+             **(MMG_RUDDER_LIFT_PARAMS if rudder_lift == "cubic" else {})}
     for key, val in (overrides or {}).items():
         if key not in known:
-            hint = " (an asymmetry term: build with asymmetry=True)" if key in MMG_ASYMMETRY_PARAMS else ""
+            hint = (" (an asymmetry term: build with asymmetry=True)" if key in MMG_ASYMMETRY_PARAMS else
+                    " (build with rudder_lift='cubic')" if key in MMG_RUDDER_LIFT_PARAMS else "")
             raise ValueError(f"unknown KVLCC2 parameter {key!r}{hint}; known: {list(known)}")
         values[key] = float(val)
-    vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth, rudder_inflow))
+    vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth, rudder_inflow, rudder_lift))
     return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, vessel=vessel, asymmetry=asymmetry,
-                        smooth=smooth, rudder_inflow=rudder_inflow, meta={"options": dict(options)}, **actuator)
+                        smooth=smooth, rudder_inflow=rudder_inflow, rudder_lift=rudder_lift,
+                        meta={"options": dict(options)}, **actuator)
 
 
 def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
            rudder_time_constant: float = 1.0, rudder_rate_max: float = RUDDER_RATE_FULL,
            rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False,
-           rudder_inflow: str = "published") -> Model:
+           rudder_inflow: str = "published", rudder_lift: str = "sine") -> Model:
     """KVLCC2 at full scale (L_pp = 320 m), MMG standard method.
 
     Parameters
@@ -150,6 +155,10 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
     rudder_inflow : str
         ``"published"`` or ``"race-additive"``: how the propeller race enters the rudder inflow
         (see :func:`casship.models.mmg.mmg_standard`).
+    rudder_lift : str
+        ``"sine"`` (published) or ``"cubic"``: the rudder normal force loses lift slope at large
+        effective angle, ``sin(alpha_R) - c_alpha3 sin(alpha_R)^3`` (parameter ``c_alpha3``, 0 by
+        default: the published force; see :func:`casship.models.mmg.mmg_standard`).
 
     Returns
     -------
@@ -157,7 +166,7 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
         States ``u, v, r, x, y, psi`` (+ ``delta``), inputs ``delta`` (or ``delta_cmd``) and ``n``;
         ``vessel`` holds the particulars, the approach speed ``U0`` (15.5 kn) and rate ``n0``
         (1.53 rps), the rudder limits, the wind geometry and the parameter set
-        (``kvlcc2/YY2015-full-scale``, with ``+asymmetry`` / ``+smooth`` for the variants);
+        (``kvlcc2/YY2015-full-scale``, with ``+asymmetry`` / ``+smooth`` / ... for the variants);
         ``meta["options"]`` records the build options that differ from the defaults (so that
         ``get_model("kvlcc2", **model.meta["options"])`` rebuilds the variant).
 
@@ -178,16 +187,17 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
     return _build(KVLCC2_FULL, params, "kvlcc2", "KVLCC2 full scale, MMG standard method (Yasukawa & "
                   "Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
-                  asymmetry=asymmetry, smooth=smooth, rudder_inflow=rudder_inflow, options=_options(kvlcc2, dict(
+                  asymmetry=asymmetry, smooth=smooth, rudder_inflow=rudder_inflow, rudder_lift=rudder_lift,
+                  options=_options(kvlcc2, dict(
                       rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
                       rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth,
-                      rudder_inflow=rudder_inflow)))
+                      rudder_inflow=rudder_inflow, rudder_lift=rudder_lift)))
 
 
 def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
               rudder_time_constant: float = 0.1, rudder_rate_max: float = RUDDER_RATE_FULL * np.sqrt(SCALE_L7),
               rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False,
-              rudder_inflow: str = "published") -> Model:
+              rudder_inflow: str = "published", rudder_lift: str = "sine") -> Model:
     """KVLCC2 model L7 (L_pp = 7 m, scale 1/45.7), MMG standard method.
 
     ``vessel.U0`` is 1.18 m/s (Fn 0.142, S2020); ``vessel.n0`` is not given (sources disagree); the
@@ -203,8 +213,8 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
         Actuator settings [s, rad/s, rad]; the default rate is the Froude-scaled 15.68 deg/s.
     asymmetry, smooth : bool
         The extended variant and the smooth sign switches (as in :func:`kvlcc2`).
-    rudder_inflow : str
-        Form of the rudder inflow (as in :func:`kvlcc2`).
+    rudder_inflow, rudder_lift : str
+        Form of the rudder inflow and of the rudder lift (as in :func:`kvlcc2`).
 
     Returns
     -------
@@ -218,7 +228,8 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
     return _build(KVLCC2_L7, params, "kvlcc2-l7", "KVLCC2 model L7 (1/45.7), MMG standard method "
                   "(Yasukawa & Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
-                  asymmetry=asymmetry, smooth=smooth, rudder_inflow=rudder_inflow, options=_options(kvlcc2_l7, dict(
+                  asymmetry=asymmetry, smooth=smooth, rudder_inflow=rudder_inflow, rudder_lift=rudder_lift,
+                  options=_options(kvlcc2_l7, dict(
                       rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
                       rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth,
-                      rudder_inflow=rudder_inflow)))
+                      rudder_inflow=rudder_inflow, rudder_lift=rudder_lift)))

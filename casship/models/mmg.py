@@ -34,7 +34,8 @@ from ..builder import ModelBuilder
 from ..model import Model
 from ..vessel import Vessel
 
-__all__ = ["mmg_standard", "MMG_PARAMS", "MMG_ASYMMETRY_PARAMS", "MMG_BOUNDS", "SMOOTH_WIDTH", "RUDDER_INFLOWS",
+__all__ = ["mmg_standard", "MMG_PARAMS", "MMG_ASYMMETRY_PARAMS", "MMG_RUDDER_LIFT_PARAMS", "MMG_BOUNDS", "SMOOTH_WIDTH",
+           "RUDDER_INFLOWS", "RUDDER_LIFTS",
            "rigid_body_3dof",
            "declare_ship_states", "declare_ship_limits", "add_rudder_actuator", "smooth_saturation", "mmg_propeller",
            "smooth_abs", "smooth_step"]
@@ -91,6 +92,12 @@ MMG_ASYMMETRY_PARAMS: dict[str, tuple[str, str]] = {
     "N_0_dash": ("-", "propeller-induced yaw moment / (propeller thrust L_pp), at midship"),
 }
 
+#: Parameter of the rudder-lift variant (``rudder_lift="cubic"``); zero gives the published sine.
+MMG_RUDDER_LIFT_PARAMS: dict[str, tuple[str, str]] = {
+    "c_alpha3": ("-", "loss of rudder lift slope at large effective angle: F_N proportional to "
+                      "sin(alpha_R) - c_alpha3 sin(alpha_R)^3"),
+}
+
 _POS = (0.0, np.inf)
 #: Physical bounds of the MMG parameters (an identification cannot leave them).
 MMG_BOUNDS: dict[str, tuple[float, float]] = {
@@ -100,10 +107,15 @@ MMG_BOUNDS: dict[str, tuple[float, float]] = {
     "t_P": (0.0, 1.0), "w_P0": (0.0, 1.0), "t_R": (0.0, 1.0), "a_H": (0.0, 1.0),
     "kappa": (0.0, 1.0),       # between the propeller disk (about 0.5) and the far race (1.0)
     "delta_0": (-np.radians(10.0), np.radians(10.0)),
+    # c_alpha3 <= 1 keeps the normal force rising up to 35 deg (its peak is at sin^2 alpha_R = 1 / (3 c_alpha3))
+    "c_alpha3": (-1.0, 1.0),
 }
 
 #: Forms of the rudder inflow speed ``u_R`` (see :func:`mmg_standard`, option ``rudder_inflow``).
 RUDDER_INFLOWS = ("published", "race-additive")
+
+#: Forms of the rudder normal force against the effective angle (see :func:`mmg_standard`, option ``rudder_lift``).
+RUDDER_LIFTS = ("sine", "cubic")
 
 #: Width [rad] of the smooth sign switches of ``smooth=True`` (see :func:`mmg_standard`).
 SMOOTH_WIDTH = 0.01
@@ -273,7 +285,7 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
                  rudder_actuator: bool = False, rudder_time_constant: float = 1.0,
                  rudder_rate_max: float = np.radians(2.32), rudder_max: float | None = None,
                  asymmetry: bool = False, smooth: bool = False, rudder_inflow: str = "published",
-                 meta: Mapping | None = None) -> Model:
+                 rudder_lift: str = "sine", meta: Mapping | None = None) -> Model:
     """MMG standard-method model (Yasukawa & Yoshimura 2015) with the given parameter values.
 
     Hull (Eq. 8): ``X_H = 0.5 rho L d U^2 (-R0' + X'vv v'^2 + X'vr v' r' + X'rr r'^2 + X'vvvv v'^4)``,
@@ -310,6 +322,18 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     dominates): with the published form the race at the rudder follows the wake ratio, with the
     additive one it follows the thrust.
 
+    **Rudder lift** (``rudder_lift``): the published normal force ``f_alpha sin(alpha_R)`` keeps its
+    lift slope up to any angle. Real rudders, behind the hull and in the propeller race as well, lose
+    lift slope towards stall at the effective angles of a hard-over turn (rudder lift curves, e.g.
+    Molland & Turnock 2007). With ``"cubic"`` the normal force is ``F_N = 0.5 rho A_R U_R^2 f_alpha
+    (sin(alpha_R) - c_alpha3 sin(alpha_R)^3)``: the next odd term of the expansion in the angle, as
+    in the cubic rudder derivatives ``Y_ddd``, ``N_ddd`` of Abkowitz-type models (the Mariner of
+    Chislett & Strøm-Tejsen 1965: ``Y_ddd / Y_d = N_ddd / N_d = -0.32``, about ``c_alpha3 = 0.19`` in
+    this form at 35 deg). ``c_alpha3 = 0`` (its default) is the published model; a positive value
+    weakens the rudder by the fraction ``c_alpha3 sin^2(alpha_R)`` (``0.33 c_alpha3`` at 35 deg,
+    ``0.03 c_alpha3`` at 10 deg), a negative one strengthens it (the cross-flow lift of a low-aspect-ratio foil).
+    The bounds ``[-1, 1]`` keep the force rising up to 35 deg.
+
     **Smooth sign switches** (``smooth=True``): the published wake and flow-straightening terms switch
     on the signs of ``beta_P`` and ``beta_R`` (``C_2``, ``gamma_R``) and use ``|beta_P|``; their
     derivatives jump at zero drift, which makes an identification cost non-smooth (a Newton-type
@@ -345,6 +369,9 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
         Smooth sign switches of ``C_2`` and ``gamma_R`` (see above).
     rudder_inflow : str
         ``"published"`` (Yasukawa & Yoshimura 2015, Eq. 24) or ``"race-additive"`` (see above).
+    rudder_lift : str
+        ``"sine"`` (published) or ``"cubic"``: adds the parameter ``c_alpha3`` (zero unless ``values``
+        gives it; see above).
     meta : mapping, optional
         Entries for ``model.meta`` (a preset records its build options under ``"options"`` there,
         so that a fit file rebuilds the same variant).
@@ -355,16 +382,22 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     """
     if rudder_inflow not in RUDDER_INFLOWS:
         raise ValueError(f"rudder_inflow must be one of {RUDDER_INFLOWS}, got {rudder_inflow!r}")
-    sources = dict(sources or {})
-    known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {})}
+    if rudder_lift not in RUDDER_LIFTS:
+        raise ValueError(f"rudder_lift must be one of {RUDDER_LIFTS}, got {rudder_lift!r}")
+    cubic = rudder_lift == "cubic"
+    sources = {"c_alpha3": "rudder-lift variant; 0 gives the published model", **(sources or {})}
+    known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {}), **(MMG_RUDDER_LIFT_PARAMS if cubic else {})}
     unknown = set(values) - set(known)
     if unknown:
-        hint = " (the asymmetry terms need asymmetry=True)" if unknown & set(MMG_ASYMMETRY_PARAMS) else ""
+        hint = (" (the asymmetry terms need asymmetry=True)" if unknown & set(MMG_ASYMMETRY_PARAMS) else
+                " (c_alpha3 needs rudder_lift='cubic')" if unknown & set(MMG_RUDDER_LIFT_PARAMS) else "")
         raise ValueError(f"unknown MMG parameter(s) {sorted(unknown)}{hint}; known: {list(known)}")
     b = ModelBuilder(name, doc or "MMG standard method (Yasukawa & Yoshimura 2015)")
     P = {k: _param(b, k, values, sources, MMG_PARAMS) for k in MMG_PARAMS}
     if asymmetry:
         P.update({k: _param(b, k, values, sources, MMG_ASYMMETRY_PARAMS, default=0.0) for k in MMG_ASYMMETRY_PARAMS})
+    if cubic:
+        P["c_alpha3"] = _param(b, "c_alpha3", values, sources, MMG_RUDDER_LIFT_PARAMS, default=0.0)
     b.meta.update(dict(meta or {}))
     if asymmetry:          # port/starboard terms: identified only from mirrored evidence (casship.identify.asymmetry)
         b.meta["asymmetric"] = list(MMG_ASYMMETRY_PARAMS)
@@ -454,7 +487,8 @@ def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None =
                rudder_inflow: str = "published"):
     """Hull + propeller + rudder force ``(X, Y, N)`` at midship of the MMG standard method.
 
-    ``P`` may hold the asymmetry terms of :data:`MMG_ASYMMETRY_PARAMS`; ``smooth`` is the width of
+    ``P`` may hold the asymmetry terms of :data:`MMG_ASYMMETRY_PARAMS` and the rudder-lift term of
+    :data:`MMG_RUDDER_LIFT_PARAMS` (absent: the published sine); ``smooth`` is the width of
     the smooth sign switches (``None``: the published ``if_else`` switches); ``rudder_inflow`` one of
     :data:`RUDDER_INFLOWS` (see :func:`mmg_standard`).
     """
@@ -492,7 +526,10 @@ def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None =
     v_R = U * gamma_R * beta_R
     alpha_R = delta - P.get("delta_0", 0.0) - ca.atan2(v_R, u_R)
     U_R2 = u_R**2 + v_R**2
-    F_N = 0.5 * rho * P["A_R"] * U_R2 * P["f_alpha"] * ca.sin(alpha_R)
+    lift = ca.sin(alpha_R)
+    if "c_alpha3" in P:         # loss of lift slope at large effective angle (option rudder_lift="cubic")
+        lift = lift - P["c_alpha3"] * lift**3
+    F_N = 0.5 * rho * P["A_R"] * U_R2 * P["f_alpha"] * lift
     x_R, x_H = P["x_R_dash"] * L, P["x_H_dash"] * L
     X_R = -(1 - P["t_R"]) * F_N * ca.sin(delta)
     Y_R = -(1 + P["a_H"]) * F_N * ca.cos(delta)

@@ -45,7 +45,11 @@ Prior (standard deviations, relative to the published value unless stated): line
 derivatives 20 %; cubic hull and surge derivatives 50 % (``X'_vr`` at least 0.01); straight-run
 resistance 30 %; rudder and interaction factors 20 % (``gamma_R`` 25 %, ``a_H``, ``t_R`` 30 %); added
 masses 20 %; rudder neutral angle 1 deg; propeller-induced side force and yaw moment 0.05 and 0.025
-(what a 1 deg rudder gives at the approach).
+(what a 1 deg rudder gives at the approach); with the rudder-lift variant
+(``kvlcc2(rudder_lift="cubic")``), its loss of lift slope ``c_alpha3`` 0.5 about 0: one standard
+deviation weakens the rudder by 16 % at 35 deg effective angle and 6 % at 20 deg; the cubic rudder
+terms of the Mariner (Chislett & Strøm-Tejsen 1965) amount to 0.19, a stall at 35 deg (the bound 1)
+is two standard deviations away.
 
 A run of any facility, direction or regime is replayed with the one parameter set of the fit (there
 are no per-facility copies): the fit file's ``params``, exactly what ``casship simulate --params``
@@ -68,7 +72,8 @@ from casship.models import kvlcc2
 from .data import Run, fit_record
 from .propulsion import PropulsionFit, fit_propulsion, resistance_for_run
 
-__all__ = ["MODEL_OPTIONS", "study_model", "MEASURED", "CANDIDATES", "REGRESSED", "ASYMMETRY", "prior_std",
+__all__ = ["MODEL_OPTIONS", "study_model", "MEASURED", "CANDIDATES", "OPTION_CANDIDATES", "candidates", "REGRESSED",
+           "ASYMMETRY", "prior_std",
            "smooth_runs", "with_smoothed_speed", "FoldFit", "fit_fold", "select_free", "record_weights"]
 
 MODEL_OPTIONS = {"asymmetry": True, "smooth": True}
@@ -101,10 +106,12 @@ ASYMMETRY_RULES = {
 REGRESSED = (*HULL_LINEAR, *HULL_CUBIC, "f_alpha", "Y_0_dash", "N_0_dash")
 CANDIDATES = (*HULL_LINEAR, *HULL_CUBIC, "R_0_dash", "gamma_R_minus", "gamma_R_plus", "l_R_dash", "epsilon", "kappa",
               "f_alpha", "a_H", "x_H_dash", "t_R", "m_x_dash", "m_y_dash", "J_z_dash", *ASYMMETRY)
+#: Candidates that exist only in a model variant (``MODEL_OPTIONS``): the rudder's loss of lift slope.
+OPTION_CANDIDATES = ("c_alpha3",)
 PRIOR_REL = {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "R_0_dash": 0.3, "gamma_R_minus": 0.25,
              "gamma_R_plus": 0.25, "l_R_dash": 0.2, "epsilon": 0.2, "kappa": 0.2, "f_alpha": 0.2, "a_H": 0.3,
              "x_H_dash": 0.2, "t_R": 0.3, "m_x_dash": 0.2, "m_y_dash": 0.2, "J_z_dash": 0.2}
-PRIOR_ABS = {"delta_0": np.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025}
+PRIOR_ABS = {"delta_0": np.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025, "c_alpha3": 0.5}
 PRIOR_FLOOR = {"X_vr_dash": 0.01}
 MAX_RATIO, MAX_CORR, MAX_FREE = 0.5, 0.95, 15
 
@@ -112,6 +119,11 @@ MAX_RATIO, MAX_CORR, MAX_FREE = 0.5, 0.95, 15
 def study_model() -> cs.Model:
     """The full-scale KVLCC2 with the asymmetry terms and smooth sign switches (published values)."""
     return kvlcc2(**MODEL_OPTIONS)
+
+
+def candidates(model: cs.Model) -> list[str]:
+    """The candidates of the free set: :data:`CANDIDATES` and those of :data:`OPTION_CANDIDATES` the model has."""
+    return [*CANDIDATES, *(c for c in OPTION_CANDIDATES if c in model.param_names)]
 
 
 def prior_std(model: cs.Model, names) -> dict[str, float]:
@@ -220,9 +232,10 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
                              autocorrelation=True)
     start = {**idfit.estimates, "R_0_dash": r0}
     recs = [fit_record(r, dt, outputs=MEASURED) for r in train]
-    at = {k: float(fixed[model.index(k, "param")]) for k in CANDIDATES}
-    unit = cs.OutputErrorProblem(model, recs, list(CANDIDATES), measured=list(MEASURED),
-                                 sigma={c: 1.0 for c in MEASURED}, params=fixed, scale=dict(PRIOR_ABS))
+    cands = candidates(model)
+    at = {k: float(fixed[model.index(k, "param")]) for k in cands}
+    unit = cs.OutputErrorProblem(model, recs, cands, measured=list(MEASURED), sigma={c: 1.0 for c in MEASURED},
+                                 params=fixed, scale={k: v for k, v in PRIOR_ABS.items() if k in cands})
     res = unit.residuals(at)
     neff = effective_samples(res, list(MEASURED))
     sigma = {c: float(np.sqrt(sum(np.nansum(r[:, j] ** 2) for r in res) / neff[c]["n_eff"]))
@@ -238,14 +251,14 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
         sub = [recs[i] for i in paired]
         share = {q: [facilities[i] for i in paired] for q in rig_terms}
         asym_stage, chosen_a, rows_a, _, _ = _select_and_refine(
-            model, sub, [c for c in CANDIDATES if c not in rig_terms] + list(rig_terms), sigma, fixed, at,
+            model, sub, [c for c in cands if c not in rig_terms] + list(rig_terms), sigma, fixed, at,
             start, max_free, show, share=share)
         asym = {n: asym_stage.estimates[n] for n in chosen_a if n in ship}
         rig = {n: asym_stage.estimates[n] for n in chosen_a if n not in asym and n.split("@")[0] in ASYMMETRY}
         rows_a = [dict(r, stage=f"asymmetry: mirror-pair runs {', '.join(train[i].name for i in paired)}")
                   for r in rows_a if r["quantity"].split("@")[0] in ASYMMETRY]
     fixed = model.params({**preset, **asym})
-    symmetric = [c for c in CANDIDATES if c not in ASYMMETRY]
+    symmetric = [c for c in cands if c not in ASYMMETRY]
     fit, first, _, _, _ = _select_and_refine(model, recs, symmetric, sigma, fixed, at, start, max_free, show)
     # the free set chosen again by the same rule, from the information at this estimate, and refined
     est = {k: float(v) for k, v in fit.estimates.items()}
@@ -255,7 +268,7 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
     rows += [{"quantity": q, "ratio_when_added": float("nan"), "confounded": why, "stage": "asymmetry"}
              for q, why in confounded.items()]
     return FoldFit([r.name for r in train], prop, preset, start, "first estimate" if use_id else "preset", sigma,
-                   list(CANDIDATES), rows, confounded, chosen, fit, time.perf_counter() - t0, idfit, idf,
+                   cands, rows, confounded, chosen, fit, time.perf_counter() - t0, idfit, idf,
                    asym_stage, sorted(asym), rig, first)
 
 
