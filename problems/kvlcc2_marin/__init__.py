@@ -31,7 +31,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from casship.models import kvlcc2
 from casship.parallel import call, run_cases
 from casship.studies import Study
 
@@ -41,7 +40,7 @@ from .data import first_rudder_side, load_runs, regime
 from .diagnose import steady_turn_balance, through_the_turn
 from .propulsion import open_water
 from .report import fold_figure, slug, write_outputs
-from .validate import evaluate, write_fold_file
+from .validate import evaluate, published_model, write_fold_file
 from .workflow import fit_fold, smooth_runs, study_model, with_smoothed_speed
 
 QUICK = {"runs": ("MARIN tc_-35", "MARIN zz_-20", "MARIN zz_10", "HSVA Z_10_10_P", "HSVA Z_10_10_S",
@@ -82,7 +81,7 @@ def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int
 
 def in_sample(run, fit_path: Path) -> tuple[dict, dict]:
     """A run replayed with the fit on all runs, and its mirror-image check (a case of the loop)."""
-    return evaluate(run, fit_path)["row"], mirror_check([run], fit_path, kvlcc2())[run.name]
+    return evaluate(run, fit_path)["row"], mirror_check([run], fit_path, published_model())[run.name]
 
 
 def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None) -> dict:
@@ -125,15 +124,15 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
     replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler)
     model = study_model()
-    asym = asymmetry_check(runs, everything.fit.params, model, kvlcc2())
+    asym = asymmetry_check(runs, everything.fit.params, model, published_model())
     asym["mirror"] = {r.name: mirror for r, (_, mirror) in zip(runs, replays)}
     turns = {}
     for circle in (r for r in runs if r.kind == "turning"):
         files = {"fit.json (in training)": fit_path}
         if (out / fold_file_name("run", circle.name)).exists():
             files[fold_file_name("run", circle.name)] = out / fold_file_name("run", circle.name)
-        turns[circle.name] = {"turn": through_the_turn(circle, files, kvlcc2()),
-                              "balance": steady_turn_balance(circle, files, kvlcc2())}
+        turns[circle.name] = {"turn": through_the_turn(circle, files, published_model()),
+                              "balance": steady_turn_balance(circle, files, published_model())}
     return write_outputs(out, runs, everything, results, [row for row, _ in replays], calibration=calibration,
                          jack=jack, asymmetry=asym, bands=bands, turns=turns, quick=quick)
 
