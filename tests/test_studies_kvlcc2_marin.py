@@ -122,3 +122,23 @@ def test_runs_are_split_by_the_side_of_their_first_rudder():
     # a 5/1 zig-zag from a 0.3 deg approach: the first swing (+5 deg) is less than 5 deg from the approach
     delta = np.radians(np.where(t < 10, 0.3, np.where(t < 40, 5.0, -5.0)))
     assert first_rudder_side(Run("5/1", "X", cs.Dataset(t, {"delta": delta}), "zigzag")) == "+"
+
+
+def test_work_of_one_run_is_done_once_per_process_and_again_for_other_content():
+    """Fit records and published replays are kept per run; a run whose columns differ in one bit (the
+    HSVA runs with smoothed speeds carry their old names) is another run."""
+    import casship as cs
+    from problems.kvlcc2_marin.data import Run, per_run
+
+    t = np.arange(5.0)
+    run = Run("HSVA X", "HSVA", cs.Dataset(t, {"u": np.ones(5), "delta": np.zeros(5)}), "zigzag")
+    made = []
+    make = lambda: made.append(1) or len(made)          # noqa: E731
+    assert per_run(("test",), run, make) == 1 and per_run(("test",), run, make) == 1
+    copy = Run("HSVA X", "HSVA", cs.Dataset(t.copy(), {"u": np.ones(5), "delta": np.zeros(5)}), "zigzag")
+    assert per_run(("test",), copy, make) == 1                  # the same content: found again
+    assert per_run(("other",), run, make) == 2                  # another kind of work
+    u = np.ones(5)
+    u[3] = np.nextafter(1.0, 2.0)
+    changed = Run("HSVA X", "HSVA", cs.Dataset(t, {"u": u, "delta": np.zeros(5)}), "zigzag")
+    assert per_run(("test",), changed, make) == 3
