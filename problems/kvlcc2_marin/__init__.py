@@ -88,8 +88,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     """Fit, cross-validate and report (see the module text); ``quick``: seven runs, one fold.
 
     The fit on all runs and the folds are independent cases, run by :func:`casship.parallel.run_cases`
-    (``workers`` local processes, or the Dask cluster at ``scheduler``); every case is
-    deterministic, so the numbers do not depend on how they are spread.
+    (``workers`` local processes, or the Dask cluster at ``scheduler``) with one BLAS thread each
+    (the inverse dynamics at the process's count); every case is deterministic, so the numbers do
+    not depend on how they are spread.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -109,7 +110,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     cases = [(fit_fold, (runs, smoothed, curve), opts)]
     cases += [(run_fold, (spec, runs, smoothed, curve, out), opts) for spec in fold_specs(runs, quick)]
     everything, *results = run_cases(call, cases, workers=workers, scheduler=scheduler,
-                                     label="kvlcc2-marin fits", unit="fit")
+                                     label="kvlcc2-marin fits", unit="fit", blas_threads=1)
     loro = [res["fold"] for res in results if res["kind"] == "run"]
     jack = jackknife(everything, loro) if len(loro) > 2 else None
     calibration = calibration_table(everything, loro, jack) if jack is not None else {}
@@ -122,7 +123,8 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
         "estimated_against": "the fold files' robust (sandwich) parameter bands; this file's covariance is the "
                              "run-level jackknife, wider, so its predictive band is conservative"}} if bands else {}
     fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
-    replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler)
+    replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler,
+                        blas_threads=1)
     model = study_model()
     asym = asymmetry_check(runs, everything.fit.params, model, published_model())
     asym["mirror"] = {r.name: mirror for r, (_, mirror) in zip(runs, replays)}

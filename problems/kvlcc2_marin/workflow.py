@@ -65,6 +65,7 @@ from casship.identify import IdentificationWarning, Prior, inverse_dynamics, smo
 from casship.identify.asymmetry import confounded_asymmetry, mirror_pairs
 from casship.identify.uncertainty import effective_samples
 from casship.models import kvlcc2
+from casship.parallel import blas_threads
 
 from .data import Run, fit_record, per_run
 from .propulsion import PropulsionFit, fit_propulsion, resistance_for_run
@@ -218,9 +219,10 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
     preset = dict(prop.values)
     fixed = model.params(preset)
     r0 = float(np.mean([resistance_for_run(model, r, fixed) for r in train]))
-    idfit = inverse_dynamics(model, [smoothed[r.name] for r in train], list(REGRESSED),
-                             params=model.params({**preset, "R_0_dash": r0}), prior=prior_std(model, REGRESSED),
-                             autocorrelation=True)
+    with blas_threads(None):     # its least squares at the process's BLAS threads: the numbers depend on them
+        idfit = inverse_dynamics(model, [smoothed[r.name] for r in train], list(REGRESSED),
+                                 params=model.params({**preset, "R_0_dash": r0}), prior=prior_std(model, REGRESSED),
+                                 autocorrelation=True)
     start = {**idfit.estimates, "R_0_dash": r0}
     recs = [per_run(("fit record", dt, MEASURED), r, lambda r=r: fit_record(r, dt, outputs=MEASURED)) for r in train]
     at = {k: float(fixed[model.index(k, "param")]) for k in CANDIDATES}
