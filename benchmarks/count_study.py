@@ -6,11 +6,11 @@ call-heavy stages such as the figures), and with calls counted. CPU seconds infl
 wall clock on a loaded machine; the counts (fits, engine evaluations, simulations, models built,
 figures) do not depend on the load at all. Stages overlap where one calls another (a fold's fit
 includes its inverse dynamics); a function called inside itself is timed once. BLAS threads that
-spin after a call charge their CPU to whatever runs next: run with ``OPENBLAS_NUM_THREADS=1``.
+spin after a call charge their CPU to whatever runs next (the study's cases hold their BLAS to one
+thread; compare runs made with the same BLAS settings).
 
-Run ``OPENBLAS_NUM_THREADS=1 python -m benchmarks.count_study [--quick] [--out DIR]`` with a
-filled compile cache (run the study once before). Needs the measured data (``CASSHIP_DATA`` or
-``../shared/data``).
+Run ``python -m benchmarks.count_study [--quick] [--out DIR]`` with a filled compile cache (run the
+study once before). Needs the measured data (``CASSHIP_DATA`` or ``../shared/data``).
 """
 from __future__ import annotations
 
