@@ -6,10 +6,10 @@ workers are forked from the calling process on POSIX, so they start with everyth
 
 Cases may run with their BLAS (OpenBLAS, MKL) held to a number of threads (``blas_threads``): the
 cases are the parallelism, and a BLAS thread woken by one large product spins on a core for a while
-after it (costing the study about a fifth of its CPU time with the BLAS's default threads). A
-threaded BLAS may sum a product's terms in another order than a single thread does (results that
-differ in the last bits): code whose numbers must not depend on it runs inside :func:`blas_threads`
-with ``None``, the count the process started with.
+after it (15-20 % of the kvlcc2-marin study's CPU time with two BLAS threads). A threaded BLAS
+may sum a product's terms in another order than a single thread does (results that differ in the
+last bits): code whose numbers must not depend on the limit runs inside :func:`blas_threads` with
+``None``, the count the BLAS had before any limit of this module.
 """
 from __future__ import annotations
 
