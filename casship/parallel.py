@@ -3,17 +3,26 @@
 Cases carry their own seeds, so a parallel run returns exactly what a serial run returns. Local
 workers are forked from the calling process on POSIX, so they start with everything it has built
 (models, compiled Functions in memory) and find the rest in the on-disk compile cache.
+
+Cases may run with their BLAS (OpenBLAS, MKL) held to a number of threads (``blas_threads``): the
+cases are the parallelism, and a BLAS thread woken by one large product spins on a core for a while
+after it (15-20 % of the kvlcc2-marin study's CPU time with two BLAS threads). A threaded BLAS
+may sum a product's terms in another order than a single thread does (results that differ in the
+last bits): code whose numbers must not depend on the limit runs inside :func:`blas_threads` with
+``None``, the count the BLAS had before any limit of this module.
 """
 from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Callable, Iterable, Sequence
+from contextlib import contextmanager
+from functools import partial
+from typing import Callable, Iterable, Iterator, Sequence
 
-__all__ = ["run_cases", "call"]
+__all__ = ["run_cases", "call", "blas_threads"]
 
 
 def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, scheduler: str | None = None,
-              label: str | None = None, unit: str = "case") -> list:
+              label: str | None = None, unit: str = "case", blas_threads: int | None = None) -> list:
     """``[func(case) for case in cases]``, in parallel, results in the order of ``cases``.
 
     Parameters
@@ -30,6 +39,9 @@ def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, sc
         Show a progress bar with this text, advanced as cases finish (see :mod:`casship.progress`).
     unit : str
         Name of one case on the bar.
+    blas_threads : int, optional
+        Run each case with at most this many BLAS threads (see the module text; serial cases too);
+        None leaves the BLAS as it is.
 
     Returns
     -------
@@ -43,6 +55,10 @@ def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, sc
     [1, 2, 3]
     """
     cases: Sequence = list(cases)
+    if blas_threads is not None:
+        if isinstance(blas_threads, bool) or not isinstance(blas_threads, int) or blas_threads < 1:
+            raise ValueError(f"blas_threads must be a positive int or None, got {blas_threads!r}")
+        func = partial(_limited, func, blas_threads)
     if scheduler is not None:
         try:
             from dask.distributed import Client
@@ -89,6 +105,52 @@ def call(case: tuple):
     """
     func, args, *rest = case
     return func(*args, **(rest[0] if rest else {}))
+
+
+_STARTED: dict = {}      # BLAS library path -> its threads before any limit of this module
+
+
+def _blas():
+    """The BLAS libraries of this process (threadpoolctl), their thread counts first recorded."""
+    from threadpoolctl import ThreadpoolController
+
+    blas = ThreadpoolController().select(user_api="blas")
+    for lib in blas.lib_controllers:
+        _STARTED.setdefault(lib.filepath, lib.num_threads)
+    return blas
+
+
+@contextmanager
+def blas_threads(n: int | None) -> Iterator[None]:
+    """Hold the BLAS libraries to ``n`` threads within the block (``None``: the number each had when
+    this module first met it, e.g. inside a case limited by :func:`run_cases`); restored after.
+
+    Parameters
+    ----------
+    n : int or None
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> with blas_threads(1):
+    ...     float(np.ones((200, 200)) @ np.ones(200) @ np.ones(200))
+    40000.0
+    """
+    blas = _blas()
+    before = {lib.filepath: lib.num_threads for lib in blas.lib_controllers}
+    try:
+        for lib in blas.lib_controllers:
+            lib.set_num_threads(_STARTED[lib.filepath] if n is None else n)
+        yield
+    finally:
+        for lib in blas.lib_controllers:
+            lib.set_num_threads(before[lib.filepath])
+
+
+def _limited(func: Callable, n: int, case):
+    """``func(case)`` with the BLAS held to ``n`` threads."""
+    with blas_threads(n):
+        return func(case)
 
 
 def _track(cases, label, unit):

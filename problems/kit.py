@@ -105,16 +105,41 @@ def md_table(rows: Mapping[str, Mapping] | Sequence[Mapping], columns: Sequence[
 
 # -- figures and JSON --------------------------------------------------------------------------------------
 @contextmanager
-def figure(path: str | os.PathLike, nrows: int = 1, ncols: int = 1, **kwargs) -> Iterator:
+def figure(path: str | os.PathLike, nrows: int = 1, ncols: int = 1, *, margins: Mapping[str, float] | None = None,
+           **kwargs) -> Iterator:
     """``with figure(out / "x.png", 2, 1, figsize=(8, 5)) as (fig, axes):`` -- saved (110 dpi); made
-    without pyplot, so no backend is chosen and nothing stays open."""
+    without pyplot, so no backend is chosen and nothing stays open.
+
+    The layout is matplotlib's tight layout, unless ``margins`` gives it in inches (keys ``left``,
+    ``right``, ``bottom``, ``top``: figure edge to axes; ``wspace``, ``hspace``: between axes): for
+    figures drawn many times over, as the tight layout draws every text once more to measure it.
+    """
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=kwargs.pop("figsize", None))
     axes = fig.subplots(nrows, ncols, **kwargs)
     yield fig, axes
-    fig.tight_layout()
+    if margins is None:
+        fig.tight_layout()
+    else:
+        _fixed_margins(fig, nrows, ncols, margins)
     fig.savefig(path, dpi=110)
+
+
+def _fixed_margins(fig, nrows: int, ncols: int, margins: Mapping[str, float]) -> None:
+    """Place the subplots with the margins and gaps ``margins`` [in] (see :func:`figure`)."""
+    m = {"left": 0.8, "right": 0.15, "bottom": 0.6, "top": 0.35, "wspace": 0.8, "hspace": 0.8}
+    unknown = sorted(set(margins) - set(m))
+    if unknown:
+        raise ValueError(f"figure: unknown margin(s) {unknown}; known: {sorted(m)}")
+    m.update(margins)
+    width, height = fig.get_size_inches()
+    axis_w = (width - m["left"] - m["right"] - (ncols - 1) * m["wspace"]) / ncols
+    axis_h = (height - m["bottom"] - m["top"] - (nrows - 1) * m["hspace"]) / nrows
+    if axis_w <= 0 or axis_h <= 0:
+        raise ValueError(f"figure: margins {m} leave no room for {nrows} x {ncols} axes in {width:g} x {height:g} in")
+    fig.subplots_adjust(left=m["left"] / width, right=1 - m["right"] / width, bottom=m["bottom"] / height,
+                        top=1 - m["top"] / height, wspace=m["wspace"] / axis_w, hspace=m["hspace"] / axis_h)
 
 
 def json_ready(value):

@@ -87,3 +87,43 @@ def test_background_compile_gives_the_interpreted_numbers(tmp_path, monkeypatch)
     fit_a = prob.solve(guess={"K": 0.05, "T": 10.0}, show=False)
     fit_b = ref.solve(guess={"K": 0.05, "T": 10.0}, show=False)
     assert fit_a.estimates == fit_b.estimates
+
+
+def test_an_evaluation_repeated_at_the_same_point_is_answered_from_the_last_one(monkeypatch):
+    """A solve checks, starts and ends at points just evaluated: the engine evaluates each point once
+    in a row, returns what a fresh evaluation returns, and evaluates again at any other point."""
+    model = _model("repeat_test", 1.1e-3)
+    prob = cs.OutputErrorProblem(model, _records(model, n=2), free=["K", "T"], sigma={"psi": 0.01}, jit=False)
+    evaluated = {"cost": 0, "derivatives": 0}
+    for kind in evaluated:
+        real = getattr(type(prob.engine), f"_{kind}")
+
+        def counted(self, theta, _real=real, _kind=kind):
+            evaluated[_kind] += 1
+            return _real(self, theta)
+        monkeypatch.setattr(type(prob.engine), f"_{kind}", counted)
+    theta = np.array([0.1, 20.0])
+    first = prob.engine.derivatives(theta)
+    again = prob.engine.derivatives(theta.copy())
+    assert evaluated["derivatives"] == 1 and again[0] == first[0] and np.array_equal(again[2], first[2])
+    fresh = cs.OutputErrorProblem(model, _records(model, n=2), free=["K", "T"], sigma={"psi": 0.01}, jit=False)
+    assert np.array_equal(fresh.engine.derivatives(theta)[2], first[2])      # a problem of its own
+    assert evaluated["derivatives"] == 2
+    prob.engine.derivatives(theta * (1 + 1e-12))              # another point, however near: evaluated
+    assert evaluated["derivatives"] == 3
+    c = prob.cost({"K": 0.1, "T": 20.0})
+    assert prob.cost({"K": 0.1, "T": 20.0}) == c and evaluated["cost"] == 1
+    prob.cost({"K": 0.11, "T": 20.0})
+    assert evaluated["cost"] == 2
+    assert prob.solve(show=False).status == "converged"
+
+
+def test_problems_on_one_model_share_its_discretisation():
+    model = _model("disc_test", 1.1e-3)
+    recs = _records(model, n=2)
+    a = cs.OutputErrorProblem(model, recs, free=["K"], sigma={"psi": 0.01}, jit=False)
+    b = cs.OutputErrorProblem(model, recs[1:], free=["K", "T"], sigma={"psi": 0.02}, jit=False)
+    assert a.dmodel is b.dmodel and a.dmodel.dt == 1.0
+    # another method is another discretisation
+    c = cs.OutputErrorProblem(model, recs, free=["K"], sigma={"psi": 0.01}, method="euler", jit=False)
+    assert c.dmodel is not a.dmodel and c.dmodel.method == "euler"

@@ -101,3 +101,35 @@ def test_call_runs_a_function_with_its_arguments():
     from casship.parallel import call
 
     assert run_cases(call, [(divmod, (7, 2)), (round, (2.567,), {"ndigits": 1})], workers=2) == [(3, 1), 2.6]
+
+
+def _blas_counts(case) -> dict:
+    """BLAS threads seen inside a case, and inside ``blas_threads(None)`` there."""
+    from threadpoolctl import threadpool_info
+
+    from casship.parallel import blas_threads
+
+    inner = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    with blas_threads(None):
+        restored = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    return {"case": case, "inner": inner, "restored": restored}
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_cases_run_with_the_blas_threads_asked_for_and_give_them_back(workers):
+    from threadpoolctl import threadpool_info
+
+    before = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+    if not before:
+        pytest.skip("no BLAS library that threadpoolctl controls")
+    out = run_cases(_blas_counts, [0, 1], workers=workers, blas_threads=1)
+    assert [o["case"] for o in out] == [0, 1]
+    for o in out:
+        assert o["inner"] == [1] * len(before)            # every BLAS library held to one thread
+        assert o["restored"] == before                    # the count the process started with
+    assert [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"] == before
+    # the numbers of a case do not change with the limit here (no BLAS product in it that threads)
+    _assert_same(run_cases(_case, CASES, workers=workers, blas_threads=1), [_case(c) for c in CASES])
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(ValueError, match="blas_threads"):
+            run_cases(_case, CASES, workers=1, blas_threads=bad)

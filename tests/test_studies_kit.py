@@ -3,6 +3,7 @@ studies use the estimator contract instead of branching on estimator names."""
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from problems.kit import Departure, Report, effect, md_table
@@ -41,3 +42,23 @@ def test_no_study_module_over_600_lines():
     long = {str(p.relative_to(ROOT)): n for p in (ROOT / "problems").rglob("*.py")
             if (n := len(p.read_text().splitlines())) > 600}
     assert not long, long
+
+
+def test_figure_with_fixed_margins_places_the_axes_in_inches(tmp_path):
+    from problems.kit import figure
+
+    with figure(tmp_path / "f.png", 2, 3, figsize=(12, 6), margins={"left": 1.2, "hspace": 0.6}) as (fig, axes):
+        for ax in axes.ravel():
+            ax.plot([0, 1], [0, 1])
+    assert (tmp_path / "f.png").stat().st_size > 0
+    boxes = [ax.get_position() for ax in axes.ravel()]          # figure fractions
+    assert np.isclose(boxes[0].x0 * 12, 1.2) and np.isclose((1 - boxes[2].x1) * 12, 0.15)      # left, right default
+    assert np.isclose((1 - boxes[0].y1) * 6, 0.35) and np.isclose(boxes[3].y0 * 6, 0.6)        # top, bottom
+    assert np.isclose((boxes[0].y0 - boxes[3].y1) * 6, 0.6)                                     # the gap asked for
+    assert np.isclose((boxes[1].x0 - boxes[0].x1) * 12, 0.8)                                    # the default gap
+    with pytest.raises(ValueError, match="unknown margin"):
+        with figure(tmp_path / "g.png", margins={"middle": 1.0}):
+            pass
+    with pytest.raises(ValueError, match="no room"):
+        with figure(tmp_path / "h.png", 1, 2, figsize=(2, 2), margins={"wspace": 2.0}):
+            pass

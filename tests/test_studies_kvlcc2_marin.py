@@ -134,3 +134,23 @@ def test_rudder_lift_term_is_a_candidate_only_of_the_variant_that_has_it():
     assert workflow.candidates(lift) == [*workflow.CANDIDATES, "c_alpha3"]
     assert workflow.prior_std(lift, ["c_alpha3"]) == {"c_alpha3": 0.5}     # absolute: its published value is 0
     assert workflow.MODEL_OPTIONS.get("rudder_lift", "sine") == "sine"      # lost its cross-validation: off
+
+
+def test_work_of_one_run_is_done_once_per_process_and_again_for_other_content():
+    """Fit records and published replays are kept per run; a run whose columns differ in one bit (the
+    HSVA runs with smoothed speeds carry their old names) is another run."""
+    import casship as cs
+    from problems.kvlcc2_marin.data import Run, per_run
+
+    t = np.arange(5.0)
+    run = Run("HSVA X", "HSVA", cs.Dataset(t, {"u": np.ones(5), "delta": np.zeros(5)}), "zigzag")
+    made = []
+    make = lambda: made.append(1) or len(made)          # noqa: E731
+    assert per_run(("test",), run, make) == 1 and per_run(("test",), run, make) == 1
+    copy = Run("HSVA X", "HSVA", cs.Dataset(t.copy(), {"u": np.ones(5), "delta": np.zeros(5)}), "zigzag")
+    assert per_run(("test",), copy, make) == 1                  # the same content: found again
+    assert per_run(("other",), run, make) == 2                  # another kind of work
+    u = np.ones(5)
+    u[3] = np.nextafter(1.0, 2.0)
+    changed = Run("HSVA X", "HSVA", cs.Dataset(t, {"u": u, "delta": np.zeros(5)}), "zigzag")
+    assert per_run(("test",), changed, make) == 3

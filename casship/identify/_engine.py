@@ -154,6 +154,16 @@ class Engine:
     def __init__(self, space, jit):
         self.space, self.jit = space, jit
         self._signature = None
+        self._last: dict = {}     # kind -> (free values as bytes, result): the last evaluation of each kind
+
+    def _again(self, kind: str, theta, compute):
+        """``compute()``, or its result of the last call of ``kind`` at the same free values (to the
+        bit): a solve checks, starts and ends at points its caller has often just evaluated."""
+        key = np.asarray(theta, dtype=float).tobytes()
+        last = self._last.get(kind)
+        if last is None or last[0] != key:
+            last = self._last[kind] = (key, compute())
+        return last[1]
 
     def _structure(self) -> tuple:
         """What the Functions of this engine depend on: Functions and plain values (subclasses)."""
@@ -196,6 +206,9 @@ class Engine:
 
     def cost(self, theta) -> tuple[float, np.ndarray]:
         """Total cost and the cost of each record at the free values ``theta``."""
+        return self._again("cost", theta, lambda: self._cost(theta))
+
+    def _cost(self, theta):
         runs = run_jobs([self._job(r, theta, "value")[0] for r in self._records()])
         per = np.array([sum(self._chunk_cost(out, take) for _, out, take in run) for run in runs])
         return float(per.sum()), per
@@ -205,8 +218,12 @@ class Engine:
 
         Returns ``(f, g, H, details)``; ``details[r]`` holds ``f``, ``cols`` (the free values the
         record sees), per-sample ``scores`` (gradient contributions, ``(N, k_r)``) and normalised
-        ``residuals`` (``(N, ny)``, NaN where not measured).
+        ``residuals`` (``(N, ny)``, NaN where not measured). The arrays are shared with the next call
+        at the same ``theta``: read them, do not change them.
         """
+        return self._again("derivatives", theta, lambda: self._derivatives(theta))
+
+    def _derivatives(self, theta):
         k = len(self.space)
         jobs = [self._job(r, theta, "sens") for r in self._records()]
         runs = run_jobs([j for j, _ in jobs])

@@ -114,8 +114,10 @@ class OutputErrorProblem(IdentificationProblem):
         records = as_records(datasets)
         self.record_weights = _record_weights(record_weights, records)
         if isinstance(model, Model):          # a discrete-time model has its own step
-            model = discretize(model) if model.dt is not None else discretize(
-                model, float(np.median(np.diff(records[0].t))), method=method)
+            cont = model                       # kept with the model: every problem on it shares the steps
+            dt = None if cont.dt is not None else float(np.median(np.diff(records[0].t)))
+            model = cont.derived(("discretize", method, dt), lambda: discretize(cont) if dt is None
+                                 else discretize(cont, dt, method=method))
         if not isinstance(model, DiscreteModel):
             raise TypeError(f"OutputErrorProblem needs a Model or DiscreteModel, got {type(model).__name__}")
         for d in records:                      # a discrete-time model steps its own dt, nothing else

@@ -34,7 +34,6 @@ from pathlib import Path
 import numpy as np
 
 from casship.identify import ParameterUncertainty
-from casship.models import kvlcc2
 from casship.parallel import call, run_cases
 from casship.studies import Study
 
@@ -44,7 +43,7 @@ from .data import first_rudder_side, load_runs, regime
 from .diagnose import steady_turn_balance, through_the_turn
 from .propulsion import open_water
 from .report import fold_figure, slug, write_outputs
-from .validate import evaluate, robust_uncertainty, write_fold_file
+from .validate import evaluate, published_model, robust_uncertainty, write_fold_file
 from .workflow import fit_fold, smooth_runs, study_model, with_smoothed_speed
 
 QUICK = {"runs": ("MARIN tc_-35", "MARIN zz_-20", "MARIN zz_10", "HSVA Z_10_10_P", "HSVA Z_10_10_S",
@@ -99,15 +98,16 @@ def beside_discrepancy(everything, jack):
 
 def in_sample(run, fit_path: Path) -> tuple[dict, dict]:
     """A run replayed with the fit on all runs, and its mirror-image check (a case of the loop)."""
-    return evaluate(run, fit_path)["row"], mirror_check([run], fit_path, kvlcc2())[run.name]
+    return evaluate(run, fit_path)["row"], mirror_check([run], fit_path, published_model())[run.name]
 
 
 def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None) -> dict:
     """Fit, cross-validate and report (see the module text); ``quick``: seven runs, one fold.
 
     The fit on all runs and the folds are independent cases, run by :func:`casship.parallel.run_cases`
-    (``workers`` local processes, or the Dask cluster at ``scheduler``); every case is
-    deterministic, so the numbers do not depend on how they are spread.
+    (``workers`` local processes, or the Dask cluster at ``scheduler``) with one BLAS thread each
+    (the inverse dynamics at the process's count); every case is deterministic, so the numbers do
+    not depend on how they are spread.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -127,7 +127,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     cases = [(fit_fold, (runs, smoothed, curve), opts)]
     cases += [(run_fold, (spec, runs, smoothed, curve, out), opts) for spec in fold_specs(runs, quick)]
     everything, *results = run_cases(call, cases, workers=workers, scheduler=scheduler,
-                                     label="kvlcc2-marin fits", unit="fit")
+                                     label="kvlcc2-marin fits", unit="fit", blas_threads=1)
     loro = [res["fold"] for res in results if res["kind"] == "run"]
     jack = jackknife(everything, loro) if len(loro) > 2 else None
     calibration = calibration_table(everything, loro, jack) if jack is not None else {}
@@ -140,17 +140,18 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
                    "estimated_with",
         "estimated_with": beside_discrepancy(everything, jack).to_dict()}} if bands else {}
     fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
-    replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler)
+    replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler,
+                        blas_threads=1)
     model = study_model()
-    asym = asymmetry_check(runs, everything.fit.params, model, kvlcc2())
+    asym = asymmetry_check(runs, everything.fit.params, model, published_model())
     asym["mirror"] = {r.name: mirror for r, (_, mirror) in zip(runs, replays)}
     turns = {}
     for circle in (r for r in runs if r.kind == "turning"):
         files = {"fit.json (in training)": fit_path}
         if (out / fold_file_name("run", circle.name)).exists():
             files[fold_file_name("run", circle.name)] = out / fold_file_name("run", circle.name)
-        turns[circle.name] = {"turn": through_the_turn(circle, files, kvlcc2()),
-                              "balance": steady_turn_balance(circle, files, kvlcc2())}
+        turns[circle.name] = {"turn": through_the_turn(circle, files, published_model()),
+                              "balance": steady_turn_balance(circle, files, published_model())}
     return write_outputs(out, runs, everything, results, [row for row, _ in replays], calibration=calibration,
                          jack=jack, asymmetry=asym, bands=bands, turns=turns, quick=quick)
 

@@ -35,6 +35,7 @@ from casship.identify import replay_file
 from casship.validation import replay
 
 from .validate import INDICES
+from .workflow import study_model
 
 __all__ = ["jackknife", "calibration_table", "band_check", "asymmetry_check", "mirror_check", "mirrored", "Z95"]
 
@@ -180,7 +181,7 @@ def mirror_check(runs, fit_file, published) -> dict:
     for run in runs:
         row = {}
         for label, data in (("run", run.data), ("mirror image", mirrored(run.data))):
-            pub, fit = replay(published, data), replay_file(fit_file, data, "kvlcc2", samples=0)
+            pub, fit = replay(published, data), replay_file(fit_file, data, study_model(), samples=0)
             row[f"{label}: psi RMSE published [deg]"] = pub.errors["psi_rmse_deg"]
             row[f"{label}: psi RMSE fit [deg]"] = fit.errors["psi_rmse_deg"]
         out[run.name] = row

@@ -12,8 +12,10 @@ its measured outputs are sampled. Validation replays use the full-rate records.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -22,7 +24,8 @@ from casship.identify.asymmetry import turn_side
 from casship.io import hsva_runs, marin_runs, read_hsva, read_marin
 from casship.maneuvers import execute_time
 
-__all__ = ["Run", "load_runs", "fit_record", "approach", "first_rudder_side", "regime", "FIT_DT", "INPUTS"]
+__all__ = ["Run", "load_runs", "fit_record", "per_run", "approach", "first_rudder_side", "regime", "FIT_DT",
+           "INPUTS"]
 
 FIT_DT = 2.0                       # s, sampling period of the fit records (full scale)
 REGIME_DEG = 17.5                  # deg: zig-zags with a larger rudder angle are "large-rudder" runs
@@ -62,6 +65,23 @@ def _run(name: str, facility: str, d: cs.Dataset, kind: str) -> Run:
     meta = dict(d.meta)
     meta.update(name=name, facility=facility)
     return Run(name, facility, cs.Dataset(d.t, {c: d[c] for c in d.names}, d.units, meta), kind)
+
+
+_PER_RUN: dict = {}
+
+
+def per_run(what: tuple, run: Run, make: Callable[[], object]):
+    """``make()``, kept per process under ``what`` and the run's content (name and every column, to
+    the bit): work that depends on one run alone (its fit record, its published replay) is done once
+    however many folds hold the run. Results are shared: read them, do not change them."""
+    h = hashlib.sha1(repr((run.name, run.facility, run.kind, run.data.names)).encode())
+    h.update(np.ascontiguousarray(run.data.t, dtype=float).tobytes())
+    for c in run.data.names:
+        h.update(np.ascontiguousarray(run.data[c], dtype=float).tobytes())
+    key = (what, h.hexdigest())
+    if key not in _PER_RUN:
+        _PER_RUN[key] = make()
+    return _PER_RUN[key]
 
 
 def fit_record(run: Run, dt: float = FIT_DT, outputs=("psi", "r", "u"), states=("u", "v", "r", "x", "y", "psi"),

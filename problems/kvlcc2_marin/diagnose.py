@@ -19,6 +19,8 @@ from casship.identify import replay_file
 from casship.models.mmg import SMOOTH_WIDTH, mmg_forces, mmg_propeller
 from casship.validation import replay
 
+from .workflow import study_model
+
 __all__ = ["HEADINGS_DEG", "through_the_turn", "steady_turn_balance"]
 
 HEADINGS_DEG = (15, 30, 60, 90, 180, 270, 360)
@@ -45,7 +47,7 @@ def through_the_turn(run, fit_files: dict, published) -> dict:
     d = run.data
     rows = {"measured": _at_headings(d.t, d["psi"], d["u"], d["v"], d["r"], L)}
     trajectories = {"published": replay(published, d).trajectory}
-    trajectories.update({label: replay_file(path, d, "kvlcc2", samples=0).trajectory for label, path in fit_files.items()})
+    trajectories.update({label: replay_file(path, d, study_model(), samples=0).trajectory for label, path in fit_files.items()})
     for label, tr in trajectories.items():
         rows[label] = _at_headings(tr.t, tr["psi"], tr["u"], tr["v"], tr["r"], L)
     return rows

@@ -80,6 +80,11 @@ _GROUP_TITLE = {"facility": lambda label: f"of {label}", "regime": lambda label:
                 "direction": lambda label: f"with the first rudder {'positive' if label == '+' else 'negative'}"}
 
 
+# the fold figures' layout, fixed [in]: 23 figures of two kinds (the tight layout measured each one's texts)
+_HELDOUT_MARGINS = {"left": 0.85, "right": 0.15, "bottom": 0.6, "top": 0.35, "wspace": 0.8}
+_GROUP_MARGINS = {"left": 0.8, "right": 0.15, "bottom": 0.6, "top": 0.35, "wspace": 0.95, "hspace": 0.8}
+
+
 def fold_figure(out: Path, runs, res: dict) -> str:
     """Draw the figure of one fold's held-out replays (``res`` from the study's ``run_fold``) into
     ``out``; returns its file name."""
@@ -89,7 +94,7 @@ def fold_figure(out: Path, runs, res: dict) -> str:
         ev = evals[0]
         run = by_name[ev["row"]["run"]]
         name = f"fig_heldout_{slug(run.name)}.png"
-        with figure(out / name, 1, 2, figsize=(13, 4.5)) as (fig, axes):
+        with figure(out / name, 1, 2, figsize=(13, 4.5), margins=_HELDOUT_MARGINS) as (fig, axes):
             plot_overlay(axes, run, ev["published"], ev["fit"],
                          f"{run.name} replayed with {res['file']} (fit on the other {len(res['fold'].train)} runs)",
                          ev["bands"])
@@ -98,7 +103,7 @@ def fold_figure(out: Path, runs, res: dict) -> str:
     name = f"fig_{res['kind']}_{slug(str(res['label']) if res['kind'] != 'direction' else label.split()[-1])}.png"
     ncol = 3
     nrow = int(math.ceil(len(evals) / ncol))
-    with figure(out / name, nrow, ncol, figsize=(15, 3.2 * nrow), squeeze=False) as (fig, axes):
+    with figure(out / name, nrow, ncol, figsize=(15, 3.2 * nrow), squeeze=False, margins=_GROUP_MARGINS) as (fig, axes):
         for ax, ev in zip(axes.ravel(), evals):
             run = by_name[ev["row"]["run"]]
             ax.plot(run.data.t, np.degrees(np.unwrap(run.data["psi"])), "k-", lw=1.2, label="measured")
@@ -108,7 +113,7 @@ def fold_figure(out: Path, runs, res: dict) -> str:
             if ev["bands"]:
                 w = np.degrees(ev["bands"]["z"] * ev["bands"]["psi_std"])
                 ax.fill_between(ev["fit"].t, psi - w, psi + w, color="C0", alpha=0.25, lw=0)
-            ax.set_title(run.name, fontsize=9)
+            ax.set_title(run.name, fontsize=9, y=1.0)       # placed, not searched for (no ticks on top)
             ax.set_xlabel("t [s]")
             ax.set_ylabel("heading [deg]")
         axes.ravel()[0].legend(fontsize=7)

@@ -11,6 +11,7 @@ overshoot) computed by the same functions.
 """
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -21,9 +22,11 @@ from casship.models import kvlcc2
 from casship.identify import replay_file
 from casship.validation import replay
 
-from .data import Run
+from .data import Run, per_run
+from .workflow import study_model
 
-__all__ = ["ERRORS", "INDICES", "evaluate", "closer", "plot_overlay", "write_fold_file", "SAMPLES"]
+__all__ = ["ERRORS", "INDICES", "evaluate", "closer", "plot_overlay", "write_fold_file", "SAMPLES", "published_model",
+           "published_replay"]
 
 ERRORS = ("psi_rmse_deg", "u_rmse_mps", "position_rmse_m")
 INDICES = {"turning": ("advance_m", "transfer_m", "tactical_diameter_m"),
@@ -73,10 +76,22 @@ def write_fold_file(fold, path: Path, uncertainty=None, extra=None) -> Path:
     return path
 
 
+@functools.cache
+def published_model():
+    """The published KVLCC2 (:func:`casship.models.kvlcc2`), built once per process."""
+    return kvlcc2()
+
+
+def published_replay(run: Run):
+    """``run`` replayed with the published constants, once per process and run (see :func:`.data.per_run`)."""
+    return per_run(("published replay",), run, lambda: replay(published_model(), run.data))
+
+
 def evaluate(run: Run, fit_file: Path, *, published=None, seed: int = 0) -> dict:
-    """Replay ``run`` with the published constants and with the fit file; errors, indices, bands."""
-    pub = replay(published or kvlcc2(), run.data)
-    fit = replay_file(fit_file, run.data, "kvlcc2", samples=SAMPLES, seed=seed)
+    """Replay ``run`` with the published constants (``published``: another model) and with the fit
+    file (on the study's model variant, which the file names); errors, indices, bands."""
+    pub = published_replay(run) if published is None else replay(published, run.data)
+    fit = replay_file(fit_file, run.data, study_model(), samples=SAMPLES, seed=seed)
     row = {"run": run.name, "facility": run.facility, "kind": run.kind, "fit_file": Path(fit_file).name}
     for key in ERRORS:
         row[f"{key}_published"] = pub.errors.get(key, np.nan)
@@ -135,5 +150,5 @@ def plot_overlay(axes, run: Run, published, fit, title: str, bands=None) -> None
     ax2.plot(d.t, np.degrees(d["delta"]), "k:", lw=0.8, label="rudder [deg]")
     ax2.set_xlabel("t [s]")
     ax2.set_ylabel("heading [deg]")
-    ax2.set_title(title, fontsize=9)
+    ax2.set_title(title, fontsize=9, y=1.0)               # placed, not searched for (no ticks on top)
     ax2.legend(fontsize=7)

@@ -57,6 +57,7 @@ uses.
 """
 from __future__ import annotations
 
+import functools
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -68,8 +69,9 @@ from casship.identify import IdentificationWarning, Prior, inverse_dynamics, smo
 from casship.identify.asymmetry import confounded_asymmetry, mirror_pairs
 from casship.identify.uncertainty import effective_samples
 from casship.models import kvlcc2
+from casship.parallel import blas_threads
 
-from .data import Run, fit_record
+from .data import Run, fit_record, per_run
 from .propulsion import PropulsionFit, fit_propulsion, resistance_for_run
 
 __all__ = ["MODEL_OPTIONS", "study_model", "MEASURED", "CANDIDATES", "OPTION_CANDIDATES", "candidates", "REGRESSED",
@@ -116,8 +118,10 @@ PRIOR_FLOOR = {"X_vr_dash": 0.01}
 MAX_RATIO, MAX_CORR, MAX_FREE = 0.5, 0.95, 15
 
 
+@functools.cache
 def study_model() -> cs.Model:
-    """The full-scale KVLCC2 with the asymmetry terms and smooth sign switches (published values)."""
+    """The full-scale KVLCC2 with the asymmetry terms and smooth sign switches (published values),
+    built once per process (a model is immutable: every fold and replay shares it and what it derives)."""
     return kvlcc2(**MODEL_OPTIONS)
 
 
@@ -227,11 +231,12 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
     preset = dict(prop.values)
     fixed = model.params(preset)
     r0 = float(np.mean([resistance_for_run(model, r, fixed) for r in train]))
-    idfit = inverse_dynamics(model, [smoothed[r.name] for r in train], list(REGRESSED),
-                             params=model.params({**preset, "R_0_dash": r0}), prior=prior_std(model, REGRESSED),
-                             autocorrelation=True)
+    with blas_threads(None):     # its least squares at the process's BLAS threads: the numbers depend on them
+        idfit = inverse_dynamics(model, [smoothed[r.name] for r in train], list(REGRESSED),
+                                 params=model.params({**preset, "R_0_dash": r0}), prior=prior_std(model, REGRESSED),
+                                 autocorrelation=True)
     start = {**idfit.estimates, "R_0_dash": r0}
-    recs = [fit_record(r, dt, outputs=MEASURED) for r in train]
+    recs = [per_run(("fit record", dt, MEASURED), r, lambda r=r: fit_record(r, dt, outputs=MEASURED)) for r in train]
     cands = candidates(model)
     at = {k: float(fixed[model.index(k, "param")]) for k in cands}
     unit = cs.OutputErrorProblem(model, recs, cands, measured=list(MEASURED), sigma={c: 1.0 for c in MEASURED},
