@@ -67,9 +67,6 @@ class ParameterUncertainty:
 
     def __post_init__(self):
         self.psi_variance_rate = float(self.psi_variance_rate)
-        if self.discrepancy_covariance is not None:
-            self.discrepancy_covariance = _checked_covariance(self.discrepancy_covariance, self.names,
-                                                              "discrepancy_covariance")
         if not (np.isfinite(self.psi_variance_rate) and self.psi_variance_rate >= 0.0):
             raise ValueError(f"ParameterUncertainty: psi_variance_rate must be finite and >= 0, "
                              f"got {self.psi_variance_rate}")
@@ -78,6 +75,9 @@ class ParameterUncertainty:
         if self.values.size != len(self.names):
             raise ValueError(f"ParameterUncertainty: {self.values.size} values for {len(self.names)} names")
         self.covariance = _checked_covariance(self.covariance, self.names, "covariance")
+        if self.discrepancy_covariance is not None:
+            self.discrepancy_covariance = _checked_covariance(self.discrepancy_covariance, self.names,
+                                                              "discrepancy_covariance")
 
     @property
     def std(self) -> np.ndarray:
@@ -230,8 +230,7 @@ def read_params(path, model=None, *, uncertainty: bool = False):
             if base.names != unc.names:
                 raise ValueError(f"{path}: model_discrepancy.estimated_with has parameters {base.names}, "
                                  f"param_covariance {unc.names}; they must be the same, in the same order")
-            unc.discrepancy_covariance = _checked_covariance(base.covariance, unc.names,
-                                                             "model_discrepancy.estimated_with")
+            unc.discrepancy_covariance = base.covariance          # checked as it was read
     return model, p, unc
 
 

@@ -118,11 +118,16 @@ PRIOR_FLOOR = {"X_vr_dash": 0.01}
 MAX_RATIO, MAX_CORR, MAX_FREE = 0.5, 0.95, 15
 
 
-@functools.cache
 def study_model() -> cs.Model:
     """The full-scale KVLCC2 with the asymmetry terms and smooth sign switches (published values),
-    built once per process (a model is immutable: every fold and replay shares it and what it derives)."""
-    return kvlcc2(**MODEL_OPTIONS)
+    built once per process and :data:`MODEL_OPTIONS` (a model is immutable: every fold and replay
+    shares it and what it derives)."""
+    return _model_with(tuple(sorted(MODEL_OPTIONS.items())))
+
+
+@functools.cache
+def _model_with(options: tuple) -> cs.Model:
+    return kvlcc2(**dict(options))
 
 
 def candidates(model: cs.Model) -> list[str]:
