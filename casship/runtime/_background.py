@@ -7,8 +7,10 @@ A first fit on a machine used to wait, silent, while the C compiler built its se
 compiled one is loaded, and the compiled one from then on. A one-off fit that ends before the
 compiler does never waits for it; a longer one switches to compiled code as soon as it exists.
 
-The compiles run one at a time in a worker thread that is not a daemon: a process that ends
-while a compile runs finishes it first, so the library is in the cache for the next run.
+The compiles run one at a time in a daemon worker thread: a process whose work is done exits at
+once, without waiting for a compile nobody needs any more; the compiler it was running is stopped
+with everything it started, and its build folder removed (:func:`~._compiler.stop_compilers`, run at
+exit). The next process that needs the library compiles it again.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from typing import Callable, Sequence
 import casadi as ca
 
 from ._cache import compile_function
+from ._compiler import stopping
 
 __all__ = ["Compiling", "compile_in_background"]
 
@@ -60,12 +63,15 @@ class Compiling:
         Why compiling failed (the handle then stays interpreted).
     """
 
-    def __init__(self, fun: ca.Function, flags: Sequence[str] | None = None, on_done: Callable | None = None):
+    def __init__(self, fun: ca.Function, flags: Sequence[str] | None = None, on_done: Callable | None = None,
+                 extra_source: str = ""):
         if not isinstance(fun, ca.Function):
             raise TypeError(f"compile_in_background needs a casadi.Function, got {type(fun).__name__}")
         self.interpreted = fun
         self.flags = None if flags is None else tuple(flags)
+        self.extra_source = extra_source
         self.error: Exception | None = None
+        self.library = None             # the ctypes handle of the library (with extra_source)
         self._compiled: ca.Function | None = None
         self._done = threading.Event()
         self._on_done = on_done
@@ -103,9 +109,18 @@ class Compiling:
         self._done.wait(timeout)
         return self.function
 
+    @property
+    def cancelled(self) -> bool:
+        """Whether the compile was stopped because the process is ending."""
+        return stopping()
+
     def _run(self) -> None:
         try:
-            self._compiled = compile_function(self.interpreted, flags=self.flags)
+            if self.extra_source:
+                self._compiled, self.library = compile_function(self.interpreted, flags=self.flags,
+                                                                extra_source=self.extra_source, library=True)
+            else:
+                self._compiled = compile_function(self.interpreted, flags=self.flags)
         except Exception as exc:       # noqa: BLE001 - reported through .error; the handle stays interpreted
             self.error = exc
         finally:
@@ -132,7 +147,7 @@ def _work() -> None:
 
 
 def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = None,
-                          on_done: Callable | None = None) -> Compiling:
+                          on_done: Callable | None = None, extra_source: str = "") -> Compiling:
     """Compile ``fun`` in a background thread (through the on-disk cache); interpreted until then.
 
     Parameters
@@ -142,6 +157,8 @@ def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = Non
         Compiler flags (default as for :func:`~casship.runtime.compile_function`).
     on_done : callable, optional
         ``on_done(handle)``, called from the worker thread when the compile ended.
+    extra_source : str
+        C source compiled into the same library (then ``handle.library`` is its ctypes handle).
 
     Returns
     -------
@@ -156,7 +173,7 @@ def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = Non
     >>> float(h.function(3.0))                                          # doctest: +SKIP
     6.0
     """
-    return _submit(Compiling(fun, flags, on_done))
+    return _submit(Compiling(fun, flags, on_done, extra_source))
 
 
 def _submit(job: Compiling) -> Compiling:
@@ -164,7 +181,7 @@ def _submit(job: Compiling) -> Compiling:
     _JOBS.put(job)
     with _WORKER_LOCK:
         if not _WORKER:
-            worker = threading.Thread(target=_work, name="casship-compile", daemon=False)
+            worker = threading.Thread(target=_work, name="casship-compile", daemon=True)
             _WORKER.append(worker)
             worker.start()
     return job

@@ -49,8 +49,8 @@ from typing import Sequence
 
 import casadi as ca
 
-from ._compiler import (ENV_FLAGS, PORTABLE_FLAGS, SUFFIX, CompileError, accepts_native,
-                        build_library, chosen_flags, compile_timeout, find_compiler)
+from ._compiler import SUFFIX, CompileError, build_library, building, find_compiler
+from ._settings import DEFAULT_FLAGS, ENV_CACHE, ENV_FLAGS, chosen_flags, compile_timeout
 
 try:                                    # file locks: fcntl on POSIX, msvcrt on Windows
     import fcntl
@@ -61,15 +61,18 @@ try:
 except ImportError:
     msvcrt = None
 
-__all__ = ["compile_function", "cached_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo"]
+__all__ = ["compile_function", "cached_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo",
+           "Cleared"]
 
-_ENV_DIR = "CASSHIP_CACHE_DIR"
+_ENV_DIR = ENV_CACHE
+_BUILD = "casship-cc-"                      # build folders: casship-cc-<key>-<pid> (leftovers of a killed process)
 _OFF = ("off", "0", "no", "false", "none")
 # compiled Functions loaded by this process, by (key, folder); weak: a Function nobody uses is let go
 _LOADED: "weakref.WeakValueDictionary[tuple, ca.Function]" = weakref.WeakValueDictionary()
 _LIBRARY_OF: dict[tuple, Path] = {}        # the library file of each of them
 _LIBRARIES: dict[str, ctypes.CDLL] = {}     # ctypes handles of libraries with extra source (never closed)
 _REFUSED: dict[Path, str] = {}              # folders not used by this process, and why (warned once)
+_SWEPT: set = set()                         # folders whose leftovers this process has removed
 _LOCK = threading.RLock()
 
 
@@ -161,7 +164,44 @@ def _usable_folder(path) -> Path | None:
     if why is not None:
         _refuse(folder, why)
         return None
+    if folder not in _SWEPT:
+        _SWEPT.add(folder)
+        remove_leftovers(folder)
     return folder
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (a process of another user counts as alive)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, OSError):
+        return True
+    return True
+
+
+def _build_owner(name: str) -> tuple[str, int] | None:
+    """``(key, pid)`` of a build folder named ``casship-cc-<key>-<pid>``, else None."""
+    parts = name[len(_BUILD):].split("-") if name.startswith(_BUILD) else []
+    if len(parts) != 2 or not _is_key(parts[0]) or not parts[1].isdigit():
+        return None
+    return parts[0], int(parts[1])
+
+
+def remove_leftovers(folder: Path) -> int:
+    """Remove the build folders of processes that ended without removing them (killed); returns how many."""
+    removed = 0
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return 0
+    for f in entries:
+        owner = _build_owner(f.name)
+        if owner is not None and f.is_dir() and not _alive(owner[1]):
+            shutil.rmtree(f, ignore_errors=True)
+            removed += 1
+    return removed
 
 
 # -- keys and integrity ------------------------------------------------------------------------------------
@@ -262,7 +302,7 @@ def _from_cache(fun, folder: Path, key: str, clean: bool) -> tuple | None:
 @contextmanager
 def _key_lock(folder: Path, key: str):
     """Hold the lock file of ``key`` (waits at most the compile time limit, then raises OSError)."""
-    fd = os.open(folder / f"{key}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+    fd = os.open(folder / f"{key}.lock", os.O_RDWR | os.O_CREAT, 0o600)   # kept: see clear_cache
     deadline = time.monotonic() + compile_timeout() + 30.0
     try:
         while True:
@@ -292,9 +332,9 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     fun : casadi.Function
         Any Function CasADi can generate C code for (SX or MX, with maps and folds).
     flags : sequence of str or str, optional
-        Compiler flags (default: ``$CASSHIP_CFLAGS`` or :data:`DEFAULT_FLAGS`, which fall back to
-        :data:`PORTABLE_FLAGS` for a compiler that refuses ``-march=native``); ``-fPIC -shared``
-        are always added. Part of the cache key.
+        Compiler flags (default: ``$CASSHIP_CFLAGS``, else :data:`DEFAULT_FLAGS`, which keep the
+        interpreted numbers to the last bit; :data:`NATIVE_FLAGS` is the opt-in for speed);
+        ``-fPIC -shared`` are always added. Part of the cache key.
     compiler : str, optional
         The C compiler (default: ``$CC``, else ``gcc``, else ``cc``). Part of the cache key.
     cache_dir : str or path, optional
@@ -335,19 +375,17 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
         cc = find_compiler(compiler)
     except CompileError as exc:
         raise CompileError(f"compiling {fun.name()!r} to C: {exc}") from None
-    flags, default = chosen_flags(flags)
+    flags = chosen_flags(flags)
     with _LOCK:
         folder = _usable_folder(cache_dir) if cache else None
         loaded, lib = _compiled(fun, cc, flags, folder, extra_source)
-        if default and lib is None and not accepts_native(cc):     # only a refused flag is dropped
-            flags = PORTABLE_FLAGS
-            loaded, lib = _compiled(fun, cc, flags, folder, extra_source)
     if lib is None:         # not under the process lock: other threads look up and load meanwhile
         loaded, lib = _compile(fun, cc, flags, folder, extra_source)
     return (loaded, _library(lib)) if library else loaded
 
 
-def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None) -> ca.Function | None:
+def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None, extra_source: str = "",
+                    library: bool = False):
     """``fun`` compiled, if this process or the cache already holds its library; else None, at once.
 
     Never compiles and never waits for a compile running in another thread (then None).
@@ -355,20 +393,23 @@ def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = Non
     Parameters
     ----------
     fun : casadi.Function
-    flags : sequence of str or str, optional
+    flags, extra_source, library
         As for :func:`compile_function`.
     """
     try:
         cc = find_compiler(None)
     except CompileError:
         return None
-    flags, _ = chosen_flags(flags)
+    flags = chosen_flags(flags)
     if not _LOCK.acquire(blocking=False):
         return None
     try:
-        return _compiled(fun, cc, flags, _usable_folder(None), "")[0]
+        loaded, lib = _compiled(fun, cc, flags, _usable_folder(None), extra_source)
     finally:
         _LOCK.release()
+    if loaded is None:
+        return None
+    return (loaded, _library(lib)) if library else loaded
 
 
 def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
@@ -407,7 +448,7 @@ def _compile(fun, cc, flags, folder, extra_source) -> tuple:
             return _remember(hit, key, folder)
         except OSError as exc:                  # read-only, full, or locked too long
             _refuse(folder, f"writing into it failed ({exc})")
-    with tempfile.TemporaryDirectory(prefix="casship-cc-", ignore_cleanup_errors=True) as tmp:
+    with tempfile.TemporaryDirectory(prefix=_BUILD, ignore_cleanup_errors=True) as tmp, building(tmp):
         lib = build_library(fun, Path(tmp), f"f{key[:16]}", cc[0], flags, extra_source)
         loaded = _load(fun, lib)
         if loaded is None:
@@ -419,17 +460,27 @@ def _compile(fun, cc, flags, folder, extra_source) -> tuple:
 
 def _compile_into(fun, folder: Path, key: str, cc: tuple[str, str], flags, extra_source: str) -> tuple:
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="casship-cc-", dir=folder, ignore_cleanup_errors=True) as tmp:
-        built = build_library(fun, Path(tmp), f"f{key[:16]}", cc[0], flags, extra_source)
-        meta = {"key": key, "function": fun.name(), "bytes": built.stat().st_size, "sha256": _sha256(built),
-                "compiler": cc[0], "compiler_version": cc[1], "flags": list(flags), "casadi": ca.__version__,
-                "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "compile_s": round(time.perf_counter() - t0, 3)}
-        tmp_record = Path(tmp) / "record.json"
-        tmp_record.write_text(json.dumps(meta, indent=1))
-        os.chmod(tmp_record, 0o600)
-        lib, record = _entry(folder, key)
-        os.replace(built, lib)                  # library first: a record always describes a whole file
-        os.replace(tmp_record, record)
+    tmp = folder / f"{_BUILD}{key}-{os.getpid()}"       # named by key and process: see remove_leftovers
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(mode=0o700)
+    try:
+        with building(tmp):
+            return _build_into(fun, folder, key, cc, flags, extra_source, tmp, t0)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _build_into(fun, folder: Path, key: str, cc, flags, extra_source: str, tmp: Path, t0: float) -> tuple:
+    built = build_library(fun, Path(tmp), f"f{key[:16]}", cc[0], flags, extra_source)
+    meta = {"key": key, "function": fun.name(), "bytes": built.stat().st_size, "sha256": _sha256(built),
+            "compiler": cc[0], "compiler_version": cc[1], "flags": list(flags), "casadi": ca.__version__,
+            "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "compile_s": round(time.perf_counter() - t0, 3)}
+    tmp_record = Path(tmp) / "record.json"
+    tmp_record.write_text(json.dumps(meta, indent=1))
+    os.chmod(tmp_record, 0o600)
+    lib, record = _entry(folder, key)
+    os.replace(built, lib)                  # library first: a record always describes a whole file
+    os.replace(tmp_record, record)
     loaded = _load(fun, lib) if _verified(lib, record) else None
     if loaded is None:
         raise CompileError(f"the compiled library of {fun.name()!r} in {folder} could not be loaded")
@@ -458,7 +509,7 @@ class CacheInfo:
     flags : tuple of str
         The flags used by default here.
     flags_note : str
-        Why those flags (the defaults, ``$CASSHIP_CFLAGS``, or a compiler refusing ``-march=native``).
+        Why those flags (the defaults or ``$CASSHIP_CFLAGS``).
     timeout : float
         Seconds a compiler run may take.
     paths : tuple of str
@@ -517,13 +568,10 @@ def cache_info(path: str | os.PathLike | None = None) -> CacheInfo:
         compiler = f"{cc[0]} ({cc[1]})" if cc[1] else cc[0]
     except CompileError:
         cc = compiler = None
-    flags, default = chosen_flags(None)
-    if not default:
-        note = f"from ${ENV_FLAGS}"
-    elif cc is None or accepts_native(cc):
-        note = "the defaults: this compiler accepts -march=native"
-    else:
-        flags, note = PORTABLE_FLAGS, "the compiler refuses -march=native: the portable defaults"
+    flags = chosen_flags(None)
+    note = ("the defaults: the interpreted numbers to the last bit" if flags == DEFAULT_FLAGS
+            else f"from ${ENV_FLAGS}" + ("; -march=native: results differ from interpreted in the last bits"
+                                         if any("native" in f for f in flags) else ""))
     common = {"compiler": compiler, "flags": flags, "flags_note": note, "timeout": compile_timeout(), "paths": _PATHS}
     if folder is None:
         return CacheInfo(None, 0, 0, {}, **common)
@@ -548,13 +596,39 @@ def cache_info(path: str | os.PathLike | None = None) -> CacheInfo:
     return CacheInfo(folder, entries, size, functions, **common)
 
 
-def clear_cache(path: str | os.PathLike | None = None) -> int:
-    """Delete every compiled library and record in the compile cache.
+class Cleared(int):
+    """The number of files :func:`clear_cache` removed, with the keys it left alone (:attr:`busy`:
+    compiles in progress in some process, whose files stay)."""
 
-    Only files the cache writes (``<key>.so`` / ``.dylib`` / ``.dll``, ``<key>.json`` and left-over
-    ``casship-cc-*`` build folders) are removed; anything else in the folder stays, and so do the
-    empty lock files ``<key>.lock`` (removing one while another process compiles under it would let
-    a second compile of the same key in). A refused folder (see :func:`cache_info`) is not touched.
+    busy: tuple = ()
+
+
+def _busy(folder: Path, key: str) -> bool:
+    """Whether some process (this one too) holds the lock of ``key``: a compile in progress."""
+    lock = folder / f"{key}.lock"
+    if fcntl is None or not lock.exists():
+        return False
+    try:
+        fd = os.open(lock, os.O_RDWR)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)                        # closing releases the probe's lock
+    return False
+
+
+def clear_cache(path: str | os.PathLike | None = None) -> Cleared:
+    """Delete every compiled library and record in the compile cache, except those being compiled now.
+
+    Only files the cache writes (``<key>.so`` / ``.dylib`` / ``.dll``, ``<key>.json`` and build
+    folders ``casship-cc-*``) are removed; anything else in the folder stays, and so do the empty
+    lock files ``<key>.lock``. A key whose lock some process holds (a compile in progress, here or
+    in another process) is left alone with its build folder, so that compile ends as it would have:
+    its key is listed in the result's ``busy``. A refused folder (see :func:`cache_info`) is not touched.
 
     Parameters
     ----------
@@ -563,24 +637,33 @@ def clear_cache(path: str | os.PathLike | None = None) -> int:
 
     Returns
     -------
-    int
-        The number of files removed.
+    Cleared
+        The number of files removed (an ``int``), with ``busy``: the keys left alone.
     """
     folder = cache_dir(path)
     if folder is None or not folder.is_dir() or _folder_problem(folder, create=False):
-        return 0
-    removed = 0
+        return Cleared(0)
+    removed, busy = 0, {}
     with _LOCK:
-        for f in folder.iterdir():
-            if f.is_dir() and f.name.startswith("casship-cc-"):
+        for f in sorted(folder.iterdir()):
+            if f.is_dir() and f.name.startswith(_BUILD):
+                owner = _build_owner(f.name)
+                if owner is not None and _busy(folder, owner[0]):
+                    busy[owner[0]] = True
+                    continue
                 shutil.rmtree(f, ignore_errors=True)
                 removed += 1
             elif f.is_file() and f.suffix in (".json", SUFFIX) and _is_key(f.stem):
+                if _busy(folder, f.stem):
+                    busy[f.stem] = True
+                    continue
                 f.unlink(missing_ok=True)
                 removed += 1
         for k in [k for k in _LOADED.keys() if k[1] == folder]:
             _LOADED.pop(k, None)
-    return removed
+    out = Cleared(removed)
+    out.busy = tuple(busy)
+    return out
 
 
 def _is_key(stem: str) -> bool:

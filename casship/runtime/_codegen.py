@@ -1,4 +1,5 @@
-"""Export estimator steps (or any CasADi Function) as standalone C source and header.
+"""Export any CasADi Function as standalone C source and header (estimators export theirs through
+:mod:`casship.estimators.export`).
 
 The exported code is CasADi's code generation of the very Function that casship evaluates in
 Python, so an onboard computer runs the same arithmetic. The generated C has no dependency beyond
@@ -21,7 +22,7 @@ queried at run time with ``NAME_n_in()``, ``NAME_name_in(i)``, ``NAME_sparsity_i
 For an estimator step the inputs are its memory slots (``x, P`` for the Kalman family), then
 ``u_prev, u, y, mask, dt, p, Q, R, gate``; the outputs are the memory slots under the same names,
 then the diagnostics chosen when exporting (see :mod:`casship.estimators.base`).
-``export_estimator`` also writes ``NAME_data.h`` with the estimator's parameter vector, ``Q``,
+``casship.estimators.export_estimator`` also writes ``NAME_data.h`` with the estimator's parameter vector, ``Q``,
 ``R`` and the measured channel names.
 """
 from __future__ import annotations
@@ -37,8 +38,7 @@ import numpy as np
 from ._buffers import DUPLICATE_NAMES
 from ._compiler import CompileError, run_compiler
 
-__all__ = ["CFiles", "generate_c", "export_estimator", "export_mhe_rti", "write_harness", "compile_c",
-           "read_harness_output"]
+__all__ = ["CFiles", "generate_c", "write_harness", "compile_c", "read_harness_output", "c_array", "check_c_name"]
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,8 @@ class CFiles:
         return [r * c for _, (r, c) in self.outputs]
 
 
-def _check_name(name: str) -> str:
+def check_c_name(name: str) -> str:
+    """``name`` if it is a valid C identifier, else ``ValueError`` naming it."""
     if not isinstance(name, str) or not name.isidentifier() or not name.isascii():
         raise ValueError(f"C function name {name!r} is not a valid C identifier")
     return name
@@ -135,7 +136,7 @@ def generate_c(fun: ca.Function, directory, name: str | None = None, *, title: s
     """
     if not isinstance(fun, ca.Function):
         raise TypeError(f"generate_c needs a casadi.Function, got {type(fun).__name__}")
-    name = _check_name(name or fun.name())
+    name = check_c_name(name or fun.name())
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     dense = _dense_copy(fun, name)
@@ -162,100 +163,17 @@ def generate_c(fun: ca.Function, directory, name: str | None = None, *, title: s
                   tuple((dense.name_out(i), shape(dense, i, True)) for i in range(dense.n_out())))
 
 
-def _c_array(ctype: str, name: str, values) -> str:
+def c_array(ctype: str, name: str, values) -> str:
+    """A C array definition ``static const ctype name[] = {...}`` of ``values`` (column-major, 17 digits).
+
+    Parameters
+    ----------
+    ctype, name : str
+    values : array_like
+    """
     values = np.asarray(values, dtype=float).reshape(-1, order="F")
     body = ", ".join(f"{v:.17g}" for v in values) if values.size else "0"
     return f"CASSHIP_UNUSED static const {ctype} {name}[{max(values.size, 1)}] = {{{body}}};\n"
-
-
-def export_estimator(estimator, directory, name: str | None = None, p=None, outputs=None) -> CFiles:
-    """Export an estimator's step Function as C, plus ``NAME_data.h`` with its numbers.
-
-    Parameters
-    ----------
-    estimator : Estimator
-    directory : path
-    name : str, optional
-        C name (default ``<estimator>_step``).
-    p : array or mapping, optional
-        Parameter vector written to the data header (nominal by default).
-    outputs : sequence of str or "all", optional
-        Diagnostics the exported step returns besides its memory (default: the estimator's
-        ``outputs`` option, ``x`` and ``P`` unless asked otherwise); only these are computed.
-
-    The data header holds the dimensions (``NAME_NX``, ``NAME_NU``, ``NAME_NY``, ...), the size of
-    each memory slot (``NAME_SIZE_x``, ``NAME_SIZE_P``, ...), the parameter vector ``NAME_p``, the
-    covariances ``NAME_Q`` and ``NAME_R`` (column-major) and the measured channel and state names
-    in order, so that an onboard program can assemble the step's inputs without Python.
-    """
-    step_function = getattr(estimator, "step_function", None)
-    if not callable(step_function):
-        raise TypeError(f"{type(estimator).__name__} has no step Function to export")
-    fun = step_function(outputs)
-    model = estimator.model
-    name = _check_name(name or f"{type(estimator).__name__.lower()}_step")
-    title = (f"{name}: {type(estimator).__name__} step of model '{model.name}' "
-             f"(states {', '.join(model.state_names)}; measured {', '.join(estimator.measured)})")
-    files = generate_c(fun, directory, name, title=title)
-    pvec = model.params() if p is None else model.params(p)
-    guard = f"{name.upper()}_DATA_H"
-    strings = lambda names: "{" + ", ".join(f'"{n}"' for n in names) + "}"  # noqa: E731
-    text = (f"/* Numbers of the exported {type(estimator).__name__} '{name}' (model '{model.name}'). */\n"
-            f"#ifndef {guard}\n#define {guard}\n\n"
-            "#ifndef CASSHIP_UNUSED\n#if defined(__GNUC__)\n#define CASSHIP_UNUSED __attribute__((unused))\n"
-            "#else\n#define CASSHIP_UNUSED\n#endif\n#endif\n\n"
-            f"#define {name}_NX {model.nx}\n#define {name}_NU {model.nu}\n#define {name}_NP {model.np}\n"
-            f"#define {name}_NW {model.nw}\n#define {name}_NY {estimator.ny}\n"
-            + "".join(f"#define {name}_SIZE_{slot} {fun.nnz_in(slot)}\n" for slot in estimator.memory) + "\n"
-            + _c_array("double", f"{name}_p", pvec) + _c_array("double", f"{name}_Q", estimator.Q)
-            + _c_array("double", f"{name}_R", estimator.R)
-            + f"CASSHIP_UNUSED static const char *const {name}_states[{max(model.nx, 1)}] = {strings(model.state_names)};\n"
-            + f"CASSHIP_UNUSED static const char *const {name}_measured[{max(estimator.ny, 1)}] = {strings(estimator.measured)};\n"
-            + f"\n#endif /* {guard} */\n")
-    data = files.source.parent / f"{name}_data.h"
-    data.write_text(text)
-    return CFiles(files.name, files.source, files.header, files.inputs, files.outputs, data)
-
-
-def export_mhe_rti(mhe, directory, name: str | None = None) -> CFiles:
-    """Export the real-time-iteration step of a moving-horizon estimator's window as C.
-
-    Parameters
-    ----------
-    mhe : MHE
-        A moving-horizon estimator (its ``horizon`` sets ``N``).
-    directory : path
-        Created if missing.
-    name : str, optional
-        C name (default ``mhe_rti_step_<N>``).
-
-    The exported function is ``NAME(z, p) -> z_next``: one Gauss-Newton step of the window problem
-    of :class:`casship.MHE` (horizon ``N`` = the estimator's ``horizon`` option), solving the
-    equality-constrained Gauss-Newton problem (what ``solver="rti"`` does when no bound is active:
-    with option ``jit`` by a Riccati recursion over the stages, else through a sparse QR
-    factorisation of the KKT system). The layouts (column-major throughout):
-
-    * ``z``: for each stage ``j = 0 .. N-1`` the state ``x_j`` (nx) and whitened process noise
-      ``v_j`` (nv), then ``x_N``;
-    * ``p``: ``xbar`` (nx, arrival-cost mean), ``W`` (nx x nx, arrival-cost whitening
-      ``P^-1/2``), ``U`` (nu x N+1), ``U_prev`` (nu x N), ``Y`` (ny x N+1, 0 where missing),
-      ``M`` (ny x N+1 mask), ``dt`` (1 x N), the model parameters (np).
-
-    The arrival cost of the next window comes from the EKF step running alongside the MHE, which
-    :func:`export_estimator` exports (``mhe.arrival_filter``). Bounds on states or noise need the QP
-    solver and are not part of this export.
-    """
-    if type(mhe).__name__ != "MHE" or not hasattr(mhe, "window"):
-        raise TypeError(f"export_mhe_rti needs a casship.MHE, got {type(mhe).__name__}")
-    N = mhe.horizon
-    window = mhe.window(N, "rti")
-    name = _check_name(name or f"mhe_rti_step_{N}")
-    m = mhe.model
-    title = (f"{name}: MHE real-time-iteration step, model '{m.name}', horizon N = {N} "
-             f"(nx = {m.nx}, nv = {mhe.nv}, nu = {m.nu}, ny = {mhe.ny}, np = {m.np}; "
-             f"measured {', '.join(mhe.measured)}). z = [x_0 v_0 ... x_N-1 v_N-1 x_N]; "
-             "p = [xbar, W, U, U_prev, Y, M, dt, params]")
-    return generate_c(window.gn().fun, directory, name, title=title)
 
 
 HARNESS = r"""/* Test harness for {name}: reads input sets from stdin, prints the outputs.

@@ -11,7 +11,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ...runtime import DUPLICATE_NAMES, compile_function
+from ...runtime import DUPLICATE_NAMES, current_function, jit_function
 from ...data import Dataset
 from ...gaussian import Gaussian, as_cov
 from ...progress import track
@@ -137,7 +137,7 @@ class MHE(Estimator):
         """The MHE has no step Function: this raises :class:`~casship.estimators.NoStepFunction`."""
         raise NoStepFunction(
             "MHE has no step Function: each sample solves the window's optimisation problem (MHE.window). "
-            "Use MHE.online(prior).update(y, dt) sample by sample, casship.runtime.export_mhe_rti for the "
+            "Use MHE.online(prior).update(y, dt) sample by sample, casship.estimators.export_mhe_rti for the "
             "real-time-iteration step as C, or mhe.arrival_filter.step for the EKF step that supplies the "
             "arrival cost")
 
@@ -153,8 +153,8 @@ class MHE(Estimator):
         key = tuple(outputs)
         if key not in self._arrival_steps:
             fun = self.arrival_filter.step_function(key)
-            self._arrival_steps[key] = compile_function(fun) if self.options.jit else fun
-        return self._arrival_steps[key]
+            self._arrival_steps[key] = jit_function(fun, self.options.jit)    # the runtime's policy
+        return current_function(self._arrival_steps[key])
 
     @property
     def horizon(self) -> int:
