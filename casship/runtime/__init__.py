@@ -38,17 +38,18 @@ CasADi's ``external`` and buffer mechanisms, and the record loop's C driver thro
 from ._background import Compiling, compile_in_background
 from ._buffers import DUPLICATE_NAMES, BoundedTable, BufferedCall
 from ._pieces import Job, PieceFailed, piece, pieces, run_pieces
-from ._cache import CacheInfo, Cleared, cache_dir, cache_info, cache_key, cached_function, clear_cache, compile_function
+from ._cache import cache_dir, cache_key, cached_function, compile_function
+from ._housekeeping import CacheInfo, Cleared, cache_info, clear_cache
 from ._codegen import CFiles, c_array, check_c_name, compile_c, generate_c, read_harness_output, write_harness
 from ._compiler import CompileError, find_compiler, stop_compilers
 from ._loop import NativeFold
-from ._policy import (COUNTS, JitPolicy, current_function, is_compiled, jit_function, record_loop, shared_function,
+from ._policy import (BACKGROUND_FAILURES, COUNTS, FUNCTIONS, JitPolicy, current_function, is_compiled, jit_function, record_loop, shared_function,
                       shared_functions)
 from ._settings import DEFAULT_CHUNK, DEFAULT_FLAGS, DEFAULT_TIMEOUT, NATIVE_FLAGS, fold_chunk
 
 __all__ = ["BufferedCall", "BoundedTable", "Job", "PieceFailed", "run_pieces", "pieces", "piece", "DUPLICATE_NAMES", "NativeFold",
            "JitPolicy", "jit_function", "shared_function", "shared_functions", "record_loop", "is_compiled",
-           "current_function", "COUNTS",
+           "current_function", "COUNTS", "FUNCTIONS", "BACKGROUND_FAILURES",
            "fold_chunk", "DEFAULT_CHUNK",
            "compile_function", "cached_function", "compile_in_background", "Compiling", "CompileError", "cache_dir",
            "cache_info", "clear_cache", "cache_key", "CacheInfo", "Cleared", "stop_compilers",

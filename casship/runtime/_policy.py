@@ -38,7 +38,7 @@ from ._cache import cached_function, compile_function
 from ._loop import NativeFold, driver_source
 
 __all__ = ["JitPolicy", "jit_function", "shared_function", "shared_functions", "record_loop", "is_compiled",
-           "current_function",
+           "current_function", "BACKGROUND_FAILURES",
            "FUNCTIONS", "COUNTS"]
 
 
@@ -87,6 +87,7 @@ KEEP = 384                                  # Functions kept per process (the ol
 FUNCTIONS = BoundedTable(KEEP)              # (namespace, structure..., policy) -> Function or Compiling
 COUNTS: dict[str, dict[str, int]] = {}      # namespace -> Functions built and found again (profiles, tests)
 _BROKEN: list[str] = []                     # why a background compile failed (later ones then stay interpreted)
+BACKGROUND_FAILURES = _BROKEN               # public view (read, or cleared by a test that plants a failure)
 _LOCK = threading.Lock()
 
 
@@ -216,7 +217,9 @@ def record_loop(step: ca.Function, memory: Sequence[str], jit) -> NativeFold | N
     policy = JitPolicy.of(jit)
     if policy is JitPolicy.OFF:
         return None
-    key = ("record-loop", _digest(step, memory), policy)
+    from ._cache import cache_dir
+
+    key = ("record-loop", _digest(step, memory), str(cache_dir()), policy)    # each cache folder gets its copy
     entry = FUNCTIONS.get(key)
     if isinstance(entry, NativeFold):
         return entry
