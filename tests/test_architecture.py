@@ -43,8 +43,6 @@ PACKAGE_INTERNAL = {
     ("casship.identify.crossval", "_kwargs"):
         "cross-validation rebuilds a problem of the same class with the same settings on other records",
     ("casship.identify.mle", "_value_raw"): "the likelihood engine's unscaled value for the MLE problem",
-    ("casship.identify.mle", "_chunk"): "the record folds' chunk size of identify._engine",
-    ("casship.identify.mle", "_pieces"): "the record folds' pieces of identify._engine",
     ("casship.maneuvers.runners", "_input_vector"): "the manoeuvres' input vector of maneuvers.inputs",
     ("casship.models.lowspeed", "_param"): "the ship models' parameter declaration of models.mmg",
     ("casship.models.wind_fourier", "_lib"): "casadi-or-numpy choice of the wind-load formulas in models.wind",

@@ -63,22 +63,22 @@ except ImportError:
 __all__ = ["compile_function", "cached_function", "cache_dir", "cache_key", "remove_leftovers"]
 
 _ENV_DIR = ENV_CACHE
-_BUILD = "casship-cc-"                      # build folders: casship-cc-<key>-<pid> (leftovers of a killed process)
+BUILD_PREFIX = "casship-cc-"                      # build folders: casship-cc-<key>-<pid> (leftovers of a killed process)
 _OFF = ("off", "0", "no", "false", "none")
 # compiled Functions loaded by this process, by (key, folder); weak: a Function nobody uses is let go
-_LOADED: "weakref.WeakValueDictionary[tuple, ca.Function]" = weakref.WeakValueDictionary()
+LOADED: "weakref.WeakValueDictionary[tuple, ca.Function]" = weakref.WeakValueDictionary()
 _LIBRARY_OF: dict[tuple, Path] = {}        # the library file of each of them
 _LIBRARIES: dict[str, ctypes.CDLL] = {}     # ctypes handles of libraries with extra source (never closed)
-_REFUSED: dict[Path, str] = {}              # folders not used by this process, and why (warned once)
+REFUSED: dict[Path, str] = {}              # folders not used by this process, and why (warned once)
 _SWEPT: set = set()                         # folders whose leftovers this process has removed
-_LOCK = threading.RLock()
+PROCESS_LOCK = threading.RLock()
 
 
 def _new_lock_after_fork() -> None:
     """A forked child gets a lock of its own: one held by a compiling thread of the parent would
     never be released there (that thread does not exist in the child)."""
-    global _LOCK
-    _LOCK = threading.RLock()
+    global PROCESS_LOCK
+    PROCESS_LOCK = threading.RLock()
 
 
 if hasattr(os, "register_at_fork"):
@@ -129,7 +129,7 @@ def _not_private(st: os.stat_result) -> str | None:
     return None
 
 
-def _folder_problem(folder: Path, create: bool) -> str | None:
+def folder_problem(folder: Path, create: bool) -> str | None:
     """Why ``folder`` cannot hold the cache (created with mode 0700 if asked), or None."""
     try:
         if create:
@@ -146,8 +146,8 @@ def _folder_problem(folder: Path, create: bool) -> str | None:
 
 def _refuse(folder: Path, why: str) -> None:
     """Stop using ``folder`` in this process, with one warning."""
-    if folder not in _REFUSED:
-        _REFUSED[folder] = why
+    if folder not in REFUSED:
+        REFUSED[folder] = why
         warnings.warn(f"casship compile cache {folder} is not used: {why}; compiled code goes to private "
                       f"temporary folders and is not kept (use a folder of your own with mode 700, e.g. "
                       f"chmod 700 it if it is yours, or set {_ENV_DIR})", RuntimeWarning, stacklevel=4)
@@ -156,9 +156,9 @@ def _refuse(folder: Path, why: str) -> None:
 def _usable_folder(path) -> Path | None:
     """The cache folder to use now (created if needed), or None: caching off, or the folder refused."""
     folder = cache_dir(path)
-    if folder is None or folder in _REFUSED:
+    if folder is None or folder in REFUSED:
         return None
-    why = _folder_problem(folder, create=True)
+    why = folder_problem(folder, create=True)
     if why is not None:
         _refuse(folder, why)
         return None
@@ -179,10 +179,10 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _build_owner(name: str) -> tuple[str, int] | None:
+def build_owner(name: str) -> tuple[str, int] | None:
     """``(key, pid)`` of a build folder named ``casship-cc-<key>-<pid>``, else None."""
-    parts = name[len(_BUILD):].split("-") if name.startswith(_BUILD) else []
-    if len(parts) != 2 or not _is_key(parts[0]) or not parts[1].isdigit():
+    parts = name[len(BUILD_PREFIX):].split("-") if name.startswith(BUILD_PREFIX) else []
+    if len(parts) != 2 or not is_key(parts[0]) or not parts[1].isdigit():
         return None
     return parts[0], int(parts[1])
 
@@ -195,7 +195,7 @@ def remove_leftovers(folder: Path) -> int:
     except OSError:
         return 0
     for f in entries:
-        owner = _build_owner(f.name)
+        owner = build_owner(f.name)
         if owner is not None and f.is_dir() and not _alive(owner[1]):
             shutil.rmtree(f, ignore_errors=True)
             removed += 1
@@ -374,7 +374,7 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     except CompileError as exc:
         raise CompileError(f"compiling {fun.name()!r} to C: {exc}") from None
     flags = chosen_flags(flags)
-    with _LOCK:
+    with PROCESS_LOCK:
         folder = _usable_folder(cache_dir) if cache else None
         loaded, lib = _compiled(fun, cc, flags, folder, extra_source)
     if lib is None:         # not under the process lock: other threads look up and load meanwhile
@@ -399,12 +399,12 @@ def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = Non
     except CompileError:
         return None
     flags = chosen_flags(flags)
-    if not _LOCK.acquire(blocking=False):
+    if not PROCESS_LOCK.acquire(blocking=False):
         return None
     try:
         loaded, lib = _compiled(fun, cc, flags, _usable_folder(None), extra_source)
     finally:
-        _LOCK.release()
+        PROCESS_LOCK.release()
     if loaded is None:
         return None
     return (loaded, _library(lib)) if library else loaded
@@ -413,7 +413,7 @@ def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = Non
 def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
     """``(Function, library path)`` already loaded by this process or in the cache, else ``(None, None)``."""
     key = cache_key(fun, cc, flags, extra_source)
-    loaded = _LOADED.get((key, folder))
+    loaded = LOADED.get((key, folder))
     if loaded is not None:
         return loaded, _LIBRARY_OF[key, folder]
     if folder is not None:
@@ -429,8 +429,8 @@ def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
 
 def _remember(hit: tuple, key: str, folder) -> tuple:
     loaded, lib = hit
-    with _LOCK:
-        _LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
+    with PROCESS_LOCK:
+        LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
     return loaded, lib
 
 
@@ -446,7 +446,7 @@ def _compile(fun, cc, flags, folder, extra_source) -> tuple:
             return _remember(hit, key, folder)
         except OSError as exc:                  # read-only, full, or locked too long
             _refuse(folder, f"writing into it failed ({exc})")
-    with tempfile.TemporaryDirectory(prefix=_BUILD, ignore_cleanup_errors=True) as tmp, building(tmp):
+    with tempfile.TemporaryDirectory(prefix=BUILD_PREFIX, ignore_cleanup_errors=True) as tmp, building(tmp):
         lib = build_library(fun, Path(tmp), f"f{key[:16]}", cc[0], flags, extra_source)
         loaded = _load(fun, lib)
         if loaded is None:
@@ -458,7 +458,7 @@ def _compile(fun, cc, flags, folder, extra_source) -> tuple:
 
 def _compile_into(fun, folder: Path, key: str, cc: tuple[str, str], flags, extra_source: str) -> tuple:
     t0 = time.perf_counter()
-    tmp = folder / f"{_BUILD}{key}-{os.getpid()}"       # named by key and process: see remove_leftovers
+    tmp = folder / f"{BUILD_PREFIX}{key}-{os.getpid()}"       # named by key and process: see remove_leftovers
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(mode=0o700)
     try:
@@ -485,5 +485,5 @@ def _build_into(fun, folder: Path, key: str, cc, flags, extra_source: str, tmp: 
     return loaded, lib
 
 
-def _is_key(stem: str) -> bool:
+def is_key(stem: str) -> bool:
     return len(stem) == 40 and all(c in "0123456789abcdef" for c in stem)

@@ -8,7 +8,8 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ._cache import (_BUILD, _LOADED, _LOCK, _REFUSED, _build_owner, _folder_problem, _is_key, cache_dir, fcntl)
+from . import _cache as cache
+from ._cache import BUILD_PREFIX, LOADED, REFUSED, build_owner, cache_dir, fcntl, folder_problem, is_key
 from ._compiler import SUFFIX, CompileError, find_compiler
 from ._settings import DEFAULT_FLAGS, ENV_CACHE, ENV_FLAGS, chosen_flags, compile_timeout
 
@@ -105,7 +106,7 @@ def cache_info(path: str | os.PathLike | None = None) -> CacheInfo:
     common = {"compiler": compiler, "flags": flags, "flags_note": note, "timeout": compile_timeout(), "paths": _PATHS}
     if folder is None:
         return CacheInfo(None, 0, 0, {}, **common)
-    refused = _REFUSED.get(folder) or _folder_problem(folder, create=False)
+    refused = REFUSED.get(folder) or folder_problem(folder, create=False)
     if refused or not folder.is_dir():
         return CacheInfo(folder, 0, 0, {}, refused=refused, **common)
     functions: dict[str, int] = {}
@@ -171,26 +172,26 @@ def clear_cache(path: str | os.PathLike | None = None) -> Cleared:
         The number of files removed (an ``int``), with ``busy``: the keys left alone.
     """
     folder = cache_dir(path)
-    if folder is None or not folder.is_dir() or _folder_problem(folder, create=False):
+    if folder is None or not folder.is_dir() or folder_problem(folder, create=False):
         return Cleared(0)
     removed, busy = 0, {}
-    with _LOCK:
+    with cache.PROCESS_LOCK:          # rebound in a forked child: read it here
         for f in sorted(folder.iterdir()):
-            if f.is_dir() and f.name.startswith(_BUILD):
-                owner = _build_owner(f.name)
+            if f.is_dir() and f.name.startswith(BUILD_PREFIX):
+                owner = build_owner(f.name)
                 if owner is not None and _busy(folder, owner[0]):
                     busy[owner[0]] = True
                     continue
                 shutil.rmtree(f, ignore_errors=True)
                 removed += 1
-            elif f.is_file() and f.suffix in (".json", SUFFIX) and _is_key(f.stem):
+            elif f.is_file() and f.suffix in (".json", SUFFIX) and is_key(f.stem):
                 if _busy(folder, f.stem):
                     busy[f.stem] = True
                     continue
                 f.unlink(missing_ok=True)
                 removed += 1
-        for k in [k for k in _LOADED.keys() if k[1] == folder]:
-            _LOADED.pop(k, None)
+        for k in [k for k in LOADED.keys() if k[1] == folder]:
+            LOADED.pop(k, None)
     out = Cleared(removed)
     out.busy = tuple(busy)
     return out
