@@ -119,6 +119,8 @@ def test_ctrl_c_during_a_compile_exits_130_at_once_with_no_build_folder(tmp_path
         _wait_for(lambda: _pids(pids) and _builds(cache), 60, "the compile to start")
         sent = time.monotonic()
         proc.send_signal(signal.SIGINT)
+        time.sleep(0.1)
+        proc.send_signal(signal.SIGINT)             # a second Ctrl-C while it cleans up changes nothing
         code = proc.wait(timeout=30)
         took = time.monotonic() - sent
         err = proc.stderr.read()
@@ -207,3 +209,23 @@ def test_cache_clear_leaves_another_process_compile_in_progress_alone(tmp_path):
     assert proc.returncode == 0, err
     assert "result [2, 4]" in out and "compilation terminated" not in err
     assert len(list(cache.glob("*.json"))) == 1 and _builds(cache) == []       # kept for the next process
+
+
+def test_an_error_raised_while_a_ctrl_c_unwinds_is_still_an_interrupt(monkeypatch, capsys):
+    """A library that turns the interrupt into another exception on its way out (as the rare
+    "internal error ... needed a message argument" did) gives exit 130, not an internal error."""
+    from casship.cli import cmd_cache, main
+
+    def interrupted_then_broken(args):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5)
+        except KeyboardInterrupt:
+            raise TypeError("needed a message argument") from None
+
+    monkeypatch.setattr(cmd_cache, "run", interrupted_then_broken)
+    before = signal.getsignal(signal.SIGINT)
+    assert main(["cache", "info"]) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "internal error" not in err
+    assert signal.getsignal(signal.SIGINT) is before             # the handler is put back after a call

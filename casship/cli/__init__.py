@@ -176,38 +176,62 @@ def main(argv: list[str] | None = None) -> int:
 
     interrupted = []
     previous = _on_interrupt(interrupted)
+    code = None
     try:
-        with warnings.catch_warnings():
-            warnings.showwarning = show
-            try:
-                return int(args.func(args) or 0)
-            except UsageError as exc:
-                return _usage(exc)
-            except KeyboardInterrupt:
-                return _interrupted(command)
-            except BrokenPipeError:
-                # the reader of the output went away (casship ... | head): nothing to report, as a tool
-                # that SIGPIPE stops; standard output is pointed at devnull so that its flush at exit is quiet
-                import os
-
-                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-                return 141
-            except Exception as exc:
-                if interrupted:         # an error raised while a Ctrl-C unwound the work: still an interrupt
-                    return _interrupted(command)
-                if getattr(args, "debug", False):
-                    raise
-                if is_user_error(exc):
-                    print(f"casship {command}: error: {_one_line(exc)}", file=sys.stderr)
-                    return 2
-                print(f"casship {command}: internal error (a bug in casship): {type(exc).__name__}: "
-                      f"{_one_line(exc)}; run it again with --debug for the traceback and report it", file=sys.stderr)
-                return 1
+        code = _run(args, command, show, interrupted)
+        return code
     finally:
         if previous is not None:
             # run as the program (no argv given): the result is out, the exit must not be interrupted
             # ("Exception ignored ... KeyboardInterrupt" and exit status 0); otherwise put it back
             signal.signal(signal.SIGINT, signal.SIG_IGN if argv_given is False else previous)
+        if code == 130 and argv_given is False:
+            _exit_now(code)
+
+
+def _exit_now(code: int) -> None:
+    """End the program at once after a Ctrl-C: the work is unwound and the compilers are stopped; the
+    interpreter's own teardown of a large numeric session can take seconds on a busy machine."""
+    import logging
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    logging.shutdown()
+    os._exit(code)
+
+
+def _run(args, command: str, show, interrupted: list) -> int:
+    """The command, its errors turned into exit codes (see :func:`main`)."""
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        try:
+            return int(args.func(args) or 0)
+        except UsageError as exc:
+            return _usage(exc)
+        except KeyboardInterrupt:
+            return _interrupted(command)
+        except BrokenPipeError:
+            # the reader of the output went away (casship ... | head): nothing to report, as a tool
+            # that SIGPIPE stops; standard output is pointed at devnull so that its flush at exit is quiet
+            import os
+
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141
+        except Exception as exc:
+            if interrupted:         # an error raised while a Ctrl-C unwound the work: still an interrupt
+                return _interrupted(command)
+            if getattr(args, "debug", False):
+                raise
+            if is_user_error(exc):
+                print(f"casship {command}: error: {_one_line(exc)}", file=sys.stderr)
+                return 2
+            print(f"casship {command}: internal error (a bug in casship): {type(exc).__name__}: "
+                  f"{_one_line(exc)}; run it again with --debug for the traceback and report it", file=sys.stderr)
+            return 1
 
 
 def _on_interrupt(seen: list):
