@@ -156,7 +156,7 @@ def test_ctrl_c_during_a_compile_in_the_calling_thread_stops_it_and_removes_its_
     finally:
         proc.kill()
     assert proc.returncode != 0 and "KeyboardInterrupt" in proc.stderr.read()
-    assert took < 2.0
+    assert took < 10.0          # a plain script: its own interpreter teardown (the CLI skips it, above)
     assert _builds(cache) == []
     _wait_for(lambda: all(_gone(p) for p in _pids(pids)), 5, "the compiler's process group to be stopped")
 
