@@ -140,22 +140,27 @@ class ReplayResult:
             lines.append(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
         return "\n".join(lines)
 
-    def plot(self, path=None):
+    def plot(self, ax=None, path=None):
         """Track, heading, surge speed and rudder of the replay against the record.
 
         Parameters
         ----------
+        ax : four matplotlib Axes, optional
+            Draw into these axes (track, heading, speed, rudder) instead of a new figure.
         path : str or Path, optional
-            Save the figure as PNG there (and close it); otherwise return it open.
+            Also write the figure there (PNG unless the suffix says otherwise).
 
         Returns
         -------
-        matplotlib.figure.Figure or Path
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting`.
         """
-        import matplotlib.pyplot as plt
+        from .plotting import finish, panels, split_args
 
+        ax, path = split_args(ax, path)
+        given = ax
         tr, data = self.trajectory, self.measured
-        fig, axes = plt.subplots(2, 2, figsize=(11, 7))
+        fig, axes = panels(ax, 2, 2, figsize=(11, 7), what="the replay plot")
         track, heading, speed, rudder = axes.ravel()
         if "x" in tr and "y" in tr:
             track.plot(tr["y"], tr["x"], label="replayed")
@@ -183,13 +188,9 @@ class ReplayResult:
             ax.grid(alpha=0.3)
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=8)
-        fig.suptitle(f"replay of the measured inputs with {tr.model_name!r} ({self.kind})")
-        fig.tight_layout()
-        if path is None:
-            return fig
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        return Path(path)
+        if given is None:
+            fig.suptitle(f"replay of the measured inputs with {tr.model_name!r} ({self.kind})")
+        return finish(fig, given, path)
 
 
     def _draw_bands(self, track, heading) -> None:
