@@ -94,7 +94,8 @@ def plot_design(L, path=None, title: str = "", closed=None, *, ax=None, schedule
     axes = axes.ravel()
     bode_axes = np.array([[axes[0]], [axes[1]]])
     w = _omega(L)
-    control.bode_plot(L, w, ax=bode_axes, display_margins=True, dB=True)
+    control.bode_plot(L, w, ax=bode_axes, display_margins=True, dB=True,
+                      **({"label": "design (scheduled at its speed)"} if schedule else {}))
     for d in schedule:
         g = d.gains
         control.bode_plot(d.loop, w, ax=bode_axes, dB=True,

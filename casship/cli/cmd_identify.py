@@ -3,21 +3,22 @@
 Examples::
 
     casship identify run1.csv run2.csv --model nomoto1 --free K,T --R psi=1e-4 --out fit.json
-    casship identify A.dat B.dat C.dat --model kvlcc2 --method oe --free N_r_dash,Y_v_dash,bias[n] \\
+    casship identify A.dat B.dat C.dat --model kvlcc2 --objective oe --free N_r_dash,Y_v_dash,bias[n] \\
         --share bias[n]=record --prior N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
         --identifiability --out fit.json --plot fit.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
 units, radians) or MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
-to the MMG convention). ``--method mle`` (default) maximises the likelihood through an EKF;
-``--method oe`` minimises the simulated output error. Every option maps onto the Python API
+to the MMG convention). ``--objective mle`` (default) maximises the likelihood through an EKF;
+``--objective oe`` minimises the simulated output error. Every option maps onto the Python API
 (:class:`casship.OutputErrorProblem`, :class:`casship.MLEProblem`).
 """
 from __future__ import annotations
 
 import warnings
 
+from ._vocabulary import add_deprecated_alias
 from ._common import (check_input_files, check_outputs, count, load_record, number, parse_items, parse_pairs, positive,
                       print_json, refuse_unused, write_output)
 from .cmd_filter import DEFAULT_Q
@@ -37,8 +38,10 @@ def register(sub) -> None:
                    help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
     p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out / --plot file")
-    p.add_argument("--method", default="mle", choices=("mle", "oe"),
-                   help="mle: likelihood through an EKF (default); oe: output error (simulation)")
+    p.add_argument("--objective", dest="method", default="mle", choices=("mle", "oe"),
+                   help="what the fit minimises: mle the negative log-likelihood through an EKF (default); oe the "
+                        "output error of a simulation")
+    add_deprecated_alias(p, "--method", "--objective", dest="method", choices=("mle", "oe"))
     p.add_argument("--measured", default=None, help="outputs to use a,b,... (default: outputs in every record)")
     p.add_argument("--share", default=None,
                    help="per-record or per-group quantities name=record|all|group,... (group: see --group)")
@@ -135,10 +138,10 @@ def run(args) -> int:
     if args.method == "oe":
         refuse_unused(args.parser, {"--R": args.R is not None, "--Q": args.Q is not None,
                                     "--estimate-noise": args.estimate_noise is not None},
-                      "--method oe weighs the output errors with --sigma (no filter, no noise covariances)")
+                      "--objective oe weighs the output errors with --sigma (no filter, no noise covariances)")
     else:
         refuse_unused(args.parser, {"--sigma": args.sigma is not None, "--shooting": args.shooting != "single"},
-                      "--method mle runs the likelihood through an EKF (no simulation weights or shooting)")
+                      "--objective mle runs the likelihood through an EKF (no simulation weights or shooting)")
     refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
                                 "--group": bool(args.group) and "=group" not in (args.share or "")},
                   "--prior-weight weighs a --prior; --group labels the records for --share NAME=group")

@@ -8,6 +8,7 @@ Examples::
 """
 from __future__ import annotations
 
+from ._vocabulary import add_deprecated_alias
 from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_input_files, check_outputs,
                       check_ship, level, load_model, load_record, print_json, refuse_unused, require, seed, whole,
                       write_output)
@@ -47,7 +48,9 @@ def register(sub) -> None:
     p.add_argument("--dt", type=float, default=None, help="time step [s] (default: L/U/400, rounded)")
     p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
     p.add_argument("--seed", type=seed, default=None, help="seed of the random rudder sequence (default 0)")
-    p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
+    p.add_argument("--integrator", dest="method", default="rk4", choices=("rk4", "euler", "cvodes"),
+                   help="how the model's equations are integrated in time")
+    add_deprecated_alias(p, "--method", "--integrator", dest="method", choices=("rk4", "euler", "cvodes"))
     p.add_argument("--params", default=None,
                    help='JSON file {"params": {name: value}} overriding parameters (a fit file rebuilds the '
                         'model variant it was fitted on)')
