@@ -22,6 +22,8 @@ RENAMED = {
                          ("autopilot",)),
     "--rudder-rate-deg": ("--rudder-rate-deg-s", ("design-trial",)),
     "--json": ("--json-file", ("bench",)),
+    "--prior": ("--prior-std", ("identify",)),
+    "--t-end": ("--duration", ("autopilot",)),
 }
 
 

@@ -80,7 +80,9 @@ def register(sub) -> None:
     p.add_argument("--waypoints", nargs="+", default=None, metavar="N_M,E_M",
                    help="track scenario: waypoints North,East [m] (default: a dog-leg of two 90 deg turns with legs of "
                         "12 LOS lookahead distances, LOSGuidance.for_design)")
-    p.add_argument("--t-end", type=float, default=None, help="duration [s] (default: two segments, see --segment)")
+    p.add_argument("--duration", dest="t_end", type=float, default=None,
+                   help="simulated time [s] (default: two segments, see --segment; track: the path once and a fifth)")
+    add_deprecated_alias(p, "--t-end", "--duration", dest="t_end", type=float)
     for name, (unit, rule) in RULES.items():
         if name in _SKIP:
             continue

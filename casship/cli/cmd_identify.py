@@ -4,7 +4,7 @@ Examples::
 
     casship identify run1.csv run2.csv --model nomoto1 --free K,T --R psi=1e-4 --out fit.json
     casship identify A.dat B.dat C.dat --model kvlcc2 --objective oe --free N_r_dash,Y_v_dash,bias[n] \\
-        --share bias[n]=record --prior N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
+        --share bias[n]=record --prior-std N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
         --identifiability --out fit.json --plot fit.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
@@ -46,8 +46,9 @@ def register(sub) -> None:
     p.add_argument("--share", default=None,
                    help="per-record or per-group quantities name=record|all|group,... (group: see --group)")
     p.add_argument("--group", default=None, help="one group label per record A,A,B,... (for --share name=group)")
-    p.add_argument("--prior", default=None,
+    p.add_argument("--prior-std", dest="prior", default=None,
                    help="Gaussian prior standard deviations name=std,... centred on the published values (MAP)")
+    add_deprecated_alias(p, "--prior", "--prior-std", dest="prior")
     p.add_argument("--prior-weight", dest="prior_weight", type=positive, default=1.0, help="weight of the prior")
     p.add_argument("--bounds", default=None, help="bounds name=lower:upper,...")
     p.add_argument("--R", default=None, help="measurement variances name=value,... (mle; default: estimated)")
@@ -99,7 +100,7 @@ def _problem(args, model, records, free, measured):
     groups = {"group": labels} if labels else None
     if any(h == "group" for h in share.values()) and not labels:
         raise ValueError("--share name=group needs --group with one label per record")
-    prior = Prior(parse_pairs(args.prior, "--prior"), weight=args.prior_weight) if args.prior else None
+    prior = Prior(parse_pairs(args.prior, "--prior-std"), weight=args.prior_weight) if args.prior else None
     params = read_params(args.params, model)[1] if args.params else None
     common = dict(share=share or None, groups=groups, prior=prior, params=params, bounds=_bounds(args.bounds) or None,
                   estimate_x0=parse_items(args.estimate_x0, "--estimate-x0"))
@@ -144,7 +145,7 @@ def run(args) -> int:
                       "--objective mle runs the likelihood through an EKF (no simulation weights or shooting)")
     refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
                                 "--group": bool(args.group) and "=group" not in (args.share or "")},
-                  "--prior-weight weighs a --prior; --group labels the records for --share NAME=group")
+                  "--prior-weight weighs a --prior-std; --group labels the records for --share NAME=group")
     check_input_files({"--params": args.params})
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
