@@ -24,7 +24,7 @@ from .maneuvers import execute_time, turning_metrics, zigzag_metrics
 from .model import Model
 from .simulate import simulate, simulate_many
 
-__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics"]
+__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent"]
 
 
 @dataclass
@@ -64,6 +64,10 @@ class ReplayResult:
     not_compared : list of str
         Columns of the record that the replay cannot be compared with, the model having no such
         state or output (``x, y, u`` of a Nomoto model).
+    metric_notes : dict
+        Metric -> why it is missing on one side (``"measured: ..."`` or ``"replayed: ..."``): the
+        manoeuvre did not reach it in that record (:func:`why_absent`), or its metrics could not be
+        taken at all (the reason the metric function gave).
     """
 
     trajectory: Trajectory
@@ -77,6 +81,7 @@ class ReplayResult:
     sampling: dict = field(default_factory=dict)
     start: dict = field(default_factory=dict)
     not_compared: list = field(default_factory=list)
+    metric_notes: dict = field(default_factory=dict)
 
     def band_summary(self) -> dict:
         """Scalar summary of the bands (JSON-friendly): level, largest and final half-widths of the
@@ -136,6 +141,7 @@ class ReplayResult:
                          + (f"  {100 * self.bands['level']:.0f} % interval" if iv else ""))
             lines += [f"  {k:28s} {self.metrics[k]:12.2f} {self.measured_metrics[k]:12.2f}"
                       + (f"  [{iv[k][0]:.2f}, {iv[k][1]:.2f}]" if k in iv else "") for k in keys]
+        lines += [f"  {k:28s} not compared: {why}" for k, why in self.metric_notes.items()]
         for k, v in self.band_summary().items():
             lines.append(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
         return "\n".join(lines)
@@ -261,6 +267,69 @@ def classify_maneuver(data: Dataset, rudder: str = "delta") -> tuple[str, dict]:
     return "other", {}
 
 
+#: why a manoeuvre metric is absent from a record: what the manoeuvre did not reach (see
+#: :func:`casship.maneuvers.zigzag_metrics`, :func:`casship.maneuvers.turning_metrics`)
+_ABSENT = {
+    "initial_turning": "the heading never reaches the switch heading",
+    "period_s": "the heading crosses the switch heading fewer than three times (three rudder reversals)",
+    "advance": "the heading never changes by 90 deg",
+    "transfer": "the heading never changes by 90 deg",
+    "tactical_diameter": "the heading never changes by 180 deg",
+}
+
+
+def why_absent(key: str) -> str:
+    """Why a manoeuvre metric is absent from a record, in words.
+
+    Parameters
+    ----------
+    key : str
+        The metric (``overshoot_2_deg``, ``period_s``, ``tactical_diameter_m``...).
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> why_absent("overshoot_2_deg")
+    'the record ends before the heading turns back after the 2nd overshoot'
+    """
+    import re
+
+    m = re.match(r"overshoot_(\d)_", key)
+    if m:
+        k = int(m.group(1))
+        return f"the record ends before the heading turns back after the {k}{ {1: 'st', 2: 'nd', 3: 'rd'}.get(k, 'th')} overshoot"
+    for prefix, why in _ABSENT.items():
+        if key.startswith(prefix):
+            return why
+    return "not reached in this record"
+
+
+def _metrics_and_reason(data, kind, options, *, t_exec, L) -> tuple[dict, str | None]:
+    """:func:`maneuver_metrics` with the reason when none could be taken."""
+    try:
+        if kind == "turning":
+            return turning_metrics(data, t_exec=t_exec, L=L), None
+        if kind == "zigzag":
+            return zigzag_metrics(data, options["heading_deg"], t_exec=t_exec, L=L), None
+    except ValueError as exc:
+        return {}, str(exc)
+    return {}, None
+
+
+def _metric_notes(replayed: dict, measured: dict, reasons: dict) -> dict:
+    """Metric -> why it is on one side only (numbers only: ``first_side`` and the like are labels)."""
+    notes = {}
+    for key in sorted(set(replayed) ^ set(measured), key=lambda k: list({**replayed, **measured}).index(k)):
+        if not isinstance({**replayed, **measured}[key], float) or key.endswith("_time_s"):
+            continue
+        side = "measured" if key in replayed else "replayed"
+        notes[key] = f"{side}: {reasons.get(side) or why_absent(key)}"
+    return notes
+
+
 def maneuver_metrics(data: Dataset, kind: str, options: dict, *, t_exec: float, L: float | None) -> dict:
     """Metrics of ``kind`` (see :func:`classify_maneuver`) for a record, or ``{}`` if not defined.
 
@@ -366,10 +435,13 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     metrics, measured = {}, {}
     L = model.vessel.L_pp if model.vessel is not None else None
     t_exec = execute_time(data) if kind != "other" else None
+    notes = {}
     if kind != "other":
-        metrics = maneuver_metrics(traj, kind, options, t_exec=t_exec, L=L)
-        measured = maneuver_metrics(data, kind, options, t_exec=t_exec, L=L)
-    result = ReplayResult(traj, errors, metrics, measured, kind, data, start=start, not_compared=not_compared)
+        metrics, why_replayed = _metrics_and_reason(traj, kind, options, t_exec=t_exec, L=L)
+        measured, why_measured = _metrics_and_reason(data, kind, options, t_exec=t_exec, L=L)
+        notes = _metric_notes(metrics, measured, {"replayed": why_replayed, "measured": why_measured})
+    result = ReplayResult(traj, errors, metrics, measured, kind, data, start=start, not_compared=not_compared,
+                          metric_notes=notes)
     if uncertainty is not None:
         _add_uncertainty(result, model, traj, data, uncertainty, level, samples, seed, method, max_step, jit,
                          lambda tr: maneuver_metrics(tr, kind, options, t_exec=t_exec, L=L) if kind != "other" else {})

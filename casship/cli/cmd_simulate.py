@@ -121,7 +121,8 @@ def run(args) -> int:
         traj = res.trajectory
         out.update({"maneuver": f"replay ({res.kind})", "inputs": str(args.inputs), "replay": res.errors,
                     "start": res.start, "not_compared": res.not_compared,
-                    "metrics": res.metrics, "measured_metrics": res.measured_metrics})
+                    "metrics": res.metrics, "measured_metrics": res.measured_metrics,
+                    "metric_notes": res.metric_notes})
         notes = res.start_notes()
         if res.bands:
             out.update({"bands": res.band_summary(), "metric_intervals": res.metric_intervals,
@@ -211,6 +212,8 @@ def _print_text(out, notes=()) -> None:
             meas = (f" {measured[k]:12.2f}" if k in measured else f" {'-':>12s}") if measured else ""
             iv = f"  [{intervals[k][0]:.2f}, {intervals[k][1]:.2f}]" if k in intervals else ""
             print(f"  {k:28s} {sim}{meas}{iv}")
+        for k, why in out.get("metric_notes", {}).items():         # a "-" above says why here
+            print(f"  {k:28s} not compared: {why}")
     for k, v in out.get("bands", {}).items():
         print(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
     if "spiral" in metrics:

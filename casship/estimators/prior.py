@@ -36,7 +36,7 @@ TRACK_POSITIONS = (("x", "y"), ("x_n", "y_n"), ("lat", "lon"))
 _TRACK_ANGLE_VAR = np.radians(20.0) ** 2         # a course from a few seconds of track: +-20 deg
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)     # Gaussian's repr: names, values, angles in degrees
 class DataPrior(Gaussian):
     """A :class:`~casship.Gaussian` taken from a record, with where each state's value came from.
 
@@ -193,7 +193,8 @@ def prior_from_data(model, data: Dataset, *, measured: Sequence[str] = (), R=Non
                 sources[name] = f"rate of column 'psi' (first {window:g} s)"
                 continue
         sources[name] = "0 (default)"
-    return DataPrior(mean, cov, names=names, sources=sources)
+    units = tuple(getattr(v, "unit", "") for v in getattr(model, "state_vars", ()))
+    return DataPrior(mean, cov, names=names, units=units if len(units) == len(names) else (), sources=sources)
 
 
 def second_difference_std(y, angle: bool = False) -> float | None:
