@@ -140,3 +140,42 @@ def test_nothing_in_casship_switches_the_backend():
     pattern = re.compile(r"\b(matplotlib|mpl)\s*\.\s*use\s*\(|switch_backend\s*\(|plt\.close\(")
     hits = [str(p.relative_to(root)) for p in root.rglob("*.py") if pattern.search(p.read_text())]
     assert not hits, hits
+
+
+def test_design_result(tmp_path):
+    from casship.design import Approach, ParameterBelief, design_trials, standard_trials
+    from casship.models import kvlcc2
+
+    m = kvlcc2()
+    belief = ParameterBelief.from_std({"N_r_dash": 0.01, "N_v_dash": 0.03}, m.param_dict())
+    approach = Approach(m, m.params(), dt=4.0)
+    turns = standard_trials(approach, turning=(35.0,), zigzag=(), pullout=(), spiral=False,
+                            durations={"turning": 15.0})
+    res = design_trials(m, belief, {"psi": np.radians(0.2)}, "tactical_diameter", dt=4.0, candidates=turns)
+    fig = _check(lambda **kw: res.plot(**kw), tmp_path, "design", n_axes=1)
+    bars = fig.axes[0].patches
+    assert len(bars) == 2                                    # one bar per trial
+    both = res.plot(approach=approach)                       # with the best trial's rudder, track, speed
+    assert len(both.axes) == 4
+    assert res.plot(tmp_path / "old.png", approach).is_file()        # the earlier plot(path, approach)
+
+
+def test_cross_validation_figures(tmp_path):
+    from casship.identify import OutputErrorProblem, cross_validate
+
+    truth = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    runs = []
+    for i in range(2):
+        t = np.arange(0, 200.0, 1.0)
+        tr = cs.simulate(truth, truth.states(), t, {"delta": 0.1 * np.sign(np.sin(2 * np.pi * t / (90 + 20 * i)))})
+        d = cs.measure(tr, truth, {"psi": 0.005}, seed=i)
+        d.meta.update(name=f"run {i}")
+        runs.append(d)
+    cv = cross_validate(OutputErrorProblem(cs.models.nomoto_first_order(), runs, free=["K", "T"],
+                                           sigma={"psi": 0.005}))
+    figs = cv.plot()
+    assert len(figs) == 2 and all(isinstance(f, Figure) for f in figs)
+    paths = cv.plot(tmp_path / "cv")
+    assert [p.read_bytes()[:8] for p in paths] == [PNG, PNG]
+    axes = Figure().subplots(1, 3)
+    assert cv.plot(records=["run 1"], ax=axes) == [axes]
