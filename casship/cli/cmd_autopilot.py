@@ -276,6 +276,22 @@ def _track_summary(res) -> dict:
             **cross_track_metrics(d), "track_deviation_max_m": float(np.max(track_deviation(d, g)))}
 
 
+def _shown(name: str, value, moment: bool) -> str:
+    """A setting as people read it: angles and turn rates in degrees, other numbers with their unit."""
+    import numpy as np
+
+    from ..autopilot.defaults import RULES
+
+    unit = RULES.get(name, ("", ""))[0]
+    if name in _STEERING:
+        unit = unit.split(" or ")[1 if moment else 0]
+    if not isinstance(value, float) or not unit or " " in unit.replace("N m", "Nm"):
+        return str(value)
+    if unit.split("/")[0] == "rad" and name not in ("wn", "wn_ref"):     # wn: an angular frequency
+        return f"{np.degrees(value):.6g} deg{unit[3:]}"
+    return f"{value:.6g} {unit}"
+
+
 def _db(value: float) -> str:
     """A gain margin in dB; beyond 100 dB either way it bounds nothing in practice."""
     if value != value:
@@ -314,8 +330,9 @@ def run(args) -> int:
         if args.json:
             print_json({"model": args.model, "settings": rows})
         else:
+            moment = design.plant.steer == "tau_N"
             for k, row in rows.items():
-                print(f"{k:>15} = {row['value']!s:<40} ({row['source']})")
+                print(f"{k:>15} = {_shown(k, row['value'], moment):<40} ({row['source']})")
         return 0
     controller = ap.mpc_for_design(design) if args.controller == "mpc" else None
     if args.scenario == "track":
