@@ -24,7 +24,19 @@ __all__ = ["split_args", "panels", "finish"]
 
 
 def split_args(ax, path):
-    """``(ax, path)`` with a path given in the place of ``ax`` moved to ``path``."""
+    """``(ax, path)`` with a path given in the place of ``ax`` moved to ``path``.
+
+    Parameters
+    ----------
+    ax : Axes, array of Axes, str, Path or None
+        What the caller passed first.
+    path : str or Path or None
+
+    Returns
+    -------
+    tuple
+        ``(ax, path)``.
+    """
     if isinstance(ax, (str, os.PathLike)):
         if path is not None:
             raise InputError(f"plot: two paths given ({ax!r} and {path!r})")

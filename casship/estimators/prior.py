@@ -46,6 +46,8 @@ class DataPrior(Gaussian):
         As for :class:`~casship.Gaussian`.
     names : tuple of str
         The state names.
+    units : tuple of str
+        Their units (angles are shown in degrees).
     sources : dict
         State name -> where its value came from (``"given"``, ``"first sample of column 'psi'"``,
         ``"speed over ground of the track (first 5 s)"``, ``"0 (default)"``, ...).
