@@ -38,7 +38,7 @@ from typing import Iterable, Iterator, TypeVar
 
 from tqdm.auto import tqdm
 
-__all__ = ["progress", "track", "bar", "enabled", "activity", "mode", "interval", "set_quiet"]
+__all__ = ["progress", "track", "bar", "enabled", "activity", "command", "stage", "mode", "interval", "set_quiet"]
 
 T = TypeVar("T")
 
@@ -136,7 +136,7 @@ class _Lines:
 
     def __init__(self, total, label: str, unit: str, stream):
         self.total, self.desc, self.label, self.unit, self.stream = total, label, label, unit, stream
-        self.n, self.postfix = 0, ""
+        self.n, self.postfix, self.eta = 0, "", True
         self.start = time.monotonic()
         self.disable = False
         _REPORTER.add(self)
@@ -170,7 +170,7 @@ class _Lines:
             frac = min(max(self.n / total, 0.0), 1.0)
             text += f": {self.n}/{total} {self.unit}{'s' if total != 1 and self.unit != 'it' else ''} ({100 * frac:.0f} %)"
             text += f", {_clock(elapsed)} elapsed"
-            if 0 < frac < 1:
+            if 0 < frac < 1 and self.eta:
                 text += f", ETA ~{_clock(elapsed * (1 - frac) / frac)}"
         else:
             text += (f": {self.n} {self.unit}" if self.n else "") + f"{',' if self.n else ':'} {_clock(elapsed)} elapsed"
@@ -234,7 +234,9 @@ class _Reporter:
                     self._thread = None
                     return
                 now = time.monotonic()
-                self._write(self._bars[0].stream, "casship: " + " | ".join(b.line(now) for b in self._bars))
+                # a command's own line without a stage adds nothing beside the bars of its work
+                shown = [b for b in self._bars if not (b is _COMMAND and b.total is None and len(self._bars) > 1)]
+                self._write(self._bars[0].stream, "casship: " + " | ".join(b.line(now) for b in shown))
                 self._wrote = True
 
 
@@ -334,6 +336,57 @@ def progress(stages: Iterable[str], label: str, stream=None) -> Iterator[None]:
         b.set_description_str(f"{label} [{total}/{total}] done", refresh=False)
         b.n = total
         b.refresh()
+
+
+@contextmanager
+def command(label: str, *, stream=None) -> Iterator[None]:
+    """The whole of a command-line run, reported only as lines (when standard error is not a
+    terminal): a long command says it is still at work even in phases without a bar of their own,
+    and its inner bars are appended to the same line.
+
+    Parameters
+    ----------
+    label : str
+        The command (e.g. ``"identify"``).
+    stream : file-like, optional
+        Where to write (standard error by default).
+
+    Yields
+    ------
+    None
+    """
+    global _COMMAND
+    stream = stream or sys.stderr
+    if mode(stream) != "lines":
+        yield
+        return
+    with _Lines(None, label, "stage", stream) as line:
+        line.eta = False            # stages of a command are not of equal length: no time left from them
+        _COMMAND = line
+        try:
+            yield
+        finally:
+            _COMMAND = None
+
+
+def stage(name: str, index: int, total: int) -> None:
+    """Name the stage a command-line run is in (shown by the lines of :func:`command`).
+
+    Parameters
+    ----------
+    name : str
+        The stage (e.g. ``"fitting"``).
+    index : int
+        Its number, from 1.
+    total : int
+        The number of stages.
+    """
+    line = _COMMAND
+    if line is not None:
+        line.desc, line.n, line.total = f"{line.label} [{index}/{total}] {name}", index - 1, total
+
+
+_COMMAND = None
 
 
 @contextmanager

@@ -98,3 +98,17 @@ def test_quiet_silences_the_command(tmp_path, monkeypatch, capsys):
     assert main([*COMMAND, "--quiet"]) == 0
     err = capsys.readouterr().err
     assert not [x for x in err.splitlines() if LINE.match(x)], err
+
+
+def test_a_command_names_its_stage_and_appends_its_bars(piped):
+    from casship.progress import command, stage
+
+    with command("identify", stream=piped):
+        stage("fitting", 3, 4)
+        with bar(None, "fit", unit="iter", stream=piped) as b:
+            b.update(7)
+            time.sleep(0.25)
+    lines = piped.getvalue().splitlines()
+    assert lines[0].startswith("casship: identify [3/4] fitting: 2/4 stages (50 %), 0:00 elapsed | fit: 7 iter"), lines
+    assert "ETA" not in lines[0]                     # stages of unequal length give no time left
+    assert lines[-1].startswith("casship: identify: done in")

@@ -175,7 +175,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"casship {command}: warning: {_one_line(message) if isinstance(message, Warning) else message}",
               file=sys.stderr)
 
-    with warnings.catch_warnings():
+    from ..progress import command as command_progress
+
+    with warnings.catch_warnings(), command_progress(command):
         warnings.showwarning = show
         try:
             return int(args.func(args) or 0)

@@ -135,6 +135,7 @@ def _problem(args, model, records, free, measured):
 def run(args) -> int:
     from ..errors import InputError
     from ..models import get_model
+    from ..progress import stage
 
     if args.method == "oe":
         refuse_unused(args.parser, {"--R": args.R is not None, "--Q": args.Q is not None,
@@ -149,6 +150,7 @@ def run(args) -> int:
     check_input_files({"--params": args.params})
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
+    stage("reading the records", 1, 4)
     records = [load_record(p, model, wrap_angles=True).decimate(args.decimate) for p in args.data]
     free = parse_items(args.free, "--free")
     if not free:
@@ -157,6 +159,7 @@ def run(args) -> int:
                 else [n for n in model.output_names if all(n in d for d in records)])
     if not measured:
         raise InputError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
+    stage("building the problem", 2, 4)
     prob = _problem(args, model, records, free, measured)
     guess = parse_pairs(args.guess, "--guess")
     if args.identifiability:
@@ -166,10 +169,12 @@ def run(args) -> int:
               f"{idf.propose()}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
+        stage("fitting", 3, 4)
         fit = prob.solve(guess=guess, max_iter=args.max_iter)
     for w in caught:            # the fit's own warnings are printed once, with the fit
         if not any(str(w.message).endswith(text) for text in fit.warnings):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    stage("writing", 4, 4)
     write_output(args.out, fit.to_json, option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
         write_output(args.plot, fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
