@@ -478,7 +478,7 @@ def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, metho
             return [tr if isinstance(tr, Exception) else _outcome(metrics_of, tr) for tr in runs]
         s = sampled_metrics(run, unc.sample(model, p, samples, seed), level, batch=True)
         result.metric_intervals = s["intervals"]
-        check = {"samples": s["samples"], "failed": s["failed"]}
+        check = {"samples": s["samples"], "failed": s["failed"], "failures": s["failures"]}
         if s["psi_std"] is not None and "psi_std" in bands:
             lin = bands["psi_std"]
             check["psi_std_ratio_sampled_to_linear"] = float(np.sqrt(np.sum(s["psi_std"] ** 2) / max(np.sum(lin ** 2), 1e-300)))

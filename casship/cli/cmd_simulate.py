@@ -184,6 +184,7 @@ def _maneuver_intervals(simulate_with, model, p, unc, samples: int, seed: int, l
 
     s = sampled_metrics(run, unc.sample(model, p, samples, seed), level)
     return {"metric_intervals": s["intervals"], "sampling": {"samples": s["samples"], "failed": s["failed"],
+                                                             "failures": s["failures"],
                                                              "level": level, "source": unc.source}}
 
 
@@ -214,6 +215,9 @@ def _print_text(out, notes=()) -> None:
             print(f"  {k:28s} {sim}{meas}{iv}")
         for k, why in out.get("metric_notes", {}).items():         # a "-" above says why here
             print(f"  {k:28s} not compared: {why}")
+    sampling = out.get("sampling", {})
+    for why, n in sampling.get("failures", {}).items():          # intervals from the draws that ran
+        print(f"  {n} of {sampling['samples']} parameter draws failed (left out of the intervals): {why}")
     for k, v in out.get("bands", {}).items():
         print(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
     if "spiral" in metrics:
