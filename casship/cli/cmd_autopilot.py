@@ -160,7 +160,6 @@ def settings_from_args(args) -> dict:
     import numpy as np
 
     from ..autopilot.defaults import RULES
-
     from ..errors import InputError
 
     out = {}
@@ -352,8 +351,9 @@ def run(args) -> int:
     if design.schedule:
         out["schedule_speeds_m_s"] = list(design.autopilot.speeds)
         out["schedule"] = _schedule_rows(design)
-    if res.guidance is not None:
+    if res.guidance is not None:            # the course command moves with the guidance: no course changes to score
         out["track"] = _track_summary(res)
+        del out["metrics"], out["course_changes"]
     out["controller"] = "mpc" if controller is not None else res.controller
     if controller is not None:
         out["mpc"] = {"period_s": controller.period, "horizon": int(controller.horizon), "solver": "hpipm"}
@@ -398,6 +398,9 @@ def run(args) -> int:
               f"through {len(tr['waypoints_north_m'])} waypoints: reached leg {tr['legs_reached']} of {tr['legs']}; "
               f"cross-track error RMS {tr['cross_track_rms_m']:.3g} m, max {tr['cross_track_max_m']:.3g} m; "
               f"off the intended track at most {tr['track_deviation_max_m']:.3g} m")
+        print(f"steering travel {res.performance['steer_travel_per_hour'] * sc:.4g} {steer_unit}/h beside the rate "
+              f"limit active {res.performance['rate_limited_fraction']:.3f} of the time (the course-change checks "
+              "do not apply: the command follows the track)")
         return 0
     print(f"{'segment':>8} {'target':>7} {'rise s':>8} {'over %':>7} {'over deg':>9} {'settle s':>9} {'ss err':>7} "
           f"{'max steer':>10} {'rate lim':>9}  (target, errors in deg; steering in {steer_unit})")
