@@ -1,8 +1,9 @@
 """The one contract of every ``plot`` in casship: ``plot(ax=None, path=None, ...)``.
 
 * no ``ax``, no ``path``: a new :class:`matplotlib.figure.Figure` is drawn and returned. It is not
-  held by ``pyplot`` (nothing to close, no backend chosen or switched): a notebook shows the
-  returned figure once, a script saves it (``fig.savefig``) or passes its own axes;
+  held by ``pyplot`` (nothing to close, no backend chosen or switched) and shows itself as PNG
+  (``_repr_png_``): a notebook shows the returned figure once, whether or not ``pyplot`` was
+  imported; a script saves it (``fig.savefig``) or passes its own axes;
 * ``ax``: the panels are drawn into the caller's axes (one ``Axes``, or as many as the figure has
   panels) and those axes are returned, so the figure can be composed with others and shown by
   ``plt.show()``;
@@ -14,13 +15,25 @@ A path given in the place of ``ax`` (the earlier ``plot(path)``) is taken as the
 from __future__ import annotations
 
 import os
+from io import BytesIO
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from .errors import InputError
 
-__all__ = ["split_args", "panels", "finish"]
+__all__ = ["ShownFigure", "split_args", "panels", "finish"]
+
+
+class ShownFigure(Figure):
+    """A figure that a notebook shows as PNG when it is the value of a cell (IPython's
+    ``_repr_png_``), without ``pyplot``: shown once, never twice."""
+
+    def _repr_png_(self) -> bytes:
+        buf = BytesIO()
+        self.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+        return buf.getvalue()
 
 
 def split_args(ax, path):
@@ -66,9 +79,7 @@ def panels(ax, nrows: int, ncols: int, *, figsize, what: str, **subplot_kw):
     axes : numpy.ndarray of Axes, shape (nrows, ncols)
     """
     if ax is None:
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=figsize)
+        fig = ShownFigure(figsize=figsize)
         axes = fig.subplots(nrows, ncols, squeeze=False, **subplot_kw)
         return fig, axes
     axes = np.asarray(ax, dtype=object).ravel()

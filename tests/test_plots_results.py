@@ -20,6 +20,7 @@ def _check(plot, tmp_path, name, n_axes=None):
     fig = plot()
     assert isinstance(fig, Figure), type(fig)
     assert fig.axes, "an empty figure"
+    assert fig._repr_png_()[:8] == PNG              # what a notebook shows, without pyplot
     labelled = [a for a in fig.axes if a.get_xlabel() or a.get_ylabel()]
     assert labelled, "no axis labels"
     out = plot(path=tmp_path / f"{name}.png")
