@@ -52,6 +52,22 @@ def test_trajectory_of_a_ship_draws_track_and_heading(ship_run, tmp_path):
     assert "deg" in heading.get_ylabel()
 
 
+def test_maneuver_result_and_augmented_result(ship_run, tmp_path):
+    from casship.estimators import augmented_ekf
+
+    ship = cs.models.get_model("kvlcc2")
+    man = cs.maneuvers.run_maneuver(ship, "turning", rudder_deg=35, duration=200, dt=1.0)
+    fig = _check(lambda **kw: man.plot(**kw), tmp_path, "man", n_axes=2)
+    assert "turning 35 deg" in fig.get_suptitle()
+    m = cs.models.get_model("nomoto1")
+    t = np.arange(0.0, 60.0, 0.5)
+    data = cs.measure(cs.simulate(m, m.states(), t, {"delta": 0.1 * np.sign(np.sin(t / 10))}), m, {"psi": 0.01}, seed=1)
+    prior = cs.Gaussian([0.0, 0.0], [1e-4, 1e-6])
+    aug = augmented_ekf(m, ["K"], data, dt=0.5, Q=1e-8, R={"psi": 1e-4}, q_params=1e-8, prior=prior)
+    fig = _check(lambda **kw: aug.plot(**kw), tmp_path, "aug", n_axes=1)
+    assert fig.axes[0].get_ylabel().startswith("K")
+
+
 def test_trajectory_of_any_model_draws_its_states_in_degrees():
     b = cs.ModelBuilder("rate")
     th, w = b.state("theta", unit="rad"), b.state("w", unit="rad/s")
