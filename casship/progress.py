@@ -153,14 +153,14 @@ class _Lines:
     def refresh(self) -> None:
         pass
 
-    def close(self) -> None:
-        _REPORTER.remove(self)
+    def close(self, ok: bool = True) -> None:
+        _REPORTER.remove(self, ok)
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close(exc_type is None)
 
     def line(self, now: float) -> str:
         elapsed = now - self.start
@@ -201,14 +201,15 @@ class _Reporter:
                 self._thread = threading.Thread(target=self._run, name="casship-progress", daemon=True)
                 self._thread.start()
 
-    def remove(self, b: _Lines) -> None:
+    def remove(self, b: _Lines, ok: bool = True) -> None:
         with self._lock:
             if b not in self._bars:
                 return
             outermost = self._bars[0] is b
             self._bars.remove(b)
             if outermost and self._wrote:
-                self._write(b.stream, f"casship: {b.label}: done in {_clock(time.monotonic() - b.start)}")
+                self._write(b.stream, f"casship: {b.label}: {'done in' if ok else 'stopped after'} "
+                                      f"{_clock(time.monotonic() - b.start)}")
             if not self._bars:
                 self._wake.set()
 

@@ -112,3 +112,11 @@ def test_a_command_names_its_stage_and_appends_its_bars(piped):
     assert lines[0].startswith("casship: identify [3/4] fitting: 2/4 stages (50 %), 0:00 elapsed | fit: 7 iter"), lines
     assert "ETA" not in lines[0]                     # stages of unequal length give no time left
     assert lines[-1].startswith("casship: identify: done in")
+
+
+def test_work_that_fails_is_not_called_done(piped):
+    with pytest.raises(RuntimeError):
+        with bar(None, "fit", stream=piped):
+            time.sleep(0.25)
+            raise RuntimeError("solver failed")
+    assert piped.getvalue().splitlines()[-1].startswith("casship: fit: stopped after ")

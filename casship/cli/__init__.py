@@ -177,10 +177,11 @@ def main(argv: list[str] | None = None) -> int:
 
     from ..progress import command as command_progress
 
-    with warnings.catch_warnings(), command_progress(command):
+    with warnings.catch_warnings():
         warnings.showwarning = show
         try:
-            return int(args.func(args) or 0)
+            with command_progress(command):
+                return int(args.func(args) or 0)
         except UsageError as exc:
             return _usage(exc)
         except KeyboardInterrupt:
