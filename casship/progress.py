@@ -160,7 +160,9 @@ class _Lines:
         return self
 
     def __exit__(self, exc_type, *exc) -> None:
-        self.close(exc_type is None)
+        # a stage generator or a tracked iterable left unfinished by its caller ends with GeneratorExit:
+        # the caller moved on, nothing failed
+        self.close(exc_type is None or issubclass(exc_type, GeneratorExit))
 
     def line(self, now: float) -> str:
         elapsed = now - self.start
