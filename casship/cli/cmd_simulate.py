@@ -229,33 +229,5 @@ def _print_text(out, notes=()) -> None:
 
 
 def _plot(traj, measured, path, title="") -> None:
-    from pathlib import Path
-
-    import numpy as np
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(11, 4.5))
-    ax1, ax2 = fig.subplots(1, 2)
-    if "x" in traj and "y" in traj:             # a heading-only model (Nomoto) has no track
-        ax1.plot(traj["y"], traj["x"], label="simulated")
-    if measured is not None and "x" in measured and "y" in measured:
-        ax1.plot(measured["y"], measured["x"], "--", label="measured")
-    ax1.set_xlabel("East y [m]")
-    ax1.set_ylabel("North x [m]")
-    ax1.set_aspect("equal", adjustable="datalim")
-    ax1.legend()
-    ax2.plot(traj.t, np.degrees(traj["psi"]), label="heading (sim)")
-    if measured is not None and "psi" in measured:
-        ax2.plot(measured.t, np.degrees(np.unwrap(measured["psi"])), "--", label="heading (meas)")
-    for name in traj.input_names:
-        if name.startswith("delta"):
-            ax2.plot(traj.t, np.degrees(traj[name]), ":", label=f"{name} [deg]")
-    for name in traj.state_names:
-        if name.startswith("delta"):
-            ax2.plot(traj.t, np.degrees(traj[name]), ":", label=f"{name} [deg]")
-    ax2.set_xlabel("time [s]")
-    ax2.set_ylabel("heading, rudder [deg]")
-    ax2.legend(fontsize=8)
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, format=Path(path).suffix[1:].lower() or "png")
+    """Track and heading with the rudder (:meth:`casship.Trajectory.plot`), the record beside them."""
+    traj.plot(path=path, measured=measured, title=title)
