@@ -111,7 +111,7 @@ class Trajectory(Dataset):
             h_ax.plot(self.t, np.degrees(np.unwrap(self["psi"])), label="heading psi")
             if measured is not None and "psi" in measured:
                 h_ax.plot(measured.t, np.degrees(np.unwrap(measured["psi"])), "--", label="heading (measured)")
-            for name in (*self.input_names, *self.state_names):
+            for name in dict.fromkeys((*self.input_names, *self.state_names)):
                 if name.startswith("delta"):
                     h_ax.plot(self.t, np.degrees(self[name]), ":", label=f"{name}")
             h_ax.set(xlabel="t [s]", ylabel="heading, rudder [deg]")
