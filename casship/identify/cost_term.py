@@ -211,7 +211,7 @@ class JointProblem:
         theta = self._theta(values)
         H = self._terms(theta)[2]
         H[:self._k0, :self._k0] += self.problem.information(dict(zip(self._main, theta[:self._k0])))
-        H[:self._k0, :self._k0] += np.diag(self.problem._prec)
+        H[:self._k0, :self._k0] += np.diag(self.problem.prior_precision)
         return H
 
     def solve(self, guess: Mapping[str, float] | None = None, *, max_iter: int = 100, tol: float = 1e-8,
@@ -237,28 +237,28 @@ class JointProblem:
             f, g, H, _ = pb.engine.derivatives(theta[:k0])
             if not np.isfinite(f):
                 return np.inf, np.zeros(len(z)), np.eye(len(z))
-            fp, gp = pb._prior_terms(theta[:k0])
+            fp, gp = pb.prior_cost(theta[:k0])
             ft, gt, Ht = self._terms(theta)
             D = np.concatenate([sp.jac_natural(z[:k0]), np.ones(len(z) - k0)])
             G = gt.copy()
             G[:k0] += g + gp
             HH = Ht.copy()
-            HH[:k0, :k0] += H + np.diag(pb._prec)
+            HH[:k0, :k0] += H + np.diag(pb.prior_precision)
             return f + fp + ft, D * G, D[:, None] * HH * D[None, :]
 
         def cost(z):
             theta = split(z)
-            return pb.engine.cost(theta[:k0])[0] + pb._prior_terms(theta[:k0])[0] + self._terms(theta)[0]
+            return pb.engine.cost(theta[:k0])[0] + pb.prior_cost(theta[:k0])[0] + self._terms(theta)[0]
 
         z0 = np.concatenate([sp.to_z(theta0[:k0]), theta0[k0:]])
         t0 = time.perf_counter()
         rep = trust_region(derivs, cost, z0, lb, ub, tol=tol, max_iter=max_iter, label="joint fit", show=show)
         theta = split(rep.z)
         info = self.information(dict(zip(self.free, theta)))
-        n_obs = pb._n_obs() + sum(t.n_obs for t in self.terms)
+        n_obs = pb.n_measured + sum(t.n_obs for t in self.terms)
         m = pb.model
         f_data = pb.engine.cost(theta[:k0])[0]
-        loglik = pb._loglik(f_data, 1.0, pb._n_obs()) - sum(t.cost(theta[c]) for t, c in zip(self.terms, self._cols))
+        loglik = pb.data_loglik(f_data) - sum(t.cost(theta[c]) for t, c in zip(self.terms, self._cols))
         lower = np.concatenate([[e.lower for e in sp.entries], self._extra_lb])
         upper = np.concatenate([[e.upper for e in sp.entries], self._extra_ub])
         return fit_result(model_name=m.name, params=m.param_dict(sp.params(theta[:k0])), names=self.free, theta=theta,
