@@ -39,7 +39,17 @@ FACILITY_PARAMS = ("rho", "L_pp", "B", "d", "nabla", "x_G", "k_zz", "D_p", "t_P"
 
 
 def noise_groups(observations) -> list[str]:
-    """The noise group of each observation: ``static:X``, ``dynamic:N``... (test family and channel)."""
+    """The noise group of each observation: ``static:X``, ``dynamic:N``... (test family and channel).
+
+    Parameters
+    ----------
+    observations : sequence of Observation
+        From :attr:`~casship.identify.captive_forces.CaptivePredictor.observations`.
+
+    Returns
+    -------
+    list of str
+    """
     return [f"{o.test}:{o.channel}" for o in observations]
 
 
@@ -121,7 +131,17 @@ class CaptiveProblem:
             raise InputError(f"CaptiveProblem: {len(obs)} measured values for {len(free)} free parameters")
 
     def joint_name(self, name: str) -> str:
-        """The name of a model parameter in a joint problem (``name@facility`` for facility quantities)."""
+        """The name of a model parameter in a joint problem (``name@facility`` for facility quantities).
+
+        Parameters
+        ----------
+        name : str
+            A model parameter.
+
+        Returns
+        -------
+        str
+        """
         return f"{name}@{self.facility}" if name in self.facility_params else name
 
     def _prior(self, prior):
@@ -147,13 +167,33 @@ class CaptiveProblem:
 
     # -- evaluation -----------------------------------------------------------------------------
     def params(self, theta) -> np.ndarray:
-        """The model's parameter vector with the free values ``theta`` (ordered like :attr:`free`)."""
+        """The model's parameter vector with the free values ``theta``.
+
+        Parameters
+        ----------
+        theta : array_like
+            Free values ordered like :attr:`free`.
+
+        Returns
+        -------
+        array
+        """
         p = self.base.copy()
         p[self._idx] = np.asarray(theta, dtype=float)
         return p
 
     def theta(self, values: Mapping[str, float] | None = None) -> np.ndarray:
-        """Free values from a mapping (joint or plain names; missing ones: the starting values)."""
+        """Free values from a mapping.
+
+        Parameters
+        ----------
+        values : mapping name -> value, optional
+            Joint or plain names; missing ones keep the starting values.
+
+        Returns
+        -------
+        array
+        """
         values = dict(values or {})
         known = set(self.free) | set(self.plain)
         unknown = set(values) - known
@@ -163,11 +203,31 @@ class CaptiveProblem:
                         dtype=float)
 
     def prediction(self, theta=None) -> np.ndarray:
-        """The model's components at ``theta`` (default: the start), ordered like ``predictor.observations``."""
+        """The model's components, ordered like ``predictor.observations``.
+
+        Parameters
+        ----------
+        theta : array_like, optional
+            Free values (default: the start).
+
+        Returns
+        -------
+        array
+        """
         return self.predictor.predict(self.params(self.theta() if theta is None else theta))
 
     def raw_residuals(self, theta) -> tuple[np.ndarray, np.ndarray]:
-        """``(prediction - measured, d/d theta)`` (not whitened)."""
+        """``(prediction - measured, d/d theta)`` (not whitened).
+
+        Parameters
+        ----------
+        theta : array_like
+            Free values ordered like :attr:`free`.
+
+        Returns
+        -------
+        (array, 2-d array)
+        """
         y, J = self.predictor.jacobian(self.params(theta))
         return y - self.predictor.measured, J[:, self._idx]
 

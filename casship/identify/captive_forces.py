@@ -244,7 +244,23 @@ def harmonics(samples, n_harm: int = 3) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Observation:
-    """One measured scalar of a captive record: test index, channel, component and value."""
+    """One measured scalar of a captive record.
+
+    Parameters
+    ----------
+    test : str
+        ``"static"`` or ``"dynamic"``.
+    index : int
+        Point or test index in the record.
+    channel : str
+        Force channel (``X, Y, N, RX, RY, T``).
+    component : str
+        ``"value"`` for a static point, else one of :data:`~casship.io.captive.HARMONICS`.
+    value : float
+        The measured value.
+    kind : str
+        The test kind (``static_drift``, ``pure_yaw``...).
+    """
 
     test: str          # "static" or "dynamic"
     index: int         # point / test index in the record
@@ -353,7 +369,21 @@ class CaptivePredictor:
 
     # the model length is only known from p at evaluation; the motion needs it numerically
     def motion(self, i: int, L_value: float | None = None, n: int = N_PHASES) -> dict:
-        """The prescribed motion of dynamic test ``i`` (see :func:`pmm_motion`)."""
+        """The prescribed motion of dynamic test ``i`` (see :func:`pmm_motion`).
+
+        Parameters
+        ----------
+        i : int
+            Dynamic test index.
+        L_value : float, optional
+            Model length [m] (default: the model's ``L_pp``).
+        n : int
+            Phases per period.
+
+        Returns
+        -------
+        dict
+        """
         dy = self.tests.dynamic
         L = L_value if L_value is not None else float(self.model.params()[self.model.index("L_pp", "param")])
         kind = dy.kind[i]
@@ -377,10 +407,30 @@ class CaptivePredictor:
         return self.model.inputs(**vals)
 
     def predict(self, p) -> np.ndarray:
-        """The predicted components (ordered like :attr:`observations`) at the parameter vector ``p``."""
+        """The predicted components (ordered like :attr:`observations`).
+
+        Parameters
+        ----------
+        p : array_like
+            The model's parameter vector.
+
+        Returns
+        -------
+        array
+        """
         return np.asarray(self.function(p)[0]).ravel()
 
     def jacobian(self, p) -> tuple[np.ndarray, np.ndarray]:
-        """``(prediction, d prediction / d p)`` at the parameter vector ``p`` (exact)."""
+        """``(prediction, d prediction / d p)`` (exact).
+
+        Parameters
+        ----------
+        p : array_like
+            The model's parameter vector.
+
+        Returns
+        -------
+        (array, 2-d array)
+        """
         y, J = self.function(p)
         return np.asarray(y).ravel(), np.asarray(J)

@@ -61,7 +61,17 @@ class CostTerm:
     prior_std: Mapping = None
 
     def cost(self, values) -> float:
-        """``0.5 |r|^2`` at ``values`` (ordered like :attr:`names`)."""
+        """``0.5 |r|^2``.
+
+        Parameters
+        ----------
+        values : array_like
+            Values ordered like :attr:`names`.
+
+        Returns
+        -------
+        float
+        """
         r, _ = self.residual(np.asarray(values, dtype=float))
         return 0.5 * float(r @ r)
 
@@ -70,7 +80,47 @@ def fit_result(*, model_name: str, params: dict, names: Sequence[str], theta, in
                loglik: float, method: str, status: str, message: str, iterations: int, seconds: float,
                lower=None, upper=None, noise=None, records=(), prior=None, model=None,
                extra_warnings=()) -> FitResult:
-    """A :class:`FitResult` from an estimate and its information matrix (covariance = its inverse)."""
+    """A :class:`FitResult` from an estimate and its information matrix (covariance = its inverse).
+
+    Parameters
+    ----------
+    model_name : str
+        Name of the model.
+    params : dict
+        All model parameters at the estimate.
+    names : sequence of str
+        Free quantities.
+    theta : array_like
+        Their estimates.
+    info : 2-d array
+        Information matrix (natural units, prior included).
+    cost, loglik : float
+        Optimal cost and log-likelihood.
+    n_obs : int
+        Number of scalar measurements.
+    method, status, message : str
+        Method name, solver status and message.
+    iterations : int
+        Solver iterations.
+    seconds : float
+        Solve time.
+    lower, upper : array_like, optional
+        Bounds (for the "ended at a bound" warnings).
+    noise : dict, optional
+        Noise levels used.
+    records : sequence of str
+        Record labels.
+    prior : dict, optional
+        The prior as stated.
+    model : Model, optional
+        The model (its options, parameter set and parameter names).
+    extra_warnings : sequence of str
+        Warnings to list first.
+
+    Returns
+    -------
+    FitResult
+    """
     names = list(names)
     cov, warn = covariance_from_information(info, names)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -195,19 +245,49 @@ class JointProblem:
         return f, g, H
 
     def cost(self, values=None) -> float:
-        """The joint cost: the problem's (data and prior) plus the terms'."""
+        """The joint cost: the problem's (data and prior) plus the terms'.
+
+        Parameters
+        ----------
+        values : mapping name -> value, optional
+            Joint free values (missing ones: the starting values).
+
+        Returns
+        -------
+        float
+        """
         theta = self._theta(values)
         return self.problem.cost(dict(zip(self._main, theta[:self._k0]))) + self._terms(theta)[0]
 
     def gradient(self, values=None) -> np.ndarray:
-        """Exact gradient of :meth:`cost` (ordered like :attr:`free`)."""
+        """Exact gradient of :meth:`cost` (ordered like :attr:`free`).
+
+        Parameters
+        ----------
+        values : mapping name -> value, optional
+            Joint free values (missing ones: the starting values).
+
+        Returns
+        -------
+        array
+        """
         theta = self._theta(values)
         g = self._terms(theta)[1]
         g[:self._k0] += self.problem.gradient(dict(zip(self._main, theta[:self._k0])))
         return g
 
     def information(self, values=None) -> np.ndarray:
-        """Joint Gauss-Newton information: the problem's data, its prior and the terms."""
+        """Joint Gauss-Newton information: the problem's data, its prior and the terms.
+
+        Parameters
+        ----------
+        values : mapping name -> value, optional
+            Joint free values (missing ones: the starting values).
+
+        Returns
+        -------
+        2-d array
+        """
         theta = self._theta(values)
         H = self._terms(theta)[2]
         H[:self._k0, :self._k0] += self.problem.information(dict(zip(self._main, theta[:self._k0])))
@@ -217,6 +297,17 @@ class JointProblem:
     def solve(self, guess: Mapping[str, float] | None = None, *, max_iter: int = 100, tol: float = 1e-8,
               show: bool | None = None) -> FitResult:
         """Minimise the joint cost (bounded Gauss-Newton trust-region steps, as the problems do).
+
+        Parameters
+        ----------
+        guess : mapping name -> value, optional
+            Starting values (default: the problem's start and the terms' ``start``).
+        max_iter : int
+            Iteration limit.
+        tol : float
+            Convergence threshold on the predicted remaining decrease of the cost.
+        show : bool, optional
+            ``False`` hides the progress bar.
 
         Returns
         -------
@@ -268,7 +359,17 @@ class JointProblem:
                           records=list(pb.labels) + [t.label for t in self.terms], model=m)
 
     def subset(self, indices: Sequence[int]) -> "JointProblem":
-        """The same joint problem with the free-running problem on some of its records (terms kept)."""
+        """The same joint problem with the free-running problem on some of its records (terms kept).
+
+        Parameters
+        ----------
+        indices : sequence of int
+            Records to keep.
+
+        Returns
+        -------
+        JointProblem
+        """
         return JointProblem(self.problem.subset(indices), self.terms)
 
     def __repr__(self) -> str:

@@ -218,7 +218,17 @@ class IdentificationProblem:
 
     # -- what a joint objective adds to (casship.identify.cost_term.JointProblem) ---------------------
     def prior_cost(self, theta) -> tuple[float, np.ndarray]:
-        """The prior's cost and gradient at the free values ``theta`` (natural units, ordered like :attr:`free`)."""
+        """The prior's cost and gradient.
+
+        Parameters
+        ----------
+        theta : array_like
+            Free values (natural units, ordered like :attr:`free`).
+
+        Returns
+        -------
+        (float, array)
+        """
         return self._prior_terms(np.asarray(theta, dtype=float))
 
     @property
@@ -232,7 +242,17 @@ class IdentificationProblem:
         return self._n_obs()
 
     def data_loglik(self, f_data: float) -> float:
-        """Log-likelihood of the data for a data cost ``f_data`` taken as a negative log-likelihood."""
+        """Log-likelihood of the data for a data cost taken as a negative log-likelihood.
+
+        Parameters
+        ----------
+        f_data : float
+            The data cost (without the prior).
+
+        Returns
+        -------
+        float
+        """
         return self._loglik(f_data, 1.0, self._n_obs())
 
     # -- solve -----------------------------------------------------------------------------------

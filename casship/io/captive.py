@@ -53,7 +53,7 @@ _DYN_FILES = {"pure_sway": ("vdot_prime",), "pure_yaw": ("r_prime", "rdot_prime"
 class StaticTests:
     """Static captive points (steady drift and rudder angle, no rotation).
 
-    Attributes
+    Parameters
     ----------
     run : (n,) int array
         Test run number.
@@ -81,7 +81,17 @@ class StaticTests:
         return len(self.run)
 
     def select(self, kind: str) -> np.ndarray:
-        """Indices of the points of one test kind."""
+        """Indices of the points of one test kind.
+
+        Parameters
+        ----------
+        kind : str
+            One of :data:`STATIC_KINDS`.
+
+        Returns
+        -------
+        array of int
+        """
         if kind not in STATIC_KINDS:
             raise InputError(f"static test kind must be one of {STATIC_KINDS}, got {kind!r}")
         return np.array([i for i, k in enumerate(self.kind) if k == kind], dtype=int)
@@ -91,7 +101,7 @@ class StaticTests:
 class DynamicTests:
     """Dynamic (PMM) tests as harmonic components over one period.
 
-    Attributes
+    Parameters
     ----------
     run : (n,) int array
     kind : tuple of str
@@ -126,7 +136,17 @@ class DynamicTests:
         return len(self.run)
 
     def select(self, kind: str) -> np.ndarray:
-        """Indices of the tests of one kind."""
+        """Indices of the tests of one kind.
+
+        Parameters
+        ----------
+        kind : str
+            One of :data:`DYNAMIC_KINDS`.
+
+        Returns
+        -------
+        array of int
+        """
         if kind not in DYNAMIC_KINDS:
             raise InputError(f"dynamic test kind must be one of {DYNAMIC_KINDS}, got {kind!r}")
         return np.array([i for i, k in enumerate(self.kind) if k == kind], dtype=int)
@@ -136,7 +156,7 @@ class DynamicTests:
 class CaptiveTests:
     """A captive-test series: static points, dynamic PMM tests, and where they came from.
 
-    Attributes
+    Parameters
     ----------
     static : StaticTests
     dynamic : DynamicTests

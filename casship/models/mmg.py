@@ -500,6 +500,19 @@ def mmg_force_parts(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | N
                     rudder_inflow: str = "published") -> dict:
     """The MMG force of :func:`mmg_forces` with the parts a captive test measures on their own.
 
+    Parameters
+    ----------
+    P : mapping
+        Parameter name -> symbol or value (as for :func:`mmg_forces`).
+    u, v, r : SX, MX or float
+        Surge and sway velocity at midship [m/s], yaw rate [rad/s].
+    delta, n : SX, MX or float
+        Rudder angle [rad] and propeller rate [1/s].
+    smooth : float, optional
+        Width of the smooth sign switches [rad] (``None``: the published switches).
+    rudder_inflow : str
+        One of :data:`RUDDER_INFLOWS`.
+
     Returns
     -------
     dict
