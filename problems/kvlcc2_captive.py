@@ -261,6 +261,15 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=N
 
 
 def _report(rep, out, tests, fit, rows, rms, lin, replay_rows, summary, quick) -> None:
+    rep.section("Rule (fixed before any replay)")
+    rep.add("Evidence: every static point and every dynamic harmonic component (means left out) of the channels "
+            f"{', '.join(CHANNELS)}. Free: the hull polynomial coefficients and added masses ({len(HULL)}), the "
+            f"interaction quantities ({', '.join(INTERACTION)}) and HMRI's own {', '.join(OWN)} (as @HMRI). Fixed: "
+            "R'_0 at HMRI's resistance test, K_T from its open-water curve, epsilon, kappa, C_1, x'_P published. "
+            "Weights: one noise level per group (static/dynamic x channel), estimated with the coefficients; no "
+            "prior. Replay model: full-scale KVLCC2 with the captive hull and interaction estimates, the "
+            "free-running facilities' propeller, rudder and neutral angle published. Variants tried: "
+            f"{summary['variants_tried']} ({summary['variants_note']})")
     rep.section("What was fitted")
     rep.add(f"{fit.n_obs} measured values ({', '.join(CHANNELS)}) of {len(tests.static)} static points and "
             f"{len(tests.dynamic)} PMM tests (dynamic means left out); {len(fit.free)} free quantities; "

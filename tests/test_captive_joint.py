@@ -116,3 +116,11 @@ def test_a_fixed_parameter_of_the_problem_is_not_estimated_by_a_term(problems):
         JointProblem(oe, [other.cost_term(sigma=CAPTIVE_SIGMA)])
     with pytest.raises(InputError, match="at least one"):
         JointProblem(oe, [])
+    # held at the problem's value instead: the term's Yr column is not estimated
+    joint = JointProblem(oe, [other.cost_term(sigma=CAPTIVE_SIGMA)], hold_fixed=True)
+    assert joint.free == ["Yv", "Nv", "Nr", "Nd"]
+    at = {"Yv": -880.0, "Nv": -420.0, "Nr": -2400.0, "Nd": -75.0}
+    r, J = other.cost_term(sigma=CAPTIVE_SIGMA).residual(np.array([-880.0, TRUE["Yr"]]))
+    expect = oe.gradient(at)
+    expect[0] += J[:, 0] @ r
+    np.testing.assert_allclose(joint.gradient(at), expect, rtol=1e-10)

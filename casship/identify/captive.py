@@ -113,7 +113,7 @@ class CaptiveProblem:
         self.base = model.params(params) if params is not None else model.params()
         self._idx = np.array(model.indices(free, "param"), dtype=int)
         self.predictor = CaptivePredictor(model, tests, channels, components, static_kinds=static_kinds,
-                                          dynamic_kinds=dynamic_kinds)
+                                          dynamic_kinds=dynamic_kinds, params=self.base)
         obs = self.predictor.observations
         self.groups = noise_groups(obs)
         self.group_names = sorted(set(self.groups))

@@ -292,6 +292,8 @@ class CaptivePredictor:
         Names of the model's rudder (input or state) and propeller-rate input.
     n_phases : int
         Samples per PMM period.
+    params : array_like or mapping, optional
+        Parameter values whose length sets the PMM motion's amplitudes (default: the model's).
 
     Attributes
     ----------
@@ -302,8 +304,10 @@ class CaptivePredictor:
     def __init__(self, model, tests, channels: Sequence[str] = ("X", "Y", "N"),
                  components: Sequence[str] = HARMONICS[1:], *, static_kinds: Sequence[str] | None = None,
                  dynamic_kinds: Sequence[str] | None = None, length: str = "L_pp", density: str = "rho",
-                 rudder: str = "delta", propeller: str = "n", n_phases: int = N_PHASES):
+                 rudder: str = "delta", propeller: str = "n", n_phases: int = N_PHASES, params=None):
         self.model, self.tests = model, tests
+        base = model.params(params) if params is not None else model.params()
+        self.length = float(base[model.index(length, "param")])
         self.channels = tuple(channels)
         bad = [c for c in components if c not in HARMONICS]
         if bad:
@@ -376,7 +380,7 @@ class CaptivePredictor:
         i : int
             Dynamic test index.
         L_value : float, optional
-            Model length [m] (default: the model's ``L_pp``).
+            Model length [m] (default: :attr:`length`).
         n : int
             Phases per period.
 
@@ -385,7 +389,7 @@ class CaptivePredictor:
         dict
         """
         dy = self.tests.dynamic
-        L = L_value if L_value is not None else float(self.model.params()[self.model.index("L_pp", "param")])
+        L = L_value if L_value is not None else self.length
         kind = dy.kind[i]
         if kind == "pure_sway":
             omega = 2 * np.pi * dy.freq_hz[i]

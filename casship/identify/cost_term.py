@@ -166,12 +166,16 @@ class JointProblem:
         deviations): its cost is taken as a negative log-likelihood.
     terms : sequence of CostTerm
         Extra evidence (e.g. :meth:`CaptiveProblem.cost_term`).
+    hold_fixed : bool
+        A term quantity that is a parameter the problem holds fixed: ``False`` (default) refuses it;
+        ``True`` holds it in the term too, at the problem's value (one value for both).
 
     Raises
     ------
     InputError
         A term quantity that is a parameter of the problem's model but not free in it (free it in
-        both or give the term its own name), or a name given two different starting values.
+        both, give the term its own name or ``hold_fixed=True``), or a name given two different
+        starting values.
 
     Examples
     --------
@@ -181,18 +185,22 @@ class JointProblem:
 
     method = "joint"
 
-    def __init__(self, problem, terms: Sequence[CostTerm]):
+    def __init__(self, problem, terms: Sequence[CostTerm], *, hold_fixed: bool = False):
         self.problem = problem
         self.terms = list(terms)
+        self.hold_fixed = bool(hold_fixed)
         if not self.terms:
             raise InputError("JointProblem: give at least one cost term")
         sp = problem.space
         main = list(sp.names)
         declared = set(problem.model.param_names)
+        fixed_values = problem.model.param_dict(sp.params(sp.theta()))
         extras, start, lower, upper, pstd = [], {}, {}, {}, {}
         for t in self.terms:
             for j, n in enumerate(t.names):
                 if n in main:
+                    continue
+                if n in declared and self.hold_fixed:
                     continue
                 if n in declared:
                     raise InputError(f"JointProblem: term {t.label!r} estimates {n!r}, a parameter of "
@@ -213,7 +221,9 @@ class JointProblem:
         self._extra_ub = np.array([upper[n] for n in extras])
         self._extra_prec = np.array([1.0 / pstd[n] ** 2 if n in pstd else 0.0 for n in extras])
         index = {n: i for i, n in enumerate(main + extras)}
-        self._cols = [np.array([index[n] for n in t.names], dtype=int) for t in self.terms]
+        # per term: its columns in the joint vector (-1: held at the problem's fixed value)
+        self._cols = [np.array([index.get(n, -1) for n in t.names], dtype=int) for t in self.terms]
+        self._held = [np.array([fixed_values.get(n, np.nan) for n in t.names]) for t in self.terms]
 
     @property
     def free(self) -> list[str]:
@@ -233,11 +243,13 @@ class JointProblem:
         """Sum of the terms' cost, gradient and curvature (natural units), the extras' prior included."""
         k = len(theta)
         f, g, H = 0.0, np.zeros(k), np.zeros((k, k))
-        for t, cols in zip(self.terms, self._cols):
-            r, J = t.residual(theta[cols])
+        for t, cols, held in zip(self.terms, self._cols, self._held):
+            on = cols >= 0
+            r, J = t.residual(np.where(on, theta[np.where(on, cols, 0)], held))
+            J, c = J[:, on], cols[on]
             f += 0.5 * float(r @ r)
-            g[cols] += J.T @ r
-            H[np.ix_(cols, cols)] += J.T @ J
+            g[c] += J.T @ r
+            H[np.ix_(c, c)] += J.T @ J
         d = theta[self._k0:] - self._extra_start
         f += 0.5 * float(np.sum(self._extra_prec * d * d))
         g[self._k0:] += self._extra_prec * d
@@ -349,7 +361,8 @@ class JointProblem:
         n_obs = pb.n_measured + sum(t.n_obs for t in self.terms)
         m = pb.model
         f_data = pb.engine.cost(theta[:k0])[0]
-        loglik = pb.data_loglik(f_data) - sum(t.cost(theta[c]) for t, c in zip(self.terms, self._cols))
+        loglik = pb.data_loglik(f_data) - sum(t.cost(np.where(c >= 0, theta[np.where(c >= 0, c, 0)], h))
+                                              for t, c, h in zip(self.terms, self._cols, self._held))
         lower = np.concatenate([[e.lower for e in sp.entries], self._extra_lb])
         upper = np.concatenate([[e.upper for e in sp.entries], self._extra_ub])
         return fit_result(model_name=m.name, params=m.param_dict(sp.params(theta[:k0])), names=self.free, theta=theta,
@@ -370,7 +383,7 @@ class JointProblem:
         -------
         JointProblem
         """
-        return JointProblem(self.problem.subset(indices), self.terms)
+        return JointProblem(self.problem.subset(indices), self.terms, hold_fixed=self.hold_fixed)
 
     def __repr__(self) -> str:
         return (f"JointProblem({self.problem.method}, {len(self.problem.records)} record(s), terms="
