@@ -124,3 +124,26 @@ def test_a_fixed_parameter_of_the_problem_is_not_estimated_by_a_term(problems):
     expect = oe.gradient(at)
     expect[0] += J[:, 0] @ r
     np.testing.assert_allclose(joint.gradient(at), expect, rtol=1e-10)
+
+
+def test_a_pseudo_measurement_term_equals_a_prior_in_an_mle_problem():
+    """A term r = (K - 0.07) / 0.01 adds to a filter likelihood exactly what the prior N(0.07, 0.01^2) adds."""
+    from casship.identify import CostTerm, MLEProblem, Prior
+
+    m = cs.models.nomoto_first_order(K=0.08, T=20.0)
+    rng = np.random.default_rng(5)
+    t = np.arange(200) * 1.0
+    tr = cs.simulate(m, m.states(), t, {"delta": 0.15 * np.sign(np.sin(2 * np.pi * t / 120.0))},
+                     w=np.sqrt(1e-7) * rng.standard_normal((200, m.nw)))
+    rec = cs.measure(tr, m, {"psi": 0.01}, seed=rng)
+    ekf = cs.EKF(cs.discretize(m, 1.0), Q=1e-7, R=1e-4)
+    term = CostTerm("pseudo K", ("K",), np.array([0.07]), np.array([0.0]), np.array([1.0]),
+                    lambda v: (np.array([(v[0] - 0.07) / 0.01]), np.array([[1.0 / 0.01]])), 1)
+    plain = MLEProblem(ekf, [rec], free=["K", "T"])
+    joint = JointProblem(plain, [term]).solve(guess={"K": 0.05, "T": 15.0}, show=False, tol=1e-12)
+    with_prior = MLEProblem(ekf, [rec], free=["K", "T"], prior=Prior({"K": 0.01}, mean={"K": 0.07}))
+    ref = with_prior.solve(guess={"K": 0.05, "T": 15.0}, show=False, tol=1e-12)
+    for n in ("K", "T"):
+        assert joint.estimates[n] == pytest.approx(ref.estimates[n], rel=1e-6)
+        assert joint.std_errors[n] == pytest.approx(ref.std_errors[n], rel=1e-6)
+    assert joint.cost == pytest.approx(ref.cost, rel=1e-9)
