@@ -204,13 +204,13 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=N
         jn = pb.joint_name(name)
         pub = {**KVLCC2_COMMON, **KVLCC2_L7, "delta_0": 0.0}.get(name, np.nan)
         est, se = fit.estimates[jn], fit.std_errors[jn]
-        rows[jn] = {"published": pub, "captive": est, "std_error": se,
+        rows[jn] = {"published": pub, "captive": est, "std_error": se, "std_error_robust": fit.std_errors_robust[jn],
                     "z": (est - pub) / se if np.isfinite(pub) and se > 0 else np.nan}
     with open(out / "coefficients.csv", "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["name", "published", "captive", "std_error", "z"])
+        w.writerow(["name", "published", "captive", "std_error", "std_error_robust", "z"])
         for n, r in rows.items():
-            w.writerow([n, r["published"], r["captive"], r["std_error"], r["z"]])
+            w.writerow([n, r["published"], r["captive"], r["std_error"], r["std_error_robust"], r["z"]])
     _force_figure(out / "fig_forces.png", pb, fit, published_pred)
     meas = pb.predictor.measured
     gidx = np.array(pb.groups)
@@ -284,11 +284,14 @@ def _report(rep, out, tests, fit, rows, rms, lin, replay_rows, summary, quick) -
                 lin["Y_v_static_dash"], lin["N_v_dash"], lin["N_v_static_dash"], lin["N_r_dash"]))
     rep.section("Coefficients: captive tests alone vs Yasukawa & Yoshimura (2015)")
     rep.add(md_table({n: {"published": fmt(r["published"]), "captive": fmt(r["captive"]),
-                          "std error": fmt(r["std_error"], ".2g"), "z": fmt(r["z"], ".2g")} for n, r in rows.items()},
+                          "std error": fmt(r["std_error"], ".2g"), "robust": fmt(r["std_error_robust"], ".2g"),
+                          "z": fmt(r["z"], ".2g")} for n, r in rows.items()},
                      first="coefficient"))
     rep.add("`@HMRI`: HMRI's own model quantities (propeller, rudder, neutral angle); not carried to the "
             "free-running models; their published column is the L7 model's (HMRI's workbook gives w = 0.428 and "
-            "t = 0.233 at its design point). Standard errors from the information at the estimated noise levels.")
+            "t = 0.233 at its design point). Standard errors from the information at the estimated noise levels; "
+            "robust: sandwich, each value's squared residual in place of its group's level; z = (captive - "
+            "published) / std error.")
     rep.section("Residuals per group (RMS, table units)")
     rep.add(md_table({g: {"published": fmt(v["published"], ".3g"), "captive fit": fmt(v["captive"], ".3g")}
                       for g, v in rms.items()}, first="group"))

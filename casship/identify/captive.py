@@ -289,7 +289,9 @@ class CaptiveProblem:
         -------
         FitResult
             ``free`` in joint names; ``noise["sigma"]`` the noise level of each group (given or
-            estimated), ``noise["rms"]`` the RMS residual of each group.
+            estimated), ``noise["rms"]`` the RMS residual of each group; ``std_errors_robust`` the
+            heteroscedasticity-consistent (sandwich) errors, each value's squared residual in place
+            of its group's noise level.
         """
         t0 = time.perf_counter()
         theta = self.theta(guess)
@@ -314,6 +316,10 @@ class CaptiveProblem:
         r, J = self.raw_residuals(theta)
         rw, Jw = r / s, J / s[:, None]
         info = Jw.T @ Jw + np.diag(self._prec)
+        # robust (sandwich) covariance: the values' own squared residuals instead of their noise levels
+        cov_inv = np.linalg.pinv(info)
+        scores = Jw * rw[:, None]
+        robust = cov_inv @ (scores.T @ scores) @ cov_inv
         n = len(r)
         loglik = float(-0.5 * rw @ rw - np.sum(np.log(s)) - 0.5 * n * np.log(2 * np.pi))
         rms = {g: float(np.sqrt(np.mean(r[self._gidx == i] ** 2))) for i, g in enumerate(self.group_names)}
@@ -325,7 +331,8 @@ class CaptiveProblem:
                           noise={"sigma": sigma, "rms": rms, "n": counts,
                                  "rule": "per group (static/dynamic x channel), estimated by concentrated ML"
                                  if not self.sigma_given else "given"},
-                          records=[f"captive:{self.facility}"], prior=self._prior_desc, model=self.model)
+                          records=[f"captive:{self.facility}"], prior=self._prior_desc, model=self.model,
+                          robust=robust)
 
     def cost_term(self, fit=None, *, sigma: Mapping[str, float] | None = None, prior: bool = True) -> CostTerm:
         """This record as a :class:`~casship.identify.cost_term.CostTerm` for a joint problem.

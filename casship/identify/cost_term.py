@@ -79,7 +79,7 @@ class CostTerm:
 def fit_result(*, model_name: str, params: dict, names: Sequence[str], theta, info, cost: float, n_obs: int,
                loglik: float, method: str, status: str, message: str, iterations: int, seconds: float,
                lower=None, upper=None, noise=None, records=(), prior=None, model=None,
-               extra_warnings=()) -> FitResult:
+               extra_warnings=(), robust=None) -> FitResult:
     """A :class:`FitResult` from an estimate and its information matrix (covariance = its inverse).
 
     Parameters
@@ -116,6 +116,8 @@ def fit_result(*, model_name: str, params: dict, names: Sequence[str], theta, in
         The model (its options, parameter set and parameter names).
     extra_warnings : sequence of str
         Warnings to list first.
+    robust : 2-d array, optional
+        A robust (sandwich) covariance; default: the model-based one.
 
     Returns
     -------
@@ -141,6 +143,9 @@ def fit_result(*, model_name: str, params: dict, names: Sequence[str], theta, in
         if w.startswith("solver stopped"):
             warnings.warn(f"{method}: {w}", IdentificationWarning, stacklevel=3)
     k = len(names)
+    robust = cov.copy() if robust is None else np.asarray(robust, dtype=float)
+    with np.errstate(invalid="ignore"):
+        std_r = np.sqrt(np.diag(robust))
     vessel = getattr(model, "vessel", None) if model is not None else None
     return FitResult(model=model_name, params=dict(params), free=names,
                      estimates={n: float(v) for n, v in zip(names, theta)},
@@ -148,8 +153,8 @@ def fit_result(*, model_name: str, params: dict, names: Sequence[str], theta, in
                      cost=float(cost), loglik=float(loglik), n_obs=int(n_obs), aic=float(2 * k - 2 * loglik),
                      bic=float(k * np.log(max(n_obs, 1)) - 2 * loglik), warnings=out, method=method, status=status,
                      iterations=int(iterations), solve_time_s=float(seconds), noise=dict(noise or {}),
-                     message=message, std_errors_robust={n: float(s) for n, s in zip(names, std)},
-                     covariance_robust=cov.copy(), records=list(records), prior=dict(prior or {}),
+                     message=message, std_errors_robust={n: float(s) for n, s in zip(names, std_r)},
+                     covariance_robust=robust, records=list(records), prior=dict(prior or {}),
                      model_options=dict(model.meta.get("options", {})) if model is not None else {},
                      param_set=vessel.param_set if vessel else "",
                      param_names=list(model.param_names) if model is not None else [])
