@@ -23,10 +23,10 @@ from matplotlib.figure import Figure
 
 from .errors import InputError
 
-__all__ = ["ShownFigure", "split_args", "panels", "finish"]
+__all__ = ["split_args", "panels", "finish"]
 
 
-class ShownFigure(Figure):
+class _ShownFigure(Figure):
     """A figure that a notebook shows as PNG when it is the value of a cell (IPython's
     ``_repr_png_``), without ``pyplot``: shown once, never twice."""
 
@@ -79,7 +79,7 @@ def panels(ax, nrows: int, ncols: int, *, figsize, what: str, **subplot_kw):
     axes : numpy.ndarray of Axes, shape (nrows, ncols)
     """
     if ax is None:
-        fig = ShownFigure(figsize=figsize)
+        fig = _ShownFigure(figsize=figsize)
         axes = fig.subplots(nrows, ncols, squeeze=False, **subplot_kw)
         return fig, axes
     axes = np.asarray(ax, dtype=object).ravel()
