@@ -51,6 +51,8 @@ PACKAGE_INTERNAL = {
 FOREIGN = {
     ("casship.cli", "_actions"): "argparse: a parser's arguments have no public accessor",
     ("casship.cli", "_choices_actions"): "argparse: a subcommand's one-line help has no public accessor",
+    ("casship.cli", "_exit"): "os._exit (public, underscored): after a Ctrl-C the program ends without the "
+                              "interpreter's teardown, which takes seconds on a busy machine",
 }
 # The public members of namedtuples start with an underscore.
 NOT_PRIVATE = {"_replace", "_asdict", "_fields", "_make", "_field_defaults"}

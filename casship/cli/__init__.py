@@ -186,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
     previous = _on_interrupt(interrupted)
     code = None
     try:
-        code = _run(args, command, show, interrupted)
+        code = _run(args, command, show, interrupted, not argv_given)
         return code
     finally:
         if previous is not None:
@@ -212,7 +212,7 @@ def _exit_now(code: int) -> None:
     os._exit(code)
 
 
-def _run(args, command: str, show, interrupted: list) -> int:
+def _run(args, command: str, show, interrupted: list, program: bool) -> int:
     """The command, its errors turned into exit codes (see :func:`main`)."""
     from ..progress import command as command_progress
 
@@ -224,7 +224,7 @@ def _run(args, command: str, show, interrupted: list) -> int:
         except UsageError as exc:
             return _usage(exc)
         except KeyboardInterrupt:
-            return _interrupted(command)
+            return _interrupted(command, program)
         except BrokenPipeError:
             # the reader of the output went away (casship ... | head): nothing to report, as a tool
             # that SIGPIPE stops; standard output is pointed at devnull so that its flush at exit is quiet
@@ -234,7 +234,7 @@ def _run(args, command: str, show, interrupted: list) -> int:
             return 141
         except Exception as exc:
             if interrupted:         # an error raised while a Ctrl-C unwound the work: still an interrupt
-                return _interrupted(command)
+                return _interrupted(command, program)
             if getattr(args, "debug", False):
                 raise
             if is_user_error(exc):
@@ -261,12 +261,12 @@ def _on_interrupt(seen: list):
         return None
 
 
-def _interrupted(command: str) -> int:
+def _interrupted(command: str, program: bool) -> int:
     """Ctrl-C: stop the compilers this process runs (their process groups and build folders) at once."""
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)        # a second Ctrl-C does not break the clean-up
     runtime = sys.modules.get("casship.runtime")
-    if runtime is not None:
+    if runtime is not None and program:         # the process ends: no compile of it is wanted any more
         runtime.stop_compilers()
     try:
         print(f"casship {command}: interrupted", file=sys.stderr)
