@@ -35,9 +35,9 @@ import casadi as ca
 import numpy as np
 
 from ..angles import wrap_sym
-from ..runtime import COUNTS as _COUNTS, Job, JitPolicy, fold_chunk, run_pieces, shared_function, shared_functions
+from ..runtime import COUNTS as _COUNTS, THREADS, Job, JitPolicy, fold_chunk, run_pieces, shared_function, shared_functions
 
-__all__ = ["OutputErrorEngine", "Job", "run_jobs", "chunk"]
+__all__ = ["OutputErrorEngine", "Job", "run_jobs", "chunk", "THREADS"]
 
 COUNTS = _COUNTS.setdefault("identify", {"built": 0, "reused": 0})   # Functions built and found again
 

@@ -37,7 +37,7 @@ CasADi's ``external`` and buffer mechanisms, and the record loop's C driver thro
 """
 from ._background import Compiling, compile_in_background
 from ._buffers import DUPLICATE_NAMES, BoundedTable, BufferedCall
-from ._pieces import Job, PieceFailed, piece, pieces, run_pieces
+from ._pieces import THREADS, Job, PieceFailed, piece, pieces, run_pieces
 from ._cache import cache_dir, cache_key, cached_function, compile_function
 from ._housekeeping import CacheInfo, Cleared, cache_info, clear_cache
 from ._codegen import CFiles, c_array, check_c_name, compile_c, generate_c, read_harness_output, write_harness
@@ -47,7 +47,7 @@ from ._policy import (BACKGROUND_FAILURES, COUNTS, FUNCTIONS, JitPolicy, current
                       shared_functions)
 from ._settings import DEFAULT_CHUNK, DEFAULT_FLAGS, DEFAULT_TIMEOUT, NATIVE_FLAGS, fold_chunk
 
-__all__ = ["BufferedCall", "BoundedTable", "Job", "PieceFailed", "run_pieces", "pieces", "piece", "DUPLICATE_NAMES", "NativeFold",
+__all__ = ["BufferedCall", "BoundedTable", "Job", "PieceFailed", "run_pieces", "THREADS", "pieces", "piece", "DUPLICATE_NAMES", "NativeFold",
            "JitPolicy", "jit_function", "shared_function", "shared_functions", "record_loop", "is_compiled",
            "current_function", "COUNTS", "FUNCTIONS", "BACKGROUND_FAILURES",
            "fold_chunk", "DEFAULT_CHUNK",

@@ -141,13 +141,22 @@ class Job:
         return self.fold if isinstance(self.fold, ca.Function) else self.fold(size)
 
 
-def _buffers(fun: ca.Function, n: int):
-    """A buffered call of ``fun`` (mapped over ``n`` argument sets, threads) kept for the next call."""
+class _Calls:
+    """A Function's buffered call (mapped over ``n`` argument sets, threads), its slot sizes, a lock."""
+
+    def __init__(self, fun: ca.Function, n: int):
+        mapped = fun if n == 1 else fun.map(n, "thread" if THREADS > 1 else "serial", min(THREADS, n))
+        self.fun, self.call, self.lock = fun, BufferedCall(mapped), threading.Lock()
+        self.size_in = {k: tuple(fun.size_in(k)) for k in fun.name_in()}
+        self.size_out = {k: tuple(fun.size_out(k)) for k in fun.name_out()}
+
+
+def _buffers(fun: ca.Function, n: int) -> _Calls:
+    """The kept :class:`_Calls` of ``fun`` over ``n`` argument sets."""
     entry = _BUFFERS.get((id(fun), n))
     if entry is None:
-        mapped = fun if n == 1 else fun.map(n, "thread" if THREADS > 1 else "serial", min(THREADS, n))
-        entry = _BUFFERS.keep((id(fun), n), (fun, BufferedCall(mapped), threading.Lock()))
-    return entry[1], entry[2]
+        entry = _BUFFERS.keep((id(fun), n), _Calls(fun, n))
+    return entry
 
 
 def run_pieces(jobs: Sequence[Job], *, chunk: int | None = None, shrink: bool = False,
@@ -183,64 +192,92 @@ def run_pieces(jobs: Sequence[Job], *, chunk: int | None = None, shrink: bool = 
                 fun = j.function(cuts[i][c][2])
                 groups.setdefault(id(fun), (fun, []))[1].append(i)
         for fun, idx in groups.values():
-            try:
-                outs = _evaluate(fun, [(jobs[i], states[i], cuts[i][c]) for i in idx], record)
-            except PieceFailed as exc:
-                exc.start, exc.stop = cuts[idx[0]][c][:2]
-                raise
-            for i, (args, out) in zip(idx, outs):
+            direct = {}
+            if collect and len(idx) == 1 and cuts[idx[0]][c][1] - cuts[idx[0]][c][0] == cuts[idx[0]][c][2]:
+                # a whole piece of one record writes its outputs straight into the result arrays
+                i, (start, stop, size) = idx[0], cuts[idx[0]][c]
+                sizes = _buffers(fun, 1)
+                for name in collect:
+                    rows, cols = sizes.size_out[name]
+                    flat = _result(results[i], name, rows, cols // size, jobs[i].n)
+                    direct[name] = flat[start * rows * (cols // size):stop * rows * (cols // size)]
+
+            def consume(b, args, out, sizes, idx=idx, direct=direct):
+                i = idx[b]
                 j, (start, stop, size) = jobs[i], cuts[i][c]
                 take = stop - start
                 if record:
                     results[i]["pieces"].append((args, out, take))
                 carry = j.carry or {k: f"{k}_next" for k in j.state}
-                states[i] = {k: out[o][:, out[o].shape[1] - fun.size2_in(k):].copy() for k, o in carry.items()}
+                states[i] = {k: out[o][:, out[o].shape[1] - sizes.size_in[k][1]:].copy() for k, o in carry.items()}
                 for name in collect or ():
-                    _gather(results[i], name, out[name], fun.size2_out(name) // size, j.n, start, take)
+                    if name not in direct:
+                        rows, cols = sizes.size_out[name]
+                        flat = _result(results[i], name, rows, cols // size, j.n)
+                        per = rows * (cols // size)
+                        flat[start * per:stop * per] = out[name].reshape(-1, order="F")[:take * per]
+            try:
+                _evaluate(fun, [(jobs[i], states[i], cuts[i][c]) for i in idx], record, consume, direct)
+            except PieceFailed as exc:
+                exc.start, exc.stop = cuts[idx[0]][c][:2]
+                raise
     for i in range(len(jobs)):
         results[i]["memory"] = states[i]
+        flats = results[i].pop("_flat", {})
         for name in collect or ():
-            a = results[i].get(name)
-            if a is not None:
-                a.flags.writeable = False
+            if name in flats:               # read-only: results may share them without a copy
+                for a in (flats[name].base, flats[name], results[i][name]):
+                    a.flags.writeable = False
     return results
 
 
-def _gather(result: dict, name: str, out: np.ndarray, cols: int, n: int, start: int, take: int) -> None:
-    """Copy a piece's per-sample output (rows x size*cols) into the job's ``(n, rows, cols)`` array."""
-    rows = out.shape[0]
-    if name not in result:
-        block = np.empty((n, cols, rows))          # each sample's matrix in column-major order, as CasADi has it
+def _result(result: dict, name: str, rows: int, cols: int, n: int) -> np.ndarray:
+    """The flat array behind the job's ``(n, rows, cols)`` output ``name`` (made on first use): sample
+    ``k``'s matrix in column-major order at ``[k*rows*cols:(k+1)*rows*cols]``, as CasADi writes it."""
+    flats = result.setdefault("_flat", {})
+    if name not in flats:
+        block = np.empty((n, cols, rows))
         result[name] = block.transpose(0, 2, 1)
-    target = result[name].transpose(0, 2, 1)      # (n, cols, rows) view of the block
-    target[start:start + take] = out[:, :take * cols].T.reshape(take, cols, rows)
+        flats[name] = block.reshape(-1)
+    return flats[name]
 
 
-def _evaluate(fun: ca.Function, batch: list, record: bool) -> list:
-    """Evaluate ``fun`` for each ``(job, memory, (start, stop, size))`` of ``batch``: one call of its map."""
+def _evaluate(fun: ca.Function, batch: list, record: bool, consume, direct: dict | None = None) -> None:
+    """Evaluate ``fun`` for each ``(job, memory, (start, stop, size))`` of ``batch`` in one call of its
+    map; ``consume(b, args, outputs, calls)`` reads the outputs of set ``b`` under the buffers' lock
+    (views of the buffers, or copies with ``record``; ``args`` only with ``record``). ``direct``: outputs
+    written straight into the given flat arrays (one set only)."""
     n = len(batch)
-    call, lock = _buffers(fun, n)
-    with lock:                                    # one evaluation at a time on these buffers
-        for name in fun.name_in():
-            rows, cols = fun.size_in(name)
+    calls = _buffers(fun, n)
+    call = calls.call
+    with calls.lock:                              # one evaluation at a time on these buffers
+        for name, (rows, cols) in calls.size_in.items():
             view = call.arg(name)
             for b, (job, state, (start, stop, size)) in enumerate(batch):
-                target = view[:, b * cols:(b + 1) * cols]
+                target = view[:, b * cols:(b + 1) * cols] if n > 1 else view
                 if name in job.per:
                     _copy_piece(job.per[name], start, stop, size, job.pad.get(name), target, cols // size)
                 else:
                     v = state.get(name, job.consts.get(name))
                     target[:] = 0.0 if v is None else np.reshape(v, (rows, cols), order="F")
+        for name, target in (direct or {}).items():
+            call.redirect(name, target)
         try:
             call()
         except RuntimeError as exc:
             raise PieceFailed(str(exc), call.fun, {k: call.arg(k).copy() for k in call.names_in}) from exc
-        block = call.block.copy()
-        args = [{name: call.arg(name)[:, b * fun.size2_in(name):(b + 1) * fun.size2_in(name)].copy()
-                 for name in fun.name_in()} for b in range(n)] if record else [None] * n
-    outs = {}
-    for j, name in enumerate(fun.name_out()):
-        rows, cols = fun.size_out(name)
-        outs[name] = block[call.offsets[j]:call.offsets[j + 1]].reshape((rows, cols * n), order="F")
-    return [(args[b], {k: v[:, b * fun.size2_out(k):(b + 1) * fun.size2_out(k)] for k, v in outs.items()})
-            for b in range(n)]
+        finally:
+            if direct:
+                call.restore_outputs()          # kept buffers must not write into (or keep) a result
+        block = call.block.copy() if record else call.block
+        for b in range(n):
+            args = ({name: call.arg(name)[:, b * cols:(b + 1) * cols].copy()
+                     for name, (_, cols) in calls.size_in.items()} if record else None)
+            out = {}
+            for j, (name, (rows, cols)) in enumerate(calls.size_out.items()):
+                whole = block[call.offsets[j]:call.offsets[j + 1]].reshape((rows, cols * n), order="F")
+                out[name] = whole[:, b * cols:(b + 1) * cols] if n > 1 else whole
+            for name in direct or ():           # written into the result: read there
+                rows, cols = calls.size_out[name]
+                out[name] = direct[name].reshape((rows, cols), order="F")
+            consume(b, args, out, calls)
