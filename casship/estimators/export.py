@@ -3,6 +3,12 @@
 The C is CasADi's code generation of the very Function casship evaluates in Python
 (:func:`casship.runtime.generate_c`; calling convention in ``docs/codegen.md``), so an onboard computer
 runs the same arithmetic.
+
+For an estimator step the inputs are its memory slots (``x, P`` for the Kalman family), then
+``u_prev, u, y, mask, dt, p, Q, R, gate``; the outputs are the memory slots under the same names,
+then the diagnostics chosen when exporting (see :mod:`casship.estimators.base`).
+:func:`export_estimator` also writes ``NAME_data.h`` with the estimator's parameter vector, ``Q``,
+``R`` and the measured channel names.
 """
 from __future__ import annotations
 

@@ -19,11 +19,6 @@ matrices stored column-major, every input and output dense)::
 
 Sizes and names of the inputs and outputs are listed in a comment at the top of ``NAME.h`` and
 queried at run time with ``NAME_n_in()``, ``NAME_name_in(i)``, ``NAME_sparsity_in(i)``.
-For an estimator step the inputs are its memory slots (``x, P`` for the Kalman family), then
-``u_prev, u, y, mask, dt, p, Q, R, gate``; the outputs are the memory slots under the same names,
-then the diagnostics chosen when exporting (see :mod:`casship.estimators.base`).
-``casship.estimators.export_estimator`` also writes ``NAME_data.h`` with the estimator's parameter vector, ``Q``,
-``R`` and the measured channel names.
 """
 from __future__ import annotations
 
