@@ -25,16 +25,20 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="process groups 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _slow_compiler(tmp_path: Path, seconds: float) -> tuple[str, Path]:
-    """A compiler that sleeps ``seconds`` (noting its pid in a file) before compiling for real."""
+def _slow_compiler(tmp_path: Path, seconds: float, later: float | None = None) -> tuple[str, Path]:
+    """A compiler that sleeps ``seconds`` (noting its pid in a file) before compiling for real; with
+    ``later``, only its first run sleeps so long, the others ``later`` seconds."""
     try:
         real, _ = rt.find_compiler()
     except rt.CompileError as exc:
         pytest.skip(f"no C compiler: {exc}")
     pids = tmp_path / "compiler-pids"
     script = tmp_path / "slow-cc"
+    first = tmp_path / "compiler-first-run"
+    wait = (f"sleep {seconds}" if later is None else
+            f"if [ -e {first} ]; then sleep {later}; else touch {first}; sleep {seconds}; fi")
     script.write_text(f'#!/bin/sh\n[ "$1" = --version ] && exec {real} --version\n'
-                      f'echo $$ >> {pids}\nsleep {seconds}\nexec {real} "$@"\n')
+                      f'echo $$ >> {pids}\n{wait}\nexec {real} "$@"\n')
     script.chmod(0o755)
     return str(script), pids
 
@@ -90,8 +94,9 @@ def _pids(path: Path) -> list[int]:
 
 def test_a_written_result_exits_without_waiting_for_the_background_compile(tmp_path):
     """Fresh cache: ``identify`` evaluates interpreted while the (here 60 s) compile runs, writes its fit
-    and exits within 5 s of writing it; the compiler is stopped and its build folder removed."""
-    cc, pids = _slow_compiler(tmp_path, 60)
+    and exits within 5 s of writing it; its compiler is stopped and the unfinished compiles go to a
+    detached process, which puts them in the cache for the next run."""
+    cc, pids = _slow_compiler(tmp_path, 60, later=0)
     cache = tmp_path / "cache"
     proc = _identify(tmp_path, cache, cc)
     try:
@@ -105,10 +110,38 @@ def test_a_written_result_exits_without_waiting_for_the_background_compile(tmp_p
         waited = time.monotonic() - written
     finally:
         proc.kill()
-    assert _pids(pids), "the compile had started (the check would mean nothing otherwise)"
+    started = _pids(pids)
+    assert started, "the compile had started (the check would mean nothing otherwise)"
     assert waited < 5.0, f"exited {waited:.1f} s after writing its result"
-    _wait_for(lambda: all(_gone(p) for p in _pids(pids)), 5, "the compiler to be gone")
-    assert _builds(cache) == []
+    _wait_for(lambda: all(_gone(p) for p in started), 5, "its compiler to be gone")
+    _wait_for(lambda: len(list(cache.glob("*.json"))) >= 1 and not _builds(cache), 150,
+              "the detached process to fill the cache")
+
+
+def test_without_hand_off_the_unfinished_compiles_are_dropped(tmp_path):
+    cc, pids = _slow_compiler(tmp_path, 60)
+    cache = tmp_path / "cache"
+    proc = subprocess.Popen([sys.executable, "-c", _BACKGROUND, "dropped_thing"], cwd=tmp_path,
+                            env={**_env(cache, cc), "CASSHIP_COMPILE_AFTER_EXIT": "0"},
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0 and "result [2, 4]" in out, err
+    time.sleep(1.0)
+    assert not list(cache.glob("*.json")) and _builds(cache) == []
+    assert all(_gone(p) for p in _pids(pids))
+
+
+_BACKGROUND = """
+import sys, time, casadi as ca
+from casship.runtime import compile_in_background
+x = ca.SX.sym("x", 2)
+h = compile_in_background(ca.Function(sys.argv[1], [x], [2 * x], ["x"], ["y"]))
+time.sleep(1.0)                       # the compile has started
+print("result", h.function(x=[1, 2])["y"])
+"""
 
 
 def test_ctrl_c_during_a_compile_exits_130_at_once_with_no_build_folder(tmp_path):

@@ -26,7 +26,8 @@ Compile cache
     :func:`cache_key`, :func:`find_compiler`, :func:`stop_compilers` (run at exit: no process waits
     for a compile nobody needs); ``casship cache info|clear`` on the command line.
     :func:`compile_in_background` compiles in a daemon worker thread and hands out the interpreted
-    Function until then (:class:`Compiling`).
+    Function until then (:class:`Compiling`); at exit what is not finished is handed to a detached
+    process that compiles it for the next run (:func:`hand_off`, :func:`finish_handed_off`).
 C export
     :func:`generate_c` (any Function as standalone C), :func:`write_harness`, :func:`compile_c`,
     :func:`read_harness_output`, :class:`CFiles`; an estimator's export lives with the estimators
@@ -35,7 +36,7 @@ C export
 No hand-written CPython C API code is compiled or loaded: compiled code is called through
 CasADi's ``external`` and buffer mechanisms, and the record loop's C driver through ``ctypes``.
 """
-from ._background import Compiling, compile_in_background
+from ._background import Compiling, compile_in_background, finish_handed_off, hand_off
 from ._buffers import DUPLICATE_NAMES, BoundedTable, BufferedCall
 from ._pieces import THREADS, Job, PieceFailed, piece, pieces, run_pieces
 from ._cache import cache_dir, cache_key, cached_function, compile_function
@@ -51,7 +52,7 @@ __all__ = ["BufferedCall", "BoundedTable", "Job", "PieceFailed", "run_pieces", "
            "JitPolicy", "jit_function", "shared_function", "shared_functions", "record_loop", "is_compiled",
            "current_function", "COUNTS", "FUNCTIONS", "BACKGROUND_FAILURES",
            "fold_chunk", "DEFAULT_CHUNK",
-           "compile_function", "cached_function", "compile_in_background", "Compiling", "CompileError", "cache_dir",
+           "compile_function", "cached_function", "compile_in_background", "Compiling", "hand_off", "finish_handed_off", "CompileError", "cache_dir",
            "cache_info", "clear_cache", "cache_key", "CacheInfo", "Cleared", "stop_compilers",
            "find_compiler", "DEFAULT_FLAGS", "NATIVE_FLAGS", "DEFAULT_TIMEOUT",
            "CFiles", "generate_c", "write_harness", "compile_c", "read_harness_output", "c_array", "check_c_name"]

@@ -8,14 +8,21 @@ compiled one is loaded, and the compiled one from then on. A one-off fit that en
 compiler does never waits for it; a longer one switches to compiled code as soon as it exists.
 
 The compiles run one at a time in a daemon worker thread: a process whose work is done exits at
-once, without waiting for a compile nobody needs any more; the compiler it was running is stopped
-with everything it started, and its build folder removed (:func:`~._compiler.stop_compilers`, run at
-exit). The next process that needs the library compiles it again.
+once, without waiting for them. At a normal exit the compiles not finished yet are handed to one
+detached process (its own session, no output) that compiles them into the cache for the next run
+(:func:`hand_off`; ``CASSHIP_COMPILE_AFTER_EXIT=0`` drops them instead); the compiler this process was
+running is stopped with everything it started and its build folder removed
+(:func:`~._compiler.stop_compilers`). A Ctrl-C drops them: nothing compiles on after an interrupt.
 """
 from __future__ import annotations
 
+import atexit
+import json
 import os
 import queue
+import subprocess
+import sys
+import tempfile
 import threading
 from typing import Callable, Sequence
 
@@ -23,10 +30,12 @@ import casadi as ca
 
 from ._cache import compile_function
 from ._compiler import stopping
+from ._settings import ENV_AFTER_EXIT
 
-__all__ = ["Compiling", "compile_in_background"]
+__all__ = ["Compiling", "compile_in_background", "hand_off"]
 
 _JOBS: "queue.Queue[Compiling]" = queue.Queue()
+_OPEN: list = []                    # compiles queued or running (handed off at exit)
 _WORKER: list[threading.Thread] = []
 _WORKER_LOCK = threading.Lock()
 
@@ -38,6 +47,7 @@ def _fresh_after_fork() -> None:
     global _JOBS, _WORKER_LOCK
     _JOBS, _WORKER_LOCK = queue.Queue(), threading.Lock()
     _WORKER.clear()
+    _OPEN.clear()
 
 
 if hasattr(os, "register_at_fork"):
@@ -143,7 +153,65 @@ def _work() -> None:
                     _WORKER.clear()
                     return
             continue
-        job._run()
+        try:
+            job._run()
+        finally:
+            with _WORKER_LOCK:
+                if job in _OPEN:
+                    _OPEN.remove(job)
+
+
+def hand_off() -> int:
+    """Hand the compiles not finished yet to one detached process that compiles them into the cache
+    (run at exit, before the compilers are stopped); returns how many. Nothing after a Ctrl-C
+    (:func:`~._compiler.stopping`), with ``CASSHIP_COMPILE_AFTER_EXIT=0`` or without a cache."""
+    from ._cache import cache_dir
+
+    with _WORKER_LOCK:
+        jobs = [j for j in _OPEN if not j.done]
+    if (not jobs or stopping() or os.environ.get(ENV_AFTER_EXIT, "1").strip().lower() in ("0", "no", "off", "false")
+            or cache_dir() is None):
+        return 0
+    work = [{"fun": j.interpreted.serialize(), "flags": None if j.flags is None else list(j.flags),
+             "extra_source": j.extra_source} for j in jobs]
+    fd, path = tempfile.mkstemp(prefix="casship-handoff-", suffix=".json")
+    with os.fdopen(fd, "w") as f:
+        json.dump(work, f)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p), ENV_AFTER_EXIT: "0",
+           "CASSHIP_PROGRESS": "0"}
+    try:
+        subprocess.Popen([sys.executable, "-c", "import sys; from casship.runtime import finish_handed_off; "
+                          "finish_handed_off(sys.argv[1])", path], env=env, start_new_session=True,
+                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         close_fds=True)
+    except OSError:
+        os.unlink(path)
+        return 0
+    return len(jobs)
+
+
+def finish_handed_off(path: str) -> None:
+    """Compile the Functions a process handed off at its exit (:func:`hand_off`) into the cache.
+
+    Parameters
+    ----------
+    path : str
+        The hand-off file (removed here).
+    """
+    try:
+        with open(path) as f:
+            work = json.load(f)
+    finally:
+        os.unlink(path)
+    for item in work:
+        fun = ca.Function.deserialize(item["fun"])
+        try:
+            compile_function(fun, flags=item["flags"], extra_source=item["extra_source"])
+        except Exception:           # noqa: BLE001 - nobody to tell: the next run compiles it itself
+            pass
+
+
+atexit.register(hand_off)           # registered after the compiler's stop_compilers: runs before it
 
 
 def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = None,
@@ -178,6 +246,8 @@ def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = Non
 
 def _submit(job: Compiling) -> Compiling:
     """Queue ``job`` and make sure a worker thread runs."""
+    with _WORKER_LOCK:
+        _OPEN.append(job)
     _JOBS.put(job)
     with _WORKER_LOCK:
         if not _WORKER:

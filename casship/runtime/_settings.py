@@ -7,6 +7,8 @@ variable                       what                                             
 ``CASSHIP_CFLAGS``             compiler flags (replace :data:`DEFAULT_FLAGS`)       :data:`DEFAULT_FLAGS`
 ``CASSHIP_COMPILE_TIMEOUT``    seconds a compiler run may take                      :data:`DEFAULT_TIMEOUT`
 ``CASSHIP_FOLD_CHUNK``         samples per piece of a fold over a record            :data:`DEFAULT_CHUNK`
+``CASSHIP_COMPILE_AFTER_EXIT`` ``0``: background compiles unfinished at exit are     ``1`` (handed to a detached
+                               dropped, not handed to a detached process            process)
 ``CC``                         the C compiler                                       ``gcc``, else ``cc``
 =============================  ===================================================  =============================
 
@@ -20,11 +22,12 @@ from typing import Sequence
 
 from ..errors import InputError
 
-__all__ = ["ENV_CACHE", "ENV_FLAGS", "ENV_TIMEOUT", "ENV_CHUNK", "DEFAULT_FLAGS", "NATIVE_FLAGS", "DEFAULT_TIMEOUT",
+__all__ = ["ENV_CACHE", "ENV_FLAGS", "ENV_TIMEOUT", "ENV_CHUNK", "ENV_AFTER_EXIT", "DEFAULT_FLAGS", "NATIVE_FLAGS", "DEFAULT_TIMEOUT",
            "DEFAULT_CHUNK", "chosen_flags", "compile_timeout", "fold_chunk"]
 
 ENV_CACHE, ENV_FLAGS, ENV_TIMEOUT, ENV_CHUNK = ("CASSHIP_CACHE_DIR", "CASSHIP_CFLAGS", "CASSHIP_COMPILE_TIMEOUT",
                                                 "CASSHIP_FOLD_CHUNK")
+ENV_AFTER_EXIT = "CASSHIP_COMPILE_AFTER_EXIT"
 
 DEFAULT_FLAGS = ("-O1", "-fno-math-errno", "-ffp-contract=off")
 """The one flag set casship compiles with unless told otherwise: compiled code gives the numbers of the
