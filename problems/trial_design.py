@@ -293,6 +293,8 @@ def _closed_check(out: Path, quick: bool, cfg: dict, workers, scheduler, rep: Re
     rec = rows[res.best.name]
     verdict = closed_check_verdict(rec["realised_rmse_m"], rec["predicted_sd_m"], prior_rmse, ships)
     verdict.update({"recommended": res.best.name, "best_standard": best_standard, "ships": ships, "rule": RULE,
+                    "predicted_reduction": rows["(prior only)"]["predicted_sd_m"] / rec["predicted_sd_m"],
+                    "realised_reduction": prior_rmse / rec["realised_rmse_m"],
                     "recommended_beats_best_standard": rows[res.best.name]["realised_rmse_m"]
                     <= rows[best_standard]["realised_rmse_m"]})
     (out / "ranking_closed_check.md").write_text(res.table() + "\n")
@@ -341,7 +343,8 @@ def _closed_check(out: Path, quick: bool, cfg: dict, workers, scheduler, rep: Re
     rep.add(f"Verdict: **{'PASS' if verdict['passed'] else 'FAIL'}** -- not over-confident: "
             f"{'yes' if verdict['not_over_confident'] else 'no'} (realised {rec['realised_rmse_m']:.4g} m, the rule "
             f"accepts up to {verdict['upper_bound']:.4g} m; realised / predicted {verdict['ratio']:.3g}); the trial "
-            f"helps: {'yes' if verdict['trial_helps'] else 'no'} (prior alone {prior_rmse:.4g} m). The recommended "
+            f"helps: {'yes' if verdict['trial_helps'] else 'no'} (prior alone {prior_rmse:.4g} m). Error reduction: "
+            f"predicted x{verdict['predicted_reduction']:.3g}, realised x{verdict['realised_reduction']:.3g}. The recommended "
             f"trial ({res.best.name}) {'does' if verdict['recommended_beats_best_standard'] else 'does NOT'} beat the "
             f"best standard manoeuvre ({best_standard}) in realised RMSE.")
     return {"target": res.target.name, "prior_value": res.target.value, "rows": rows, "verdict": verdict,
