@@ -96,13 +96,15 @@ def fit_belief(fit_file: Path, covariance: str | None = None):
 
     The belief is the covariance the file carries (calibrated by the run-level jackknife when the
     fit was; ``covariance`` chooses another) and :data:`HELD_PRIOR` for the parameters it does not
-    cover; the noise is the fit's own (:func:`casship.design.fit_noise`).
+    cover; the noise is the fit's own (:func:`casship.design.fit_noise`); the last item is the
+    file's heading model discrepancy [rad^2/s] (0 when it carries none).
     """
-    model, p, _ = read_params(fit_file, "kvlcc2", uncertainty=True)     # the file's covariance checked too
+    model, p, unc = read_params(fit_file, "kvlcc2", uncertainty=True)     # the file's covariance checked too
     values = model.param_dict(p)
     belief = ParameterBelief.from_fit(fit_file, covariance=covariance, params=values)
     held = {n: s for n, s in prior_std(model, HELD_PRIOR).items() if n not in belief.names}
-    return model, p, belief.extended(held, values), fit_noise(fit_file)
+    q = float(getattr(unc, "psi_variance_rate", 0.0) or 0.0) if unc is not None else 0.0
+    return model, p, belief.extended(held, values), fit_noise(fit_file), q
 
 
 def design_on_fit(fit_file: Path, out: Path, rep: Report, *, dt: float, max_iter: int, free: bool,
@@ -110,7 +112,7 @@ def design_on_fit(fit_file: Path, out: Path, rep: Report, *, dt: float, max_iter
     """Part 1 on a fit file: the standard manoeuvres (and, with ``free``, a free trial) ranked for the
     tactical diameter and for the port/starboard difference."""
     fit_file, out = Path(fit_file), Path(out)
-    model, p, belief, noise = fit_belief(fit_file, covariance)
+    model, p, belief, noise, q = fit_belief(fit_file, covariance)
     approach = Approach(model, p, dt=dt)
     out_rows = {}
     shown = fit_file.relative_to(out) if fit_file.is_relative_to(out) else fit_file
@@ -119,15 +121,16 @@ def design_on_fit(fit_file: Path, out: Path, rep: Report, *, dt: float, max_iter
             + ", ".join(f"{k} {v:.3g}" for k, v in noise.items()) + " (SI, rad).")
     for target in ("tactical_diameter", TARGET):
         res = design_trials(model, belief, noise, target, p=p, dt=dt, max_iter=max_iter,
-                            limits=_limits(approach) if free else None)
+                            limits=_limits(approach) if free else None, discrepancy=q)
         (out / f"ranking_fit_{target}.md").write_text(res.table() + "\n")
         res.plot(out / f"fig_fit_{target}.png", approach)
         rep.section(f"Target: {res.target.name}", 3)
         rep.add(res.summary().replace("\n", "  \n"), res.table())
         rep.image(f"fig_fit_{target}.png", f"ranking for {target} on the fitted ship, the best trial")
         out_rows[target] = {"value": res.target.value, "best": res.best.name, "ranking": res.rows,
-                            "free": res.free}
+                            "free": res.free, "model_floor": res.model_floor, "per_hour": res.per_hour}
     return {"fit_file": str(shown), "noise": noise, "belief": belief.source, "covariance": belief.kind,
+            "discrepancy_deg2_per_s": float(np.degrees(np.degrees(q))),
             "uncertain": list(belief.names), "designs": out_rows}
 
 
