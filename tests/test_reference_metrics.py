@@ -177,8 +177,8 @@ def test_ilos_step_integrates_at_the_published_rate(turn_radius):
     assert float(out["cross_track"]) == pytest.approx(y_e, abs=1e-12)
     assert float(out["chi_ref"]) == pytest.approx(-np.arctan(s / Delta), abs=1e-14)
     expected = y_int + dt * Delta * y_e / (Delta**2 + s**2)     # 4 + 0.5 * 3000 / 11444
-    assert float(np.asarray(out["memory_next"])[1]) == pytest.approx(expected, abs=1e-14)
-    assert float(np.asarray(out["memory_next"])[0]) == 0.0
+    assert float(np.asarray(out["memory_next"]).ravel()[1]) == pytest.approx(expected, abs=1e-14)
+    assert float(np.asarray(out["memory_next"]).ravel()[0]) == 0.0
     assert float(out["y_int"]) == y_int
 
 
@@ -186,5 +186,5 @@ def test_los_without_integral_keeps_the_integral_at_zero():
     wp = Waypoints([0.0, 1000.0], [0.0, 0.0])
     f = LOSGuidance(wp, 100.0, 10.0).function(1.0)
     out = f.call({"memory": [0.0, 0.0], "north": 10.0, "east": -100.0, "U": 5.0, "angle": 0.0})
-    assert float(np.asarray(out["memory_next"])[1]) == 0.0
+    assert float(np.asarray(out["memory_next"]).ravel()[1]) == 0.0
     assert float(out["chi_ref"]) == pytest.approx(np.pi / 4, abs=1e-14)     # atan(100 / 100) back to the track
