@@ -28,7 +28,7 @@ def bash_commands(text: str) -> list[list[str]]:
     """The commands of each ``bash`` block (continuation lines joined, comments and blank lines dropped)."""
     blocks = []
     for block in re.findall(r"```(?:bash|sh|shell|console)\n(.*?)```", text, re.S):
-        joined = re.sub(r"\\\n\s*", " ", block)
+        joined = re.sub(r"\s*\\\n\s*", " ", block)
         cmds = [line.split(" #")[0].strip() if not line.lstrip().startswith("#") else ""
                 for line in joined.splitlines()]
         blocks.append([c.removeprefix("$ ") for c in cmds if c])
