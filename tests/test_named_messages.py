@@ -53,8 +53,8 @@ def test_a_prior_std_of_an_unknown_parameter_is_named():
     from casship.design import ParameterBelief
 
     ship = cs.models.get_model("kvlcc2")
-    with pytest.raises(ValueError, match=r"unknown parameter\(s\) \['bogus'\]: no value .* among the \d+ parameters "
-                                         r"given \(rho, L_pp, "):
+    with pytest.raises(ValueError, match=r"unknown parameter\(s\) \['bogus'\]: no mean value for them among the \d+ "
+                                         r"parameters given \(rho, L_pp, "):
         ParameterBelief.from_std({"bogus": 0.1, "N_r_dash": 0.01}, ship.param_dict())
 
 

@@ -129,8 +129,8 @@ class ParameterBelief:
         missing = [n for n in names if n not in mean]
         if missing:
             known = list(mean)
-            raise ValueError(f"unknown parameter(s) {missing}: no value to centre their standard deviation on "
-                             f"among the {len(known)} parameters given ({', '.join(map(str, known[:12]))}"
+            raise ValueError(f"unknown parameter(s) {missing}: no mean value for them among the {len(known)} "
+                             f"parameters given ({', '.join(map(str, known[:12]))}"
                              f"{', ...' if len(known) > 12 else ''})")
         s = np.array([float(std[n]) for n in names])
         return cls(tuple(names), Gaussian([float(mean[n]) for n in names], np.diag(s**2)), source, "prior")
