@@ -17,7 +17,7 @@ from .closed_loop import ClosedLoop
 from .components import ClosedLoopResult, LoopEstimator, Sensors
 from .defaults import AutopilotSettings, derive_settings
 from .designs import lqr_design, pid_pole_placement
-from .estimation import WaveYaw, linear_estimator, course_ekf, course_prior, heading_kf, heading_observer, heading_prior
+from .estimation import WaveYaw, linear_estimator, settings_wave, course_ekf, course_prior, heading_kf, heading_observer, heading_prior
 from .law import Actuator, Autopilot, PIDGains
 from .nomoto import Nomoto, nomoto_from_linear
 from .performance import CRITERIA, course_change_metrics, course_scenario, performance_report
@@ -136,7 +136,7 @@ class Design:
 
     def closed_loop_system(self, *, plant: SteeringPlant | None = None, environment: Mapping | None = None,
                            estimator="ekf", sensors: Sensors | None = None, wave: WaveYaw | None = None,
-                           wave_filter: bool = False, guidance=None, mode: str | None = None,
+                           wave_filter: bool | None = None, guidance=None, mode: str | None = None,
                            rate: str | None = None, controller=None) -> ClosedLoop:
         """The :class:`ClosedLoop` of this design.
 
@@ -152,8 +152,9 @@ class Design:
             Default: from the settings.
         wave : WaveYaw, optional
             First-order wave yaw on the measured heading and rate.
-        wave_filter : bool
-            Put the wave model into the heading observer (Fossen's wave filter).
+        wave_filter : bool, optional
+            Put the wave model into the heading observer (Fossen's wave filter): ``wave``, else the
+            sea state of the settings (``wave_w0``, ``wave_std``). Default: the settings' ``wave_filter``.
         guidance : LOSGuidance, optional
             Path following: the course command comes from the guidance.
         mode, rate : str, optional
@@ -168,9 +169,13 @@ class Design:
         pl = plant or self.plant
         if environment:
             pl = pl.replace(inputs=dict(environment))
+        if wave_filter is None:
+            wave_filter = s.wave_filter
         if estimator == "ekf":
-            estimator = self.estimator("course" if mode == "course" else "heading",
-                                       wave=wave if wave_filter else None, x0=pl.x0)
+            model_wave = (wave if wave is not None else settings_wave(s)) if wave_filter else None
+            if wave_filter and model_wave is None:
+                raise ValueError("wave_filter needs a wave model: give wave, or design with wave_w0 and wave_std")
+            estimator = self.estimator("course" if mode == "course" else "heading", wave=model_wave, x0=pl.x0)
         law = self.autopilot
         if isinstance(controller, (control.StateSpace, control.TransferFunction)):
             law = self.linear_controller(controller)

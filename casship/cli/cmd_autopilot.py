@@ -12,6 +12,10 @@ Example::
     casship autopilot --model kvlcc2 --params fit.json           # on the ship identified by casship identify
     casship autopilot --model kvlcc2 --speed 4 --schedule --scenario course-90 --json
     casship autopilot --model kvlcc2 --controller mpc --scenario course-60
+
+Exit codes: 0 when every performance check of the run is met; 3 when one or more is not (the
+checks not met are named on standard error, after the results; ``--allow-unmet`` accepts them and
+exits 0); 2 for bad input (a setting, scenario or file), 1 for an internal error.
 """
 from __future__ import annotations
 
@@ -28,6 +32,9 @@ _CHOICES = {"method": ("pid", "lqr"), "mode": ("heading", "course"), "rate": ("e
 _PAIRS = {"ekf_alpha", "ekf_q", "observer_q"}
 _SKIP = {"lqr_weights", "turn_rate_top"}
 
+
+#: Exit code of a run whose performance checks are not all met (``--allow-unmet``: 0).
+EXIT_UNMET = 3
 
 #: One-line description (the command list of ``casship --help``).
 HELP = "design a course autopilot for a named model and run a course change"
@@ -78,6 +85,9 @@ def register(sub) -> None:
                    help='JSON file {"params": {name: value}} (e.g. a fit of casship identify) with the ship\'s parameters')
     p.add_argument("--seed", type=seed, default=0, help="sensor-noise seed")
     p.add_argument("--show-defaults", action="store_true", help="print the settings for this ship and exit")
+    p.add_argument("--allow-unmet", action="store_true",
+                   help=f"exit 0 when performance checks are not met (default: they are named on standard error and "
+                        f"the exit code is {EXIT_UNMET})")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", default=None, metavar="DIR", help="save Bode/step and closed-loop plots to the new folder DIR")
     add_overwrite_option(p)
@@ -209,7 +219,7 @@ def run(args) -> int:
         out["plots"] = [str(Path(args.plot) / p.name) for p in (loop_png, run_png)]
     if args.json:
         print_json(out)
-        return 0
+        return _unmet(args, res.performance)
     mg, nom, g = design.margins, design.nomoto, design.gains
     print(f"{args.model} at {s.speed:.3g} m/s: Nomoto K = {nom.K:.4g} 1/s, T = {nom.T:.4g} s"
           + (f" (T1 {nom.T1:.4g}, T2 {nom.T2:.4g}, T3 {nom.T3:.4g})" if nom.second_order else ""))
@@ -235,4 +245,18 @@ def run(args) -> int:
             continue
         flag = "" if c["ok"] is None else ("ok" if c["ok"] else "NOT MET")
         print(f"  {c['check']}: {c['value']:.4g} {c['unit']} {flag}")
-    return 0
+    return _unmet(args, res.performance)
+
+
+def _unmet(args, performance: dict) -> int:
+    """Name the performance checks not met on standard error; :data:`EXIT_UNMET` unless ``--allow-unmet``."""
+    import sys
+
+    failed = [c for c in performance["checks"] if c["ok"] is False]
+    if not failed:
+        return 0
+    what = "; ".join(f"{c['check']} = {c['value']:.4g} {c['unit']}".rstrip()
+                     + (f" (limit {c['threshold']:g})" if c.get("threshold") is not None else "") for c in failed)
+    verdict = "accepted (--allow-unmet)" if args.allow_unmet else f"exit code {EXIT_UNMET}; --allow-unmet accepts"
+    print(f"casship autopilot: {len(failed)} performance check(s) not met: {what} [{verdict}]", file=sys.stderr)
+    return 0 if args.allow_unmet else EXIT_UNMET
