@@ -274,6 +274,15 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         rule("steer_max", lambda: float(_vessel(plant, "rudder_max") or np.radians(35.0)))
         rule("steer_rate_max", lambda: float(_vessel(plant, "rudder_rate") or _SOLAS_RATE))
         rule("actuator_T", lambda: 1.0)
+    if LU is not None and np.isfinite(val["steer_max"]) and val["steer_max"] / val["steer_rate_max"] > 10 * LU:
+        from ..errors import InputError
+
+        unit = "N m/s" if twin else "rad/s"
+        raise InputError(f"autopilot setting steer_rate_max = {val['steer_rate_max']:g} {unit}: the steering gear would "
+                         f"take {val['steer_max'] / val['steer_rate_max']:.3g} s from zero to its limit "
+                         f"{val['steer_max']:.4g}, more than 10 L/U = {10 * LU:.3g} s (ten ship lengths of sailing): "
+                         f"the ship could not be turned within a course change; give at least "
+                         f"{val['steer_max'] / (10 * LU):.3g} {unit}")
     limit = m.limits.get(plant.steer)
     if limit is not None and val["steer_max"] > max(abs(limit.lower), abs(limit.upper)) * (1 + 1e-9):
         from ..validity import describe_limit

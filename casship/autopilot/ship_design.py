@@ -344,16 +344,19 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
 
     if nomoto is not None:
         raise ValueError("a gain schedule designs on each speed's own linearisation; do not give nomoto")
-    point = design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
     vessel = model.vessel
+    if speed is None:
+        point = design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
+    else:
+        point = _schedule_point(model, float(speed), p=p, steer=steer, inputs=inputs, settings=settings)
     approach = vessel.U0 if vessel is not None and vessel.U0 else point.settings.speed
-    speeds = default_schedule(max(approach, point.settings.speed)) \
+    speeds = default_schedule(approach, point.settings.speed) \
         if isinstance(schedule, str) and schedule == "default" else schedule
     try:
         speeds = sorted(float(v) for v in speeds)
     except (TypeError, ValueError):
         raise ValueError(f"schedule must be a sequence of speeds [m/s] or 'default', got {schedule!r}") from None
-    designs = tuple(design_autopilot(model, v, p=p, steer=steer, inputs=inputs, **settings) for v in speeds)
+    designs = tuple(_schedule_point(model, v, p=p, steer=steer, inputs=inputs, settings=settings) for v in speeds)
     law = ScheduledAutopilot(tuple(speeds), tuple(d.autopilot for d in designs))
     s0 = point.settings
     here = law.at(s0.speed)
@@ -367,6 +370,26 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
     controller = here.gains.controller(steer=point.plant.steer)
     return Design(point.plant, point.linearization, point.nomoto, here.gains, controller,
                   L, closed, margins(L), law, point.actuator, s, designs)
+
+
+def _schedule_point(model, speed, *, p, steer, inputs, settings) -> Design:
+    """The point design of a schedule at ``speed``; a speed where the model is not valid, or where no
+    design exists, is refused naming the speed and the model's range."""
+    from ..errors import InputError
+
+    limit = model.limits.get("u")
+    if not (np.isfinite(speed) and speed > 0):
+        raise InputError(f"schedule speed {speed:g} m/s must be positive and finite")
+    if limit is not None and not (limit.lower <= speed <= limit.upper):
+        raise InputError(f"schedule speed {speed:.4g} m/s is outside the speed range of model {model.name!r}, "
+                         f"u in [{limit.lower:.4g}, {limit.upper:.4g}] m/s ({limit.why})")
+    try:
+        return design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
+    except (ValueError, ArithmeticError) as err:
+        rng = (f"u in [{limit.lower:.4g}, {limit.upper:.4g}] m/s" if limit is not None else
+               "its straight run trimmed with steering to spare")
+        raise InputError(f"schedule speed {speed:.4g} m/s: no autopilot design for model {model.name!r} there "
+                         f"({err}); the model is valid for {rng}") from err
 
 
 def simulate_autopilot(design: Design, command, t_end: float, *, step_times=(0.0,), seed=0, stepwise: bool = False,

@@ -204,6 +204,9 @@ def run(args) -> int:
     out[travel_key] = perf["steer_travel_per_hour"] * (float(np.degrees(1.0)) if steer_unit == "deg" else 1.0)
     if design.schedule:
         out["schedule_speeds_m_s"] = list(design.autopilot.speeds)
+        out["schedule"] = [{"speed_m_s": point.settings.speed, "wn_rad_s": point.settings.wn, **point.gains.as_dict(),
+                            "wn_ref_rad_s": point.settings.wn_ref,
+                            "r_max_deg_s": float(np.degrees(point.settings.r_max))} for point in design.schedule]
     out["controller"] = args.controller
     if controller is not None:
         out["mpc"] = {"period_s": controller.period, "horizon": int(controller.horizon), "solver": "hpipm"}
@@ -213,7 +216,9 @@ def run(args) -> int:
         with output_folder(args.plot, overwrite=args.overwrite, what="--plot") as folder:
             loop_png, run_png = folder / f"{args.model}_loop.png", folder / f"{args.model}_{args.scenario}.png"
             ap.plot_design(design.loop, loop_png, f"{args.model}: loop on the linearised ship", design.closed_loop)
-            ap.plot_closed_loop(res, run_png, f"{args.model} {args.scenario} ({s.mode}, {s.method})",
+            scheduled = (f", scheduled over {', '.join(f'{v:.3g}' for v in design.autopilot.speeds)} m/s"
+                         if design.schedule else "")
+            ap.plot_closed_loop(res, run_png, f"{args.model} {args.scenario} ({s.mode}, {s.method}{scheduled})",
                                 **({"steer_label": "yaw moment [N m]", "steer_scale": 1.0} if steer_unit == "N m"
                                    else {}))
         out["plots"] = [str(Path(args.plot) / p.name) for p in (loop_png, run_png)]
@@ -229,6 +234,14 @@ def run(args) -> int:
           f"{mg['phase_margin_deg']:.1f} deg at {mg['gain_crossover_rad_s']:.3g} rad/s; upper/lower gain margin "
           f"{_db(mg['upper_gain_margin_db'])}/{_db(mg['lower_gain_margin_db'])}; closed loop stable: "
           f"{mg['closed_loop_stable']}")
+    if design.schedule:
+        print(f"gain schedule over the measured speed ({len(design.schedule)} designs, interpolated between them, the "
+              f"nearest held beyond):")
+        print(f"{'speed m/s':>10} {'wn rad/s':>9} {'Kp':>10} {'Kd s':>10} {'Ki 1/s':>10} {'wn_ref':>8} {'r_max deg/s':>11}")
+        for point in design.schedule:
+            ps, pg = point.settings, point.gains
+            print(f"{ps.speed:>10.4g} {ps.wn:>9.4g} {pg.Kp:>10.4g} {pg.Kd:>10.4g} {pg.Ki:>10.4g} {ps.wn_ref:>8.4g} "
+                  f"{np.degrees(ps.r_max):>11.4g}")
     sc = 1.0 if steer_unit == "N m" else float(np.degrees(1.0))
     print(f"{'segment':>8} {'target':>7} {'rise s':>8} {'over %':>7} {'over deg':>9} {'settle s':>9} {'ss err':>7} "
           f"{'max steer':>10} {'rate lim':>9}  (target, errors in deg; steering in {steer_unit})")
