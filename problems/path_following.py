@@ -74,11 +74,13 @@ def run_case(case: dict) -> dict:
     design = ap.design_autopilot(model, mode=mode, feedforward="linear")
     wp, Delta = scenario(design)
     kappa = LOSGuidance.for_design(wp, design, integral=integral, wheel_over=False).kappa
-    guidance = LOSGuidance(wp, Delta, Delta, kappa)          # legs change at the circle of acceptance
+    at_switch = case.get("at_switch", LOSGuidance.at_switch)
+    within = case.get("integrate_within", LOSGuidance.integrate_within)
+    guidance = LOSGuidance(wp, Delta, Delta, kappa, at_switch=at_switch, integrate_within=within)   # legs change at the circle of acceptance
     if case.get("lookahead_L") or case.get("kappa_U"):
         look = case["lookahead_L"] * model.vessel.L_pp if case.get("lookahead_L") else guidance.lookahead
         kappa = case["kappa_U"] * design.settings.speed if case.get("kappa_U") else guidance.kappa
-        guidance = LOSGuidance(wp, look, look, kappa)
+        guidance = LOSGuidance(wp, look, look, kappa, at_switch=at_switch, integrate_within=within)
     U = design.settings.speed
     env = {"current_speed": CURRENT * U, "current_dir": np.radians(90.0)}
     if WIND[name] is not None:
