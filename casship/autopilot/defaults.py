@@ -274,6 +274,14 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         rule("steer_max", lambda: float(_vessel(plant, "rudder_max") or np.radians(35.0)))
         rule("steer_rate_max", lambda: float(_vessel(plant, "rudder_rate") or _SOLAS_RATE))
         rule("actuator_T", lambda: 1.0)
+    limit = m.limits.get(plant.steer)
+    if limit is not None and val["steer_max"] > max(abs(limit.lower), abs(limit.upper)) * (1 + 1e-9):
+        from ..validity import describe_limit
+
+        v = val["steer_max"]
+        shown = f"{v:g} N m" if twin else f"{v:g} rad ({np.degrees(v):.4g} deg)"
+        raise ValueError(f"autopilot setting steer_max = {shown} is beyond the valid range "
+                         f"{describe_limit(m, plant.steer)} of {plant.steer!r} of model {m.name!r}")
     if LU is not None and np.isfinite(val["steer_max"]) and val["steer_max"] / val["steer_rate_max"] > 10 * LU:
         from ..errors import InputError
 
@@ -283,14 +291,6 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
                          f"{val['steer_max']:.4g}, more than 10 L/U = {10 * LU:.3g} s (ten ship lengths of sailing): "
                          f"the ship could not be turned within a course change; give at least "
                          f"{val['steer_max'] / (10 * LU):.3g} {unit}")
-    limit = m.limits.get(plant.steer)
-    if limit is not None and val["steer_max"] > max(abs(limit.lower), abs(limit.upper)) * (1 + 1e-9):
-        from ..validity import describe_limit
-
-        v = val["steer_max"]
-        shown = f"{v:g} N m" if twin else f"{v:g} rad ({np.degrees(v):.4g} deg)"
-        raise ValueError(f"autopilot setting steer_max = {shown} is beyond the valid range "
-                         f"{describe_limit(m, plant.steer)} of {plant.steer!r} of model {m.name!r}")
     steering = None
     if "u" in m.state_names and "v" in m.state_names:
         try:

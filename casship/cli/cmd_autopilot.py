@@ -25,10 +25,10 @@ from ._common import (add_model_option, add_overwrite_option, check_input_files,
                       require, seed)
 
 #: settings shown in degrees on the command line (name -> option suffix)
-_DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s"}
+_DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s", "wave_std": "deg"}
 _CHOICES = {"method": ("pid", "lqr"), "mode": ("heading", "course"), "rate": ("estimator", "gyro"),
             "feedforward": ("nonlinear", "linear"),
-            "integral": ("fossen", "exact", "none")}
+            "integral": ("fossen", "exact", "none"), "wave_filter": ("off", "on")}
 _PAIRS = {"ekf_alpha", "ekf_q", "observer_q"}
 _SKIP = {"lqr_weights", "turn_rate_top"}
 
@@ -193,7 +193,11 @@ def run(args) -> int:
                 print(f"{k:>15} = {row['value']!s:<40} ({row['source']})")
         return 0
     controller = ap.mpc_for_design(design) if args.controller == "mpc" else None
-    res = design.simulate(args.scenario, args.t_end, seed=args.seed, environment=env, controller=controller)
+    from ..autopilot.estimation import settings_wave
+
+    sea = settings_wave(s)              # a design for a sea sails in it (first-order wave yaw on compass and gyro)
+    res = design.simulate(args.scenario, args.t_end, seed=args.seed, environment=env, controller=controller,
+                          **({"wave": sea} if sea is not None else {}))
     steer_unit = "N m" if design.plant.steer == "tau_N" else "deg"
     metrics = [{"overshoot_deg": np.nan, **m} for m in res.metrics]   # overshoot in % with degrees beside it
     out = {"model": args.model, "scenario": args.scenario, "t_end_s": float(res.data.t[-1]), "environment": env,
