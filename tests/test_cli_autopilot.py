@@ -121,12 +121,12 @@ def test_unmet_checks_are_said_and_exit_3(capsys):
     from casship.cli.cmd_autopilot import EXIT_UNMET
 
     assert EXIT_UNMET == 3
-    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "30", "--json"]) == 3
+    assert main(["autopilot", "--model", "shi-taylor", "--duration", "30", "--json"]) == 3
     cap = capsys.readouterr()
     out = json.loads(cap.out)                                  # the results are still written
     assert not out["performance"]["all_ok"]
     assert "performance check(s) not met: settled, change 1" in cap.err and "exit code 3" in cap.err
-    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "30", "--allow-unmet"]) == 0
+    assert main(["autopilot", "--model", "shi-taylor", "--duration", "30", "--allow-unmet"]) == 0
     cap = capsys.readouterr()
     assert "NOT MET" in cap.out and "accepted (--allow-unmet)" in cap.err
 
@@ -134,16 +134,16 @@ def test_unmet_checks_are_said_and_exit_3(capsys):
 def test_autopilot_refuses_a_steering_gear_that_cannot_turn_the_ship_and_mpc_in_course_mode(capsys):
     """Before: --steer-rate-max 1e-9 ran 61 000 s of simulated time without turning; the MPC in
     course mode overshot 67-90 % and exited 0."""
-    assert main(["autopilot", "--model", "kvlcc2", "--controller", "mpc", "--steer-rate-max", "1e-9"]) == 2
+    assert main(["autopilot", "--model", "kvlcc2", "--controller", "mpc", "--steer-rate-max-deg-s", "1e-9"]) == 2
     err = capsys.readouterr().err
-    assert "steer_rate_max = 1e-09 rad/s" in err and "more than 10 L/U" in err
+    assert "steer_rate_max = 1.74533e-11 rad/s" in err and "more than 10 L/U" in err
     assert main(["autopilot", "--model", "otter", "--controller", "mpc", "--mode", "course"]) == 2
     assert "the MPC is for heading control" in capsys.readouterr().err
 
 
 def test_schedule_is_shown_in_the_text_output(capsys):
     """Above the approach speed the default schedule reaches the design speed (the Otter at 2.5 m/s)."""
-    assert main(["autopilot", "--model", "otter", "--speed", "2.5", "--schedule", "--t-end", "40", "--allow-unmet"]) == 0
+    assert main(["autopilot", "--model", "otter", "--speed", "2.5", "--schedule", "--duration", "40", "--allow-unmet"]) == 0
     text = capsys.readouterr().out
     assert "gain schedule: 7 point designs" in text
     for speed in ("0.8", "2.3", "2.5"):
