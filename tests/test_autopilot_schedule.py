@@ -119,7 +119,7 @@ def test_schedule_refuses_speeds_beyond_the_model():
     kvlcc2 = get_model("kvlcc2")
     with pytest.raises(InputError, match=r"schedule speed 20 m/s is outside the speed range .* u in \[0, 15.95\]"):
         ap.design_autopilot(kvlcc2, 4.0, schedule=[3.0, 20.0])
-    with pytest.raises(InputError, match=r"schedule speed 1e-06 m/s: no autopilot design .* valid for u in"):
+    with pytest.raises(InputError, match=r"schedule speed 1e-06 m/s: .*no autopilot design .* valid for u in"):
         ap.design_autopilot(kvlcc2, 4.0, schedule=[1e-6, 4.0])
-    with pytest.raises(InputError, match=r"schedule speed 3.2 m/s: no autopilot design for model 'otter'"):
+    with pytest.raises(InputError, match=r"schedule speed 3.2 m/s: .*no autopilot design for model 'otter'"):
         ap.design_autopilot(get_model("otter"), 3.2, schedule="default")

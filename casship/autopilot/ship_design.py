@@ -392,8 +392,8 @@ def _schedule_point(model, speed, *, p, steer, inputs, settings) -> Design:
     except (ValueError, ArithmeticError) as err:
         rng = (f"u in [{limit.lower:.4g}, {limit.upper:.4g}] m/s" if limit is not None else
                "its straight run trimmed with steering to spare")
-        raise InputError(f"schedule speed {speed:.4g} m/s: no autopilot design for model {model.name!r} there "
-                         f"({err}); the model is valid for {rng}") from err
+        raise InputError(f"schedule speed {speed:.4g} m/s: {err}; no autopilot design for model {model.name!r} "
+                         f"there (the model is valid for {rng})") from err
 
 
 def simulate_autopilot(design: Design, command, t_end: float, *, step_times=(0.0,), seed=0, stepwise: bool = False,
