@@ -72,6 +72,10 @@ MEANINGS = {
     "--current": ("current speed and direction [m/s, deg]", ("autopilot",)),
     "--wind": ("wind speed and direction [m/s, deg]", ("autopilot",)),
     "--show-defaults": ("print the settings and exit", ("autopilot",)),
+    "--allow-unmet": ("exit 0 with performance checks not met", ("autopilot",)),
+    "--wave-w0": ("wave encounter frequency of the design's sea [rad/s]", ("autopilot",)),
+    "--wave-std-deg": ("wave yaw standard deviation of the design's sea [deg]", ("autopilot",)),
+    "--wave-filter": ("wave filter in the heading observer (off, on)", ("autopilot",)),
     # bench, cache, study
     "--only": ("topics to run", ("bench",)), "--markdown": ("results page to update", ("bench",)),
     "--dir": ("the cache folder", ("cache",)), "--data": ("measured-data folder", ("study",)),
@@ -115,7 +119,7 @@ MEANINGS = {
 #: angle units a help text may state in brackets, and what the option's name or metavar must then carry
 ANGLE_UNITS = {"deg": "deg", "deg/s": "deg-s", "rad": "rad", "rad/s": "rad-s"}
 #: natural frequencies are angular frequencies in rad/s (every control text writes wn so); not angles
-FREQUENCIES = {"--wn", "--wn-ref"}
+FREQUENCIES = {"--wn", "--wn-ref", "--wave-w0"}
 
 
 def _options():
