@@ -22,21 +22,15 @@ from __future__ import annotations
 
 import warnings
 
-from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model,
-                      load_record, parse_items, parse_pairs, positive, print_json, require, seed, write_output)
+from ._common import (RECORD_PRESETS, add_limits_option, add_model_option, add_overwrite_option, add_record_options,
+                      check_outputs, load_model, parse_items, parse_pairs, positive, print_json, read_records, require,
+                      seed, write_output)
 
 #: Variance of each process-noise channel when ``--Q`` is not given (in the channel's units squared).
 DEFAULT_Q = 1e-8
 
-PRESETS = {
-    "usv-gnss": {
-        "doc": "USV GNSS logs (time [s], lat/lon [deg]): lat/lon in rad and local x_n, y_n [m]; "
-               "the log's own speed [kn] and heading [deg] kept as log_speed, log_heading for comparison",
-        "time": "time:s",
-        "columns": {"lat": "lat:deg", "lon": "lon:deg", "log_speed": "speed:kn", "log_heading": "heading:deg"},
-        "latlon": ("lat", "lon"),
-    },
-}
+#: The column presets of ``--preset`` (shared by every command that reads records).
+PRESETS = RECORD_PRESETS
 
 #: One-line description (the command list of ``casship --help``).
 HELP = "run a state estimator (and smoother) over a record"
@@ -55,13 +49,7 @@ def register(sub) -> None:
     p.add_argument("--list", action="store_true", help="list the estimators and presets and exit")
     p.add_argument("--smooth", action="store_true",
                    help="smooth instead of filter (est.smooth: RTS for the Kalman filters, full information for mhe)")
-    p.add_argument("--preset", default=None, choices=sorted(PRESETS), help="column preset of a log format")
-    p.add_argument("--columns", default=None,
-                   help="NEW=SOURCE[:UNIT],... CSV columns to read and convert to SI (e.g. psi=heading:deg); "
-                        "default: all columns as they are")
-    p.add_argument("--time", default=None, help="CSV time column and unit (default t:s, or the preset's)")
-    p.add_argument("--latlon", default=None, help="LAT,LON: geodetic columns (rad after conversion) that "
-                                                  "also give local x_n, y_n [m]")
+    add_record_options(p)
     p.add_argument("--measured", default=None, help="measured outputs a,b (default: outputs present in the data)")
     p.add_argument("--R", default=None, help="measurement variances: scalar or name=value,... (SI units); "
                                              "default: estimated from the record")
@@ -164,25 +152,9 @@ def run(args) -> int:
 
 def load_data(args, model=None):
     """The record as a Dataset in SI units (any format of :func:`casship.io.read_record`; for CSV also
-    the preset, ``--columns``, ``--time``, ``--latlon``); the model's angle outputs wrapped."""
-    from pathlib import Path
-
-    from ..errors import InputError
-    from ..io import read_csv
-
-    path = Path(args.data)
-    preset = PRESETS[args.preset] if args.preset else {}
-    columns = dict(preset.get("columns", {}))
-    columns.update(parse_pairs(args.columns, "--columns", numbers=False))
-    latlon = tuple(parse_items(args.latlon, "--latlon")) if args.latlon else preset.get("latlon")
-    if latlon is not None and len(latlon) != 2:
-        raise InputError(f"--latlon: expected LAT,LON, got {args.latlon!r}")
-    time = args.time or preset.get("time")
-    if not columns and time is None and latlon is None:
-        return load_record(path, model, wrap_angles=True)
-    if not path.is_file():
-        raise FileNotFoundError(f"data file {path}: no such file")
-    return read_csv(path, columns or None, time=time or "t:s", latlon=latlon)
+    the preset, ``--columns``, ``--time``, ``--latlon``: :func:`casship.cli._common.read_records`); the
+    model's angle columns checked for degrees and wrapped."""
+    return read_records(args, [args.data], model)[0]
 
 
 def filter_file(args, model=None):

@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import warnings
 
-from ._common import (check_input_files, check_outputs, count, load_record, number, parse_items, parse_pairs, positive,
-                      print_json, refuse_unused, write_output)
+from ._common import (add_record_options, check_input_files, check_outputs, count, number, parse_items, parse_pairs,
+                      positive, print_json, read_records, refuse_unused, write_output)
+from ..identify.verdict import EXIT_WORSE
 from .cmd_filter import DEFAULT_Q
 
 
@@ -31,8 +32,10 @@ def register(sub) -> None:
     p = sub.add_parser("identify", help=HELP,
                        description="Estimate named parameters of a registered model from one or more records "
                                    "(one joint fit), with a prior, standard errors, correlations and warnings.")
-    p.add_argument("data", nargs="+", help="records: CSV with a header row, or MARIN .dat")
+    p.add_argument("data", nargs="+", help="records: CSV with a header row, MARIN .dat, NMEA log (see "
+                                            "casship.io.read_record); the record options below apply to each")
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
+    add_record_options(p, "records")
     p.add_argument("--free", required=True,
                    help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
     p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
@@ -65,6 +68,12 @@ def register(sub) -> None:
                    help="print the Fisher-information analysis of the free set at the guess before fitting")
     p.add_argument("--plot", default=None, help="PNG of measured outputs vs the fitted free-run simulation")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of a table")
+    p.add_argument("--no-loo", dest="no_loo", action="store_true",
+                   help="judge the fit on its records only (no left-one-out refits: the model discrepancy is then "
+                        "the in-sample default)")
+    p.add_argument("--accept-worse", dest="accept_worse", action="store_true",
+                   help=f"exit 0 although the verdict is worse than the start or stalled (default: exit code "
+                        f"{EXIT_WORSE}; the fit file says the verdict either way)")
     p.set_defaults(func=run, parser=p)
 
 
@@ -145,7 +154,7 @@ def run(args) -> int:
     check_input_files({"--params": args.params})
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
-    records = [load_record(p, model, wrap_angles=True).decimate(args.decimate) for p in args.data]
+    records = [d.decimate(args.decimate) for d in read_records(args, args.data, model)]
     free = parse_items(args.free, "--free")
     if not free:
         raise InputError("--free: give at least one quantity")
@@ -162,9 +171,11 @@ def run(args) -> int:
               f"{idf.propose()}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        fit = prob.solve(guess=guess, max_iter=args.max_iter)
+        fit = prob.solve(guess=guess, max_iter=args.max_iter, verdict=None)
+        # replayed on its records against the starting model, and left-one-out when there are several
+        prob.judge(fit, loo=not args.no_loo, guess=guess, solve={"max_iter": args.max_iter})
     for w in caught:            # the fit's own warnings are printed once, with the fit
-        if not any(str(w.message).endswith(text) for text in fit.warnings):
+        if not any(str(w.message).endswith(text) for text in fit.warnings) and "verdict" not in str(w.message):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     write_output(args.out, fit.to_json, option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
@@ -173,5 +184,20 @@ def run(args) -> int:
         print_json(fit.to_dict())
     else:
         print(fit.summary())
-        print(f"fit written to {args.out}")
-    return 0
+        print(f"fit written to {args.out}" + (f" (verdict: {fit.verdict['verdict']})" if fit.worse else ""))
+    return _exit_code(fit, args.accept_worse)
+
+
+def _exit_code(fit, accept: bool) -> int:
+    """0, or :data:`~casship.identify.verdict.EXIT_WORSE` for a fit worse than its start or stalled."""
+    import sys
+
+    if not fit.worse:
+        return 0
+    word = fit.verdict["verdict"]
+    if accept:
+        print(f"casship identify: verdict {word} accepted (--accept-worse): {fit.verdict['reason']}", file=sys.stderr)
+        return 0
+    print(f"casship identify: verdict {word}: {fit.verdict['reason']}; the fit file records it (exit code "
+          f"{EXIT_WORSE}; --accept-worse to exit 0)", file=sys.stderr)
+    return EXIT_WORSE
