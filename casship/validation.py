@@ -24,7 +24,10 @@ from .maneuvers import execute_time, turning_metrics, zigzag_metrics
 from .model import Model
 from .simulate import simulate, simulate_many
 
-__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics"]
+__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "COVERAGE_SLACK"]
+
+#: A heading band whose coverage of the measured heading falls more than this below its level is flagged.
+COVERAGE_SLACK = 0.15
 
 
 @dataclass
@@ -49,9 +52,8 @@ class ReplayResult:
         ``cross_track_std`` [m] (linearised, exact sensitivities), ``level`` and ``z``; and
         ``coverage``: the fraction of the measured heading inside the band. With a model-discrepancy
         term (:attr:`ParameterUncertainty.psi_variance_rate` ``q``) also the predictive heading band
-        ``psi_std_predictive = sqrt(s^2 + q t)`` and its ``coverage_predictive``, where ``s`` is the
-        heading band of the covariance ``q`` was estimated beside
-        (:attr:`ParameterUncertainty.discrepancy_covariance`; ``psi_std`` when the file names none).
+        ``psi_std_predictive = sqrt(psi_std^2 + q t)`` (the same covariance, so never narrower than the
+        parameter band) and its ``coverage_predictive``.
     metric_intervals : dict
         With a parameter uncertainty: index -> ``[lo, hi]`` at ``bands["level"]`` from parameter
         draws.
@@ -100,6 +102,23 @@ class ReplayResult:
                 out["psi_predictive_coverage"] = self.bands["coverage_predictive"]
         return out
 
+    def coverage_notes(self) -> list[str]:
+        """Warnings, as text, for a heading band whose coverage of the measured heading falls more than
+        :data:`COVERAGE_SLACK` below its nominal level (a band that does not mean what it says)."""
+        if not self.bands:
+            return []
+        level, notes = self.bands["level"], []
+        for key, what in (("coverage", "parameter band"), ("coverage_predictive", "predictive band")):
+            c = self.bands.get(key)
+            if c is not None and np.isfinite(c) and c < level - COVERAGE_SLACK:
+                notes.append(f"the {100 * level:.0f} % {what} covers {100 * c:.0f} % of the measured heading: far "
+                             f"below its nominal {100 * level:.0f} %"
+                             + ("; it carries the parameters' uncertainty only (a fit file with a model_discrepancy "
+                                "adds the predictive band)" if key == "coverage" and "coverage_predictive" not in self.bands
+                                else "" if key == "coverage_predictive" else
+                                "; it carries the parameters' uncertainty only, see the predictive band"))
+        return notes
+
     def __repr__(self) -> str:
         errors = ", ".join(f"{k}={v:.3g}" for k, v in self.errors.items())
         return (f"ReplayResult({self.trajectory.model_name!r}, {self.kind}, N={len(self.trajectory)}, "
@@ -138,6 +157,7 @@ class ReplayResult:
                       + (f"  [{iv[k][0]:.2f}, {iv[k][1]:.2f}]" if k in iv else "") for k in keys]
         for k, v in self.band_summary().items():
             lines.append(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
+        lines += [f"  warning: {note}" for note in self.coverage_notes()]
         return "\n".join(lines)
 
     def plot(self, path=None):
@@ -387,10 +407,8 @@ def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, metho
     bands["source"] = unc.source
     if unc.psi_variance_rate > 0 and "psi_std" in bands:
         # the model discrepancy the file carries: a heading variance growing with time, added to the band
-        # of the covariance it was estimated beside (see ParameterUncertainty)
-        base = bands["psi_std"] if unc.discrepancy_covariance is None else \
-            prediction_bands(model, X, S, unc.discrepancy_covariance, level)["psi_std"]
-        bands["psi_std_predictive"] = np.sqrt(base ** 2 + unc.psi_variance_rate * (traj.t - traj.t[0]))
+        # of the same covariance (so the predictive band is never narrower than the parameter band)
+        bands["psi_std_predictive"] = np.sqrt(bands["psi_std"] ** 2 + unc.psi_variance_rate * (traj.t - traj.t[0]))
     if "psi" in data and "psi_std" in bands:
         e = np.abs(wrap(traj["psi"] - data["psi"]))
         ok = np.isfinite(e)

@@ -91,13 +91,14 @@ def run(args) -> int:
                       "spiral, random; --seed: random, or the parameter draws of --params)")
     check_input_files({"--params": args.params, "--inputs": args.inputs})
     stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
-    unc = None
+    unc, verdict_note = None, ""
     if args.params:
         from ..identify import read_params
 
         # the fitted variant, checked against the file, and the file's parameter covariance
         model, p, unc = read_params(args.params, args.model, uncertainty=True)
         unc = None if args.no_bands else unc
+        verdict_note = _verdict_note(args.params)
     else:
         model = load_model(args.model)
         p = model.params()
@@ -105,7 +106,9 @@ def run(args) -> int:
         check_ship(model, args.model, "a manoeuvre")
     L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
-    measured, notes = None, []
+    if verdict_note:
+        out["params_warning"] = verdict_note[len("warning: "):]
+    measured, notes, late = None, [], []
     check = not args.allow_out_of_range
     if args.inputs:
         from ..identify import replay_file
@@ -120,6 +123,9 @@ def run(args) -> int:
                     "start": res.start, "not_compared": res.not_compared,
                     "metrics": res.metrics, "measured_metrics": res.measured_metrics})
         notes = res.start_notes()
+        late = [f"warning: {n}" for n in res.coverage_notes()]
+        if late:
+            out["band_warnings"] = [n[len("warning: "):] for n in late]
         if res.bands:
             out.update({"bands": res.band_summary(), "metric_intervals": res.metric_intervals,
                         "sampling": res.sampling})
@@ -156,8 +162,23 @@ def run(args) -> int:
     if args.json:
         print_json(out)
     else:
-        _print_text(out, notes)
+        _print_text(out, notes, late + ([verdict_note] if verdict_note else []))
     return 0
+
+
+def _verdict_note(path) -> str:
+    """A line for a fit file whose verdict says it is worse than its start (or stalled), else ''."""
+    import json
+    from pathlib import Path
+
+    try:
+        v = json.loads(Path(path).read_text()).get("verdict") or {}
+    except (OSError, ValueError, AttributeError):
+        return ""
+    word = v.get("verdict") if isinstance(v, dict) else None
+    if word in ("worse", "stalled"):
+        return f"warning: {path} holds a fit whose verdict is {word} ({v.get('reason', '')})"
+    return ""
 
 
 def _with_percent(metrics: dict, settings: dict) -> dict:
@@ -183,7 +204,7 @@ def _maneuver_intervals(simulate_with, model, p, unc, samples: int, seed: int, l
                                                              "level": level, "source": unc.source}}
 
 
-def _print_text(out, notes=()) -> None:
+def _print_text(out, notes=(), late=()) -> None:
     length = f" (L_pp = {out['L_pp_m']} m)" if out["L_pp_m"] is not None else ""
     print(f"model {out['model']}{length}, manoeuvre {out['maneuver']}")
     if "first_side" in out:
@@ -213,6 +234,8 @@ def _print_text(out, notes=()) -> None:
     if "spiral" in metrics:
         for row in metrics["spiral"]:
             print(f"  rudder {row['rudder_deg']:7.2f} deg  yaw rate {row['yaw_rate_deg_s']:8.4f} deg/s")
+    for note in late:
+        print(f"  {note}")
     for key in ("csv", "plot"):
         if key in out:
             print(f"{key} written to {out[key]}")

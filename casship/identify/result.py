@@ -381,7 +381,22 @@ class FitResult:
         if missing:
             raise ValueError(f"fit JSON lacks key(s) {missing}")
         k = len(d["free"])
-        mat = lambda key: np.asarray(d.get(key, np.full((k, k), np.nan)), dtype=float).reshape(k, k)  # noqa: E731
+        twice = sorted({n for n in d["free"] if list(d["free"]).count(n) > 1})
+        if twice:
+            raise ValueError(f"fit JSON: free names {twice} given more than once")
+
+        def mat(key):
+            value = d.get(key, np.full((k, k), np.nan))
+            if value is None:
+                raise ValueError(f"fit JSON: {key} is null; a {k} x {k} matrix of the free quantities {d['free']} "
+                                 "is wanted (or leave the key out)")
+            try:
+                a = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"fit JSON: {key} is not a matrix of numbers") from None
+            if a.size != k * k:
+                raise ValueError(f"fit JSON: {key} has {a.size} entries, {k} x {k} wanted for {d['free']}")
+            return a.reshape(k, k)
         kw = {key: d[key] for key in (*cls._SCALARS, *cls._DICTS, *cls._LISTS) if key in d}
         if "covariance_robust" in d:
             kw["covariance_robust"] = mat("covariance_robust")
@@ -405,12 +420,14 @@ class FitResult:
         -------
         FitResult
         """
+        from .params_file import load_fit_json
+
         path = Path(path)
         try:
-            d = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
-        return cls.from_dict(d)
+            return cls.from_dict(load_fit_json(path))
+        except ValueError as exc:
+            text = str(exc)
+            raise ValueError(text if text.startswith(str(path)) else f"{path}: {text}") from None
 
     # -- plot --------------------------------------------------------------------------------------
     def plot(self, path) -> Path:
