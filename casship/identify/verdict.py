@@ -30,9 +30,12 @@ as the stated default. A replay of the fit file adds ``q t`` to the parameter ba
 """
 from __future__ import annotations
 
+import warnings
 from typing import Callable, Sequence
 
 import numpy as np
+
+from .result import IdentificationWarning
 
 __all__ = ["judge", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
            "VERDICTS"]
@@ -202,7 +205,9 @@ def judge(problem, fit, *, loo: bool | None = None, refit: Callable | None = Non
         loo_rows = []
         for r, data in enumerate(records):
             train = [i for i in range(len(records)) if i != r]
-            fold = refit(train)
+            with warnings.catch_warnings():     # a fold's warnings are its own (fold.warnings), not the fit's
+                warnings.simplefilter("ignore", IdentificationWarning)
+                fold = refit(train)
             params, biases = _new_run_values(fold)
             res = _replay(model, data, params, biases, method, uncertainty=fold.uncertainty())
             loo_rows.append({"record": labels[r], "psi_rmse_deg_start": rows[r]["psi_rmse_deg_start"],
