@@ -204,7 +204,9 @@ class ParameterUncertainty:
         try:
             return cls(names, values, d["matrix"], str(d.get("source", "")), dict(d.get("info") or {}))
         except ValueError as exc:
-            raise ValueError(f"{field_}: {str(exc).removeprefix('ParameterUncertainty: ')}") from None
+            msg = str(exc).removeprefix("ParameterUncertainty: ")
+            raise ValueError(f"{field_}.matrix {msg.removeprefix('covariance ')}" if msg.startswith("covariance ")
+                             else f"{field_}: {msg}") from None
 
 
 def _numbers(value, shape: tuple, what: str) -> None:
