@@ -54,7 +54,9 @@ def register(sub) -> None:
     p.add_argument("--Q", default=None, help=f"process-noise variances: scalar or name=value,... (mle; default "
                                              f"{DEFAULT_Q:g})")
     p.add_argument("--estimate-noise", dest="estimate_noise", default=None,
-                   help="noise variances to estimate: Q, R or Q,R (mle; R is estimated when --R is absent)")
+                   help="noise variances to estimate: Q, R or Q,R (mle). Without this option R is estimated when "
+                        "--R is absent; with --estimate-noise Q alone, R stays at --R or at the record's own "
+                        "estimate (as casship filter takes it)")
     p.add_argument("--sigma", default=None,
                    help="output standard deviations name=value,... (oe weights; default: estimated from the records)")
     p.add_argument("--guess", default=None, help="starting values name=value,... (default: model values)")
@@ -127,7 +129,7 @@ def _problem(args, model, records, free, measured):
     noise = {}
     if "R" in estimate:
         noise["R"] = True
-    elif rest:
+    elif rest and not estimate:     # --estimate-noise Q alone keeps R at the record's values, as filter does
         noise["R"] = rest
     if "Q" in estimate:
         noise["Q"] = True

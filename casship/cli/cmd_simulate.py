@@ -5,12 +5,20 @@ Examples::
     casship simulate --model kvlcc2 --maneuver turning --rudder-deg 35 --speed 7.97 --json
     casship simulate --model kvlcc2-l7 --maneuver zigzag --rudder-deg 20 --first port --csv zz.csv --plot zz.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --json
+    casship simulate --model nomoto1 --inputs trial.csv --columns psi=heading:deg,delta=rudder:deg --time time:s
+
+A replay (``--inputs``) reads its record as ``filter`` and ``identify`` do (``--preset``, ``--columns``,
+``--time``, ``--latlon``; a heading in degrees is refused). With ``--params`` a fit file, the replay
+carries the file's bands: the parameter band (its covariance) and, when the file carries a model
+discrepancy, the predictive band (the same covariance plus a heading variance growing as ``q t``);
+each band's coverage of the measured heading is printed, and one far below its nominal level is
+flagged. A fit file whose verdict is ``worse`` or ``stalled`` is replayed, with a warning.
 """
 from __future__ import annotations
 
-from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_input_files, check_outputs,
-                      check_ship, level, load_model, load_record, print_json, refuse_unused, require, seed, whole,
-                      write_output)
+from ._common import (add_limits_option, add_model_option, add_overwrite_option, add_record_options, check_input_files,
+                      check_outputs, check_ship, level, load_model, print_json, read_records, refuse_unused, require,
+                      seed, whole, write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
@@ -54,6 +62,7 @@ def register(sub) -> None:
     p.add_argument("--inputs", default=None,
                    help="replay the measured inputs of a record (CSV, MARIN .dat, NMEA; see casship.io.read_record) "
                         "from its measured initial state")
+    add_record_options(p, "--inputs record")
     p.add_argument("--samples", type=whole, default=40,
                    help="parameter draws for the index intervals when the --params file carries a covariance "
                         "(0: none)")
@@ -83,6 +92,9 @@ def run(args) -> int:
                   "--seed": args.seed is not None}
         refuse_unused(args.parser, unused, "--inputs replays the record's own inputs, start and time stamps")
     else:
+        refuse_unused(args.parser, {"--preset": args.preset is not None, "--columns": args.columns is not None,
+                                    "--time": args.time is not None, "--latlon": args.latlon is not None},
+                      "the record options read the --inputs record")
         refuse_unused(args.parser, {"--first": args.first is not None and args.maneuver != "zigzag",
                                     "--heading-deg": args.heading_deg is not None and args.maneuver != "zigzag",
                                     "--hold": args.hold is not None and args.maneuver not in ("pullout", "spiral", "random"),
@@ -114,7 +126,7 @@ def run(args) -> int:
         from ..identify import replay_file
         from ..validation import replay
 
-        measured = load_record(args.inputs)
+        measured = read_records(args, [args.inputs], model, wrap_angles=False)[0]
         options = dict(method=args.method, check_limits=check, level=args.level, samples=args.samples)
         res = (replay_file(args.params, measured, model, uncertainty=not args.no_bands, **options) if args.params
                else replay(model, measured, p, **options))

@@ -267,6 +267,8 @@ class IdentificationProblem:
 
         def cost(z):
             theta = sp.natural(z)
+            if not np.all(np.isfinite(theta)):       # a trial step beyond float range (exp of a log-variance)
+                return np.inf
             return self.engine.cost(theta)[0] + self._prior_terms(theta)[0]
 
         def unit(f):
