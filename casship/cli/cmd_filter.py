@@ -3,17 +3,23 @@
 Examples::
 
     casship filter ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --model kvlcc2 --measured x,y,psi
+    casship identify ../shared/data/usv_fuzhou_gnss/zigzag_30_inter_xy.csv --preset usv-gnss \\
+        --model sog-cog-latlon --free alpha1,alpha2 --estimate-noise Q --out usv.json
     casship filter ../shared/data/usv_fuzhou_gnss/zigzag_30_inter_xy.csv --preset usv-gnss \\
-        --model sog-cog-latlon --smooth --out est.csv --plot est.png
+        --model sog-cog-latlon --params usv.json --smooth --out est.csv --plot est.png
     casship filter trial.csv --model nomoto1 --estimator ukf --measured psi --R psi=1e-4 --Q 1e-8 \\
         --columns psi=heading:deg,delta=rudder:deg --time time:s --out est.csv
 
-What is not given is taken from the record, and the output says where each value came from: the
-measurement variances ``R`` estimated from the record (:func:`casship.identify.noise_std`), the
-starting state by :func:`casship.prior_from_data` (first samples, speed and course from the track),
-``Q`` at :data:`DEFAULT_Q` per noise channel (a default, not a tuning: compare the NIS per
-measurement in the output with 1, or estimate ``Q`` with ``casship identify --estimate-noise Q``).
-A run that diverges (a non-finite estimate or log-likelihood) is an error.
+What is not given is taken from the record (or the ``--params`` fit file), and the output says
+where each value came from: the measurement variances ``R`` estimated from the record
+(:func:`casship.identify.noise_std`), the starting state by :func:`casship.prior_from_data` (first
+samples, speed and course from the track), ``Q`` at :data:`DEFAULT_Q` per noise channel (a default,
+not a tuning: compare the NIS per measurement in the output with 1). The USV example shows the
+remedy: without ``--params`` its NIS per measurement is about 1400 (the default ``Q`` is far too
+small for a small craft's manoeuvres; the output says the estimates are not to be trusted);
+``identify --estimate-noise Q`` on the same log (the same record options) estimates ``Q`` (R stays
+at the record's estimate, as here), and the filter with that fit file has a NIS per measurement
+near 1. A run that diverges (a non-finite estimate or log-likelihood) is an error.
 
 Estimators are looked up by name in :data:`casship.estimators.ESTIMATORS` (``kf``, ``ekf``,
 ``ukf``, ``enkf``, ``kalman-bucy``, ``mhe``, and any that other modules register there).
@@ -50,6 +56,9 @@ def register(sub) -> None:
     p.add_argument("--smooth", action="store_true",
                    help="smooth instead of filter (est.smooth: RTS for the Kalman filters, full information for mhe)")
     add_record_options(p)
+    p.add_argument("--params", default=None,
+                   help="fit file (casship identify): its model variant and parameters, and its noise variances Q "
+                        "and R where --Q / --R are not given")
     p.add_argument("--measured", default=None, help="measured outputs a,b (default: outputs present in the data)")
     p.add_argument("--R", default=None, help="measurement variances: scalar or name=value,... (SI units); "
                                              "default: estimated from the record")
@@ -166,6 +175,19 @@ def filter_file(args, model=None):
     from ..estimators import ESTIMATORS, noise_from_data, prior_from_data
     from ..validity import check_inputs, check_states, check_step
 
+    from pathlib import Path
+
+    params = None
+    fit_noise = {}
+    if getattr(args, "params", None):
+        import json
+
+        from ..identify import read_params
+        from ._common import check_input_files
+
+        check_input_files({"--params": args.params})
+        model, params = read_params(args.params, args.model)     # the fitted variant, checked against the file
+        fit_noise = json.loads(Path(args.params).read_text()).get("noise") or {}
     model = model if model is not None else load_model(args.model)
     data = load_data(args, model)
     if args.measured is not None:
@@ -202,16 +224,24 @@ def filter_file(args, model=None):
             raise InputError(f"--R-std: a standard deviation must be positive, got {bad}")
         R = {k: v**2 for k, v in std.items()} if isinstance(std, dict) else std**2
         sources["R"] = "given (--R-std)"
+    if R is None and isinstance(fit_noise.get("R"), dict) and set(meas) <= set(fit_noise["R"]):
+        R = {n: float(fit_noise["R"][n]) for n in meas}
+        sources["R"] = f"from the fit file {args.params}"
     if R is None:
         R, how = noise_from_data(model, data, meas)
         sources["R"] = "estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})"
                                                                   for n, v in R.items())
     Q = _variances(args.Q, model.noise_names, "--Q")
     sources["Q"] = "given (--Q)"
+    if Q is None and isinstance(fit_noise.get("Q"), dict) and fit_noise["Q"] and set(fit_noise["Q"]) <= set(model.noise_names):
+        Q = {n: float(fit_noise["Q"].get(n, DEFAULT_Q)) for n in model.noise_names}
+        sources["Q"] = f"from the fit file {args.params}" + (f" ({DEFAULT_Q:g} for the channels it did not estimate)"
+                                                            if set(fit_noise["Q"]) != set(model.noise_names) else "")
     if Q is None:
         Q = DEFAULT_Q
         sources["Q"] = (f"default {DEFAULT_Q:g} per channel {list(model.noise_names)} (not tuned: compare the NIS "
-                        "per measurement with 1, or estimate Q with casship identify --estimate-noise Q)") \
+                        "per measurement with 1, or estimate Q with casship identify --estimate-noise Q and give "
+                        "the fit file here with --params)") \
             if model.nw else "none (no noise channels)"
     options = {k: _option_value(v) for k, v in parse_pairs(args.options, "--options", numbers=False).items()}
     est = ESTIMATORS[args.estimator](dm, Q, R, measured=meas, options=options)
@@ -232,10 +262,11 @@ def filter_file(args, model=None):
         check_states(model, prior.mean, what="starting state (--x0 or the record)")
         # the record's own step; a longer interval (a gap) is the estimator's to refuse or bridge
         # (option on_gap), checked at the state where it happens
-        check_step(model, float(np.median(data.dt)), prior.mean, U[0] if model.nu else np.zeros(0), model.params(),
+        check_step(model, float(np.median(data.dt)), prior.mean, U[0] if model.nu else np.zeros(0),
+                   model.params() if params is None else params,
                    args.method, where=" (the median step of the record)")
     _check_start(est, prior, data)
-    result = (est.smooth if args.smooth else est.filter)(data, prior, seed=args.seed)
+    result = (est.smooth if args.smooth else est.filter)(data, prior, params, seed=args.seed)
     _check_finite(result)
     n_meas = result.n_measured.sum()
     nis = float(np.nansum(result.nis) / n_meas) if n_meas else float("nan")
