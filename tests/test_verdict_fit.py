@@ -61,7 +61,9 @@ def test_identify_exits_with_the_documented_code_for_a_worse_fit(mismatch, tmp_p
     out = tmp_path / "fit.json"
     args = ["identify", str(csv), "--model", "kvlcc2", "--method", "oe", "--free", ",".join(FREE),
             "--measured", "u,r,psi", "--sigma", ",".join(f"{k}={v}" for k, v in SIGMA.items()), "--out", str(out)]
-    assert main(args) == EXIT_WORSE == 3
+    from casship.cli.cmd_identify import EXIT_WORSE as CLI_EXIT_WORSE
+
+    assert main(args) == EXIT_WORSE == CLI_EXIT_WORSE == 3
     captured = capsys.readouterr()
     assert "VERDICT: WORSE" in captured.out and "verdict worse" in captured.err and "--accept-worse" in captured.err
     fit = json.loads(out.read_text())              # written, and never as if it were good

@@ -20,8 +20,11 @@ import warnings
 
 from ._common import (add_record_options, check_input_files, check_outputs, count, number, parse_items, parse_pairs,
                       positive, print_json, read_records, refuse_unused, write_output)
-from ..identify.verdict import EXIT_WORSE
 from .cmd_filter import DEFAULT_Q
+
+#: Exit code for a fit worse than its start or stalled (:data:`casship.identify.verdict.EXIT_WORSE`; a literal
+#: here so that ``--help`` loads no numerics).
+EXIT_WORSE = 3
 
 
 #: One-line description (the command list of ``casship --help``).

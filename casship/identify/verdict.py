@@ -139,6 +139,15 @@ def _errors(res, data):
     return tr.t - tr.t[0], e, s
 
 
+def _uncertainty(fit):
+    """The fit's parameter uncertainty for the bands, or None (none free, or a covariance not finite: the
+    discrepancy is then estimated against no parameter band)."""
+    try:
+        return fit.uncertainty()
+    except ValueError:
+        return None
+
+
 def _mean(values) -> float:
     v = np.asarray(list(values), dtype=float)
     return float(v.mean()) if v.size else float("nan")
@@ -185,7 +194,7 @@ def judge(problem, fit, *, loo: bool | None = None, refit: Callable | None = Non
         reason = "the records hold no heading psi to replay" + ("; the solver did not converge" if stalled else "")
         return ({**base, "verdict": verdict, "reason": reason, "records": []},
                 {"psi_variance_growth_deg2_per_s": 0.0, "method": "none (no heading in the records)"})
-    unc = fit.uncertainty()
+    unc = _uncertainty(fit)
     rows, in_sample = [], []
     for r, data in enumerate(records):
         s_res = _replay(model, data, start_p, {}, method)
@@ -209,7 +218,7 @@ def judge(problem, fit, *, loo: bool | None = None, refit: Callable | None = Non
                 warnings.simplefilter("ignore", IdentificationWarning)
                 fold = refit(train)
             params, biases = _new_run_values(fold)
-            res = _replay(model, data, params, biases, method, uncertainty=fold.uncertainty())
+            res = _replay(model, data, params, biases, method, uncertainty=_uncertainty(fold))
             loo_rows.append({"record": labels[r], "psi_rmse_deg_start": rows[r]["psi_rmse_deg_start"],
                              "psi_rmse_deg_held_out": _rmse(res), "fold_status": fold.status})
             if res is not None:
