@@ -175,19 +175,16 @@ def filter_file(args, model=None):
     from ..estimators import ESTIMATORS, noise_from_data, prior_from_data
     from ..validity import check_inputs, check_states, check_step
 
-    from pathlib import Path
-
     params = None
     fit_noise = {}
     if getattr(args, "params", None):
-        import json
-
         from ..identify import read_params
+        from ..identify.params_file import load_fit_json
         from ._common import check_input_files
 
         check_input_files({"--params": args.params})
         model, params = read_params(args.params, args.model)     # the fitted variant, checked against the file
-        fit_noise = json.loads(Path(args.params).read_text()).get("noise") or {}
+        fit_noise = load_fit_json(args.params).get("noise") or {}
     model = model if model is not None else load_model(args.model)
     data = load_data(args, model)
     if args.measured is not None:
