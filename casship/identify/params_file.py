@@ -23,7 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_params", "replay_file", "check_model", "ParameterUncertainty", "load_fit_json", "SYMMETRY_TOL"]
+__all__ = ["read_params", "replay_file", "check_model", "ParameterUncertainty", "load_fit_json", "SYMMETRY_TOL",
+           "Q_MAX_DEG2_PER_S"]
+
+#: Upper bound of a fit file's model discrepancy [deg^2/s]: beyond it the heading's 95 % band spans a
+#: full turn (+-180 deg) within about 10 s, i.e. the file predicts nothing.
+Q_MAX_DEG2_PER_S = 1e3
 
 
 def _refuse_duplicate_keys(pairs):
@@ -109,8 +114,6 @@ class ParameterUncertainty:
     discrepancy_covariance: np.ndarray | None = None
 
     def __post_init__(self):
-        from .verdict import Q_MAX_DEG2_PER_S
-
         self.psi_variance_rate = float(self.psi_variance_rate)
         q_max = float(np.radians(np.radians(Q_MAX_DEG2_PER_S)))
         if not (np.isfinite(self.psi_variance_rate) and 0.0 <= self.psi_variance_rate <= q_max):
@@ -317,8 +320,6 @@ def read_params(path, model=None, *, uncertainty: bool = False):
         raise ValueError(f"{path}: param_covariance values of {mismatch} differ from the file's params")
     discrepancy = obj.get("model_discrepancy") or {}
     if discrepancy:
-        from .verdict import Q_MAX_DEG2_PER_S
-
         if not isinstance(discrepancy, dict):
             raise ValueError(f"{path}: model_discrepancy must be an object, got {discrepancy!r:.60}")
         q = discrepancy.get("psi_variance_growth_deg2_per_s")

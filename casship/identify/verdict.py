@@ -35,6 +35,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from .params_file import Q_MAX_DEG2_PER_S
 from .result import IdentificationWarning
 
 __all__ = ["judge", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
@@ -47,9 +48,6 @@ EXIT_WORSE = 3
 #: Factor on the in-sample discrepancy (one record, or no left-one-out): a replay of a record the fit
 #: was fitted on errs less than one of a new run; the default widens it by this factor (stated, not fitted).
 IN_SAMPLE_FACTOR = 4.0
-#: Upper bound of a fit file's discrepancy [deg^2/s]: beyond it the heading's 95 % band spans a full
-#: turn (+-180 deg) within about 10 s, i.e. the file predicts nothing.
-Q_MAX_DEG2_PER_S = 1e3
 #: The verdicts, from the worst.
 VERDICTS = ("worse", "stalled", "no better", "better", "not judged")
 
