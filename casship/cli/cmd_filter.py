@@ -14,8 +14,11 @@ What is not given is taken from the record (or the ``--params`` fit file), and t
 where each value came from: the measurement variances ``R`` estimated from the record
 (:func:`casship.identify.noise_std`), the starting state by :func:`casship.prior_from_data` (first
 samples, speed and course from the track), ``Q`` at :data:`DEFAULT_Q` per noise channel (a default,
-not a tuning: compare the NIS per measurement in the output with 1). The USV example shows the
-remedy: without ``--params`` its NIS per measurement is about 1400 (the default ``Q`` is far too
+not a tuning: compare the NIS per measurement in the output with 1). The first example says so
+itself: with the default ``Q`` the published KVLCC2 model's error over the measured 10/10 zig-zag is
+far larger than the process noise allows (NIS per measurement about 180, a warning that the
+estimates are not to be trusted; ``--Q w_u=1e-4,w_v=1e-4,w_r=1e-8`` brings it to about 2). The USV
+example shows the remedy: without ``--params`` its NIS per measurement is about 1400 (the default ``Q`` is far too
 small for a small craft's manoeuvres; the output says the estimates are not to be trusted);
 ``identify --estimate-noise Q`` on the same log (the same record options) estimates ``Q`` (R stays
 at the record's estimate, as here), and the filter with that fit file has a NIS per measurement
