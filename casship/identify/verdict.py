@@ -38,7 +38,7 @@ import numpy as np
 from .params_file import Q_MAX_DEG2_PER_S
 from .result import IdentificationWarning
 
-__all__ = ["judge", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
+__all__ = ["judge", "judge_records", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
            "VERDICTS"]
 
 #: Relative margin of the mean heading RMSE beyond which a fit is worse than its start.
@@ -179,11 +179,44 @@ def judge(problem, fit, *, loo: bool | None = None, refit: Callable | None = Non
         The ``verdict`` block and the ``model_discrepancy`` block of the fit (JSON-ready; see the
         module text).
     """
-    model, records = problem.model, list(problem.records)
-    labels = list(problem.labels)
+    start = problem.model.param_dict(problem.space.params(problem.space.theta(None)))
+    if refit is None:
+        def refit(train):
+            return problem.subset(train).solve(guess=guess, verdict=None, show=False, **dict(solve or {}))
+    return judge_records(problem.model, problem.records, fit, start=start, labels=problem.labels, loo=loo,
+                         refit=refit, method=method)
+
+
+def judge_records(model, records, fit, *, start=None, labels=None, loo: bool | None = None,
+                  refit: Callable | None = None, method: str = "rk4") -> tuple[dict, dict]:
+    """The verdict of ``fit`` on ``records`` against the model ``start`` (see :func:`judge`).
+
+    Parameters
+    ----------
+    model : Model
+    records : sequence of Dataset
+        The records ``fit`` was fitted on.
+    fit : FitResult
+    start : mapping or array, optional
+        The starting model's parameters (default: the model's own values).
+    labels : sequence of str, optional
+        Record labels (default: their ``meta["name"]`` or their index).
+    loo : bool, optional
+        Left-one-out (default: when there are several records; needs ``refit``).
+    refit : callable, optional
+        ``refit(train) -> FitResult`` on the records ``train`` (indices).
+    method : str
+        Integration method of the replays.
+
+    Returns
+    -------
+    (dict, dict)
+    """
+    records = list(records)
+    labels = list(labels) if labels is not None else [str(d.meta.get("name", i)) for i, d in enumerate(records)]
     status = fit.status
     stalled = not fit.converged
-    start_p = model.param_dict(problem.space.params(problem.space.theta(None)))
+    start_p = model.param_dict(model.params() if start is None else model.params(start))
     base = {"status": status, "margin": WORSE_MARGIN,
             "start": "the parameters the problem held before the fit (the model's own values or params=)"}
     if "psi" not in model.state_names and "psi" not in model.output_names or \
@@ -203,12 +236,9 @@ def judge(problem, fit, *, loo: bool | None = None, refit: Callable | None = Non
             in_sample.append(_errors(f_res, data))
     start_mean, fit_mean = _mean(r["psi_rmse_deg_start"] for r in rows), _mean(r["psi_rmse_deg_fit"] for r in rows)
     out = {**base, "records": rows, "psi_rmse_deg_start_mean": start_mean, "psi_rmse_deg_fit_mean": fit_mean}
-    loo = len(records) > 1 if loo is None else bool(loo) and len(records) > 1
+    loo = (len(records) > 1 if loo is None else bool(loo) and len(records) > 1) and refit is not None
     held = []
     if loo:
-        if refit is None:
-            def refit(train):
-                return problem.subset(train).solve(guess=guess, verdict=None, show=False, **dict(solve or {}))
         loo_rows = []
         for r, data in enumerate(records):
             train = [i for i in range(len(records)) if i != r]
