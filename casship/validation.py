@@ -51,9 +51,10 @@ class ReplayResult:
         With a parameter uncertainty: per sample ``psi_std`` [rad], ``x_std``, ``y_std``,
         ``cross_track_std`` [m] (linearised, exact sensitivities), ``level`` and ``z``; and
         ``coverage``: the fraction of the measured heading inside the band. With a model-discrepancy
-        term (:attr:`ParameterUncertainty.psi_variance_rate` ``q``) also the predictive heading band
-        ``psi_std_predictive = sqrt(psi_std^2 + q t)`` (the same covariance, so never narrower than the
-        parameter band) and its ``coverage_predictive``.
+        term (:attr:`ParameterUncertainty.psi_variance_rate` ``q``; 0 when the file carries none)
+        also the predictive heading band ``psi_std_predictive = sqrt(psi_std^2 + q t)`` (the same
+        covariance, so never narrower than the parameter band), ``psi_variance_rate`` and its
+        ``coverage_predictive``.
     metric_intervals : dict
         With a parameter uncertainty: index -> ``[lo, hi]`` at ``bands["level"]`` from parameter
         draws.
@@ -97,7 +98,8 @@ class ReplayResult:
             out["psi_coverage"] = self.bands["coverage"]
         if "psi_std_predictive" in self.bands:
             w = np.degrees(z * self.bands["psi_std_predictive"])
-            out.update(psi_predictive_halfwidth_max_deg=float(w.max()), psi_predictive_halfwidth_end_deg=float(w[-1]))
+            out.update(psi_predictive_halfwidth_max_deg=float(w.max()), psi_predictive_halfwidth_end_deg=float(w[-1]),
+                       psi_discrepancy_deg2_per_s=float(np.degrees(np.degrees(self.bands.get("psi_variance_rate", 0.0)))))
             if "coverage_predictive" in self.bands:
                 out["psi_predictive_coverage"] = self.bands["coverage_predictive"]
         return out
@@ -108,15 +110,17 @@ class ReplayResult:
         if not self.bands:
             return []
         level, notes = self.bands["level"], []
-        for key, what in (("coverage", "parameter band"), ("coverage_predictive", "predictive band")):
+        q = self.bands.get("psi_variance_rate", 0.0)
+        for key, what, why in (("coverage", "parameter band", "it carries the parameters' uncertainty only, see "
+                                                               "the predictive band"),
+                               ("coverage_predictive", "predictive band",
+                                "the file carries no model discrepancy (q = 0)" if q == 0 else
+                                f"its model discrepancy q = {np.degrees(np.degrees(q)):.3g} deg^2/s is too small for "
+                                "this record")):
             c = self.bands.get(key)
             if c is not None and np.isfinite(c) and c < level - COVERAGE_SLACK:
                 notes.append(f"the {100 * level:.0f} % {what} covers {100 * c:.0f} % of the measured heading: far "
-                             f"below its nominal {100 * level:.0f} %"
-                             + ("; it carries the parameters' uncertainty only (a fit file with a model_discrepancy "
-                                "adds the predictive band)" if key == "coverage" and "coverage_predictive" not in self.bands
-                                else "" if key == "coverage_predictive" else
-                                "; it carries the parameters' uncertainty only, see the predictive band"))
+                             f"below its nominal {100 * level:.0f} %; {why}")
         return notes
 
     def __repr__(self) -> str:
@@ -219,8 +223,8 @@ class ReplayResult:
             psi = np.degrees(np.unwrap(tr["psi"]))
             w = np.degrees(z * b["psi_std"])
             heading.fill_between(tr.t, psi - w, psi + w, color="C0", alpha=0.25, lw=0,
-                                 label=label + (" (parameters)" if "psi_std_predictive" in b else ""))
-            if "psi_std_predictive" in b:       # edges: visible whichever band is the wider
+                                 label=label + (" (parameters)" if b.get("psi_variance_rate", 0.0) > 0 else ""))
+            if "psi_std_predictive" in b and b.get("psi_variance_rate", 0.0) > 0:     # dashed edges
                 w = np.degrees(z * b["psi_std_predictive"])
                 for sign in (-1, 1):
                     heading.plot(tr.t, psi + sign * w, color="C0", lw=0.8, ls="--",
@@ -405,10 +409,11 @@ def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, metho
     X, S = trajectory_sensitivities(model, x0, traj.t, U, p, unc.names, method=method, max_step=max_step, jit=jit)
     bands = prediction_bands(model, X, S, unc.covariance, level)
     bands["source"] = unc.source
-    if unc.psi_variance_rate > 0 and "psi_std" in bands:
-        # the model discrepancy the file carries: a heading variance growing with time, added to the band
-        # of the same covariance (so the predictive band is never narrower than the parameter band)
+    if "psi_std" in bands:
+        # the model discrepancy the file carries (0 when none): a heading variance growing with time, added to
+        # the band of the same covariance (so the predictive band is never narrower than the parameter band)
         bands["psi_std_predictive"] = np.sqrt(bands["psi_std"] ** 2 + unc.psi_variance_rate * (traj.t - traj.t[0]))
+        bands["psi_variance_rate"] = float(unc.psi_variance_rate)
     if "psi" in data and "psi_std" in bands:
         e = np.abs(wrap(traj["psi"] - data["psi"]))
         ok = np.isfinite(e)

@@ -67,6 +67,10 @@ def test_a_coverage_far_below_nominal_is_flagged_in_the_text_output(tmp_path, ca
                  "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["bands"]["psi_coverage"] < 0.5 and out["band_warnings"]
+    # a file without a model discrepancy: the predictive band is the parameter band, reported and flagged as such
+    assert out["bands"]["psi_predictive_coverage"] == out["bands"]["psi_coverage"]
+    assert out["bands"]["psi_discrepancy_deg2_per_s"] == 0.0
+    assert any("carries no model discrepancy" in w for w in out["band_warnings"])
     # a band that holds the measured heading is not flagged
     good = cs.Dataset(t, {"psi": psi, "delta": delta}).to_csv(tmp_path / "good.csv")
     assert main(["simulate", "--model", "nomoto1", "--params", str(path), "--inputs", str(good), "--samples", "0"]) == 0
