@@ -154,3 +154,23 @@ def test_a_stalled_fit_is_stalled_and_not_used_as_good():
     assert fit.status != "converged"
     assert fit.verdict["verdict"] in ("stalled", "worse") and fit.worse
     assert "VERDICT" in fit.summary()
+
+
+@pytest.mark.parametrize("fit_mean, loo, stalled, word", [
+    (9.0, None, False, "better"),
+    (10.1, None, False, "no better"),             # within the 2 % margin
+    (10.3, None, False, "worse"),
+    (float("inf"), None, False, "worse"),        # the fit's replay fails
+    (9.0, None, True, "stalled"),
+    (10.3, None, True, "worse"),                  # worse takes precedence
+    (9.0, (10.0, 9.5), False, "better"),
+    (9.0, (10.0, 10.1), False, "no better"),
+    (9.0, (10.0, 12.0), False, "no better"),      # better on its records, worse left-one-out: not shown better
+])
+def test_the_verdict_rule(fit_mean, loo, stalled, word):
+    from casship.identify.verdict import _decide
+
+    out = {"psi_rmse_deg_start_mean": 10.0, "psi_rmse_deg_fit_mean": fit_mean, "status": "x"}
+    if loo is not None:
+        out["loo"] = {"psi_rmse_deg_start_mean": loo[0], "psi_rmse_deg_held_out_mean": loo[1]}
+    assert _decide(out, stalled)[0] == word
