@@ -59,7 +59,7 @@ def test_identify_exits_with_the_documented_code_for_a_worse_fit(mismatch, tmp_p
     _, data = mismatch
     csv = data.to_csv(tmp_path / "zz.csv")
     out = tmp_path / "fit.json"
-    args = ["identify", str(csv), "--model", "kvlcc2", "--method", "oe", "--free", ",".join(FREE),
+    args = ["identify", str(csv), "--model", "kvlcc2", "--objective", "oe", "--free", ",".join(FREE),
             "--measured", "u,r,psi", "--sigma", ",".join(f"{k}={v}" for k, v in SIGMA.items()), "--out", str(out)]
     from casship.cli.cmd_identify import EXIT_WORSE as CLI_EXIT_WORSE
 
