@@ -339,13 +339,16 @@ class IdentificationProblem:
         FitResult
             ``fit``, with :attr:`~FitResult.verdict` and :attr:`~FitResult.model_discrepancy` set.
         """
+        return self._judge(fit, loo=loo, refit=refit, guess=guess, solve=solve, stacklevel=3)
+
+    def _judge(self, fit, *, loo, refit, guess, solve, stacklevel) -> FitResult:
         from .verdict import judge
 
         fit.verdict, fit.model_discrepancy = judge(self, fit, loo=loo, refit=refit, guess=guess,
                                                    solve=dict(solve or {}))
-        if fit.worse:
+        if fit.worse:       # at the caller's line (of judge, or of solve through _verdict)
             warnings.warn(f"{self.method}: verdict {fit.verdict['verdict']}: {fit.verdict['reason']}",
-                          IdentificationWarning, stacklevel=3)
+                          IdentificationWarning, stacklevel=stacklevel)
         return fit
 
     def _verdict(self, fit: FitResult, verdict, guess) -> FitResult:
@@ -354,7 +357,7 @@ class IdentificationProblem:
             return fit
         if verdict not in ("replay", "loo"):
             raise ValueError(f"verdict must be 'replay', 'loo' or None, got {verdict!r}")
-        return self.judge(fit, loo=verdict == "loo", guess=guess)
+        return self._judge(fit, loo=verdict == "loo", refit=None, guess=guess, solve=None, stacklevel=4)
 
     def _result(self, rep, at: dict, start_shares: dict) -> FitResult:
         sp, m = self.space, self.model
