@@ -90,14 +90,9 @@ def _replay(model, data, params: dict, biases: dict, method: str, uncertainty=No
     """Replay ``data`` with ``params`` (and the record's input/output biases); None when it fails."""
     from ..simulate import IntegrationError
     from ..validation import replay
+    from .crossval import debiased
 
-    cols = {}
-    for ch, b in biases.items():
-        if ch in model.input_names:
-            cols[ch] = data[ch] + b            # the model is driven by the measured input plus its bias
-        elif ch in data:
-            cols[ch] = data[ch] - b            # the sensor reads the model output plus its bias
-    d = data.with_columns(**cols) if cols else data
+    d = debiased(model, data, biases)
     try:
         res = replay(model, d, model.params(params), method=method, check_limits=False, uncertainty=uncertainty,
                      samples=0)
