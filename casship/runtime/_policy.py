@@ -197,8 +197,14 @@ def shared_functions(prefix: tuple) -> dict:
     return {k: f for k, f in list(FUNCTIONS.items()) if k[:n] == prefix}
 
 
+_DIGESTS = BoundedTable(KEEP)              # id(step) -> (step, digest): a step serialised once, kept alive
+
+
 def _digest(step: ca.Function, memory) -> str:
-    return hashlib.sha256((step.serialize() + "\0" + "\0".join(memory)).encode()).hexdigest()
+    entry = _DIGESTS.get(id(step))
+    if entry is None or entry[0] is not step:
+        entry = _DIGESTS.keep(id(step), (step, hashlib.sha256(step.serialize().encode()).hexdigest()))
+    return entry[1] + "\0" + "\0".join(memory)
 
 
 def record_loop(step: ca.Function, memory: Sequence[str], jit) -> NativeFold | None:
