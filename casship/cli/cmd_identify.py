@@ -8,6 +8,12 @@ Examples::
         --identifiability --out fit.json --plot fit.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
+Without ``--free`` the records are identified by the ship workflow
+(:func:`casship.identify.workflow.identify_ship`): propulsion first, a cost weighted by a stated
+rule, priors about the preset, the free set chosen from run-level evidence, the inverse-dynamics
+start; every choice is printed with its reason. ``--weights`` and ``--prior`` override its channel
+weights and prior.
+
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
 units, radians) or MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
 to the MMG convention). ``--method mle`` (default) maximises the likelihood through an EKF;
@@ -33,8 +39,11 @@ def register(sub) -> None:
                                    "(one joint fit), with a prior, standard errors, correlations and warnings.")
     p.add_argument("data", nargs="+", help="records: CSV with a header row, or MARIN .dat")
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
-    p.add_argument("--free", required=True,
-                   help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
+    p.add_argument("--free", default=None,
+                   help="comma-separated quantities to estimate: parameter names, bias[input], bias[output] "
+                        "(default: the ship workflow chooses them from run-level evidence, see below)")
+    p.add_argument("--weights", default=None,
+                   help="workflow: channel standard deviations of the cost name=value,... (default: the stated rule)")
     p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out / --plot file")
     p.add_argument("--method", default="mle", choices=("mle", "oe"),
@@ -142,6 +151,10 @@ def run(args) -> int:
     refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
                                 "--group": bool(args.group) and "=group" not in (args.share or "")},
                   "--prior-weight weighs a --prior; --group labels the records for --share NAME=group")
+    if args.free is None:
+        return _workflow(args)
+    refuse_unused(args.parser, {"--weights": args.weights is not None},
+                  "--weights sets the channel weights of the workflow (without --free); with --free use --sigma")
     check_input_files({"--params": args.params})
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
@@ -173,5 +186,39 @@ def run(args) -> int:
         print_json(fit.to_dict())
     else:
         print(fit.summary())
+        print(f"fit written to {args.out}")
+    return 0
+
+
+def _workflow(args) -> int:
+    """``casship identify`` without ``--free``: the ship workflow of the Python API, printed choice by choice."""
+    from ..identify.workflow import identify_ship
+    from ..models import get_model
+
+    refuse_unused(args.parser, {o: v for o, v in {
+        "--share": args.share is not None, "--group": args.group is not None,
+        "--bounds": args.bounds is not None, "--R": args.R is not None, "--Q": args.Q is not None,
+        "--estimate-noise": args.estimate_noise is not None, "--sigma": args.sigma is not None,
+        "--guess": args.guess is not None, "--params": args.params is not None,
+        "--estimate-x0": args.estimate_x0 is not None, "--shooting": args.shooting != "single",
+        "--identifiability": args.identifiability, "--prior-weight": args.prior_weight != 1.0}.items()},
+                  "without --free the ship workflow runs (output error, its own start and weights); give --free "
+                  "for a fit of your own")
+    stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
+    model = get_model(args.model)
+    records = [load_record(p, model, wrap_angles=True).decimate(args.decimate) for p in args.data]
+    measured = parse_items(args.measured, "--measured") if args.measured is not None else None
+    ship = identify_ship(records, model, weights=parse_pairs(args.weights, "--weights") or None,
+                         prior=parse_pairs(args.prior, "--prior") or None, measured=measured,
+                         verbose=not args.json)
+    facilities = sorted(set(ship.facilities))
+    write_output(args.out, lambda path: ship.to_json(path, facilities[0] if len(facilities) == 1 else None),
+                 option="--out", overwrite=args.overwrite, stamps=stamps)
+    if args.plot:
+        write_output(args.plot, ship.fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
+    if args.json:
+        print_json(ship.to_dict())
+    else:
+        print(ship.fit.summary())
         print(f"fit written to {args.out}")
     return 0
