@@ -223,6 +223,7 @@ class ShipFit:
     facility: dict = field(default_factory=dict)    # facility quantity -> pool_facilities() output
     facilities: list = field(default_factory=list)  # one label per record
     seconds: float = 0.0
+    unpinned: dict = field(default_factory=dict)    # mirror-only terms without mirrored evidence: prior std
 
     def params(self, facility: str | None = None) -> dict:
         """The parameter values to replay a record of ``facility`` with (its own neutral angle when the
@@ -235,8 +236,9 @@ class ShipFit:
 
     def uncertainty(self, facility: str | None = None):
         """The covariance a replay of a record of ``facility`` uses: the refinement's robust one, the
-        mirror-pair stage's beside it (independent stages), and each facility quantity's standard
-        error (own facility) or the population value's with the between-facility spread."""
+        mirror-pair stage's beside it (independent stages), each facility quantity's standard error
+        (own facility) or the population value's with the between-facility spread, and the prior
+        variance of the port/starboard terms held at the preset for want of mirrored evidence."""
         from scipy.linalg import block_diag
 
         from .params_file import ParameterUncertainty
@@ -253,6 +255,11 @@ class ShipFit:
             parts.append(a.covariance[np.ix_(ia, ia)])
             names += [a.names[i] for i in ia]
             values += [float(a.values[i]) for i in ia]
+        for q, std in self.unpinned.items():           # at the preset, known as well as the prior knows them
+            if q not in names:
+                parts.append(np.array([[std**2]]))
+                names.append(q)
+                values.append(float(self.fit.params[q]))
         for q, pool in self.facility.items():
             own = pool["facilities"].get(facility)
             parts.append(np.array([[(own["std_error"] if own else pool["new_facility_std"]) ** 2]]))
@@ -357,7 +364,7 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
         Prior standard deviations that override :data:`PRESET_UNCERTAINTY`.
     candidates : sequence of str, optional
         Candidates of the free set (default :data:`CANDIDATES` the model has, and the mirror-pair
-        terms when the records hold pairs).
+        terms when the records hold pairs; for a model with none of them, the names of ``prior``).
     measured : sequence of str, optional
         Outputs of the cost (default :data:`MEASURED` that every record holds).
     facility : str or sequence of str, optional
@@ -470,6 +477,14 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
          else "asked for")
 
     # candidates and the prior
+    if candidates is None and not any(c in names for c in CANDIDATES):
+        if not prior:
+            raise InputError(f"the ship workflow has no candidates among the parameters of {model.name!r}: give "
+                             "the candidates (candidates=, or their prior: prior= / --prior name=std), or the free "
+                             "set (free= / --free)")
+        candidates = list(prior)
+        note("candidates", ", ".join(candidates), f"the parameters given a prior ({model.name!r} has none of the "
+             "workflow's manoeuvring candidates)")
     if candidates is None:
         cands = [c for c in CANDIDATES if c in names]
         asym = [c for c in (*ASYMMETRY, *DIRECTION_SWITCHED) if c in names]
@@ -534,12 +549,16 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
     # 5. asymmetry and facility quantities from mirror pairs
     pairs = mirror_pairs(recs, within=fac) if (asym or facq) and all("delta" in r for r in recs) else []
     paired = sorted({i for p in pairs for i in p})
-    asym_values, asym_fit, pools, offsets = {}, None, {}, {}
+    asym_values, asym_fit, pools, offsets, unpinned = {}, None, {}, {}, {}
     if free is None and (asym or facq):
         if not paired:
-            note("asymmetry", f"{', '.join([*asym, *facq])} at the preset",
+            unpinned = {q: all_std[q] for q in asym}
+            for q in facq:
+                pools[q] = pool_facilities({}, spread=NEUTRAL_SPREAD, prior_std=all_std[q])
+            note("asymmetry", f"{', '.join([*asym, *facq])} at the preset, with their prior uncertainty in the bands",
                  "no mirror pair (the same manoeuvre turning first to both sides) within a facility: a "
-                 "port/starboard term fitted on these records would absorb the turning dynamics")
+                 "port/starboard term fitted on these records would absorb the turning dynamics, and a run "
+                 "turning the other way (or of another facility) is predicted with what the prior knows")
         else:
             sub = [recs[i] for i in paired]
             labs = [fac[i] for i in paired]
@@ -615,7 +634,13 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
             est = {q: float(v) for q, v in fit.estimates.items()}
             at.update(est)
             guess.update(est)
-        if fit is None:               # nothing the runs determine: the preset, with a fit of nothing
-            fit, _ = refine(problem(recs_b, [], fixed, weights_=rw), [], at0, {})
+        if fit is None:               # nothing the runs determine: a result, said as one
+            from .result import IdentificationError
+
+            raise IdentificationError(
+                f"the records determine none of the candidates {cands} by the run-level rule (posterior/prior std "
+                f"<= {max_ratio:g}): the preset stays; widen the prior of the quantities you expect to move "
+                "(prior= / --prior) or give the free set (free= / --free)", "nothing determined")
     return ShipFit(fit, model, list(chosen), choices, sigma, [float(w) for w in rw], rows, first,
-                   {**preset, **asym_values}, start, asym_fit, asym_values, pools, fac, time.perf_counter() - t0)
+                   {**preset, **asym_values}, start, asym_fit, asym_values, pools, fac, time.perf_counter() - t0,
+                   unpinned)

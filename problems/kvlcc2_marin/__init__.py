@@ -91,8 +91,13 @@ def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int
 
 
 def in_sample(run, fit_path: Path) -> tuple[dict, dict]:
-    """A run replayed with the fit on all runs, and its mirror-image check (a case of the loop)."""
-    return evaluate(run, fit_path)["row"], mirror_check([run], fit_path, published_model())[run.name]
+    """A run replayed with the fit on all runs (with whether its predictive heading band is at least as
+    wide as its parameter band on every sample), and its mirror-image check (a case of the loop)."""
+    ev = evaluate(run, fit_path)
+    b = ev["bands"] or {}
+    row = dict(ev["row"], predictive_never_narrower=(bool(np.all(b["psi_std_predictive"] >= b["psi_std"]))
+                                                     if "psi_std_predictive" in b else None))
+    return row, mirror_check([run], fit_path, published_model())[run.name]
 
 
 def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None) -> dict:

@@ -227,6 +227,13 @@ _CHOICES = (
     "alone takes `N'_0` (thrust form) instead, both -1.08 deg; the port/starboard difference grows from the "
     "10 to the 20 deg pair while the measured 35/5 zig-zag holds its mean heading, so a neutral angle that "
     "depends on the rudder angle, determined by the pairs, would drift it further: not run.\n"
+    "* **This round** (declared before its first cross-validation run, one variant, `workflow.VARIANTS`): the "
+    "study calls the library workflow (`casship.identify.identify_ship`); the free set is chosen by run-level "
+    "evidence (posterior/prior std, the larger of the model-based one and the leave-one-run-out spread, <= 0.5) "
+    "instead of the Fisher information alone; the neutral angle is a facility's, pooled over facilities (a "
+    "run of a facility without a value gets the population value and the spread in its band); `gamma_R_plus/minus` "
+    "are estimated only on the mirror pairs; the predictive band rests on the file's own covariance; no variant "
+    "was chosen on this round's numbers.\n"
     "* Earlier workflow (before this one): the inverse-dynamics regression counts effective samples "
     "(`autocorrelation=True`); its per-facility asymmetry, kept inverse-dynamics values, resistance trim and "
     "psi/r/u cost are replaced by the rules above.")
@@ -448,6 +455,9 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     rep.write(out)
     summary = {"study": "kvlcc2-marin", "quick": quick, "runs": [r.name for r in runs], **head,
                "predictive_coverage": coverage.get("mean", math.nan),
+               "predictive_band_never_narrower": (all(r.get("predictive_never_narrower") for r in in_sample)
+                                                  if in_sample and all(r.get("predictive_never_narrower") is not None
+                                                                       for r in in_sample) else None),
                "predictive_coverage_detail": coverage,
                "variants_tried": int(variants["this_round"] + variants["earlier_rounds"]),
                "variants": variants,
