@@ -17,6 +17,9 @@ filter, priors, identifiability and the fit result.
 * :func:`identify_ship` -- the ship workflow in one call (propulsion, weights, prior, a free set from
   run-level evidence, the inverse-dynamics start), every choice with its reason (:class:`ShipFit`).
 * :mod:`casship.identify.asymmetry` -- port/starboard terms only from mirrored evidence.
+* :class:`CaptiveProblem` -- captive (PMM) model tests: forces of a model at a prescribed motion and their
+  harmonics (:mod:`casship.identify.captive_forces`), fitted alone or as a :class:`CostTerm` of a
+  :class:`JointProblem` with the free-running records.
 """
 from .crossval import CrossValidation, cross_validate
 from .identifiability import Identifiability
@@ -28,6 +31,8 @@ from .problem import IdentificationProblem
 from .records import initial_states, noise_std, share_labels
 from .inverse_dynamics import inverse_dynamics, linear_in, rates_model, smooth_trial
 from .result import FitResult, IdentificationError, IdentificationWarning
+from .cost_term import CostTerm, JointProblem
+from .captive import CaptiveProblem, linear_derivatives
 from .workflow import ShipFit, identify_ship
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
@@ -35,3 +40,4 @@ __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResu
            "share_labels", "initial_states", "read_params", "replay_file", "ParameterUncertainty", "cross_validate", "CrossValidation"]
 __all__ += ["identify_ship", "ShipFit"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]
+__all__ += ["CaptiveProblem", "CostTerm", "JointProblem", "linear_derivatives"]
