@@ -136,3 +136,22 @@ def test_predictive_band_is_never_narrower_than_the_parameter_band(nomoto_fit, t
     rep = replay_file(path, _records(seed=10, n=1)[0], samples=0)
     s, wide = rep.bands["psi_std"], rep.bands["psi_std_predictive"]
     assert np.all(wide >= s) and wide[-1] > s[-1]
+
+
+def test_joined_evidence_adds_candidates_counts_in_every_replicate_and_keeps_its_own_quantities():
+    """A cost term (as captive tests give) on ``T`` and on a quantity of its own facility (``K@X``):
+    ``T`` becomes a candidate, the joint fit holds one ``T`` for both and ``K@X`` beside it."""
+    from casship.identify import CostTerm
+
+    def residual(v):
+        return np.array([(v[0] - TRUTH["T"]) / 0.5, (v[1] - 0.3) / 0.01]), np.array([[2.0, 0.0], [0.0, 100.0]])
+
+    term = CostTerm(label="captive:X", names=("T", "K@X"), start=np.array([20.0, 0.2]),
+                    lower=np.array([1.0, 0.0]), upper=np.array([500.0, 1.0]), residual=residual, n_obs=2)
+    model = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    fit = cs.identify_ship(_records(n=4), model, candidates=["K"], prior={"K": 0.05, "T": 10.0}, terms=[term])
+    assert "T" in fit.free and "K@X" in fit.fit.free
+    assert fit.fit.estimates["T"] == pytest.approx(TRUTH["T"], rel=0.03)
+    assert fit.fit.estimates["K@X"] == pytest.approx(0.3, abs=1e-3)
+    assert any(c["step"] == "joined evidence" and "T" in c["reason"] for c in fit.choices)
+    assert "K@X" not in fit.params()           # a facility's own quantity is not the ship's

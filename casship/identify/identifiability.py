@@ -42,6 +42,9 @@ class RunEvidence:
         Gradient of the prior's cost at the point (``P (theta - mu)``).
     kind : str
         ``"records"`` or ``"blocks"`` (how the units were formed).
+    fixed_information, fixed_gradient : array, optional
+        Evidence present in every replicate (e.g. captive tests joined to the runs): added to each
+        leave-one-unit-out estimate, never left out.
     """
 
     labels: list
@@ -49,6 +52,8 @@ class RunEvidence:
     gradient: np.ndarray
     prior_gradient: np.ndarray
     kind: str = "records"
+    fixed_information: np.ndarray | None = None
+    fixed_gradient: np.ndarray | None = None
 
     def __post_init__(self):
         self.labels = list(self.labels)
@@ -61,6 +66,9 @@ class RunEvidence:
                              f"gradient {self.gradient.shape}, prior_gradient {self.prior_gradient.shape}")
         if n < 3:
             raise ValueError(f"RunEvidence: a jackknife needs at least 3 units, got {n}")
+        self.fixed_information = (np.zeros((k, k)) if self.fixed_information is None
+                                  else np.asarray(self.fixed_information, dtype=float))
+        self.fixed_gradient = np.zeros(k) if self.fixed_gradient is None else np.asarray(self.fixed_gradient, dtype=float)
 
 
 def _marginals(S: np.ndarray, names):
@@ -321,6 +329,7 @@ class Identifiability:
             Fu = ev.information * np.outer(s, s)[None]
             gu = ev.gradient * s[None]
             b = ev.prior_gradient * s            # the prior's gradient in normalised units
+            Fc, gc = ev.fixed_information * np.outer(s, s), ev.fixed_gradient * s
 
         def trial(chosen, c):
             S = chosen + [c]
@@ -328,7 +337,7 @@ class Identifiability:
             C = np.linalg.inv(M)
             var = np.diag(C).copy()
             if ev is not None:
-                var = np.maximum(var, np.diag(_jackknife(Fu[:, S][:, :, S], gu[:, S], b[S])))
+                var = np.maximum(var, np.diag(_jackknife(Fu[:, S][:, :, S], gu[:, S], b[S], Fc[np.ix_(S, S)], gc[S])))
             d = np.sqrt(np.diag(C))
             cand = [j for j, i in enumerate(S) if i not in fixed]
             corr = np.abs(C / np.outer(d, d) - np.eye(len(S)))[np.ix_(cand, cand)]
@@ -408,14 +417,15 @@ class Identifiability:
         return path
 
 
-def _jackknife(Fu: np.ndarray, gu: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _jackknife(Fu: np.ndarray, gu: np.ndarray, b: np.ndarray, Fc=0.0, gc=0.0) -> np.ndarray:
     """Jackknife covariance of the leave-one-unit-out MAP steps in prior-normalised units.
 
     ``Fu`` (n, k, k) and ``gu`` (n, k): each unit's information and data-cost gradient; ``b`` the
-    prior's gradient. Without unit ``u`` the Gauss-Newton MAP step is ``-(I + F - F_u)^-1 (g - g_u + b)``.
+    prior's gradient; ``Fc``, ``gc`` evidence in every replicate. Without unit ``u`` the Gauss-Newton
+    MAP step is ``-(I + F + F_c - F_u)^-1 (g + g_c - g_u + b)``.
     """
     n, k = gu.shape
-    F, g = Fu.sum(axis=0), gu.sum(axis=0)
+    F, g = Fu.sum(axis=0) + Fc, gu.sum(axis=0) + gc
     steps = np.array([-np.linalg.solve(np.eye(k) + F - Fu[u], g - gu[u] + b) for u in range(n)])
     d = steps - steps.mean(axis=0)
     return (n - 1) / n * d.T @ d

@@ -77,7 +77,7 @@ PRESET_UNCERTAINTY = {
     "rel": {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "R_0_dash": 0.3,
             "gamma_R_minus": 0.25, "gamma_R_plus": 0.25, "l_R_dash": 0.2, "epsilon": 0.2, "kappa": 0.2,
             "f_alpha": 0.2, "a_H": 0.3, "x_H_dash": 0.2, "t_R": 0.3, "m_x_dash": 0.2, "m_y_dash": 0.2,
-            "J_z_dash": 0.2},
+            "J_z_dash": 0.2, "w_P0": 0.2, "C_1": 0.3, "C_2_plus": 0.2, "C_2_minus": 0.2},
     "abs": {"delta_0": math.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025},
     "floor": {"X_vr_dash": 0.01},
 }
@@ -311,6 +311,8 @@ class ShipFit:
             out[q] = {"value": pool["population"], "published": nominal[q], "std_error": pool["new_facility_std"],
                       "stage": "facility quantity, population value (pooled)"}
         for n in self.fit.free:
+            if n not in nominal:          # a joined facility's own quantity (name@facility): not the ship's
+                continue
             out[n] = {"value": self.fit.estimates[n], "published": nominal[n], "std_error": self.fit.std_errors[n],
                       "std_error_robust": self.fit.std_errors_robust.get(n, math.nan), "stage": "MAP refinement"}
         return out
@@ -347,7 +349,7 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                   candidates: Sequence[str] | None = None, measured: Sequence[str] | None = None,
                   facility=None, propulsion: Mapping[str, float] | None = None, smoothed=None, dt: float = 2.0,
                   max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR, max_free: int = 15, passes: int = 2,
-                  record_weights: str = "equal", reweigh: bool = True, show: bool = False, verbose: bool = False) -> ShipFit:
+                  record_weights: str = "equal", reweigh: bool = True, terms=None, show: bool = False, verbose: bool = False) -> ShipFit:
     """Identify a ship from free-running records by the workflow of the module text, in one call.
 
     Parameters
@@ -381,6 +383,13 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
         Each record the same weight (default), or each sample.
     reweigh : bool
         Re-estimate the channel sigmas (same rule) at the estimate before each later choice.
+    terms : sequence of CostTerm, optional
+        Further evidence joined to the records in one objective (e.g. captive tests,
+        :meth:`~casship.identify.CaptiveProblem.cost_term`): its shared quantities become candidates,
+        its information counts in every replicate of the run-level rule (never left out), the
+        refinements are :class:`~casship.identify.JointProblem` fits (its facility's own quantities,
+        ``name@facility``, free beside the chosen set; the shared ones not chosen held at one value
+        for both).
     show, verbose : bool
         Solver progress; print each choice as it is made.
 
@@ -500,6 +509,14 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
         bad = sorted(set(free) - names)
         if bad:
             raise InputError(f"free: {bad} are not parameters of {model.name!r}")
+    terms = list(terms or ())
+    if terms:
+        shared = [n for t in terms for n in t.names if "@" not in n and n in names and n not in preset]
+        extra = [n for n in dict.fromkeys(shared) if n not in cands and n not in facq and n not in asym]
+        cands = [*cands, *extra]
+        note("joined evidence", ", ".join(f"{t.label} ({t.n_obs} values)" for t in terms),
+             "one objective with the records: one set of hull coefficients, each facility its own quantities; "
+             + (f"its shared quantities {', '.join(extra)} become candidates" if extra else "no new candidates"))
     all_std = preset_prior_std(model, list(dict.fromkeys([*cands, *asym, *facq, *(free or ())])), prior)
     if prior:
         note("prior", ", ".join(f"{k} std {v:.3g}" for k, v in prior.items()), "given (overrides the stated rule)")
@@ -538,13 +555,37 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                                   scale={k: v for k, v in PRESET_UNCERTAINTY["abs"].items() if k in names_free},
                                   share=share)
 
-    def refine(prob, chosen, at, guess_pool):
+    def refine(prob, chosen, at, guess_pool, join=False):
+        if join and terms:
+            from .cost_term import JointProblem
+
+            prob = JointProblem(prob, terms, hold_fixed=True)
         guess_id = {q: guess_pool.get(q.split("@")[0], at[q.split("@")[0]]) for q in chosen}
         preset_guess = {q: at[q.split("@")[0]] for q in chosen}
         use = bool(chosen) and prob.cost(guess_id) < prob.cost(preset_guess)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IdentificationWarning)
             return prob.solve(guess=guess_id if use else None, show=show), use
+
+    def with_terms(idf, prob, point):
+        """The identifiability with the joined evidence in its information and in every replicate."""
+        if not terms:
+            return idf
+        import dataclasses
+
+        fixed_p = dict(zip(model.param_names, np.asarray(prob.space.params(prob.space.theta(point))).ravel()))
+        k = len(prob.free)
+        Fc, gc = np.zeros((k, k)), np.zeros(k)
+        for t in terms:
+            vals = np.array([point.get(n, fixed_p.get(n, t.start[j])) for j, n in enumerate(t.names)])
+            r, J = t.residual(vals)
+            cols = [(j, prob.free.index(n)) for j, n in enumerate(t.names) if n in prob.free]
+            jt, jp = [c[0] for c in cols], [c[1] for c in cols]
+            Fc[np.ix_(jp, jp)] += J[:, jt].T @ J[:, jt]
+            gc[jp] += J[:, jt].T @ r
+        ev = idf.evidence
+        ev = RunEvidence(ev.labels, ev.information, ev.gradient, ev.prior_gradient, ev.kind, Fc, gc)
+        return dataclasses.replace(idf, information=idf.information + Fc, evidence=ev)
 
     # 5. asymmetry and facility quantities from mirror pairs
     pairs = mirror_pairs(recs, within=fac) if (asym or facq) and all("delta" in r for r in recs) else []
@@ -604,7 +645,7 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
     if free is not None:
         chosen, rows, first = list(free), [], list(free)
         note("free set", ", ".join(chosen), "given (--free)")
-        fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at0, start)
+        fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at0, start, join=True)
     else:
         at, guess, first, fit, rows = dict(at0), dict(start), [], None, []
         for k in range(max(1, passes)):
@@ -615,6 +656,7 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
             point = {q: at[q] for q in cands}
             idf = prob.identifiability(at=point)
             idf.evidence = run_evidence(prob, point)
+            idf = with_terms(idf, prob, point)
             chosen, rows = idf.propose(max_ratio=max_ratio, max_corr=max_corr, max_count=max_free, evidence="runs",
                                        explain=True, candidates=cands, keep=[])
             where = "the preset" if k == 0 else "the previous estimate"
@@ -627,11 +669,11 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                 first = list(chosen)
             if not chosen:
                 break
-            fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at, guess)
+            fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at, guess, join=True)
             note("refinement", f"MAP output error, status {fit.status}, started from the "
                  + ("inverse-dynamics values" if use else "point of the choice"),
                  "the start with the lower cost" if use else "the inverse-dynamics start did not lower the cost")
-            est = {q: float(v) for q, v in fit.estimates.items()}
+            est = {q: float(v) for q, v in fit.estimates.items() if "@" not in q}
             at.update(est)
             guess.update(est)
         if fit is None:               # nothing the runs determine: a result, said as one

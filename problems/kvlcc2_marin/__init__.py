@@ -46,7 +46,10 @@ from .diagnose import steady_turn_balance, through_the_turn
 from .propulsion import open_water
 from .report import fold_figure, slug, write_outputs
 from .validate import evaluate, published_model, write_fold_file
-from .workflow import VARIANTS, VARIANTS_EARLIER, fit_fold, smooth_runs, study_model, with_smoothed_speed
+from .workflow import (VARIANTS, VARIANTS_EARLIER, captive_fit, fit_fold, smooth_runs, study_model,
+                       with_smoothed_speed)
+
+JOIN_CAPTIVE = True          # join the captive tests when present (declared before the run: workflow.VARIANTS)
 
 QUICK = {"runs": ("MARIN tc_-35", "MARIN zz_-20", "MARIN zz_10", "HSVA Z_10_10_P", "HSVA Z_10_10_S",
                   "HSVA Z_20_10_S", "HSVA Z_35_05"),
@@ -72,11 +75,12 @@ def fold_file_name(kind: str, label: str) -> str:
     return f"fit_without_{slug(label)}.json" if kind == "run" else f"fit_without_{kind}_{slug(label)}.json"
 
 
-def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int) -> dict:
+def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int, captive=None) -> dict:
     """One fold: fit on the runs not held out, write the fit file, replay it on the held-out runs and
     draw their figure. Independent of every other fold (folds may run in any order or in parallel)."""
     kind, label, held = spec
-    fold = fit_fold([r for r in runs if r.name not in held], smoothed, curve, dt=dt, max_free=max_free)
+    fold = fit_fold([r for r in runs if r.name not in held], smoothed, curve, dt=dt, max_free=max_free,
+                    captive=captive)
     # one file per facility of the held-out runs: a facility quantity (the neutral angle) is that
     # facility's where the training had it, else the population value with the spread in the band
     facilities = sorted({r.facility for r in runs if r.name in held})
@@ -122,6 +126,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     dt = QUICK["dt"] if quick else 2.0
     max_free = QUICK["max_free"] if quick else 15
     opts = {"dt": dt, "max_free": max_free}
+    folder = marin.parent / "kvlcc2_hmri_captive"
+    if JOIN_CAPTIVE and folder.is_dir():             # the captive tests in one objective with the runs
+        opts["captive"] = (str(folder), captive_fit(folder))
     # the fit on all runs first: the longest case starts at once
     cases = [(fit_fold, (runs, smoothed, curve), opts)]
     cases += [(run_fold, (spec, runs, smoothed, curve, out), opts) for spec in fold_specs(runs, quick)]

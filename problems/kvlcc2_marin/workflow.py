@@ -13,6 +13,12 @@ records:
 3. **Facilities**: each run's facility, so that the rudder neutral angle is one facility's
    (estimated on that facility's mirror pairs, pooled over facilities) and mirror pairs are looked
    for within one facility.
+4. **Captive tests joined** (when ``kvlcc2_hmri_captive`` is present): HMRI's PMM series as one
+   more term of the objective (:class:`casship.identify.JointProblem`; the captive model and its
+   free set of :mod:`..kvlcc2_captive`, weighted by the noise levels of the captive-only fit): one
+   set of hull coefficients for both, HMRI's propeller, rudder and neutral angle its own
+   (``name@HMRI``). Its shared coefficients are candidates of the free set, its information counts
+   in every replicate of the run-level rule.
 
 The rules (candidates, the preset's stated uncertainty, channel and record weights, the run-level
 selection rule, the mirror-pair rule) are the library's, fixed before this round's cross-validation
@@ -53,7 +59,9 @@ OPTION_PRIOR = {"c_alpha3": 0.5}
 #: workflow with the study's propulsion, smoothing and facilities). No variant is chosen on the
 #: numbers the headline reports.
 VARIANTS = ("library workflow: run-level selection, facility neutral angle pooled, mirror-pair rule for "
-            "gamma_R+-",)
+            "gamma_R+-",
+            "the same with the HMRI captive tests joined in one objective (shipped whenever the captive data are "
+            "present: a rule fixed before either was run, not a choice on their numbers)")
 #: Variants accepted or dropped in earlier rounds on the leave-one-run-out means the headline reported
 #: (listed in the report's choices): they count as tried on the same numbers.
 VARIANTS_EARLIER = 12
@@ -157,9 +165,32 @@ class FoldFit:
         return out
 
 
+@functools.cache
+def _captive_problem(folder: str):
+    from casship.io import read_captive
+
+    from ..kvlcc2_captive import captive_problem
+
+    return captive_problem(read_captive(folder))
+
+
+def captive_fit(folder):
+    """The captive-only fit of the HMRI tests (its noise levels weight them in the joint objective)."""
+    return _captive_problem(str(folder)).solve(show=False)
+
+
+def captive_terms(captive) -> list:
+    """``captive = (folder, captive-only fit)`` as the joint objective's term (none for None)."""
+    if captive is None:
+        return []
+    folder, alone = captive
+    return [_captive_problem(str(folder)).cost_term(alone)]
+
+
 def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float = 2.0, max_free: int = 15,
-             show: bool = False) -> FoldFit:
-    """Propulsion from the measured thrust, then the library workflow on ``train`` (see the module text)."""
+             show: bool = False, captive=None) -> FoldFit:
+    """Propulsion from the measured thrust, then the library workflow on ``train`` (see the module text);
+    ``captive``: ``(folder, captive-only fit)`` of the captive tests joined to the runs."""
     t0 = time.perf_counter()
     model = study_model()
     prop = fit_propulsion(model, train, smoothed, curve)
@@ -167,5 +198,5 @@ def fit_fold(train: list[Run], smoothed: dict, curve: np.ndarray, *, dt: float =
     ship = identify_ship(records, model, propulsion=prop.values, smoothed=[smoothed[r.name] for r in train],
                          facility=[r.facility for r in train], measured=list(MEASURED), dt=dt, max_free=max_free,
                          prior={k: v for k, v in OPTION_PRIOR.items() if k in model.param_names} or None,
-                         candidates=None, show=show)
+                         candidates=None, show=show, terms=captive_terms(captive))
     return FoldFit([r.name for r in train], prop, ship, time.perf_counter() - t0, candidates(model))
