@@ -36,12 +36,16 @@ HELP = "fit model parameters to records (maximum likelihood or output error)"
 def register(sub) -> None:
     p = sub.add_parser("identify", help=HELP,
                        description="Estimate named parameters of a registered model from one or more records "
-                                   "(one joint fit), with a prior, standard errors, correlations and warnings.")
+                                   "(one joint fit), with a prior, standard errors, correlations and warnings. "
+                                   "Without --free: the ship workflow (casship.identify_ship): propulsion first, "
+                                   "channels and records weighted by a stated rule, priors about the preset, the "
+                                   "free set chosen from run-level evidence, the inverse-dynamics start; every "
+                                   "choice printed with its reason (--weights, --prior, --measured override).")
     p.add_argument("data", nargs="+", help="records: CSV with a header row, or MARIN .dat")
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
     p.add_argument("--free", default=None,
                    help="comma-separated quantities to estimate: parameter names, bias[input], bias[output] "
-                        "(default: the ship workflow chooses them from run-level evidence, see below)")
+                        "(default: the ship workflow chooses them from run-level evidence)")
     p.add_argument("--weights", default=None,
                    help="workflow: channel standard deviations of the cost name=value,... (default: the stated rule)")
     p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
