@@ -261,7 +261,11 @@ class Design:
                           f"({self.actuator.rate_max:.4g}/s) {100 * report['rate_limited_fraction']:.1f} % of the "
                           f"time (criterion < {100 * limit:.0f} %); lower wn_ref or wn, or filter the feedback",
                           RateLimitWarning, stacklevel=3)
-        return ClosedLoopResult(data=data, metrics=metrics, mode=loop.mode, performance=report)
+        from .plots import controller_name
+
+        return ClosedLoopResult(data=data, metrics=metrics, mode=loop.mode, performance=report,
+                                controller=controller_name(loop.autopilot), steer=self.plant.steer,
+                                guidance=loop.guidance)
 
 
 def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer: str | None = None,
@@ -348,7 +352,15 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
         speeds = sorted(float(v) for v in speeds)
     except (TypeError, ValueError):
         raise ValueError(f"schedule must be a sequence of speeds [m/s] or 'default', got {schedule!r}") from None
-    designs = tuple(design_autopilot(model, v, p=p, steer=steer, inputs=inputs, **settings) for v in speeds)
+    designs = []
+    for v in speeds:
+        try:
+            designs.append(design_autopilot(model, v, p=p, steer=steer, inputs=inputs, **settings))
+        except ValueError as exc:
+            from ..errors import InputError
+
+            raise InputError(f"schedule speed {v:.4g} m/s: {exc}") from exc
+    designs = tuple(designs)
     law = ScheduledAutopilot(tuple(speeds), tuple(d.autopilot for d in designs))
     s0 = point.settings
     here = law.at(s0.speed)

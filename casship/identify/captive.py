@@ -365,12 +365,15 @@ class CaptiveProblem:
             r, J = self.raw_residuals(theta)
             return r / s, J / s[:, None]
 
+        def value(theta):
+            return (self.predictor.predict(self.params(theta)) - self.predictor.measured) / s
+
         pstd = {}
         if prior and self._prior_desc:
             pstd = {n: q["std"] for n, q in self._prior_desc["quantities"].items()
                     if n.endswith(f"@{self.facility}")}
         return CostTerm(label=f"captive:{self.facility}", names=tuple(self.free), start=start, lower=self.lower.copy(),
-                        upper=self.upper.copy(), residual=residual, n_obs=len(s), prior_std=pstd)
+                        upper=self.upper.copy(), residual=residual, n_obs=len(s), prior_std=pstd, value=value)
 
     def __repr__(self) -> str:
         return (f"CaptiveProblem({self.model.name!r}, facility={self.facility!r}, {len(self.predictor.observations)} "

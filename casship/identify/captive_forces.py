@@ -369,6 +369,7 @@ class CaptivePredictor:
         self.observations = obs
         y = ca.vertcat(*preds)
         self.function = ca.Function("captive_predict", [p], [y, ca.jacobian(y, p)], ["p"], ["y", "J"])
+        self._value = ca.Function("captive_value", [p], [y], ["p"], ["y"])       # trial points: no Jacobian
         self.measured = np.array([o.value for o in obs])
 
     # the model length is only known from p at evaluation; the motion needs it numerically
@@ -422,7 +423,7 @@ class CaptivePredictor:
         -------
         array
         """
-        return np.asarray(self.function(p)[0]).ravel()
+        return np.asarray(self._value(p)).ravel()
 
     def jacobian(self, p) -> tuple[np.ndarray, np.ndarray]:
         """``(prediction, d prediction / d p)`` (exact).

@@ -49,6 +49,9 @@ class CostTerm:
     prior_std : mapping name -> float, optional
         Gaussian prior (mean ``start``) on names the joined problem lacks; ignored for shared names
         (their prior is the problem's).
+    value : callable, optional
+        ``values -> r`` alone (cheaper than ``residual`` where the Jacobian is not needed, e.g. the
+        trial points of a solver); default: ``residual(values)[0]``.
     """
 
     label: str
@@ -59,6 +62,7 @@ class CostTerm:
     residual: Callable
     n_obs: int
     prior_std: Mapping = None
+    value: Callable = None
 
     def cost(self, values) -> float:
         """``0.5 |r|^2``.
@@ -72,7 +76,8 @@ class CostTerm:
         -------
         float
         """
-        r, _ = self.residual(np.asarray(values, dtype=float))
+        values = np.asarray(values, dtype=float)
+        r = self.value(values) if self.value is not None else self.residual(values)[0]
         return 0.5 * float(r @ r)
 
 
@@ -261,6 +266,13 @@ class JointProblem:
         H[self._k0:, self._k0:] += np.diag(self._extra_prec)
         return f, g, H
 
+    def _terms_cost(self, theta) -> float:
+        """The terms' cost alone (no Jacobians), the extras' prior included."""
+        f = sum(t.cost(np.where(c >= 0, theta[np.where(c >= 0, c, 0)], h))
+                for t, c, h in zip(self.terms, self._cols, self._held))
+        d = theta[self._k0:] - self._extra_start
+        return f + 0.5 * float(np.sum(self._extra_prec * d * d))
+
     def cost(self, values=None) -> float:
         """The joint cost: the problem's (data and prior) plus the terms'.
 
@@ -274,7 +286,7 @@ class JointProblem:
         float
         """
         theta = self._theta(values)
-        return self.problem.cost(dict(zip(self._main, theta[:self._k0]))) + self._terms(theta)[0]
+        return self.problem.cost(dict(zip(self._main, theta[:self._k0]))) + self._terms_cost(theta)
 
     def gradient(self, values=None) -> np.ndarray:
         """Exact gradient of :meth:`cost` (ordered like :attr:`free`).
@@ -356,7 +368,7 @@ class JointProblem:
 
         def cost(z):
             theta = split(z)
-            return pb.engine.cost(theta[:k0])[0] + pb.prior_cost(theta[:k0])[0] + self._terms(theta)[0]
+            return pb.engine.cost(theta[:k0])[0] + pb.prior_cost(theta[:k0])[0] + self._terms_cost(theta)
 
         z0 = np.concatenate([sp.to_z(theta0[:k0]), theta0[k0:]])
         t0 = time.perf_counter()
