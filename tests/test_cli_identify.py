@@ -74,7 +74,7 @@ def test_identify_several_records_with_sharing_prior_and_identifiability(tmp_pat
         paths.append(str(data.to_csv(tmp_path / f"run{i}.csv")))
     out = tmp_path / "fit.json"
     assert main(["identify", *paths, "--model", "nomoto1", "--method", "oe", "--free", "K,T,bias[delta]",
-                 "--share", "bias[delta]=record", "--prior", "K=0.05,T=50", "--sigma", "psi=0.005",
+                 "--share", "bias[delta]=record", "--prior-std", "K=0.05,T=50", "--sigma", "psi=0.005",
                  "--estimate-x0", "psi", "--bounds", "T=1:200", "--identifiability", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "identifiability of" in text and "proposed free set" in text and "N(" in text
@@ -94,16 +94,16 @@ def test_identify_without_free_runs_the_ship_workflow_and_prints_its_choices(nom
     assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--out", str(out)]) == 2
     assert "no candidates" in capsys.readouterr().err
     # nomoto1's preset (K = 0.185, T = 107) is far from this ship (0.1, 20): a tight prior holds it there
-    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior", "K=0.01,T=5", "--out", str(out)]) == 2
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior-std", "K=0.01,T=5", "--out", str(out)]) == 2
     assert "determine none of the candidates" in capsys.readouterr().err
-    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior", "K=0.2,T=200", "--out", str(out)]) == 0
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior-std", "K=0.2,T=200", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "[free set]" in text and "because" in text and "run-level evidence" in text
     fit = json.loads(out.read_text())
     assert fit["workflow"]["choices"] and sorted(fit["free"]) == ["K", "T"]
     assert abs(fit["estimates"]["K"] / 0.1 - 1) < 0.05 and abs(fit["estimates"]["T"] / 20.0 - 1) < 0.1
     # options of a hand-made fit would have no effect on the workflow: refused
-    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior", "K=0.2,T=200", "--R", "psi=1e-4",
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior-std", "K=0.2,T=200", "--R", "psi=1e-4",
                  "--out", str(tmp_path / "other.json")]) == 2
 
 
