@@ -38,18 +38,19 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from ..errors import InputError
-from .asymmetry import mirror_pairs, turn_side
+from .asymmetry import mirror_pairs
 from .identifiability import MAX_CORR, MAX_RATIO, RunEvidence
 from .inverse_dynamics import inverse_dynamics, smooth_trial
 from .output_error import OutputErrorProblem
 from .prior import Prior
 from .result import IdentificationWarning
+from .runlevel import MEASURED, approach_resistance, resample, run_evidence
+from .shipfit import ShipFit, pool_facilities
 from .uncertainty import effective_samples
 
 __all__ = ["identify_ship", "ShipFit", "PRESET_UNCERTAINTY", "preset_prior_std", "run_evidence", "pool_facilities",
@@ -70,7 +71,6 @@ CANDIDATES = (*HULL_LINEAR, *HULL_CUBIC, "R_0_dash", "l_R_dash", "epsilon", "kap
 #: Coefficients the inverse-dynamics start regresses (those the model has).
 REGRESSED = (*HULL_LINEAR, *HULL_CUBIC, "f_alpha")
 #: Outputs of the cost when the records hold them.
-MEASURED = ("psi", "r", "u", "v", "x", "y")
 #: The preset's stated uncertainty: relative prior standard deviations (``rel``), absolute ones
 #: (``abs``) and floors, by parameter.
 PRESET_UNCERTAINTY = {
@@ -85,14 +85,20 @@ PRESET_UNCERTAINTY = {
 #: with the resolution of a full-scale trial log printed to three digits.
 SMOOTHER_SIGMA = {"x": 3.0, "y": 3.0, "psi": math.radians(0.3), "u": 0.01, "r": math.radians(0.002)}
 JERK = {"u": 1e-3, "v": 1e-3, "r": 1e-5}
-MIN_UNITS = 6           # a jackknife over fewer records uses blocks of them, this many in all
-MIN_RECORD_UNITS = 4    # from this many records on, the records themselves are the units
 NEUTRAL_SPREAD = math.radians(1.0)   # between-facility spread of a neutral angle (its stated uncertainty)
 
 
 def preset_prior_std(model, names: Sequence[str], override: Mapping[str, float] | None = None) -> dict:
     """Prior standard deviation of each named parameter: ``override`` first, else
     :data:`PRESET_UNCERTAINTY` (relative to the preset value, or absolute).
+
+    Parameters
+    ----------
+    model : Model
+    names : sequence of str
+        The parameters.
+    override : mapping name -> std, optional
+        Standard deviations that take precedence.
 
     Raises
     ------
@@ -113,220 +119,6 @@ def preset_prior_std(model, names: Sequence[str], override: Mapping[str, float] 
         else:
             raise InputError(f"no stated prior uncertainty for {base!r}: give it (prior={{{base!r}: std}})")
     return out
-
-
-def resample(record, dt: float, outputs: Sequence[str] = MEASURED, states: Sequence[str] = ("u", "v", "r", "x", "y",
-             "psi"), inputs: Sequence[str] | None = None):
-    """The record every ``dt`` seconds for fitting: inputs averaged over each interval (the zero-order
-    hold of the full-rate signals), outputs and states sampled."""
-    from ..data import Dataset
-
-    d = record
-    step = max(1, int(round(dt / float(np.median(np.diff(d.t))))))
-    idx = np.arange(0, len(d), step)
-    cols = {}
-    for name in (inputs if inputs is not None else ()):
-        v = np.asarray(d[name], dtype=float)
-        cols[name] = np.array([v[i:i + step].mean() for i in idx])
-    for name in dict.fromkeys((*outputs, *states)):
-        if name in d and name not in cols:
-            cols[name] = np.asarray(d[name], dtype=float)[idx]
-    return Dataset(d.t[idx], cols, {k: d.units.get(k, "") for k in cols}, d.meta)
-
-
-def _approach(model, record) -> dict:
-    from ..maneuvers import execute_time
-
-    k = max(int(np.searchsorted(record.t, execute_time(record))), 3)
-    return {"u": float(np.mean(record["u"][:k])), "n": float(np.mean(record["n"][:k]))}
-
-
-def approach_resistance(model, record, params) -> float:
-    """``R_0'`` that makes ``du/dt = 0`` at the record's approach speed and propeller rate (the surge
-    equation is linear in it: evaluated at 0 and 1)."""
-    a = _approach(model, record)
-    i = model.index("R_0_dash", "param")
-    x, u = model.states(u=a["u"]), model.inputs(n=a["n"])
-    rates = []
-    for value in (0.0, 1.0):
-        p = np.array(params, dtype=float)
-        p[i] = value
-        rates.append(float(np.asarray(model.f(x, u, p, np.zeros(model.nw)))[0, 0]))
-    return rates[0] / (rates[0] - rates[1])
-
-
-def run_evidence(problem, at: Mapping[str, float] | None = None, *, min_units: int = MIN_UNITS,
-                 min_record_units: int = MIN_RECORD_UNITS) -> RunEvidence:
-    """Each record's (or block's) information and gradient at ``at``, for run-level selection.
-
-    With at least ``min_record_units`` records the records are the units; with fewer, each record is
-    cut into ``ceil(min_units / n_records)`` contiguous blocks of equal length (their gradients from
-    the per-sample scores, their information the record's in proportion to the measured samples).
-    """
-    theta = problem.space.theta(at)
-    _, _, _, details = problem.engine.derivatives(theta)
-    k = len(theta)
-    prior_grad = problem._prior_terms(theta)[1]
-    labels, F, G = [], [], []
-    blocks = 1 if len(details) >= min_record_units else int(math.ceil(min_units / len(details)))
-    for r, d in enumerate(details):
-        cols = np.asarray(d["cols"], dtype=int)
-        measured = np.isfinite(d["residuals"]).any(axis=1).astype(float)
-        cuts = np.array_split(np.arange(len(d["scores"])), blocks)
-        for b, rows in enumerate(cuts):
-            Fu, gu = np.zeros((k, k)), np.zeros(k)
-            share = measured[rows].sum() / max(measured.sum(), 1.0)
-            Fu[np.ix_(cols, cols)] = d["H"] * (share if blocks > 1 else 1.0)
-            gu[cols] = d["scores"][rows].sum(axis=0)
-            labels.append(f"record {r}" + (f" block {b + 1}/{blocks}" if blocks > 1 else ""))
-            F.append(Fu)
-            G.append(gu)
-    return RunEvidence(labels, np.array(F), np.array(G), prior_grad, "records" if blocks == 1 else "blocks")
-
-
-def pool_facilities(estimates: Mapping[str, tuple[float, float]], *, spread: float, prior_std: float,
-                    prior_mean: float = 0.0) -> dict:
-    """Normal-normal pooling of a facility quantity: ``value_f ~ N(mu, spread^2)``, ``mu ~ N(prior_mean,
-    prior_std^2)``; ``estimates`` facility -> (estimate, standard error).
-
-    Returns ``population`` (posterior mean of ``mu``), ``population_std`` and ``new_facility_std``
-    (``sqrt(var(mu) + spread^2)``: what a record of a facility not in ``estimates`` is replayed with).
-    """
-    prec = 1.0 / prior_std**2
-    num = prior_mean * prec
-    for est, se in estimates.values():
-        w = 1.0 / (spread**2 + se**2)
-        prec += w
-        num += w * est
-    var = 1.0 / prec
-    return {"population": num * var, "population_std": math.sqrt(var),
-            "new_facility_std": math.sqrt(var + spread**2), "spread": spread,
-            "facilities": {f: {"value": float(e), "std_error": float(s)} for f, (e, s) in estimates.items()}}
-
-
-@dataclass
-class ShipFit:
-    """The result of :func:`identify_ship`: the fit, the choices that made it and their reasons."""
-
-    fit: object                            # FitResult of the last refinement
-    model: object = field(repr=False)
-    free: list
-    choices: list                          # dicts: step, choice, reason
-    sigma: dict
-    record_weights: list
-    selection: list = field(default_factory=list)   # rows of the last run-level selection
-    first_free: list = field(default_factory=list)
-    preset: dict = field(default_factory=dict)      # values set before the fit (propulsion, asymmetry)
-    start: dict = field(default_factory=dict)       # inverse-dynamics estimates (guesses only)
-    asymmetry_fit: object = None                    # FitResult of the mirror-pair stage
-    asymmetry: dict = field(default_factory=dict)   # ship asymmetry terms applied: name -> value
-    facility: dict = field(default_factory=dict)    # facility quantity -> pool_facilities() output
-    facilities: list = field(default_factory=list)  # one label per record
-    seconds: float = 0.0
-    unpinned: dict = field(default_factory=dict)    # mirror-only terms without mirrored evidence: prior std
-
-    def params(self, facility: str | None = None) -> dict:
-        """The parameter values to replay a record of ``facility`` with (its own neutral angle when the
-        training had one, else the population value)."""
-        p = dict(self.fit.params)
-        for q, pool in self.facility.items():
-            own = pool["facilities"].get(facility)
-            p[q] = own["value"] if own else pool["population"]
-        return p
-
-    def uncertainty(self, facility: str | None = None):
-        """The covariance a replay of a record of ``facility`` uses: the refinement's robust one, the
-        mirror-pair stage's beside it (independent stages), each facility quantity's standard error
-        (own facility) or the population value's with the between-facility spread, and the prior
-        variance of the port/starboard terms held at the preset for want of mirrored evidence."""
-        from scipy.linalg import block_diag
-
-        from .params_file import ParameterUncertainty
-
-        parts, names, values = [], [], []
-        b = self.fit.uncertainty("robust")
-        if b is not None:
-            parts.append(b.covariance)
-            names += b.names
-            values += list(b.values)
-        if self.asymmetry:
-            a = self.asymmetry_fit.uncertainty("robust")
-            ia = [a.names.index(n) for n in self.asymmetry if n in a.names]
-            parts.append(a.covariance[np.ix_(ia, ia)])
-            names += [a.names[i] for i in ia]
-            values += [float(a.values[i]) for i in ia]
-        for q, std in self.unpinned.items():           # at the preset, known as well as the prior knows them
-            if q not in names:
-                parts.append(np.array([[std**2]]))
-                names.append(q)
-                values.append(float(self.fit.params[q]))
-        for q, pool in self.facility.items():
-            own = pool["facilities"].get(facility)
-            parts.append(np.array([[(own["std_error"] if own else pool["new_facility_std"]) ** 2]]))
-            names.append(q)
-            values.append(own["value"] if own else pool["population"])
-        if not names:
-            return None
-        return ParameterUncertainty(names, values, block_diag(*parts), "robust (sandwich) of the refinement and the "
-                                    "mirror-pair stage; facility quantities pooled over facilities")
-
-    def to_dict(self, facility: str | None = None, uncertainty=None) -> dict:
-        """The fit file's content for replaying records of ``facility`` (see :meth:`params`)."""
-        import dataclasses
-
-        unc = self.uncertainty(facility) if uncertainty is None else uncertainty
-        fit = self.fit
-        if unc is not None:
-            fit = dataclasses.replace(fit, param_covariance=unc.to_dict())
-        d = fit.to_dict()
-        d["params"] = {k: float(v) for k, v in self.params(facility).items()}
-        d["workflow"] = {"choices": self.choices, "free": self.free, "first_free": self.first_free,
-                         "sigma": self.sigma, "record_weights": self.record_weights,
-                         "facility_quantities": self.facility, "replayed_as_facility": facility,
-                         "asymmetry": self.asymmetry}
-        return d
-
-    def to_json(self, path, facility: str | None = None, uncertainty=None, extra: Mapping | None = None):
-        """Write the fit file (``casship simulate --params`` replays it) for records of ``facility``."""
-        from pathlib import Path
-
-        from ..io.jsonfile import write_json
-
-        content = self.to_dict(facility, uncertainty)
-        content.update(dict(extra or {}))
-        path = Path(path)
-        write_json(path, content, what="fit file")
-        return path
-
-    def moved(self) -> dict:
-        """Every parameter that differs from the preset, with its standard error and stage."""
-        nominal = self.model.param_dict()
-        out = {n: {"value": float(v), "published": nominal[n], "std_error": math.nan, "stage": "preset (given)"}
-               for n, v in self.preset.items() if n not in self.asymmetry}
-        for n, v in self.asymmetry.items():
-            out[n] = {"value": v, "published": nominal[n], "std_error": self.asymmetry_fit.std_errors[n],
-                      "std_error_robust": self.asymmetry_fit.std_errors_robust.get(n, math.nan),
-                      "stage": "asymmetry (MAP on the mirror-pair records)"}
-        for q, pool in self.facility.items():
-            out[q] = {"value": pool["population"], "published": nominal[q], "std_error": pool["new_facility_std"],
-                      "stage": "facility quantity, population value (pooled)"}
-        for n in self.fit.free:
-            if n not in nominal:          # a joined facility's own quantity (name@facility): not the ship's
-                continue
-            out[n] = {"value": self.fit.estimates[n], "published": nominal[n], "std_error": self.fit.std_errors[n],
-                      "std_error_robust": self.fit.std_errors_robust.get(n, math.nan), "stage": "MAP refinement"}
-        return out
-
-    def summary(self) -> str:
-        """The choices with their reasons, then the fit."""
-        lines = ["ship identification workflow: every choice and why"]
-        for c in self.choices:
-            lines.append(f"  [{c['step']}] {c['choice']}\n      because {c['reason']}")
-        lines.append(self.fit.summary())
-        return "\n".join(lines)
-
-    def __repr__(self) -> str:
-        return f"ShipFit(free={self.free}, status={self.fit.status!r}, {len(self.choices)} choices)"
 
 
 def _labels(records, facility) -> list[str]:
