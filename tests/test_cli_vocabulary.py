@@ -39,6 +39,7 @@ MEANINGS = {
     "--measured": ("measured outputs to use", ("filter", "identify")),
     "--sigma": ("noise standard deviation per output name=value", ("design-trial", "identify")),
     "--prior-std": ("prior standard deviations name=std of parameters", ("design-trial", "identify")),
+    "--weights": ("channel standard deviations name=value of the ship workflow's cost", ("identify",)),
     "--Q": ("process-noise variances", ("filter", "identify")),
     "--R": ("measurement variances", ("filter", "identify")),
     "--integrator": ("how the model's equations are integrated in time", ("filter", "simulate")),
