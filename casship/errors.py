@@ -20,7 +20,7 @@ True
 """
 from __future__ import annotations
 
-__all__ = ["CasshipError", "InputError", "SolverError", "DivergenceError", "SetupError"]
+__all__ = ["CasshipError", "InputError", "InputTypeError", "SolverError", "DivergenceError", "SetupError"]
 
 
 class CasshipError(Exception):
@@ -29,6 +29,12 @@ class CasshipError(Exception):
 
 class InputError(CasshipError, ValueError):
     """Bad input (a value, a name, a record, a setting), named in the message with what is accepted."""
+
+
+class InputTypeError(InputError, TypeError):
+    """Input of the wrong kind (a list where a :class:`~casship.Dataset` is needed, a model where a
+    discretised one is): an :class:`InputError`, and also a ``TypeError`` so that ``except TypeError``
+    keeps working."""
 
 
 class SolverError(CasshipError, RuntimeError):

@@ -225,6 +225,46 @@ class StepEstimator(Estimator):
             self._fold_calls[key] = BufferedCall(self.fold(size, outputs))
         return self._fold_calls[key]
 
+    # -- records: the step's per-sample slots ------------------------------------------------------
+    def gate_threshold(self, n_measured: int) -> float:
+        """Chi-square threshold of the gate for ``n_measured`` scalar measurements (inf: no gate).
+
+        Parameters
+        ----------
+        n_measured : int
+        """
+        return self.records.gate_threshold(n_measured)
+
+    def prepare(self, data: Dataset, p=None) -> dict:
+        """Check a record and turn it into the step's per-sample and constant slots.
+
+        Parameters
+        ----------
+        data : Dataset
+            Inputs (finite) and measured outputs (NaN or masked = not measured).
+        p : array or mapping, optional
+            Model parameters (nominal by default).
+
+        Returns
+        -------
+        dict
+            ``u_prev, u, y, mask, dt, gate`` with one column per sample (see
+            :meth:`Records.prepare <casship.estimators.records.Records.prepare>`), and ``p, Q, R``.
+        """
+        m = self.model
+        return {**self.records.prepare(data, m.params() if p is None else m.params(p)), "Q": self.Q, "R": self.R}
+
+    def result(self, data: Dataset, arrays: dict, out: dict, estimator: str | None = None) -> FilterResult:
+        """The :class:`FilterResult` of a run (see :meth:`Records.result
+        <casship.estimators.records.Records.result>`).
+
+        Parameters
+        ----------
+        data, arrays, out, estimator
+            The record, its prepared arrays, the per-sample diagnostics and the name to record.
+        """
+        return self.records.result(data, arrays, out, estimator)
+
     # -- data ------------------------------------------------------------------------------------
     def sample_draws(self, n: int, rng) -> dict:
         """Standard-normal draws for ``n`` steps, indexed by step first (name -> ``(n, rows, cols)`` view).

@@ -18,7 +18,7 @@ from ...progress import track
 from ...discretize import DiscreteModel, discretize
 from ..augmented import augment, augmented_noise, augmented_prior
 from ..base import per_sample
-from ..contract import Estimator, NoStepFunction
+from ..contract import Estimator
 from ..ekf import EKF
 from ..gaps import bridge_gaps
 from ..online import OnlineRun
@@ -63,9 +63,10 @@ class MHE(Estimator):
     original states, then the estimated parameters, then the disturbances ``d_<state>``. The ``p``
     given to :meth:`filter` is a parameter vector (or mapping) of the original model. Solver
     failures raise :class:`MHEFailed` (a ``RuntimeError``) naming the row and the solver's return
-    status. The MHE has no step Function (each sample solves an optimisation problem):
-    :attr:`step` raises :class:`~casship.estimators.NoStepFunction` saying what to use; the window
-    problem itself is :meth:`window`. Time gaps longer than the one-step prediction limit raise or
+    status. The MHE is not of the step family and has no ``step`` (each sample solves an
+    optimisation problem): the window problem itself is :meth:`window`, the real-time-iteration step
+    as C is ``casship.runtime.export_mhe_rti``, and the EKF step that supplies the arrival cost is
+    ``mhe.arrival_filter.step``. Time gaps longer than the one-step prediction limit raise or
     are bridged by prediction-only rows (options ``max_gap``, ``on_gap``), in batch and online alike.
 
     Examples
@@ -77,7 +78,6 @@ class MHE(Estimator):
 
     name = "MHE"
     Options = MHEOptions
-    has_step = False
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured=None, options=None):
         if not isinstance(dmodel, DiscreteModel):
@@ -131,15 +131,6 @@ class MHE(Estimator):
             vlo[j], vhi[j] = a / s, c / s
         self.v_bounds = (vlo, vhi)
         self.R_diagonal = np.count_nonzero(self.R - np.diag(np.diag(self.R))) == 0
-
-    @property
-    def step(self):
-        """The MHE has no step Function: this raises :class:`~casship.estimators.NoStepFunction`."""
-        raise NoStepFunction(
-            "MHE has no step Function: each sample solves the window's optimisation problem (MHE.window). "
-            "Use MHE.online(prior).update(y, dt) sample by sample, casship.runtime.export_mhe_rti for the "
-            "real-time-iteration step as C, or mhe.arrival_filter.step for the EKF step that supplies the "
-            "arrival cost")
 
     def arrival_step(self, outputs) -> ca.Function:
         """The step of :attr:`arrival_filter` returning its memory and ``outputs`` (compiled with option
@@ -219,15 +210,9 @@ class MHE(Estimator):
         """
         super().check_prior(self.augmented_prior(prior))
 
-    def prepare(self, data: Dataset, p=None) -> dict:
-        """The per-sample arrays of a record (``p`` of the original model; estimated parameters dropped).
-
-        Parameters
-        ----------
-        data : Dataset
-        p : array or mapping, optional
-        """
-        return super().prepare(data, self._params(p))
+    def _prepare(self, data: Dataset, p=None) -> dict:
+        """The per-sample arrays of a record (``p`` of the original model; estimated parameters dropped)."""
+        return self.records.prepare(data, self._params(p))
 
     # -- the estimator contract ---------------------------------------------------------------------
     def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
@@ -253,7 +238,7 @@ class MHE(Estimator):
         self.check_prior(prior)
         prior = self.augmented_prior(prior, p)
         data = bridge_gaps(self, data, prior, self._params(p), through=self.arrival_filter)
-        arrays = self.prepare(data, p)
+        arrays = self._prepare(data, p)
         n = len(data)
         engine = WindowEngine(self, prior, arrays["p"], outputs=DIAGNOSTICS)
         nx = self.model.nx
@@ -268,7 +253,7 @@ class MHE(Estimator):
                 out[key].append(info[key])
         out = {k: np.array(v) for k, v in out.items()}
         out["accepted"] = np.ones(n)
-        return self.result(data, arrays, out)
+        return self.records.result(data, arrays, out)
 
     def online(self, prior: Gaussian, p=None, *, u=None, seed=None) -> OnlineRun:
         """A stateful runner on a stream (``update(y, dt, u_prev=None, u=None) -> x``), started from
@@ -330,7 +315,7 @@ class MHE(Estimator):
         self.check_prior(prior)
         prior = self.augmented_prior(prior, p)
         data = bridge_gaps(self, data, prior, self._params(p), through=self.arrival_filter)
-        arrays = self.prepare(data, p)
+        arrays = self._prepare(data, p)
         n = len(data)
         if n < 2:
             raise ValueError("smooth needs at least two samples")
@@ -354,10 +339,10 @@ class MHE(Estimator):
             W[1:] = Vv @ self.LQ.T
         fold = self._linearised_step().mapaccum("mhe_gn_fold", n, ["P"], ["P"], DUPLICATE_NAMES)
         res = fold(P=prior.cov, x_prev=np.vstack([X[:1], X[:-1]]).T, w_prev=W.T, x_map=X.T,
-                   **{k: arrays[k] for k in ("u_prev", "u", "y", "mask", "dt", "p", "R")})
+                   R=self.R, **{k: arrays[k] for k in ("u_prev", "u", "y", "mask", "dt", "p")})
         out = {k: per_sample(np.asarray(v), n) for k, v in res.items()}
         out["x"], out["accepted"] = X, np.ones(n)
-        forward = self.result(data, arrays, out, estimator="MHE-full")
+        forward = self.records.result(data, arrays, out, estimator="MHE-full")
         return forward.replace(P=rts_smooth(forward).P)
 
     def _linearised_step(self) -> ca.Function:
