@@ -1,4 +1,4 @@
-"""casship's studies: seed-paper reproductions and real-data analyses on casship's public API.
+"""casship's studies: reproductions of published papers and real-data analyses on casship's public API.
 
 Installed as the package ``casship_studies`` (this folder is its source), registered in the entry
 point group ``casship.studies`` so that ``casship study NAME`` finds them. Each study is a module
@@ -13,13 +13,8 @@ import pkgutil
 
 from casship.studies import Study
 
-from .kit import resolve_data_dir
 
-__all__ = ["Study", "studies", "get_study", "DATA_DIR"]
-
-#: The measured-data folder by casship's rule at import time (None when absent). Kept for studies
-#: that have not moved to their ``data_dir`` argument; new code uses :func:`.kit.resolve_data_dir`.
-DATA_DIR = resolve_data_dir(None, quiet=True)
+__all__ = ["Study", "studies", "get_study"]
 
 
 def studies() -> dict[str, Study]:

@@ -295,9 +295,20 @@ def test_library_code_never_switches_the_plotting_backend():
     assert not hits, hits
 
 
+#: Internal ids of the reproduced papers, however spelt ("seed 002", "seed_003", "seed-paper", "seed papers").
+FILE_IDS = re.compile(r"seed[ _-]?00\d|seed[ _-]papers?", re.IGNORECASE)
+
+
+def test_the_file_id_pattern_sees_every_spelling():
+    for text in ("seed 002", "seed_003", "seed004", "seed-paper reproductions", "the Seed papers", "seed_paper"):
+        assert FILE_IDS.search(text), text
+    for text in ("seeded simulation", "seed=3", "a seed per paper"):
+        assert not FILE_IDS.search(text), text
+
+
 def test_papers_are_cited_by_author_and_year():
     """No internal file ids ("seed 002") for the papers reproduced; they are cited by author and year."""
-    pattern = re.compile(r"seed[ _-]?00\d|seed papers?", re.IGNORECASE)
+    pattern = FILE_IDS
     texts = [p for top in ("casship", "problems", "docs", "tests", "examples", "benchmarks")
              for p in (ROOT / top).rglob("*") if p.suffix in (".py", ".md") and p != Path(__file__)]
     hits = [f"{p.relative_to(ROOT)}:{n}: {line.strip()}" for p in [*texts, ROOT / "README.md"]
