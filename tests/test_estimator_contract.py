@@ -276,8 +276,8 @@ def test_infinite_samples_are_refused_naming_the_item_in_batch_and_online(name, 
     run.update([0.1, 0.2], 0.0)
     x, P = run.x, run.P
     for args, message in ((([0.1, np.inf], 0.1), r"measurement\(s\) \['y2'\] infinite \(NaN means not measured\)"),
-                          (([0.1, 0.2], 0.1, [np.inf]), r"input\(s\) \['f'\] not finite in u_prev"),
-                          (([0.1, 0.2], 0.1, [0.0], [np.nan]), r"input\(s\) \['f'\] not finite in u "),
+                          (([0.1, 0.2], 0.1, [np.inf]), r"inputs \['f'\] must be finite, got u_prev = \[inf\]"),
+                          (([0.1, 0.2], 0.1, [0.0], [np.nan]), r"inputs \['f'\] must be finite, got u = \[nan\]"),
                           (([0.1, 0.2], np.inf), r"dt must be >= 0 and finite, got inf")):
         with pytest.raises(InputError, match=message):
             run.update(*args)
@@ -286,7 +286,7 @@ def test_infinite_samples_are_refused_naming_the_item_in_batch_and_online(name, 
     assert run.samples == 1
     with pytest.raises(InputError, match=r"u must hold 1 value for \['f'\]"):
         est.online(prior, u=[0.0, 1.0])
-    with pytest.raises(InputError, match=r"input\(s\) \['f'\] not finite in u "):
+    with pytest.raises(InputError, match=r"inputs \['f'\] must be finite, got u = \[nan\]"):
         est.online(prior, u=[np.nan])
 
 

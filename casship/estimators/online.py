@@ -131,7 +131,7 @@ def check_sample(y, dt, u_prev, u, measured: Sequence[str], inputs: Sequence[str
             value = sample_vector(value, inputs, what)
             bad = [n for n, v in zip(inputs, value) if not np.isfinite(v)]
             if bad:
-                raise InputError(f"input(s) {bad} not finite in {what} = {value}; inputs must be finite")
+                raise InputError(f"inputs {bad} must be finite, got {what} = {value}")
         vectors.append(value)
     return (y, dt, *vectors)
 
