@@ -290,6 +290,25 @@ def test_infinite_samples_are_refused_naming_the_item_in_batch_and_online(name, 
         est.online(prior, u=[np.nan])
 
 
+def test_one_sample_check_for_every_engine(linear):
+    """The same bad sample is refused with the same words by every estimator's online run (one check)."""
+    m, dm, traj, data, prior = linear
+    bad = [(([0.1], 0.1), "y"), (([0.1, np.inf], 0.1), "infinite"), (("ab", 0.1), "numbers"),
+           (([[0.1, 0.2]], 0.1), "shape"), (([0.1, 0.2], -1.0), "dt"), (([0.1, 0.2], "0.1"), "dt"),
+           (([0.1, 0.2], 0.1, [np.nan]), "input"), (([0.1, 0.2], 0.1, None, [1.0, 2.0]), "u"),
+           (([0.1, 0.2], 0.1, np.ma.array([0.1], mask=[True])), "masked input")]
+    messages = {}
+    for name in NAMES:
+        run = make(name, dm, Q, R).online(prior, seed=1, u=[0.0])
+        run.update([0.1, 0.2], 0.0)
+        for k, (args, _) in enumerate(bad):
+            with pytest.raises(InputError) as info:
+                run.update(*args)
+            messages.setdefault(k, {})[name] = str(info.value)
+    for k, by_name in messages.items():
+        assert len(set(by_name.values())) == 1, (bad[k][1], by_name)
+
+
 # -- time gaps ------------------------------------------------------------------------------------------------
 
 def _gap_case(linear):

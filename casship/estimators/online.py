@@ -199,6 +199,8 @@ class OnlineRun:
     """
 
     def __init__(self, engine: OnlineEngine):
+        if not isinstance(engine, OnlineEngine):     # a casship bug, not the user's
+            raise TypeError(f"OnlineRun needs an OnlineEngine, got {type(engine).__name__}")
         self._engine = engine
         self._lock = threading.RLock()
 
