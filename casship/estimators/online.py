@@ -153,7 +153,18 @@ def first_input(u, inputs: Sequence[str]) -> np.ndarray:
 class OnlineEngine(Protocol):
     """What does the work of an :class:`OnlineRun` per sample (a recursive estimator's step, the MHE's
     window). ``update`` checks its sample with :func:`check_sample` before it changes anything, so a
-    refused sample leaves the engine as it was."""
+    refused sample leaves the engine as it was.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        None: a protocol is not instantiated; an engine is any object with these members.
+
+    Attributes
+    ----------
+    name : str
+        The estimator's name (in messages).
+    """
 
     name: str
 
@@ -162,7 +173,13 @@ class OnlineEngine(Protocol):
         """Samples taken so far."""
 
     def update(self, y, dt, u_prev, u) -> np.ndarray:
-        """Take one sample (see :meth:`OnlineRun.update`); return a copy of the new mean."""
+        """Take one sample; return a copy of the new mean.
+
+        Parameters
+        ----------
+        y, dt, u_prev, u
+            As for :meth:`OnlineRun.update` (``u_prev`` and ``u`` None: the engine's defaults).
+        """
 
     @property
     def x(self) -> np.ndarray:
