@@ -70,6 +70,11 @@ class LoopEstimator:
     kind: str = "course"
 
     def __post_init__(self):
+        from ..estimators.base import StepEstimator
+
+        if not isinstance(self.est, StepEstimator):   # the loop folds the estimator's step Function
+            raise TypeError(f"the loop runs an estimator's step Function: give a KF, EKF, UKF, EnKF or KalmanBucy, "
+                            f"got {type(self.est).__name__}")
         if self.kind not in ("course", "heading"):
             raise ValueError(f"estimator kind must be 'course' or 'heading', got {self.kind!r}")
         want = ("x_n", "y_n") if self.kind == "course" else ("psi_m", "r_m")

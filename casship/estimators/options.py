@@ -44,7 +44,7 @@ class EstimatorOptions:
     jit : bool
         Compile the step and its folds to C with the system compiler (CasADi JIT).
     outputs : tuple of str or "all"
-        Diagnostics the step Function :attr:`Estimator.step` (and the online runner) returns
+        Diagnostics the step Function :attr:`StepEstimator.step` (and the online runner) returns
         besides the memory: a subset of ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted``
         that contains ``x`` and ``P``. The compiled code computes only what is asked for; the
         default is the lean ``("x", "P")``. ``filter`` always computes every diagnostic.
