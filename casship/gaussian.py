@@ -61,6 +61,14 @@ def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_z
     return m
 
 
+def _in_units(value: float, std: float, unit: str) -> str:
+    """``value +- std unit``, radians (and rad/s...) shown in degrees, as people read angles."""
+    base, _, rest = (unit or "").partition("/")
+    if base == "rad":
+        value, std, unit = np.degrees(value), np.degrees(std), "deg" + (f"/{rest}" if rest else "")
+    return f"{value:.4g} +- {std:.3g}" + (f" {unit}" if unit else "")
+
+
 @dataclass(frozen=True)
 class Gaussian:
     """A Gaussian belief ``N(mean, cov)``.
@@ -69,10 +77,23 @@ class Gaussian:
     ----------
     mean : array_like, shape (n,)
     cov : array_like, shape (n, n), or (n,) variances, or scalar
+    names : sequence of str, optional
+        What each entry is (state names, e.g. ``model.state_names``): the repr and :meth:`summary`
+        speak of them.
+    units : sequence of str, optional
+        Their units (``tuple(v.unit for v in model.state_vars)``); radians are shown in degrees.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> Gaussian([0.1745, 0.0], np.diag([1e-4, 1e-6]), names=("psi", "r"), units=("rad", "rad/s"))
+    Gaussian(psi = 9.998 +- 0.573 deg, r = 0 +- 0.0573 deg/s)
     """
 
     mean: np.ndarray
     cov: np.ndarray
+    names: tuple = ()
+    units: tuple = ()
 
     def __post_init__(self):
         mean = np.asarray(self.mean, dtype=float).reshape(-1)
@@ -80,6 +101,41 @@ class Gaussian:
             raise ValueError("Gaussian: mean contains non-finite entries")
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "cov", as_cov(self.cov, mean.size, "Gaussian covariance"))
+        for key in ("names", "units"):
+            value = tuple(str(v) for v in (getattr(self, key) or ()))
+            if value and len(value) != mean.size:
+                raise ValueError(f"Gaussian: {len(value)} {key} {list(value)} for a mean of size {mean.size}")
+            object.__setattr__(self, key, value)
+
+    def _rows(self) -> list[str]:
+        names = self.names or tuple(f"x[{i}]" for i in range(self.mean.size))
+        units = self.units or ("",) * self.mean.size
+        return [f"{n} = {_in_units(m, s, u)}" for n, m, s, u in zip(names, self.mean, self.std, units)]
+
+    def __repr__(self) -> str:
+        rows = self._rows()
+        if len(rows) > 6:
+            rows = rows[:5] + [f"... {len(rows) - 5} more"]
+        return f"{type(self).__name__}({', '.join(rows)})"
+
+    def summary(self) -> str:
+        """Mean and standard deviation per entry (angles in degrees) and the correlations.
+
+        Returns
+        -------
+        str
+        """
+        rows = [f"Gaussian belief over {self.mean.size} entries (mean +- standard deviation)"]
+        rows += [f"  {r}" for r in self._rows()]
+        std = self.std
+        if self.mean.size > 1 and np.all(std > 0):
+            corr = self.cov / np.outer(std, std)
+            names = self.names or tuple(f"x[{i}]" for i in range(self.mean.size))
+            pairs = [(abs(corr[i, j]), names[i], names[j], corr[i, j]) for i in range(len(names))
+                     for j in range(i + 1, len(names)) if abs(corr[i, j]) >= 0.5]
+            for _, a, b, c in sorted(pairs, reverse=True)[:10]:
+                rows.append(f"  correlation {a}, {b}: {c:+.3f}")
+        return "\n".join(rows)
 
     @property
     def std(self) -> np.ndarray:

@@ -171,7 +171,8 @@ def sampled_metrics(run: Callable, draws: np.ndarray, level: float = 0.95, *, ba
     -------
     dict
         ``intervals`` (index -> ``[lo, hi]``), ``psi_std`` (the sampled heading standard deviation per
-        sample, or None), ``samples`` and ``failed`` (draws whose simulation failed).
+        sample, or None), ``samples``, ``failed`` (draws whose simulation failed) and ``failures``
+        (each distinct reason a draw failed, its first line, -> how many draws it stopped).
     """
     from .angles import wrap
 
@@ -187,10 +188,12 @@ def sampled_metrics(run: Callable, draws: np.ndarray, level: float = 0.95, *, ba
                 outcomes.append(run(p))
             except failures as exc:
                 outcomes.append(exc)
-    values, psis, failed = {}, [], 0
+    values, psis, failed, reasons = {}, [], 0, {}
     for outcome in outcomes:
         if isinstance(outcome, failures):
             failed += 1
+            why = (str(outcome).strip().splitlines() or [type(outcome).__name__])[0]
+            reasons[why] = reasons.get(why, 0) + 1
             continue
         metrics, psi = outcome
         for key, v in metrics.items():
@@ -206,4 +209,5 @@ def sampled_metrics(run: Callable, draws: np.ndarray, level: float = 0.95, *, ba
         P = np.array(psis)
         ref = P.mean(axis=0)
         psi_std = np.sqrt(np.mean(wrap(P - ref) ** 2, axis=0) * len(psis) / (len(psis) - 1))
-    return {"intervals": intervals, "psi_std": psi_std, "samples": int(len(draws)), "failed": failed}
+    return {"intervals": intervals, "psi_std": psi_std, "samples": int(len(draws)), "failed": failed,
+            "failures": reasons}

@@ -61,6 +61,81 @@ class Trajectory(Dataset):
     def _like(self, data: Dataset) -> "Trajectory":
         return Trajectory.from_dataset(data, self._names())
 
+    # -- figure ------------------------------------------------------------------------------------
+    def plot(self, ax=None, path=None, *, measured: Dataset | None = None, title: str | None = None):
+        """The run as a person reads it.
+
+        A ship (a ``psi`` column): its track (North over East, when ``x`` and ``y`` are columns)
+        and its heading with the rudder angles, in degrees. Any other model: one panel per state
+        (radians drawn in degrees).
+
+        Parameters
+        ----------
+        ax : matplotlib Axes or sequence of Axes, optional
+            Draw into these axes (one per panel) instead of a new figure.
+        path : str or Path, optional
+            Also write the figure there (PNG unless the suffix says otherwise).
+        measured : Dataset, optional
+            A record to draw beside the run (its ``x``, ``y``, ``psi``).
+        title : str, optional
+            Figure title (default: the model's name; not drawn into a caller's axes).
+
+        Returns
+        -------
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting`.
+
+        Examples
+        --------
+        >>> import casship as cs
+        >>> fig = cs.simulate(cs.get_model("nomoto1"), [0.0, 0.0], cs.maneuvers.step(0.1, 10.0, 0.1)).plot()  # doctest: +SKIP
+        """
+        from .plotting import finish, panels, split_args
+
+        ax, path = split_args(ax, path)
+        given = ax
+        if "psi" in self:
+            track = "x" in self and "y" in self
+            fig, axes = panels(ax, 1, 2 if track else 1, figsize=(11 if track else 6.5, 4.5),
+                               what=f"the trajectory plot of {self.model_name!r}")
+            drawn = list(axes.ravel())
+            if track:
+                t_ax = drawn.pop(0)
+                t_ax.plot(self["y"], self["x"], label="simulated")
+                if measured is not None and "x" in measured and "y" in measured:
+                    t_ax.plot(measured["y"], measured["x"], "--", label="measured")
+                t_ax.set(xlabel="East y [m]", ylabel="North x [m]", title="track")
+                t_ax.set_aspect("equal", adjustable="datalim")
+                t_ax.legend(fontsize=8)
+            h_ax = drawn[0]
+            h_ax.plot(self.t, np.degrees(np.unwrap(self["psi"])), label="heading psi")
+            if measured is not None and "psi" in measured:
+                h_ax.plot(measured.t, np.degrees(np.unwrap(measured["psi"])), "--", label="heading (measured)")
+            for name in dict.fromkeys((*self.input_names, *self.state_names)):
+                if name.startswith("delta"):
+                    h_ax.plot(self.t, np.degrees(self[name]), ":", label=f"{name}")
+            h_ax.set(xlabel="t [s]", ylabel="heading, rudder [deg]")
+            h_ax.legend(fontsize=8)
+        else:
+            names = list(self.state_names)
+            fig, axes = panels(ax, len(names), 1, figsize=(7.5, 1.8 * len(names) + 0.8),
+                               what=f"the trajectory plot of {self.model_name!r} ({len(names)} states)", sharex=True)
+            for a, name in zip(axes[:, 0], names):
+                unit = self.units.get(name, "") or ""
+                base, _, rest = unit.partition("/")
+                if base == "rad":
+                    a.plot(self.t, np.degrees(self[name]))
+                    unit = "deg" + (f"/{rest}" if rest else "")
+                else:
+                    a.plot(self.t, self[name])
+                a.set_ylabel(f"{name} [{unit}]" if unit else name)
+            axes[-1, 0].set_xlabel("t [s]")
+        for a in np.ravel(axes):
+            a.grid(True, alpha=0.3)
+        if given is None:
+            fig.suptitle(self.model_name if title is None else title)
+        return finish(fig, given, path)
+
     # -- I/O with the names kept -----------------------------------------------------------------
     def to_pandas(self):
         """A DataFrame with ``t`` and all columns; the model and variable names go to ``frame.attrs``."""

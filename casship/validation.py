@@ -24,7 +24,7 @@ from .maneuvers import execute_time, turning_metrics, zigzag_metrics
 from .model import Model
 from .simulate import simulate, simulate_many
 
-__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics"]
+__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent"]
 
 
 @dataclass
@@ -64,6 +64,10 @@ class ReplayResult:
     not_compared : list of str
         Columns of the record that the replay cannot be compared with, the model having no such
         state or output (``x, y, u`` of a Nomoto model).
+    metric_notes : dict
+        Metric -> why it is missing on one side (``"measured: ..."`` or ``"replayed: ..."``): the
+        manoeuvre did not reach it in that record (:func:`why_absent`), or its metrics could not be
+        taken at all (the reason the metric function gave).
     """
 
     trajectory: Trajectory
@@ -77,6 +81,7 @@ class ReplayResult:
     sampling: dict = field(default_factory=dict)
     start: dict = field(default_factory=dict)
     not_compared: list = field(default_factory=list)
+    metric_notes: dict = field(default_factory=dict)
 
     def band_summary(self) -> dict:
         """Scalar summary of the bands (JSON-friendly): level, largest and final half-widths of the
@@ -136,26 +141,32 @@ class ReplayResult:
                          + (f"  {100 * self.bands['level']:.0f} % interval" if iv else ""))
             lines += [f"  {k:28s} {self.metrics[k]:12.2f} {self.measured_metrics[k]:12.2f}"
                       + (f"  [{iv[k][0]:.2f}, {iv[k][1]:.2f}]" if k in iv else "") for k in keys]
+        lines += [f"  {k:28s} not compared: {why}" for k, why in self.metric_notes.items()]
         for k, v in self.band_summary().items():
             lines.append(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
         return "\n".join(lines)
 
-    def plot(self, path=None):
+    def plot(self, ax=None, path=None):
         """Track, heading, surge speed and rudder of the replay against the record.
 
         Parameters
         ----------
+        ax : four matplotlib Axes, optional
+            Draw into these axes (track, heading, speed, rudder) instead of a new figure.
         path : str or Path, optional
-            Save the figure as PNG there (and close it); otherwise return it open.
+            Also write the figure there (PNG unless the suffix says otherwise).
 
         Returns
         -------
-        matplotlib.figure.Figure or Path
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting`.
         """
-        import matplotlib.pyplot as plt
+        from .plotting import finish, panels, split_args
 
+        ax, path = split_args(ax, path)
+        given = ax
         tr, data = self.trajectory, self.measured
-        fig, axes = plt.subplots(2, 2, figsize=(11, 7))
+        fig, axes = panels(ax, 2, 2, figsize=(11, 7), what="the replay plot")
         track, heading, speed, rudder = axes.ravel()
         if "x" in tr and "y" in tr:
             track.plot(tr["y"], tr["x"], label="replayed")
@@ -183,13 +194,9 @@ class ReplayResult:
             ax.grid(alpha=0.3)
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=8)
-        fig.suptitle(f"replay of the measured inputs with {tr.model_name!r} ({self.kind})")
-        fig.tight_layout()
-        if path is None:
-            return fig
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        return Path(path)
+        if given is None:
+            fig.suptitle(f"replay of the measured inputs with {tr.model_name!r} ({self.kind})")
+        return finish(fig, given, path)
 
 
     def _draw_bands(self, track, heading) -> None:
@@ -258,6 +265,69 @@ def classify_maneuver(data: Dataset, rudder: str = "delta") -> tuple[str, dict]:
     if np.abs(psi - psi0).max() > np.pi:
         return "turning", {}
     return "other", {}
+
+
+#: why a manoeuvre metric is absent from a record: what the manoeuvre did not reach (see
+#: :func:`casship.maneuvers.zigzag_metrics`, :func:`casship.maneuvers.turning_metrics`)
+_ABSENT = {
+    "initial_turning": "the heading never reaches the switch heading",
+    "period_s": "the heading crosses the switch heading fewer than three times (three rudder reversals)",
+    "advance": "the heading never changes by 90 deg",
+    "transfer": "the heading never changes by 90 deg",
+    "tactical_diameter": "the heading never changes by 180 deg",
+}
+
+
+def why_absent(key: str) -> str:
+    """Why a manoeuvre metric is absent from a record, in words.
+
+    Parameters
+    ----------
+    key : str
+        The metric (``overshoot_2_deg``, ``period_s``, ``tactical_diameter_m``...).
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> why_absent("overshoot_2_deg")
+    'the record ends before the heading turns back after the 2nd overshoot'
+    """
+    import re
+
+    m = re.match(r"overshoot_(\d)_", key)
+    if m:
+        k = int(m.group(1))
+        return f"the record ends before the heading turns back after the {k}{ {1: 'st', 2: 'nd', 3: 'rd'}.get(k, 'th')} overshoot"
+    for prefix, why in _ABSENT.items():
+        if key.startswith(prefix):
+            return why
+    return "not reached in this record"
+
+
+def _metrics_and_reason(data, kind, options, *, t_exec, L) -> tuple[dict, str | None]:
+    """:func:`maneuver_metrics` with the reason when none could be taken."""
+    try:
+        if kind == "turning":
+            return turning_metrics(data, t_exec=t_exec, L=L), None
+        if kind == "zigzag":
+            return zigzag_metrics(data, options["heading_deg"], t_exec=t_exec, L=L), None
+    except ValueError as exc:
+        return {}, str(exc)
+    return {}, None
+
+
+def _metric_notes(replayed: dict, measured: dict, reasons: dict) -> dict:
+    """Metric -> why it is on one side only (numbers only: ``first_side`` and the like are labels)."""
+    notes = {}
+    for key in sorted(set(replayed) ^ set(measured), key=lambda k: list({**replayed, **measured}).index(k)):
+        if not isinstance({**replayed, **measured}[key], float) or key.endswith("_time_s"):
+            continue
+        side = "measured" if key in replayed else "replayed"
+        notes[key] = f"{side}: {reasons.get(side) or why_absent(key)}"
+    return notes
 
 
 def maneuver_metrics(data: Dataset, kind: str, options: dict, *, t_exec: float, L: float | None) -> dict:
@@ -365,10 +435,13 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     metrics, measured = {}, {}
     L = model.vessel.L_pp if model.vessel is not None else None
     t_exec = execute_time(data) if kind != "other" else None
+    notes = {}
     if kind != "other":
-        metrics = maneuver_metrics(traj, kind, options, t_exec=t_exec, L=L)
-        measured = maneuver_metrics(data, kind, options, t_exec=t_exec, L=L)
-    result = ReplayResult(traj, errors, metrics, measured, kind, data, start=start, not_compared=not_compared)
+        metrics, why_replayed = _metrics_and_reason(traj, kind, options, t_exec=t_exec, L=L)
+        measured, why_measured = _metrics_and_reason(data, kind, options, t_exec=t_exec, L=L)
+        notes = _metric_notes(metrics, measured, {"replayed": why_replayed, "measured": why_measured})
+    result = ReplayResult(traj, errors, metrics, measured, kind, data, start=start, not_compared=not_compared,
+                          metric_notes=notes)
     if uncertainty is not None:
         _add_uncertainty(result, model, traj, data, uncertainty, level, samples, seed, method, max_step, jit,
                          lambda tr: maneuver_metrics(tr, kind, options, t_exec=t_exec, L=L) if kind != "other" else {})
@@ -405,7 +478,7 @@ def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, metho
             return [tr if isinstance(tr, Exception) else _outcome(metrics_of, tr) for tr in runs]
         s = sampled_metrics(run, unc.sample(model, p, samples, seed), level, batch=True)
         result.metric_intervals = s["intervals"]
-        check = {"samples": s["samples"], "failed": s["failed"]}
+        check = {"samples": s["samples"], "failed": s["failed"], "failures": s["failures"]}
         if s["psi_std"] is not None and "psi_std" in bands:
             lin = bands["psi_std"]
             check["psi_std_ratio_sampled_to_linear"] = float(np.sqrt(np.sum(s["psi_std"] ** 2) / max(np.sum(lin ** 2), 1e-300)))

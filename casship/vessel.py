@@ -27,7 +27,7 @@ def _positive(value, what: str, vessel: str, optional: bool = False):
     return value
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Vessel:
     """Main particulars and identity of a ship.
 
@@ -177,6 +177,30 @@ class Vessel:
         if missing:
             raise ValueError(f"Vessel {self.name!r} names input(s) {missing} that the model does not have; "
                              f"inputs: {list(input_names)}")
+
+    def __repr__(self) -> str:
+        """One line with units; angles in degrees (``rudder_max=35.0 deg``), as people read them."""
+        parts = [repr(self.name), f"L_pp={self.L_pp:g} m"]
+        for key, unit in (("B", "m"), ("draught", "m"), ("mass", "kg")):
+            value = getattr(self, key)
+            if value is not None:
+                parts.append(f"{key}={value:.6g} {unit}")
+        if self.scale != 1.0:
+            parts.append(f"scale=1:{self.scale:g}")
+        if self.U0 is not None:
+            parts.append(f"U0={self.U0:.4g} m/s")
+        if self.n0 is not None:
+            parts.append(f"n0={self.n0:.4g} 1/s")
+        parts += [f"rudders={self.rudders!r}", f"propellers={self.propellers!r}"]
+        if self.rudder_max is not None:
+            parts.append(f"rudder_max={np.degrees(self.rudder_max):.1f} deg")
+        if self.rudder_rate is not None:
+            parts.append(f"rudder_rate={np.degrees(self.rudder_rate):.3g} deg/s")
+        if self.propeller_range is not None:
+            parts.append(f"propeller_range=({self.propeller_range[0]:g}, {self.propeller_range[1]:g}) 1/s")
+        if self.param_set:
+            parts.append(f"param_set={self.param_set!r}")
+        return f"Vessel({', '.join(parts)})"
 
     def summary(self) -> str:
         """A few lines describing the ship."""

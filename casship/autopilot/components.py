@@ -188,17 +188,52 @@ class ClosedLoopResult:
         ``"course"`` or ``"heading"``.
     performance : dict
         :func:`casship.autopilot.performance.performance_report` of the run.
+    controller : str
+        The control law that ran (``"pid"``, ``"lqr"``, ``"mpc"``, ``"pid gain schedule (5
+        speeds)"``...; :func:`casship.autopilot.plots.controller_name`).
+    steer : str
+        The steering input (``"delta"`` a rudder, ``"tau_N"`` a yaw moment).
+    guidance : LOSGuidance, optional
+        The path guidance of a track-control run.
     """
 
     data: Dataset
     metrics: list
     mode: str
     performance: dict = field(default_factory=dict)
+    controller: str = ""
+    steer: str = "delta"
+    guidance: object = None
 
     def summary(self) -> dict:
         """Mode, per-step metrics and the performance report."""
         return {"mode": self.mode, "steps": self.metrics, "performance": self.performance}
 
+    def plot(self, ax=None, path=None, *, title: str = ""):
+        """Course, rate, steering and track of the run (waypoints and intended track with guidance).
+
+        Parameters
+        ----------
+        ax : four matplotlib Axes, optional
+            Draw into these axes instead of a new figure.
+        path : str or Path, optional
+            Also write the figure there (PNG unless the suffix says otherwise).
+        title : str
+            Figure title (default: mode and controller).
+
+        Returns
+        -------
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting` and :func:`casship.autopilot.plots.plot_closed_loop`.
+        """
+        from ..plotting import split_args
+        from .plots import plot_closed_loop
+
+        ax, path = split_args(ax, path)
+        return plot_closed_loop(self, path, title, ax=ax)
+
     def __repr__(self) -> str:
-        return (f"ClosedLoopResult(mode={self.mode!r}, samples={len(self.data)}, steps={len(self.metrics)}, "
+        return (f"ClosedLoopResult(mode={self.mode!r}"
+                + (f", controller={self.controller!r}" if self.controller else "")
+                + f", samples={len(self.data)}, steps={len(self.metrics)}, "
                 f"rate_limited={self.performance.get('rate_limited_fraction', float('nan')):.3f})")

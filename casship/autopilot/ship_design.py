@@ -261,7 +261,11 @@ class Design:
                           f"({self.actuator.rate_max:.4g}/s) {100 * report['rate_limited_fraction']:.1f} % of the "
                           f"time (criterion < {100 * limit:.0f} %); lower wn_ref or wn, or filter the feedback",
                           RateLimitWarning, stacklevel=3)
-        return ClosedLoopResult(data=data, metrics=metrics, mode=loop.mode, performance=report)
+        from .plots import controller_name
+
+        return ClosedLoopResult(data=data, metrics=metrics, mode=loop.mode, performance=report,
+                                controller=controller_name(loop.autopilot), steer=self.plant.steer,
+                                guidance=loop.guidance)
 
 
 def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer: str | None = None,

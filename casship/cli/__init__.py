@@ -78,6 +78,10 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         if not any("--debug" in a.option_strings for a in command_parser._actions):
             command_parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                                         help="show the Python traceback of an error")
+        if not any("--quiet" in a.option_strings for a in command_parser._actions):
+            command_parser.add_argument("--quiet", action="store_true", default=argparse.SUPPRESS,
+                                        help="no progress on standard error (bars on a terminal; otherwise a line "
+                                             "at most every 10 s with stage, fraction and time left)")
     return parser
 
 
@@ -143,15 +147,22 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     command = args.command
+    if getattr(args, "quiet", False):
+        from ..progress import set_quiet
+
+        set_quiet()
 
     def show(message, category, filename, lineno, file=None, line=None):
         print(f"casship {command}: warning: {_one_line(message) if isinstance(message, Warning) else message}",
               file=sys.stderr)
 
+    from ..progress import command as command_progress
+
     with warnings.catch_warnings():
         warnings.showwarning = show
         try:
-            return int(args.func(args) or 0)
+            with command_progress(command):
+                return int(args.func(args) or 0)
         except UsageError as exc:
             return _usage(exc)
         except KeyboardInterrupt:

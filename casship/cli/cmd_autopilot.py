@@ -7,16 +7,22 @@ The options are the settings of :func:`casship.autopilot.design_autopilot`, with
 Example::
 
     casship autopilot --model kvlcc2 --json
-    casship autopilot --model kvlcc2 --scenario course-60 --method lqr --wind 10 45 --plot out/
+    casship autopilot --model kvlcc2 --scenario course-60 --design lqr --wind 10 45 --plot out/
     casship autopilot --model otter --mode course --gnss-std 0.02 --show-defaults
     casship autopilot --model kvlcc2 --params fit.json           # on the ship identified by casship identify
     casship autopilot --model kvlcc2 --speed 4 --schedule --scenario course-90 --json
     casship autopilot --model kvlcc2 --controller mpc --scenario course-60
+    casship autopilot --model otter --scenario track --plot out/        # LOS track control through waypoints
+
+Option names follow one vocabulary (:mod:`casship.cli._vocabulary`): angles in degrees with ``-deg``
+names (``--steer-max-deg``, ``--r-max-deg-s``), a yaw moment with ``-N-m``; ``--design`` is the
+design method (``--method`` before), ``--rate-source`` the rate fed to the law (``--rate`` before).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
+from ._vocabulary import add_deprecated_alias
 from ._common import (add_model_option, add_overwrite_option, check_input_files, check_outputs, check_ship, print_json,
                       require, seed)
 
@@ -27,6 +33,10 @@ _CHOICES = {"method": ("pid", "lqr"), "mode": ("heading", "course"), "rate": ("e
             "integral": ("fossen", "exact", "none")}
 _PAIRS = {"ekf_alpha", "ekf_q", "observer_q"}
 _SKIP = {"lqr_weights", "turn_rate_top"}
+#: settings whose option has another name than the setting (one meaning per option name across commands)
+_NAMES = {"method": "design", "rate": "rate_source"}
+#: steering limits: in degrees for a rudder, in N m for a yaw moment (setting -> (deg suffix, moment suffix))
+_STEERING = {"steer_max": ("deg", "N_m"), "steer_rate_max": ("deg_s", "N_m_s")}
 
 
 #: One-line description (the command list of ``casship --help``).
@@ -35,7 +45,24 @@ HELP = "design a course autopilot for a named model and run a course change"
 
 def _option(name: str) -> str:
     suffix = _DEGREES.get(name)
+    name = _NAMES.get(name, name)
     return "--" + (f"{name}_{suffix}" if suffix else name).replace("_", "-")
+
+
+def _add_steering_limit(p, name: str, rule: str) -> None:
+    """``--steer-max-deg`` (a rudder) and ``--steer-max-N-m`` (a yaw moment), and the old SI spelling."""
+    deg, moment = _STEERING[name]
+    unit = {"deg": "deg", "deg_s": "deg/s"}[deg]
+    p.add_argument("--" + f"{name}_{deg}".replace("_", "-"), dest=f"{name}_deg", type=float, default=None,
+                   metavar=deg.upper(),
+                   help=f"[{unit}] a rudder's limit; default: {rule}")
+    p.add_argument("--" + f"{name}_{moment}".replace("_", "-"), dest=f"{name}_{moment}", type=float, default=None,
+                   metavar=moment.upper(),
+                   help=f"[{moment.replace('_', ' ').replace('N m s', 'N m/s')}] the yaw-moment limit of a craft "
+                        f"steered by its propellers; default: {rule}")
+    add_deprecated_alias(p, "--" + name.replace("_", "-"),
+                         f"{'--' + f'{name}_{deg}'.replace('_', '-')} (a rudder) or "
+                         f"{'--' + f'{name}_{moment}'.replace('_', '-')} (a yaw moment)", dest=name, type=float)
 
 
 def register(sub) -> None:
@@ -48,14 +75,23 @@ def register(sub) -> None:
                                    "Python API (casship.autopilot.design_autopilot) uses the same rules.")
     add_model_option(p)
     p.add_argument("--scenario", default="course-20",
-                   help="course-A (A deg, back to 0 at half the run; course-20 = Fossen & Fossen 2021) or step-A")
-    p.add_argument("--t-end", type=float, default=None, help="duration [s] (default: two segments, see --segment)")
+                   help="course-A (A deg, back to 0 at half the run; course-20 = Fossen & Fossen 2021), step-A, "
+                        "rot-R (R deg/min), or track (LOS track control through --waypoints)")
+    p.add_argument("--waypoints", nargs="+", default=None, metavar="N_M,E_M",
+                   help="track scenario: waypoints North,East [m] (default: a dog-leg of two 90 deg turns with legs of "
+                        "12 LOS lookahead distances, LOSGuidance.for_design)")
+    p.add_argument("--duration", dest="t_end", type=float, default=None,
+                   help="simulated time [s] (default: two segments, see --segment; track: the path once and a fifth)")
+    add_deprecated_alias(p, "--t-end", "--duration", dest="t_end", type=float)
     for name, (unit, rule) in RULES.items():
         if name in _SKIP:
             continue
         kw = {"default": None, "dest": name}
         unit_txt = {"deg": "deg", "deg_s": "deg/s"}.get(_DEGREES.get(name), unit)
         rule = rule.replace("%", "%%")          # argparse formats help strings with %
+        if name in _STEERING:
+            _add_steering_limit(p, name, rule)
+            continue
         kw["help"] = f"[{unit_txt}] default: {rule}" if unit_txt else f"default: {rule}"
         if name in _CHOICES:
             kw["choices"] = _CHOICES[name]
@@ -64,6 +100,8 @@ def register(sub) -> None:
         else:
             kw["type"] = float
         p.add_argument(_option(name), **kw)
+        if name in _NAMES:
+            add_deprecated_alias(p, "--" + name, _option(name), dest=name, choices=_CHOICES.get(name))
     p.add_argument("--controller", choices=("law", "mpc"), default="law",
                    help="'law': the designed PID/LQR law; 'mpc': the design's MPC (HPIPM, 60-step horizon) in the "
                         "compiled loop")
@@ -96,15 +134,49 @@ def _course_changes(res, steer_unit: str) -> list:
              "turn_rate_max_deg_s": float(np.degrees(m["turn_rate_max"]))} for m in res.metrics]
 
 
+def _steering_options(name: str) -> tuple[str, str]:
+    deg, moment = _STEERING[name]
+    return tuple("--" + f"{name}_{suffix}".replace("_", "-") for suffix in (deg, moment))
+
+
+def _check_steering_units(args, model) -> None:
+    """A limit in degrees for a craft steered by a yaw moment (or in N m for a rudder) is refused
+    (a ship with a rudder steers by it, a craft without one by a yaw moment:
+    :func:`casship.autopilot.steering_plant`)."""
+    from ..errors import InputError
+
+    moment = not getattr(getattr(model, "vessel", None), "rudders", ())
+    for name in _STEERING:
+        deg_opt, moment_opt = _steering_options(name)
+        if moment and getattr(args, f"{name}_deg", None) is not None:
+            raise InputError(f"{deg_opt}: {model.name!r} steers by a yaw moment (tau_N), not a rudder; "
+                             f"give {moment_opt}")
+        if not moment and getattr(args, f"{name}_{_STEERING[name][1]}", None) is not None:
+            raise InputError(f"{moment_opt}: {model.name!r} steers by a rudder; give {deg_opt}")
+
+
 def settings_from_args(args) -> dict:
     """The settings given on the command line, in SI units (the others follow the rules)."""
     import numpy as np
 
     from ..autopilot.defaults import RULES
+    from ..errors import InputError
 
     out = {}
+    for name in _STEERING:
+        deg_opt, moment_opt = _steering_options(name)
+        given = {deg_opt: getattr(args, f"{name}_deg", None), moment_opt: getattr(args, f"{name}_{_STEERING[name][1]}", None),
+                 "--" + name.replace("_", "-"): getattr(args, name, None)}
+        given = {k: v for k, v in given.items() if v is not None}
+        if len(given) > 1:
+            raise InputError(f"{' and '.join(given)} set the same limit: give the one for the ship's steering "
+                             f"({deg_opt} for a rudder, {moment_opt} for a yaw moment)")
+        if deg_opt in given:
+            out[name] = float(np.radians(given[deg_opt]))
+        elif given:
+            out[name] = float(next(iter(given.values())))
     for name in RULES:
-        if name in _SKIP:
+        if name in _SKIP or name in _STEERING:
             continue
         value = getattr(args, name, None)
         if value is None:
@@ -143,6 +215,82 @@ def _environment(args, model):
     return model, env
 
 
+def _schedule_rows(design) -> list:
+    """The point designs of a gain schedule: speed, natural frequency, gains and phase margin."""
+    rows = []
+    for d in design.schedule:
+        g = d.gains
+        rows.append({"speed_m_s": float(d.settings.speed), "wn_rad_s": float(d.settings.wn), "Kp": float(g.Kp),
+                     "Kd_s": float(g.Kd), "Ki_1_s": float(g.Ki), "method": g.method,
+                     "phase_margin_deg": float(d.margins["phase_margin_deg"]),
+                     "upper_gain_margin_db": float(d.margins["upper_gain_margin_db"])})
+    return rows
+
+
+def _waypoints(args, design):
+    """The track scenario's waypoints: given North,East pairs [m], or a dog-leg scaled by the LOS lookahead."""
+    from ..autopilot import LOSGuidance, Waypoints
+    from ..errors import InputError
+
+    if args.waypoints is None:
+        D = LOSGuidance.for_design(Waypoints([0.0, 1.0], [0.0, 0.0]), design).lookahead
+        return Waypoints([0.0, 12 * D, 12 * D, 24 * D], [0.0, 0.0, 12 * D, 12 * D])
+    pairs = []
+    for item in args.waypoints:
+        try:
+            north, east = (float(v) for v in item.split(","))
+        except ValueError:
+            raise InputError(f"--waypoints: {item!r} is not a North,East pair in metres (e.g. 0,0 500,0 500,500)") from None
+        pairs.append((north, east))
+    try:
+        return Waypoints([n for n, _ in pairs], [e for _, e in pairs])
+    except ValueError as exc:
+        raise InputError(f"--waypoints: {exc}") from None
+
+
+def _track_run(args, design, env, controller):
+    """LOS track control through the waypoints (turns at the wheel-over points), from the first waypoint
+    heading along the first leg; by default long enough to sail the path once and a fifth."""
+    import numpy as np
+
+    from ..autopilot import LOSGuidance, simulate_autopilot
+
+    wp = _waypoints(args, design)
+    g = LOSGuidance.for_design(wp, design)
+    t_end = args.t_end if args.t_end is not None else 1.2 * float(np.sum(wp.lengths)) / design.settings.speed
+    return simulate_autopilot(design, float(wp.angles[0]), t_end, seed=args.seed, environment=env,
+                              controller=controller, guidance=g)
+
+
+def _track_summary(res) -> dict:
+    """Waypoints, guidance settings and how closely the run kept to the intended track."""
+    import numpy as np
+
+    from ..autopilot import cross_track_metrics, track_deviation
+
+    g, d = res.guidance, res.data
+    return {"waypoints_north_m": list(g.waypoints.north), "waypoints_east_m": list(g.waypoints.east),
+            "lookahead_m": float(g.lookahead), "turn_radius_m": float(g.turn_radius or 0.0),
+            "legs": int(g.waypoints.n_segments), "legs_reached": int(d["segment"][-1]) + 1,
+            **cross_track_metrics(d), "track_deviation_max_m": float(np.max(track_deviation(d, g)))}
+
+
+def _shown(name: str, value, moment: bool) -> str:
+    """A setting as people read it: angles and turn rates in degrees, other numbers with their unit."""
+    import numpy as np
+
+    from ..autopilot.defaults import RULES
+
+    unit = RULES.get(name, ("", ""))[0]
+    if name in _STEERING:
+        unit = unit.split(" or ")[1 if moment else 0]
+    if not isinstance(value, float) or not unit or " " in unit.replace("N m", "Nm"):
+        return str(value)
+    if unit.split("/")[0] == "rad" and name not in ("wn", "wn_ref"):     # wn: an angular frequency
+        return f"{np.degrees(value):.6g} deg{unit[3:]}"
+    return f"{value:.6g} {unit}"
+
+
 def _db(value: float) -> str:
     """A gain margin in dB; beyond 100 dB either way it bounds nothing in practice."""
     if value != value:
@@ -156,6 +304,7 @@ def run(args) -> int:
     import numpy as np
 
     from .. import autopilot as ap
+    from ..errors import InputError
     from ..models import get_model
 
     require(args.parser, args, {"--model": args.model})
@@ -172,6 +321,7 @@ def run(args) -> int:
     model, env = _environment(args, ship)
     p = model.params({k: v for k, v in given.items() if k in model.param_names}) if given else None
     schedule = None if args.schedule is None else (args.schedule or "default")
+    _check_steering_units(args, model)
     design = ap.design_autopilot(model, p=p, schedule=schedule, **settings_from_args(args))   # designed in calm water
     s = design.settings
     if args.show_defaults:
@@ -179,11 +329,17 @@ def run(args) -> int:
         if args.json:
             print_json({"model": args.model, "settings": rows})
         else:
+            moment = design.plant.steer == "tau_N"
             for k, row in rows.items():
-                print(f"{k:>15} = {row['value']!s:<40} ({row['source']})")
+                print(f"{k:>15} = {_shown(k, row['value'], moment):<40} ({row['source']})")
         return 0
     controller = ap.mpc_for_design(design) if args.controller == "mpc" else None
-    res = design.simulate(args.scenario, args.t_end, seed=args.seed, environment=env, controller=controller)
+    if args.scenario == "track":
+        res = _track_run(args, design, env, controller)
+    else:
+        if args.waypoints is not None:
+            raise InputError(f"--waypoints: only the track scenario follows waypoints (--scenario {args.scenario})")
+        res = design.simulate(args.scenario, args.t_end, seed=args.seed, environment=env, controller=controller)
     steer_unit = "N m" if design.plant.steer == "tau_N" else "deg"
     metrics = [{"overshoot_deg": np.nan, **m} for m in res.metrics]   # overshoot in % with degrees beside it
     out = {"model": args.model, "scenario": args.scenario, "t_end_s": float(res.data.t[-1]), "environment": env,
@@ -194,7 +350,11 @@ def run(args) -> int:
     out[travel_key] = perf["steer_travel_per_hour"] * (float(np.degrees(1.0)) if steer_unit == "deg" else 1.0)
     if design.schedule:
         out["schedule_speeds_m_s"] = list(design.autopilot.speeds)
-    out["controller"] = args.controller
+        out["schedule"] = _schedule_rows(design)
+    if res.guidance is not None:            # the course command moves with the guidance: no course changes to score
+        out["track"] = _track_summary(res)
+        del out["metrics"], out["course_changes"]
+    out["controller"] = "mpc" if controller is not None else res.controller
     if controller is not None:
         out["mpc"] = {"period_s": controller.period, "horizon": int(controller.horizon), "solver": "hpipm"}
     if args.plot:
@@ -202,10 +362,10 @@ def run(args) -> int:
 
         with output_folder(args.plot, overwrite=args.overwrite, what="--plot") as folder:
             loop_png, run_png = folder / f"{args.model}_loop.png", folder / f"{args.model}_{args.scenario}.png"
-            ap.plot_design(design.loop, loop_png, f"{args.model}: loop on the linearised ship", design.closed_loop)
-            ap.plot_closed_loop(res, run_png, f"{args.model} {args.scenario} ({s.mode}, {s.method})",
-                                **({"steer_label": "yaw moment [N m]", "steer_scale": 1.0} if steer_unit == "N m"
-                                   else {}))
+            ap.plot_design(design.loop, loop_png, f"{args.model}: loop on the linearised ship"
+                           + (f" (gain schedule over {len(design.schedule)} speeds)" if design.schedule else ""),
+                           design.closed_loop, schedule=design.schedule)
+            ap.plot_closed_loop(res, run_png, f"{args.model} {args.scenario} ({s.mode}, {res.controller})")
         out["plots"] = [str(Path(args.plot) / p.name) for p in (loop_png, run_png)]
     if args.json:
         print_json(out)
@@ -213,13 +373,35 @@ def run(args) -> int:
     mg, nom, g = design.margins, design.nomoto, design.gains
     print(f"{args.model} at {s.speed:.3g} m/s: Nomoto K = {nom.K:.4g} 1/s, T = {nom.T:.4g} s"
           + (f" (T1 {nom.T1:.4g}, T2 {nom.T2:.4g}, T3 {nom.T3:.4g})" if nom.second_order else ""))
-    print(f"{g.method}: wn = {s.wn:.4g} rad/s, Kp = {g.Kp:.4g}, Kd = {g.Kd:.4g} s, Ki = {g.Ki:.4g} 1/s; "
-          f"{s.mode} mode, loop period {s.dt:g} s")
+    if controller is not None:
+        print(f"controller: mpc (HPIPM, period {controller.period:g} s, horizon {int(controller.horizon)} steps); "
+              f"{s.mode} mode, loop period {s.dt:g} s; reference model and margins below from the {g.method} design")
+        print(f"{g.method} design: wn = {s.wn:.4g} rad/s, Kp = {g.Kp:.4g}, Kd = {g.Kd:.4g} s, Ki = {g.Ki:.4g} 1/s")
+    else:
+        print(f"controller: {res.controller}: wn = {s.wn:.4g} rad/s, Kp = {g.Kp:.4g}, Kd = {g.Kd:.4g} s, "
+              f"Ki = {g.Ki:.4g} 1/s (at {s.speed:.3g} m/s); {s.mode} mode, loop period {s.dt:g} s")
+    if design.schedule:
+        print(f"gain schedule: {len(design.schedule)} point designs, the law interpolated linearly in the measured "
+              "speed (held beyond the ends)")
+        print(f"{'speed m/s':>10} {'wn rad/s':>9} {'Kp':>10} {'Kd s':>10} {'Ki 1/s':>10} {'PM deg':>7}")
+        for row in out["schedule"]:
+            print(f"{row['speed_m_s']:>10.3g} {row['wn_rad_s']:>9.4g} {row['Kp']:>10.4g} {row['Kd_s']:>10.4g} "
+                  f"{row['Ki_1_s']:>10.4g} {row['phase_margin_deg']:>7.1f}")
     print(f"margins (python-control): gain {_db(mg['gain_margin_db'])} ({mg['gain_margin_side']}), phase "
           f"{mg['phase_margin_deg']:.1f} deg at {mg['gain_crossover_rad_s']:.3g} rad/s; upper/lower gain margin "
           f"{_db(mg['upper_gain_margin_db'])}/{_db(mg['lower_gain_margin_db'])}; closed loop stable: "
           f"{mg['closed_loop_stable']}")
     sc = 1.0 if steer_unit == "N m" else float(np.degrees(1.0))
+    if res.guidance is not None:
+        tr = out["track"]
+        print(f"track control (LOS, lookahead {tr['lookahead_m']:.4g} m, turn radius {tr['turn_radius_m']:.4g} m) "
+              f"through {len(tr['waypoints_north_m'])} waypoints: reached leg {tr['legs_reached']} of {tr['legs']}; "
+              f"cross-track error RMS {tr['cross_track_rms_m']:.3g} m, max {tr['cross_track_max_m']:.3g} m; "
+              f"off the intended track at most {tr['track_deviation_max_m']:.3g} m")
+        print(f"steering travel {res.performance['steer_travel_per_hour'] * sc:.4g} {steer_unit}/h beside the rate "
+              f"limit active {res.performance['rate_limited_fraction']:.3f} of the time (the course-change checks "
+              "do not apply: the command follows the track)")
+        return 0
     print(f"{'segment':>8} {'target':>7} {'rise s':>8} {'over %':>7} {'over deg':>9} {'settle s':>9} {'ss err':>7} "
           f"{'max steer':>10} {'rate lim':>9}  (target, errors in deg; steering in {steer_unit})")
     for k, m in enumerate(metrics):

@@ -4,6 +4,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ._vocabulary import add_deprecated_alias
+
 
 #: One-line description (the command list of ``casship --help``).
 HELP = "run the speed comparisons in benchmarks/ and print a table of ratios"
@@ -12,12 +14,14 @@ HELP = "run the speed comparisons in benchmarks/ and print a table of ratios"
 def register(sub) -> None:
     p = sub.add_parser("bench", help=HELP)
     p.add_argument("--quick", action="store_true", help="short problem sizes (a smoke run)")
-    p.add_argument("--json", default=None, help="write rows and machine description to this JSON file")
+    p.add_argument("--json-file", dest="json", default=None, metavar="FILE",
+                   help="write rows and machine description to this JSON file")
+    add_deprecated_alias(p, "--json", "--json-file", dest="json")
     p.add_argument("--only", nargs="+", default=None,
                    help="run only these topics, named whole: no prefix matching (e.g. simulate ship_filters)")
     p.add_argument("--markdown", default=None, help="write the results section of this Markdown page (an existing "
                                                     "page: only its results section is replaced)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --json file")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --json-file file")
     p.set_defaults(func=run)
 
 
@@ -40,8 +44,8 @@ def _import_runner():
 def run(args) -> int:
     from ._common import check_outputs
 
-    check_outputs({"--json": args.json, "--markdown": args.markdown}, overwrite=True)    # distinct paths
-    check_outputs({"--json": args.json}, overwrite=args.overwrite)
+    check_outputs({"--json-file": args.json, "--markdown": args.markdown}, overwrite=True)    # distinct paths
+    check_outputs({"--json-file": args.json}, overwrite=args.overwrite)
     if args.markdown and not Path(args.markdown).is_file():
         raise FileNotFoundError(f"--markdown {args.markdown}: no such page (the results section of an existing "
                                 "page is replaced)")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 
+from ._vocabulary import add_deprecated_alias
 from ._common import (add_overwrite_option, check_input_files, check_outputs, check_ship, count, parse_pairs,
                       print_json, refuse_unused, write_output)
 
@@ -53,16 +54,19 @@ def register(sub) -> None:
                                                  "name=value,... in SI units and radians (default: the fit file's)")
     p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: the vessel's)")
     p.add_argument("--dt", type=float, default=None, help="design step and sampling of a trial [s] (default L/U/40)")
-    p.add_argument("--turning", default="35", help="turning-circle rudder angles [deg], comma-separated")
-    p.add_argument("--zigzag", default="10,20", help="zig-zag angles [deg], comma-separated")
-    p.add_argument("--pullout", default="35", help="pull-out rudder angles [deg], comma-separated ('' for none)")
+    p.add_argument("--turning", default="35", metavar="DEG,...",
+                   help="turning-circle rudder angles [deg], comma-separated")
+    p.add_argument("--zigzag", default="10,20", metavar="DEG,...", help="zig-zag angles [deg], comma-separated")
+    p.add_argument("--pullout", default="35", metavar="DEG,...",
+                   help="pull-out rudder angles [deg], comma-separated ('' for none)")
     p.add_argument("--no-spiral", dest="spiral", action="store_false", help="leave the spiral out")
     p.add_argument("--no-free", dest="free", action="store_false", help="rank the standard trials only")
     p.add_argument("--duration", type=float, default=None, help="free trial: duration [s] (default 25 L/U)")
     p.add_argument("--rudder-max-deg", dest="rudder_max_deg", type=float, default=None,
                    help="free trial: largest rudder angle [deg] (default: the rudder stop)")
-    p.add_argument("--rudder-rate-deg", dest="rudder_rate_deg", type=float, default=None,
+    p.add_argument("--rudder-rate-deg-s", dest="rudder_rate_deg", type=float, default=None,
                    help="free trial: largest rudder rate [deg/s] (default: the vessel's)")
+    add_deprecated_alias(p, "--rudder-rate-deg", "--rudder-rate-deg-s", dest="rudder_rate_deg", type=float)
     p.add_argument("--corridor", type=float, default=None, help="free trial: half width of the track corridor [m]")
     p.add_argument("--speed-min", dest="speed_min", type=float, default=None, help="free trial: speed floor [m/s]")
     p.add_argument("--knot", type=float, default=None, help="free trial: time between rudder knots [s] (default L/U/4)")

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import warnings
 
+from ._vocabulary import add_deprecated_alias
 from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model,
                       load_record, parse_items, parse_pairs, positive, print_json, require, seed, write_output)
 
@@ -78,7 +79,9 @@ def register(sub) -> None:
     p.add_argument("--rate", type=positive, default=None,
                    help="run the filter at RATE Hz (not below the data rate), inserting prediction-only rows "
                         "between the samples (Dataset.resample)")
-    p.add_argument("--method", default="euler", choices=("euler", "rk4"), help="discretisation")
+    p.add_argument("--integrator", dest="method", default="euler", choices=("euler", "rk4"),
+                   help="how the model's equations are integrated in time (the filter's discretisation)")
+    add_deprecated_alias(p, "--method", "--integrator", dest="method", choices=("euler", "rk4"))
     p.add_argument("--options", default=None, help="estimator options key=value,... (e.g. gate=0.999,members=100)")
     p.add_argument("--seed", type=seed, default=0, help="seed of stochastic estimators (EnKF)")
     p.add_argument("--out", default=None, help="CSV of estimates and standard deviations")

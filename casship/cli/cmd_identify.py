@@ -3,21 +3,22 @@
 Examples::
 
     casship identify run1.csv run2.csv --model nomoto1 --free K,T --R psi=1e-4 --out fit.json
-    casship identify A.dat B.dat C.dat --model kvlcc2 --method oe --free N_r_dash,Y_v_dash,bias[n] \\
-        --share bias[n]=record --prior N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
+    casship identify A.dat B.dat C.dat --model kvlcc2 --objective oe --free N_r_dash,Y_v_dash,bias[n] \\
+        --share bias[n]=record --prior-std N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
         --identifiability --out fit.json --plot fit.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
 units, radians) or MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
-to the MMG convention). ``--method mle`` (default) maximises the likelihood through an EKF;
-``--method oe`` minimises the simulated output error. Every option maps onto the Python API
+to the MMG convention). ``--objective mle`` (default) maximises the likelihood through an EKF;
+``--objective oe`` minimises the simulated output error. Every option maps onto the Python API
 (:class:`casship.OutputErrorProblem`, :class:`casship.MLEProblem`).
 """
 from __future__ import annotations
 
 import warnings
 
+from ._vocabulary import add_deprecated_alias
 from ._common import (check_input_files, check_outputs, count, load_record, number, parse_items, parse_pairs, positive,
                       print_json, refuse_unused, write_output)
 from .cmd_filter import DEFAULT_Q
@@ -37,14 +38,17 @@ def register(sub) -> None:
                    help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
     p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out / --plot file")
-    p.add_argument("--method", default="mle", choices=("mle", "oe"),
-                   help="mle: likelihood through an EKF (default); oe: output error (simulation)")
+    p.add_argument("--objective", dest="method", default="mle", choices=("mle", "oe"),
+                   help="what the fit minimises: mle the negative log-likelihood through an EKF (default); oe the "
+                        "output error of a simulation")
+    add_deprecated_alias(p, "--method", "--objective", dest="method", choices=("mle", "oe"))
     p.add_argument("--measured", default=None, help="outputs to use a,b,... (default: outputs in every record)")
     p.add_argument("--share", default=None,
                    help="per-record or per-group quantities name=record|all|group,... (group: see --group)")
     p.add_argument("--group", default=None, help="one group label per record A,A,B,... (for --share name=group)")
-    p.add_argument("--prior", default=None,
+    p.add_argument("--prior-std", dest="prior", default=None,
                    help="Gaussian prior standard deviations name=std,... centred on the published values (MAP)")
+    add_deprecated_alias(p, "--prior", "--prior-std", dest="prior")
     p.add_argument("--prior-weight", dest="prior_weight", type=positive, default=1.0, help="weight of the prior")
     p.add_argument("--bounds", default=None, help="bounds name=lower:upper,...")
     p.add_argument("--R", default=None, help="measurement variances name=value,... (mle; default: estimated)")
@@ -96,7 +100,7 @@ def _problem(args, model, records, free, measured):
     groups = {"group": labels} if labels else None
     if any(h == "group" for h in share.values()) and not labels:
         raise ValueError("--share name=group needs --group with one label per record")
-    prior = Prior(parse_pairs(args.prior, "--prior"), weight=args.prior_weight) if args.prior else None
+    prior = Prior(parse_pairs(args.prior, "--prior-std"), weight=args.prior_weight) if args.prior else None
     params = read_params(args.params, model)[1] if args.params else None
     common = dict(share=share or None, groups=groups, prior=prior, params=params, bounds=_bounds(args.bounds) or None,
                   estimate_x0=parse_items(args.estimate_x0, "--estimate-x0"))
@@ -131,20 +135,22 @@ def _problem(args, model, records, free, measured):
 def run(args) -> int:
     from ..errors import InputError
     from ..models import get_model
+    from ..progress import stage
 
     if args.method == "oe":
         refuse_unused(args.parser, {"--R": args.R is not None, "--Q": args.Q is not None,
                                     "--estimate-noise": args.estimate_noise is not None},
-                      "--method oe weighs the output errors with --sigma (no filter, no noise covariances)")
+                      "--objective oe weighs the output errors with --sigma (no filter, no noise covariances)")
     else:
         refuse_unused(args.parser, {"--sigma": args.sigma is not None, "--shooting": args.shooting != "single"},
-                      "--method mle runs the likelihood through an EKF (no simulation weights or shooting)")
+                      "--objective mle runs the likelihood through an EKF (no simulation weights or shooting)")
     refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
                                 "--group": bool(args.group) and "=group" not in (args.share or "")},
-                  "--prior-weight weighs a --prior; --group labels the records for --share NAME=group")
+                  "--prior-weight weighs a --prior-std; --group labels the records for --share NAME=group")
     check_input_files({"--params": args.params})
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
+    stage("reading the records", 1, 4)
     records = [load_record(p, model, wrap_angles=True).decimate(args.decimate) for p in args.data]
     free = parse_items(args.free, "--free")
     if not free:
@@ -153,6 +159,7 @@ def run(args) -> int:
                 else [n for n in model.output_names if all(n in d for d in records)])
     if not measured:
         raise InputError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
+    stage("building the problem", 2, 4)
     prob = _problem(args, model, records, free, measured)
     guess = parse_pairs(args.guess, "--guess")
     if args.identifiability:
@@ -162,10 +169,12 @@ def run(args) -> int:
               f"{idf.propose()}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
+        stage("fitting", 3, 4)
         fit = prob.solve(guess=guess, max_iter=args.max_iter)
     for w in caught:            # the fit's own warnings are printed once, with the fit
         if not any(str(w.message).endswith(text) for text in fit.warnings):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    stage("writing", 4, 4)
     write_output(args.out, fit.to_json, option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
         write_output(args.plot, fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)

@@ -8,6 +8,7 @@ Examples::
 """
 from __future__ import annotations
 
+from ._vocabulary import add_deprecated_alias
 from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_input_files, check_outputs,
                       check_ship, level, load_model, load_record, print_json, refuse_unused, require, seed, whole,
                       write_output)
@@ -47,7 +48,9 @@ def register(sub) -> None:
     p.add_argument("--dt", type=float, default=None, help="time step [s] (default: L/U/400, rounded)")
     p.add_argument("--hold", type=float, default=None, help="hold time for pull-out/spiral/random [s]")
     p.add_argument("--seed", type=seed, default=None, help="seed of the random rudder sequence (default 0)")
-    p.add_argument("--method", default="rk4", choices=("rk4", "euler", "cvodes"), help="integration method")
+    p.add_argument("--integrator", dest="method", default="rk4", choices=("rk4", "euler", "cvodes"),
+                   help="how the model's equations are integrated in time")
+    add_deprecated_alias(p, "--method", "--integrator", dest="method", choices=("rk4", "euler", "cvodes"))
     p.add_argument("--params", default=None,
                    help='JSON file {"params": {name: value}} overriding parameters (a fit file rebuilds the '
                         'model variant it was fitted on)')
@@ -118,7 +121,8 @@ def run(args) -> int:
         traj = res.trajectory
         out.update({"maneuver": f"replay ({res.kind})", "inputs": str(args.inputs), "replay": res.errors,
                     "start": res.start, "not_compared": res.not_compared,
-                    "metrics": res.metrics, "measured_metrics": res.measured_metrics})
+                    "metrics": res.metrics, "measured_metrics": res.measured_metrics,
+                    "metric_notes": res.metric_notes})
         notes = res.start_notes()
         if res.bands:
             out.update({"bands": res.band_summary(), "metric_intervals": res.metric_intervals,
@@ -180,6 +184,7 @@ def _maneuver_intervals(simulate_with, model, p, unc, samples: int, seed: int, l
 
     s = sampled_metrics(run, unc.sample(model, p, samples, seed), level)
     return {"metric_intervals": s["intervals"], "sampling": {"samples": s["samples"], "failed": s["failed"],
+                                                             "failures": s["failures"],
                                                              "level": level, "source": unc.source}}
 
 
@@ -208,6 +213,11 @@ def _print_text(out, notes=()) -> None:
             meas = (f" {measured[k]:12.2f}" if k in measured else f" {'-':>12s}") if measured else ""
             iv = f"  [{intervals[k][0]:.2f}, {intervals[k][1]:.2f}]" if k in intervals else ""
             print(f"  {k:28s} {sim}{meas}{iv}")
+        for k, why in out.get("metric_notes", {}).items():         # a "-" above says why here
+            print(f"  {k:28s} not compared: {why}")
+    sampling = out.get("sampling", {})
+    for why, n in sampling.get("failures", {}).items():          # intervals from the draws that ran
+        print(f"  {n} of {sampling['samples']} parameter draws failed (left out of the intervals): {why}")
     for k, v in out.get("bands", {}).items():
         print(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
     if "spiral" in metrics:
@@ -219,33 +229,5 @@ def _print_text(out, notes=()) -> None:
 
 
 def _plot(traj, measured, path, title="") -> None:
-    from pathlib import Path
-
-    import numpy as np
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(11, 4.5))
-    ax1, ax2 = fig.subplots(1, 2)
-    if "x" in traj and "y" in traj:             # a heading-only model (Nomoto) has no track
-        ax1.plot(traj["y"], traj["x"], label="simulated")
-    if measured is not None and "x" in measured and "y" in measured:
-        ax1.plot(measured["y"], measured["x"], "--", label="measured")
-    ax1.set_xlabel("East y [m]")
-    ax1.set_ylabel("North x [m]")
-    ax1.set_aspect("equal", adjustable="datalim")
-    ax1.legend()
-    ax2.plot(traj.t, np.degrees(traj["psi"]), label="heading (sim)")
-    if measured is not None and "psi" in measured:
-        ax2.plot(measured.t, np.degrees(np.unwrap(measured["psi"])), "--", label="heading (meas)")
-    for name in traj.input_names:
-        if name.startswith("delta"):
-            ax2.plot(traj.t, np.degrees(traj[name]), ":", label=f"{name} [deg]")
-    for name in traj.state_names:
-        if name.startswith("delta"):
-            ax2.plot(traj.t, np.degrees(traj[name]), ":", label=f"{name} [deg]")
-    ax2.set_xlabel("time [s]")
-    ax2.set_ylabel("heading, rudder [deg]")
-    ax2.legend(fontsize=8)
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, format=Path(path).suffix[1:].lower() or "png")
+    """Track and heading with the rudder (:meth:`casship.Trajectory.plot`), the record beside them."""
+    traj.plot(path=path, measured=measured, title=title)

@@ -148,25 +148,34 @@ class DesignResult:
         write_json(path, self.to_dict(), what="design result")
         return Path(path)
 
-    def plot(self, path, approach: Approach | None = None) -> Path:
+    def plot(self, ax=None, path=None, approach: Approach | None = None):
         """Bar chart of the target's standard deviation after each trial; with ``approach``, also the
-        best trial's rudder and track (PNG).
+        best trial's rudder, track and speed.
 
         Parameters
         ----------
-        path : str or Path
+        ax : matplotlib Axes (four with ``approach``), optional
+            Draw into these axes instead of a new figure.
+        path : str or Path, optional
+            Also write the figure there (PNG unless the suffix says otherwise).
         approach : Approach, optional
 
         Returns
         -------
-        Path
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting`.
         """
-        from matplotlib.figure import Figure
+        from ..plotting import finish, panels, split_args
 
+        if isinstance(path, Approach) and approach is None:      # the earlier plot(path, approach)
+            path, approach = None, path
+        ax, path = split_args(ax, path)
+        given = ax
         deg = self.target.unit == "rad"
         scale, unit = (np.degrees(1.0), "deg") if deg else (1.0, self.target.unit)
-        fig = Figure(figsize=(10, 4.5 if approach is None else 8))
-        axes = fig.subplots(1 if approach is None else 2, 1 if approach is None else 2, squeeze=False).ravel()
+        n = 1 if approach is None else 2
+        fig, axes = panels(ax, n, n, figsize=(10, 4.5 if approach is None else 8), what="the design plot")
+        axes = axes.ravel()
         names = [r["trial"] for r in self.rows]
         ax = axes[0]
         from matplotlib.ticker import NullFormatter
@@ -191,10 +200,7 @@ class DesignResult:
             axes[3].plot(rec.t, np.hypot(rec["u"], rec["v"]))
             axes[3].set_xlabel("t [s]")
             axes[3].set_ylabel("speed [m/s]")
-        fig.tight_layout()
-        path = Path(path)
-        fig.savefig(path, dpi=110)
-        return path
+        return finish(fig, given, path)
 
 
 def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], target="tactical_diameter", *,

@@ -167,6 +167,23 @@ class AugmentedResult:
             raise ValueError(f"unknown augmented parameter {name!r}; estimated: {list(self.params)}")
         return self.result[name]
 
+    def plot(self, ax=None, path=None):
+        """The estimated parameters over the record with +-2 standard deviations (one panel each).
+
+        Parameters
+        ----------
+        ax : matplotlib Axes or sequence of Axes, optional
+            One per parameter, instead of a new figure.
+        path : str or Path, optional
+            Also write the figure there.
+
+        Returns
+        -------
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting` and :meth:`FilterResult.plot`.
+        """
+        return self.result.plot(ax, path, states=list(self.params))
+
     @property
     def final(self) -> dict[str, float]:
         """Parameter estimates at the end of the record."""

@@ -36,7 +36,7 @@ TRACK_POSITIONS = (("x", "y"), ("x_n", "y_n"), ("lat", "lon"))
 _TRACK_ANGLE_VAR = np.radians(20.0) ** 2         # a course from a few seconds of track: +-20 deg
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)     # Gaussian's repr: names, values, angles in degrees
 class DataPrior(Gaussian):
     """A :class:`~casship.Gaussian` taken from a record, with where each state's value came from.
 
@@ -46,6 +46,8 @@ class DataPrior(Gaussian):
         As for :class:`~casship.Gaussian`.
     names : tuple of str
         The state names.
+    units : tuple of str
+        Their units (angles are shown in degrees).
     sources : dict
         State name -> where its value came from (``"given"``, ``"first sample of column 'psi'"``,
         ``"speed over ground of the track (first 5 s)"``, ``"0 (default)"``, ...).
@@ -193,7 +195,8 @@ def prior_from_data(model, data: Dataset, *, measured: Sequence[str] = (), R=Non
                 sources[name] = f"rate of column 'psi' (first {window:g} s)"
                 continue
         sources[name] = "0 (default)"
-    return DataPrior(mean, cov, names=names, sources=sources)
+    units = tuple(getattr(v, "unit", "") for v in getattr(model, "state_vars", ()))
+    return DataPrior(mean, cov, names=names, units=units if len(units) == len(names) else (), sources=sources)
 
 
 def second_difference_std(y, angle: bool = False) -> float | None:

@@ -291,7 +291,7 @@ class FilterResult:
             lines.append(f"{n:>12s} {self.x[-1, i]:14.6g} {sd}  {self.state_units[i]}")
         return "\n".join(lines)
 
-    def plot(self, path, states=None, *, measured=None, t_measured=None) -> Path:
+    def plot(self, ax=None, path=None, states=None, *, measured=None, t_measured=None):
         """Estimates with +-2 standard deviations over time, one panel per state.
 
         Angles and angular rates (states in rad, rad/s, ...) are drawn in degrees; axes carry the
@@ -301,18 +301,27 @@ class FilterResult:
 
         Parameters
         ----------
-        path : path
-            The figure file to write (its suffix chooses the format: ``.png``, ``.pdf``, ``.svg``...;
-            PNG without one).
+        ax : matplotlib Axes or sequence of Axes, optional
+            Draw into these axes (one per state drawn) instead of a new figure.
+        path : path, optional
+            Also write the figure there (its suffix chooses the format: ``.png``, ``.pdf``,
+            ``.svg``...; PNG without one).
         states : sequence of str, optional
             The states to draw (all by default).
         measured : mapping state -> array, optional
             Measurements of states to draw over the estimates (same units as the states).
         t_measured : array, optional
             Their time stamps (default: the result's).
-        """
-        from matplotlib.figure import Figure
 
+        Returns
+        -------
+        matplotlib.figure.Figure, the axes given, or Path
+            The new figure; ``ax`` when given; the path when ``path`` is given (see
+            :mod:`casship.plotting`).
+        """
+        from ..plotting import finish, panels, split_args
+
+        ax, path = split_args(ax, path)
         names = list(self.state_names if states is None else states)
         unknown = [n for n in names if n not in self.state_names]
         if unknown:
@@ -324,8 +333,9 @@ class FilterResult:
         t_meas = self.t if t_measured is None else np.asarray(t_measured, dtype=float)
         idx = [self.state_names.index(n) for n in names]
         std = self.std
-        fig = Figure(figsize=(7.5, 1.8 * len(names) + 0.8))
-        axes = fig.subplots(len(names), 1, sharex=True, squeeze=False)
+        given = ax
+        fig, axes = panels(ax, len(names), 1, figsize=(7.5, 1.8 * len(names) + 0.8),
+                           what=f"the plot of {len(names)} state(s)", sharex=True)
         for ax, name, i in zip(axes[:, 0], names, idx):
             angle = self.angle_states is not None and self.angle_states[i]
             unit = self.state_units[i] or "-"
@@ -357,10 +367,7 @@ class FilterResult:
                 labels.setdefault(label, handle)
         axes[0, 0].legend(list(labels.values()), list(labels), loc="best", fontsize=8)
         axes[-1, 0].set_xlabel("t [s]")
-        fig.tight_layout()
-        path = Path(path)
-        fig.savefig(path, dpi=120, format=path.suffix[1:].lower() or "png")
-        return path
+        return finish(fig, given, path, dpi=120)
 
     def to_dataset(self) -> Dataset:
         """Estimates and their standard deviations (``<state>_std``) as a :class:`Dataset`."""

@@ -15,6 +15,9 @@ filter, priors, identifiability and the fit result.
 * :func:`read_params` and :class:`ParameterUncertainty` -- a fit file's parameters and their covariance;
   :func:`replay_file` -- a record replayed with a fit file (the path of ``casship simulate --params``).
 * :mod:`casship.identify.asymmetry` -- port/starboard terms only from mirrored evidence.
+* :class:`CaptiveProblem` -- captive (PMM) model tests: forces of a model at a prescribed motion and their
+  harmonics (:mod:`casship.identify.captive_forces`), fitted alone or as a :class:`CostTerm` of a
+  :class:`JointProblem` with the free-running records.
 """
 from .crossval import CrossValidation, cross_validate
 from .identifiability import Identifiability
@@ -26,8 +29,11 @@ from .problem import IdentificationProblem
 from .records import initial_states, noise_std, share_labels
 from .inverse_dynamics import inverse_dynamics, linear_in, rates_model, smooth_trial
 from .result import FitResult, IdentificationError, IdentificationWarning
+from .cost_term import CostTerm, JointProblem
+from .captive import CaptiveProblem, linear_derivatives
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
            "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std",
            "share_labels", "initial_states", "read_params", "replay_file", "ParameterUncertainty", "cross_validate", "CrossValidation"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]
+__all__ += ["CaptiveProblem", "CostTerm", "JointProblem", "linear_derivatives"]

@@ -82,7 +82,7 @@ def _step(g, H, free, lam):
 
 
 class _Printer:
-    """Iteration, cost and elapsed time on a :func:`casship.progress.bar` (quiet when not a terminal)."""
+    """Iteration, cost and elapsed time on a :func:`casship.progress.bar` (a line every 10 s when not a terminal)."""
 
     def __init__(self, label: str, total: int, show: bool | None):
         from ..progress import bar

@@ -246,55 +246,68 @@ class CrossValidation:
         write_json(path, doc, what="cross-validation file")
         return path
 
-    def plot(self, directory, records: Sequence[str] | None = None) -> list[Path]:
-        """Overlay figures (PNG), one per held-out record: track, heading and speed, measured against
-        the replays with the reference and the fitted parameters.
+    def plot(self, directory=None, records: Sequence[str] | None = None, *, ax=None) -> list:
+        """Overlay figures, one per held-out record: track, heading and speed, measured against the
+        replays with the reference and the fitted parameters.
 
         Parameters
         ----------
-        directory : str or Path
-            Folder for the figures (created if needed).
+        directory : str or Path, optional
+            Write the figures there as PNG (the folder is created if needed) and return their paths;
+            without it the figures are returned.
         records : sequence of str, optional
             Records to plot (default: all held out).
+        ax : three matplotlib Axes, optional
+            Draw the one record named in ``records`` into these axes (returned in a list).
 
         Returns
         -------
-        list of Path
+        list of matplotlib.figure.Figure, of Path, or of the axes given
+            See :mod:`casship.plotting`.
         """
-        from matplotlib.figure import Figure
+        from ..plotting import finish, panels
 
+        names = list(records or list(self.replays))
+        if ax is not None and len(names) != 1:
+            raise ValueError(f"ax: draws one record's figure; name one in records (got {len(names)})")
+        if directory is not None:
+            directory = Path(directory)
+            directory.mkdir(parents=True, exist_ok=True)
+        out = []
+        for i, name in enumerate(names):
+            if name not in self.replays:
+                raise ValueError(f"records: {name!r} was not held out; held out: {list(self.replays)}")
+            fig, axes = panels(ax, 1, 3, figsize=(14, 4.2), what="the cross-validation plot of one record")
+            self._draw(name, axes.ravel(), fig if ax is None else None)
+            path = None
+            if directory is not None:
+                safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+                path = directory / f"cv_{i:02d}_{safe}.png"
+            out.append(finish(fig, ax, path, dpi=100))
+        return out
+
+    def _draw(self, name: str, axes, fig) -> None:
         from ..angles import unwrap
 
-        directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        paths = []
-        for i, name in enumerate(records or list(self.replays)):
-            rep = self.replays[name]
-            data = rep["data"]
-            fig = Figure(figsize=(14, 4.2))
-            axes = fig.subplots(1, 3)
-            styles = (("measured", data, dict(color="0.3", lw=1.6)),
-                      ("reference", rep["reference"].trajectory, dict(color="C1", lw=1.0, ls="--")),
-                      ("fit", rep["fit"].trajectory, dict(color="C0", lw=1.0)))
-            for label, d, st in styles:
-                if "x" in d and "y" in d:
-                    axes[0].plot(d["y"], d["x"], label=label, **st)
-                if "psi" in d:
-                    axes[1].plot(d.t, np.degrees(unwrap(np.nan_to_num(d["psi"]))), label=label, **st)
-                if "u" in d:
-                    axes[2].plot(d.t, d["u"], label=label, **st)
-            axes[0].set(xlabel="y (East) [m]", ylabel="x (North) [m]", title="track")
-            axes[0].set_aspect("equal", adjustable="datalim")
-            axes[1].set(xlabel="t [s]", ylabel="psi [deg]", title="heading")
-            axes[2].set(xlabel="t [s]", ylabel="u [m/s]", title="surge speed")
-            axes[1].legend(fontsize=8)
+        rep = self.replays[name]
+        data = rep["data"]
+        styles = (("measured", data, dict(color="0.3", lw=1.6)),
+                  ("reference", rep["reference"].trajectory, dict(color="C1", lw=1.0, ls="--")),
+                  ("fit", rep["fit"].trajectory, dict(color="C0", lw=1.0)))
+        for label, d, st in styles:
+            if "x" in d and "y" in d:
+                axes[0].plot(d["y"], d["x"], label=label, **st)
+            if "psi" in d:
+                axes[1].plot(d.t, np.degrees(unwrap(np.nan_to_num(d["psi"]))), label=label, **st)
+            if "u" in d:
+                axes[2].plot(d.t, d["u"], label=label, **st)
+        axes[0].set(xlabel="y (East) [m]", ylabel="x (North) [m]", title="track")
+        axes[0].set_aspect("equal", adjustable="datalim")
+        axes[1].set(xlabel="t [s]", ylabel="psi [deg]", title="heading")
+        axes[2].set(xlabel="t [s]", ylabel="u [m/s]", title="surge speed")
+        axes[1].legend(fontsize=8)
+        if fig is not None:
             row = next(r for r in self.rows if r["record"] == name)
             fig.suptitle(f"{name} (held out, fold {row['fold']}): psi RMSE "
                          f"{row['reference'].get('psi_rmse_deg', np.nan):.2f} deg reference, "
                          f"{row['fit'].get('psi_rmse_deg', np.nan):.2f} deg fit", fontsize=10)
-            fig.tight_layout()
-            safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
-            path = directory / f"cv_{i:02d}_{safe}.png"
-            fig.savefig(path, dpi=100)
-            paths.append(path)
-        return paths

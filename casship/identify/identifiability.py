@@ -240,23 +240,29 @@ class Identifiability:
         return (f"Identifiability({len(self.names)} quantities, {len(self.correlated)} correlated pair(s), "
                 f"not seen: {self.not_seen})")
 
-    def plot(self, path) -> Path:
-        """Relative standard errors of the eigen-directions and of each quantity, and the loadings (PNG).
+    def plot(self, ax=None, path=None):
+        """Relative standard errors of the eigen-directions and of each quantity, and the loadings.
 
         Parameters
         ----------
-        path : str or Path
-            Output file.
+        ax : sequence of three matplotlib Axes, optional
+            Draw into these axes instead of a new figure.
+        path : str or Path, optional
+            Also write the figure there (PNG unless the suffix says otherwise).
 
         Returns
         -------
-        Path
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting`.
         """
-        from matplotlib.figure import Figure
+        from ..plotting import finish, panels, split_args
 
+        ax, path = split_args(ax, path)
+        given = ax
         k = len(self.names)
-        fig = Figure(figsize=(13, 0.35 * k + 2.5))
-        axes = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1, 1.4]})
+        fig, axes = panels(ax, 1, 3, figsize=(13, 0.35 * k + 2.5), what="the identifiability plot",
+                           gridspec_kw={"width_ratios": [1, 1, 1.4]})
+        axes = axes.ravel()
         lam = np.where(self.eigenvalues > 0, self.eigenvalues, np.nan)
         axes[0].barh(np.arange(k), 1 / np.sqrt(lam), color="C0")
         axes[0].set_xscale("log")
@@ -279,7 +285,4 @@ class Identifiability:
         axes[2].set_yticks(np.arange(k), self.names)
         axes[2].set_xlabel("direction (best determined first)")
         fig.colorbar(im, ax=axes[2], label="loading [-]")
-        fig.tight_layout()
-        path = Path(path)
-        fig.savefig(path, dpi=110)
-        return path
+        return finish(fig, given, path)

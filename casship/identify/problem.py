@@ -216,6 +216,45 @@ class IdentificationProblem:
     def _first_nonfinite(self, r, theta) -> str:
         return ""
 
+    # -- what a joint objective adds to (casship.identify.cost_term.JointProblem) ---------------------
+    def prior_cost(self, theta) -> tuple[float, np.ndarray]:
+        """The prior's cost and gradient.
+
+        Parameters
+        ----------
+        theta : array_like
+            Free values (natural units, ordered like :attr:`free`).
+
+        Returns
+        -------
+        (float, array)
+        """
+        return self._prior_terms(np.asarray(theta, dtype=float))
+
+    @property
+    def prior_precision(self) -> np.ndarray:
+        """The prior's precision of each free quantity (0: no prior), ordered like :attr:`free`."""
+        return self._prec.copy()
+
+    @property
+    def n_measured(self) -> int:
+        """Number of scalar measurements in the cost."""
+        return self._n_obs()
+
+    def data_loglik(self, f_data: float) -> float:
+        """Log-likelihood of the data for a data cost taken as a negative log-likelihood.
+
+        Parameters
+        ----------
+        f_data : float
+            The data cost (without the prior).
+
+        Returns
+        -------
+        float
+        """
+        return self._loglik(f_data, 1.0, self._n_obs())
+
     # -- solve -----------------------------------------------------------------------------------
     def solve(self, guess: Mapping[str, float] | None = None, *, max_iter: int = 100, tol: float = 1e-8,
               show: bool | None = None) -> FitResult:

@@ -367,27 +367,33 @@ class FitResult:
         return cls.from_dict(d)
 
     # -- plot --------------------------------------------------------------------------------------
-    def plot(self, path) -> Path:
-        """Measured outputs against the fitted model's free-run simulation, per record (PNG).
+    def plot(self, ax=None, path=None):
+        """Measured outputs against the fitted model's free-run simulation, per record.
 
         Angles are shown in degrees. Rows are records, columns the measured outputs.
 
         Parameters
         ----------
-        path : str or Path
+        ax : matplotlib Axes or array of Axes, optional
+            Draw into these axes (records x measured outputs of them) instead of a new figure.
+        path : str or Path, optional
+            Also write the figure there (PNG unless the suffix says otherwise).
 
         Returns
         -------
-        Path
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting`.
         """
         if not self.predictions:
             raise ValueError("this FitResult holds no predictions (read from JSON?); nothing to plot")
-        from matplotlib.figure import Figure
+        from ..plotting import finish, panels, split_args
 
+        ax, path = split_args(ax, path)
+        given = ax
         names = list(self.predictions[0]["measured"])
         nrec = len(self.predictions)
-        fig = Figure(figsize=(max(6.0, 3.4 * len(names) + 0.6), 1.9 * nrec + 0.8))
-        axes = fig.subplots(nrec, len(names), squeeze=False, sharex="row")
+        fig, axes = panels(ax, nrec, len(names), figsize=(max(6.0, 3.4 * len(names) + 0.6), 1.9 * nrec + 0.8),
+                           what="the fit plot (records x measured outputs)", sharex="row")
         for r, rec in enumerate(self.predictions):
             units, angle = rec.get("units", {}), rec.get("angle", {})
             for c, n in enumerate(names):
@@ -410,8 +416,6 @@ class FitResult:
         for ax in axes[-1]:
             ax.set_xlabel("t [s]")
         axes[0, 0].legend(fontsize=7, loc="lower right")
-        fig.suptitle(f"{self.method} fit of {self.model}: measured vs free-run simulation", fontsize=10)
-        fig.tight_layout()
-        path = Path(path)
-        fig.savefig(path, dpi=100)
-        return path
+        if given is None:
+            fig.suptitle(f"{self.method} fit of {self.model}: measured vs free-run simulation", fontsize=10)
+        return finish(fig, given, path, dpi=100)

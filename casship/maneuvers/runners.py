@@ -125,6 +125,27 @@ class ManeuverResult:
     metrics: dict
     settings: dict = field(default_factory=dict)
 
+    def plot(self, ax=None, path=None):
+        """Track and heading with the rudder in degrees (:meth:`Trajectory.plot`), titled with the
+        manoeuvre.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes or sequence of Axes, optional
+            Draw into these axes instead of a new figure.
+        path : str or Path, optional
+            Also write the figure there.
+
+        Returns
+        -------
+        matplotlib.figure.Figure, the axes given, or Path
+            See :mod:`casship.plotting`.
+        """
+        s = self.settings
+        title = f"{self.trajectory.model_name}: {s.get('kind', 'manoeuvre')}" + (
+            f" {s['rudder_deg']:g} deg" if isinstance(s.get("rudder_deg"), (int, float)) else "")
+        return self.trajectory.plot(ax, path, title=title)
+
 
 def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.0, heading_deg: float | None = None,
                  speed: float | None = None, n: float | None = None, duration: float | None = None,

@@ -37,7 +37,7 @@ from ..vessel import Vessel
 __all__ = ["mmg_standard", "MMG_PARAMS", "MMG_ASYMMETRY_PARAMS", "MMG_RUDDER_LIFT_PARAMS", "MMG_BOUNDS", "SMOOTH_WIDTH",
            "RUDDER_INFLOWS", "RUDDER_LIFTS",
            "rigid_body_3dof",
-           "declare_ship_states", "declare_ship_limits", "add_rudder_actuator", "smooth_saturation", "mmg_propeller",
+           "mmg_force_parts", "declare_ship_states", "declare_ship_limits", "add_rudder_actuator", "smooth_saturation", "mmg_propeller",
            "smooth_abs", "smooth_step"]
 
 # name -> (unit, description). The numeric values come from a preset (see casship.models.kvlcc2).
@@ -492,6 +492,34 @@ def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None =
     the smooth sign switches (``None``: the published ``if_else`` switches); ``rudder_inflow`` one of
     :data:`RUDDER_INFLOWS` (see :func:`mmg_standard`).
     """
+    parts = mmg_force_parts(P, u, v, r, delta, n, smooth, rudder_inflow)
+    return parts["X"], parts["Y"], parts["N"]
+
+
+def mmg_force_parts(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None = None,
+                    rudder_inflow: str = "published") -> dict:
+    """The MMG force of :func:`mmg_forces` with the parts a captive test measures on their own.
+
+    Parameters
+    ----------
+    P : mapping
+        Parameter name -> symbol or value (as for :func:`mmg_forces`).
+    u, v, r : SX, MX or float
+        Surge and sway velocity at midship [m/s], yaw rate [rad/s].
+    delta, n : SX, MX or float
+        Rudder angle [rad] and propeller rate [1/s].
+    smooth : float, optional
+        Width of the smooth sign switches [rad] (``None``: the published switches).
+    rudder_inflow : str
+        One of :data:`RUDDER_INFLOWS`.
+
+    Returns
+    -------
+    dict
+        ``X, Y, N`` (the total at midship [N, N, N m]), ``T`` (propeller thrust [N]) and the rudder
+        force on the rudder stock ``RX = -F_N sin(delta)``, ``RY = -F_N cos(delta)`` [N] (without the
+        hull's share ``a_H``).
+    """
     rho, L, d = P["rho"], P["L_pp"], P["d"]
     U = ca.sqrt(u**2 + v**2 + 1e-12)
     rL = r * L
@@ -536,4 +564,5 @@ def mmg_forces(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | None =
     N_R = -(x_R + P["a_H"] * x_H) * F_N * ca.cos(delta)
     Y_P = P.get("Y_0_dash", 0.0) * T               # propeller-induced side force and yaw moment
     N_P = P.get("N_0_dash", 0.0) * L * T
-    return X_H + X_P + X_R, Y_H + Y_P + Y_R, N_H + N_P + N_R
+    return {"X": X_H + X_P + X_R, "Y": Y_H + Y_P + Y_R, "N": N_H + N_P + N_R, "T": T,
+            "RX": -F_N * ca.sin(delta), "RY": -F_N * ca.cos(delta)}

@@ -1,0 +1,323 @@
+"""KVLCC2 MMG coefficients from the HMRI captive (PMM) tests alone, beside Yasukawa & Yoshimura (2015),
+and that model replaying the shared free-running runs.
+
+Data: ``kvlcc2_hmri_captive`` (static rudder, static drift, drift with counter-rudder, pure sway,
+pure yaw, yaw with drift; read by :func:`casship.io.read_captive`) and, for the replays, the three
+MARIN and thirteen HSVA free-running runs (loaded and replayed as :mod:`.kvlcc2_marin` does).
+
+Method, fixed before any replay was looked at:
+
+* **Model**: :func:`casship.models.kvlcc2_l7` with HMRI's particulars (:data:`HMRI`) and the
+  extended variant (neutral angle) with smooth sign switches. What the captive rig measures is the
+  force of the model on the rig, rigid-body inertia included (:mod:`casship.identify.captive_forces`).
+* **Evidence**: every measured force channel the MMG models: hull ``X, Y, N``, rudder normal force
+  on the stock ``RY`` and thrust ``T``; every static point and every harmonic component of the
+  dynamic tests except their means (referenced to the running condition in the tables).
+* **Free set** (:data:`FREE`): every hull coefficient the tests are designed to measure (the
+  polynomial derivatives, ``m'_x, m'_y, J'_z``), the hull-rudder and hull-propeller interaction
+  (``t_R, a_H, x'_H, gamma_R+-, l'_R, C_2+-``) and HMRI's own ``t_P, w_P0, f_alpha, delta_0``.
+  Fixed: ``R'_0`` at HMRI's resistance test, ``K_T`` from HMRI's open-water curve, ``epsilon`` and
+  ``kappa`` published (``epsilon`` cannot be separated from ``f_alpha`` by these tests), ``C_1``
+  and ``x'_P`` published.
+* **Weights**: Gaussian noise, one standard deviation per group (static / dynamic, per channel),
+  estimated with the coefficients (concentrated likelihood); no prior.
+* **Replays**: the full-scale :func:`casship.models.kvlcc2` with the captive estimates of the hull
+  and interaction quantities; the facility quantities of the free-running models (propeller,
+  rudder, neutral angle) stay published. Nothing is tuned on the replays.
+
+Outputs: ``report.md``, ``coefficients.csv``, ``fig_forces.png`` (measured vs model per test kind),
+``fig_replays.png``, ``captive_fit.json``, ``summary.json``.
+"""
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+
+from casship.identify.captive import CaptiveProblem, linear_derivatives
+from casship.io import read_captive
+from casship.models import kvlcc2, kvlcc2_l7
+from casship.models.kvlcc2 import KVLCC2_COMMON, KVLCC2_L7
+from casship.validation import replay
+
+from . import Study
+from .kit import Departure, Report, data_folder, figure, fmt, md_table, write_json
+
+FACILITY = "HMRI"
+RHO = 998.5                       # kg/m^3, fresh water at 18.6 deg C (README: water temperature)
+L_HMRI = 6.8279
+MASS = 3123.0                     # kg
+IZ_MIDSHIP = 9516.0               # kg m^2, the pure-yaw sheet's yaw inertia (about midship: m (0.253 L)^2 + m x_G^2)
+X_G = 0.035 * L_HMRI              # LCG 3.50 % L_pp forward of midship
+#: HMRI model T530 particulars (README of kvlcc2_hmri_captive); the rest of the MMG constants published.
+HMRI = {"L_pp": L_HMRI, "B": 1.249, "d": 0.448, "nabla": MASS / RHO, "x_G": X_G, "rho": RHO,
+        "k_zz": float(np.sqrt((IZ_MIDSHIP - MASS * X_G**2) / MASS) / L_HMRI), "D_p": 0.2124,
+        "A_R": 0.0523, "H_R": 0.345 * L_HMRI / 7.0, "w_P0": 0.428, "t_P": 0.233}
+CHANNELS = ("X", "Y", "N", "RY", "T")
+HULL = ("X_vv_dash", "X_vr_dash", "X_rr_dash", "X_vvvv_dash", "Y_v_dash", "Y_r_dash", "Y_vvv_dash", "Y_vvr_dash",
+        "Y_vrr_dash", "Y_rrr_dash", "N_v_dash", "N_r_dash", "N_vvv_dash", "N_vvr_dash", "N_vrr_dash", "N_rrr_dash",
+        "m_x_dash", "m_y_dash", "J_z_dash")
+INTERACTION = ("t_R", "a_H", "x_H_dash", "gamma_R_minus", "gamma_R_plus", "l_R_dash", "C_2_plus", "C_2_minus")
+OWN = ("t_P", "w_P0", "f_alpha", "delta_0")
+FREE = HULL + INTERACTION + OWN
+KINDS = ("static_rudder", "static_drift", "drift_rudder", "pure_sway", "pure_yaw", "yaw_drift")
+WATCH = ("N_vvr_dash", "m_y_dash", "Y_vvv_dash", "N_rrr_dash", "N_vrr_dash", "x_H_dash", "t_R", "a_H")
+
+
+def hmri_model(tests, **overrides):
+    """The KVLCC2 L7 MMG model with HMRI's particulars, its open-water K_T and its resistance ``R'_0``."""
+    ow = tests.open_water
+    J = ow["J"]
+    k = np.linalg.lstsq(np.vstack([np.ones_like(J), J, J**2]).T, ow["K_T"], rcond=None)[0]
+    U0 = 1.1702
+    R = float(np.interp(U0, tests.resistance["speed"], tests.resistance["resistance"]))
+    values = dict(HMRI, k_0=float(k[0]), k_1=float(k[1]), k_2=float(k[2]),
+                  R_0_dash=R / (0.5 * RHO * U0**2 * HMRI["L_pp"] * HMRI["d"]))
+    values.update(overrides)
+    return kvlcc2_l7(values, asymmetry=True, smooth=True)
+
+
+def captive_problem(tests, model=None):
+    """The study's captive problem (the free set, channels and noise rule of the module docstring)."""
+    return CaptiveProblem(model or hmri_model(tests), tests, list(FREE), facility=FACILITY, channels=CHANNELS)
+
+
+def shared_estimates(fit) -> dict:
+    """The captive estimates that carry to another ship model: hull and interaction (not ``@HMRI``)."""
+    return {n: v for n, v in fit.estimates.items() if "@" not in n}
+
+
+# -- figures -------------------------------------------------------------------------------------
+def _force_figure(path: Path, pb, fit, published_pred) -> None:
+    obs = pb.predictor.observations
+    pred = pb.prediction(np.array([fit.estimates[n] for n in pb.free]))
+    meas = pb.predictor.measured
+    chans = ("X", "Y", "N", "RY", "T")
+    with figure(path, len(KINDS), len(chans), figsize=(15, 17)) as (fig, axes):
+        for i, kind in enumerate(KINDS):
+            for j, c in enumerate(chans):
+                ax = axes[i, j]
+                idx = [q for q, o in enumerate(obs) if o.kind == kind and o.channel == c]
+                if not idx:
+                    ax.set_axis_off()
+                    continue
+                m = meas[idx]
+                ax.plot(m, published_pred[idx], "x", color="tab:gray", ms=4, label="published")
+                ax.plot(m, pred[idx], "o", color="tab:blue", ms=3, mfc="none", label="captive fit")
+                lo, hi = float(np.min(m)), float(np.max(m))
+                ax.plot([lo, hi], [lo, hi], "k-", lw=0.6)
+                ax.set_title(f"{kind}: {c}'", fontsize=9)
+                ax.tick_params(labelsize=7)
+                if i == len(KINDS) - 1:
+                    ax.set_xlabel("measured", fontsize=8)
+                if j == 0:
+                    ax.set_ylabel("model", fontsize=8)
+        axes[0, 0].legend(fontsize=7)
+
+
+def _replay_figure(path: Path, rows) -> None:
+    with figure(path, 1, 1, figsize=(10, 4)) as (fig, ax):
+        x = np.arange(len(rows))
+        ax.bar(x - 0.2, [r["published_deg"] for r in rows], 0.4, label="published (Yasukawa & Yoshimura 2015)",
+               color="tab:gray")
+        ax.bar(x + 0.2, [r["captive_deg"] for r in rows], 0.4, label="captive-only (HMRI)", color="tab:blue")
+        ax.set_xticks(x)
+        ax.set_xticklabels([r["run"] for r in rows], rotation=60, ha="right", fontsize=7)
+        ax.set_ylabel("heading RMSE [deg]")
+        ax.legend(fontsize=8)
+
+
+# -- replays -------------------------------------------------------------------------------------
+def _group_mean(rows, key) -> dict:
+    groups = {}
+    for r in rows:
+        groups.setdefault(r[key], []).append(r)
+    per = {g: (float(np.mean([r["published_deg"] for r in rs])), float(np.mean([r["captive_deg"] for r in rs])))
+           for g, rs in groups.items()}
+    return {"published_mean_deg": float(np.mean([p for p, _ in per.values()])),
+            "fit_mean_deg": float(np.mean([f for _, f in per.values()])),
+            "better": int(sum(f < p for p, f in per.values())), "of": len(per),
+            "groups": {g: {"published_mean_deg": p, "fit_mean_deg": f} for g, (p, f) in per.items()}}
+
+
+def replays(runs, captive_model) -> tuple[list, dict]:
+    """Heading RMSE of every run replayed with the published constants and the captive-only model."""
+    from .kvlcc2_marin.data import first_rudder_side, regime
+    from .kvlcc2_marin.validate import published_replay
+
+    rows, circle = [], {}
+    for run in runs:
+        pub = published_replay(run)
+        cap = replay(captive_model, run.data)
+        row = {"run": run.name, "facility": run.facility, "kind": run.kind, "regime": regime(run),
+               "direction": first_rudder_side(run), "published_deg": float(pub.errors["psi_rmse_deg"]),
+               "captive_deg": float(cap.errors["psi_rmse_deg"])}
+        rows.append(row)
+        if run.kind == "turning":
+            c = {}
+            for key in ("advance_m", "tactical_diameter_m"):
+                meas = pub.measured_metrics.get(key, np.nan)
+                c[key] = {"measured": meas, "published": pub.metrics.get(key, np.nan),
+                          "captive": cap.metrics.get(key, np.nan)}
+            circle[run.name] = c
+    return rows, circle
+
+
+def _circle_summary(circle) -> dict:
+    if not circle:
+        return {"advance_pct": None, "tactical_diameter_pct": None}
+    out = {}
+    for key, name in (("advance_m", "advance_pct"), ("tactical_diameter_m", "tactical_diameter_pct")):
+        errs = [100.0 * (c[key]["captive"] / c[key]["measured"] - 1) for c in circle.values()]
+        out[name] = float(np.mean(errs))
+        out[name.replace("_pct", "_published_pct")] = float(
+            np.mean([100.0 * (c[key]["published"] / c[key]["measured"] - 1) for c in circle.values()]))
+    out["runs"] = list(circle)
+    return out
+
+
+# -- the study -----------------------------------------------------------------------------------
+def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=None) -> dict:
+    """Fit the captive tests, compare with the published coefficients, replay the free-running runs."""
+    t_start = time.perf_counter()
+    out = Path(out)
+    folder = data_folder(data_dir, "kvlcc2_hmri_captive", study="kvlcc2-captive", part="the captive fit")
+    rep = Report("KVLCC2 MMG coefficients from HMRI captive tests alone", quick=quick)
+    if folder is None:
+        rep.add("The captive-test folder `kvlcc2_hmri_captive` is absent: nothing was fitted.")
+        rep.departures([Departure("data", "HMRI PMM tests", "absent", "no result")])
+        rep.write(out)
+        return write_json(out / "summary.json", {"skipped": "no captive data"})
+    tests = read_captive(folder)
+    model = hmri_model(tests)
+    pb = captive_problem(tests, model)
+    fit = pb.solve(show=False)
+    fit.to_json(out / "captive_fit.json")
+    published_pred = pb.predictor.predict(model.params())     # the published hull on HMRI's model
+    lin = linear_derivatives(tests, L=L_HMRI, T=HMRI["d"], mass=MASS, rho=RHO, x_G=X_G, I_z=IZ_MIDSHIP)
+
+    # coefficients beside the published ones
+    rows = {}
+    for name in FREE:
+        jn = pb.joint_name(name)
+        pub = {**KVLCC2_COMMON, **KVLCC2_L7, "delta_0": 0.0}.get(name, np.nan)
+        est, se = fit.estimates[jn], fit.std_errors[jn]
+        rows[jn] = {"published": pub, "captive": est, "std_error": se, "std_error_robust": fit.std_errors_robust[jn],
+                    "z": (est - pub) / se if np.isfinite(pub) and se > 0 else np.nan}
+    with open(out / "coefficients.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["name", "published", "captive", "std_error", "std_error_robust", "z"])
+        for n, r in rows.items():
+            w.writerow([n, r["published"], r["captive"], r["std_error"], r["std_error_robust"], r["z"]])
+    _force_figure(out / "fig_forces.png", pb, fit, published_pred)
+    meas = pb.predictor.measured
+    gidx = np.array(pb.groups)
+    pred = pb.prediction(np.array([fit.estimates[n] for n in pb.free]))
+    rms = {g: {"published": float(np.sqrt(np.mean((published_pred - meas)[gidx == g] ** 2))),
+               "captive": float(np.sqrt(np.mean((pred - meas)[gidx == g] ** 2)))} for g in pb.group_names}
+
+    # replays of the free-running runs
+    runs_folder = data_folder(data_dir, "kvlcc2_marin_free", study="kvlcc2-captive", part="the replays")
+    replay_rows, circle = [], {}
+    if runs_folder is not None:
+        from .kvlcc2_marin.data import load_runs
+
+        runs = load_runs(runs_folder.parent)
+        if quick:
+            runs = [r for r in runs if r.facility == "MARIN"]
+        full = kvlcc2(shared_estimates(fit))
+        replay_rows, circle = replays(runs, full)
+        _replay_figure(out / "fig_replays.png", replay_rows)
+    for r in replay_rows:
+        r["better"] = r["captive_deg"] < r["published_deg"]
+    loro = ({"published_mean_deg": float(np.mean([r["published_deg"] for r in replay_rows])),
+             "fit_mean_deg": float(np.mean([r["captive_deg"] for r in replay_rows])),
+             "better": int(sum(r["better"] for r in replay_rows)), "of": len(replay_rows)} if replay_rows else None)
+    summary = {
+        "note": ("captive-only model: no free-running run is used in the fit, so every replay is out of sample; "
+                 "loro is the replay of every run, loro_regime / lodo / lofo the same replays averaged per "
+                 "regime / first-turn direction / facility (means of the group means)"),
+        "loro": loro,
+        "loro_regime": _group_mean(replay_rows, "regime") if replay_rows else None,
+        "lodo": _group_mean(replay_rows, "direction") if replay_rows else None,
+        "lofo": _group_mean(replay_rows, "facility") if replay_rows else None,
+        "circle_left_out": _circle_summary(circle),
+        "predictive_coverage": None,
+        "variants_tried": 2,
+        "variants_note": ("1: epsilon free with f_alpha (not separable: near-singular information, so fixed); "
+                          "2: the study's set. Decided on the captive fit's information alone, before any replay."),
+        "captive": {"n_obs": fit.n_obs, "status": fit.status, "noise_sigma": fit.noise["sigma"],
+                    "coefficients": {n: {k: (None if not np.isfinite(v) else v) for k, v in r.items()}
+                                     for n, r in rows.items()},
+                    "rms_by_group": rms, "linear_derivatives": lin},
+        "replays": replay_rows, "circle": circle,
+        "wall_time_s": None,
+    }
+    _report(rep, out, tests, fit, rows, rms, lin, replay_rows, summary, quick)
+    summary["wall_time_s"] = time.perf_counter() - t_start
+    return write_json(out / "summary.json", summary)
+
+
+def _report(rep, out, tests, fit, rows, rms, lin, replay_rows, summary, quick) -> None:
+    rep.section("Rule (fixed before any replay)")
+    rep.add("Evidence: every static point and every dynamic harmonic component (means left out) of the channels "
+            f"{', '.join(CHANNELS)}. Free: the hull polynomial coefficients and added masses ({len(HULL)}), the "
+            f"interaction quantities ({', '.join(INTERACTION)}) and HMRI's own {', '.join(OWN)} (as @HMRI). Fixed: "
+            "R'_0 at HMRI's resistance test, K_T from its open-water curve, epsilon, kappa, C_1, x'_P published. "
+            "Weights: one noise level per group (static/dynamic x channel), estimated with the coefficients; no "
+            "prior. Replay model: full-scale KVLCC2 with the captive hull and interaction estimates, the "
+            "free-running facilities' propeller, rudder and neutral angle published. Variants tried: "
+            f"{summary['variants_tried']} ({summary['variants_note']})")
+    rep.section("What was fitted")
+    rep.add(f"{fit.n_obs} measured values ({', '.join(CHANNELS)}) of {len(tests.static)} static points and "
+            f"{len(tests.dynamic)} PMM tests (dynamic means left out); {len(fit.free)} free quantities; "
+            f"status {fit.status} after {fit.iterations} iterations. Notes of the reader: "
+            + "; ".join(tests.notes) + ".")
+    rep.add("Non-dimensionalisation (established from the data, see docs/data.md): X', Y' = F / (0.5 rho U^2 L^2), "
+            "N' = N / (0.5 rho U^2 L^3); the dynamic components include the rigid-body inertia. From the first "
+            "harmonics: m'_y = {:.3f} (published 0.223; {:.3f} if the inertia were subtracted), J'_z = {:.4f} "
+            "(published 0.011), Y'_v = {:.3f} (PMM) / {:.3f} (static), N'_v = {:.3f} / {:.3f}, N'_r = {:.4f} "
+            "(published -0.315, -0.137, -0.049).".format(
+                lin["m_y_dash"], lin["m_y_dash_if_inertia_subtracted"], lin["J_z_dash"], lin["Y_v_dash"],
+                lin["Y_v_static_dash"], lin["N_v_dash"], lin["N_v_static_dash"], lin["N_r_dash"]))
+    rep.section("Coefficients: captive tests alone vs Yasukawa & Yoshimura (2015)")
+    rep.add(md_table({n: {"published": fmt(r["published"]), "captive": fmt(r["captive"]),
+                          "std error": fmt(r["std_error"], ".2g"), "robust": fmt(r["std_error_robust"], ".2g"),
+                          "z": fmt(r["z"], ".2g")} for n, r in rows.items()},
+                     first="coefficient"))
+    rep.add("`@HMRI`: HMRI's own model quantities (propeller, rudder, neutral angle); not carried to the "
+            "free-running models; their published column is the L7 model's (HMRI's workbook gives w = 0.428 and "
+            "t = 0.233 at its design point). Standard errors from the information at the estimated noise levels; "
+            "robust: sandwich, each value's squared residual in place of its group's level; z = (captive - "
+            "published) / std error.")
+    rep.section("Residuals per group (RMS, table units)")
+    rep.add(md_table({g: {"published": fmt(v["published"], ".3g"), "captive fit": fmt(v["captive"], ".3g")}
+                      for g, v in rms.items()}, first="group"))
+    rep.image("fig_forces.png", "measured vs model force components per test kind")
+    if replay_rows:
+        rep.section("Replays of the free-running runs (heading RMSE, deg)")
+        rep.add(md_table({r["run"]: {"published": fmt(r["published_deg"], ".3g"),
+                                     "captive-only": fmt(r["captive_deg"], ".3g"),
+                                     "better": "yes" if r["better"] else "no"} for r in replay_rows}, first="run"))
+        lo = summary["loro"]
+        rep.add(f"Mean over {lo['of']} runs: published {lo['published_mean_deg']:.2f} deg, captive-only "
+                f"{lo['fit_mean_deg']:.2f} deg; better on {lo['better']} of {lo['of']}. Circle: "
+                + ", ".join(f"{k} {fmt(v, '.3g')} %" for k, v in summary["circle_left_out"].items() if k != "runs")
+                + ".")
+        rep.image("fig_replays.png", "heading RMSE per run")
+    rep.departures([
+        Departure("facility", "Yasukawa & Yoshimura's model (NMRI L7)", "HMRI model T530 (L 6.83 m), its own "
+                  "propeller, rudder, resistance and open-water curve", "hull coefficients shared; facility "
+                  "quantities @HMRI not carried over"),
+        Departure("rudder inflow", "epsilon, kappa from the paper", "kept published (epsilon not separable from "
+                  "f_alpha in these tests)", "f_alpha@HMRI absorbs it"),
+        Departure("dynamic means", "used in a PMM analysis", "left out: the tables' means are referenced to the "
+                  "running condition", "Y_vrr, N_vrr from the 2nd harmonics only"),
+    ])
+    rep.write(out)
+
+
+STUDY = Study("kvlcc2-captive", "KVLCC2 MMG coefficients from HMRI captive (PMM) tests alone, beside Yasukawa & "
+              "Yoshimura (2015), replaying the shared free-running runs", run, needs_data=True)
