@@ -45,10 +45,14 @@ def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_z
         m = np.diag(m)
     if m.shape != (n, n):
         raise ValueError(f"{name}: expected shape ({n}, {n}), got {m.shape}")
+    label = (lambda i: repr(names[i])) if names is not None and len(names) == n else str   # noqa: E731
     if not np.all(np.isfinite(m)):
-        raise ValueError(f"{name}: contains non-finite entries")
+        i, j = (int(k) for k in np.argwhere(~np.isfinite(m))[0])
+        raise ValueError(f"{name}: contains non-finite entries: ({label(i)}, {label(j)}) is {m[i, j]}")
     if not np.allclose(m, m.T, rtol=1e-10, atol=1e-12 * np.abs(m).max(initial=0.0)):   # relative to the scale
-        raise ValueError(f"{name}: matrix is not symmetric")
+        i, j = (int(k) for k in np.unravel_index(np.argmax(np.abs(m - m.T)), m.shape))
+        raise ValueError(f"{name}: matrix is not symmetric: entry ({label(i)}, {label(j)}) is {m[i, j]:.6g}, "
+                         f"entry ({label(j)}, {label(i)}) is {m[j, i]:.6g}")
     m = 0.5 * (m + m.T)
     if n:
         eig = np.linalg.eigvalsh(m)
@@ -98,7 +102,8 @@ class Gaussian:
     def __post_init__(self):
         mean = np.asarray(self.mean, dtype=float).reshape(-1)
         if not np.all(np.isfinite(mean)):
-            raise ValueError("Gaussian: mean contains non-finite entries")
+            i = int(np.flatnonzero(~np.isfinite(mean))[0])
+            raise ValueError(f"Gaussian: mean contains non-finite entries: entry {i} is {mean[i]}")
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "cov", as_cov(self.cov, mean.size, "Gaussian covariance"))
         for key in ("names", "units"):

@@ -1,6 +1,8 @@
-"""Shared fixtures: the measured data folder (tests needing it skip with a reason when it is absent)."""
+"""Shared fixtures: every test in its own temporary folder; the measured data folder (tests needing it skip
+with a reason when it is absent)."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import matplotlib
@@ -9,6 +11,21 @@ import pytest
 from casship.io import DATA_ENV, data_dir as find_data_dir
 
 matplotlib.use("Agg")
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(autouse=True)
+def _own_folder(tmp_path, monkeypatch):
+    """Run each test in its own temporary folder (its ``tmp_path``).
+
+    Nothing a test writes to a relative path lands in the checkout, and nothing it finds there (a
+    ``fit.json`` left by following docs/getting-started.md) changes its outcome. Processes a test starts
+    still import this checkout's casship, as they did when started from the checkout's root.
+    """
+    monkeypatch.chdir(tmp_path)
+    path = os.environ.get("PYTHONPATH")
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(ROOT), path]) if path else str(ROOT))
 
 
 @pytest.fixture(scope="session")

@@ -12,6 +12,7 @@ repository root::
 
     python tests/mutation.py                    # every mutant (a while: about half a minute each)
     python tests/mutation.py -k likelihood      # the mutants whose name or file contains a word
+    python tests/mutation.py -k IMO,HAC         # ... any of several words
     python tests/mutation.py --list             # the table of mutants, nothing run
     python tests/mutation.py --out mutation.md  # also write the result table (Markdown)
     python tests/mutation.py -k reacquire --all-failures   # every test that fails, not only the first
@@ -57,6 +58,12 @@ MET, MMG = "casship/maneuvers/metrics.py", "casship/models/mmg.py"
 T_LIK, T_UKF = "tests/test_likelihood_reference.py", "tests/test_ukf_reference.py"
 T_FISH, T_GRAD = "tests/test_fisher_reference.py", "tests/test_gradient_reference.py"
 T_MAP, T_GATE, T_MMG = "tests/test_map_reference.py", "tests/test_gate_reference.py", "tests/test_mmg_reference.py"
+PERF, PRED, GUID = "casship/autopilot/performance.py", "casship/prediction.py", "casship/autopilot/guidance.py"
+UNC, ASYM, CV = "casship/identify/uncertainty.py", "casship/identify/asymmetry.py", "casship/identify/crossval.py"
+ARR, RUN = "casship/estimators/mhe/arrival.py", "casship/estimators/mhe/runner.py"
+SCH, PLANTS, MPC = "casship/autopilot/schedule.py", "casship/autopilot/plants.py", "casship/autopilot/mpc.py"
+T_RMET, T_RID = "tests/test_reference_metrics.py", "tests/test_reference_identify.py"
+T_RMHE, T_RAP = "tests/test_reference_mhe_arrival.py", "tests/test_reference_autopilot.py"
 
 MUTANTS = [
     # -- the statistics of the filters and the fits -------------------------------------------------------------
@@ -147,6 +154,78 @@ MUTANTS = [
       (T_MMG,)),
     M("MMG: flow-straightening switch reversed", MMG, 'ca.if_else(beta_R < 0, P["gamma_R_minus"]',
       'ca.if_else(beta_R > 0, P["gamma_R_minus"]', (T_MMG,)),
+    # -- IMO limits and step-response metrics (published and hand-built references) -------------------------
+    M("IMO: second overshoot limit = first-overshoot limit + 15 deg", MET,
+      "return 5.0 + 0.5 * L_over_V, 17.5 + 0.75 * L_over_V", "return 5.0 + 0.5 * L_over_V, 20.0 + 0.5 * L_over_V",
+      (T_RMET,)),
+    M("IMO: 35 deg second overshoot for L/V >= 30 s", MET, "return 20.0, 40.0", "return 20.0, 35.0", (T_RMET,)),
+    M("IMO: 10/10 limits of L/V < 10 s", MET, "return 10.0, 25.0", "return 10.0, 20.0", (T_RMET,)),
+    M("step: the settling band's edge counts as outside", PERF, "outside = np.flatnonzero(np.abs(err) > tol)",
+      "outside = np.flatnonzero(np.abs(err) >= tol)", (T_RMET,)),
+    M("step: settled at the last sample outside", PERF, "float(t[outside[-1] + 1] - t[0])",
+      "float(t[outside[-1]] - t[0])", (T_RMET,)),
+    M("step: overshoot counted from 90 %", PERF, "over = max(0.0, float(np.max(frac) - 1.0))",
+      "over = max(0.0, float(np.max(frac) - 0.9))", (T_RMET,)),
+    # -- predictive band and integral LOS ---------------------------------------------------------------------
+    M("band: one-sided quantile (z 1.645 for 95 %)", PRED, "stats.norm.ppf(0.5 + 0.5 * float(level))",
+      "stats.norm.ppf(float(level))", (T_RMET,)),
+    M("ILOS: integral rate without Delta (legs)", GUID,
+      "chi = wrap_sym(a - ca.atan((y_e + kappa * y_int) / Delta))\n        y_int_next = y_int + dt * Delta * y_e",
+      "chi = wrap_sym(a - ca.atan((y_e + kappa * y_int) / Delta))\n        y_int_next = y_int + dt * y_e",
+      (T_RMET,)),
+    M("ILOS: integral rate halved (turns)", GUID, "pick(along)\n        y_int_next = y_int + dt * Delta * y_e",
+      "pick(along)\n        y_int_next = y_int + 0.5 * dt * Delta * y_e", (T_RMET,)),
+    # -- robust (HAC) covariance ------------------------------------------------------------------------------
+    M("HAC: Bartlett weight 1 - l/L", UNC, "w = 1.0 - lag / (L + 1.0)", "w = 1.0 - lag / L", (T_RID,)),
+    M("HAC: one side of the lagged covariance", UNC, "G += w * (C + C.T)", "G += w * C", (T_RID,)),
+    M("HAC: Andrews constant of the quadratic-spectral kernel", UNC, "np.ceil(1.1447 * (alpha * n) ** (1 / 3))",
+      "np.ceil(1.3221 * (alpha * n) ** (1 / 3))", (T_RID,)),
+    M("HAC: bandwidth capped at half the record", UNC, "return int(min(n // 4,", "return int(min(n // 2,", (T_RID,)),
+    # -- mirror pairs: when an asymmetry is estimable --------------------------------------------------------
+    M("asymmetry: rudder tolerance exclusive", ASYM, 'abs(a["rudder_deg"] - b["rudder_deg"]) > ANGLE_TOL_DEG',
+      'abs(a["rudder_deg"] - b["rudder_deg"]) >= ANGLE_TOL_DEG', (T_RID,)),
+    M("asymmetry: switch heading not compared", ASYM,
+      'return a["kind"] != "zigzag" or abs(a["heading_deg"] - b["heading_deg"]) <= ANGLE_TOL_DEG', "return True",
+      (T_RID,)),
+    M("asymmetry: 'other' records pair", ASYM, 'if a["kind"] != b["kind"] or a["kind"] == "other" or',
+      'if a["kind"] != b["kind"] or', (T_RID,)),
+    M("asymmetry: pairs across facilities", ASYM,
+      'if sig[i]["side"] != sig[j]["side"] and _same(sig[i], sig[j]) and same(i, j)}',
+      'if sig[i]["side"] != sig[j]["side"] and _same(sig[i], sig[j])}', (T_RID,)),
+    M("asymmetry: records without a copy join every group", ASYM, "if lab is not None and str(lab) == label",
+      "if lab is None or str(lab) == label", (T_RID,)),
+    M("asymmetry: a group's pair may reach outside it", ASYM,
+      "if not any(i in members and j in members for i, j in pairs)",
+      "if not any(i in members or j in members for i, j in pairs)", (T_RID,)),
+    # -- cross-validation's replay of a held-out record -------------------------------------------------------
+    M("cross-validation: output bias added to the record", CV, "cols[ch] = data[ch] - b",
+      "cols[ch] = data[ch] + b", (T_RID,)),
+    M("cross-validation: input bias subtracted", CV, "cols[ch] = data[ch] + b", "cols[ch] = data[ch] - b", (T_RID,)),
+    M("cross-validation: the first record's group copy for every record", CV, "label = labels[name][r]",
+      "label = labels[name][0]", (T_RID,)),
+    # -- MHE fixed arrival cost -------------------------------------------------------------------------------
+    M("MHE arrival: previous estimate one window early", ARR, 'if kind == "fixed" and k > N:',
+      'if kind == "fixed" and k >= N:', (T_RMHE,)),
+    M("MHE arrival: previous estimate one window late", ARR, 'if kind == "fixed" and k > N:',
+      'if kind == "fixed" and k > N + 1:', (T_RMHE,)),
+    M("MHE arrival: the previous window's first state", RUN, "self.z[win.ix[1]], self.P0)",
+      "self.z[win.ix[0]], self.P0)", (T_RMHE,)),
+    # -- gain schedule and MPC preview ------------------------------------------------------------------------
+    M("schedule: Kd and Ki swapped in the law handed out", SCH, 'PIDGains(P["Kp"], P["Kd"], P["Ki"], P["m"]',
+      'PIDGains(P["Kp"], P["Ki"], P["Kd"], P["m"]', (T_RAP,)),
+    M("schedule: m_hf handed out as m", SCH, 'm_hf=P["m_hf"]', 'm_hf=P["m"]', (T_RAP,)),
+    M("schedule: interpolation over the whole range", PLANTS, "w = (x - xs[i]) / (xs[i + 1] - xs[i])",
+      "w = (x - xs[i]) / (xs[-1] - xs[0])", (T_RAP,)),
+    M("schedule: the slowest design's numbers at the top speed", SCH,
+      "piecewise_linear(speed, self.speeds, [t[k] for t in tables])",
+      "piecewise_linear(speed, self.speeds, [t[k] for t in tables[:-1]] + [tables[0][k]])", (T_RAP,)),
+    M("MPC preview: one period late", MPC, "M = Ad @ M\n            rows.append(M[:2])",
+      "rows.append(M[:2])\n            M = Ad @ M", (T_RAP,)),
+    M("MPC preview: from the reference state before the sample's step", MPC,
+      '"target": self._preview(mem["xr"], ref)', '"target": self._preview(memory["xr"], ref)', (T_RAP,)),
+    M("MPC preview: the reference model's acceleration dropped", MPC,
+      "z = np.array([float(wrap(xr[0] - ref)), xr[1], xr[2]])", "z = np.array([float(wrap(xr[0] - ref)), xr[1], 0.0])",
+      (T_RAP,)),
 ]
 
 
@@ -209,7 +288,8 @@ def markdown(rows) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("-k", dest="keyword", help="only mutants whose name or file contains this (case-insensitive)")
+    ap.add_argument("-k", dest="keyword", help="only mutants whose name or file contains this (case-insensitive; "
+                                               "several words separated by commas: any of them)")
     ap.add_argument("--list", action="store_true", help="print the table of mutants and stop")
     ap.add_argument("--out", help="also write the result table (Markdown) to this file")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per mutant before it counts as killed")
@@ -217,8 +297,8 @@ def main(argv=None) -> int:
     ap.add_argument("--all-failures", action="store_true",
                     help="run each mutant's tests to the end and list every test that fails (slower)")
     args = ap.parse_args(argv)
-    chosen = [mu for mu in MUTANTS if not args.keyword
-              or args.keyword.lower() in (mu.name + " " + mu.path).lower()]
+    words = [w.strip().lower() for w in (args.keyword or "").split(",") if w.strip()]
+    chosen = [mu for mu in MUTANTS if not words or any(w in (mu.name + " " + mu.path).lower() for w in words)]
     problems = check_table(chosen)
     if problems:
         print("the mutation table is out of step with the code:\n  " + "\n  ".join(problems), file=sys.stderr)

@@ -83,5 +83,6 @@ def test_identify_several_records_with_sharing_prior_and_identifiability(tmp_pat
     assert fit["prior"]["quantities"]["T"]["std"] == 50.0 and len(fit["records"]) == 3
     for name, truth in {"K": 0.1, "T": 20.0, "bias[delta]@0": 0.01, "bias[delta]@1": -0.005}.items():
         assert abs(fit["estimates"][name] - truth) < 4 * fit["std_errors"][name], name
-    assert main(["identify", *paths, "--model", "nomoto1", "--free", "K", "--share", "K=group"]) == 2
+    assert main(["identify", *paths, "--model", "nomoto1", "--free", "K", "--share", "K=group",
+                 "--out", str(tmp_path / "fit2.json")]) == 2
     assert "--group" in capsys.readouterr().err

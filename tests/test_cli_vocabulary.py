@@ -34,6 +34,7 @@ MEANINGS = {
     "--speed": ("approach (design) speed [m/s]", ("autopilot", "design-trial", "simulate")),
     "--dt": ("time step [s]", ("autopilot", "design-trial", "filter", "simulate")),
     "--duration": ("simulated or trial time [s]", ("autopilot", "design-trial", "simulate")),
+    "--discrepancy-deg2-s": ("heading model discrepancy q [deg^2/s] of a trial design", ("design-trial",)),
     "--max-iter": ("iteration limit of the optimiser", ("design-trial", "identify")),
     "--measured": ("measured outputs to use", ("filter", "identify")),
     "--sigma": ("noise standard deviation per output name=value", ("design-trial", "identify")),

@@ -41,11 +41,34 @@ def test_process_pool_equals_serial():
 
 
 def test_dask_scheduler_equals_serial():
-    distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+    from dask import distributed           # the test extra brings dask[distributed]: this path is tested, not skipped
+
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster:
         remote = run_cases(_case, CASES[:2], scheduler=cluster.scheduler_address)
     _assert_same(run_cases(_case, CASES[:2], workers=1), remote)
+
+
+def test_a_studys_cases_on_a_two_worker_dask_cluster_give_the_serial_numbers():
+    """The autopilot-waves study's quick cases (the Otter with and without its wave filter), as its
+    ``run(scheduler=...)`` hands them to :func:`run_cases`."""
+    from dask import distributed
+
+    from casship_studies.autopilot_waves import run_case
+
+    cases = [{"ship": "otter", "filter": f, "seed": 2} for f in (False, True)]
+    serial = run_cases(run_case, cases, workers=1)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        with distributed.Client(cluster.scheduler_address) as client:
+            assert len(client.scheduler_info()["workers"]) == 2
+        remote = run_cases(run_case, cases, scheduler=cluster.scheduler_address)
+    assert [r["filter"] for r in remote] == [False, True]
+    for a, b in zip(serial, remote):
+        for key in ("psi", "steer", "psd"):
+            assert np.array_equal(a[key], b[key]), key             # bit-identical
+        assert a["keeping"] == b["keeping"]
+    assert not np.array_equal(serial[0]["steer"], serial[1]["steer"])     # the filter changes the run
 
 
 def test_unpicklable_case_function_fails_loudly():

@@ -174,6 +174,11 @@ def nomoto_from_linear(sys: control.StateSpace, *, steer: str = "delta", yaw_rat
     poles, zeros = np.real_if_close(tf.poles()), np.real_if_close(tf.zeros())
     K = float(num[-1] / den[-1]) if den[-1] != 0 else float("nan")
     source = f"linearisation of {sys.name}"
+    if not (np.isfinite(K) and K != 0):
+        # e.g. a ship at (nearly) zero speed: no hydrodynamic damping of the yaw rate, no steady turn rate
+        raise ValueError(f"the {steer!r} -> {yaw_rate!r} response of {sys.name!r} has no finite steady gain "
+                         f"(K = {K:.4g}: the yaw rate is not damped at this operating point, e.g. a speed "
+                         "near zero); no Nomoto model there")
     if poles.size == 1:
         return Nomoto(K=K, T=float(-1 / poles[0].real), source=source)
     if poles.size == 2 and zeros.size <= 1 and np.all(np.isreal(poles)):

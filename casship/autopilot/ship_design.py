@@ -352,7 +352,15 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
         speeds = sorted(float(v) for v in speeds)
     except (TypeError, ValueError):
         raise ValueError(f"schedule must be a sequence of speeds [m/s] or 'default', got {schedule!r}") from None
-    designs = tuple(design_autopilot(model, v, p=p, steer=steer, inputs=inputs, **settings) for v in speeds)
+    designs = []
+    for v in speeds:
+        try:
+            designs.append(design_autopilot(model, v, p=p, steer=steer, inputs=inputs, **settings))
+        except ValueError as exc:
+            from ..errors import InputError
+
+            raise InputError(f"schedule speed {v:.4g} m/s: {exc}") from exc
+    designs = tuple(designs)
     law = ScheduledAutopilot(tuple(speeds), tuple(d.autopilot for d in designs))
     s0 = point.settings
     here = law.at(s0.speed)

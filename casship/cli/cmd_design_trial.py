@@ -70,7 +70,11 @@ def register(sub) -> None:
     p.add_argument("--corridor", type=float, default=None, help="free trial: half width of the track corridor [m]")
     p.add_argument("--speed-min", dest="speed_min", type=float, default=None, help="free trial: speed floor [m/s]")
     p.add_argument("--knot", type=float, default=None, help="free trial: time between rudder knots [s] (default L/U/4)")
-    p.add_argument("--max-iter", dest="max_iter", type=count, default=150, help="free trial: iteration limit")
+    p.add_argument("--max-iter", dest="max_iter", type=count, default=60, help="free trial: iteration limit")
+    p.add_argument("--discrepancy-deg2-s", dest="discrepancy", type=float, default=None,
+                   help="heading model discrepancy q [deg^2/s] (heading error variance growing as q t; default: the "
+                        "fit file's model_discrepancy, else 0 = a model right in its structure); it sets the floor no "
+                        "trial removes and tempers what long trials teach")
     p.add_argument("--csv", default=None, help="write the free rudder sequence as CSV (t_s, rudder_deg, n)")
     p.add_argument("--plot", default=None, help="figure (.png, .pdf or .svg): ranking, the best trial's rudder, track and speed")
     p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
@@ -87,6 +91,28 @@ def _angles(text, what: str) -> list[float]:
     if bad:
         raise ValueError(f"{what}: angles must be in (0, 90] deg, got {bad}")
     return out
+
+
+def _discrepancy(args) -> tuple[float, str]:
+    """The heading's model discrepancy [rad^2/s] and where it comes from: ``--discrepancy-deg2-s``, else the fit
+    file's ``model_discrepancy``, else none."""
+    import numpy as np
+
+    from ..errors import InputError
+    from ..identify import read_params
+
+    if args.discrepancy is not None:
+        q = args.discrepancy
+        if not (math.isfinite(q) and 0 <= q <= 1e4):
+            raise InputError(f"--discrepancy-deg2-s: a heading variance growth in [0, 1e4] deg^2/s, got {q:g}")
+        return float(np.radians(np.radians(q))), "--discrepancy-deg2-s"
+    if args.params:
+        _, _, unc = read_params(args.params, args.model, uncertainty=True)
+        q = getattr(unc, "psi_variance_rate", None) if unc is not None else None
+        if q:
+            return float(q), f"{args.params} (model_discrepancy)"
+        return 0.0, f"{args.params} carries no model_discrepancy"
+    return 0.0, "none given"
 
 
 def _belief_and_noise(args, model):
@@ -132,8 +158,10 @@ def run(args) -> int:
     model = get_model(args.model)
     check_ship(model, args.model, "a trial design")
     model, p, belief, sigma = _belief_and_noise(args, model)
+    q, q_source = _discrepancy(args)
     if not args.json:
         print(f"belief: {belief.kind} ({belief.source}); {len(belief.names)} uncertain parameters")
+        print(f"model discrepancy: {math.degrees(math.degrees(q)):.4g} deg^2/s ({q_source})")
     approach = Approach(model, p, speed=args.speed, dt=args.dt)
     limits = None
     if free:
@@ -146,7 +174,7 @@ def run(args) -> int:
                                  zigzag=_angles(args.zigzag, "--zigzag"), pullout=_angles(args.pullout, "--pullout"),
                                  spiral=args.spiral)
     res = design_trials(model, belief, sigma, args.target, criterion=args.criterion, p=p, speed=args.speed,
-                        dt=approach.dt, candidates=candidates, limits=limits, max_iter=args.max_iter)
+                        dt=approach.dt, candidates=candidates, limits=limits, max_iter=args.max_iter, discrepancy=q)
     if args.csv:
         write_output(args.csv, lambda tmp: res.trials["free"].to_csv(tmp, approach), option="--csv",
                      overwrite=args.overwrite, stamps=stamps)
@@ -160,5 +188,5 @@ def run(args) -> int:
         print(res.table())
         if free:
             where = f"written to {args.csv}" if args.csv else "--csv FILE writes its rudder sequence"
-            print(f"free trial ({res.free['status']}, {res.free['iterations']} iterations): {where}")
+            print(f"free trial: {res.free['outcome']} ({res.free['iterations']} iterations); {where}")
     return 0

@@ -128,7 +128,10 @@ class ParameterBelief:
             raise ValueError(f"standard deviations must be positive and finite: {bad}")
         missing = [n for n in names if n not in mean]
         if missing:
-            raise ValueError(f"no mean value for parameter(s) {missing}")
+            known = list(mean)
+            raise ValueError(f"unknown parameter(s) {missing}: no mean value for them among the {len(known)} "
+                             f"parameters given ({', '.join(map(str, known[:12]))}"
+                             f"{', ...' if len(known) > 12 else ''})")
         s = np.array([float(std[n]) for n in names])
         return cls(tuple(names), Gaussian([float(mean[n]) for n in names], np.diag(s**2)), source, "prior")
 

@@ -2,10 +2,13 @@
 
 A trial's Fisher information about the uncertain parameters is the Gauss-Newton matrix ``J' J`` of
 the output-error likelihood the fit uses (:class:`casship.identify.OutputErrorProblem`: measured
-channels, noise standard deviations as weights, wrapped heading residuals), at the current estimate,
-on the trial's noise-free record. ``J`` holds the exact sensitivities of the simulated outputs
-(the problem's compiled forward-sensitivity fold). For a linear-Gaussian model it is the Fisher
-matrix exactly; for a nonlinear one it is the expected information to first order.
+channels, noise standard deviations as weights), at the current estimate, on the trial's noise-free
+record, from the exact sensitivities of the simulated outputs (:mod:`~.infofold`, one compiled fold;
+equal to the problem's own information to rounding, tested). With a model discrepancy (a heading
+error growing as a random walk, the ``model_discrepancy`` of a fit file) the heading residuals are
+whitened first, so the information is that of the trial under the error model the fit measured.
+For a linear-Gaussian model it is the Fisher matrix exactly; for a nonlinear one it is the expected
+information to first order.
 """
 from __future__ import annotations
 
@@ -13,6 +16,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..errors import InputError
 from .belief import ParameterBelief
 from .sensitivity import Approach
 from .trials import Trial
@@ -92,7 +96,7 @@ def fit_noise(fit) -> dict:
 
 
 def trial_information(approach: Approach, trial: Trial, names: Sequence[str], noise: Mapping[str, float], *,
-                      jit: bool | None = None) -> np.ndarray:
+                      discrepancy: float = 0.0, fold=None, jit: bool | None = None) -> np.ndarray:
     """Fisher information of one trial about the parameters ``names`` at ``approach.p``.
 
     Parameters
@@ -104,23 +108,30 @@ def trial_information(approach: Approach, trial: Trial, names: Sequence[str], no
         The uncertain parameters.
     noise : mapping output -> standard deviation
         Measured channels and the standard deviation of one sample (as the fit weighs them).
+    discrepancy : float
+        The heading's model discrepancy ``q`` [rad^2/s]: heading residuals are white noise plus a
+        random walk of variance ``q t`` (:mod:`~.infofold`); 0 for white residuals, where the
+        information is ``J' J`` of the weighted residuals.
+    fold : InformationFold, optional
+        The compiled fold to use (one per model, uncertain set and channels; built when not given).
     jit : bool, optional
-        Compile the likelihood's fold (None: when a compiler works).
+        Compile policy of the fold (None: in the background when a compiler works).
 
     Returns
     -------
     (k, k) array
-        ``J' J`` of the weighted residuals ``(y - yhat) / sigma`` over the trial's samples.
+        The trial's information.
     """
-    from ..identify import OutputErrorProblem
+    from .infofold import InformationFold
 
     noise = check_noise(approach.model, noise)
     if abs(trial.dt - approach.dt) > 1e-12 * approach.dt:
-        raise ValueError(f"trial {trial.name!r} has step {trial.dt:g} s, the design {approach.dt:g} s")
-    record = trial.record(approach)
-    prob = OutputErrorProblem(approach.model, [record], free=list(names), measured=list(noise), sigma=noise,
-                              params=approach.p, x0=[approach.x0], jit=jit)
-    info = prob.information()
+        raise InputError(f"trial {trial.name!r} has step {trial.dt:g} s, the design {approach.dt:g} s")
+    if not (np.isfinite(discrepancy) and discrepancy >= 0):
+        raise InputError(f"discrepancy must be a finite non-negative heading variance growth [rad^2/s], got {discrepancy}")
+    if fold is None or tuple(fold.names) != tuple(names) or tuple(fold.channels) != tuple(noise):
+        fold = InformationFold(approach, names, list(noise), jit=jit)
+    info = fold.information(approach.inputs(trial.rudder), noise, discrepancy)
     return 0.5 * (info + info.T)
 
 

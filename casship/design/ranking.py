@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import InputError
 from .belief import ParameterBelief
 from .free import FreeTrialError, TrialLimits, optimise_free_trial
+from .infofold import InformationFold
 from .information import CRITERIA, check_noise, criterion_value, trial_information
 from .sensitivity import Approach
 from .targets import TargetValue, get_target
@@ -53,6 +54,11 @@ class DesignResult:
         Speed, propeller rate and step of the design.
     information : dict
         Trial name -> Fisher information (k x k) about ``belief.names``.
+    discrepancy : float
+        The heading's model discrepancy ``q`` [rad^2/s] the design assumed (0: none).
+    model_floor : float
+        The target's standard deviation that the model's own error sets (:meth:`TargetValue.floor`):
+        included in ``sd_before`` and ``sd_after``, so no trial is predicted to know the target better.
     """
 
     target: TargetValue
@@ -64,6 +70,18 @@ class DesignResult:
     free: dict = field(default_factory=dict)
     approach: dict = field(default_factory=dict)
     information: dict = field(default_factory=dict, repr=False)
+    discrepancy: float = 0.0
+    model_floor: float = 0.0
+
+    @property
+    def per_hour(self) -> list:
+        """The trials within the limits ranked by the target's variance removed per hour of trial time
+        (tank and sea time are what a trial costs): dicts ``trial``, ``hours``,
+        ``variance_reduction_per_hour`` (target unit squared per hour), ``sd_after``."""
+        out = [{"trial": r["trial"], "hours": r["duration_s"] / 3600.0,
+                "variance_reduction_per_hour": (r["sd_before"] ** 2 - r["sd_after"] ** 2) / (r["duration_s"] / 3600.0),
+                "sd_after": r["sd_after"]} for r in self.rows if not r["violations"]]
+        return sorted(out, key=lambda r: -r["variance_reduction_per_hour"])
 
     @property
     def best(self) -> Trial:
@@ -92,14 +110,16 @@ class DesignResult:
         deg = self.target.unit == "rad"
         unit = "deg" if deg else self.target.unit
         scale = np.degrees(1.0) if deg else 1.0
-        head = ["rank", "trial", "duration [s]", f"sd before [{unit}]", f"sd after [{unit}]", "reduction"]
+        head = ["rank", "trial", "duration [s]", f"sd before [{unit}]", f"sd after [{unit}]", "reduction",
+                "per hour"]
         if self.criterion:
             head.append(f"{self.criterion}-criterion")
         head.append("limits")
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        hourly = {r["trial"]: f"#{i}" for i, r in enumerate(self.per_hour, 1)}
         for i, r in enumerate(self.rows, 1):
             cells = [str(i), r["trial"], f"{r['duration_s']:.0f}", f"{r['sd_before'] * scale:.4g}",
-                     f"{r['sd_after'] * scale:.4g}", f"x{r['reduction']:.3g}"]
+                     f"{r['sd_after'] * scale:.4g}", f"x{r['reduction']:.3g}", hourly.get(r["trial"], "-")]
             if self.criterion:
                 cells.append(f"{r['criterion']:.4g}")
             cells.append("; ".join(r["violations"]) or "within")
@@ -115,7 +135,12 @@ class DesignResult:
         return (f"target {self.target.name} = {self.target.value * scale:.4g} {unit}, standard deviation "
                 f"{r['sd_before'] * scale:.4g} {unit} now ({self.belief.source}; {len(self.belief.names)} uncertain "
                 f"parameters)\nranked by {by}; best within the limits: {self.best.name} "
-                f"({r['duration_s']:.0f} s): {r['sd_after'] * scale:.4g} {unit} after it (x{r['reduction']:.3g})")
+                f"({r['duration_s']:.0f} s): {r['sd_after'] * scale:.4g} {unit} after it (x{r['reduction']:.3g})"
+                + (f"\nmodel-error floor: {self.model_floor * scale:.4g} {unit} (heading discrepancy "
+                   f"{np.degrees(np.degrees(self.discrepancy)):.3g} deg^2/s; no trial removes it)" if self.discrepancy > 0
+                   else "\nno model error assumed (no discrepancy term): the standard deviations after a trial are "
+                        "those of a model that is right in its structure")
+                + (f"\nbest per hour of trial time: {self.per_hour[0]['trial']}" if self.per_hour else ""))
 
     def __repr__(self) -> str:
         return f"DesignResult(target={self.target.name!r}, {len(self.rows)} trials, best={self.best.name!r})"
@@ -128,6 +153,8 @@ class DesignResult:
                            "source": self.belief.source, "covariance": self.belief.kind},
                 "noise": dict(self.noise), "criterion": self.criterion, "approach": dict(self.approach),
                 "ranking": [dict(r) for r in self.rows], "free": dict(self.free),
+                "model_floor": self.model_floor, "discrepancy_deg2_per_s": float(np.degrees(np.degrees(self.discrepancy))),
+                "per_hour": self.per_hour,
                 "trials": {n: {"kind": t.kind, "dt_s": t.dt, "rudder_deg": np.degrees(t.rudder).tolist()}
                            for n, t in self.trials.items()}}
 
@@ -182,6 +209,9 @@ class DesignResult:
 
         ax.barh(names[::-1], [r["sd_after"] * scale for r in self.rows][::-1], color="tab:blue")
         ax.axvline(self.rows[0]["sd_before"] * scale, color="k", ls="--")
+        if self.model_floor > 0:
+            ax.axvline(self.model_floor * scale, color="tab:red", ls=":", label="model-error floor")
+            ax.legend(loc="lower right")
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(f"standard deviation of {self.target.name} [{unit}]")
@@ -206,7 +236,8 @@ class DesignResult:
 def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], target="tactical_diameter", *,
                   criterion: str | None = None, p=None, speed: float | None = None, dt: float | None = None,
                   candidates: Sequence[Trial] | None = None, limits: TrialLimits | None = None,
-                  start: Trial | None = None, max_iter: int = 150, jit: bool | None = None) -> DesignResult:
+                  start: Trial | None = None, max_iter: int = 60, discrepancy: float = 0.0,
+                  jit: bool | None = None) -> DesignResult:
     """Rank candidate trials (and optimise a free one) by what they would teach about ``target``.
 
     Parameters
@@ -239,8 +270,13 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
         keeps the limits other than the duration is a second start, and the better result is kept.
     max_iter : int
         Iteration limit of the free optimisation.
+    discrepancy : float
+        The heading's model discrepancy ``q`` [rad^2/s] (a fit file's ``model_discrepancy``): it sets
+        the target's floor (:attr:`DesignResult.model_floor`, added to every standard deviation) and
+        whitens the heading residuals in each trial's information (long trials no longer teach in
+        proportion to their length). 0: a model right in its structure.
     jit : bool, optional
-        Compile the likelihood's fold (None: when a compiler works).
+        Compile policy of the information fold (None: in the background when a compiler works).
 
     Returns
     -------
@@ -285,14 +321,19 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
     if len(set(names)) != len(names):
         raise ValueError(f"candidate trials need distinct names, got {names}")
     next(steps)
-    info = {t.name: trial_information(approach, t, belief.names, noise, jit=jit) for t in trials}
-    sd0 = np.sqrt(belief.variance_of(tv.gradient))
+    floor = tv.floor(discrepancy)
+    fold = InformationFold(approach, belief.names, list(noise), jit=jit)
+    info = {t.name: trial_information(approach, t, belief.names, noise, discrepancy=discrepancy, fold=fold)
+            for t in trials}
+    sd0 = np.sqrt(belief.variance_of(tv.gradient) + floor ** 2)
 
     def row(t):
         after = belief.after(info[t.name])
-        sd = np.sqrt(after.variance_of(tv.gradient))
+        sd_par = np.sqrt(after.variance_of(tv.gradient))
+        sd = np.hypot(sd_par, floor)
         return {"trial": t.name, "kind": t.kind, "duration_s": t.duration, "sides": sorted(t.sides()),
-                "sd_before": float(sd0), "sd_after": float(sd), "reduction": float(sd0 / sd) if sd > 0 else np.inf,
+                "sd_before": float(sd0), "sd_after": float(sd), "sd_after_parameters": float(sd_par),
+                "reduction": float(sd0 / sd) if sd > 0 else np.inf,
                 "criterion": criterion_value(after, belief, criterion) if criterion else None,
                 "violations": limits.violations(t, approach) if limits is not None else []}
 
@@ -311,7 +352,8 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
         for s in starts:
             try:
                 cand = optimise_free_trial(approach, belief, noise, lim, gradient=None if criterion else tv.gradient,
-                                           criterion=criterion, start=s, max_iter=max_iter)
+                                           criterion=criterion, start=s, max_iter=max_iter, discrepancy=discrepancy,
+                                           floor=floor, fold=fold, jit=jit)
             except FreeTrialError as exc:
                 errors.append(exc)
                 continue
@@ -321,8 +363,9 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
             raise errors[-1]
         free, free_report = best
         trials.append(free)
-        info[free.name] = trial_information(approach, free, belief.names, noise, jit=jit)
+        info[free.name] = trial_information(approach, free, belief.names, noise, discrepancy=discrepancy, fold=fold)
         rows = sorted(rows + [row(free)], key=key)
     next(steps, None)
     return DesignResult(tv, belief, noise, rows, {t.name: t for t in trials}, criterion, free_report,
-                        {"speed_mps": approach.speed, "n": approach.n, "dt_s": approach.dt}, info)
+                        {"speed_mps": approach.speed, "n": approach.n, "dt_s": approach.dt}, info,
+                        float(discrepancy), floor)

@@ -17,6 +17,7 @@ from typing import Sequence
 import casadi as ca
 import numpy as np
 
+from ..errors import InputError
 from .sensitivity import Approach
 
 __all__ = ["Target", "TargetValue", "Turning", "FirstOvershoot", "Difference", "TARGETS", "get_target"]
@@ -39,6 +40,58 @@ class TargetValue:
     value: float
     gradient: np.ndarray
     unit: str
+    error_paths: tuple = ()
+    dt: float = 0.0
+
+    def floor(self, discrepancy: float) -> float:
+        """The standard deviation of this prediction that the model's own error sets, which no trial removes.
+
+        A fit's model discrepancy says that its heading prediction errs by a random walk of variance
+        ``q t`` (``q`` = ``discrepancy`` [rad^2/s]). Carried through the kinematics (the heading error
+        turns the track and moves the event that defines the metric: the 90 or 180 deg heading change,
+        the zig-zag's switch), to first order, it moves the prediction by ``a' e`` (``e`` the heading
+        error on the design's grid, ``a`` one of :attr:`error_paths`); its variance is ``q a' K a``,
+        ``K_ij = min(t_i, t_j)``. Terms of a difference (port and starboard) err independently.
+
+        Parameters
+        ----------
+        discrepancy : float
+            ``q`` [rad^2/s] (0: no floor).
+
+        Returns
+        -------
+        float
+            In the unit of the target.
+        """
+        if not (np.isfinite(discrepancy) and discrepancy >= 0):
+            raise InputError(f"discrepancy must be a finite non-negative heading variance growth [rad^2/s], "
+                             f"got {discrepancy}")
+        return float(np.sqrt(discrepancy * sum(_walk_variance(a, self.dt) for a in self.error_paths)))
+
+
+def _walk_variance(a: np.ndarray, dt: float) -> float:
+    """``a' K a / q`` for a random walk from zero at the first sample, ``K_ij = q min(t_i, t_j)``: the
+    sum over the steps of ``dt`` times the squared tail sum of ``a`` after the step."""
+    tail = np.cumsum(np.asarray(a, dtype=float)[::-1])[::-1]
+    return float(dt * np.sum(tail[1:] ** 2))
+
+
+def _track_error_path(X: np.ndarray, model, quantity: str, side: int, k: int, frac: float) -> np.ndarray:
+    """Weights ``a`` of a turning metric's first-order change ``a' e`` under a heading error ``e`` held over
+    each step: the track turned by ``e`` (``dx = -dy_nominal e``, ``dy = dx_nominal e`` per step), the
+    crossing of the heading level moved by ``side e``."""
+    ix, iy, ipsi = model.index("x"), model.index("y"), model.index("psi")
+    along = quantity == "advance"
+    pos = X[:, ix] if along else side * X[:, iy]
+    w = -np.diff(X[:, iy]) if along else side * np.diff(X[:, ix])     # d pos_(j+1) / d e_j
+    a = np.zeros(X.shape[0])
+    a[:k - 1] += (1.0 - frac) * w[:k - 1]
+    a[:k] += frac * w[:k]
+    s = side * X[:, ipsi]
+    span = s[k] - s[k - 1]
+    a[k - 1] += (pos[k] - pos[k - 1]) * (-(1.0 - frac) * side) / span
+    a[k] += (pos[k] - pos[k - 1]) * (-frac * side) / span
+    return a
 
 
 class Target:
@@ -175,7 +228,8 @@ class Turning(Target):
             v, dv = _interp(X[:, ix], dX[:, ix], k, frac, dfrac)
         else:
             v, dv = _interp(self.side * X[:, iy], self.side * dX[:, iy], k, frac, dfrac)
-        return TargetValue(self.name, float(v), np.asarray(dv, dtype=float), self.unit)
+        path = _track_error_path(X, approach.model, self.quantity, self.side, k, frac)
+        return TargetValue(self.name, float(v), np.asarray(dv, dtype=float), self.unit, (path,), approach.dt)
 
 
 @dataclass(frozen=True)
@@ -261,7 +315,13 @@ class FirstOvershoot(Target):
             raise ValueError(f"{self.name}: no first overshoot within {n * approach.dt:g} s after the execute")
         ds = self.side * dX[j, ipsi]
         grad = ds[:-1] + ds[-1] * dt1
-        return TargetValue(self.name, float(s[j] - level), np.asarray(grad, dtype=float), self.unit)
+        # the heading error from the switch to the peak is what the model cannot predict of the overshoot
+        path = np.zeros(n + 1)
+        path[j] += 1.0
+        path[k - 1] -= 1.0 - frac
+        path[k] -= frac
+        return TargetValue(self.name, float(s[j] - level), np.asarray(grad, dtype=float), self.unit, (path,),
+                           approach.dt)
 
 
 @dataclass(frozen=True)
@@ -291,7 +351,8 @@ class Difference(Target):
 
     def evaluate(self, approach: Approach, names: Sequence[str]) -> TargetValue:
         a, b = self.first.evaluate(approach, names), self.second.evaluate(approach, names)
-        return TargetValue(self.name, a.value - b.value, a.gradient - b.gradient, a.unit)
+        return TargetValue(self.name, a.value - b.value, a.gradient - b.gradient, a.unit,
+                           a.error_paths + b.error_paths, a.dt)
 
 
 #: The named targets (``casship design-trial --target NAME``).

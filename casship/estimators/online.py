@@ -270,6 +270,24 @@ class OnlineRun:
     def __repr__(self) -> str:
         return f"OnlineRun({self._engine.name}, samples={self._engine.samples})"
 
+    # A run's memory lives in CasADi's buffers (and the MHE's window), under a lock: a shallow copy
+    # would share them with the original (an update of one changes the other), and neither buffers
+    # nor lock pickle. Said plainly rather than left to copy and pickle.
+    def _refuse(self, what: str):
+        name = self.__dict__.get("name") or getattr(self.__dict__.get("_engine"), "name", "estimator")
+        raise TypeError(f"an online {name} run cannot be {what}: its memory lives in the "
+                        "estimator's buffers; keep its state (run.x, run.P) and start another run with "
+                        "est.online(casship.Gaussian(run.x, run.P), p)")
+
+    def __copy__(self):
+        self._refuse("copied (a copy would share its buffers with this run)")
+
+    def __deepcopy__(self, memo):
+        self._refuse("copied")
+
+    def __reduce_ex__(self, protocol):
+        self._refuse("pickled")
+
 
 class _Info(Mapping):
     """Diagnostics of one update, copied when read."""

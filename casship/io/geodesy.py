@@ -13,7 +13,9 @@ def _check(lat, lon, what: str):
         raise ValueError(f"{what}: latitude has shape {lat.shape}, longitude {lon.shape}")
     ok = np.isfinite(lat)
     if np.any(np.abs(lat[ok]) > np.pi / 2 + 1e-12):
-        raise ValueError(f"{what}: latitude outside [-pi/2, pi/2] rad (degrees given?)")
+        i = int(np.flatnonzero(np.abs(np.where(ok, lat, 0.0)).ravel() > np.pi / 2 + 1e-12)[0])
+        raise ValueError(f"{what}: latitude {lat.ravel()[i]:.6g} (element {i}) outside [-pi/2, pi/2] rad "
+                         "(degrees given?)")
     return lat, lon
 
 

@@ -77,7 +77,10 @@ def read_marin(path, *, flip_rudder: bool = True) -> Dataset:
     w = 1.0 / _quantum(np.abs(stamps)) ** 2
     dt = float(np.sum(w * k * stamps) / np.sum(w * k * k))
     if not dt > 0:
-        raise ValueError(f"{path}: time stamps do not increase")
+        bad = np.flatnonzero(np.diff(col["time"]) <= 0)
+        where = f"; data row {bad[0] + 1} ({col['time'][bad[0] + 1]:g}) is not after {col['time'][bad[0]]:g}" \
+            if bad.size else ""
+        raise ValueError(f"{path}: time stamps do not increase (step fitted to the stamps: {dt:g} s){where}")
     t = col["time"][0] + k * dt
     residual = float(np.max(np.abs(t - col["time"]) / _quantum(np.abs(col["time"]))))
     psi = np.radians(col["psi"])

@@ -46,7 +46,7 @@ def read_numeric_rows(path: Path, lines: Sequence[str], first: int, columns: Seq
         except ValueError:
             raise ValueError(f"{path}: line {number} is not numeric: {line!r}") from None
     if len(rows) < 3:
-        raise ValueError(f"{path}: fewer than 3 data rows")
+        raise ValueError(f"{path}: {len(rows)} data row(s); a record needs at least 3")
     data = np.asarray(rows)
     if not np.all(np.isfinite(data)):
         row, col = np.argwhere(~np.isfinite(data))[0]

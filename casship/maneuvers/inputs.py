@@ -383,7 +383,8 @@ class ZigZag:
 
     def __call__(self, t: float, x: np.ndarray) -> np.ndarray:
         if self.t_prev is not None and t < self.t_prev:
-            raise ValueError("ZigZag instances are single-use: time went backwards (create a new instance)")
+            raise ValueError(f"ZigZag instances are single-use: time went backwards from {self.t_prev:g} s to "
+                             f"{t:g} s (create a new instance per run)")
         if t >= self.t_exec:
             if self.psi0 is None:
                 self.psi0 = float(x[self.i_psi])

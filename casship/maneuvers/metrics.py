@@ -247,13 +247,12 @@ def zigzag_metrics(data: Dataset, heading_deg: float, *, t_exec: float | None = 
 
 # -- IMO MSC.137(76) ----------------------------------------------------------------------------------------
 def _zz10_limits(L_over_V: float) -> tuple[float, float]:
+    """First and second overshoot limits [deg] of the 10/10 zig-zag, MSC.137(76) Annex 5.3.3.1-2."""
     if L_over_V < 10:
-        first = 10.0
-    elif L_over_V < 30:
-        first = 5.0 + 0.5 * L_over_V
-    else:
-        first = 20.0
-    return first, first + 15.0          # second overshoot: 15 deg above the first-overshoot limit
+        return 10.0, 25.0
+    if L_over_V < 30:
+        return 5.0 + 0.5 * L_over_V, 17.5 + 0.75 * L_over_V
+    return 20.0, 40.0
 
 
 def imo_check(L: float, V: float, *, turning: Mapping | None = None, zz10: Mapping | None = None,
@@ -263,7 +262,8 @@ def imo_check(L: float, V: float, *, turning: Mapping | None = None, zz10: Mappi
     Criteria: advance <= 4.5 L and tactical diameter <= 5 L (35 deg turning circle); distance
     travelled before a 10 deg heading change with 10 deg rudder <= 2.5 L (from the 10/10
     zig-zag); 10/10 first overshoot <= 10 deg if L/V < 10 s, <= 20 deg if L/V >= 30 s, else
-    5 + 0.5 L/V deg; 10/10 second overshoot <= those limits + 15 deg; 20/20 first overshoot <= 25 deg.
+    5 + 0.5 L/V deg; 10/10 second overshoot <= 25 deg if L/V < 10 s, <= 40 deg if L/V >= 30 s, else
+    17.5 + 0.75 L/V deg; 20/20 first overshoot <= 25 deg.
     (Stopping ability is not checked.)
 
     Parameters
