@@ -331,8 +331,10 @@ def progress(stages: Iterable[str], label: str, stream=None) -> Iterator[None]:
     stages = list(stages)
     total = len(stages)
     with bar(total, label, unit="stage", stream=stream, leave=True, bar_format="{desc} |{bar}| {elapsed}") as b:
-        for i, stage in enumerate(stages):
-            b.set_description_str(f"{label} [{i + 1}/{total}] {stage}", refresh=False)
+        for i, name in enumerate(stages):
+            if _COMMAND is not None and _COMMAND.label == label:     # the command's own stages: name them on its line
+                stage(name, i + 1, total)
+            b.set_description_str(f"{label} [{i + 1}/{total}] {name}", refresh=False)
             b.n = i                       # stages completed
             b.refresh()
             yield

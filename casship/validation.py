@@ -24,7 +24,10 @@ from .maneuvers import execute_time, turning_metrics, zigzag_metrics
 from .model import Model
 from .simulate import simulate, simulate_many
 
-__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent"]
+__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent", "COVERAGE_SLACK"]
+
+#: A heading band whose coverage of the measured heading falls more than this below its level is flagged.
+COVERAGE_SLACK = 0.15
 
 
 @dataclass
@@ -48,10 +51,10 @@ class ReplayResult:
         With a parameter uncertainty: per sample ``psi_std`` [rad], ``x_std``, ``y_std``,
         ``cross_track_std`` [m] (linearised, exact sensitivities), ``level`` and ``z``; and
         ``coverage``: the fraction of the measured heading inside the band. With a model-discrepancy
-        term (:attr:`ParameterUncertainty.psi_variance_rate` ``q``) also the predictive heading band
-        ``psi_std_predictive = sqrt(s^2 + q t)`` and its ``coverage_predictive``, where ``s`` is the
-        heading band of the covariance ``q`` was estimated beside
-        (:attr:`ParameterUncertainty.discrepancy_covariance`; ``psi_std`` when the file names none).
+        term (:attr:`ParameterUncertainty.psi_variance_rate` ``q``; 0 when the file carries none)
+        also the predictive heading band ``psi_std_predictive = sqrt(psi_std^2 + q t)`` (the same
+        covariance, so never narrower than the parameter band), ``psi_variance_rate`` and its
+        ``coverage_predictive``.
     metric_intervals : dict
         With a parameter uncertainty: index -> ``[lo, hi]`` at ``bands["level"]`` from parameter
         draws.
@@ -100,10 +103,30 @@ class ReplayResult:
             out["psi_coverage"] = self.bands["coverage"]
         if "psi_std_predictive" in self.bands:
             w = np.degrees(z * self.bands["psi_std_predictive"])
-            out.update(psi_predictive_halfwidth_max_deg=float(w.max()), psi_predictive_halfwidth_end_deg=float(w[-1]))
+            out.update(psi_predictive_halfwidth_max_deg=float(w.max()), psi_predictive_halfwidth_end_deg=float(w[-1]),
+                       psi_discrepancy_deg2_per_s=float(np.degrees(np.degrees(self.bands.get("psi_variance_rate", 0.0)))))
             if "coverage_predictive" in self.bands:
                 out["psi_predictive_coverage"] = self.bands["coverage_predictive"]
         return out
+
+    def coverage_notes(self) -> list[str]:
+        """Warnings, as text, for a heading band whose coverage of the measured heading falls more than
+        :data:`COVERAGE_SLACK` below its nominal level (a band that does not mean what it says)."""
+        if not self.bands:
+            return []
+        level, notes = self.bands["level"], []
+        q = self.bands.get("psi_variance_rate", 0.0)
+        for key, what, why in (("coverage", "parameter band", "it carries the parameters' uncertainty only, see "
+                                                               "the predictive band"),
+                               ("coverage_predictive", "predictive band",
+                                "the file carries no model discrepancy (q = 0)" if q == 0 else
+                                f"its model discrepancy q = {np.degrees(np.degrees(q)):.3g} deg^2/s is too small for "
+                                "this record")):
+            c = self.bands.get(key)
+            if c is not None and np.isfinite(c) and c < level - COVERAGE_SLACK:
+                notes.append(f"the {100 * level:.0f} % {what} covers {100 * c:.0f} % of the measured heading: far "
+                             f"below its nominal {100 * level:.0f} %; {why}")
+        return notes
 
     def __repr__(self) -> str:
         errors = ", ".join(f"{k}={v:.3g}" for k, v in self.errors.items())
@@ -144,6 +167,7 @@ class ReplayResult:
         lines += [f"  {k:28s} not compared: {why}" for k, why in self.metric_notes.items()]
         for k, v in self.band_summary().items():
             lines.append(f"  band {k:23s} {v}" if isinstance(v, str) else f"  band {k:23s} {v:12.4g}")
+        lines += [f"  warning: {note}" for note in self.coverage_notes()]
         return "\n".join(lines)
 
     def plot(self, ax=None, path=None):
@@ -206,8 +230,8 @@ class ReplayResult:
             psi = np.degrees(np.unwrap(tr["psi"]))
             w = np.degrees(z * b["psi_std"])
             heading.fill_between(tr.t, psi - w, psi + w, color="C0", alpha=0.25, lw=0,
-                                 label=label + (" (parameters)" if "psi_std_predictive" in b else ""))
-            if "psi_std_predictive" in b:       # edges: visible whichever band is the wider
+                                 label=label + (" (parameters)" if b.get("psi_variance_rate", 0.0) > 0 else ""))
+            if "psi_std_predictive" in b and b.get("psi_variance_rate", 0.0) > 0:     # dashed edges
                 w = np.degrees(z * b["psi_std_predictive"])
                 for sign in (-1, 1):
                     heading.plot(tr.t, psi + sign * w, color="C0", lw=0.8, ls="--",
@@ -458,12 +482,11 @@ def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, metho
     X, S = trajectory_sensitivities(model, x0, traj.t, U, p, unc.names, method=method, max_step=max_step, jit=jit)
     bands = prediction_bands(model, X, S, unc.covariance, level)
     bands["source"] = unc.source
-    if unc.psi_variance_rate > 0 and "psi_std" in bands:
-        # the model discrepancy the file carries: a heading variance growing with time, added to the band
-        # of the covariance it was estimated beside (see ParameterUncertainty)
-        base = bands["psi_std"] if unc.discrepancy_covariance is None else \
-            prediction_bands(model, X, S, unc.discrepancy_covariance, level)["psi_std"]
-        bands["psi_std_predictive"] = np.sqrt(base ** 2 + unc.psi_variance_rate * (traj.t - traj.t[0]))
+    if "psi_std" in bands:
+        # the model discrepancy the file carries (0 when none): a heading variance growing with time, added to
+        # the band of the same covariance (so the predictive band is never narrower than the parameter band)
+        bands["psi_std_predictive"] = np.sqrt(bands["psi_std"] ** 2 + unc.psi_variance_rate * (traj.t - traj.t[0]))
+        bands["psi_variance_rate"] = float(unc.psi_variance_rate)
     if "psi" in data and "psi_std" in bands:
         e = np.abs(wrap(traj["psi"] - data["psi"]))
         ok = np.isfinite(e)

@@ -83,3 +83,38 @@ def test_guided_loop_compiled_equals_stepwise(otter):
     a, b = loop.run(0.0, 40.0, seed=3), loop.run_stepwise(0.0, 40.0, seed=3)
     for name in ("cross_track", "segment", "y_int", "psi", "steer"):
         np.testing.assert_allclose(a[name], b[name], atol=1e-12, rtol=0)
+
+
+def _los_step(g, memory, north, east):
+    out = g.function(0.1).call({"memory": memory, "north": north, "east": east, "U": 1.0, "angle": 0.0})
+    return np.asarray(out["memory_next"]).ravel()
+
+
+@pytest.mark.parametrize("turn_deg", [90.0, 60.0])
+def test_ilos_integral_at_a_waypoint_by_rule(turn_deg):
+    """At the switch to the next leg the integral is kept (MSS), reset, or projected by the cosine of
+    the course change (hand-computed: 0 for 90 deg, half for 60 deg)."""
+    a = np.radians(turn_deg)
+    wp = Waypoints([0.0, 100.0, 100.0 + 100.0 * np.cos(a)], [0.0, 0.0, 100.0 * np.sin(a)])
+    y_int = 3.0
+    at = [100.5, 0.0]                                         # past the first waypoint: the leg changes
+    for rule, expect in (("keep", y_int), ("reset", 0.0), ("project", np.cos(a) * y_int)):
+        g = LOSGuidance(wp, 20.0, 5.0, 0.5, at_switch=rule, integrate_within=None)
+        mem = _los_step(g, np.array([0.0, y_int]), *at)
+        assert mem[0] == 1.0
+        assert mem[1] == pytest.approx(expect, abs=1e-12)
+    with pytest.raises(ValueError, match="at_switch"):
+        LOSGuidance(wp, 20.0, 5.0, 0.5, at_switch="hold")
+
+
+def test_ilos_integrates_only_near_the_path():
+    """Conditional integration: within half a lookahead the Borhaug et al. increment
+    dt Delta y_e / (Delta^2 + (y_e + kappa y_int)^2); beyond it, none."""
+    wp = Waypoints([0.0, 1000.0], [0.0, 0.0])
+    g = LOSGuidance(wp, 20.0, 5.0, 0.5)                       # the default: within 0.5 Delta
+    assert (g.at_switch, g.integrate_within) == ("project", 0.5)
+    near = _los_step(g, np.array([0.0, 1.0]), 50.0, 8.0)[1]
+    assert near == pytest.approx(1.0 + 0.1 * 20.0 * 8.0 / (20.0**2 + (8.0 + 0.5) ** 2), rel=1e-12)
+    assert _los_step(g, np.array([0.0, 1.0]), 50.0, 10.5)[1] == 1.0
+    mss = LOSGuidance(wp, 20.0, 5.0, 0.5, at_switch="keep", integrate_within=None)
+    assert _los_step(mss, np.array([0.0, 1.0]), 50.0, 10.5)[1] > 1.0

@@ -93,3 +93,10 @@ def test_mpc_settings_are_checked():
         MPCAutopilot(ap.Nomoto(0.1, 10.0), period=1.0, horizon=1, steer_max=1.0, rate_max=1.0, r_max=1.0)
     with pytest.raises(ValueError, match="rate_max"):
         MPCAutopilot(ap.Nomoto(0.1, 10.0), period=1.0, horizon=5, steer_max=1.0, rate_max=0.0, r_max=1.0)
+
+
+def test_mpc_refuses_a_course_mode_design():
+    """Before: the MPC in course mode overshot 67-90 % and never settled, silently."""
+    d = ap.design_autopilot(cs.models.get_model("otter"), mode="course")
+    with pytest.raises(cs.errors.InputError, match="heading control.*drift angle"):
+        ap.mpc_for_design(d)

@@ -87,3 +87,39 @@ def test_schedule_errors_name_the_problem():
         ap.design_autopilot(ship, schedule=["fast", "slow"])
     with pytest.raises(ValueError, match="nomoto"):
         ap.design_autopilot(ship, schedule="default", nomoto=ap.Nomoto(0.1, 10.0))
+
+
+@pytest.mark.parametrize("name", ["kvlcc2", "otter"])
+@pytest.mark.parametrize("fraction", [0.5, 0.75, 1.25])
+def test_default_schedule_covers_the_speed_sailed(name, fraction):
+    """At 50, 75 and 125 % of the approach speed the default schedule reaches the operating speed (above
+    the approach speed it is extended to it, so no design is held beyond its speed) and the 20 and
+    90 deg changes stay within the 10 % line. Before: the Otter at 125 % held the approach-speed
+    design and overshot 3.8 %."""
+    ship = get_model(name)
+    U0 = ship.vessel.U0
+    d = ap.design_autopilot(ship, fraction * U0, schedule="default")
+    speeds = d.autopilot.speeds
+    assert speeds[0] <= min(fraction, 0.4) * U0 * (1 + 1e-12) and speeds[-1] >= max(fraction, 1.0) * U0 * (1 - 1e-12)
+    for scenario in ("course-20", "course-90"):
+        res = d.simulate(scenario, seed=0)
+        assert max(m["overshoot_pct"] for m in res.metrics) <= 10.0, scenario
+
+
+def test_default_schedule_speeds():
+    assert ap.default_schedule(10.0) == pytest.approx((4.0, 5.5, 7.0, 8.5, 10.0))
+    assert ap.default_schedule(10.0, 12.5) == pytest.approx((4.0, 5.5, 7.0, 8.5, 10.0, 11.5, 12.5))
+    assert ap.default_schedule(10.0, 2.0) == pytest.approx((2.0, 4.0, 5.5, 7.0, 8.5, 10.0))
+    assert ap.default_schedule(10.0, 7.0) == pytest.approx((4.0, 5.5, 7.0, 8.5, 10.0))
+
+
+def test_schedule_refuses_speeds_beyond_the_model():
+    from casship.errors import InputError
+
+    kvlcc2 = get_model("kvlcc2")
+    with pytest.raises(InputError, match=r"schedule speed 20 m/s is outside the speed range .* u in \[0, 15.95\]"):
+        ap.design_autopilot(kvlcc2, 4.0, schedule=[3.0, 20.0])
+    with pytest.raises(InputError, match=r"schedule speed 1e-06 m/s: .*no autopilot design .* valid for u in"):
+        ap.design_autopilot(kvlcc2, 4.0, schedule=[1e-6, 4.0])
+    with pytest.raises(InputError, match=r"schedule speed 3.2 m/s: .*no autopilot design for model 'otter'"):
+        ap.design_autopilot(get_model("otter"), 3.2, schedule="default")

@@ -80,7 +80,7 @@ def test_help_shows_the_rules(capsys):
 
 
 def test_autopilot_text_output_and_errors(capsys):
-    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "200", "--wn", "0.05"]) == 0
+    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "200", "--wn", "0.05", "--allow-unmet"]) == 0
     text = capsys.readouterr().out
     assert "margins (python-control)" in text and "Nomoto" in text and "rate limit active" in text
     assert main(["autopilot", "--model", "no-such-ship"]) == 2
@@ -108,8 +108,43 @@ def test_autopilot_plot_folder_follows_the_overwrite_rule(tmp_path, capsys):
     assert main(["autopilot", "--model", "shi-taylor", "--t-end", "300", "--plot", str(folder)]) == 2
     assert "pass --overwrite" in capsys.readouterr().err and (folder / "mine.txt").exists()
     fresh = tmp_path / "fresh"
-    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "300", "--plot", str(fresh), "--json"]) == 0
+    assert main(["autopilot", "--model", "shi-taylor", "--t-end", "300", "--plot", str(fresh), "--json",
+                 "--allow-unmet"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert all(Path(p).is_file() for p in out["plots"])
     for m in out["metrics"]:       # overshoot in % with its degrees beside it
         assert "overshoot_pct" in m and "overshoot_deg" in m
+
+
+def test_unmet_checks_are_said_and_exit_3(capsys):
+    """Before: a run whose checks failed exited 0 with nothing on standard error."""
+    from casship.cli.cmd_autopilot import EXIT_UNMET
+
+    assert EXIT_UNMET == 3
+    assert main(["autopilot", "--model", "shi-taylor", "--duration", "30", "--json"]) == 3
+    cap = capsys.readouterr()
+    out = json.loads(cap.out)                                  # the results are still written
+    assert not out["performance"]["all_ok"]
+    assert "performance check(s) not met: settled, change 1" in cap.err and "exit code 3" in cap.err
+    assert main(["autopilot", "--model", "shi-taylor", "--duration", "30", "--allow-unmet"]) == 0
+    cap = capsys.readouterr()
+    assert "NOT MET" in cap.out and "accepted (--allow-unmet)" in cap.err
+
+
+def test_autopilot_refuses_a_steering_gear_that_cannot_turn_the_ship_and_mpc_in_course_mode(capsys):
+    """Before: --steer-rate-max 1e-9 ran 61 000 s of simulated time without turning; the MPC in
+    course mode overshot 67-90 % and exited 0."""
+    assert main(["autopilot", "--model", "kvlcc2", "--controller", "mpc", "--steer-rate-max-deg-s", "1e-9"]) == 2
+    err = capsys.readouterr().err
+    assert "steer_rate_max = 1.74533e-11 rad/s" in err and "more than 10 L/U" in err
+    assert main(["autopilot", "--model", "otter", "--controller", "mpc", "--mode", "course"]) == 2
+    assert "the MPC is for heading control" in capsys.readouterr().err
+
+
+def test_schedule_is_shown_in_the_text_output(capsys):
+    """Above the approach speed the default schedule reaches the design speed (the Otter at 2.5 m/s)."""
+    assert main(["autopilot", "--model", "otter", "--speed", "2.5", "--schedule", "--duration", "40", "--allow-unmet"]) == 0
+    text = capsys.readouterr().out
+    assert "gain schedule: 7 point designs" in text
+    for speed in ("0.8", "2.3", "2.5"):
+        assert f"\n{speed:>10} " in text

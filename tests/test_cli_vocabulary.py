@@ -19,8 +19,8 @@ MEANINGS = {
     "--quiet": ("no progress on standard error", ALL),
     "--overwrite": ("replace existing output files or folders", tuple(c for c in ALL if c != "cache")),
     "--model": ("registered model name", ("autopilot", "design-trial", "filter", "identify", "simulate")),
-    "--params": ("JSON file with the ship's parameters (a fit file)", ("autopilot", "design-trial", "identify",
-                                                                       "simulate")),
+    "--params": ("JSON file with the ship's parameters (a fit file)", ("autopilot", "design-trial", "filter",
+                                                                       "identify", "simulate")),
     "--json": ("print the result as JSON on standard output", ("autopilot", "design-trial", "filter", "identify",
                                                                "simulate")),
     "--json-file": ("write the result as JSON to this file", ("bench",)),
@@ -72,6 +72,10 @@ MEANINGS = {
     "--current": ("current speed and direction [m/s, deg]", ("autopilot",)),
     "--wind": ("wind speed and direction [m/s, deg]", ("autopilot",)),
     "--show-defaults": ("print the settings and exit", ("autopilot",)),
+    "--allow-unmet": ("exit 0 with performance checks not met", ("autopilot",)),
+    "--wave-w0": ("wave encounter frequency of the design's sea [rad/s]", ("autopilot",)),
+    "--wave-std-deg": ("wave yaw standard deviation of the design's sea [deg]", ("autopilot",)),
+    "--wave-filter": ("wave filter in the heading observer (off, on)", ("autopilot",)),
     # bench, cache, study
     "--only": ("topics to run", ("bench",)), "--markdown": ("results page to update", ("bench",)),
     "--dir": ("the cache folder", ("cache",)), "--data": ("measured-data folder", ("study",)),
@@ -90,8 +94,13 @@ MEANINGS = {
     "--knot": ("free trial knot spacing [s]", ("design-trial",)),
     # filter
     "--estimator": ("estimator name", ("filter",)), "--smooth": ("smooth instead of filter", ("filter",)),
-    "--preset": ("log format preset", ("filter",)), "--columns": ("CSV columns and units", ("filter",)),
-    "--time": ("time column and unit", ("filter",)), "--latlon": ("geodetic columns", ("filter",)),
+    # the record options: one vocabulary for every command that reads records
+    "--preset": ("log format preset", ("filter", "identify", "simulate")),
+    "--columns": ("CSV columns and units", ("filter", "identify", "simulate")),
+    "--time": ("time column and unit", ("filter", "identify", "simulate")),
+    "--latlon": ("geodetic columns", ("filter", "identify", "simulate")),
+    "--accept-worse": ("exit 0 although the fit's verdict is worse than its start or stalled", ("identify",)),
+    "--no-loo": ("judge the fit on its records only (no left-one-out refits)", ("identify",)),
     "--R-std": ("measurement standard deviations", ("filter",)), "--x0": ("initial state", ("filter",)),
     "--P0": ("initial variances", ("filter",)), "--rate": ("filter rate [Hz]", ("filter",)),
     "--options": ("estimator options", ("filter",)),
@@ -115,7 +124,7 @@ MEANINGS = {
 #: angle units a help text may state in brackets, and what the option's name or metavar must then carry
 ANGLE_UNITS = {"deg": "deg", "deg/s": "deg-s", "rad": "rad", "rad/s": "rad-s"}
 #: natural frequencies are angular frequencies in rad/s (every control text writes wn so); not angles
-FREQUENCIES = {"--wn", "--wn-ref"}
+FREQUENCIES = {"--wn", "--wn-ref", "--wave-w0"}
 
 
 def _options():

@@ -245,6 +245,8 @@ def test_identification_guide_examples_run(tmp_path, monkeypatch):
     page = Path(__file__).resolve().parents[1] / "docs" / "identification.md"
     namespace: dict = {}
     for block in re.findall(r"```python\n(.*?)```", page.read_text(), re.S):
+        if block.startswith("# needs the measured data") and not _have_data():
+            continue          # the blocks that read ../shared/data run where it is
         exec(compile(block, str(page), "exec"), namespace)
     assert (tmp_path / "fit.json").exists() and (tmp_path / "fit.png").exists()
 
@@ -293,3 +295,13 @@ def test_compiled_likelihood_gives_the_same_fit_and_is_reused():
     assert cache_info().entries == n_compiled
     plain = MLEProblem(ekf, other.records, free=["K", "T"], x0=PRIOR, jit=False).solve(guess={"K": 0.05, "T": 10.0})
     assert again.estimates["K"] == pytest.approx(plain.estimates["K"], rel=1e-10)
+
+
+def _have_data() -> bool:
+    """Whether the measured data are here (the docs' blocks marked "# needs the measured data" need them)."""
+    from casship.io import data_dir
+
+    try:
+        return data_dir() is not None
+    except FileNotFoundError:
+        return False

@@ -67,9 +67,9 @@ def test_the_runtime_imports_no_other_part_of_casship():
     bad = [f"{p.relative_to(ROOT)}: {m}" for p in sorted(RUNTIME.glob("*.py")) for m, _ in _imports(p)
            if m.startswith("casship") and not m.startswith("casship.runtime") and m not in LEAVES]
     assert not bad, bad
-    for leaf in LEAVES:                            # and the leaves stay leaves
+    for leaf in LEAVES:                            # and the leaves stay leaves (they may use each other)
         path = ROOT / (leaf.replace(".", "/") + ".py")
-        assert not [m for m, _ in _imports(path) if m.startswith("casship")], leaf
+        assert not [m for m, _ in _imports(path) if m.startswith("casship") and m not in LEAVES], leaf
 
 
 @pytest.mark.parametrize("old", ["casship._fast", "casship.compile", "casship.native_fold", "casship.native_update",

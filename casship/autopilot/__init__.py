@@ -29,7 +29,7 @@ heading from North clockwise, errors wrapped to (-pi, pi].
 from .analysis import closed_loop_tf, course_linearization, loop_systems, loop_transfer, margins
 from .closed_loop import ClosedLoop
 from .components import ClosedLoopResult, LoopEstimator, Sensors
-from .defaults import RULES, AutopilotSettings, derive_settings
+from .defaults import WaveBudgetWarning, RULES, AutopilotSettings, derive_settings
 from .designs import LQG, lqg_design, lqr_design, pid_pole_placement
 from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linear_estimator
 from .guidance import LOSGuidance, Waypoints, cross_track_metrics, track_deviation

@@ -25,13 +25,17 @@ import numpy as np
 
 from .analysis import course_change_demand, loop_systems, margins
 from .designs import lqr_design, pid_pole_placement
-from .estimation import linear_estimator, tune_course_q, tune_heading_q
+from .estimation import linear_estimator, settings_wave, tune_course_q, tune_heading_q
 from .law import Actuator
 from .nomoto import Nomoto
 from .plants import SteeringPlant, steering_feedforward, twin_propeller_yaw_limit
 from .reference import ReferenceModel
 
-__all__ = ["AutopilotSettings", "RULES", "derive_settings", "STANDARD_CHANGE_DEG"]
+__all__ = ["AutopilotSettings", "RULES", "derive_settings", "STANDARD_CHANGE_DEG", "WaveBudgetWarning"]
+
+
+class WaveBudgetWarning(UserWarning):
+    """No bandwidth keeps the steering noise of the design's sea state within the budget."""
 
 #: The standard course change the bandwidth is chosen for [deg] (and back: scenario ``course-20``).
 STANDARD_CHANGE_DEG = 20.0
@@ -81,6 +85,9 @@ class AutopilotSettings:
     observer_q: tuple
     segment: float
     feedforward: str = "nonlinear"
+    wave_w0: float = 0.0
+    wave_std: float = 0.0
+    wave_filter: bool = False
     turn_rate_top: float = float("nan")
     lqr_weights: dict = field(default_factory=dict)
     sources: dict = field(default_factory=dict, compare=False)
@@ -115,6 +122,12 @@ RULES: dict[str, tuple[str, str]] = {
                        "steering limit at this speed (IMO A.342(IX) 3.2: within the ship's turning ability)"),
     "feedforward": ("", "'nonlinear': m a_d + s(r_d) with s the steady steering of the nonlinear ship at this speed "
                         "(a reverse spiral by trim); 'linear': m a_d + d r_d of the Nomoto model"),
+    "wave_w0": ("rad/s", "0 (calm water); the encounter frequency of the first-order wave yaw the design is for: its "
+                         "spectrum (relative damping 0.1, standard deviation wave_std) enters the steering-noise budget "
+                         "of the estimator tuning, and so the bandwidth search"),
+    "wave_std": ("rad", "0 (calm water); standard deviation of the first-order wave yaw on compass and gyro"),
+    "wave_filter": ("", "'off'; 'on': the heading observer holds the wave model (Fossen's wave filter) and the "
+                        "margins are those of the loop with it"),
     "turn_rate_top": ("rad/s", "the rate of turn the ship reaches steadily with its full steering at this speed "
                                "(reported; the check of r_max)"),
     "steer_max": ("rad or N m", "vessel.rudder_max; two-propeller craft: the yaw moment both propellers give at the "
@@ -167,7 +180,8 @@ def _check_given(given: Mapping) -> dict:
 
 
 #: Settings that may be zero (the others must be positive), and limits that may be inf (no limit).
-_NON_NEGATIVE = ("delay", "filter_T", "actuator_T", "zeta", "zeta_ref", "gyro_std", "compass_std", "gnss_std")
+_NON_NEGATIVE = ("delay", "filter_T", "actuator_T", "zeta", "zeta_ref", "gyro_std", "compass_std", "gnss_std",
+                 "wave_w0", "wave_std", "wave_filter")
 _UNBOUNDED = ("steer_max", "steer_rate_max", "r_max")
 
 
@@ -214,7 +228,12 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     ValueError
         Naming an unknown setting, or when no bandwidth stabilises the ship within the noise budget.
     """
-    g = _check_given(dict(given or {}))
+    given = dict(given or {})
+    if isinstance(given.get("wave_filter"), str):
+        if given["wave_filter"] not in ("on", "off"):
+            raise ValueError(f"autopilot setting wave_filter must be 'on' or 'off', got {given['wave_filter']!r}")
+        given["wave_filter"] = given["wave_filter"] == "on"
+    g = _check_given(given)
     src = {k: "given" for k in g}
     val = dict(g)
 
@@ -263,6 +282,15 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         shown = f"{v:g} N m" if twin else f"{v:g} rad ({np.degrees(v):.4g} deg)"
         raise ValueError(f"autopilot setting steer_max = {shown} is beyond the valid range "
                          f"{describe_limit(m, plant.steer)} of {plant.steer!r} of model {m.name!r}")
+    if LU is not None and np.isfinite(val["steer_max"]) and val["steer_max"] / val["steer_rate_max"] > 10 * LU:
+        from ..errors import InputError
+
+        unit = "N m/s" if twin else "rad/s"
+        raise InputError(f"autopilot setting steer_rate_max = {val['steer_rate_max']:g} {unit}: the steering gear would "
+                         f"take {val['steer_max'] / val['steer_rate_max']:.3g} s from zero to its limit "
+                         f"{val['steer_max']:.4g}, more than 10 L/U = {10 * LU:.3g} s (ten ship lengths of sailing): "
+                         f"the ship could not be turned within a course change; give at least "
+                         f"{val['steer_max'] / (10 * LU):.3g} {unit}")
     steering = None
     if "u" in m.state_names and "v" in m.state_names:
         try:
@@ -281,6 +309,18 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         raise ValueError(f"model {m.name!r} has no sway/surge states for the nonlinear feed-forward; use "
                          "feedforward='linear'")
     rule("filter_T", lambda: 0.0)
+    rule("wave_w0", lambda: 0.0)
+    rule("wave_std", lambda: 0.0)
+    rule("wave_filter", lambda: False)
+    val["wave_filter"] = bool(val["wave_filter"])
+    wave = settings_wave(SimpleNamespace(**val))
+    if (val["wave_w0"] > 0) != (val["wave_std"] > 0):
+        raise ValueError(f"autopilot settings wave_w0 = {val['wave_w0']:g} rad/s and wave_std = {val['wave_std']:g} rad "
+                         "are given together (both positive: a sea state) or not at all")
+    if val["wave_filter"] and wave is None:
+        raise ValueError("autopilot setting wave_filter needs the sea state: give wave_w0 and wave_std")
+    if val["wave_filter"] and mode == "course":
+        raise ValueError("autopilot setting wave_filter is the heading observer's; mode 'course' has none")
     rule("dt", lambda: _loop_period(LU, val["actuator_T"]))
     rule("gnss_rate", lambda: 5.0)
     rule("gnss_std", lambda: min(0.5, float(L) / 100.0) if L is not None else 0.5)
@@ -294,6 +334,8 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     budget = min(_NOISE_RATE * actuator.rate_max * max(actuator.T, dt), _NOISE_STEER * actuator.steer_max)
     a1 = float(val["ekf_alpha"][0]) if "ekf_alpha" in val else _surge_pole(plant)
     q_b = (0.05 * val["steer_max"]) ** 2 / (10 * (LU if LU else 1.0 / val.get("wn", 1.0)))
+
+    budget_wave = [wave]            # the sea state the noise budget counts (dropped when no bandwidth meets it)
 
     def candidate(wn, wn_ref=None):
         """Gains, estimator tuning and the linear loop (with the estimator) at bandwidth ``wn``."""
@@ -318,35 +360,57 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
                 q_r, qb = val["observer_q"]
             else:
                 qb = q_b
-                q_r, _ = tune_heading_q(K=nom.K, T=nom.T, q_r_max=2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T), q_b=qb, dt=dt,
+                q_r, noise = tune_heading_q(K=nom.K, T=nom.T, q_r_max=2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T), q_b=qb, dt=dt,
                                         compass_every=max(1, int(round(1 / (val["compass_rate"] * dt)))),
                                         compass_std=val["compass_std"], gyro_std=val["gyro_std"], Kp=gains.Kp,
-                                        Kd=Kd_est, budget=room)
+                                        Kd=Kd_est, budget=room, wave=budget_wave[0],
+                                        wave_filter=val["wave_filter"])
+                tuned["_quiet"] = tuned["_quiet"] and noise <= room * (1 + 1e-9)
+                tuned["_command_noise"] = noise
             tuned.update(observer_q=(q_r, qb))
-        est = linear_estimator(SimpleNamespace(**{**val, **tuned}), nom, plant.steer)
+        est = linear_estimator(SimpleNamespace(**{**val, **tuned, "wave_filter": val["wave_filter"] and
+                                                  budget_wave[0] is not None}), nom, plant.steer)
         ref = ReferenceModel(wn_ref, val["zeta_ref"]) if wn_ref else None
         L, closed = loop_systems(lin, gains, actuator, delay=val["delay"], reference=ref, controlled=controlled,
                                  filter_T=val["filter_T"], estimator=est, rate=val["rate"])
         return L, closed, tuned
 
     if "wn" not in val:
-        wn, best = 1.0 / LU, None
-        for _ in range(_SEARCH_STEPS):
-            L_, _, tuned = candidate(wn)
-            mg = margins(L_)
-            if mg["closed_loop_stable"] and tuned["_quiet"]:
-                if mg["phase_margin_deg"] >= _PM_MIN and mg["upper_gain_margin_db"] >= _GM_MIN:
-                    best = None
-                    break
-                if best is None or mg["phase_margin_deg"] > best[1]:
-                    best = (wn, mg["phase_margin_deg"], mg["upper_gain_margin_db"])
-            wn /= 2 ** 0.25
-        else:
-            if best is None:
-                raise ValueError(f"no bandwidth below U/L = {1 / LU:.3g} rad/s stabilises {m.name!r} within the "
-                                 "steering-noise budget; give wn")
+
+        def search():
+            wn, best = 1.0 / LU, None
+            for _ in range(_SEARCH_STEPS):
+                L_, _, tuned = candidate(wn)
+                mg = margins(L_)
+                if mg["closed_loop_stable"] and tuned["_quiet"]:
+                    if mg["phase_margin_deg"] >= _PM_MIN and mg["upper_gain_margin_db"] >= _GM_MIN:
+                        return wn, None
+                    if best is None or mg["phase_margin_deg"] > best[1]:
+                        best = (wn, mg["phase_margin_deg"], mg["upper_gain_margin_db"])
+                wn /= 2 ** 0.25
+            return (None, None) if best is None else (best[0], best)
+
+        wn, best = search()
+        if wn is None and wave is not None:
+            # the sea is beyond what a loop on compass and gyro can keep out of the steering: say why, design
+            # for calm water (the wave filter, when on, stays in the estimator and in the margins)
+            t_unstable = nom.T1 if nom.second_order and nom.T1 < 0 else nom.T
+            p_unstable = 1.0 / abs(t_unstable) if t_unstable < 0 else 0.0
+            why = (f"its unstable yaw pole at {p_unstable:.3g} rad/s needs a loop crossover of at least "
+                   f"{2 * p_unstable:.3g} rad/s, within a factor 3 of the wave encounter frequency "
+                   f"{wave.w0:.3g} rad/s (the rule: w0 >= 6 / |T|)" if p_unstable > 0 and wave.w0 < 6 * p_unstable
+                   else "the wave yaw's steering noise exceeds the budget at every bandwidth")
+            warnings.warn(f"{m.name}: no bandwidth keeps the steering noise of the wave yaw ({np.degrees(val['wave_std']):.3g} "
+                          f"deg at {wave.w0:.3g} rad/s) within the budget of {budget:.3g} "
+                          f"{'N m' if twin else 'rad'}: {why}; the bandwidth is chosen for calm water (the margins "
+                          "reported are those of the loop with the wave filter when it is on)",
+                          WaveBudgetWarning, stacklevel=3)
+            budget_wave[0] = None
+            wn, best = search()
+        if wn is None:
+            raise ValueError(f"no bandwidth below U/L = {1 / LU:.3g} rad/s stabilises {m.name!r} within the "
+                             "steering-noise budget; give wn")
         if best is not None:
-            wn = best[0]
             warnings.warn(f"{m.name}: no bandwidth below U/L gives PM >= {_PM_MIN} deg and GM >= {_GM_MIN} dB with "
                           f"the {mode} estimator in the loop; using wn = {wn:.3g} rad/s (PM {best[1]:.1f} deg, GM "
                           f"{best[2]:.1f} dB)", stacklevel=3)

@@ -292,19 +292,77 @@ def tune_course_q(*, speed: float, alpha, q_U: float, q_chi_max: float, dt: floa
     return _largest_within(q_chi_max, noise, budget)
 
 
+def _heading_matrices(K: float, T: float, wave: WaveYaw | None):
+    """Continuous ``A, B, G, C`` of the heading observer (:func:`heading_observer`): states ``psi, r, b``
+    and with ``wave`` the wave states ``psi_w, r_w``; noises ``w_r, w_b`` (and ``w_w``); outputs
+    compass and gyro."""
+    n = 5 if wave is not None else 3
+    A = np.zeros((n, n))
+    A[0, 1], A[1, 1], A[1, 2] = 1.0, -1.0 / T, K / T
+    B = np.zeros((n, 1))
+    B[1, 0] = K / T
+    G = np.zeros((n, 3 if wave is not None else 2))
+    G[1, 0] = G[2, 1] = 1.0
+    C = np.zeros((2, n))
+    C[0, 0] = C[1, 1] = 1.0
+    if wave is not None:
+        Aw, Gw = wave._matrices()
+        A[3:, 3:], G[3:, 2:] = Aw, Gw
+        C[0, 3] = C[1, 4] = 1.0
+    return A, B, G, C
+
+
+def wave_command_noise(Ad, C, L, k, wave: WaveYaw, dt: float) -> float:
+    """Standard deviation of the steering command ``k x_hat`` that first-order wave yaw on the compass
+    and the gyro makes through the steady-state filter ``x_hat+ = (Ad - L C) x_hat + L y`` (the ship
+    itself held still: the noise budget's open-loop reading). The wave process (:meth:`WaveYaw.discrete`)
+    and the filter are one linear system; its stationary covariance by ``scipy.linalg.solve_discrete_lyapunov``.
+
+    Parameters
+    ----------
+    Ad, C, L : ndarray
+        The filter's transition, output matrix and (predictor-form) gain.
+    k : ndarray
+        Command weights on the filter's states.
+    wave : WaveYaw
+    dt : float
+        Filter period [s].
+    """
+    from scipy.linalg import solve_discrete_lyapunov
+
+    Aw, Bw = wave.discrete(dt)
+    n = Ad.shape[0]
+    Az = np.block([[Aw, np.zeros((2, n))], [L @ np.eye(2), Ad - L @ C]])
+    Bz = np.vstack([Bw, np.zeros((n, 1))])
+    Pz = solve_discrete_lyapunov(Az, Bz @ Bz.T)
+    kz = np.concatenate([np.zeros(2), k])
+    return float(np.sqrt(max(kz @ Pz @ kz, 0.0)))
+
+
 def tune_heading_q(*, K: float, T: float, q_r_max: float, q_b: float, dt: float, compass_every: int,
-                   compass_std: float, gyro_std: float, Kp: float, Kd: float, budget: float) -> tuple[float, float]:
+                   compass_std: float, gyro_std: float, Kp: float, Kd: float, budget: float,
+                   wave: WaveYaw | None = None, wave_filter: bool = False) -> tuple[float, float]:
     """Like :func:`tune_course_q` for the heading observer (compass readings once per
     ``compass_every`` samples taken as one reading per sample with ``compass_every`` times the
-    variance). Returns ``(q_r, command noise std)``."""
-    A = np.array([[0.0, 1.0, 0.0], [0.0, -1.0 / T, K / T], [0.0, 0.0, 0.0]])
-    Ad = np.eye(3) + dt * A
-    G = dt * np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
-    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    variance). With ``wave`` the first-order wave yaw on compass and gyro counts too: through the
+    observer without the wave model (:func:`wave_command_noise`), or, with ``wave_filter``, through
+    the observer with it (its error covariance holds the wave's share). Returns ``(q_r, command noise std)``."""
+    model_wave = wave if (wave is not None and wave_filter) else None
+    A, _, G, C = _heading_matrices(K, T, model_wave)
+    Ad = np.eye(A.shape[0]) + dt * A
+    Gd = dt * G
     R = np.diag([compass_std**2 * compass_every, gyro_std**2])
+    k = np.zeros(A.shape[0])
+    k[0], k[1] = Kp, Kd
 
     def noise(q):
-        return command_noise(Ad, G, C, np.diag([q / dt, max(q_b, 1e-30) / dt]), R, 0, 1, Kp, Kd)
+        Q = np.diag([q / dt, max(q_b, 1e-30) / dt] + ([1.0 / dt] if model_wave is not None else []))
+        L, P, _ = control.dlqe(Ad, Gd, C, Q, R)
+        sensor = float(np.sqrt(max(k @ np.asarray(P) @ k, 0.0)))
+        if wave is None or wave_filter:
+            return sensor
+        L = Ad @ np.asarray(P) @ C.T @ np.linalg.inv(C @ np.asarray(P) @ C.T + R)     # predictor-form gain
+        return float(np.hypot(sensor, wave_command_noise(Ad, C, L, k, wave, dt)))
 
     return _largest_within(q_r_max, noise, budget)
 
@@ -329,17 +387,19 @@ def course_filter_system(speed: float, alpha2: float, q_chi: float, r_pos: float
 
 
 def heading_filter_system(K: float, T: float, q_r: float, q_b: float, r_psi: float, r_r: float, *,
-                          steer: str = "delta") -> control.StateSpace:
-    """The heading observer (without waves) as a steady-state Kalman-Bucy filter (``control.lqe``),
-    a labelled system for the linear loop: inputs ``<steer>, psi, r`` (measured), outputs
-    ``chi_hat, rate_hat`` (heading and yaw-rate estimates). Densities as in :func:`course_filter_system`."""
-    A = np.array([[0.0, 1.0, 0.0], [0.0, -1.0 / T, K / T], [0.0, 0.0, 0.0]])
-    B = np.array([[0.0], [K / T], [0.0]])
-    G = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
-    C = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    L, _, _ = control.lqe(A, G, C, np.diag([q_r, max(q_b, 1e-30)]), np.diag([r_psi, r_r]))
+                          steer: str = "delta", wave: WaveYaw | None = None) -> control.StateSpace:
+    """The heading observer as a steady-state Kalman-Bucy filter (``control.lqe``), a labelled
+    system for the linear loop: inputs ``<steer>, psi, r`` (measured), outputs ``chi_hat, rate_hat``
+    (heading and yaw-rate estimates). Densities as in :func:`course_filter_system`; with ``wave`` the
+    filter holds the wave model (Fossen's wave filter, unit wave intensity), so that the loop's
+    margins are those of the loop with the wave filter in it."""
+    A, B, G, C = _heading_matrices(K, T, wave)
+    Q = np.diag([q_r, max(q_b, 1e-30)] + ([1.0] if wave is not None else []))
+    L, _, _ = control.lqe(A, G, C, Q, np.diag([r_psi, r_r]))
     L = np.asarray(L)
-    return control.ss(A - L @ C, np.hstack([B, L]), C, np.zeros((2, 3)), states=["psi_h", "r_h", "b_h"],
+    n = A.shape[0]
+    states = ["psi_h", "r_h", "b_h"] + (["psi_w_h", "r_w_h"] if wave is not None else [])
+    return control.ss(A - L @ C, np.hstack([B, L]), np.eye(n)[:2], np.zeros((2, 3)), states=states,
                       inputs=[steer, "psi", "r"], outputs=["chi_hat", "rate_hat"], name="estimator")
 
 
@@ -353,5 +413,16 @@ def linear_estimator(settings, nomoto, steer: str = "delta") -> control.StateSpa
     if s.mode == "course":
         return course_filter_system(s.speed, s.ekf_alpha[1], s.ekf_q[1] * s.dt, s.gnss_std**2 / s.gnss_rate)
     q_r, q_b = s.observer_q
+    wave = settings_wave(s) if getattr(s, "wave_filter", False) else None
     return heading_filter_system(nomoto.K, nomoto.T, q_r, q_b, s.compass_std**2 / s.compass_rate,
-                                 s.gyro_std**2 * s.dt, steer=steer)
+                                 s.gyro_std**2 * s.dt, steer=steer, wave=wave)
+
+
+def settings_wave(settings) -> WaveYaw | None:
+    """The sea state the settings design for (``wave_w0``, ``wave_std``; relative damping 0.1), or
+    None in calm water."""
+    w0, std = float(getattr(settings, "wave_w0", 0.0) or 0.0), float(getattr(settings, "wave_std", 0.0) or 0.0)
+    if w0 <= 0 or std <= 0:
+        return None
+    lam = 0.1
+    return WaveYaw(w0, std / np.sqrt(lam * w0), lam)

@@ -154,6 +154,15 @@ class LOSGuidance:
         On a turn, the course command leads the path course by ``lead`` times its rate ``U / R``
         [s]: the ramp-following lag of the autopilot's reference model (``(2 zeta + 1) / wn`` for
         the third-order model), which would otherwise leave the ship that far behind the turn.
+    at_switch : {"keep", "reset", "project"}
+        What the ILOS integral does where one path element ends and the next begins: ``"keep"`` it
+        (MSS ``ILOSpsi``), ``"reset"`` it to zero, or ``"project"`` it: scale it by the cosine of the
+        change of path course, the share of the old leg's cross drift that lies across the new one
+        (the drift of a current or a wind is fixed in the earth frame).
+    integrate_within : float, optional
+        Conditional integration: the ILOS integral moves only while the cross-track error is within
+        this many lookahead distances (None: always), so that the large errors of a turn's
+        transient do not wind it up.
     """
 
     waypoints: Waypoints
@@ -162,6 +171,8 @@ class LOSGuidance:
     kappa: float = 0.0
     turn_radius: float | None = None
     lead: float = 0.0
+    at_switch: str = "project"
+    integrate_within: float | None = 0.5
 
     #: Logged signals (closed-loop record columns; ``segment``: the leg, counted from its
     #: wheel-over point when the guidance turns).
@@ -175,6 +186,10 @@ class LOSGuidance:
                 raise ValueError(f"LOS {name} must be positive, got {v}")
         if not (np.isfinite(self.kappa) and self.kappa >= 0):
             raise ValueError(f"ILOS kappa must be >= 0, got {self.kappa}")
+        if self.integrate_within is not None and not (np.isfinite(self.integrate_within) and self.integrate_within > 0):
+            raise ValueError(f"ILOS integrate_within must be positive, got {self.integrate_within}")
+        if self.at_switch not in ("keep", "reset", "project"):
+            raise ValueError(f"ILOS at_switch must be 'keep', 'reset' or 'project', got {self.at_switch!r}")
         if self.turn_radius is not None and not (np.isfinite(self.turn_radius) and self.turn_radius > 0):
             raise ValueError(f"turn_radius must be positive, got {self.turn_radius}")
         if self.turn_radius is not None:
@@ -268,13 +283,29 @@ class LOSGuidance:
         y_e = -dn * ca.sin(a) + de * ca.cos(a)
         Delta, kappa = self.lookahead, self.kappa
         chi = wrap_sym(a - ca.atan((y_e + kappa * y_int) / Delta))
-        y_int_next = y_int + dt * Delta * y_e / (Delta**2 + (y_e + kappa * y_int) ** 2) if kappa > 0 else y_int
+        y_int_next = self._integrate(y_int, y_e, dt)
         reached = ca.logic_or((north - n1) ** 2 + (east - e1) ** 2 < self.acceptance**2, s > length)
         switch = ca.logic_and(reached, k < n_seg - 1)
         k_next = ca.if_else(switch, k + 1, k)
-        y_int_next = ca.if_else(switch, 0.0, y_int_next)       # a new leg starts without the old integral
+        y_int_next = self._integral_at_switch(switch, y_int_next, pick(np.cos(np.diff(angles)).tolist() + [1.0]))
         return {"memory": ca.vertcat(k_next, y_int_next), "chi_ref": chi, "cross_track": y_e, "along_track": s,
                 "segment": k, "y_int": y_int}
+
+    def _integrate(self, y_int, y_e, dt):
+        """The ILOS integral one sample on (Borhaug et al. 2008), conditional on ``integrate_within``."""
+        Delta, kappa = self.lookahead, self.kappa
+        if kappa <= 0:
+            return y_int
+        step = dt * Delta * y_e / (Delta**2 + (y_e + kappa * y_int) ** 2)
+        if self.integrate_within is not None:
+            step = ca.if_else(ca.fabs(y_e) <= self.integrate_within * Delta, step, 0.0)
+        return y_int + step
+
+    def _integral_at_switch(self, switch, y_int, cos_turn):
+        """The ILOS integral on the next path element (see ``at_switch``)."""
+        if self.at_switch == "keep":
+            return y_int
+        return ca.if_else(switch, 0.0 if self.at_switch == "reset" else cos_turn * y_int, y_int)
 
     def elements(self) -> list[dict]:
         """The track as elements: legs (``kind="line"``, from the end of one turn to the next
@@ -332,10 +363,12 @@ class LOSGuidance:
             return sum(ca.if_else(k == i, v, 0.0) for i, v in enumerate(values))
 
         chi, y_e, s = pick(chis), pick(errs), pick(along)
-        y_int_next = y_int + dt * Delta * y_e / (Delta**2 + (y_e + kappa * y_int) ** 2) if kappa > 0 else y_int
+        y_int_next = self._integrate(y_int, y_e, dt)
         switch = ca.logic_and(pick(done), k < len(elements) - 1)
         k_next = ca.if_else(switch, k + 1, k)
-        y_int_next = ca.if_else(switch, 0.0, y_int_next)
+        turns = [np.cos(el["turn"]) if el["kind"] == "arc" else 1.0 for el in elements]
+        # the path course turns along the arc: project once, when the arc ends
+        y_int_next = self._integral_at_switch(switch, y_int_next, pick([float(v) for v in turns]))
         return {"memory": ca.vertcat(k_next, y_int_next), "chi_ref": chi, "cross_track": y_e, "along_track": s,
                 "segment": pick([float(v) for v in legs]), "y_int": y_int}
 

@@ -362,7 +362,7 @@ class MPCLaw:
 
 def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60, q_r: float | None = None,
                    r_u: float | None = None) -> MPCAutopilot:
-    """An MPC with the design's model, limits and reference model: horizon ``6 pi / wn_ref`` (three
+    """An MPC (heading control; a course-mode design is refused) with the design's model, limits and reference model: horizon ``6 pi / wn_ref`` (three
     periods of the reference model's natural frequency) in ``steps`` steps (the period rounded to a
     multiple of the loop period; on a course-unstable ship (``T < 0``) at most ``|T| / 10``, the
     horizon then shorter), re-planned ten times per period; weights: course error 1/(1 deg)^2, yaw
@@ -381,6 +381,13 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
         Replace the yaw-rate and steering-rate weights.
     """
     s = design.settings
+    if s.mode == "course":
+        from ..errors import InputError
+
+        raise InputError("the MPC is for heading control (mode 'heading'): its prediction model is the Nomoto "
+                         "heading model, and the course over ground adds the drift angle of a turn, which it does "
+                         "not predict (in course mode the KVLCC2's 60 deg change overshot 22-27 % and did not "
+                         "settle); use the PID/LQR law for course control")
     horizon_time = horizon_time or 6 * np.pi / s.wn_ref
     period = horizon_time / steps
     nom = design.nomoto

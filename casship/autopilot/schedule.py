@@ -26,15 +26,34 @@ __all__ = ["ScheduledAutopilot", "default_schedule"]
 SCHEDULE_FRACTIONS = (0.4, 0.55, 0.7, 0.85, 1.0)
 
 
-def default_schedule(speed: float) -> tuple:
-    """The default design speeds: :data:`SCHEDULE_FRACTIONS` of the approach ``speed`` [m/s].
+def default_schedule(speed: float, operating: float | None = None) -> tuple:
+    """The default design speeds: :data:`SCHEDULE_FRACTIONS` of the approach ``speed`` [m/s], extended
+    to the ``operating`` speed where it lies outside them: above the approach speed in steps of 15 %
+    of it up to the operating speed, below 40 % by the operating speed itself, so that the schedule
+    covers every speed the ship sails at between its slowest and its fastest (beyond its designs the
+    scheduled law only holds the nearest design).
 
     Parameters
     ----------
     speed : float
         Approach speed [m/s].
+    operating : float, optional
+        The speed the design is for [m/s].
+
+    Examples
+    --------
+    >>> default_schedule(10.0, 12.5)
+    (4.0, 5.5, 7.0, 8.5, 10.0, 11.5, 12.5)
     """
-    return tuple(float(f * speed) for f in SCHEDULE_FRACTIONS)
+    speeds = [float(f * speed) for f in SCHEDULE_FRACTIONS]
+    if operating is not None and operating > speeds[-1] * (1 + 1e-9):
+        step = (SCHEDULE_FRACTIONS[-1] - SCHEDULE_FRACTIONS[-2]) * speed
+        while speeds[-1] + step < operating * (1 - 1e-9) - 0.25 * step:
+            speeds.append(round(speeds[-1] + step, 12))
+        speeds.append(float(operating))
+    elif operating is not None and operating < speeds[0] * (1 - 1e-9):
+        speeds.insert(0, float(operating))
+    return tuple(speeds)
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from .closed_loop import ClosedLoop
 from .components import ClosedLoopResult, LoopEstimator, Sensors
 from .defaults import AutopilotSettings, derive_settings
 from .designs import lqr_design, pid_pole_placement
-from .estimation import WaveYaw, linear_estimator, course_ekf, course_prior, heading_kf, heading_observer, heading_prior
+from .estimation import WaveYaw, linear_estimator, settings_wave, course_ekf, course_prior, heading_kf, heading_observer, heading_prior
 from .law import Actuator, Autopilot, PIDGains
 from .nomoto import Nomoto, nomoto_from_linear
 from .performance import CRITERIA, course_change_metrics, course_scenario, performance_report
@@ -136,7 +136,7 @@ class Design:
 
     def closed_loop_system(self, *, plant: SteeringPlant | None = None, environment: Mapping | None = None,
                            estimator="ekf", sensors: Sensors | None = None, wave: WaveYaw | None = None,
-                           wave_filter: bool = False, guidance=None, mode: str | None = None,
+                           wave_filter: bool | None = None, guidance=None, mode: str | None = None,
                            rate: str | None = None, controller=None) -> ClosedLoop:
         """The :class:`ClosedLoop` of this design.
 
@@ -152,8 +152,9 @@ class Design:
             Default: from the settings.
         wave : WaveYaw, optional
             First-order wave yaw on the measured heading and rate.
-        wave_filter : bool
-            Put the wave model into the heading observer (Fossen's wave filter).
+        wave_filter : bool, optional
+            Put the wave model into the heading observer (Fossen's wave filter): ``wave``, else the
+            sea state of the settings (``wave_w0``, ``wave_std``). Default: the settings' ``wave_filter``.
         guidance : LOSGuidance, optional
             Path following: the course command comes from the guidance.
         mode, rate : str, optional
@@ -168,9 +169,13 @@ class Design:
         pl = plant or self.plant
         if environment:
             pl = pl.replace(inputs=dict(environment))
+        if wave_filter is None:
+            wave_filter = s.wave_filter
         if estimator == "ekf":
-            estimator = self.estimator("course" if mode == "course" else "heading",
-                                       wave=wave if wave_filter else None, x0=pl.x0)
+            model_wave = (wave if wave is not None else settings_wave(s)) if wave_filter else None
+            if wave_filter and model_wave is None:
+                raise ValueError("wave_filter needs a wave model: give wave, or design with wave_w0 and wave_std")
+            estimator = self.estimator("course" if mode == "course" else "heading", wave=model_wave, x0=pl.x0)
         law = self.autopilot
         if isinstance(controller, (control.StateSpace, control.TransferFunction)):
             law = self.linear_controller(controller)
@@ -343,24 +348,19 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
 
     if nomoto is not None:
         raise ValueError("a gain schedule designs on each speed's own linearisation; do not give nomoto")
-    point = design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
     vessel = model.vessel
+    if speed is None:
+        point = design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
+    else:
+        point = _schedule_point(model, float(speed), p=p, steer=steer, inputs=inputs, settings=settings)
     approach = vessel.U0 if vessel is not None and vessel.U0 else point.settings.speed
-    speeds = default_schedule(max(approach, point.settings.speed)) \
+    speeds = default_schedule(approach, point.settings.speed) \
         if isinstance(schedule, str) and schedule == "default" else schedule
     try:
         speeds = sorted(float(v) for v in speeds)
     except (TypeError, ValueError):
         raise ValueError(f"schedule must be a sequence of speeds [m/s] or 'default', got {schedule!r}") from None
-    designs = []
-    for v in speeds:
-        try:
-            designs.append(design_autopilot(model, v, p=p, steer=steer, inputs=inputs, **settings))
-        except ValueError as exc:
-            from ..errors import InputError
-
-            raise InputError(f"schedule speed {v:.4g} m/s: {exc}") from exc
-    designs = tuple(designs)
+    designs = tuple(_schedule_point(model, v, p=p, steer=steer, inputs=inputs, settings=settings) for v in speeds)
     law = ScheduledAutopilot(tuple(speeds), tuple(d.autopilot for d in designs))
     s0 = point.settings
     here = law.at(s0.speed)
@@ -374,6 +374,26 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
     controller = here.gains.controller(steer=point.plant.steer)
     return Design(point.plant, point.linearization, point.nomoto, here.gains, controller,
                   L, closed, margins(L), law, point.actuator, s, designs)
+
+
+def _schedule_point(model, speed, *, p, steer, inputs, settings) -> Design:
+    """The point design of a schedule at ``speed``; a speed where the model is not valid, or where no
+    design exists, is refused naming the speed and the model's range."""
+    from ..errors import InputError
+
+    limit = model.limits.get("u")
+    if not (np.isfinite(speed) and speed > 0):
+        raise InputError(f"schedule speed {speed:g} m/s must be positive and finite")
+    if limit is not None and not (limit.lower <= speed <= limit.upper):
+        raise InputError(f"schedule speed {speed:.4g} m/s is outside the speed range of model {model.name!r}, "
+                         f"u in [{limit.lower:.4g}, {limit.upper:.4g}] m/s ({limit.why})")
+    try:
+        return design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
+    except (ValueError, ArithmeticError) as err:
+        rng = (f"u in [{limit.lower:.4g}, {limit.upper:.4g}] m/s" if limit is not None else
+               "its straight run trimmed with steering to spare")
+        raise InputError(f"schedule speed {speed:.4g} m/s: {err}; no autopilot design for model {model.name!r} "
+                         f"there (the model is valid for {rng})") from err
 
 
 def simulate_autopilot(design: Design, command, t_end: float, *, step_times=(0.0,), seed=0, stepwise: bool = False,

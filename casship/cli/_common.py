@@ -16,6 +16,7 @@ from ..errors import InputError
 
 __all__ = ["Parser", "UsageError", "HelpFormatter", "add_model_option", "require", "load_model", "add_overwrite_option",
            "add_limits_option", "check_ship", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
+           "add_record_options", "read_records", "check_angle_columns", "RECORD_PRESETS",
            "check_input_files", "check_outputs", "write_output", "print_json", "refuse_unused"]
 
 
@@ -283,6 +284,153 @@ def add_limits_option(parser: argparse.ArgumentParser) -> None:
 
 
 # -- records ----------------------------------------------------------------------------------------------
+#: Column presets of log formats (``--preset``): time column, columns with units, geodetic columns.
+RECORD_PRESETS = {
+    "usv-gnss": {
+        "doc": "USV GNSS logs (time [s], lat/lon [deg]): lat/lon in rad and local x_n, y_n [m]; "
+               "the log's own speed [kn] and heading [deg] kept as log_speed, log_heading for comparison",
+        "time": "time:s",
+        "columns": {"lat": "lat:deg", "lon": "lon:deg", "log_speed": "speed:kn", "log_heading": "heading:deg"},
+        "latlon": ("lat", "lon"),
+    },
+}
+
+
+def add_record_options(parser: argparse.ArgumentParser, what: str = "record") -> None:
+    """The record options every command that reads records takes: ``--preset``, ``--columns``, ``--time``,
+    ``--latlon`` (one vocabulary for ``filter``, ``identify`` and ``simulate``; see :func:`read_records`)."""
+    parser.add_argument("--preset", default=None, choices=sorted(RECORD_PRESETS),
+                        help=f"column preset of a log format for the {what} (see 'casship filter --list')")
+    parser.add_argument("--columns", default=None,
+                        help="NEW=SOURCE[:UNIT],... CSV columns to read and convert to SI (e.g. psi=heading:deg); "
+                             "default: all columns as they are")
+    parser.add_argument("--time", default=None, help="CSV time column and unit (default t:s, or the preset's)")
+    parser.add_argument("--latlon", default=None, help="LAT,LON: geodetic columns (rad after conversion) that "
+                                                       "also give local x_n, y_n [m]")
+
+
+def read_records(args, paths, model=None, *, wrap_angles: bool = True) -> list:
+    """The records of a command, read the one way (:func:`add_record_options`).
+
+    Without record options a file is read by :func:`casship.io.read_record` (CSV, MARIN, HSVA, NMEA);
+    with them as a CSV converted to SI (:func:`casship.io.read_csv`). Either way the model's angle
+    columns are checked for degrees on the raw column (:func:`check_angle_columns`), before any
+    wrapping, and then (``wrap_angles``) wrapped to (-pi, pi].
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        With ``preset``, ``columns``, ``time``, ``latlon`` (absent attributes count as not given).
+    paths : sequence of str or Path
+    model : Model, optional
+    wrap_angles : bool
+
+    Returns
+    -------
+    list of Dataset
+    """
+    from pathlib import Path
+
+    from ..io import read_csv
+
+    preset_name = getattr(args, "preset", None)
+    preset = RECORD_PRESETS[preset_name] if preset_name else {}
+    columns = dict(preset.get("columns", {}))
+    columns.update(parse_pairs(getattr(args, "columns", None), "--columns", numbers=False))
+    latlon_text = getattr(args, "latlon", None)
+    latlon = tuple(parse_items(latlon_text, "--latlon")) if latlon_text else preset.get("latlon")
+    if latlon is not None and len(latlon) != 2:
+        raise InputError(f"--latlon: expected LAT,LON, got {latlon_text!r}")
+    time = getattr(args, "time", None) or preset.get("time")
+    out = []
+    for path in paths:
+        path = Path(path)
+        if not columns and time is None and latlon is None:
+            out.append(load_record(path, model, wrap_angles=wrap_angles))
+            continue
+        if not path.is_file():
+            raise FileNotFoundError(f"data file {path}: no such file")
+        data = read_csv(path, columns or None, time=time or "t:s", latlon=latlon)
+        data = _checked_and_wrapped(data, model, path, wrap_angles)
+        data.meta.setdefault("name", path.name)
+        out.append(data)
+    return out
+
+
+def _angle_names(model) -> list[str]:
+    names = [n for n, a in zip(model.output_names, model.angle_outputs) if a]
+    names += [n for n, a in zip(model.state_names, model.angle_states) if a and n not in names]
+    return names
+
+
+def check_angle_columns(data, model, source: str = "the record") -> None:
+    """Refuse an angle column of ``model`` (heading, course) that holds degrees, on the raw column.
+
+    A heading in radians lies within +-2 pi, or (a continuous heading of a record that turns more
+    than once) starts within +-2 pi and turns on steadily. Beyond 2 pi, the column is taken as degrees
+    when it starts beyond 2 pi, jumps by more than half a turn between samples other than by one
+    turn (a heading in degrees wrapping at 360), or turns back by more than half a turn (a zig-zag
+    in degrees); and, with a yaw-rate column ``r``, when its rate is ten times that of ``r``.
+
+    Parameters
+    ----------
+    data : Dataset
+    model : Model
+    source : str
+        The record, for the message.
+
+    Raises
+    ------
+    InputError
+        Naming the column, the record and the reason.
+    """
+    import numpy as np
+
+    if model is None:
+        return
+    for name in _angle_names(model):
+        if name not in data:
+            continue
+        v = np.asarray(data[name], dtype=float)
+        v = v[np.isfinite(v)]
+        if not v.size or np.abs(v).max() <= 2 * np.pi + 1e-9:
+            continue
+        why = None
+        d = np.diff(v)
+        jumps = np.abs(d) > np.pi
+        if abs(v[0]) > 2 * np.pi + 1e-9:
+            why = f"it starts at {v[0]:.4g}"
+        elif np.any(jumps & (np.abs(np.abs(d) - 2 * np.pi) > 0.5 * np.pi)):
+            k = int(np.flatnonzero(jumps & (np.abs(np.abs(d) - 2 * np.pi) > 0.5 * np.pi))[0])
+            why = f"it jumps from {v[k]:.4g} to {v[k + 1]:.4g} between two samples"
+        elif max(np.max(np.maximum.accumulate(v) - v), np.max(v - np.minimum.accumulate(v))) > np.pi and \
+                min(np.max(np.maximum.accumulate(v) - v), np.max(v - np.minimum.accumulate(v))) > np.pi:
+            why = "it turns back and forth by more than half a turn"
+        elif "r" in data and name == "psi" and data.t.size > 1:
+            r = np.asarray(data["r"], dtype=float)
+            rate = np.nanmean(np.abs(np.diff(np.asarray(data[name], dtype=float)) / np.diff(data.t)))
+            if np.isfinite(rate) and rate > 10 * max(np.nanmean(np.abs(r)), 1e-12):
+                why = f"it turns {rate:.3g} per second on average, the yaw rate column r only {np.nanmean(np.abs(r)):.3g} rad/s"
+        if why is None:         # a continuous heading of a record that turns more than once
+            continue
+        raise InputError(f"{source}: column {name!r} reaches {np.abs(v).max():.4g} and {why}: it looks like degrees; "
+                         f"angles are radians (give --columns {name}=SOURCE:deg, or convert the column)")
+
+
+def _checked_and_wrapped(data, model, path, wrap_angles: bool):
+    """``data`` with the model's angle columns checked for degrees (raw) and then wrapped."""
+    from ..angles import wrap
+
+    if model is None:
+        return data
+    check_angle_columns(data, model, str(path))
+    if wrap_angles:
+        angles = {n: wrap(data[n]) for n in _angle_names(model) if n in data}
+        if angles:
+            data = data.with_columns(**angles)
+    return data
+
+
 def load_record(path, model=None, *, wrap_angles: bool = False):
     """A record by :func:`casship.io.read_record` (CSV, MARIN, HSVA, NMEA), the one reader of the commands.
 
@@ -290,8 +438,9 @@ def load_record(path, model=None, *, wrap_angles: bool = False):
     ----------
     path : str or Path
     model : Model, optional
-        With ``wrap_angles``: the model whose angle outputs are wrapped to (-pi, pi] (trial files hold
-        a continuous heading; an estimator compares angles on the circle).
+        The model whose angle columns are checked for degrees on the raw column
+        (:func:`check_angle_columns`) and, with ``wrap_angles``, then wrapped to (-pi, pi] (trial
+        files hold a continuous heading; an estimator compares angles on the circle).
     wrap_angles : bool
         Wrap the model's angle outputs.
 
@@ -302,14 +451,9 @@ def load_record(path, model=None, *, wrap_angles: bool = False):
     """
     from pathlib import Path
 
-    from ..angles import wrap
     from ..io import read_record
 
-    data = read_record(path)
-    if wrap_angles and model is not None:
-        angles = {n: wrap(data[n]) for n, a in zip(model.output_names, model.angle_outputs) if a and n in data}
-        if angles:
-            data = data.with_columns(**angles)
+    data = _checked_and_wrapped(read_record(path), model, path, wrap_angles)
     data.meta.setdefault("name", Path(path).name)
     return data
 

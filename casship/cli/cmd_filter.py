@@ -3,17 +3,26 @@
 Examples::
 
     casship filter ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --model kvlcc2 --measured x,y,psi
+    casship identify ../shared/data/usv_fuzhou_gnss/zigzag_30_inter_xy.csv --preset usv-gnss \\
+        --model sog-cog-latlon --free alpha1,alpha2 --estimate-noise Q --out usv.json
     casship filter ../shared/data/usv_fuzhou_gnss/zigzag_30_inter_xy.csv --preset usv-gnss \\
-        --model sog-cog-latlon --smooth --out est.csv --plot est.png
+        --model sog-cog-latlon --params usv.json --smooth --out est.csv --plot est.png
     casship filter trial.csv --model nomoto1 --estimator ukf --measured psi --R psi=1e-4 --Q 1e-8 \\
         --columns psi=heading:deg,delta=rudder:deg --time time:s --out est.csv
 
-What is not given is taken from the record, and the output says where each value came from: the
-measurement variances ``R`` estimated from the record (:func:`casship.identify.noise_std`), the
-starting state by :func:`casship.prior_from_data` (first samples, speed and course from the track),
-``Q`` at :data:`DEFAULT_Q` per noise channel (a default, not a tuning: compare the NIS per
-measurement in the output with 1, or estimate ``Q`` with ``casship identify --estimate-noise Q``).
-A run that diverges (a non-finite estimate or log-likelihood) is an error.
+What is not given is taken from the record (or the ``--params`` fit file), and the output says
+where each value came from: the measurement variances ``R`` estimated from the record
+(:func:`casship.identify.noise_std`), the starting state by :func:`casship.prior_from_data` (first
+samples, speed and course from the track), ``Q`` at :data:`DEFAULT_Q` per noise channel (a default,
+not a tuning: compare the NIS per measurement in the output with 1). The first example says so
+itself: with the default ``Q`` the published KVLCC2 model's error over the measured 10/10 zig-zag is
+far larger than the process noise allows (NIS per measurement about 180, a warning that the
+estimates are not to be trusted; ``--Q w_u=1e-4,w_v=1e-4,w_r=1e-8`` brings it to about 2). The USV
+example shows the remedy: without ``--params`` its NIS per measurement is about 1400 (the default ``Q`` is far too
+small for a small craft's manoeuvres; the output says the estimates are not to be trusted);
+``identify --estimate-noise Q`` on the same log (the same record options) estimates ``Q`` (R stays
+at the record's estimate, as here), and the filter with that fit file has a NIS per measurement
+near 1. A run that diverges (a non-finite estimate or log-likelihood) is an error.
 
 Estimators are looked up by name in :data:`casship.estimators.ESTIMATORS` (``kf``, ``ekf``,
 ``ukf``, ``enkf``, ``kalman-bucy``, ``mhe``, and any that other modules register there).
@@ -23,21 +32,15 @@ from __future__ import annotations
 import warnings
 
 from ._vocabulary import add_deprecated_alias
-from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_outputs, load_model,
-                      load_record, parse_items, parse_pairs, positive, print_json, require, seed, write_output)
+from ._common import (RECORD_PRESETS, add_limits_option, add_model_option, add_overwrite_option, add_record_options,
+                      check_outputs, load_model, parse_items, parse_pairs, positive, print_json, read_records, require,
+                      seed, write_output)
 
 #: Variance of each process-noise channel when ``--Q`` is not given (in the channel's units squared).
 DEFAULT_Q = 1e-8
 
-PRESETS = {
-    "usv-gnss": {
-        "doc": "USV GNSS logs (time [s], lat/lon [deg]): lat/lon in rad and local x_n, y_n [m]; "
-               "the log's own speed [kn] and heading [deg] kept as log_speed, log_heading for comparison",
-        "time": "time:s",
-        "columns": {"lat": "lat:deg", "lon": "lon:deg", "log_speed": "speed:kn", "log_heading": "heading:deg"},
-        "latlon": ("lat", "lon"),
-    },
-}
+#: The column presets of ``--preset`` (shared by every command that reads records).
+PRESETS = RECORD_PRESETS
 
 #: One-line description (the command list of ``casship --help``).
 HELP = "run a state estimator (and smoother) over a record"
@@ -56,13 +59,10 @@ def register(sub) -> None:
     p.add_argument("--list", action="store_true", help="list the estimators and presets and exit")
     p.add_argument("--smooth", action="store_true",
                    help="smooth instead of filter (est.smooth: RTS for the Kalman filters, full information for mhe)")
-    p.add_argument("--preset", default=None, choices=sorted(PRESETS), help="column preset of a log format")
-    p.add_argument("--columns", default=None,
-                   help="NEW=SOURCE[:UNIT],... CSV columns to read and convert to SI (e.g. psi=heading:deg); "
-                        "default: all columns as they are")
-    p.add_argument("--time", default=None, help="CSV time column and unit (default t:s, or the preset's)")
-    p.add_argument("--latlon", default=None, help="LAT,LON: geodetic columns (rad after conversion) that "
-                                                  "also give local x_n, y_n [m]")
+    add_record_options(p)
+    p.add_argument("--params", default=None,
+                   help="fit file (casship identify): its model variant and parameters, and its noise variances Q "
+                        "and R where --Q / --R are not given")
     p.add_argument("--measured", default=None, help="measured outputs a,b (default: outputs present in the data)")
     p.add_argument("--R", default=None, help="measurement variances: scalar or name=value,... (SI units); "
                                              "default: estimated from the record")
@@ -167,25 +167,9 @@ def run(args) -> int:
 
 def load_data(args, model=None):
     """The record as a Dataset in SI units (any format of :func:`casship.io.read_record`; for CSV also
-    the preset, ``--columns``, ``--time``, ``--latlon``); the model's angle outputs wrapped."""
-    from pathlib import Path
-
-    from ..errors import InputError
-    from ..io import read_csv
-
-    path = Path(args.data)
-    preset = PRESETS[args.preset] if args.preset else {}
-    columns = dict(preset.get("columns", {}))
-    columns.update(parse_pairs(args.columns, "--columns", numbers=False))
-    latlon = tuple(parse_items(args.latlon, "--latlon")) if args.latlon else preset.get("latlon")
-    if latlon is not None and len(latlon) != 2:
-        raise InputError(f"--latlon: expected LAT,LON, got {args.latlon!r}")
-    time = args.time or preset.get("time")
-    if not columns and time is None and latlon is None:
-        return load_record(path, model, wrap_angles=True)
-    if not path.is_file():
-        raise FileNotFoundError(f"data file {path}: no such file")
-    return read_csv(path, columns or None, time=time or "t:s", latlon=latlon)
+    the preset, ``--columns``, ``--time``, ``--latlon``: :func:`casship.cli._common.read_records`); the
+    model's angle columns checked for degrees and wrapped."""
+    return read_records(args, [args.data], model)[0]
 
 
 def filter_file(args, model=None):
@@ -197,6 +181,16 @@ def filter_file(args, model=None):
     from ..estimators import ESTIMATORS, noise_from_data, prior_from_data
     from ..validity import check_inputs, check_states, check_step
 
+    params = None
+    fit_noise = {}
+    if getattr(args, "params", None):
+        from ..identify import read_params
+        from ..identify.params_file import load_fit_json
+        from ._common import check_input_files
+
+        check_input_files({"--params": args.params})
+        model, params = read_params(args.params, args.model)     # the fitted variant, checked against the file
+        fit_noise = load_fit_json(args.params).get("noise") or {}
     model = model if model is not None else load_model(args.model)
     data = load_data(args, model)
     if args.measured is not None:
@@ -233,16 +227,24 @@ def filter_file(args, model=None):
             raise InputError(f"--R-std: a standard deviation must be positive, got {bad}")
         R = {k: v**2 for k, v in std.items()} if isinstance(std, dict) else std**2
         sources["R"] = "given (--R-std)"
+    if R is None and isinstance(fit_noise.get("R"), dict) and set(meas) <= set(fit_noise["R"]):
+        R = {n: float(fit_noise["R"][n]) for n in meas}
+        sources["R"] = f"from the fit file {args.params}"
     if R is None:
         R, how = noise_from_data(model, data, meas)
         sources["R"] = "estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})"
                                                                   for n, v in R.items())
     Q = _variances(args.Q, model.noise_names, "--Q")
     sources["Q"] = "given (--Q)"
+    if Q is None and isinstance(fit_noise.get("Q"), dict) and fit_noise["Q"] and set(fit_noise["Q"]) <= set(model.noise_names):
+        Q = {n: float(fit_noise["Q"].get(n, DEFAULT_Q)) for n in model.noise_names}
+        sources["Q"] = f"from the fit file {args.params}" + (f" ({DEFAULT_Q:g} for the channels it did not estimate)"
+                                                            if set(fit_noise["Q"]) != set(model.noise_names) else "")
     if Q is None:
         Q = DEFAULT_Q
         sources["Q"] = (f"default {DEFAULT_Q:g} per channel {list(model.noise_names)} (not tuned: compare the NIS "
-                        "per measurement with 1, or estimate Q with casship identify --estimate-noise Q)") \
+                        "per measurement with 1, or estimate Q with casship identify --estimate-noise Q and give "
+                        "the fit file here with --params)") \
             if model.nw else "none (no noise channels)"
     options = {k: _option_value(v) for k, v in parse_pairs(args.options, "--options", numbers=False).items()}
     est = ESTIMATORS[args.estimator](dm, Q, R, measured=meas, options=options)
@@ -263,10 +265,11 @@ def filter_file(args, model=None):
         check_states(model, prior.mean, what="starting state (--x0 or the record)")
         # the record's own step; a longer interval (a gap) is the estimator's to refuse or bridge
         # (option on_gap), checked at the state where it happens
-        check_step(model, float(np.median(data.dt)), prior.mean, U[0] if model.nu else np.zeros(0), model.params(),
+        check_step(model, float(np.median(data.dt)), prior.mean, U[0] if model.nu else np.zeros(0),
+                   model.params() if params is None else params,
                    args.method, where=" (the median step of the record)")
     _check_start(est, prior, data)
-    result = (est.smooth if args.smooth else est.filter)(data, prior, seed=args.seed)
+    result = (est.smooth if args.smooth else est.filter)(data, prior, params, seed=args.seed)
     _check_finite(result)
     n_meas = result.n_measured.sum()
     nis = float(np.nansum(result.nis) / n_meas) if n_meas else float("nan")

@@ -3,25 +3,46 @@
 Examples::
 
     casship identify run1.csv run2.csv --model nomoto1 --free K,T --R psi=1e-4 --out fit.json
+    casship identify log.csv --model nomoto1 --free K,T --columns psi=heading:deg,delta=rudder:deg --time time:s
+    casship identify ../shared/data/usv_fuzhou_gnss/zigzag_30_inter_xy.csv --preset usv-gnss \\
+        --model sog-cog-latlon --free alpha1,alpha2 --estimate-noise Q --out usv.json
     casship identify A.dat B.dat C.dat --model kvlcc2 --objective oe --free N_r_dash,Y_v_dash,bias[n] \\
         --share bias[n]=record --prior-std N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
         --identifiability --out fit.json --plot fit.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
-units, radians) or MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
-to the MMG convention). ``--objective mle`` (default) maximises the likelihood through an EKF;
+units, radians), MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
+to the MMG convention), HSVA or NMEA logs; the record options (``--preset``, ``--columns``,
+``--time``, ``--latlon``) are those of ``casship filter`` and ``simulate``, and a heading logged in
+degrees is refused. ``--objective mle`` (default) maximises the likelihood through an EKF;
 ``--objective oe`` minimises the simulated output error. Every option maps onto the Python API
 (:class:`casship.OutputErrorProblem`, :class:`casship.MLEProblem`).
+
+Every fit is replayed on its records against the model it started from (the model's published
+values, or ``--params``), and with several records left-one-out (refit without each record, replay
+it): the verdict (``better``, ``no better``, ``worse``, ``stalled``, ``not judged``), the heading
+RMSE per record and the model-discrepancy term of the bands are printed and written in the fit file.
+Exit codes: 0 a fit that is not worse than its start; 3 a fit worse than its start or stalled (the
+file is written and says so; ``--accept-worse`` exits 0); 2 a usage or input error. The USV example
+(the remedy ``casship filter`` suggests) ends ``not judged`` (its model has no heading) with exit
+code 0; the first two end ``better`` on records of a Nomoto ship. The kvlcc2 example shows the
+options on three records of your own: its verdict says whether the fit beats the published constants
+(on the shared MARIN 10/10 zig-zag a yaw-only free set with the surge channel in the cost does not:
+verdict ``worse``, exit code 3), and the ``simulate`` line replays such a file with its bands.
 """
 from __future__ import annotations
 
 import warnings
 
 from ._vocabulary import add_deprecated_alias
-from ._common import (check_input_files, check_outputs, count, load_record, number, parse_items, parse_pairs, positive,
-                      print_json, refuse_unused, write_output)
+from ._common import (add_record_options, check_input_files, check_outputs, count, number, parse_items, parse_pairs,
+                      positive, print_json, read_records, refuse_unused, write_output)
 from .cmd_filter import DEFAULT_Q
+
+#: Exit code for a fit worse than its start or stalled (:data:`casship.identify.verdict.EXIT_WORSE`; a literal
+#: here so that ``--help`` loads no numerics).
+EXIT_WORSE = 3
 
 
 #: One-line description (the command list of ``casship --help``).
@@ -31,9 +52,12 @@ HELP = "fit model parameters to records (maximum likelihood or output error)"
 def register(sub) -> None:
     p = sub.add_parser("identify", help=HELP,
                        description="Estimate named parameters of a registered model from one or more records "
-                                   "(one joint fit), with a prior, standard errors, correlations and warnings.")
-    p.add_argument("data", nargs="+", help="records: CSV with a header row, or MARIN .dat")
+                                   "(one joint fit), with a prior, standard errors, correlations and warnings.\n\n"
+                                   + __doc__.split("\n\n", 1)[1])
+    p.add_argument("data", nargs="+", help="records: CSV with a header row, MARIN .dat, NMEA log (see "
+                                            "casship.io.read_record); the record options below apply to each")
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
+    add_record_options(p, "records")
     p.add_argument("--free", required=True,
                    help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
     p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
@@ -55,7 +79,9 @@ def register(sub) -> None:
     p.add_argument("--Q", default=None, help=f"process-noise variances: scalar or name=value,... (mle; default "
                                              f"{DEFAULT_Q:g})")
     p.add_argument("--estimate-noise", dest="estimate_noise", default=None,
-                   help="noise variances to estimate: Q, R or Q,R (mle; R is estimated when --R is absent)")
+                   help="noise variances to estimate: Q, R or Q,R (mle). Without this option R is estimated when "
+                        "--R is absent; with --estimate-noise Q alone, R stays at --R or at the record's own "
+                        "estimate (as casship filter takes it)")
     p.add_argument("--sigma", default=None,
                    help="output standard deviations name=value,... (oe weights; default: estimated from the records)")
     p.add_argument("--guess", default=None, help="starting values name=value,... (default: model values)")
@@ -69,6 +95,12 @@ def register(sub) -> None:
                    help="print the Fisher-information analysis of the free set at the guess before fitting")
     p.add_argument("--plot", default=None, help="PNG of measured outputs vs the fitted free-run simulation")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of a table")
+    p.add_argument("--no-loo", dest="no_loo", action="store_true",
+                   help="judge the fit on its records only (no left-one-out refits: the model discrepancy is then "
+                        "the in-sample default)")
+    p.add_argument("--accept-worse", dest="accept_worse", action="store_true",
+                   help=f"exit 0 although the verdict is worse than the start or stalled (default: exit code "
+                        f"{EXIT_WORSE}; the fit file says the verdict either way)")
     p.set_defaults(func=run, parser=p)
 
 
@@ -122,7 +154,7 @@ def _problem(args, model, records, free, measured):
     noise = {}
     if "R" in estimate:
         noise["R"] = True
-    elif rest:
+    elif rest and not estimate:     # --estimate-noise Q alone keeps R at the record's values, as filter does
         noise["R"] = rest
     if "Q" in estimate:
         noise["Q"] = True
@@ -150,8 +182,8 @@ def run(args) -> int:
     check_input_files({"--params": args.params})
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
-    stage("reading the records", 1, 4)
-    records = [load_record(p, model, wrap_angles=True).decimate(args.decimate) for p in args.data]
+    stage("reading the records", 1, 5)
+    records = [d.decimate(args.decimate) for d in read_records(args, args.data, model)]
     free = parse_items(args.free, "--free")
     if not free:
         raise InputError("--free: give at least one quantity")
@@ -159,7 +191,7 @@ def run(args) -> int:
                 else [n for n in model.output_names if all(n in d for d in records)])
     if not measured:
         raise InputError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
-    stage("building the problem", 2, 4)
+    stage("building the problem", 2, 5)
     prob = _problem(args, model, records, free, measured)
     guess = parse_pairs(args.guess, "--guess")
     if args.identifiability:
@@ -169,12 +201,16 @@ def run(args) -> int:
               f"{idf.propose()}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        stage("fitting", 3, 4)
-        fit = prob.solve(guess=guess, max_iter=args.max_iter)
+        stage("fitting", 3, 5)
+        fit = prob.solve(guess=guess, max_iter=args.max_iter, verdict=None)
+        # replayed on its records against the starting model, and left-one-out when there are several
+        stage("judging the fit: replays against the start" + ("" if args.no_loo or len(records) < 2 else
+                                                              ", left-one-out refits"), 4, 5)
+        prob.judge(fit, loo=not args.no_loo, guess=guess, solve={"max_iter": args.max_iter})
     for w in caught:            # the fit's own warnings are printed once, with the fit
-        if not any(str(w.message).endswith(text) for text in fit.warnings):
+        if not any(str(w.message).endswith(text) for text in fit.warnings) and "verdict" not in str(w.message):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    stage("writing", 4, 4)
+    stage("writing", 5, 5)
     write_output(args.out, fit.to_json, option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
         write_output(args.plot, fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
@@ -182,5 +218,20 @@ def run(args) -> int:
         print_json(fit.to_dict())
     else:
         print(fit.summary())
-        print(f"fit written to {args.out}")
-    return 0
+        print(f"fit written to {args.out}" + (f" (verdict: {fit.verdict['verdict']})" if fit.worse else ""))
+    return _exit_code(fit, args.accept_worse)
+
+
+def _exit_code(fit, accept: bool) -> int:
+    """0, or :data:`~casship.identify.verdict.EXIT_WORSE` for a fit worse than its start or stalled."""
+    import sys
+
+    if not fit.worse:
+        return 0
+    word = fit.verdict["verdict"]
+    if accept:
+        print(f"casship identify: verdict {word} accepted (--accept-worse): {fit.verdict['reason']}", file=sys.stderr)
+        return 0
+    print(f"casship identify: verdict {word}: {fit.verdict['reason']}; the fit file records it (exit code "
+          f"{EXIT_WORSE}; --accept-worse to exit 0)", file=sys.stderr)
+    return EXIT_WORSE

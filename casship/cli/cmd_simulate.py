@@ -5,13 +5,21 @@ Examples::
     casship simulate --model kvlcc2 --maneuver turning --rudder-deg 35 --speed 7.97 --json
     casship simulate --model kvlcc2-l7 --maneuver zigzag --rudder-deg 20 --first port --csv zz.csv --plot zz.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_10_m.dat --json
+    casship simulate --model nomoto1 --inputs trial.csv --columns psi=heading:deg,delta=rudder:deg --time time:s
+
+A replay (``--inputs``) reads its record as ``filter`` and ``identify`` do (``--preset``, ``--columns``,
+``--time``, ``--latlon``; a heading in degrees is refused). With ``--params`` a fit file, the replay
+carries the file's bands: the parameter band (its covariance) and, when the file carries a model
+discrepancy, the predictive band (the same covariance plus a heading variance growing as ``q t``);
+each band's coverage of the measured heading is printed, and one far below its nominal level is
+flagged. A fit file whose verdict is ``worse`` or ``stalled`` is replayed, with a warning.
 """
 from __future__ import annotations
 
 from ._vocabulary import add_deprecated_alias
-from ._common import (add_limits_option, add_model_option, add_overwrite_option, check_input_files, check_outputs,
-                      check_ship, level, load_model, load_record, print_json, refuse_unused, require, seed, whole,
-                      write_output)
+from ._common import (add_limits_option, add_model_option, add_overwrite_option, add_record_options, check_input_files,
+                      check_outputs, check_ship, level, load_model, print_json, read_records, refuse_unused, require,
+                      seed, whole, write_output)
 
 _METRIC_ORDER = ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m", "steady_speed_mps",
                  "time_to_90_s", "time_to_180_s", "overshoot_1_deg", "overshoot_1_pct", "overshoot_2_deg",
@@ -57,6 +65,7 @@ def register(sub) -> None:
     p.add_argument("--inputs", default=None,
                    help="replay the measured inputs of a record (CSV, MARIN .dat, NMEA; see casship.io.read_record) "
                         "from its measured initial state")
+    add_record_options(p, "--inputs record")
     p.add_argument("--samples", type=whole, default=40,
                    help="parameter draws for the index intervals when the --params file carries a covariance "
                         "(0: none)")
@@ -86,6 +95,9 @@ def run(args) -> int:
                   "--seed": args.seed is not None}
         refuse_unused(args.parser, unused, "--inputs replays the record's own inputs, start and time stamps")
     else:
+        refuse_unused(args.parser, {"--preset": args.preset is not None, "--columns": args.columns is not None,
+                                    "--time": args.time is not None, "--latlon": args.latlon is not None},
+                      "the record options read the --inputs record")
         refuse_unused(args.parser, {"--first": args.first is not None and args.maneuver != "zigzag",
                                     "--heading-deg": args.heading_deg is not None and args.maneuver != "zigzag",
                                     "--hold": args.hold is not None and args.maneuver not in ("pullout", "spiral", "random"),
@@ -94,13 +106,14 @@ def run(args) -> int:
                       "spiral, random; --seed: random, or the parameter draws of --params)")
     check_input_files({"--params": args.params, "--inputs": args.inputs})
     stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
-    unc = None
+    unc, verdict_note = None, ""
     if args.params:
         from ..identify import read_params
 
         # the fitted variant, checked against the file, and the file's parameter covariance
         model, p, unc = read_params(args.params, args.model, uncertainty=True)
         unc = None if args.no_bands else unc
+        verdict_note = _verdict_note(args.params)
     else:
         model = load_model(args.model)
         p = model.params()
@@ -108,13 +121,15 @@ def run(args) -> int:
         check_ship(model, args.model, "a manoeuvre")
     L = model.vessel.L_pp if model.vessel is not None else None
     out = {"model": args.model, "L_pp_m": L}
-    measured, notes = None, []
+    if verdict_note:
+        out["params_warning"] = verdict_note[len("warning: "):]
+    measured, notes, late = None, [], []
     check = not args.allow_out_of_range
     if args.inputs:
         from ..identify import replay_file
         from ..validation import replay
 
-        measured = load_record(args.inputs)
+        measured = read_records(args, [args.inputs], model, wrap_angles=False)[0]
         options = dict(method=args.method, check_limits=check, level=args.level, samples=args.samples)
         res = (replay_file(args.params, measured, model, uncertainty=not args.no_bands, **options) if args.params
                else replay(model, measured, p, **options))
@@ -124,6 +139,9 @@ def run(args) -> int:
                     "metrics": res.metrics, "measured_metrics": res.measured_metrics,
                     "metric_notes": res.metric_notes})
         notes = res.start_notes()
+        late = [f"warning: {n}" for n in res.coverage_notes()]
+        if late:
+            out["band_warnings"] = [n[len("warning: "):] for n in late]
         if res.bands:
             out.update({"bands": res.band_summary(), "metric_intervals": res.metric_intervals,
                         "sampling": res.sampling})
@@ -160,8 +178,23 @@ def run(args) -> int:
     if args.json:
         print_json(out)
     else:
-        _print_text(out, notes)
+        _print_text(out, notes, late + ([verdict_note] if verdict_note else []))
     return 0
+
+
+def _verdict_note(path) -> str:
+    """A line for a fit file whose verdict says it is worse than its start (or stalled), else ''."""
+    import json
+    from pathlib import Path
+
+    try:
+        v = json.loads(Path(path).read_text()).get("verdict") or {}
+    except (OSError, ValueError, AttributeError):
+        return ""
+    word = v.get("verdict") if isinstance(v, dict) else None
+    if word in ("worse", "stalled"):
+        return f"warning: {path} holds a fit whose verdict is {word} ({v.get('reason', '')})"
+    return ""
 
 
 def _with_percent(metrics: dict, settings: dict) -> dict:
@@ -188,7 +221,7 @@ def _maneuver_intervals(simulate_with, model, p, unc, samples: int, seed: int, l
                                                              "level": level, "source": unc.source}}
 
 
-def _print_text(out, notes=()) -> None:
+def _print_text(out, notes=(), late=()) -> None:
     length = f" (L_pp = {out['L_pp_m']} m)" if out["L_pp_m"] is not None else ""
     print(f"model {out['model']}{length}, manoeuvre {out['maneuver']}")
     if "first_side" in out:
@@ -223,6 +256,8 @@ def _print_text(out, notes=()) -> None:
     if "spiral" in metrics:
         for row in metrics["spiral"]:
             print(f"  rudder {row['rudder_deg']:7.2f} deg  yaw rate {row['yaw_rate_deg_s']:8.4f} deg/s")
+    for note in late:
+        print(f"  {note}")
     for key in ("csv", "plot"):
         if key in out:
             print(f"{key} written to {out[key]}")

@@ -149,6 +149,14 @@ class InformationFold:
     def weights(self, n: int, sigma: Mapping[str, float], q: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Per-channel inverse standard deviations and the heading's per-sample gains.
 
+        Parameters
+        ----------
+        n : int
+            Steps of the record.
+        sigma : mapping channel -> standard deviation of one sample (SI, rad)
+        q : float
+            Heading model discrepancy [rad^2/s].
+
         Returns
         -------
         isig : (channels,) array
@@ -161,7 +169,17 @@ class InformationFold:
         return isig, np.vstack(discrepancy_gains(n, self.approach.dt, float(sigma["psi"]), q))
 
     def unpack(self, z):
-        """The symmetric information matrix ``(k, k)`` from an accumulator (numbers or symbols)."""
+        """The symmetric information matrix ``(k, k)`` from an accumulator (numbers or symbols).
+
+        Parameters
+        ----------
+        z : array_like or casadi.MX
+            The fold's accumulator (state, sensitivities, information, walk sensitivity).
+
+        Returns
+        -------
+        ndarray or casadi.MX
+        """
         k, off = self.k, self.nx + self.nx * self.k
         pos = np.zeros((k, k), dtype=int)
         t = 0
@@ -177,7 +195,19 @@ class InformationFold:
 
     # -- evaluation -----------------------------------------------------------------------------------
     def columns(self, U: np.ndarray, kc: np.ndarray) -> np.ndarray:
-        """The per-step input columns ``(nu + 3, n)`` of a record with inputs ``U`` ``(nu, n)``."""
+        """The per-step input columns ``(nu + 3, n)`` of a record.
+
+        Parameters
+        ----------
+        U : (nu, n) array
+            Inputs held over each step.
+        kc : (2, n) array
+            The heading's gains (:meth:`weights`).
+
+        Returns
+        -------
+        (nu + 3, n) array
+        """
         n = U.shape[1]
         return np.vstack([U, kc, np.ones((1, n))])
 
@@ -203,9 +233,24 @@ class InformationFold:
         return self.unpack(z)
 
     def symbolic(self, z0: ca.MX, C: ca.MX, p: ca.MX, isig: ca.MX) -> ca.MX:
-        """The information (symbolic) of a record: ``C`` ``(nu + 3, n)`` its step columns (:meth:`columns`),
-        ``z0``, ``p`` and ``isig`` symbols or numbers; chunk calls of the interpreted step fold, so that
-        the caller can differentiate and compile the whole."""
+        """The information (symbolic) of a record: chunk calls of the interpreted step fold, so that the
+        caller can differentiate and compile the whole.
+
+        Parameters
+        ----------
+        z0 : casadi.MX
+            The accumulator at the execute (:meth:`z0`).
+        C : casadi.MX (nu + 3, n)
+            The step columns (:meth:`columns`).
+        p : casadi.MX
+            The model's parameter vector.
+        isig : casadi.MX
+            The channels' inverse standard deviations.
+
+        Returns
+        -------
+        casadi.MX (k, k)
+        """
         n = C.shape[1]
         chunk = self.step.mapaccum("information_chunk_sym", CHUNK)
         pad = (-n) % CHUNK

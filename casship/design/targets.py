@@ -34,6 +34,11 @@ class TargetValue:
     gradient : (k,) array
         Ordered like the uncertain parameters.
     unit : str
+    error_paths : tuple of (n + 1,) arrays
+        Weights ``a`` of the target's first-order change ``a' e`` under a heading error ``e`` on the
+        design's grid, one per independent manoeuvre (see :meth:`floor`).
+    dt : float
+        Step of that grid [s].
     """
 
     name: str

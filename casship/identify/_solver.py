@@ -163,8 +163,16 @@ def trust_region(derivs: Callable, cost: Callable, z0, lb, ub, *, unit: Callable
                 continue
             rho = (f - ft) / pred if pred > 0 else -1.0
             if rho > 1e-4 or (pred <= 1e-15 * max(abs(f), 1.0) and ft <= f):
-                z = zt
-                f, g, H = derivs(z)
+                fn, gn, Hn = derivs(zt)
+                if not (np.isfinite(fn) and np.all(np.isfinite(gn)) and np.all(np.isfinite(Hn))):
+                    # a finite cost whose derivatives overflow: not a point to step from
+                    rejected += 1
+                    lam, nu = lam * nu, nu * 2
+                    if lam > 1e12:
+                        status, message = "nan", "the derivatives are not finite at every trial step from the last iterate"
+                        break
+                    continue
+                z, f, g, H = zt, fn, gn, Hn
                 lam, nu = lam * max(1 / 3, 1 - (2 * rho - 1) ** 3) if rho > 0 else lam, 2.0
                 rejected = 0
                 break

@@ -65,16 +65,33 @@ def _held_out_values(fit, problem, r: int) -> tuple[dict, dict]:
     return params, biases
 
 
-def _replay(model, data, params, biases, method):
-    from ..validation import replay
+def debiased(model, data, biases: dict):
+    """``data`` with a fit's per-record biases taken out, as a replay of the fit needs it.
 
+    Parameters
+    ----------
+    model : Model
+    data : Dataset
+    biases : dict
+        Channel -> bias the fit estimated for this record (inputs and outputs).
+
+    Returns
+    -------
+    Dataset
+    """
     cols = {}
     for ch, b in biases.items():
         if ch in model.input_names:
             cols[ch] = data[ch] + b            # the model is driven by the measured input plus its bias
         elif ch in data:
             cols[ch] = data[ch] - b            # the sensor reads the model output plus its bias
-    return replay(model, data.with_columns(**cols) if cols else data, model.params(params), method=method)
+    return data.with_columns(**cols) if cols else data
+
+
+def _replay(model, data, params, biases, method):
+    from ..validation import replay
+
+    return replay(model, debiased(model, data, biases), model.params(params), method=method)
 
 
 def _fold_rows(fold, problem, reference, method):

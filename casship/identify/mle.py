@@ -277,7 +277,7 @@ class MLEProblem(IdentificationProblem):
 
     def solve(self, guess: Mapping[str, float] | None = None, *, hessian: str = "fisher",
               information: str = "fisher", max_iter: int = 100, tol: float = 1e-8, show: bool | None = None,
-              options: Mapping | None = None) -> FitResult:
+              options: Mapping | None = None, verdict: str | None = "replay") -> FitResult:
         """Maximise the likelihood (or the posterior, with a prior) from ``guess``.
 
         Parameters
@@ -300,6 +300,9 @@ class MLEProblem(IdentificationProblem):
             ``False`` hides the progress bar.
         options : mapping, optional
             IPOPT options (``hessian="exact"`` or ``"limited-memory"``).
+        verdict : {"replay", "loo", None}
+            Replay the fit on its records against the starting model (``"replay"``), also left-one-out
+            (``"loo"``: one refit per record), or not (None); see :meth:`judge`.
 
         Returns
         -------
@@ -316,7 +319,7 @@ class MLEProblem(IdentificationProblem):
             fit = self._solve_ipopt(guess, hessian, max_iter, options)
         if information == "hessian":
             fit = self._observed(fit)
-        return fit
+        return self._verdict(fit, verdict, guess)
 
     def _solve_ipopt(self, guess, hessian, max_iter, options) -> FitResult:
         from ._ipopt import IPOPT_OK, ipopt_solve

@@ -219,7 +219,7 @@ class OutputErrorProblem(IdentificationProblem):
 
     # -- multiple shooting -------------------------------------------------------------------------
     def solve(self, guess: Mapping[str, float] | None = None, *, max_iter: int = 100, tol: float = 1e-8,
-              show: bool | None = None, options: Mapping | None = None) -> FitResult:
+              show: bool | None = None, options: Mapping | None = None, verdict: str | None = "replay") -> FitResult:
         """Minimise the weighted output error (plus the prior's cost).
 
         Single shooting uses bounded Gauss-Newton trust-region steps on the exact residual Jacobian
@@ -239,14 +239,19 @@ class OutputErrorProblem(IdentificationProblem):
             ``False`` hides the progress bar.
         options : mapping, optional
             IPOPT options (multiple shooting).
+        verdict : {"replay", "loo", None}
+            Replay the fit on its records against the starting model (``"replay"``), also left-one-out
+            (``"loo"``: one refit per record), or not (None); see :meth:`judge`.
 
         Returns
         -------
         FitResult
         """
         if self.shooting == "single":
-            return super().solve(guess, max_iter=max_iter, tol=tol, show=show)
-        return self._solve_multiple(guess, max_iter, options)
+            fit = super().solve(guess, max_iter=max_iter, tol=tol, show=show)
+        else:
+            fit = self._solve_multiple(guess, max_iter, options)
+        return self._verdict(fit, verdict, guess)
 
     def _solve_multiple(self, guess, max_iter, options) -> FitResult:
         from ._ipopt import ipopt_solve

@@ -17,12 +17,60 @@ beside the parameter-only one.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_params", "replay_file", "check_model", "ParameterUncertainty"]
+__all__ = ["read_params", "replay_file", "check_model", "ParameterUncertainty", "load_fit_json", "SYMMETRY_TOL",
+           "Q_MAX_DEG2_PER_S"]
+
+#: Upper bound of a fit file's model discrepancy [deg^2/s]: beyond it the heading's 95 % band spans a
+#: full turn (+-180 deg) within about 10 s, i.e. the file predicts nothing.
+Q_MAX_DEG2_PER_S = 1e3
+
+
+def _refuse_duplicate_keys(pairs):
+    """``object_pairs_hook`` of :func:`json.loads`: a key given twice in one object is refused, naming it."""
+    seen = {}
+    for key, value in pairs:
+        if key in seen:
+            raise ValueError(f"the key {key!r} is given more than once in one object")
+        seen[key] = value
+    return seen
+
+
+def load_fit_json(path) -> dict:
+    """The JSON object of a parameter or fit file: the one reader of such files.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    ValueError
+        A file that is not JSON, not an object with ``"params"``, a key given twice in one object
+        (JSON readers would silently keep the last), or ``params`` values that are not numbers.
+    """
+    path = Path(path)
+    try:
+        obj = json.loads(path.read_text(), object_pairs_hook=_refuse_duplicate_keys)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    if not isinstance(obj, dict) or not isinstance(obj.get("params"), dict):
+        raise ValueError(f'{path}: expected a JSON object with key "params": {{name: value}}')
+    bad = [k for k, v in obj["params"].items() if isinstance(v, bool) or not isinstance(v, (int, float))]
+    if bad:
+        raise ValueError(f"{path}: params {bad} are not numbers")
+    return obj
 
 
 @dataclass
@@ -67,10 +115,14 @@ class ParameterUncertainty:
 
     def __post_init__(self):
         self.psi_variance_rate = float(self.psi_variance_rate)
-        if not (np.isfinite(self.psi_variance_rate) and self.psi_variance_rate >= 0.0):
-            raise ValueError(f"ParameterUncertainty: psi_variance_rate must be finite and >= 0, "
-                             f"got {self.psi_variance_rate}")
+        q_max = float(np.radians(np.radians(Q_MAX_DEG2_PER_S)))
+        if not (np.isfinite(self.psi_variance_rate) and 0.0 <= self.psi_variance_rate <= q_max):
+            raise ValueError(f"ParameterUncertainty: psi_variance_rate must be finite, >= 0 and <= {q_max:.4g} rad^2/s "
+                             f"({Q_MAX_DEG2_PER_S:g} deg^2/s), got {self.psi_variance_rate}")
         self.names = [str(n) for n in self.names]
+        twice = sorted({n for n in self.names if self.names.count(n) > 1})
+        if twice:
+            raise ValueError(f"ParameterUncertainty: parameter name(s) {twice} given more than once")
         self.values = np.asarray(self.values, dtype=float).reshape(-1)
         if self.values.size != len(self.names):
             raise ValueError(f"ParameterUncertainty: {self.values.size} values for {len(self.names)} names")
@@ -115,7 +167,7 @@ class ParameterUncertainty:
                 "source": self.source, "info": dict(self.info)}
 
     @classmethod
-    def from_dict(cls, d, where: str = "the file") -> "ParameterUncertainty":
+    def from_dict(cls, d, where: str = "the file", *, key: str = "param_covariance") -> "ParameterUncertainty":
         """Read the form of :meth:`to_dict`.
 
         Parameters
@@ -124,30 +176,83 @@ class ParameterUncertainty:
             With ``names``, ``values``, ``matrix`` (and optionally ``source``, ``info``).
         where : str
             What holds it (for the messages).
+        key : str
+            The field of the file that holds it (for the messages).
 
         Returns
         -------
         ParameterUncertainty
+
+        Raises
+        ------
+        ValueError
+            Naming the field: missing or null names, values or matrix, a shape other than the names',
+            a name given twice, a matrix not symmetric beyond round-off (naming the entry) or not
+            positive semi-definite.
         """
+        field_ = f"{where}: {key}"
+        if not isinstance(d, Mapping):
+            raise ValueError(f"{field_}: expected an object with names, values and matrix, got {type(d).__name__}")
         missing = [k for k in ("names", "matrix") if k not in d]
         if missing:
-            raise ValueError(f"{where}: param_covariance lacks {missing}")
+            raise ValueError(f"{field_} lacks {missing}")
+        names = d["names"]
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise ValueError(f"{field_}.names: expected a list of parameter names, got {names!r}")
         values = d.get("values")
         if values is None:
-            raise ValueError(f"{where}: param_covariance lacks the values of {d['names']}")
-        return cls(d["names"], values, d["matrix"], str(d.get("source", "")), dict(d.get("info") or {}))
+            raise ValueError(f"{field_} lacks the values of {names}")
+        _numbers(values, (len(names),), f"{field_}.values")
+        _numbers(d["matrix"], (len(names), len(names)), f"{field_}.matrix")
+        try:
+            return cls(names, values, d["matrix"], str(d.get("source", "")), dict(d.get("info") or {}))
+        except ValueError as exc:
+            msg = str(exc).removeprefix("ParameterUncertainty: ")
+            raise ValueError(f"{field_}.matrix {msg.removeprefix('covariance ')}" if msg.startswith("covariance ")
+                             else f"{field_}: {msg}") from None
+
+
+def _numbers(value, shape: tuple, what: str) -> None:
+    """Refuse a JSON value that is not a (nested) list of numbers of ``shape``, naming ``what``."""
+    if value is None:
+        raise ValueError(f"{what} is null; a fit file carries a {' x '.join(map(str, shape))} list of numbers there")
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what}: expected a {' x '.join(map(str, shape))} list of numbers, got {value!r:.80}") from None
+    if a.shape != shape:
+        raise ValueError(f"{what}: shape {a.shape}, {' x '.join(map(str, shape))} wanted")
+
+
+#: Relative asymmetry of a covariance entry tolerated as round-off (``|a_ij - a_ji| / sqrt(a_ii a_jj)``).
+SYMMETRY_TOL = 1e-8
 
 
 def _checked_covariance(matrix, names, what: str) -> np.ndarray:
-    """``matrix`` as a symmetric positive semi-definite covariance of ``names``, or ``ValueError``."""
+    """``matrix`` as a symmetric positive semi-definite covariance of ``names``, or ``ValueError``.
+
+    An asymmetry within round-off (:data:`SYMMETRY_TOL`) is averaged away; beyond it the entry is named.
+    """
     k = len(names)
-    a = np.asarray(matrix, dtype=float)
+    if matrix is None:
+        raise ValueError(f"ParameterUncertainty: {what} is null ({k} x {k} wanted for {list(names)})")
+    try:
+        a = np.asarray(matrix, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"ParameterUncertainty: {what} is not a matrix of numbers") from None
     if a.size != k * k:
         raise ValueError(f"ParameterUncertainty: {what} has {a.size} entries, {k} x {k} wanted for {list(names)}")
     a = a.reshape(k, k)
     if not np.all(np.isfinite(a)):
         bad = [n for n, d in zip(names, np.diag(a)) if not np.isfinite(d)]
         raise ValueError(f"ParameterUncertainty: {what} not finite for {bad or list(names)}")
+    scale = np.sqrt(np.abs(np.outer(np.diag(a), np.diag(a))))
+    gap = np.abs(a - a.T)
+    bad = gap > SYMMETRY_TOL * np.maximum(scale, np.abs(a).max(initial=0.0) * 1e-12) + 1e-300
+    if bad.any():
+        i, j = (int(x) for x in np.argwhere(np.triu(bad, 1))[0])
+        raise ValueError(f"ParameterUncertainty: {what} is not symmetric: entry ({names[i]}, {names[j]}) = {a[i, j]:.6g} "
+                         f"but ({names[j]}, {names[i]}) = {a[j, i]:.6g} (beyond round-off)")
     a = 0.5 * (a + a.T)
     if np.linalg.eigvalsh(a).min(initial=0.0) < -1e-9 * max(1.0, np.abs(a).max()):
         raise ValueError(f"ParameterUncertainty: {what} is not positive semi-definite")
@@ -189,12 +294,7 @@ def read_params(path, model=None, *, uncertainty: bool = False):
     from ..models import get_model
 
     path = Path(path)
-    try:
-        obj = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(obj, dict) or not isinstance(obj.get("params"), dict):
-        raise ValueError(f'{path}: expected a JSON object with key "params": {{name: value}}')
+    obj = load_fit_json(path)
     params = {str(k): float(v) for k, v in obj["params"].items()}
     name, options, pset = obj.get("model"), dict(obj.get("model_options") or {}), str(obj.get("param_set") or "")
     if model is None or isinstance(model, str):
@@ -220,13 +320,17 @@ def read_params(path, model=None, *, uncertainty: bool = False):
         raise ValueError(f"{path}: param_covariance values of {mismatch} differ from the file's params")
     discrepancy = obj.get("model_discrepancy") or {}
     if discrepancy:
+        if not isinstance(discrepancy, dict):
+            raise ValueError(f"{path}: model_discrepancy must be an object, got {discrepancy!r:.60}")
         q = discrepancy.get("psi_variance_growth_deg2_per_s")
-        if not isinstance(q, (int, float)) or isinstance(q, bool) or not np.isfinite(q) or q < 0:
-            raise ValueError(f"{path}: model_discrepancy.psi_variance_growth_deg2_per_s must be a number >= 0, got {q!r}")
+        if not isinstance(q, (int, float)) or isinstance(q, bool) or not np.isfinite(q) or not 0 <= q <= Q_MAX_DEG2_PER_S:
+            raise ValueError(f"{path}: model_discrepancy.psi_variance_growth_deg2_per_s must be a number in "
+                             f"[0, {Q_MAX_DEG2_PER_S:g}] deg^2/s (beyond, the 95 % heading band spans a full turn within "
+                             f"about 10 s), got {q!r}")
         unc.psi_variance_rate = float(np.radians(np.radians(q)))
         beside = discrepancy.get("estimated_with")
         if beside is not None:      # the covariance whose band q completes (same parameters, same order)
-            base = ParameterUncertainty.from_dict(beside, f"{path} (model_discrepancy.estimated_with)")
+            base = ParameterUncertainty.from_dict(beside, str(path), key="model_discrepancy.estimated_with")
             if base.names != unc.names:
                 raise ValueError(f"{path}: model_discrepancy.estimated_with has parameters {base.names}, "
                                  f"param_covariance {unc.names}; they must be the same, in the same order")

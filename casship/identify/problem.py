@@ -306,6 +306,8 @@ class IdentificationProblem:
 
         def cost(z):
             theta = sp.natural(z)
+            if not np.all(np.isfinite(theta)):       # a trial step beyond float range (exp of a log-variance)
+                return np.inf
             return self.engine.cost(theta)[0] + self._prior_terms(theta)[0]
 
         def unit(f):
@@ -317,6 +319,45 @@ class IdentificationProblem:
         if not np.array_equal(cache.get("z"), rep.z):
             derivs(rep.z)
         return self._result(rep, cache, self._shares(start[3]))
+
+    def judge(self, fit: FitResult, *, loo: bool | None = None, refit=None, guess=None,
+              solve: Mapping | None = None) -> FitResult:
+        """Replay ``fit`` on the records against the starting model (and left-one-out): its verdict and
+        model discrepancy (see :func:`casship.identify.verdict.judge`), set on ``fit`` and returned.
+
+        Parameters
+        ----------
+        fit : FitResult
+            A fit of this problem.
+        loo : bool, optional
+            Refit without each record and replay it (default: when there are several records).
+        refit, guess, solve
+            See :func:`casship.identify.verdict.judge`.
+
+        Returns
+        -------
+        FitResult
+            ``fit``, with :attr:`~FitResult.verdict` and :attr:`~FitResult.model_discrepancy` set.
+        """
+        return self._judge(fit, loo=loo, refit=refit, guess=guess, solve=solve, stacklevel=3)
+
+    def _judge(self, fit, *, loo, refit, guess, solve, stacklevel) -> FitResult:
+        from .verdict import judge
+
+        fit.verdict, fit.model_discrepancy = judge(self, fit, loo=loo, refit=refit, guess=guess,
+                                                   solve=dict(solve or {}))
+        if fit.worse:       # at the caller's line (of judge, or of solve through _verdict)
+            warnings.warn(f"{self.method}: verdict {fit.verdict['verdict']}: {fit.verdict['reason']}",
+                          IdentificationWarning, stacklevel=stacklevel)
+        return fit
+
+    def _verdict(self, fit: FitResult, verdict, guess) -> FitResult:
+        """``fit`` judged as ``solve(verdict=...)`` asks: None (not), "replay" or "loo"."""
+        if verdict is None:
+            return fit
+        if verdict not in ("replay", "loo"):
+            raise ValueError(f"verdict must be 'replay', 'loo' or None, got {verdict!r}")
+        return self._judge(fit, loo=verdict == "loo", refit=None, guess=guess, solve=None, stacklevel=4)
 
     def _result(self, rep, at: dict, start_shares: dict) -> FitResult:
         sp, m = self.space, self.model

@@ -124,6 +124,15 @@ class FitResult:
         The uncertainty a fit file carries for replays (see :meth:`uncertainty`), when it was set
         explicitly (e.g. a run-level jackknife); empty: the robust covariance of the shared free
         model parameters.
+    verdict : dict
+        The fit replayed on its records against the model it started from (and left-one-out):
+        ``verdict`` (``"better"``, ``"no better"``, ``"worse"``, ``"stalled"``, ``"not judged"``),
+        ``reason``, the heading RMSE per record of start and fit, ``loo`` (see
+        :func:`casship.identify.verdict.judge`). Empty: not judged (``solve(verdict=None)``).
+    model_discrepancy : dict
+        ``psi_variance_growth_deg2_per_s``: the heading variance growing as ``q t`` that the parameter
+        band misses, estimated from the fit's own runs (left-one-out when several) and how
+        (``method``); replays of the fit file add it to the parameter band (the predictive band).
     """
 
     model: str
@@ -159,6 +168,8 @@ class FitResult:
     param_names: list = field(default_factory=list)
     covariance_robust: np.ndarray = None
     param_covariance: dict = field(default_factory=dict)
+    verdict: dict = field(default_factory=dict)
+    model_discrepancy: dict = field(default_factory=dict)
 
     # -- queries -----------------------------------------------------------------------------------
     @property
@@ -206,8 +217,11 @@ class FitResult:
         """
         from .params_file import ParameterUncertainty
 
+        q = float(np.radians(np.radians(self.model_discrepancy.get("psi_variance_growth_deg2_per_s", 0.0) or 0.0)))
         if kind is None and self.param_covariance:
-            return ParameterUncertainty.from_dict(self.param_covariance, "this fit")
+            unc = ParameterUncertainty.from_dict(self.param_covariance, "this fit")
+            unc.psi_variance_rate = q
+            return unc
         if kind not in (None, "model", "robust"):
             raise ValueError(f"kind must be None, 'model' or 'robust', got {kind!r}")
         robust = kind != "model" and self.covariance_robust is not None
@@ -217,7 +231,7 @@ class FitResult:
             return None
         names = [self.free[i] for i in idx]
         return ParameterUncertainty(names, [self.estimates[n] for n in names], C[np.ix_(idx, idx)],
-                                    "robust (sandwich)" if robust else "model-based")
+                                    "robust (sandwich)" if robust else "model-based", psi_variance_rate=q)
 
     def record_parameters(self, record: int) -> dict:
         """All model parameters of one fitted record (its own per-record and per-group copies applied).
@@ -276,7 +290,38 @@ class FitResult:
             lines.append(f"channel share at {when}: " + ", ".join(f"{n} {s:.1%}" for n, s in shares.items()))
         lines.append(f"AIC {self.aic:.6g}  BIC {self.bic:.6g}  n_obs {self.n_obs}")
         lines += [f"warning: {w}" for w in self.warnings]
+        lines += self._verdict_lines()
         return "\n".join(lines)
+
+    @property
+    def worse(self) -> bool:
+        """Whether the fit's verdict is ``"worse"`` or ``"stalled"`` (not to be used as a better model)."""
+        return self.verdict.get("verdict") in ("worse", "stalled")
+
+    def _verdict_lines(self) -> list[str]:
+        v = self.verdict
+        if not v:
+            return []
+        lines = []
+        rows = v.get("records", [])
+        if rows:
+            lines.append(f"{'replayed record':>24s} {'start psi RMSE':>15s} {'fit psi RMSE':>13s}"
+                         + (f" {'left-one-out':>13s}" if "loo" in v else ""))
+            held = {r["record"]: r["psi_rmse_deg_held_out"] for r in v.get("loo", {}).get("records", [])}
+            for r in rows:
+                lines.append(f"{str(r['record'])[-24:]:>24s} {r['psi_rmse_deg_start']:>11.3f} deg "
+                             f"{r['psi_rmse_deg_fit']:>9.3f} deg"
+                             + (f" {held.get(r['record'], np.nan):>9.3f} deg" if held else ""))
+        d = self.model_discrepancy
+        if d:
+            lines.append(f"model discrepancy q = {d.get('psi_variance_growth_deg2_per_s', 0.0):.4g} deg^2/s "
+                         f"({d.get('method', '')})")
+        word = v.get("verdict", "")
+        head = {"worse": "VERDICT: WORSE than its start", "stalled": "VERDICT: STALLED"}.get(word, f"verdict: {word}")
+        lines.append(f"{head}: {v.get('reason', '')}")
+        if word in ("worse", "stalled"):
+            lines.append("  do not use this fit as an improved model (see docs/identification.md, the verdict)")
+        return lines
 
     def __str__(self) -> str:
         return self.summary()
@@ -284,7 +329,8 @@ class FitResult:
     # -- JSON --------------------------------------------------------------------------------------
     _SCALARS = ("cost", "loglik", "n_obs", "aic", "bic", "method", "status", "iterations", "solve_time_s", "message",
                 "param_set")
-    _DICTS = ("whiteness", "noise", "std_errors_robust", "effective_samples", "channel_share", "prior", "model_options")
+    _DICTS = ("whiteness", "noise", "std_errors_robust", "effective_samples", "channel_share", "prior", "model_options",
+              "verdict", "model_discrepancy")
     _LISTS = ("warnings", "x0", "records", "record_params", "param_names")
 
     def to_dict(self) -> dict:
@@ -335,7 +381,22 @@ class FitResult:
         if missing:
             raise ValueError(f"fit JSON lacks key(s) {missing}")
         k = len(d["free"])
-        mat = lambda key: np.asarray(d.get(key, np.full((k, k), np.nan)), dtype=float).reshape(k, k)  # noqa: E731
+        twice = sorted({n for n in d["free"] if list(d["free"]).count(n) > 1})
+        if twice:
+            raise ValueError(f"fit JSON: free names {twice} given more than once")
+
+        def mat(key):
+            value = d.get(key, np.full((k, k), np.nan))
+            if value is None:
+                raise ValueError(f"fit JSON: {key} is null; a {k} x {k} matrix of the free quantities {d['free']} "
+                                 "is wanted (or leave the key out)")
+            try:
+                a = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"fit JSON: {key} is not a matrix of numbers") from None
+            if a.size != k * k:
+                raise ValueError(f"fit JSON: {key} has {a.size} entries, {k} x {k} wanted for {d['free']}")
+            return a.reshape(k, k)
         kw = {key: d[key] for key in (*cls._SCALARS, *cls._DICTS, *cls._LISTS) if key in d}
         if "covariance_robust" in d:
             kw["covariance_robust"] = mat("covariance_robust")
@@ -359,12 +420,14 @@ class FitResult:
         -------
         FitResult
         """
+        from .params_file import load_fit_json
+
         path = Path(path)
         try:
-            d = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from None
-        return cls.from_dict(d)
+            return cls.from_dict(load_fit_json(path))
+        except ValueError as exc:
+            text = str(exc)
+            raise ValueError(text if text.startswith(str(path)) else f"{path}: {text}") from None
 
     # -- plot --------------------------------------------------------------------------------------
     def plot(self, ax=None, path=None):

@@ -335,9 +335,10 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
                 f"of {sm['indices checked, with discrepancy']}. q over all folds: "
                 f"{bands['q_all_folds_deg2_per_s']:.3g} deg^2/s; `fit.json` carries it (`model_discrepancy`) with "
                 "the covariance it was estimated beside (`estimated_with`: the robust covariance, as the fold "
-                "files carry it), so its replays (`casship simulate --params fit.json`) give the parameter band "
-                "of the jackknife covariance and, beside it, the predictive band `sqrt(s^2 + q t)`, `s` the "
-                "band of `estimated_with`: the construction whose coverage is checked above.",
+                "files carry it), and its replays (`casship simulate --params fit.json`) give the parameter band "
+                "of the jackknife covariance and, beside it, the predictive band `sqrt(s^2 + q t)` on the same "
+                "covariance (never narrower than the parameter band; wider than the construction checked above, "
+                "whose `s` is the band of `estimated_with`).",
                 md_table(bands["runs"], list(dict.fromkeys(c for r in bands["runs"].values() for c in r)),
                          first="held-out run", spec=".3g"))
     rep.section("Port/starboard asymmetry")
