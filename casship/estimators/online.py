@@ -444,7 +444,7 @@ class StepRun(OnlineRun):
             if status[0]:
                 if rng_state is not None:                   # a refused update draws nothing
                     self._rng.bit_generator.state = rng_state
-                self._refuse(dt)
+                self._refuse_sample(dt)
             self._cur = 1 - cur
             self._samples += 1
             return x.copy()
@@ -487,7 +487,7 @@ class StepRun(OnlineRun):
         self.update(y, dt / pieces, u_held, u)
         return True
 
-    def _refuse(self, dt) -> None:
+    def _refuse_sample(self, dt) -> None:
         """Raise what made the evaluation report an invalid sample (its outputs are not used): the
         sample as written into the buffers, through the one :func:`check_sample`."""
         est = self._est
