@@ -12,6 +12,7 @@ import importlib
 import pkgutil
 
 from casship.studies import Study
+from casship.errors import InputError
 
 
 __all__ = ["Study", "studies", "get_study"]
@@ -36,5 +37,5 @@ def get_study(name: str) -> Study:
     """The study called ``name`` (``ValueError`` listing the known ones otherwise)."""
     table = studies()
     if name not in table:
-        raise ValueError(f"unknown study {name!r}; known: {list(table)}")
+        raise InputError(f"unknown study {name!r}; known: {list(table)}")
     return table[name]

@@ -3,6 +3,9 @@
 casship's own code included, is a bug (exit 1, ``--debug`` for the traceback)."""
 from __future__ import annotations
 
+import ast
+from pathlib import Path
+
 import pytest
 
 from casship.cli import cmd_cache, is_user_error, main
@@ -48,3 +51,59 @@ def test_classification_is_by_type_not_by_where_it_was_raised():
             raise exc
         except Exception as caught:
             assert not is_user_error(caught)
+
+
+# -- the raise sites: casship's own types for what the user can fix ---------------------------------------------
+ROOT = Path(__file__).resolve().parents[1]
+#: (file, function) -> why its plain built-in raises are internal invariants (a casship bug if they fire),
+#: not the user's to fix. The list only shrinks: an entry without such a raise fails.
+INTERNAL = {
+    ("casship/runtime/_buffers.py", "__init__"): "buffers bound by casship's own code to its own Functions",
+    ("casship/runtime/_buffers.py", "__setitem__"): "buffers bound by casship's own code to its own Functions",
+    ("casship/runtime/_buffers.py", "redirect"): "buffers bound by casship's own code to its own Functions",
+    ("casship/runtime/_loop.py", "driver_source"): "the record loop is built by casship's estimators",
+    ("casship/runtime/_loop.py", "_in_place"): "the record loop is driven by casship's estimators",
+    ("casship/runtime/_loop.py", "__init__"): "the record loop is built by casship's estimators",
+    ("casship/runtime/_loop.py", "_constant"): "the record loop is driven by casship's estimators",
+    ("casship/runtime/_loop.py", "_target"): "the record loop is driven by casship's estimators",
+    ("casship/runtime/_loop.py", "run"): "the record loop is driven by casship's estimators",
+    ("casship/runtime/_codegen.py", "read_harness_output"): "the output of casship's own test harness",
+    ("casship/io/jsonfile.py", "json_ready"): "casship writing a value of its own it cannot encode",
+    ("casship/estimators/online.py", "__getitem__"): "a Mapping's KeyError (the protocol)",
+    ("casship/estimators/online.py", "__init__"): "OnlineRun handed something that is not an engine by casship",
+    ("problems/kit.py", "md_table"): "a study's own report",
+    ("problems/kit.py", "_fixed_margins"): "a study's own figure layout",
+    ("problems/kit.py", "departures"): "a study's own report",
+    ("problems/kit.py", "write"): "a study's own report",
+    ("problems/__init__.py", "studies"): "two studies of the package with one name",
+    ("problems/filter_guidelines/scenario.py", "q_channels"): "the study's own models",
+}
+
+
+def _plain_raises():
+    """``(file, innermost function, line)`` of every ``raise ValueError/TypeError/KeyError(...)`` in
+    casship/ and problems/."""
+    found = []
+    for top in ("casship", "problems"):
+        for path in sorted((ROOT / top).rglob("*.py")):
+            tree = ast.parse(path.read_text())
+            parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call) \
+                        and getattr(node.exc.func, "id", None) in ("ValueError", "TypeError", "KeyError"):
+                    func = parents.get(node)
+                    while func is not None and not isinstance(func, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                        func = parents.get(func)
+                    found.append((str(path.relative_to(ROOT)), getattr(func, "name", "<module>"), node.lineno))
+    return found
+
+
+def test_deliberate_raises_are_casships_own_types():
+    """A plain ValueError is reported by the command line as a bug: what the user can fix raises
+    ``InputError`` (``InputTypeError``), ``SolverError`` or ``SetupError``."""
+    found = _plain_raises()
+    bad = [f"{f}:{line} in {func}" for f, func, line in found if (f, func) not in INTERNAL]
+    assert not bad, ("raise casship.errors.InputError (or another casship type) for what the user can fix, "
+                     f"or list the function in INTERNAL with the reason: {bad}")
+    stale = sorted(set(INTERNAL) - {(f, func) for f, func, _ in found})
+    assert not stale, f"no plain raise left there: remove from INTERNAL: {stale}"

@@ -270,7 +270,7 @@ def test_infinite_samples_are_refused_naming_the_item_in_batch_and_online(name, 
     with pytest.raises(InputError, match=r"measurement 'y2' is infinite at row 7 \(NaN means not measured\)"):
         est.filter(data.with_columns(y2=y2), prior, seed=1)
     f = np.where(np.arange(20) == 4, np.inf, data["f"])
-    with pytest.raises(ValueError, match=r"input 'f' is not finite at row 4"):
+    with pytest.raises(InputError, match=r"input 'f' is not finite at row 4"):
         est.filter(data.with_columns(f=f), prior, seed=1)
     run = est.online(prior, seed=1, u=[0.0])
     run.update([0.1, 0.2], 0.0)

@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from ..data import Dataset, check_rows
-from ..errors import InputError
+from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, compile_function, run_fold
@@ -150,7 +150,7 @@ class StepEstimator(Estimator):
         memory = self.memory
         unknown = [o for o in outputs if o not in DIAGNOSTICS and o not in memory]
         if unknown:
-            raise ValueError(f"unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)}")
+            raise InputError(f"unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)}")
         names = (*memory, *(o for o in DIAGNOSTICS if o in outputs and o not in memory))
         if key is not None:
             self._names[key] = names
@@ -400,28 +400,28 @@ class StepEstimator(Estimator):
         """
         m = self.model
         if not isinstance(result, FilterResult):
-            raise TypeError(f"predict needs a FilterResult, got {type(result).__name__}")
+            raise InputTypeError(f"predict needs a FilterResult, got {type(result).__name__}")
         if result.state_names != m.state_names:
-            raise ValueError(f"result has states {list(result.state_names)}; {self.name} on {m.name!r} has "
+            raise InputError(f"result has states {list(result.state_names)}; {self.name} on {m.name!r} has "
                              f"{list(m.state_names)}")
         t_last = float(result.t[-1])
         if np.ndim(t) == 0:
             steps = check_rows(np.floor(float(t) / self.dmodel.dt + 1e-9),
                                f"{self.name} prediction: {float(t):g} s at steps of {self.dmodel.dt:g} s")
             if steps < 1:
-                raise ValueError(f"prediction horizon {t} s is shorter than one step ({self.dmodel.dt:g} s)")
+                raise InputError(f"prediction horizon {t} s is shorter than one step ({self.dmodel.dt:g} s)")
             times = t_last + self.dmodel.dt * np.arange(1, steps + 1)
         else:
             times = np.asarray(t, dtype=float).reshape(-1)
             if times.size == 0 or not times[0] > t_last:
-                raise ValueError(f"prediction times must start after the last sample t = {t_last:g} s")
+                raise InputError(f"prediction times must start after the last sample t = {t_last:g} s")
         n = times.size
         if u is None:
             U = np.tile(result.inputs[-1], (n, 1))
         elif isinstance(u, Mapping):
             unknown = sorted(set(u) - set(m.input_names))
             if unknown:
-                raise ValueError(f"unknown input(s) {unknown}; inputs: {list(m.input_names)}")
+                raise InputError(f"unknown input(s) {unknown}; inputs: {list(m.input_names)}")
             U = np.tile(result.inputs[-1], (n, 1))
             for k, v in u.items():
                 U[:, m.index(k, "input")] = np.broadcast_to(np.asarray(v, dtype=float), (n,))

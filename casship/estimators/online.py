@@ -21,7 +21,7 @@ from typing import Protocol, Sequence, runtime_checkable
 import casadi as ca
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian
 from ..runtime import DUPLICATE_NAMES, BufferedCall
 from .gaps import gap_pieces, gap_threshold
@@ -275,9 +275,9 @@ class OnlineRun:
     # nor lock pickle. Said plainly rather than left to copy and pickle.
     def _refuse(self, what: str):
         name = self.__dict__.get("name") or getattr(self.__dict__.get("_engine"), "name", "estimator")
-        raise TypeError(f"an online {name} run cannot be {what}: its memory lives in the "
-                        "estimator's buffers; keep its state (run.x, run.P) and start another run with "
-                        "est.online(casship.Gaussian(run.x, run.P), p)")
+        raise InputTypeError(f"an online {name} run cannot be {what}: its memory lives in the "
+                             "estimator's buffers; keep its state (run.x, run.P) and start another run with "
+                             "est.online(casship.Gaussian(run.x, run.P), p)")
 
     def __copy__(self):
         self._refuse("copied (a copy would share its buffers with this run)")

@@ -18,6 +18,7 @@ from typing import Sequence
 import numpy as np
 
 from .uncertainty import covariance_from_information
+from ..errors import InputError
 
 __all__ = ["Identifiability", "MAX_REL_STD", "MAX_CORR"]
 
@@ -190,7 +191,7 @@ class Identifiability:
         candidates = [n for n in candidates if n not in self.confounded]
         unknown = [n for n in (*keep, *candidates) if n not in index]
         if unknown:
-            raise ValueError(f"unknown quantities {unknown}; free: {self.names}")
+            raise InputError(f"unknown quantities {unknown}; free: {self.names}")
         chosen = [index[n] for n in keep]
         pool = [index[n] for n in candidates if n not in keep]
         while pool:

@@ -20,6 +20,7 @@ from typing import Callable, Sequence
 import casadi as ca
 
 from ._cache import compile_function
+from ..errors import InputTypeError
 
 __all__ = ["Compiling", "compile_in_background"]
 
@@ -62,7 +63,7 @@ class Compiling:
 
     def __init__(self, fun: ca.Function, flags: Sequence[str] | None = None, on_done: Callable | None = None):
         if not isinstance(fun, ca.Function):
-            raise TypeError(f"compile_in_background needs a casadi.Function, got {type(fun).__name__}")
+            raise InputTypeError(f"compile_in_background needs a casadi.Function, got {type(fun).__name__}")
         self.interpreted = fun
         self.flags = None if flags is None else tuple(flags)
         self.error: Exception | None = None

@@ -51,6 +51,7 @@ import casadi as ca
 
 from ._compiler import (ENV_FLAGS, PORTABLE_FLAGS, SUFFIX, CompileError, accepts_native,
                         build_library, chosen_flags, compile_timeout, find_compiler)
+from ..errors import InputError, InputTypeError
 
 try:                                    # file locks: fcntl on POSIX, msvcrt on Windows
     import fcntl
@@ -328,9 +329,9 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     DM([2, 4])
     """
     if not isinstance(fun, ca.Function):
-        raise TypeError(f"compile_function needs a casadi.Function, got {type(fun).__name__}")
+        raise InputTypeError(f"compile_function needs a casadi.Function, got {type(fun).__name__}")
     if library and not extra_source:
-        raise ValueError("compile_function: library=True is for calling extra_source; none given")
+        raise InputError("compile_function: library=True is for calling extra_source; none given")
     try:
         cc = find_compiler(compiler)
     except CompileError as exc:

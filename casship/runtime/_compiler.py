@@ -21,7 +21,7 @@ from typing import Sequence
 
 import casadi as ca
 
-from ..errors import SetupError
+from ..errors import InputError, InputTypeError, SetupError
 from ..progress import activity
 
 __all__ = ["CompileError", "DEFAULT_FLAGS", "PORTABLE_FLAGS", "DEFAULT_TIMEOUT", "find_compiler", "chosen_flags",
@@ -103,7 +103,7 @@ def chosen_flags(flags: Sequence[str] | str | None) -> tuple[tuple[str, ...], bo
     flags = tuple(flags)
     bad = [f for f in flags if not isinstance(f, str)]
     if bad:
-        raise TypeError(f"compiler flags must be strings, got {bad}")
+        raise InputTypeError(f"compiler flags must be strings, got {bad}")
     return flags, False
 
 
@@ -117,7 +117,7 @@ def compile_timeout() -> float:
     except ValueError:
         value = float("nan")
     if not value > 0:
-        raise ValueError(f"{ENV_TIMEOUT} must be a positive number of seconds, got {env!r}")
+        raise InputError(f"{ENV_TIMEOUT} must be a positive number of seconds, got {env!r}")
     return value
 
 

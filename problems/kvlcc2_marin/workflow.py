@@ -73,6 +73,7 @@ from casship.parallel import blas_threads
 
 from .data import Run, fit_record, per_run
 from .propulsion import PropulsionFit, fit_propulsion, resistance_for_run
+from casship.errors import InputError
 
 __all__ = ["MODEL_OPTIONS", "study_model", "MEASURED", "CANDIDATES", "OPTION_CANDIDATES", "candidates", "REGRESSED",
            "ASYMMETRY", "prior_std",
@@ -327,7 +328,7 @@ def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR
     F = np.asarray(idf.information, dtype=float)
     prec = np.asarray(idf.prior_precision, dtype=float)
     if np.any(prec <= 0):
-        raise ValueError("select_free needs a prior on every candidate")
+        raise InputError("select_free needs a prior on every candidate")
     s = 1.0 / np.sqrt(prec)
     Fs = F * np.outer(s, s)
     names = list(idf.names)
@@ -337,7 +338,7 @@ def select_free(idf, *, max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR
     after = dict(after or {})
     unknown = sorted({n for k, v in after.items() for n in (k, *v)} - set(names))
     if unknown:
-        raise ValueError(f"select_free: {unknown} in 'after' are not candidates")
+        raise InputError(f"select_free: {unknown} in 'after' are not candidates")
     waits = {names.index(k): [names.index(n) for n in v] for k, v in after.items()}
     while pool and len(chosen) < max_count:
         best = None

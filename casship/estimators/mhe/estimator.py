@@ -31,6 +31,7 @@ from .problem import Window, build_window, params_vector, sqrt_factor
 from .arrival import inv_sqrt
 from .runner import WindowEngine
 from .solvers import solve_window
+from ...errors import InputError, InputTypeError
 
 __all__ = ["MHE"]
 
@@ -81,7 +82,7 @@ class MHE(Estimator):
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured=None, options=None):
         if not isinstance(dmodel, DiscreteModel):
-            raise TypeError(f"MHE needs a DiscreteModel (use casship.discretize), got {type(dmodel).__name__}")
+            raise InputTypeError(f"MHE needs a DiscreteModel (use casship.discretize), got {type(dmodel).__name__}")
         opts = MHEOptions.from_value(options, "MHE")
         base = dmodel.model
         self.base_model = base
@@ -104,7 +105,7 @@ class MHE(Estimator):
     def _check_options(self) -> None:
         o, m, b = self.options, self.model, self.base_model
         if self.dmodel.symbolic is ca.MX:
-            raise ValueError(f"MHE needs an explicit discretisation ('euler' or 'rk4'), got {self.dmodel.method!r}")
+            raise InputError(f"MHE needs an explicit discretisation ('euler' or 'rk4'), got {self.dmodel.method!r}")
         self.LQ, q_diag = sqrt_factor(self.Q)
         self.nv = self.LQ.shape[1]
         lo, hi = np.full(m.nx, -np.inf), np.full(m.nx, np.inf)
@@ -117,14 +118,14 @@ class MHE(Estimator):
         self.x_bounds = (lo, hi)
         vlo, vhi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)
         if o.noise_bounds and not q_diag:
-            raise ValueError("option 'noise_bounds' needs a diagonal Q")
+            raise InputError("option 'noise_bounds' needs a diagonal Q")
         cols = np.flatnonzero(np.diag(self.Q) > 0) if q_diag else np.arange(self.nv)
         for n, (a, c) in o.noise_bounds.items():
             i = m.index(n, "noise")
             a, c = bound_pair(n, a, c)
             if i not in cols:
                 if a > 0 or c < 0:
-                    raise ValueError(f"noise bound on {n!r} excludes 0, but Q gives it zero variance")
+                    raise InputError(f"noise bound on {n!r} excludes 0, but Q gives it zero variance")
                 continue
             j = int(np.flatnonzero(cols == i)[0])
             s = np.sqrt(self.Q[i, i])
@@ -189,12 +190,12 @@ class MHE(Estimator):
             Parameters of the original model (the prior means of the estimated ones).
         """
         if not isinstance(prior, Gaussian):
-            raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
+            raise InputTypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
         m, b = self.model, self.base_model
         if prior.mean.size == m.nx:
             return prior
         if prior.mean.size != b.nx:
-            raise ValueError(f"prior has {prior.mean.size} entries; expected {b.nx} (states of {b.name!r}) "
+            raise InputError(f"prior has {prior.mean.size} entries; expected {b.nx} (states of {b.name!r}) "
                              f"or {m.nx} (augmented states {list(m.state_names)})")
         pf = self._full_params(p)
         mean = np.concatenate([pf[[b.index(n, "param") for n in self._est_names]],
@@ -318,7 +319,7 @@ class MHE(Estimator):
         arrays = self._prepare(data, p)
         n = len(data)
         if n < 2:
-            raise ValueError("smooth needs at least two samples")
+            raise InputError("smooth needs at least two samples")
         win = self.window(n - 1, "sqp" if self.options.solver == "rti" else None)
         if guess is None:
             guess = self.arrival_filter.filter(data, prior, arrays["p"])
