@@ -1,4 +1,4 @@
-"""The EKF step exported as standalone C (``casship.runtime.export_estimator``), run in a C loop, vs Python filters.
+"""The EKF step exported as standalone C (``casship.estimators.export_estimator``), run in a C loop, vs Python filters.
 
 Problem: the SOG/COG EKF case of ``bench_filters`` (Fossen & Fossen 2021 model, 50 Hz, GNSS at 5 Hz,
 NaN rows predict only). casship's EKF step Function is exported with ``export_estimator``, compiled
@@ -22,7 +22,8 @@ import numpy as np
 
 import casship as cs
 from benchmarks import format_table, median_time, row, skipped_row
-from casship.runtime import compile_c, export_estimator
+from casship.estimators import export_estimator
+from casship.runtime import compile_c
 
 DRIVER = r"""#define _POSIX_C_SOURCE 199309L
 #include <stdio.h>

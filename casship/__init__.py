@@ -25,6 +25,7 @@ _EXPORTS = {
     "MHE": "estimators", "prior_from_data": "estimators", "noise_from_data": "estimators",
     "linearize": "linear", "to_iosys": "linear", "trim": "linear",
     "FitResult": "identify", "MLEProblem": "identify", "OutputErrorProblem": "identify",
+    "identify_ship": "identify",
     "CasshipError": "errors", "InputError": "errors", "SolverError": "errors", "SetupError": "errors",
 }
 _SUBMODULES = ("frames", "identify", "models", "io")
@@ -33,7 +34,7 @@ __all__ = ["ModelBuilder", "Model", "Vessel", "Limit", "DiscreteModel", "discret
            "Trajectory", "EKF", "KF", "FilterResult", "persistence_model", "UKF", "EnKF", "KalmanBucy", "augment",
            "simulate", "simulate_many", "measure", "linearize", "to_iosys", "trim", "wrap", "unwrap", "frames", "models", "__version__",
            "MLEProblem", "OutputErrorProblem", "FitResult", "identify", "MHE", "prior_from_data", "noise_from_data",
-           "CasshipError",
+           "CasshipError", "identify_ship",
            "InputError", "SolverError", "SetupError", "io"]
 
 

@@ -17,11 +17,13 @@ sub-steps) and their sizes, never on the model object, the record or the paramet
 are kept per process under a digest of the step, as the identification keeps its folds: the replays
 of many fit files (each file rebuilds its model) build them once.
 
-``jit`` chooses how they run (see :mod:`casship.compiling`): ``False`` interpreted, ``True`` compiled
-now, ``None`` compiled if the compile cache holds the library, else compiled in the background while
-evaluated interpreted. The flags keep the numbers: interpreted and compiled folds give the same
-states to the last bit (tested), so where the switch happens does not change a result. A step with an
-adaptive integrator (``cvodes``) always runs interpreted: CasADi generates no C code for it.
+``jit`` is the runtime's compile policy (:class:`casship.runtime.JitPolicy`): ``False`` interpreted,
+``True`` compiled now, ``None`` compiled if the compile cache holds the library, else compiled in the
+background while evaluated interpreted. The flags keep the numbers: interpreted and compiled folds give
+the same states to the last bit (tested), so where the switch happens does not change a result. A step
+with an adaptive integrator (``cvodes``) always runs interpreted: CasADi generates no C code for it.
+The Functions live in the runtime's one table (:func:`casship.runtime.shared_function`) and records run
+through its one driver (:func:`casship.runtime.run_pieces`).
 """
 from __future__ import annotations
 
@@ -31,21 +33,14 @@ import weakref
 import casadi as ca
 import numpy as np
 
-from .compiling import compiled, resolve
 from .errors import SolverError
-from .runtime import BoundedTable, BufferedCall
+from .runtime import COUNTS as _COUNTS, Job, JitPolicy, PieceFailed, fold_chunk, pieces, run_pieces, shared_function
 
-__all__ = ["CHUNK", "simulation_fold", "sensitivity_fold", "fold_steps", "padded", "signature",
+__all__ = ["simulation_fold", "sensitivity_fold", "fold_steps", "padded", "signature",
            "IntegrationError", "solver_status", "COUNTS"]
 
-#: Samples per chunk of a compiled fold (one size: one library per structure). Interpreted folds of
-#: short records take the next power of two below it (less padding; building them costs nothing to compile).
-CHUNK = 256
-KEEP = 128                  # Functions kept per process (the oldest go first)
-_SHARED = BoundedTable(KEEP)          # (signature, what, sizes..., jit) -> Function or background compile
-_MAPPED = BoundedTable(KEEP)          # (id(fold), n) -> (fold, fold mapped over n parameter vectors)
 _SIGNATURES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-COUNTS = {"built": 0, "reused": 0}    # Functions built and found again (for profiles and tests)
+COUNTS = _COUNTS.setdefault("folds", {"built": 0, "reused": 0})   # Functions built and found again
 
 
 class IntegrationError(SolverError):
@@ -95,49 +90,46 @@ def signature(dmodel) -> str:
     return sig
 
 
-def _jit(dmodel, jit):
+def _jit(dmodel, jit) -> JitPolicy:
     """An integrator's step is not generated as C: interpreted whatever ``jit`` says."""
-    return jit if dmodel.symbolic is ca.SX else False
+    return JitPolicy.of(jit) if dmodel.symbolic is ca.SX else JitPolicy.OFF
 
 
 def _shared(dmodel, key: tuple, make, jit):
     """The Function ``make()`` (compiled per ``jit``), built once per process for every
-    discretisation of the same step."""
-    jit = _jit(dmodel, jit)
-    full = (signature(dmodel), *key, jit)
-    fun = _SHARED.get(full)
-    if fun is None:
-        fun = _SHARED.keep(full, compiled(make(), jit=jit))
-        COUNTS["built"] += 1
-    else:
-        COUNTS["reused"] += 1
-    return resolve(fun)
+    discretisation of the same step (the runtime's table)."""
+    return shared_function(("folds", signature(dmodel), *key), make, _jit(dmodel, jit))
 
 
 def _size(steps: int, jit) -> int:
-    """Chunk length: :data:`CHUNK` compiled; interpreted, a power of two up to it (short records)."""
-    if jit is not False:
-        return CHUNK
-    return min(CHUNK, 1 << max(0, int(steps - 1).bit_length()))
+    """Chunk length: the runtime's :func:`~casship.runtime.fold_chunk` compiled; interpreted, a power of
+    two up to it (short records)."""
+    chunk = fold_chunk()
+    if jit:
+        return chunk
+    return min(chunk, 1 << max(0, int(steps - 1).bit_length()))
 
 
-def simulation_fold(dmodel, n: int = CHUNK, *, jit=False) -> ca.Function:
-    """``F`` folded over ``n`` steps: ``fold(x, U, p, W, dt) -> X`` with ``U`` (nu, n), ``W`` (nw, n),
-    ``dt`` (1, n) and ``X`` the (nx, n) states after each step; shared per process by structure.
+def simulation_fold(dmodel, n: int | None = None, *, jit=False) -> ca.Function:
+    """``F`` folded over ``n`` steps: ``fold(x, U, p, W, dt) -> (X, x_last)`` with ``U`` (nu, n), ``W``
+    (nw, n), ``dt`` (1, n), ``X`` the (nx, n) states after each step and ``x_last`` the last of them;
+    shared per process by structure.
 
     Parameters
     ----------
     dmodel : DiscreteModel
-    n : int
-        Steps per call.
-    jit : bool or None
+    n : int, optional
+        Steps per call (default :func:`casship.runtime.fold_chunk`).
+    jit : bool, None, str or JitPolicy
         Interpreted (``False``), compiled now (``True``) or compiled from the cache / in the background
-        (``None``).
+        (``None``): :class:`casship.runtime.JitPolicy`.
 
     Returns
     -------
     casadi.Function
     """
+    n = fold_chunk() if n is None else n
+
     def make():
         m, n_ = dmodel.model, int(n)
         acc = dmodel.F.mapaccum(f"simulate_steps{n_}", n_)
@@ -145,11 +137,12 @@ def simulation_fold(dmodel, n: int = CHUNK, *, jit=False) -> ca.Function:
         W, dt = ca.MX.sym("w", m.nw, n_), ca.MX.sym("dt", 1, n_)
         # one parameter vector for the chunk (so that a map over parameter vectors maps one column each)
         X = acc(x, U, ca.repmat(p, 1, n_), W, dt)
-        return ca.Function(f"simulate_fold{n_}", [x, U, p, W, dt], [X], ["x", "u", "p", "w", "dt"], ["xf"])
+        return ca.Function(f"simulate_fold{n_}", [x, U, p, W, dt], [X, X[:, -1]], ["x", "u", "p", "w", "dt"],
+                           ["xf", "x_last"])
     return _shared(dmodel, ("simulate", int(n)), make, jit)
 
 
-def sensitivity_fold(dmodel, k: int, n: int = CHUNK, *, jit=False) -> ca.Function:
+def sensitivity_fold(dmodel, k: int, n: int | None = None, *, jit=False) -> ca.Function:
     """The step with forward sensitivities to ``k`` parameters, folded over ``n`` steps.
 
     ``fold(x, S, u, p, E, dt) -> (xn, Sn)``: ``x`` (nx, 1) and ``S`` (nx, k) the state and its sensitivities at
@@ -162,8 +155,8 @@ def sensitivity_fold(dmodel, k: int, n: int = CHUNK, *, jit=False) -> ca.Functio
     dmodel : DiscreteModel
     k : int
         Number of parameters.
-    n : int
-        Steps per call.
+    n : int, optional
+        Steps per call (default :func:`casship.runtime.fold_chunk`).
     jit : bool or None
         As for :func:`simulation_fold`.
 
@@ -171,6 +164,8 @@ def sensitivity_fold(dmodel, k: int, n: int = CHUNK, *, jit=False) -> ca.Functio
     -------
     casadi.Function
     """
+    n = fold_chunk() if n is None else n
+
     def make():
         m, sym = dmodel.model, dmodel.symbolic
         x, S = sym.sym("x", m.nx), sym.sym("S", m.nx, k)
@@ -189,15 +184,19 @@ def sensitivity_fold(dmodel, k: int, n: int = CHUNK, *, jit=False) -> ca.Functio
     return _shared(dmodel, ("sensitivity", int(k), int(n)), make, jit)
 
 
-def _mapped(fold: ca.Function, n: int) -> ca.Function:
-    """``fold`` mapped over ``n`` parameter vectors (and states), the inputs, noise and steps shared."""
+def _mapped(dmodel, size: int, jit, n: int) -> ca.Function:
+    """The simulation fold mapped over ``n`` parameter vectors (and states), the inputs, noise and steps
+    shared (the runtime's table keeps it)."""
     if n == 1:
-        return fold
-    entry = _MAPPED.get((id(fold), n))
-    if entry is None:
+        return simulation_fold(dmodel, size, jit=jit)
+
+    def make():
+        fold = simulation_fold(dmodel, size, jit=jit)
         shared = [fold.index_in(name) for name in ("u", "w", "dt")]
-        entry = _MAPPED.keep((id(fold), n), (fold, fold.map(f"{fold.name()}_map{n}", "serial", n, shared, [])))
-    return entry[1]
+        return fold.map(f"{fold.name()}_map{n}", "serial", n, shared, [])
+    # mapped around the fold as jit hands it out (compiled or not): not compiled again
+    return shared_function(("folds", signature(dmodel), "mapped", int(size), int(n), _jit(dmodel, jit)), make,
+                           JitPolicy.OFF)
 
 
 def padded(a: np.ndarray, total: int) -> np.ndarray:
@@ -260,32 +259,24 @@ def fold_steps(dmodel, x0, U, P, W, dt, *, jit=False) -> np.ndarray:
     if steps == 0:
         return X[0] if single else X
     size = _size(steps, _jit(dmodel, jit))
-    fun = _mapped(simulation_fold(dmodel, size, jit=jit), m)
-    total = -(-steps // size) * size
-    Uc = padded(np.asarray(U, dtype=float)[:steps].T, total)
-    Wc = padded(np.asarray(W, dtype=float)[:steps].T, total)
-    dtc = padded(dt[None, :], total)
-    call = BufferedCall(fun)            # no conversion of CasADi matrices per chunk
-    call["x"], call["p"] = np.repeat(x0[:, None], m, axis=1), P.T
-    for start in range(0, total, size):
-        cols = slice(start, start + size)
-        call["u"], call["w"], call["dt"] = Uc[:, cols], Wc[:, cols], dtc[:, cols]
-        try:
-            call()
-        except RuntimeError:
-            _failure(dmodel, fun, call, start, min(start + size, steps) - 1)
-        block = call.out("xf").reshape(nx, m, size)           # the parameter vectors' chunks side by side
-        take = min(size, steps - start)
+    fun = _mapped(dmodel, size, jit, m)
+    per = {"u": np.asarray(U, dtype=float)[:steps].T, "w": np.asarray(W, dtype=float)[:steps].T, "dt": dt[None, :]}
+    job = Job(fun, {"x": np.repeat(x0[:, None], m, axis=1)}, {"p": P.T}, per, steps, carry={"x": "x_last"}, pad={})
+    try:
+        run = run_pieces([job], chunk=size)[0]["pieces"]
+    except PieceFailed as exc:
+        _failure(dmodel, exc.fun, exc.inputs, exc.start, exc.stop - 1)
+    for (start, _, _), (_, out, take) in zip(pieces(steps, size), run):
+        block = out["xf"].reshape(nx, m, size)           # the parameter vectors' chunks side by side
         X[:, start + 1:start + 1 + take] = block[:, :, :take].transpose(1, 2, 0)
-        call["x"] = block[:, :, -1]
     return X[0] if single else X
 
 
-def _failure(dmodel, fun, call, first: int, last: int):
+def _failure(dmodel, fun, inputs: dict, first: int, last: int):
     """Raise :class:`IntegrationError` for a failed chunk, with the solver's status (which only the
     exception of a plain call of the Function carries)."""
     try:
-        fun(*(call.arg(name) for name in fun.name_in()))
+        fun(*(inputs[name] for name in fun.name_in()))
     except RuntimeError as exc:
         status = solver_status(exc)
         raise IntegrationError(f"integration of {dmodel.model.name!r} ({dmodel.method}) failed in steps "

@@ -20,8 +20,8 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
-from .folds import CHUNK, sensitivity_fold
-from .runtime import BufferedCall
+from .folds import sensitivity_fold
+from .runtime import Job, run_pieces
 from .model import Model
 from .errors import InputError
 
@@ -90,26 +90,16 @@ def trajectory_sensitivities(model: Model, x0, t, U, p, names, *, method: str = 
     E[idx, np.arange(k)] = 1.0
     p = np.asarray(p, dtype=float)
     steps = dt.size
-    fold = sensitivity_fold(dmodel, k, CHUNK, jit=jit)
-    total = -(-steps // CHUNK) * CHUNK
-    Uc = np.zeros((model.nu, total))
-    Uc[:, :steps] = np.asarray(U, dtype=float)[:steps].T
-    dtc = np.zeros((1, total))
-    dtc[0, :steps] = dt
     X, S = np.empty((steps + 1, model.nx)), np.zeros((steps + 1, model.nx, k))
     X[0] = np.asarray(x0, dtype=float).reshape(-1)
-    call = BufferedCall(fold)
-    call["x"], call["S"], call["p"], call["E"] = X[0], S[0], p, E
-    for start in range(0, total, CHUNK):
-        cols = slice(start, start + CHUNK)
-        call["u"], call["dt"] = Uc[:, cols], dtc[:, cols]
-        call()
-        take = min(CHUNK, steps - start)
-        Xb, Sb = call.out("xn"), call.out("Sn")
-        X[start + 1:start + 1 + take] = Xb.T[:take]
-        # a chunk's Sn (nx, CHUNK k) holds sample j in columns j k:(j + 1) k
-        S[start + 1:start + 1 + take] = Sb.reshape(model.nx, CHUNK, k).transpose(1, 0, 2)[:take]
-        call["x"], call["S"] = Xb[:, -1], Sb[:, -k:]
+    if steps:
+        # padded steps (dt = 0, no input) leave the state alone; the runtime's driver runs the pieces
+        job = Job(sensitivity_fold(dmodel, k, jit=jit), {"x": X[0], "S": S[0]}, {"p": p, "E": E},
+                  {"u": np.asarray(U, dtype=float)[:steps].T.reshape(model.nu, steps), "dt": dt[None, :]}, steps,
+                  carry={"x": "xn", "S": "Sn"}, pad={"u": 0.0, "dt": 0.0})
+        out = run_pieces([job], collect=("xn", "Sn"), record=False)[0]
+        X[1:] = out["xn"][:, :, 0]
+        S[1:] = out["Sn"]
     return X, S
 
 

@@ -109,12 +109,11 @@ def check_radians(model: Model, U: np.ndarray) -> None:
                              "radians (degrees given?)")
 
 
-FOLD_CHUNK = 1024
-
-
 def _chunk(steps: int) -> int:
-    """Fold length for ``steps`` steps: a power of two up to :data:`FOLD_CHUNK` (few cached sizes)."""
-    return min(FOLD_CHUNK, 1 << max(0, int(steps - 1).bit_length()))
+    """Map length for ``steps`` steps: a power of two up to the runtime's chunk (few cached sizes)."""
+    from .runtime import fold_chunk
+
+    return min(fold_chunk(), 1 << max(0, int(steps - 1).bit_length()))
 
 
 def eval_outputs(model: Model, X: np.ndarray, U: np.ndarray, p) -> np.ndarray:

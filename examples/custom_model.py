@@ -13,7 +13,7 @@ import casadi as ca
 import numpy as np
 
 import casship as cs
-from casship.runtime import export_estimator
+from casship.estimators import export_estimator
 
 # -- 1. the model: named states, inputs, parameters with nominal values, noise, outputs -------------
 b = cs.ModelBuilder("linear3dof", "linear surge-sway-yaw model with NED kinematics (example)")

@@ -46,8 +46,6 @@ PACKAGE_INTERNAL = {
     ("casship.identify.crossval", "_kwargs"):
         "cross-validation rebuilds a problem of the same class with the same settings on other records",
     ("casship.identify.mle", "_value_raw"): "the likelihood engine's unscaled value for the MLE problem",
-    ("casship.identify.mle", "_chunk"): "the record folds' chunk size of identify._engine",
-    ("casship.identify.mle", "_pieces"): "the record folds' pieces of identify._engine",
     ("casship.maneuvers.runners", "_input_vector"): "the manoeuvres' input vector of maneuvers.inputs",
     ("casship.models.lowspeed", "_param"): "the ship models' parameter declaration of models.mmg",
     ("casship.models.wind_fourier", "_lib"): "casadi-or-numpy choice of the wind-load formulas in models.wind",
@@ -56,6 +54,8 @@ PACKAGE_INTERNAL = {
 FOREIGN = {
     ("casship.cli", "_actions"): "argparse: a parser's arguments have no public accessor",
     ("casship.cli", "_choices_actions"): "argparse: a subcommand's one-line help has no public accessor",
+    ("casship.cli", "_exit"): "os._exit (public, underscored): after a Ctrl-C the program ends without the "
+                              "interpreter's teardown, which takes seconds on a busy machine",
 }
 # The public members of namedtuples start with an underscore.
 NOT_PRIVATE = {"_replace", "_asdict", "_fields", "_make", "_field_defaults"}

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import casship as cs
+from casship import runtime
 from casship.identify import MLEProblem
 from casship.identify import _engine
 from casship.runtime import Compiling, cached_function, compile_in_background
@@ -92,7 +93,7 @@ def test_first_fit_on_an_empty_cache_runs_while_compiling_and_equals_the_interpr
     for h in handles:
         h.wait(timeout=300)
         assert h.ready, h.error
-    _engine._SHARED.clear()                                           # as a new process would start
+    runtime.FUNCTIONS.clear()                                           # as a new process would start
     again = MLEProblem(ekf, data, free=["K", "T"], x0=prior)
     assert again.solve(guess=guess).estimates["K"] == ref.estimates["K"]
     assert again.engine.functions()

@@ -78,7 +78,7 @@ def test_identify_several_records_with_sharing_prior_and_identifiability(tmp_pat
         paths.append(str(data.to_csv(tmp_path / f"run{i}.csv")))
     out = tmp_path / "fit.json"
     assert main(["identify", *paths, "--model", "nomoto1", "--method", "oe", "--free", "K,T,bias[delta]",
-                 "--share", "bias[delta]=record", "--prior", "K=0.05,T=50", "--sigma", "psi=0.005",
+                 "--share", "bias[delta]=record", "--prior-std", "K=0.05,T=50", "--sigma", "psi=0.005",
                  "--estimate-x0", "psi", "--bounds", "T=1:200", "--identifiability", "--out", str(out)]) == 0
     text = capsys.readouterr().out
     assert "identifiability of" in text and "proposed free set" in text and "N(" in text
@@ -90,3 +90,37 @@ def test_identify_several_records_with_sharing_prior_and_identifiability(tmp_pat
     assert main(["identify", *paths, "--model", "nomoto1", "--free", "K", "--share", "K=group",
                  "--out", str(tmp_path / "fit2.json")]) == 2
     assert "--group" in capsys.readouterr().err
+
+
+def test_identify_without_free_runs_the_ship_workflow_and_prints_its_choices(nomoto_csv, tmp_path, capsys):
+    out = tmp_path / "fit.json"
+    # a model without the workflow's manoeuvring candidates: the candidates are the ones given a prior
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--out", str(out)]) == 2
+    assert "no candidates" in capsys.readouterr().err
+    # nomoto1's preset (K = 0.185, T = 107) is far from this ship (0.1, 20): a tight prior holds it there
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior-std", "K=0.01,T=5", "--out", str(out)]) == 2
+    assert "determine none of the candidates" in capsys.readouterr().err
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior-std", "K=0.2,T=200", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "[free set]" in text and "because" in text and "run-level evidence" in text
+    fit = json.loads(out.read_text())
+    assert fit["workflow"]["choices"] and sorted(fit["free"]) == ["K", "T"]
+    assert abs(fit["estimates"]["K"] / 0.1 - 1) < 0.05 and abs(fit["estimates"]["T"] / 20.0 - 1) < 0.1
+    # options of a hand-made fit would have no effect on the workflow: refused
+    assert main(["identify", str(nomoto_csv), "--model", "nomoto1", "--prior-std", "K=0.2,T=200", "--R", "psi=1e-4",
+                 "--out", str(tmp_path / "other.json")]) == 2
+
+
+@pytest.mark.data
+def test_workflow_fit_on_two_marin_runs_predicts_the_third_better_than_published(data_dir, tmp_path, capsys):
+    folder = data_dir / "kvlcc2_marin_free"
+    out = tmp_path / "fit.json"
+    assert main(["identify", str(folder / "MARIN_FREE_KVLCC2_tc_-35_m.dat"), str(folder / "MARIN_FREE_KVLCC2_zz_10_m.dat"),
+                 "--model", "kvlcc2", "--out", str(out)]) == 0
+    held = str(folder / "MARIN_FREE_KVLCC2_zz_-20_m.dat")
+    capsys.readouterr()
+    rmse = {}
+    for label, extra in (("fit", ["--params", str(out)]), ("published", [])):
+        assert main(["simulate", "--model", "kvlcc2", *extra, "--inputs", held, "--json"]) == 0
+        rmse[label] = json.loads(capsys.readouterr().out)["replay"]["psi_rmse_deg"]
+    assert rmse["fit"] < rmse["published"]

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import casship as cs
-from casship.runtime import compile_c, export_estimator, generate_c, read_harness_output, write_harness
+from casship.estimators import export_estimator
+from casship.runtime import compile_c, generate_c, read_harness_output, write_harness
 from casship.estimators.base import SAMPLE_INPUTS
 
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc is not installed: C export not compiled")
@@ -132,7 +133,7 @@ def test_the_onboard_loop_in_the_docs_compiles_and_runs(tmp_path, monkeypatch):
 
 @needs_gcc
 def test_compiled_mhe_rti_step_equals_python(tmp_path):
-    from casship.runtime import export_mhe_rti
+    from casship.estimators import export_mhe_rti
 
     m = cs.models.nomoto_first_order()
     mhe = cs.MHE(cs.discretize(m, 0.5), Q=1e-6, R=1e-4, options={"horizon": 8, "solver": "rti"})

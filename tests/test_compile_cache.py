@@ -294,14 +294,14 @@ def test_file_system_errors_mean_no_cache_with_one_warning(tmp_path, monkeypatch
     folder.mkdir(mode=0o700)
     folder.chmod(0o500)
     if os.geteuid() == 0:
-        real = tempfile.mkdtemp
+        real = os.mkdir
 
-        def read_only(suffix=None, prefix=None, dir=None):
-            if dir is not None and Path(dir) == folder:
+        def read_only(path, *args, **kwargs):
+            if Path(path).parent == folder:
                 raise PermissionError(13, "Read-only file system", str(folder))
-            return real(suffix, prefix, dir)
+            return real(path, *args, **kwargs)
 
-        monkeypatch.setattr(tempfile, "mkdtemp", read_only)
+        monkeypatch.setattr(os, "mkdir", read_only)
     with pytest.warns(RuntimeWarning, match="is not used: writing into it failed") as seen:
         a = rt.compile_function(_twice("ro_one"), flags=["-O1"], cache_dir=folder)
         b = rt.compile_function(_twice("ro_two"), flags=["-O1"], cache_dir=folder)
@@ -340,20 +340,23 @@ def _stand_in(tmp_path, name, body):
 
 
 @posix_only
-def test_a_compiler_refusing_march_native_gets_the_portable_flags(cache, tmp_path, monkeypatch):
-    """The default flags include -march=native; a compiler that refuses it still compiles, with the
-    portable flags (and they are what the cache records and what cache info says)."""
+def test_the_default_flags_are_bit_exact_and_march_native_is_an_opt_in(cache, tmp_path, monkeypatch):
+    """The one flag set keeps the interpreted numbers (no -march=native, no contraction into fused
+    multiply-adds), so a compiler that refuses -march=native compiles the defaults untouched; the
+    native flags are asked for explicitly ($CASSHIP_CFLAGS), and then cache info says so."""
+    assert "-march=native" not in rt.DEFAULT_FLAGS and "-ffp-contract=off" in rt.DEFAULT_FLAGS
+    assert "-march=native" in rt.NATIVE_FLAGS
     real, _ = rt.find_compiler()
     picky = _stand_in(tmp_path, "picky-cc", "for a in \"$@\"; do [ \"$a\" = -march=native ] && "
                                             f"{{ echo 'unknown -march' >&2; exit 1; }}; done\nexec {real} \"$@\"\n")
     f = rt.compile_function(_twice("picky_thing"), compiler=picky)
     assert _y(f) == [2.0, 4.0]
     (record,) = _entry_files(cache)[1]
-    assert json.loads(record.read_text())["flags"] == list(rt.PORTABLE_FLAGS)
-    assert "-march=native" in rt.DEFAULT_FLAGS
-    monkeypatch.setenv("CC", picky)                               # cache info says which flags and why
+    assert json.loads(record.read_text())["flags"] == list(rt.DEFAULT_FLAGS)
+    assert "last bit" in rt.cache_info().flags_note
+    monkeypatch.setenv("CASSHIP_CFLAGS", " ".join(rt.NATIVE_FLAGS))
     info = rt.cache_info()
-    assert info.flags == rt.PORTABLE_FLAGS and "refuses -march=native" in info.flags_note
+    assert info.flags == rt.NATIVE_FLAGS and "differ" in info.flags_note
 
 
 @posix_only

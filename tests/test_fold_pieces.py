@@ -1,10 +1,10 @@
-"""Batch runs go through compiled folds in pieces (whole pieces write straight into the result,
-a padded last piece is copied): the pieces must not change a single number."""
+"""Batch runs go through folds in pieces (the runtime's one driver, ``run_pieces``; the chunk length is
+the one setting ``CASSHIP_FOLD_CHUNK``): the pieces must not change a single number."""
 import numpy as np
 import pytest
 
 import casship as cs
-from casship.estimators import rts
+from casship.runtime import fold_chunk
 
 
 def _record(n=1100, dt=0.5):
@@ -20,11 +20,11 @@ def test_pieces_give_the_same_filter_and_smoother_as_one_piece(kind, monkeypatch
     m, dm, data, prior = _record()
     options = {"members": 20} if kind == "EnKF" else {}
     est = getattr(cs, kind)(dm, Q=1e-7, R=1e-4, options=options)
-    assert len(data) > 2 * est.FOLD_CHUNK                  # two whole pieces and a padded one
+    assert len(data) > 2 * fold_chunk()                     # two whole pieces and a padded one
     pieces = est.smooth(data, prior, seed=1)
     one = getattr(cs, kind)(dm, Q=1e-7, R=1e-4, options=options)
-    one.FOLD_CHUNK = 2048                                   # the whole record in one padded piece
-    monkeypatch.setattr(rts, "FOLD_CHUNK", 2048)
+    monkeypatch.setenv("CASSHIP_FOLD_CHUNK", "2048")        # the whole record in one padded piece
+    assert fold_chunk() == 2048
     whole = one.smooth(data, prior, seed=1)
     for name in ("x", "P", "x_pred", "P_pred", "C", "K", "innovations", "S", "nis", "loglik_terms"):
         np.testing.assert_array_equal(getattr(pieces, name), getattr(whole, name), err_msg=name)
@@ -48,7 +48,7 @@ def test_cached_fold_calls_let_go_of_the_result():
     m, dm, data, prior = _record()
     ekf = cs.EKF(dm, Q=1e-7, R=1e-4)
     res = ekf.filter(data, prior)
-    assert all(not call._redirected for call in ekf._fold_calls.values())
+    assert not res.P.flags.writeable                # results are read-only: shared without a copy
     block = weakref.ref(res.P.base if res.P.base is not None else res.P)
     del res
     gc.collect()

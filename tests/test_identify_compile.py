@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import casship as cs
+from casship import runtime
 from casship.identify import _engine
 from casship.runtime import CompileError, Compiling, cache_info, find_compiler
 
@@ -69,7 +70,7 @@ def test_background_compile_gives_the_interpreted_numbers(tmp_path, monkeypatch)
     ref = cs.OutputErrorProblem(model, recs, free=["K", "T"], sigma={"psi": 0.01}, jit=False)
     prob = ref.replace(jit=None)
     sens = prob.engine._sens_fold(2, ("p",))                         # the interpreted fold while compiling
-    pending = [f for f in _engine._SHARED.values() if isinstance(f, Compiling)
+    pending = [f for f in runtime.FUNCTIONS.values() if isinstance(f, Compiling)
                and f.interpreted.name().startswith("oe_sens2")]
     assert pending
     background = pending[-1]

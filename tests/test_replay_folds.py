@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import casship as cs
-from casship import compiling, folds
+from casship import folds, runtime
 from casship.errors import DivergenceError
 from casship.identify import ParameterUncertainty
 from casship.models import kvlcc2
@@ -160,7 +160,7 @@ def test_replays_of_new_model_objects_build_no_function_again():
     assert folds.COUNTS["built"] > built
 
 
-def test_without_a_compiler_replays_run_interpreted_with_the_same_numbers(tmp_path, monkeypatch):
+def test_without_a_compiler_replays_run_interpreted_with_the_same_numbers(tmp_path, monkeypatch, request):
     m = _steering("no_compiler", 4.0e-3)                 # a structure no other test compiles
     t = np.arange(0.0, 200.0, 1.0)
     data = cs.Dataset(t, {"delta": np.radians(10.0) * np.sign(np.sin(t / 30.0) + 1e-9), "psi": np.zeros(t.size)})
@@ -171,10 +171,12 @@ def test_without_a_compiler_replays_run_interpreted_with_the_same_numbers(tmp_pa
     bad.write_text('#!/bin/sh\n[ "$1" = --version ] && echo "badcc 1.0" && exit 0\necho "badcc: refused" >&2\nexit 1\n')
     bad.chmod(0o755)
     monkeypatch.setenv("CC", str(bad))
-    monkeypatch.setattr(compiling, "_BROKEN", [])         # this process's other tests keep compiling
+    saved = list(runtime.BACKGROUND_FAILURES)            # this process's other tests keep compiling
+    runtime.BACKGROUND_FAILURES.clear()
+    request.addfinalizer(lambda: runtime.BACKGROUND_FAILURES.__setitem__(slice(None), saved))
     with pytest.warns(RuntimeWarning, match="interpreted"):
         res = replay(m, data, uncertainty=unc, samples=6)            # jit=None: compiled in the background
-        for handle in [f for f in folds._SHARED.values() if isinstance(f, Compiling)]:
+        for handle in [f for f in runtime.FUNCTIONS.values() if isinstance(f, Compiling)]:
             handle.wait(timeout=120)
     np.testing.assert_array_equal(res.trajectory["psi"], ref.trajectory["psi"])
     np.testing.assert_array_equal(res.bands["psi_std"], ref.bands["psi_std"])

@@ -1,8 +1,9 @@
 """The kvlcc2-marin study's asymmetry rule on a simulated ship (no measured data needed).
 
 A KVLCC2 with a known propeller-induced yaw moment ``N_P = N'_0 L T`` (it scales with the thrust):
-with zig-zags that turn first to both sides the study's selection rule (:func:`select_free`, the
-rig's neutral angle waiting for the ship's thrust terms) chooses the thrust term over a rudder
+with zig-zags that turn first to both sides the prior-ratio selection rule
+(:meth:`casship.identify.Identifiability.propose` with ``max_ratio``, the rig's neutral angle waiting
+for the ship's thrust terms) chooses the thrust term over a rudder
 neutral angle of the facility, which explains nearly the same port/starboard difference, and the
 refinement recovers its value; trained on one direction only, both are flagged confounded with
 the turning dynamics and neither is chosen.
@@ -12,7 +13,6 @@ import pytest
 
 import casship as cs
 from casship.identify import Prior
-from problems.kvlcc2_marin.workflow import select_free
 
 from asymmetry_records import SIGMA, both_directions
 
@@ -37,6 +37,10 @@ def _choose(ship, records):
     prob = _problem(ship, records)
     idf = prob.identifiability(at={"N_0_dash": 0.0, "delta_0@A": 0.0, "N_r_dash": ship.param_dict()["N_r_dash"]})
     return idf, *select_free(idf, after={"delta_0@A": ["N_0_dash"]})
+
+
+def select_free(idf, after):
+    return idf.propose(max_ratio=0.5, max_count=15, after=after, candidates=idf.names, keep=[], explain=True)
 
 
 def test_both_directions_choose_and_recover_the_thrust_dependent_term(runs):

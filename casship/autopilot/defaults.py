@@ -52,7 +52,7 @@ class AutopilotSettings:
 
     Parameters
     ----------
-    speed, method, mode, rate, wn, zeta, integral, wn_ref, zeta_ref, r_max, steer_max, steer_rate_max, actuator_T, filter_T, dt, delay, gnss_rate, gnss_std, compass_rate, compass_std, gyro_std, ekf_alpha, ekf_q, observer_q, segment, feedforward, turn_rate_top, lqr_weights
+    speed, method, mode, rate, wn, zeta, integral, wn_ref, zeta_ref, r_max, steer_max, steer_rate_max, actuator_T, filter_T, dt, delay, gnss_rate, gnss_std, compass_rate, compass_std, gyro_std, ekf_alpha, ekf_q, observer_q, segment, feedforward, turn_rate_top, lqr_weights, wave_w0, wave_std, wave_filter
         The settings, each with its unit and rule in :data:`RULES`.
     sources : dict
         Name -> ``"given"`` or the rule that produced the value.

@@ -11,13 +11,19 @@ end with exit code 2 and one line ``casship CMD: error: ...`` naming the item. A
 ``ValueError`` included, is a bug in casship: it is reported as one (``casship CMD: internal error:
 ...``, exit code 1). ``--debug`` shows the Python traceback of either. Warnings print as one line
 ``casship CMD: warning: ...``.
+
+Ctrl-C: exit code 130 at once, the compilers this process runs stopped (their process groups) and
+their build folders removed; an error raised while the interrupt unwinds is still an interrupt. A
+command whose result is written exits without waiting for background compiles.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
 import pkgutil
+import signal
 import sys
+import threading
 import warnings
 
 from ._common import HelpFormatter, Parser, UsageError
@@ -136,6 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         Exit code: 0 success, 2 user error (one line on standard error), 1 a bug in casship,
         130 interrupted, 141 the reader of the output went away (a closed pipe).
     """
+    argv_given = argv is not None
     argv = list(sys.argv[1:] if argv is None else argv)
     command = _selected(argv)
     parser = build_parser(command if command in _commands() else "")
@@ -156,6 +163,38 @@ def main(argv: list[str] | None = None) -> int:
         print(f"casship {command}: warning: {_one_line(message) if isinstance(message, Warning) else message}",
               file=sys.stderr)
 
+    interrupted = []
+    previous = _on_interrupt(interrupted)
+    code = None
+    try:
+        code = _run(args, command, show, interrupted, not argv_given)
+        return code
+    finally:
+        if previous is not None:
+            # run as the program (no argv given): the result is out, the exit must not be interrupted
+            # ("Exception ignored ... KeyboardInterrupt" and exit status 0); otherwise put it back
+            signal.signal(signal.SIGINT, signal.SIG_IGN if argv_given is False else previous)
+        if code == 130 and argv_given is False:
+            _exit_now(code)
+
+
+def _exit_now(code: int) -> None:
+    """End the program at once after a Ctrl-C: the work is unwound and the compilers are stopped; the
+    interpreter's own teardown of a large numeric session can take seconds on a busy machine."""
+    import logging
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    logging.shutdown()
+    os._exit(code)
+
+
+def _run(args, command: str, show, interrupted: list, program: bool) -> int:
+    """The command, its errors turned into exit codes (see :func:`main`)."""
     from ..progress import command as command_progress
 
     with warnings.catch_warnings():
@@ -166,8 +205,7 @@ def main(argv: list[str] | None = None) -> int:
         except UsageError as exc:
             return _usage(exc)
         except KeyboardInterrupt:
-            print(f"casship {command}: interrupted", file=sys.stderr)
-            return 130
+            return _interrupted(command, program)
         except BrokenPipeError:
             # the reader of the output went away (casship ... | head): nothing to report, as a tool
             # that SIGPIPE stops; standard output is pointed at devnull so that its flush at exit is quiet
@@ -176,15 +214,46 @@ def main(argv: list[str] | None = None) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 141
         except Exception as exc:
+            if interrupted:         # an error raised while a Ctrl-C unwound the work: still an interrupt
+                return _interrupted(command, program)
             if getattr(args, "debug", False):
                 raise
             if is_user_error(exc):
                 print(f"casship {command}: error: {_one_line(exc)}", file=sys.stderr)
                 return 2
-            print(f"casship {command}: internal error (a bug in casship): {type(exc).__name__}: {_one_line(exc)}; "
-                  f"run it again with --debug for the traceback and report it", file=sys.stderr)
+            print(f"casship {command}: internal error (a bug in casship): {type(exc).__name__}: "
+                  f"{_one_line(exc)}; run it again with --debug for the traceback and report it", file=sys.stderr)
             return 1
 
+
+def _on_interrupt(seen: list):
+    """Note every Ctrl-C in ``seen`` while a command runs (then raise ``KeyboardInterrupt`` as Python
+    does); returns the handler it replaced, or None where no handler can be set (not the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        seen.append(signum)
+        raise KeyboardInterrupt
+
+    try:
+        return signal.signal(signal.SIGINT, handler)
+    except (ValueError, OSError):
+        return None
+
+
+def _interrupted(command: str, program: bool) -> int:
+    """Ctrl-C: stop the compilers this process runs (their process groups and build folders) at once."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)        # a second Ctrl-C does not break the clean-up
+    runtime = sys.modules.get("casship.runtime")
+    if runtime is not None and program:         # the process ends: no compile of it is wanted any more
+        runtime.stop_compilers()
+    try:
+        print(f"casship {command}: interrupted", file=sys.stderr)
+    except (KeyboardInterrupt, OSError):
+        pass
+    return 130
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

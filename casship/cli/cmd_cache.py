@@ -14,7 +14,8 @@ def register(sub) -> None:
                                    "that belongs to another user or that others may write into is not used.")
     p.add_argument("action", choices=("info", "clear"), help="info: where, how many entries, how big, which compiler, "
                                                              "flags and time limit, how compiled code is called; "
-                                                             "clear: delete every compiled library")
+                                                             "clear: delete every compiled library (a compile in "
+                                                             "progress is left alone and finishes)")
     p.add_argument("--dir", default=None, help="the cache directory (default: as described above)")
     p.set_defaults(func=run)
 
@@ -34,4 +35,7 @@ def run(args) -> int:
         return 0
     removed = clear_cache(args.dir)
     print(f"removed {removed} file(s) ({info.bytes / 1e6:.1f} MB) from {info.path}")
+    if removed.busy:
+        print(f"left alone: {len(removed.busy)} compile(s) in progress in another process or thread "
+              f"({', '.join(k[:12] for k in removed.busy)}); they finish as they would have")
     return 0

@@ -11,6 +11,12 @@ Examples::
         --identifiability --out fit.json --plot fit.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
 
+Without ``--free`` the records are identified by the ship workflow
+(:func:`casship.identify.workflow.identify_ship`): propulsion first, a cost weighted by a stated
+rule, priors about the preset, the free set chosen from run-level evidence, the inverse-dynamics
+start; every choice is printed with its reason. ``--weights`` and ``--prior-std`` override its channel
+weights and prior.
+
 Records are CSV files with a header row (columns named like the model's inputs and outputs, SI
 units, radians), MARIN ``.dat`` files (read by :func:`casship.io.read_marin`, rudder sign flipped
 to the MMG convention), HSVA or NMEA logs; the record options (``--preset``, ``--columns``,
@@ -53,14 +59,21 @@ HELP = "fit model parameters to records (maximum likelihood or output error)"
 def register(sub) -> None:
     p = sub.add_parser("identify", help=HELP,
                        description="Estimate named parameters of a registered model from one or more records "
-                                   "(one joint fit), with a prior, standard errors, correlations and warnings.\n\n"
+                                   "(one joint fit), with a prior, standard errors, correlations and warnings. "
+                                   "Without --free: the ship workflow (casship.identify_ship): propulsion first, "
+                                   "channels and records weighted by a stated rule, priors about the preset, the "
+                                   "free set chosen from run-level evidence, the inverse-dynamics start; every "
+                                   "choice printed with its reason (--weights, --prior-std, --measured override).\n\n"
                                    + __doc__.split("\n\n", 1)[1])
     p.add_argument("data", nargs="+", help="records: CSV with a header row, MARIN .dat, NMEA log (see "
                                             "casship.io.read_record); the record options below apply to each")
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
     add_record_options(p, "records")
-    p.add_argument("--free", required=True,
-                   help="comma-separated quantities to estimate: parameter names, bias[input], bias[output]")
+    p.add_argument("--free", default=None,
+                   help="comma-separated quantities to estimate: parameter names, bias[input], bias[output] "
+                        "(default: the ship workflow chooses them from run-level evidence)")
+    p.add_argument("--weights", default=None,
+                   help="workflow: channel standard deviations of the cost name=value,... (default: the stated rule)")
     p.add_argument("--out", default="fit.json", help="JSON file for the fit (an existing file needs --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --out / --plot file")
     p.add_argument("--objective", dest="method", default="mle", choices=("mle", "oe"),
@@ -177,6 +190,10 @@ def run(args) -> int:
     refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
                                 "--group": bool(args.group) and "=group" not in (args.share or "")},
                   "--prior-weight weighs a --prior-std; --group labels the records for --share NAME=group")
+    if args.free is None:
+        return _workflow(args)
+    refuse_unused(args.parser, {"--weights": args.weights is not None},
+                  "--weights sets the channel weights of the workflow (without --free); with --free use --sigma")
     check_input_files({"--params": args.params})
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
@@ -233,3 +250,37 @@ def _exit_code(fit, accept: bool) -> int:
     print(f"casship identify: verdict {word}: {fit.verdict['reason']}; the fit file records it (exit code "
           f"{EXIT_WORSE}; --accept-worse to exit 0)", file=sys.stderr)
     return EXIT_WORSE
+
+
+def _workflow(args) -> int:
+    """``casship identify`` without ``--free``: the ship workflow of the Python API, printed choice by choice."""
+    from ..identify.workflow import identify_ship
+    from ..models import get_model
+
+    refuse_unused(args.parser, {o: v for o, v in {
+        "--share": args.share is not None, "--group": args.group is not None,
+        "--bounds": args.bounds is not None, "--R": args.R is not None, "--Q": args.Q is not None,
+        "--estimate-noise": args.estimate_noise is not None, "--sigma": args.sigma is not None,
+        "--guess": args.guess is not None, "--params": args.params is not None,
+        "--estimate-x0": args.estimate_x0 is not None, "--shooting": args.shooting != "single",
+        "--identifiability": args.identifiability, "--prior-weight": args.prior_weight != 1.0}.items()},
+                  "without --free the ship workflow runs (output error, its own start and weights); give --free "
+                  "for a fit of your own")
+    stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
+    model = get_model(args.model)
+    records = [d.decimate(args.decimate) for d in read_records(args, args.data, model)]
+    measured = parse_items(args.measured, "--measured") if args.measured is not None else None
+    ship = identify_ship(records, model, weights=parse_pairs(args.weights, "--weights") or None,
+                         prior=parse_pairs(args.prior, "--prior-std") or None, measured=measured,
+                         verbose=not args.json)
+    facilities = sorted(set(ship.facilities))
+    write_output(args.out, lambda path: ship.to_json(path, facilities[0] if len(facilities) == 1 else None),
+                 option="--out", overwrite=args.overwrite, stamps=stamps)
+    if args.plot:
+        write_output(args.plot, ship.fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
+    if args.json:
+        print_json(ship.to_dict())
+    else:
+        print(ship.fit.summary())
+        print(f"fit written to {args.out}" + (f" (verdict: {ship.fit.verdict['verdict']})" if ship.fit.worse else ""))
+    return _exit_code(ship.fit, args.accept_worse)

@@ -19,7 +19,7 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from ..compiling import compiled, resolve
+from ..runtime import current_function, jit_function
 from ..errors import InputError, SolverError
 from .belief import ParameterBelief
 from .infofold import InformationFold, free_trial_objective
@@ -215,7 +215,7 @@ def optimise_free_trial(approach: Approach, belief: ParameterBelief, noise: Mapp
     fold : InformationFold, optional
         The information fold (built when not given).
     jit : bool or None
-        Compile policy (see :func:`casship.compiling.compiled`).
+        Compile policy (the runtime's :class:`~casship.runtime.JitPolicy`).
 
     Returns
     -------
@@ -246,7 +246,7 @@ def optimise_free_trial(approach: Approach, belief: ParameterBelief, noise: Mapp
     mm = approach.model
     fold = fold if fold is not None else InformationFold(approach, names, list(noise), jit=jit)
     rudder_rows = [mm.input_names.index(r) for r in approach.rudders]
-    fg = compiled(free_trial_objective(fold, B, rudder_rows, criterion=criterion), jit=jit)
+    fg = jit_function(free_trial_objective(fold, B, rudder_rows, criterion=criterion), jit)
     isig, kc = fold.weights(n, noise, discrepancy)
     u0 = approach.inputs(np.zeros(1))[:, 0]
     w, v = np.linalg.eigh(belief.cov)
@@ -263,7 +263,7 @@ def optimise_free_trial(approach: Approach, belief: ParameterBelief, noise: Mapp
     def evaluate(dv):
         key = dv.tobytes()
         if last.get("key") != key:
-            f, g = resolve(fg)(dv, *fixed)
+            f, g = current_function(fg)(dv, *fixed)
             last.update(key=key, f=float(f), g=np.asarray(g, dtype=float).reshape(-1))
         return last["f"], last["g"]
 
@@ -273,11 +273,11 @@ def optimise_free_trial(approach: Approach, belief: ParameterBelief, noise: Mapp
     cons = [{"type": "ineq", "fun": lambda dv: step - D @ dv, "jac": lambda dv: -D},
             {"type": "ineq", "fun": lambda dv: step + D @ dv, "jac": lambda dv: D}]
     if lim.corridor is not None or lim.speed_min is not None:
-        path = compiled(_path_constraints(approach, B, rudder_rows, lim), jit=jit)
+        path = jit_function(_path_constraints(approach, B, rudder_rows, lim), jit)
         path_args = (approach.x0, approach.p, u0)
 
         def path_eval(dv):
-            g, J = resolve(path)(dv, *path_args)
+            g, J = current_function(path)(dv, *path_args)
             return np.asarray(g, dtype=float).reshape(-1), np.asarray(J, dtype=float)
         cons.append({"type": "ineq", "fun": lambda dv: path_eval(dv)[0], "jac": lambda dv: path_eval(dv)[1]})
     knots = np.arange(1, m + 1) * lim.knot

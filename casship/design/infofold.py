@@ -30,13 +30,11 @@ from typing import Mapping, Sequence
 import casadi as ca
 import numpy as np
 
-from ..compiling import compiled, resolve
+from ..runtime import current_function, fold_chunk, jit_function
 from .sensitivity import Approach
 
-__all__ = ["InformationFold", "discrepancy_gains", "CHUNK"]
+__all__ = ["InformationFold", "discrepancy_gains"]
 
-#: Steps per compiled chunk of the fold (a record is run chunk by chunk, the last one padded).
-CHUNK = 100
 
 
 def discrepancy_gains(n: int, dt: float, sigma: float, q: float) -> tuple[np.ndarray, np.ndarray]:
@@ -124,7 +122,7 @@ class InformationFold:
     channels : sequence of str
         Measured outputs (their order is the order of ``sigma`` in :meth:`information`).
     jit : bool or None
-        Compile policy of the chunk (see :func:`casship.compiling.compiled`).
+        Compile policy of the chunk (the runtime's :class:`~casship.runtime.JitPolicy`).
     """
 
     def __init__(self, approach: Approach, names: Sequence[str], channels: Sequence[str], *, jit=None):
@@ -137,7 +135,8 @@ class InformationFold:
         self.step = _step(approach.dmodel.F, m.h, m.nx, m.nu, m.np, tuple(m.indices(self.names, "param")), rows,
                           heading, float(approach.dt))
         self.nz = self.step.size1_in(0)
-        self._chunk = compiled(self.step.mapaccum("information_chunk", CHUNK), jit=jit)
+        self.size = fold_chunk()          # steps per chunk: the runtime's one setting (padding changes nothing)
+        self._chunk = jit_function(self.step.mapaccum("information_chunk", self.size), jit)
 
     # -- inputs ------------------------------------------------------------------------------------
     def z0(self) -> np.ndarray:
@@ -224,12 +223,13 @@ class InformationFold:
         n = U.shape[1]
         isig, kc = self.weights(n, sigma, q)
         C = self.columns(np.asarray(U, dtype=float), kc)
-        pad = (-n) % CHUNK
+        size = self.size
+        pad = (-n) % size
         if pad:
             C = np.hstack([C, np.zeros((C.shape[0], pad))])      # on = 0: the padded steps change nothing
         z, p = self.z0(), self.approach.p
-        for i in range(0, C.shape[1], CHUNK):
-            z = np.asarray(resolve(self._chunk)(z, C[:, i:i + CHUNK], p, isig))[:, -1]
+        for i in range(0, C.shape[1], size):
+            z = np.asarray(current_function(self._chunk)(z, C[:, i:i + size], p, isig))[:, -1]
         return self.unpack(z)
 
     def symbolic(self, z0: ca.MX, C: ca.MX, p: ca.MX, isig: ca.MX) -> ca.MX:
@@ -252,13 +252,14 @@ class InformationFold:
         casadi.MX (k, k)
         """
         n = C.shape[1]
-        chunk = self.step.mapaccum("information_chunk_sym", CHUNK)
-        pad = (-n) % CHUNK
+        size = self.size
+        chunk = self.step.mapaccum("information_chunk_sym", size)
+        pad = (-n) % size
         if pad:
             C = ca.horzcat(C, ca.MX.zeros(C.shape[0], pad))
         z = z0
-        for i in range(0, n + pad, CHUNK):
-            z = chunk(z, C[:, i:i + CHUNK], p, isig)[:, -1]
+        for i in range(0, n + pad, size):
+            z = chunk(z, C[:, i:i + size], p, isig)[:, -1]
         return self.unpack(z)
 
 

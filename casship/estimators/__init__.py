@@ -23,6 +23,7 @@ from .kalman_bucy import KalmanBucy, KalmanBucyOptions
 from .augmented import AugmentedResult, augment, augmented_ekf
 from .mhe import MHE, MHEFailed, MHEOptions
 from .prior import DataPrior, noise_from_data, prior_from_data
+from .export import export_estimator, export_mhe_rti
 
 # Estimators by command-line name (``casship filter --estimator NAME``); other modules may add theirs.
 ESTIMATORS = {"kf": KF, "ekf": EKF, "ukf": UKF, "enkf": EnKF, "kalman-bucy": KalmanBucy, "mhe": MHE}
@@ -31,4 +32,4 @@ __all__ = ["Estimator", "StepEstimator", "Records", "EstimatorOptions", "FilterR
            "OnlineEngine", "check_sample",
            "EKF", "KF", "EKFOptions", "persistence_model", "UKF", "UKFOptions", "rts_smooth", "EnKF", "EnKFOptions", "KalmanBucy",
            "KalmanBucyOptions", "augment", "augmented_ekf", "AugmentedResult", "ESTIMATORS", "MHE", "MHEFailed",
-           "MHEOptions", "prior_from_data", "noise_from_data", "DataPrior"]
+           "MHEOptions", "prior_from_data", "noise_from_data", "DataPrior", "export_estimator", "export_mhe_rti"]

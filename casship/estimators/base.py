@@ -27,7 +27,7 @@ from ..data import Dataset, check_rows
 from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
-from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, compile_function, run_fold
+from ..runtime import DUPLICATE_NAMES, Job, NativeFold, current_function, jit_function, record_loop, run_pieces
 from .contract import Estimator
 from .gaps import checked_run
 from .options import DIAGNOSTICS
@@ -75,15 +75,12 @@ class StepEstimator(Estimator):
         Names of the memory slots.
     """
 
-    FOLD_CHUNK = 512
-
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured: Sequence[str] | None = None, options=None):
         super().__init__(dmodel, Q, R, measured=measured, options=options)
         self.sym = self._symbolic()
         self._steps: dict[tuple, ca.Function] = {}
         self._folds: dict[tuple, ca.Function] = {}
-        self._fold_calls: dict[tuple, BufferedCall] = {}
-        self._compiled: dict[tuple, ca.Function] = {}
+        self._jitted: dict[tuple, object] = {}     # what the runtime handed out under option jit
         self._names: dict[tuple, tuple] = {}
         self._build_expressions()
 
@@ -204,26 +201,24 @@ class StepEstimator(Estimator):
         return self._folds[key]
 
     def _compiled_function(self, key, make) -> ca.Function:
-        """``make()``, compiled to C with option ``jit`` (cached per key)."""
+        """``make()`` under option ``jit`` (the runtime's policy), kept per key: interpreted, compiled, or
+        (background) compiled once the library is loaded."""
         if not self.options.jit:
             return make()
-        if key not in self._compiled:
-            self._compiled[key] = compile_function(make())
-        return self._compiled[key]
+        if key not in self._jitted:
+            self._jitted[key] = jit_function(make(), self.options.jit)
+        return current_function(self._jitted[key])
 
-    def _native_fold(self, outputs) -> NativeFold:
-        """The step returning ``outputs``, compiled with its record loop (cached)."""
+    def _native_fold(self, outputs) -> NativeFold | None:
+        """The step returning ``outputs`` with its compiled record loop under option ``jit``, or None
+        (run the interpreted fold: ``jit`` off, or a background compile not loaded yet)."""
         key = ("native", outputs)
-        if key not in self._compiled:
-            self._compiled[key] = NativeFold(self.step_function(outputs), self.memory)
-        return self._compiled[key]
-
-    def _fold_call(self, size: int, outputs) -> BufferedCall:
-        """The interpreted fold over ``size`` samples through buffers (compiled runs use :meth:`_native_fold`)."""
-        key = (size, outputs)
-        if key not in self._fold_calls:
-            self._fold_calls[key] = BufferedCall(self.fold(size, outputs))
-        return self._fold_calls[key]
+        loop = self._jitted.get(key)
+        if loop is None and self.options.jit:
+            loop = record_loop(self.step_function(outputs), self.memory, self.options.jit)
+            if loop is not None:
+                self._jitted[key] = loop
+        return loop
 
     # -- records: the step's per-sample slots ------------------------------------------------------
     def gate_threshold(self, n_measured: int) -> float:
@@ -340,15 +335,18 @@ class StepEstimator(Estimator):
         draws = self.sample_draws(n, rng) if stochastic else {}
         outputs = self._output_names("all")
         constants = {k: arrays[k] for k in CONSTANT_INPUTS}
-        if self.options.jit:                             # one C loop over the record
+        loop = self._native_fold(outputs)
+        if loop is not None:                             # one C loop over the record
             per = {**{k: arrays[k].T for k in SAMPLE_INPUTS}, **draws}
-            _, outs = self._native_fold(outputs).run(n, memory=memory, per_sample=per, constants=constants,
-                                                     keep=DIAGNOSTICS)
-        else:
-            per = {**{k: arrays[k] for k in SAMPLE_INPUTS}, **draws}
+            _, outs = loop.run(n, memory=memory, per_sample=per, constants=constants, keep=DIAGNOSTICS)
+        else:                                            # the fold in pieces (the runtime's one driver)
+            per = {**{k: arrays[k] for k in SAMPLE_INPUTS},
+                   **{k: np.ascontiguousarray(v.transpose(1, 0, 2).reshape(v.shape[1], n * v.shape[2]))
+                      for k, v in draws.items()}}
             pad = {"mask": 0.0, "dt": 0.0, **{k: 0.0 for k in draws}}
-            _, outs = run_fold(lambda size: self._fold_call(size, outputs), n, self.FOLD_CHUNK, memory=memory,
-                               per_sample=per, constants=constants, pad=pad, keep=DIAGNOSTICS)
+            job = Job(lambda size: self.fold(size, outputs), memory, constants, per, n,
+                      carry={m: m for m in self.memory}, pad=pad)
+            outs = run_pieces([job], shrink=True, collect=DIAGNOSTICS, record=False)[0]
         return self.result(data, arrays, outs)
 
     def smooth(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian
-from ..runtime import DUPLICATE_NAMES, BufferedCall
+from ..runtime import DUPLICATE_NAMES, BufferedCall, is_compiled
 from .gaps import gap_pieces, gap_threshold
 from .options import DIAGNOSTICS
 
@@ -374,7 +374,7 @@ class StepRun(OnlineRun):
         self._prior = prior
         m = est.model
         fun = est._compiled_function(("online", est.options.outputs), lambda: online_step(est))
-        first = BufferedCall(fun, cannot_fail=est.options.jit)
+        first = BufferedCall(fun, cannot_fail=is_compiled(fun))
         self._calls = (first, first.partner(est.memory))
         self._cur, self._samples = 0, 0         # the call whose inputs hold the memory now, samples taken
         for k, v in est.memory_from(prior, rng).items():

@@ -43,8 +43,11 @@ class EstimatorOptions:
         Probability of the chi-square innovation gate (e.g. 0.999); off by default. A sample whose
         normalised innovation squared exceeds the quantile for the number of channels measured is
         not used for the update and is reported as rejected (a NIS equal to the quantile passes).
-    jit : bool
-        Compile the step and its folds to C with the system compiler (CasADi JIT).
+    jit : bool, None, str or casship.runtime.JitPolicy
+        When to compile the step and its record loop to C (the runtime's one policy):
+        ``False`` interpreted, ``True`` compiled before the first run, ``None`` compiled from the
+        cache or in the background while the first runs go interpreted (the same numbers: the
+        default flags keep them to the last bit). Stored as a :class:`~casship.runtime.JitPolicy`.
     outputs : tuple of str or "all"
         Diagnostics the step Function :attr:`StepEstimator.step` (and the online runner) returns
         besides the memory: a subset of ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted``
@@ -59,7 +62,7 @@ class EstimatorOptions:
     """
 
     gate: float | None = None
-    jit: bool = False
+    jit: object = False
     outputs: tuple = ("x", "P")
     max_gap: float | None = None
     on_gap: str = "raise"
@@ -70,8 +73,13 @@ class EstimatorOptions:
             if not 0 < gate < 1:
                 raise InputError(f"option 'gate' is a probability in (0, 1), got {self.gate!r}")
             object.__setattr__(self, "gate", gate)
-        if not isinstance(self.jit, bool):
-            raise InputError(f"option 'jit' is True or False, got {self.jit!r}")
+        from ..runtime import JitPolicy
+
+        try:
+            object.__setattr__(self, "jit", JitPolicy.of(self.jit))
+        except ValueError:
+            raise ValueError(f"option 'jit' is True, False, None or one of 'off', 'now', 'background', "
+                             f"got {self.jit!r}") from None
         outputs = DIAGNOSTICS if self.outputs == "all" else self.outputs
         if isinstance(outputs, str):
             outputs = (outputs,)

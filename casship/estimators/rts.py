@@ -21,15 +21,12 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from ..runtime import DUPLICATE_NAMES, BufferedCall, NativeFold, run_fold
+from ..runtime import DUPLICATE_NAMES, Job, record_loop, run_pieces
 from .result import FilterResult
 from .update import from_lower, sandwich, spd_solve, wrap_residual
 from ..errors import InputError, InputTypeError
 
 __all__ = ["rts_smooth", "backward_step"]
-
-FOLD_CHUNK = 512
-
 
 @lru_cache(maxsize=32)
 def backward_step(nx: int, angles: tuple) -> ca.Function:
@@ -49,17 +46,11 @@ def backward_step(nx: int, angles: tuple) -> ca.Function:
 
 
 @lru_cache(maxsize=256)
-def _backward_fold(nx: int, angles: tuple, n: int) -> BufferedCall:
-    fold = backward_step(nx, angles).mapaccum(f"rts_fold{n}", n, ["x", "P"], ["x", "P"], DUPLICATE_NAMES)
-    return BufferedCall(fold)
+def _backward_fold(nx: int, angles: tuple, n: int) -> ca.Function:
+    return backward_step(nx, angles).mapaccum(f"rts_fold{n}", n, ["x", "P"], ["x", "P"], DUPLICATE_NAMES)
 
 
-@lru_cache(maxsize=32)
-def _native_backward(nx: int, angles: tuple) -> NativeFold:
-    return NativeFold(backward_step(nx, angles), ["x", "P"])
-
-
-def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
+def rts_smooth(result: FilterResult, *, jit=False) -> FilterResult:
     """Fixed-interval (RTS) smoothing of a filter run (``Estimator.smooth`` runs the filter and this).
 
     Parameters
@@ -67,8 +58,9 @@ def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
     result : FilterResult
         Output of ``KF``, ``EKF`` (discrete or continuous-discrete), ``UKF`` or ``EnKF``
         ``.filter``; its predictions and cross-covariances ``C`` drive the backward pass.
-    jit : bool
-        Compile the backward fold to C with the system compiler (cached for the session).
+    jit : bool, None, str or casship.runtime.JitPolicy
+        Run the backward pass as a compiled C loop (``True``: compiled now; ``None``: once the
+        cache or a background compile has it), see :class:`casship.runtime.JitPolicy`.
 
     Returns
     -------
@@ -88,13 +80,13 @@ def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
     if n == 1:
         return result.replace(estimator=f"{result.estimator}+RTS")
     angles = tuple(bool(a) for a in result.angle_states)
-    # backwards in time, as (sample, rows, cols) views: run_fold copies them straight into its buffers
+    # backwards in time, as (sample, rows, cols) views (the C loop reads them in place)
     per = {"x_filt": result.x[-2::-1, :, None], "P_filt": result.P[-2::-1], "x_pred": result.x_pred[:0:-1, :, None],
            "P_pred": result.P_pred[:0:-1], "C": result.C[:0:-1]}
     memory = {"x": result.x[-1], "P": result.P[-1]}
-    if jit:
+    fold = record_loop(backward_step(nx, angles), ["x", "P"], jit) if jit else None
+    if fold is not None:
         # one block for the smoothed x and P (P per sample in column-major order), written backwards in place
-        fold = _native_backward(nx, angles)
         flat = np.empty(n * (nx + nx * nx))
         block = flat.reshape(n, nx + nx * nx)
         xs, Ps = block[:, :nx], block[:, nx:].reshape(n, nx, nx).transpose(0, 2, 1)
@@ -102,8 +94,11 @@ def rts_smooth(result: FilterResult, *, jit: bool = False) -> FilterResult:
         fold.run(n - 1, memory=memory, per_sample=per, keep=("x", "P"), out={"x": xs[-2::-1], "P": Ps[-2::-1]})
         flat.setflags(write=False)
     else:
-        _, outs = run_fold(lambda size: _backward_fold(nx, angles, size), n - 1, FOLD_CHUNK, memory=memory,
-                           per_sample=per, constants={}, keep=("x", "P"))
+        flat = {k: np.ascontiguousarray(v.transpose(1, 0, 2).reshape(v.shape[1], (n - 1) * v.shape[2]))
+                for k, v in per.items()}
+        job = Job(lambda size: _backward_fold(nx, angles, size), memory, {}, flat, n - 1, carry={"x": "x", "P": "P"},
+                  pad={})
+        outs = run_pieces([job], shrink=True, collect=("x", "P"), record=False)[0]
         xs = np.vstack([outs["x"].reshape(n - 1, nx)[::-1], result.x[-1:]])
         Ps = np.concatenate([outs["P"][::-1], result.P[-1:]], axis=0)
         for a in (xs, Ps):                        # own arrays: the result keeps them without a copy

@@ -14,6 +14,8 @@ filter, priors, identifiability and the fit result.
 * :func:`noise_std`, :func:`decimate`, :func:`share_labels`, :func:`initial_states` -- record helpers.
 * :func:`read_params` and :class:`ParameterUncertainty` -- a fit file's parameters and their covariance;
   :func:`replay_file` -- a record replayed with a fit file (the path of ``casship simulate --params``).
+* :func:`identify_ship` -- the ship workflow in one call (propulsion, weights, prior, a free set from
+  run-level evidence, the inverse-dynamics start), every choice with its reason (:class:`ShipFit`).
 * :mod:`casship.identify.asymmetry` -- port/starboard terms only from mirrored evidence.
 * :class:`CaptiveProblem` -- captive (PMM) model tests: forces of a model at a prescribed motion and their
   harmonics (:mod:`casship.identify.captive_forces`), fitted alone or as a :class:`CostTerm` of a
@@ -31,9 +33,11 @@ from .inverse_dynamics import inverse_dynamics, linear_in, rates_model, smooth_t
 from .result import FitResult, IdentificationError, IdentificationWarning
 from .cost_term import CostTerm, JointProblem
 from .captive import CaptiveProblem, linear_derivatives
+from .workflow import ShipFit, identify_ship
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
            "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std",
            "share_labels", "initial_states", "read_params", "replay_file", "ParameterUncertainty", "cross_validate", "CrossValidation"]
+__all__ += ["identify_ship", "ShipFit"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]
 __all__ += ["CaptiveProblem", "CostTerm", "JointProblem", "linear_derivatives"]

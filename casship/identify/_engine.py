@@ -2,7 +2,7 @@
 
 One per-sample CasADi Function carries the state (or the filter's memory) together with its
 forward sensitivities to the free values and is folded (``mapaccum``) over chunks of
-:data:`CHUNK` samples. Its inputs are the record's samples and the record's affine map of the free
+:func:`casship.runtime.fold_chunk` samples (the runtime's one driver, :func:`casship.runtime.run_pieces`). Its inputs are the record's samples and the record's affine map of the free
 values (:class:`~casship.identify._space.RecordMap`: parameter vector, biases, noise and initial
 state with their derivative matrices), so the compiled code depends only on the model, the
 estimator, the number of free values a record sees and which inputs they enter through, never on
@@ -11,8 +11,7 @@ neither predict (``dt = 0``) nor measure (``mask = 0``), which leave the memory 
 
 Records run chunk by chunk in step: the records at the same chunk position that use the same
 Function are evaluated in one call of its ``map`` over records (threads), so a many-record fit uses
-the cores the machine has. The calls go through preallocated buffers (no conversion of CasADi
-matrices), one set per Function and number of records.
+the cores the machine has (the runtime's driver does that).
 
 Build once, run many: the Functions are kept per process under the *structure* of the problem
 (the model's step and output Functions, which outputs are measured, the kind and size of the
@@ -31,128 +30,54 @@ of free values).
 from __future__ import annotations
 
 import hashlib
-import os
-import threading
-from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
 from ..angles import wrap_sym
-from ..runtime import BoundedTable, BufferedCall
-from ..compiling import compiled, resolve
+from ..runtime import COUNTS as _COUNTS, THREADS, Job, JitPolicy, fold_chunk, run_pieces, shared_function, shared_functions
 
-__all__ = ["CHUNK", "OutputErrorEngine", "Job", "run_jobs"]
+__all__ = ["OutputErrorEngine", "Job", "run_jobs", "chunk", "THREADS"]
 
-CHUNK = 256
-THREADS = max(1, min(os.cpu_count() or 1, 8))
-KEEP = 256                  # Functions and buffer sets kept per process (the oldest go first)
-_SHARED = BoundedTable(KEEP)          # (structure, jit, what) -> Function or Background compile
-_BUFFERS = BoundedTable(KEEP)         # (id(Function), records) -> (Function, BufferedCall, lock)
-COUNTS = {"built": 0, "reused": 0}    # Functions built and found again (for profiles and tests)
+COUNTS = _COUNTS.setdefault("identify", {"built": 0, "reused": 0})   # Functions built and found again
+
+
+def chunk() -> int:
+    """Samples per piece of the identification's folds (the runtime's one setting)."""
+    return fold_chunk()
 
 
 
 def fold(fun: ca.Function, accumulate: dict, constants) -> ca.Function:
-    """``fun`` folded over :data:`CHUNK` samples: inputs ``accumulate`` (name -> output name) carried
+    """``fun`` folded over :func:`chunk` samples: inputs ``accumulate`` (name -> output name) carried
     from sample to sample (only their final values are returned), ``constants`` the same for every
     sample, all other inputs and outputs side by side per sample."""
-    acc = fun.mapaccum(f"{fun.name()}_fold", CHUNK, list(accumulate), list(accumulate.values()), {})
-    ins = {n: ca.MX.sym(n, fun.size1_in(n), fun.size2_in(n) * (1 if n in accumulate or n in constants else CHUNK))
-           for n in fun.name_in()}
-    outs = acc.call({n: ca.repmat(v, 1, CHUNK) if n in constants else v for n, v in ins.items()})
-    res = {n: (outs[n][:, -fun.size2_out(n):] if n in accumulate.values() else outs[n]) for n in fun.name_out()}
-    return ca.Function(f"{fun.name()}_fold{CHUNK}", list(ins.values()), list(res.values()), list(ins), list(res))
-
-
-def _pieces(n: int):
-    """(start, stop) of the chunks of a record of ``n`` samples."""
-    return [(s, min(s + CHUNK, n)) for s in range(0, n, CHUNK)]
-
-
-def _chunk(a: np.ndarray, start: int, stop: int, zero: bool = False) -> np.ndarray:
-    """Columns ``start:stop`` of ``a`` padded to :data:`CHUNK` (last column repeated, or zeros)."""
-    part = a[:, start:stop]
-    if stop - start == CHUNK:
-        return part
-    pad = np.zeros((a.shape[0], CHUNK - (stop - start))) if zero else np.repeat(part[:, -1:], CHUNK - (stop - start), 1)
-    return np.hstack([part, pad])
+    n = chunk()
+    acc = fun.mapaccum(f"{fun.name()}_fold", n, list(accumulate), list(accumulate.values()), {})
+    ins = {k: ca.MX.sym(k, fun.size1_in(k), fun.size2_in(k) * (1 if k in accumulate or k in constants else n))
+           for k in fun.name_in()}
+    outs = acc.call({k: ca.repmat(v, 1, n) if k in constants else v for k, v in ins.items()})
+    res = {k: (outs[k][:, -fun.size2_out(k):] if k in accumulate.values() else outs[k]) for k in fun.name_out()}
+    return ca.Function(f"{fun.name()}_fold{n}", list(ins.values()), list(res.values()), list(ins), list(res))
 
 
 def per_sample(a, n_rows: int, cols: int, take: int) -> np.ndarray:
-    """A stacked fold output (``rows x cols*CHUNK``) as ``(take, rows, cols)``."""
-    a = np.asarray(a, dtype=float).reshape(n_rows, CHUNK, cols)
+    """A stacked fold output (``rows x cols*chunk``) as ``(take, rows, cols)``."""
+    a = np.asarray(a, dtype=float).reshape(n_rows, -1, cols)
     return a.transpose(1, 0, 2)[:take]
 
 
-@dataclass
-class Job:
-    """One record through one fold: accumulated ``state`` (inputs continued by ``<name>_next``
-    outputs), ``consts`` and ``per``-sample inputs (rows x N); ``zero``: inputs padded with zeros."""
-
-    fold: ca.Function
-    state: dict
-    consts: dict
-    per: dict
-    n: int
-    zero: tuple = ("mask", "dt")
-
-
-def _call(fun: ca.Function, args: list[dict]) -> list[dict]:
-    """Evaluate ``fun`` on each argument set (inputs by name, missing ones 0): one call of its
-    ``map`` over the sets (threads) for several, through buffers kept for the next call."""
-    n = len(args)
-    entry = _BUFFERS.get((id(fun), n))
-    if entry is None:
-        mapped = fun if n == 1 else fun.map(n, "thread" if THREADS > 1 else "serial", min(THREADS, n))
-        entry = _BUFFERS.keep((id(fun), n), (fun, BufferedCall(mapped), threading.Lock()))
-    _, call, lock = entry
-    with lock:                      # one evaluation at a time on these buffers
-        for name in fun.name_in():
-            rows, cols = fun.size_in(name)
-            view = call.arg(name)
-            for i, a in enumerate(args):
-                v = a.get(name)
-                view[:, i * cols:(i + 1) * cols] = 0.0 if v is None else np.reshape(v, (rows, cols), order="F")
-        call()
-        block = call.block.copy()
-    outs = {}
-    for j, name in enumerate(fun.name_out()):
-        rows, cols = fun.size_out(name)
-        outs[name] = block[call.offsets[j]:call.offsets[j + 1]].reshape((rows, cols * n), order="F")
-    return [{k: v[:, i * fun.size2_out(k):(i + 1) * fun.size2_out(k)] for k, v in outs.items()} for i in range(n)]
-
-
 def run_jobs(jobs: list[Job]) -> list[list[tuple[dict, dict, int]]]:
-    """Run each job chunk by chunk; returns per job the ``(args, outputs, samples)`` of each chunk.
-
-    Jobs with the same fold at the same chunk position run in one mapped call."""
-    states = [dict(j.state) for j in jobs]
-    counts = [len(_pieces(j.n)) for j in jobs]
-    results: list[list] = [[] for _ in jobs]
-    for c in range(max(counts, default=0)):
-        groups: dict = {}
-        for i, j in enumerate(jobs):
-            if c < counts[i]:
-                groups.setdefault(id(j.fold), []).append(i)
-        for idx in groups.values():
-            batch = []
-            for i in idx:
-                j = jobs[i]
-                start, stop = c * CHUNK, min((c + 1) * CHUNK, j.n)
-                args = {**states[i], **j.consts, **{k: _chunk(v, start, stop, k in j.zero) for k, v in j.per.items()}}
-                batch.append((args, stop - start))
-            for i, (args, take), out in zip(idx, batch, _call(jobs[i].fold, [a for a, _ in batch])):
-                results[i].append((args, out, take))
-                states[i] = {k: out[f"{k}_next"] for k in states[i]}
-    return results
+    """Run each job piece by piece (the runtime's driver); per job the ``(args, outputs, samples)`` of
+    each piece."""
+    return [r["pieces"] for r in run_pieces(jobs)]
 
 
 class Engine:
     """Shared evaluation of a problem's records: cost, gradient (reverse mode), curvature."""
 
     def __init__(self, space, jit):
-        self.space, self.jit = space, jit
+        self.space, self.jit = space, JitPolicy.of(jit)
         self._signature = None
         self._last: dict = {}     # kind -> (free values as bytes, result): the last evaluation of each kind
 
@@ -181,25 +106,23 @@ class Engine:
     def _fun(self, key, make):
         """The Function ``make()``, built once per process for every engine of the same structure
         (a compile still running in the background gives the interpreted Function meanwhile)."""
-        full = (self.signature(), self.jit, key)
-        fun = _SHARED.get(full)
-        if fun is None:
-            fun = _SHARED.keep(full, make())
-            COUNTS["built"] += 1
-        else:
-            COUNTS["reused"] += 1
-        return resolve(fun)
+        return shared_function(("identify", self.signature(), chunk(), key), make, self.jit)
+
+    def _raw(self, key, make):
+        """The Function ``make()`` interpreted, built once per process per structure (the compiled ones
+        are built from it)."""
+        return shared_function(("identify", self.signature(), chunk(), key), make, JitPolicy.OFF)
 
     def functions(self) -> dict:
-        """This engine's Functions as built so far (a background compile still as its handle)."""
-        sig = self.signature()
-        return {k[2]: f for k, f in list(_SHARED.items()) if k[0] == sig and k[1] == self.jit}
+        """This engine's compiled Functions as built so far (a background compile still as its handle)."""
+        return {k[3]: f for k, f in shared_functions(("identify", self.signature(), chunk())).items()
+                if k[-1] is self.jit}
 
     def _value_fold(self):
-        return self._fun("value_c", lambda: compiled(self._value_raw(), jit=self.jit))
+        return self._fun("value_c", self._value_raw)
 
     def _reverse_fold(self):
-        return self._fun("reverse_c", lambda: compiled(self._value_raw().reverse(1), jit=self.jit))
+        return self._fun("reverse_c", lambda: self._value_raw().reverse(1))
 
     def _records(self, records=None):
         return range(self.space.n_records) if records is None else records
@@ -262,7 +185,7 @@ class Engine:
             for n in args:
                 if n not in memory:
                     a = np.asarray(res[f"adj_{n}"])
-                    part = a[:, :take].sum(axis=1) if a.shape[1] == CHUNK else a.reshape(-1)
+                    part = a[:, :take].sum(axis=1) if a.shape[1] == chunk() else a.reshape(-1)
                     sums[n] = sums.get(n, 0.0) + part
         return adj_mem, sums
 
@@ -316,7 +239,7 @@ class OutputErrorEngine(Engine):
             names = ["x", "u", "y", "mask", "dt", "p", "w"]
             fun = ca.Function("oe_value", [s[n] for n in names], [s["x_next"], s["r"]], names, ["x_next", "r"])
             return fold(fun, {"x": "x_next"}, ("p", "w"))
-        return self._fun("value", make)
+        return self._raw("value", make)
 
     def _sens_fold(self, k: int, seeds: tuple):
         """The sensitivity fold for ``k`` free values entering through the inputs ``seeds`` (a subset of
@@ -334,7 +257,7 @@ class OutputErrorEngine(Engine):
             fun = ca.Function(f"oe_sens{k}_{''.join(seeds)}", [s.get(n, d.get(n)) for n in names],
                               [s["x_next"], Jx, s["r"], Jr], names, ["x_next", "dx_next", "r", "J"])
             consts = ("p", "w", *(f"d{n}" for n in seeds))
-            return compiled(fold(fun, {"x": "x_next", "dx": "dx_next"}, consts), jit=self.jit)
+            return fold(fun, {"x": "x_next", "dx": "dx_next"}, consts)
         return self._fun(("sens", k, seeds), make)
 
     def _job(self, r, theta, kind):
@@ -365,9 +288,9 @@ class OutputErrorEngine(Engine):
         R = np.vstack([out["r"][:, :take].T for _, out, take in run])                    # (N, ny)
         scores, H = [], np.zeros((k, k))
         for _, out, take in run:
-            # a chunk's J (ny, CHUNK * k) holds sample s in columns s*k:(s+1)*k; stored column-major it
-            # is a (CHUNK, k, ny) array without a copy. Small products by einsum: no BLAS threads
-            A = np.asarray(out["J"]).T.reshape(CHUNK, k, -1)[:take]
+            # a chunk's J (ny, chunk * k) holds sample s in columns s*k:(s+1)*k; stored column-major it
+            # is a (chunk, k, ny) array without a copy. Small products by einsum: no BLAS threads
+            A = np.asarray(out["J"]).T.reshape(-1, k, out["r"].shape[0])[:take]
             scores.append(np.einsum("sjy,sy->sj", A, out["r"][:, :take].T))
             H += np.einsum("sjy,sly->jl", A, A)
         scores = np.concatenate(scores)

@@ -11,8 +11,7 @@ import numpy as np
 
 from ..gaussian import Gaussian
 from ..estimators.base import CONSTANT_INPUTS, SAMPLE_INPUTS
-from ..compiling import compiled
-from ._engine import CHUNK, Engine, Job, fold, per_sample, run_jobs
+from ._engine import Engine, Job, chunk, fold, per_sample, run_jobs
 
 __all__ = ["StepSlots", "LikelihoodEngine"]
 
@@ -92,7 +91,7 @@ class LikelihoodEngine(Engine):
                               [*(ca.vec(outs[n]) for n in mem), outs["ll"], ca.vec(outs["e"]), ca.vec(outs["S"])],
                               [*(f"m_{n}" for n in mem), *rest], [*(f"m_{n}_next" for n in mem), "ll", "e", "S"])
             return fold(fun, {f"m_{n}": f"m_{n}_next" for n in mem}, StepSlots.RECORD)
-        return self._fun("value", make)
+        return self._raw("value", make)
 
     def _sens_fold(self, k: int, seeds: tuple):
         """The sensitivity fold for ``k`` free values entering through the inputs ``seeds`` (a subset of
@@ -124,7 +123,7 @@ class LikelihoodEngine(Engine):
             fun = ca.Function(f"ll_sens{k}_{'_'.join(seeds)}", ins,
                               [*mem_next, *dmem, Hn, outs["ll"], dll, ca.vec(outs["e"]), ca.vec(S)], names_in, names_out)
             acc = {n: f"{n}_next" for n in (*(f"m_{n}" for n in mem), *(f"dm_{n}" for n in mem), "H")}
-            return compiled(fold(fun, acc, (*StepSlots.RECORD, *(f"d_{n}" for n in seeds))), jit=self.jit)
+            return fold(fun, acc, (*StepSlots.RECORD, *(f"d_{n}" for n in seeds)))
         return self._fun(("sens", k, seeds), make)
 
     # -- numbers ---------------------------------------------------------------------------------
@@ -187,7 +186,7 @@ class LikelihoodEngine(Engine):
 
     def _record_gradient(self, rm, ctx, run) -> np.ndarray:
         def seeds(out, take):
-            ll = np.zeros((1, CHUNK))
+            ll = np.zeros((1, chunk()))
             ll[0, :take] = -1.0
             return {"adj_ll": ll}
 

@@ -20,7 +20,7 @@ from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..estimators.base import StepEstimator
 from ..estimators.gaps import bridge_gaps
-from ._engine import CHUNK, _chunk, _pieces
+from ..runtime import piece, pieces
 from ._likelihood import LikelihoodEngine, StepSlots
 from ._solver import SolverReport
 from .problem import IdentificationProblem
@@ -256,9 +256,9 @@ class MLEProblem(IdentificationProblem):
                 v = mem[f"m_{slot}"]
                 mem[f"m_{slot}"] = ca.vertcat(v[:row], blk["x0"], v[row + self.model.nx:])
             per = {n: a[n] for n in (*StepSlots.SAMPLE, *eng.slots.draw_names)}
-            for start, stop in _pieces(per["dt"].shape[1]):
-                ch = {n: ca.DM(_chunk(v, start, stop, n in ("mask", "dt"))) for n, v in per.items()}
-                ones = ca.DM.ones(1, CHUNK)
+            for start, stop, size in pieces(per["dt"].shape[1]):
+                ch = {n: ca.DM(piece(v, start, stop, size, 0.0 if n in ("mask", "dt") else None)) for n, v in per.items()}
+                ones = ca.DM.ones(1, size)
                 ch["u_prev"] = ch["u_prev"] + blk["u"] @ ones
                 ch["u"] = ch["u"] + blk["u"] @ ones
                 ch["y"] = (ch["y"] - blk["y"] @ ones) * ch["mask"]

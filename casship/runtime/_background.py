@@ -7,24 +7,35 @@ A first fit on a machine used to wait, silent, while the C compiler built its se
 compiled one is loaded, and the compiled one from then on. A one-off fit that ends before the
 compiler does never waits for it; a longer one switches to compiled code as soon as it exists.
 
-The compiles run one at a time in a worker thread that is not a daemon: a process that ends
-while a compile runs finishes it first, so the library is in the cache for the next run.
+The compiles run one at a time in a daemon worker thread: a process whose work is done exits at
+once, without waiting for them. At a normal exit the compiles not finished yet are handed to one
+detached process (its own session, no output) that compiles them into the cache for the next run
+(:func:`hand_off`; ``CASSHIP_COMPILE_AFTER_EXIT=0`` drops them instead); the compiler this process was
+running is stopped with everything it started and its build folder removed
+(:func:`~._compiler.stop_compilers`). A Ctrl-C drops them: nothing compiles on after an interrupt.
 """
 from __future__ import annotations
 
+import atexit
+import json
 import os
 import queue
+import subprocess
+import sys
+import tempfile
 import threading
 from typing import Callable, Sequence
 
 import casadi as ca
 
 from ._cache import compile_function
-from ..errors import InputTypeError
+from ._compiler import stopping
+from ._settings import ENV_AFTER_EXIT
 
-__all__ = ["Compiling", "compile_in_background"]
+__all__ = ["Compiling", "compile_in_background", "hand_off"]
 
 _JOBS: "queue.Queue[Compiling]" = queue.Queue()
+_OPEN: list = []                    # compiles queued or running (handed off at exit)
 _WORKER: list[threading.Thread] = []
 _WORKER_LOCK = threading.Lock()
 
@@ -36,6 +47,7 @@ def _fresh_after_fork() -> None:
     global _JOBS, _WORKER_LOCK
     _JOBS, _WORKER_LOCK = queue.Queue(), threading.Lock()
     _WORKER.clear()
+    _OPEN.clear()
 
 
 if hasattr(os, "register_at_fork"):
@@ -61,12 +73,15 @@ class Compiling:
         Why compiling failed (the handle then stays interpreted).
     """
 
-    def __init__(self, fun: ca.Function, flags: Sequence[str] | None = None, on_done: Callable | None = None):
+    def __init__(self, fun: ca.Function, flags: Sequence[str] | None = None, on_done: Callable | None = None,
+                 extra_source: str = ""):
         if not isinstance(fun, ca.Function):
-            raise InputTypeError(f"compile_in_background needs a casadi.Function, got {type(fun).__name__}")
+            raise TypeError(f"compile_in_background needs a casadi.Function, got {type(fun).__name__}")
         self.interpreted = fun
         self.flags = None if flags is None else tuple(flags)
+        self.extra_source = extra_source
         self.error: Exception | None = None
+        self.library = None             # the ctypes handle of the library (with extra_source)
         self._compiled: ca.Function | None = None
         self._done = threading.Event()
         self._on_done = on_done
@@ -104,9 +119,18 @@ class Compiling:
         self._done.wait(timeout)
         return self.function
 
+    @property
+    def cancelled(self) -> bool:
+        """Whether the compile was stopped because the process is ending."""
+        return stopping()
+
     def _run(self) -> None:
         try:
-            self._compiled = compile_function(self.interpreted, flags=self.flags)
+            if self.extra_source:
+                self._compiled, self.library = compile_function(self.interpreted, flags=self.flags,
+                                                                extra_source=self.extra_source, library=True)
+            else:
+                self._compiled = compile_function(self.interpreted, flags=self.flags)
         except Exception as exc:       # noqa: BLE001 - reported through .error; the handle stays interpreted
             self.error = exc
         finally:
@@ -129,11 +153,69 @@ def _work() -> None:
                     _WORKER.clear()
                     return
             continue
-        job._run()
+        try:
+            job._run()
+        finally:
+            with _WORKER_LOCK:
+                if job in _OPEN:
+                    _OPEN.remove(job)
+
+
+def hand_off() -> int:
+    """Hand the compiles not finished yet to one detached process that compiles them into the cache
+    (run at exit, before the compilers are stopped); returns how many. Nothing after a Ctrl-C
+    (:func:`~._compiler.stopping`), with ``CASSHIP_COMPILE_AFTER_EXIT=0`` or without a cache."""
+    from ._cache import cache_dir
+
+    with _WORKER_LOCK:
+        jobs = [j for j in _OPEN if not j.done]
+    if (not jobs or stopping() or os.environ.get(ENV_AFTER_EXIT, "1").strip().lower() in ("0", "no", "off", "false")
+            or cache_dir() is None):
+        return 0
+    work = [{"fun": j.interpreted.serialize(), "flags": None if j.flags is None else list(j.flags),
+             "extra_source": j.extra_source} for j in jobs]
+    fd, path = tempfile.mkstemp(prefix="casship-handoff-", suffix=".json")
+    with os.fdopen(fd, "w") as f:
+        json.dump(work, f)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p), ENV_AFTER_EXIT: "0",
+           "CASSHIP_PROGRESS": "0"}
+    try:
+        subprocess.Popen([sys.executable, "-c", "import sys; from casship.runtime import finish_handed_off; "
+                          "finish_handed_off(sys.argv[1])", path], env=env, start_new_session=True,
+                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                         close_fds=True)
+    except OSError:
+        os.unlink(path)
+        return 0
+    return len(jobs)
+
+
+def finish_handed_off(path: str) -> None:
+    """Compile the Functions a process handed off at its exit (:func:`hand_off`) into the cache.
+
+    Parameters
+    ----------
+    path : str
+        The hand-off file (removed here).
+    """
+    try:
+        with open(path) as f:
+            work = json.load(f)
+    finally:
+        os.unlink(path)
+    for item in work:
+        fun = ca.Function.deserialize(item["fun"])
+        try:
+            compile_function(fun, flags=item["flags"], extra_source=item["extra_source"])
+        except Exception:           # noqa: BLE001 - nobody to tell: the next run compiles it itself
+            pass
+
+
+atexit.register(hand_off)           # registered after the compiler's stop_compilers: runs before it
 
 
 def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = None,
-                          on_done: Callable | None = None) -> Compiling:
+                          on_done: Callable | None = None, extra_source: str = "") -> Compiling:
     """Compile ``fun`` in a background thread (through the on-disk cache); interpreted until then.
 
     Parameters
@@ -143,6 +225,8 @@ def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = Non
         Compiler flags (default as for :func:`~casship.runtime.compile_function`).
     on_done : callable, optional
         ``on_done(handle)``, called from the worker thread when the compile ended.
+    extra_source : str
+        C source compiled into the same library (then ``handle.library`` is its ctypes handle).
 
     Returns
     -------
@@ -157,15 +241,17 @@ def compile_in_background(fun: ca.Function, *, flags: Sequence[str] | None = Non
     >>> float(h.function(3.0))                                          # doctest: +SKIP
     6.0
     """
-    return _submit(Compiling(fun, flags, on_done))
+    return _submit(Compiling(fun, flags, on_done, extra_source))
 
 
 def _submit(job: Compiling) -> Compiling:
     """Queue ``job`` and make sure a worker thread runs."""
+    with _WORKER_LOCK:
+        _OPEN.append(job)
     _JOBS.put(job)
     with _WORKER_LOCK:
         if not _WORKER:
-            worker = threading.Thread(target=_work, name="casship-compile", daemon=False)
+            worker = threading.Thread(target=_work, name="casship-compile", daemon=True)
             _WORKER.append(worker)
             worker.start()
     return job

@@ -3,19 +3,19 @@
 Calling a Function with numpy arrays converts every argument to ``DM`` and every result back,
 which costs tens of microseconds per call. :class:`BufferedCall` instead binds preallocated numpy
 arrays once through CasADi's own buffer API (``Function.buffer``), addressed by the Function's
-input and output *names*; a call only triggers the evaluation. :func:`run_fold` runs a folded step
-Function (``mapaccum``) over a long record in pieces through such buffers. :class:`BoundedTable`
+input and output *names*; a call only triggers the evaluation (the fold driver,
+:func:`~casship.runtime.run_pieces`, runs its pieces through such buffers). :class:`BoundedTable`
 keeps such Functions and buffers for reuse within a process, up to a limit.
 """
 from __future__ import annotations
 
 import threading
-from typing import Callable, Mapping
+from typing import Mapping
 
 import casadi as ca
 import numpy as np
 
-__all__ = ["BufferedCall", "run_fold", "DUPLICATE_NAMES", "BoundedTable"]
+__all__ = ["BufferedCall", "DUPLICATE_NAMES", "BoundedTable"]
 
 # Step Functions name their memory slots alike on both sides (input ``x``, output ``x``).
 DUPLICATE_NAMES = {"allow_duplicate_io_names": True}
@@ -209,105 +209,3 @@ class BufferedCall:
             if status != 0:
                 raise RuntimeError(f"evaluation of {self.fun.name()} failed (status {status})")
         return self.res
-
-
-def run_fold(fold_call: Callable[[int], BufferedCall], n: int, chunk: int, *, memory: Mapping[str, np.ndarray],
-             per_sample: Mapping[str, np.ndarray], constants: Mapping[str, np.ndarray],
-             pad: Mapping[str, float] | None = None, keep=None) -> tuple[dict, dict]:
-    """Run a folded step (``mapaccum`` over the memory slots) over ``n`` samples in pieces.
-
-    Parameters
-    ----------
-    fold_call : callable
-        ``fold_call(size)`` gives a :class:`BufferedCall` of the fold over ``size`` samples; its
-        inputs are named like ``memory``, ``per_sample`` and ``constants``, its outputs are the
-        memory slots and diagnostics at every sample (columns of a sample side by side).
-    n, chunk : int
-        Samples in the record and per piece; the last piece is padded up to a power of two.
-    memory : mapping name -> array
-        Initial memory (matrices keep their shape).
-    per_sample : mapping name -> array
-        Inputs that change per sample: the columns of sample ``k`` at ``[:, k*c:(k+1)*c]``, or a 3-D
-        array ``(n, rows, cols)`` of the samples' matrices (any strides: copied without an
-        intermediate).
-    constants : mapping name -> array
-        Inputs that are the same for every sample (written once per piece length).
-    pad : mapping name -> value
-        Value of a per-sample input in the padded columns (other inputs repeat their last
-        column); it must make the padded steps leave the memory alone.
-    keep : sequence of str, optional
-        Outputs to return (default: all).
-
-    Returns
-    -------
-    memory : dict
-        The memory after the last sample.
-    outputs : dict name -> array
-        Each kept output per sample, shape ``(n, rows, cols)`` (a view of a contiguous array: the
-        pieces are copied in one block each).
-    """
-    pad = dict(pad or {})
-    mem = {k: np.array(v, dtype=float) for k, v in memory.items()}
-    shapes = None
-    outs, flat, start, primed = {}, {}, 0, set()
-    used = {}                                     # the calls of this run, by id
-    try:
-        while start < n:
-            size = min(chunk, 1 << (n - start - 1).bit_length())
-            take = min(size, n - start)
-            call = fold_call(size)
-            used[id(call)] = call
-            if shapes is None:
-                keep = list(call.names_out if keep is None else keep)
-                shapes = {k: (call.out(k).shape[0], call.out(k).shape[1] // size) for k in call.names_out}
-                for k in keep:
-                    r, c = shapes[k]
-                    block = np.empty((n, c, r))           # sample k's matrix in column-major order, as CasADi has it
-                    outs[k], flat[k] = block.transpose(0, 2, 1), block.reshape(-1)
-            if id(call) not in primed:
-                for k, v in constants.items():
-                    call[k] = v
-                primed.add(id(call))
-            for k, v in mem.items():
-                call[k] = v
-            for k, src in per_sample.items():
-                if src.ndim == 3:                         # (n, rows, cols): one strided copy into the buffer
-                    r, c = src.shape[1:]
-                    blocks = call.flat_in(k).reshape(size, c, r)
-                    blocks[:take] = src[start:start + take].transpose(0, 2, 1)
-                    if take < size:
-                        blocks[take:] = pad[k] if k in pad else blocks[take - 1]
-                    continue
-                view = call.arg(k)
-                c = view.shape[1] // size
-                view[:, :take * c] = src[:, start * c:(start + take) * c]
-                if take < size:
-                    if k in pad:
-                        view[:, take * c:] = pad[k]
-                    elif src.shape[0]:
-                        view[:, take * c:] = np.tile(src[:, (start + take - 1) * c:(start + take) * c], (1, size - take))
-            # a whole piece writes its results straight into the result block; a padded last piece
-            # writes into the call's own arrays and its first `take` samples are copied
-            for k in keep:
-                r, c = shapes[k]
-                call.redirect(k, flat[k][start * r * c:(start + size) * r * c] if take == size else None)
-            call()
-            if take < size:
-                for k in keep:
-                    r, c = shapes[k]
-                    flat[k][start * r * c:(start + take) * r * c] = call.flat_out(k)[:take * r * c]
-            for k in mem:
-                r, c = shapes[k]
-                if k in keep:
-                    last = flat[k][(start + take - 1) * r * c:(start + take) * r * c]
-                    mem[k] = last.reshape((r, c), order="F").copy()
-                else:
-                    mem[k] = call.out(k)[:, (take - 1) * c:take * c].copy()
-            start += take
-    finally:                                      # cached calls must not keep (or write into) this result
-        for call in used.values():
-            call.restore_outputs()
-    for k in flat:                                # read-only: results may share them without a copy
-        for a in (flat[k].base, flat[k], outs[k]):
-            a.setflags(write=False)
-    return mem, outs

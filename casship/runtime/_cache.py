@@ -43,15 +43,13 @@ import time
 import warnings
 import weakref
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
 import casadi as ca
 
-from ._compiler import (ENV_FLAGS, PORTABLE_FLAGS, SUFFIX, CompileError, accepts_native,
-                        build_library, chosen_flags, compile_timeout, find_compiler)
-from ..errors import InputError, InputTypeError
+from ._compiler import SUFFIX, CompileError, build_library, building, find_compiler
+from ._settings import ENV_CACHE, chosen_flags, compile_timeout
 
 try:                                    # file locks: fcntl on POSIX, msvcrt on Windows
     import fcntl
@@ -62,23 +60,25 @@ try:
 except ImportError:
     msvcrt = None
 
-__all__ = ["compile_function", "cached_function", "cache_dir", "cache_info", "clear_cache", "cache_key", "CacheInfo"]
+__all__ = ["compile_function", "cached_function", "cache_dir", "cache_key", "remove_leftovers"]
 
-_ENV_DIR = "CASSHIP_CACHE_DIR"
+_ENV_DIR = ENV_CACHE
+BUILD_PREFIX = "casship-cc-"                      # build folders: casship-cc-<key>-<pid> (leftovers of a killed process)
 _OFF = ("off", "0", "no", "false", "none")
 # compiled Functions loaded by this process, by (key, folder); weak: a Function nobody uses is let go
-_LOADED: "weakref.WeakValueDictionary[tuple, ca.Function]" = weakref.WeakValueDictionary()
+LOADED: "weakref.WeakValueDictionary[tuple, ca.Function]" = weakref.WeakValueDictionary()
 _LIBRARY_OF: dict[tuple, Path] = {}        # the library file of each of them
 _LIBRARIES: dict[str, ctypes.CDLL] = {}     # ctypes handles of libraries with extra source (never closed)
-_REFUSED: dict[Path, str] = {}              # folders not used by this process, and why (warned once)
-_LOCK = threading.RLock()
+REFUSED: dict[Path, str] = {}              # folders not used by this process, and why (warned once)
+_SWEPT: set = set()                         # folders whose leftovers this process has removed
+PROCESS_LOCK = threading.RLock()
 
 
 def _new_lock_after_fork() -> None:
     """A forked child gets a lock of its own: one held by a compiling thread of the parent would
     never be released there (that thread does not exist in the child)."""
-    global _LOCK
-    _LOCK = threading.RLock()
+    global PROCESS_LOCK
+    PROCESS_LOCK = threading.RLock()
 
 
 if hasattr(os, "register_at_fork"):
@@ -129,7 +129,7 @@ def _not_private(st: os.stat_result) -> str | None:
     return None
 
 
-def _folder_problem(folder: Path, create: bool) -> str | None:
+def folder_problem(folder: Path, create: bool) -> str | None:
     """Why ``folder`` cannot hold the cache (created with mode 0700 if asked), or None."""
     try:
         if create:
@@ -146,8 +146,8 @@ def _folder_problem(folder: Path, create: bool) -> str | None:
 
 def _refuse(folder: Path, why: str) -> None:
     """Stop using ``folder`` in this process, with one warning."""
-    if folder not in _REFUSED:
-        _REFUSED[folder] = why
+    if folder not in REFUSED:
+        REFUSED[folder] = why
         warnings.warn(f"casship compile cache {folder} is not used: {why}; compiled code goes to private "
                       f"temporary folders and is not kept (use a folder of your own with mode 700, e.g. "
                       f"chmod 700 it if it is yours, or set {_ENV_DIR})", RuntimeWarning, stacklevel=4)
@@ -156,13 +156,50 @@ def _refuse(folder: Path, why: str) -> None:
 def _usable_folder(path) -> Path | None:
     """The cache folder to use now (created if needed), or None: caching off, or the folder refused."""
     folder = cache_dir(path)
-    if folder is None or folder in _REFUSED:
+    if folder is None or folder in REFUSED:
         return None
-    why = _folder_problem(folder, create=True)
+    why = folder_problem(folder, create=True)
     if why is not None:
         _refuse(folder, why)
         return None
+    if folder not in _SWEPT:
+        _SWEPT.add(folder)
+        remove_leftovers(folder)
     return folder
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (a process of another user counts as alive)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, OSError):
+        return True
+    return True
+
+
+def build_owner(name: str) -> tuple[str, int] | None:
+    """``(key, pid)`` of a build folder named ``casship-cc-<key>-<pid>``, else None."""
+    parts = name[len(BUILD_PREFIX):].split("-") if name.startswith(BUILD_PREFIX) else []
+    if len(parts) != 2 or not is_key(parts[0]) or not parts[1].isdigit():
+        return None
+    return parts[0], int(parts[1])
+
+
+def remove_leftovers(folder: Path) -> int:
+    """Remove the build folders of processes that ended without removing them (killed); returns how many."""
+    removed = 0
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return 0
+    for f in entries:
+        owner = build_owner(f.name)
+        if owner is not None and f.is_dir() and not _alive(owner[1]):
+            shutil.rmtree(f, ignore_errors=True)
+            removed += 1
+    return removed
 
 
 # -- keys and integrity ------------------------------------------------------------------------------------
@@ -263,7 +300,7 @@ def _from_cache(fun, folder: Path, key: str, clean: bool) -> tuple | None:
 @contextmanager
 def _key_lock(folder: Path, key: str):
     """Hold the lock file of ``key`` (waits at most the compile time limit, then raises OSError)."""
-    fd = os.open(folder / f"{key}.lock", os.O_RDWR | os.O_CREAT, 0o600)
+    fd = os.open(folder / f"{key}.lock", os.O_RDWR | os.O_CREAT, 0o600)   # kept: see clear_cache
     deadline = time.monotonic() + compile_timeout() + 30.0
     try:
         while True:
@@ -293,9 +330,9 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     fun : casadi.Function
         Any Function CasADi can generate C code for (SX or MX, with maps and folds).
     flags : sequence of str or str, optional
-        Compiler flags (default: ``$CASSHIP_CFLAGS`` or :data:`DEFAULT_FLAGS`, which fall back to
-        :data:`PORTABLE_FLAGS` for a compiler that refuses ``-march=native``); ``-fPIC -shared``
-        are always added. Part of the cache key.
+        Compiler flags (default: ``$CASSHIP_CFLAGS``, else :data:`DEFAULT_FLAGS`, which keep the
+        interpreted numbers to the last bit; :data:`NATIVE_FLAGS` is the opt-in for speed);
+        ``-fPIC -shared`` are always added. Part of the cache key.
     compiler : str, optional
         The C compiler (default: ``$CC``, else ``gcc``, else ``cc``). Part of the cache key.
     cache_dir : str or path, optional
@@ -329,26 +366,24 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     DM([2, 4])
     """
     if not isinstance(fun, ca.Function):
-        raise InputTypeError(f"compile_function needs a casadi.Function, got {type(fun).__name__}")
+        raise TypeError(f"compile_function needs a casadi.Function, got {type(fun).__name__}")
     if library and not extra_source:
-        raise InputError("compile_function: library=True is for calling extra_source; none given")
+        raise ValueError("compile_function: library=True is for calling extra_source; none given")
     try:
         cc = find_compiler(compiler)
     except CompileError as exc:
         raise CompileError(f"compiling {fun.name()!r} to C: {exc}") from None
-    flags, default = chosen_flags(flags)
-    with _LOCK:
+    flags = chosen_flags(flags)
+    with PROCESS_LOCK:
         folder = _usable_folder(cache_dir) if cache else None
         loaded, lib = _compiled(fun, cc, flags, folder, extra_source)
-        if default and lib is None and not accepts_native(cc):     # only a refused flag is dropped
-            flags = PORTABLE_FLAGS
-            loaded, lib = _compiled(fun, cc, flags, folder, extra_source)
     if lib is None:         # not under the process lock: other threads look up and load meanwhile
         loaded, lib = _compile(fun, cc, flags, folder, extra_source)
     return (loaded, _library(lib)) if library else loaded
 
 
-def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None) -> ca.Function | None:
+def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = None, extra_source: str = "",
+                    library: bool = False):
     """``fun`` compiled, if this process or the cache already holds its library; else None, at once.
 
     Never compiles and never waits for a compile running in another thread (then None).
@@ -356,26 +391,29 @@ def cached_function(fun: ca.Function, *, flags: Sequence[str] | str | None = Non
     Parameters
     ----------
     fun : casadi.Function
-    flags : sequence of str or str, optional
+    flags, extra_source, library
         As for :func:`compile_function`.
     """
     try:
         cc = find_compiler(None)
     except CompileError:
         return None
-    flags, _ = chosen_flags(flags)
-    if not _LOCK.acquire(blocking=False):
+    flags = chosen_flags(flags)
+    if not PROCESS_LOCK.acquire(blocking=False):
         return None
     try:
-        return _compiled(fun, cc, flags, _usable_folder(None), "")[0]
+        loaded, lib = _compiled(fun, cc, flags, _usable_folder(None), extra_source)
     finally:
-        _LOCK.release()
+        PROCESS_LOCK.release()
+    if loaded is None:
+        return None
+    return (loaded, _library(lib)) if library else loaded
 
 
 def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
     """``(Function, library path)`` already loaded by this process or in the cache, else ``(None, None)``."""
     key = cache_key(fun, cc, flags, extra_source)
-    loaded = _LOADED.get((key, folder))
+    loaded = LOADED.get((key, folder))
     if loaded is not None:
         return loaded, _LIBRARY_OF[key, folder]
     if folder is not None:
@@ -391,8 +429,8 @@ def _compiled(fun, cc, flags, folder, extra_source) -> tuple:
 
 def _remember(hit: tuple, key: str, folder) -> tuple:
     loaded, lib = hit
-    with _LOCK:
-        _LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
+    with PROCESS_LOCK:
+        LOADED[key, folder], _LIBRARY_OF[key, folder] = loaded, lib
     return loaded, lib
 
 
@@ -408,7 +446,7 @@ def _compile(fun, cc, flags, folder, extra_source) -> tuple:
             return _remember(hit, key, folder)
         except OSError as exc:                  # read-only, full, or locked too long
             _refuse(folder, f"writing into it failed ({exc})")
-    with tempfile.TemporaryDirectory(prefix="casship-cc-", ignore_cleanup_errors=True) as tmp:
+    with tempfile.TemporaryDirectory(prefix=BUILD_PREFIX, ignore_cleanup_errors=True) as tmp, building(tmp):
         lib = build_library(fun, Path(tmp), f"f{key[:16]}", cc[0], flags, extra_source)
         loaded = _load(fun, lib)
         if loaded is None:
@@ -420,169 +458,32 @@ def _compile(fun, cc, flags, folder, extra_source) -> tuple:
 
 def _compile_into(fun, folder: Path, key: str, cc: tuple[str, str], flags, extra_source: str) -> tuple:
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="casship-cc-", dir=folder, ignore_cleanup_errors=True) as tmp:
-        built = build_library(fun, Path(tmp), f"f{key[:16]}", cc[0], flags, extra_source)
-        meta = {"key": key, "function": fun.name(), "bytes": built.stat().st_size, "sha256": _sha256(built),
-                "compiler": cc[0], "compiler_version": cc[1], "flags": list(flags), "casadi": ca.__version__,
-                "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "compile_s": round(time.perf_counter() - t0, 3)}
-        tmp_record = Path(tmp) / "record.json"
-        tmp_record.write_text(json.dumps(meta, indent=1))
-        os.chmod(tmp_record, 0o600)
-        lib, record = _entry(folder, key)
-        os.replace(built, lib)                  # library first: a record always describes a whole file
-        os.replace(tmp_record, record)
+    tmp = folder / f"{BUILD_PREFIX}{key}-{os.getpid()}"       # named by key and process: see remove_leftovers
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(mode=0o700)
+    try:
+        with building(tmp):
+            return _build_into(fun, folder, key, cc, flags, extra_source, tmp, t0)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _build_into(fun, folder: Path, key: str, cc, flags, extra_source: str, tmp: Path, t0: float) -> tuple:
+    built = build_library(fun, Path(tmp), f"f{key[:16]}", cc[0], flags, extra_source)
+    meta = {"key": key, "function": fun.name(), "bytes": built.stat().st_size, "sha256": _sha256(built),
+            "compiler": cc[0], "compiler_version": cc[1], "flags": list(flags), "casadi": ca.__version__,
+            "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "compile_s": round(time.perf_counter() - t0, 3)}
+    tmp_record = Path(tmp) / "record.json"
+    tmp_record.write_text(json.dumps(meta, indent=1))
+    os.chmod(tmp_record, 0o600)
+    lib, record = _entry(folder, key)
+    os.replace(built, lib)                  # library first: a record always describes a whole file
+    os.replace(tmp_record, record)
     loaded = _load(fun, lib) if _verified(lib, record) else None
     if loaded is None:
         raise CompileError(f"the compiled library of {fun.name()!r} in {folder} could not be loaded")
     return loaded, lib
 
 
-# -- the cache as a whole ---------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class CacheInfo:
-    """What the compile cache holds and how compiled code runs here.
-
-    Parameters
-    ----------
-    path : Path or None
-        The folder (``None``: caching switched off).
-    entries : int
-        Compiled libraries with their records.
-    bytes : int
-        Disk space of the folder's files.
-    functions : dict
-        Function name -> number of entries.
-    refused : str or None
-        Why the folder is not used (then code is compiled into private temporary folders).
-    compiler : str or None
-        The C compiler and its version (``None``: none found, ``jit`` raises).
-    flags : tuple of str
-        The flags used by default here.
-    flags_note : str
-        Why those flags (the defaults, ``$CASSHIP_CFLAGS``, or a compiler refusing ``-march=native``).
-    timeout : float
-        Seconds a compiler run may take.
-    paths : tuple of str
-        How compiled code is called here (the online update, the record loop).
-    """
-
-    path: Path | None
-    entries: int
-    bytes: int
-    functions: dict
-    refused: str | None = None
-    compiler: str | None = None
-    flags: tuple = ()
-    flags_note: str = ""
-    timeout: float = 0.0
-    paths: tuple = field(default=())
-
-    def summary(self) -> str:
-        """A few lines for people."""
-        if self.path is None:
-            lines = [f"compile cache: off ({_ENV_DIR}=off): compiled code goes to private temporary folders"]
-        elif self.refused:
-            lines = [f"compile cache: {self.path} is NOT USED: {self.refused}; compiled code goes to private "
-                     "temporary folders (fix the folder or set CASSHIP_CACHE_DIR)"]
-        else:
-            lines = [f"compile cache: {self.path}", f"entries: {self.entries}, {self.bytes / 1e6:.1f} MB"]
-        lines += [f"compiler: {self.compiler or 'none found (install gcc or clang, or set CC): option jit raises'}",
-                  f"flags: {' '.join(self.flags)} ({self.flags_note})",
-                  f"compile time limit: {self.timeout:g} s (CASSHIP_COMPILE_TIMEOUT)", *self.paths]
-        lines += [f"  {name}: {count}" for name, count in sorted(self.functions.items())]
-        return "\n".join(lines)
-
-
-# How compiled code is called: the same on every platform, so no platform takes a slower path unsaid.
-_PATHS = ("online update: one evaluation per sample of the step through CasADi's Function.buffer "
-          "(compiled with option jit, else interpreted); the same on every platform",
-          "record loop: with option jit one compiled C loop over the whole record, called through ctypes; "
-          "else mapaccum folds in pieces")
-
-
-def cache_info(path: str | os.PathLike | None = None) -> CacheInfo:
-    """Entries and size of the compile cache, and how compiled code is built and called here.
-
-    Parameters
-    ----------
-    path : str or path, optional
-        The cache folder (default: see :func:`cache_dir`).
-
-    Returns
-    -------
-    CacheInfo
-    """
-    folder = cache_dir(path)
-    try:
-        cc = find_compiler()
-        compiler = f"{cc[0]} ({cc[1]})" if cc[1] else cc[0]
-    except CompileError:
-        cc = compiler = None
-    flags, default = chosen_flags(None)
-    if not default:
-        note = f"from ${ENV_FLAGS}"
-    elif cc is None or accepts_native(cc):
-        note = "the defaults: this compiler accepts -march=native"
-    else:
-        flags, note = PORTABLE_FLAGS, "the compiler refuses -march=native: the portable defaults"
-    common = {"compiler": compiler, "flags": flags, "flags_note": note, "timeout": compile_timeout(), "paths": _PATHS}
-    if folder is None:
-        return CacheInfo(None, 0, 0, {}, **common)
-    refused = _REFUSED.get(folder) or _folder_problem(folder, create=False)
-    if refused or not folder.is_dir():
-        return CacheInfo(folder, 0, 0, {}, refused=refused, **common)
-    functions: dict[str, int] = {}
-    entries = size = 0
-    try:
-        for f in folder.iterdir():
-            if f.is_file():
-                size += f.stat().st_size
-                if f.suffix == ".json":
-                    try:
-                        name = json.loads(f.read_text())["function"]
-                    except (OSError, ValueError, KeyError, TypeError):
-                        name = "(unreadable record)"
-                    functions[name] = functions.get(name, 0) + 1
-                    entries += 1
-    except OSError as exc:
-        return CacheInfo(folder, 0, 0, {}, refused=f"it cannot be read ({exc.strerror or exc})", **common)
-    return CacheInfo(folder, entries, size, functions, **common)
-
-
-def clear_cache(path: str | os.PathLike | None = None) -> int:
-    """Delete every compiled library and record in the compile cache.
-
-    Only files the cache writes (``<key>.so`` / ``.dylib`` / ``.dll``, ``<key>.json`` and left-over
-    ``casship-cc-*`` build folders) are removed; anything else in the folder stays, and so do the
-    empty lock files ``<key>.lock`` (removing one while another process compiles under it would let
-    a second compile of the same key in). A refused folder (see :func:`cache_info`) is not touched.
-
-    Parameters
-    ----------
-    path : str or path, optional
-        The cache folder (default: see :func:`cache_dir`).
-
-    Returns
-    -------
-    int
-        The number of files removed.
-    """
-    folder = cache_dir(path)
-    if folder is None or not folder.is_dir() or _folder_problem(folder, create=False):
-        return 0
-    removed = 0
-    with _LOCK:
-        for f in folder.iterdir():
-            if f.is_dir() and f.name.startswith("casship-cc-"):
-                shutil.rmtree(f, ignore_errors=True)
-                removed += 1
-            elif f.is_file() and f.suffix in (".json", SUFFIX) and _is_key(f.stem):
-                f.unlink(missing_ok=True)
-                removed += 1
-        for k in [k for k in _LOADED.keys() if k[1] == folder]:
-            _LOADED.pop(k, None)
-    return removed
-
-
-def _is_key(stem: str) -> bool:
+def is_key(stem: str) -> bool:
     return len(stem) == 40 and all(c in "0123456789abcdef" for c in stem)

@@ -1,56 +1,97 @@
-"""The C compiler: which one, with which flags, and running it with a time limit.
+"""The C compiler: which one, running it with a time limit, and stopping it.
 
-The compiler is ``$CC`` if set, else ``gcc``, else ``cc``. The flags are :data:`DEFAULT_FLAGS`
-unless ``flags=`` or ``$CASSHIP_CFLAGS`` says otherwise; a compiler that refuses
-``-march=native`` (found by compiling a one-line probe with and without it) gets
-:data:`PORTABLE_FLAGS` instead, and only then. Every compiler run is limited to
-``$CASSHIP_COMPILE_TIMEOUT`` seconds (default :data:`DEFAULT_TIMEOUT`); a compiler that does not
-finish is stopped with everything it started, and the compile fails with :class:`CompileError`.
+The compiler is ``$CC`` if set, else ``gcc``, else ``cc``; the flags and the time limit come from
+:mod:`._settings` (one flag set, bit-exact by default). Every compiler run is limited to
+``$CASSHIP_COMPILE_TIMEOUT`` seconds; a compiler that does not finish is stopped with everything it
+started (its process group), and the compile fails with :class:`CompileError`.
+
+Nothing waits for a compiler nobody needs: a Ctrl-C while one runs in the calling thread stops it
+(its process group) before the interrupt goes on, and at exit :func:`stop_compilers` stops those
+still running in background threads and removes their build folders.
 """
 from __future__ import annotations
 
+import atexit
 import os
-import shlex
 import shutil
 import signal
 import subprocess
 import sys
-import tempfile
+import threading
 from pathlib import Path
 from typing import Sequence
 
 import casadi as ca
 
-from ..errors import InputError, InputTypeError, SetupError
+from ..errors import SetupError
 from ..progress import activity
+from ._settings import ENV_TIMEOUT, compile_timeout
 
-__all__ = ["CompileError", "DEFAULT_FLAGS", "PORTABLE_FLAGS", "DEFAULT_TIMEOUT", "find_compiler", "chosen_flags",
-           "compile_timeout", "accepts_native", "build_library", "run_compiler", "SUFFIX"]
+__all__ = ["CompileError", "find_compiler", "run_compiler", "build_library", "stop_compilers", "stopping",
+           "building", "SUFFIX"]
 
-DEFAULT_FLAGS = ("-O3", "-fno-math-errno", "-march=native")
-"""Compiler flags used unless told otherwise, chosen by measurement (``benchmarks/bench_compile.py``,
-``docs/benchmarks.md``): ``-O3`` runs the filter folds about 1.3 times faster than ``-O2`` at the same
-compile time; ``-fno-math-errno`` lets ``sqrt`` and friends compile to single instructions (only
-``errno`` is not set); ``-march=native`` uses the instructions of this CPU (fused multiply-add among
-them, so results differ from the interpreted step in the last bits) and makes the filter and
-smoother loops 10-17 % faster. Code compiled for one CPU is never loaded on another: the cache key
-then includes the CPU model and features."""
-
-PORTABLE_FLAGS = ("-O3", "-fno-math-errno")
-"""The default flags without ``-march=native``, for compilers that refuse it."""
-
-DEFAULT_TIMEOUT = 600.0
-"""Seconds a compiler run may take (``$CASSHIP_COMPILE_TIMEOUT`` overrides)."""
-
-ENV_FLAGS, ENV_TIMEOUT = "CASSHIP_CFLAGS", "CASSHIP_COMPILE_TIMEOUT"
 SUFFIX = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
 _COMPILERS: dict[str, tuple[str, str]] = {}
-_NATIVE: dict[tuple[str, str], bool] = {}          # (path, version) -> accepts -march=native
+_RUNNING: set = set()               # compiler processes running now
+_BUILDING: set = set()              # build folders in use now
+_STATE = {"stopping": False}
+_STATE_LOCK = threading.Lock()
 
 
 class CompileError(SetupError):
     """C code could not be compiled here: no compiler, a compiler error, or the time limit (a
     :class:`casship.errors.SetupError`, so a ``RuntimeError``)."""
+
+
+def stopping() -> bool:
+    """Whether this process is ending (no compiler is started any more)."""
+    return _STATE["stopping"]
+
+
+def _kill(proc: subprocess.Popen) -> None:
+    """Stop ``proc`` and everything it started (its process group, on POSIX)."""
+    if os.name == "posix":
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except OSError:
+            pass
+    try:
+        proc.kill()
+    except OSError:
+        pass
+
+
+def stop_compilers() -> None:
+    """Stop every compiler this process runs (their process groups) and remove their build folders;
+    later compiles fail at once. Run at exit, so that a process whose work is done never waits for a
+    background compile."""
+    with _STATE_LOCK:
+        _STATE["stopping"] = True
+        procs, folders = list(_RUNNING), list(_BUILDING)
+    for proc in procs:
+        _kill(proc)
+    for folder in folders:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+atexit.register(stop_compilers)
+
+
+class building:
+    """Context manager: ``folder`` is a build folder in use (removed by :func:`stop_compilers` at exit)."""
+
+    def __init__(self, folder):
+        self.folder = Path(folder)
+
+    def __enter__(self):
+        with _STATE_LOCK:
+            _BUILDING.add(self.folder)
+        return self.folder
+
+    def __exit__(self, *exc):
+        with _STATE_LOCK:
+            _BUILDING.discard(self.folder)
+        return False
 
 
 def find_compiler(compiler: str | None = None) -> tuple[str, str]:
@@ -87,40 +128,6 @@ def find_compiler(compiler: str | None = None) -> tuple[str, str]:
     raise CompileError(f"no C compiler found (tried {names}); install gcc or clang, or set CC")
 
 
-def chosen_flags(flags: Sequence[str] | str | None) -> tuple[tuple[str, ...], bool]:
-    """The flags to use and whether they are the defaults (which may fall back to the portable ones).
-
-    Parameters
-    ----------
-    flags : sequence of str, str or None
-        Explicit flags; ``None``: ``$CASSHIP_CFLAGS``, else :data:`DEFAULT_FLAGS`.
-    """
-    if flags is None:
-        env = os.environ.get(ENV_FLAGS)
-        return (tuple(shlex.split(env)), False) if env and env.strip() else (DEFAULT_FLAGS, True)
-    if isinstance(flags, str):
-        return tuple(shlex.split(flags)), False
-    flags = tuple(flags)
-    bad = [f for f in flags if not isinstance(f, str)]
-    if bad:
-        raise InputTypeError(f"compiler flags must be strings, got {bad}")
-    return flags, False
-
-
-def compile_timeout() -> float:
-    """Seconds a compiler run may take: ``$CASSHIP_COMPILE_TIMEOUT``, else :data:`DEFAULT_TIMEOUT`."""
-    env = os.environ.get(ENV_TIMEOUT)
-    if env is None or not env.strip():
-        return DEFAULT_TIMEOUT
-    try:
-        value = float(env)
-    except ValueError:
-        value = float("nan")
-    if not value > 0:
-        raise InputError(f"{ENV_TIMEOUT} must be a positive number of seconds, got {env!r}")
-    return value
-
-
 def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     """Run a compiler command within the time limit (stopping it and its children when over).
 
@@ -138,47 +145,40 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     """
     limit = compile_timeout()
     posix = os.name == "posix"
-    try:
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                start_new_session=posix)
-    except OSError as exc:
-        raise CompileError(f"compiling {what}: the compiler {cmd[0]} cannot be run ({exc})") from None
+    with _STATE_LOCK:
+        if _STATE["stopping"]:
+            raise CompileError(f"compiling {what}: not started, the process is ending")
+        try:
+            # a session of its own: a Ctrl-C at the terminal reaches casship, which stops the group
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                    start_new_session=posix)
+        except OSError as exc:
+            raise CompileError(f"compiling {what}: the compiler {cmd[0]} cannot be run ({exc})") from None
+        _RUNNING.add(proc)
     try:
         with activity(f"casship: compiling {what} to C (once; then kept in the cache)"):
             out, err = proc.communicate(timeout=limit)
     except subprocess.TimeoutExpired:
-        if posix:                           # the driver and the passes it started (cc1, as, ld)
-            try:
-                os.killpg(proc.pid, signal.SIGKILL)
-            except OSError:
-                pass
-        proc.kill()
+        _kill(proc)
         try:
             proc.communicate(timeout=10)
         except subprocess.TimeoutExpired:       # a child still holds the pipes (no process groups here)
             pass
         raise CompileError(f"compiling {what}: the compiler {cmd[0]} did not finish within {limit:g} s and was "
                            f"stopped (${ENV_TIMEOUT} sets the limit)") from None
+    except BaseException:                       # a Ctrl-C (or any error) here: the compiler goes too
+        _kill(proc)
+        try:
+            proc.wait(timeout=1)
+        except BaseException:                   # noqa: BLE001 - a second Ctrl-C: the group is killed already
+            pass
+        raise
+    finally:
+        with _STATE_LOCK:
+            _RUNNING.discard(proc)
+    if _STATE["stopping"]:
+        raise CompileError(f"compiling {what}: stopped, the process is ending")
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
-
-
-def accepts_native(compiler: tuple[str, str]) -> bool:
-    """Whether ``compiler`` (path, version) accepts ``-march=native`` (probed once per process).
-
-    A compiler that fails the probe also without the flag is not said to refuse it (whatever is
-    wrong with it shows when the real code is compiled).
-    """
-    if compiler not in _NATIVE:
-        with tempfile.TemporaryDirectory(prefix="casship-probe-") as tmp:
-            src = Path(tmp) / "probe.c"
-            src.write_text("int casship_probe(int a) { return 2 * a; }\n")
-
-            def ok(*flags):
-                cmd = [compiler[0], *flags, "-c", str(src), "-o", str(Path(tmp) / "probe.o")]
-                return run_compiler(cmd, "a probe").returncode == 0
-
-            _NATIVE[compiler] = ok("-march=native") or not ok()
-    return _NATIVE[compiler]
 
 
 def build_library(fun: ca.Function, folder: Path, stem: str, compiler: str, flags: Sequence[str],
@@ -207,3 +207,16 @@ def build_library(fun: ca.Function, folder: Path, stem: str, compiler: str, flag
                            f"{msg[-1] if msg else f'exit status {out.returncode}'}")
     os.chmod(lib, 0o700)
     return lib
+
+
+def _fresh_after_fork() -> None:
+    """A forked child runs none of its parent's compilers and is not ending."""
+    global _STATE_LOCK
+    _STATE_LOCK = threading.Lock()
+    _RUNNING.clear()
+    _BUILDING.clear()
+    _STATE["stopping"] = False
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_fresh_after_fork)

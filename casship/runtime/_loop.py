@@ -110,6 +110,8 @@ class NativeFold:
         outputs of the same name.
     memory : sequence of str
         The memory slots.
+    compiled : (casadi.Function, ctypes.CDLL), optional
+        The step and its driver compiled already (a background compile); else compiled here now.
 
     Examples
     --------
@@ -122,7 +124,7 @@ class NativeFold:
     [1.0, 2.0, 3.0]
     """
 
-    def __init__(self, step: ca.Function, memory: Sequence[str]):
+    def __init__(self, step: ca.Function, memory: Sequence[str], *, compiled: tuple | None = None):
         for i in range(step.n_in()):
             if not step.sparsity_in(i).is_dense():
                 raise ValueError(f"{step.name()}: input {step.name_in(i)!r} is not dense")
@@ -134,8 +136,8 @@ class NativeFold:
         if missing:
             raise ValueError(f"{step.name()}: memory slot(s) {missing} are not both an input and an output")
         self.memory = tuple(memory)
-        self.fun, lib = compile_function(step, extra_source=driver_source(step.name(), step.n_in(), step.n_out()),
-                                         library=True)
+        self.fun, lib = compiled or compile_function(
+            step, extra_source=driver_source(step.name(), step.n_in(), step.n_out()), library=True)
         self._driver = getattr(lib, f"casship_fold_{step.name()}")
         self._driver.restype = ctypes.c_int
         self._driver.argtypes = [ctypes.c_longlong] + [ctypes.c_void_p] * 10

@@ -4,11 +4,13 @@ Data: the three MARIN runs (full scale: 35 deg turning circle, 10/10 and 20/20 z
 thirteen HSVA zig-zags (model scale, Froude-scaled with ``lambda = 45.7``, with measured thrust and
 torque), see :mod:`.data`.
 
-Method (:mod:`.workflow`): propulsion from the measured thrust (:mod:`.propulsion`), EKF + RTS
-smoothing, a free set chosen from the Fisher information by a stated rule (asymmetry terms only
-from mirrored evidence), and a MAP output-error refinement of the full-scale
+Method (:mod:`.workflow`): propulsion from the measured thrust (:mod:`.propulsion`), then the
+library's ship workflow (:func:`casship.identify.identify_ship`, what ``casship identify`` does
+without ``--free``): EKF + RTS smoothing, a free set chosen from run-level evidence by a stated
+rule (port/starboard and direction-switched terms only from mirrored evidence, the rudder neutral
+angle per facility and pooled), and a MAP output-error refinement of the full-scale
 :func:`casship.models.kvlcc2` with asymmetry terms and smooth sign switches
-(``kvlcc2(asymmetry=True, smooth=True)``): one parameter set for the ship.
+(``kvlcc2(asymmetry=True, smooth=True)``): one set of hull coefficients for the ship.
 
 Validation (:mod:`.validate`): every fold writes its fit file and every held-out run is scored by
 replaying that file through :func:`casship.identify.replay_file` (what ``casship simulate
@@ -17,10 +19,10 @@ and free-set choice included, runs on the other fifteen), leave-one-regime-out (
 zig-zags, large-rudder zig-zags, turning circles), leave-one-facility-out and
 leave-one-direction-out (train on the runs that turn first to one side, predict the others).
 
-Uncertainty (:mod:`.calibration`): run-level jackknife over the leave-one-run-out folds, a
-calibration table (reported 95 % intervals against the fold estimates), the coverage of each
-held-out run by its fold's prediction band (parameter-only, and with a discrepancy term from the
-other folds) and the port/starboard check against the HSVA mirror pairs.
+Uncertainty (:mod:`.calibration`): run-level jackknife over the leave-one-run-out folds (the
+covariance of ``fit.json``), the coverage of every left-out run of every fold family by its fold's
+predictive band (the fold file's parameter band plus a discrepancy term from the held-out errors
+of runs that fold did not hold out), and the port/starboard check against the HSVA mirror pairs.
 
 Outputs (:mod:`.report`): ``report.md``, ``fit.json`` (the fit on all runs, with the jackknife
 covariance; replays with ``casship simulate --model kvlcc2 --params fit.json``),
@@ -33,18 +35,21 @@ from pathlib import Path
 
 import numpy as np
 
-from casship.identify import ParameterUncertainty
 from casship.parallel import call, run_cases
 from casship.studies import Study
 
 from ..kit import data_folder
-from .calibration import asymmetry_check, band_check, calibration_table, jackknife, mirror_check
+from .calibration import (asymmetry_check, band_check, calibration_table, heading_growth, jackknife, mirror_check,
+                          predictive_coverage)
 from .data import first_rudder_side, load_runs, regime
 from .diagnose import steady_turn_balance, through_the_turn
 from .propulsion import open_water
 from .report import fold_figure, slug, write_outputs
-from .validate import evaluate, published_model, robust_uncertainty, write_fold_file
-from .workflow import fit_fold, smooth_runs, study_model, with_smoothed_speed
+from .validate import evaluate, published_model, write_fold_file
+from .workflow import (VARIANTS, VARIANTS_EARLIER, captive_fit, fit_fold, smooth_runs, study_model,
+                       with_smoothed_speed)
+
+JOIN_CAPTIVE = True          # join the captive tests when present (declared before the run: workflow.VARIANTS)
 
 QUICK = {"runs": ("MARIN tc_-35", "MARIN zz_-20", "MARIN zz_10", "HSVA Z_10_10_P", "HSVA Z_10_10_S",
                   "HSVA Z_20_10_S", "HSVA Z_35_05"),
@@ -70,35 +75,33 @@ def fold_file_name(kind: str, label: str) -> str:
     return f"fit_without_{slug(label)}.json" if kind == "run" else f"fit_without_{kind}_{slug(label)}.json"
 
 
-def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int) -> dict:
+def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int, captive=None) -> dict:
     """One fold: fit on the runs not held out, write the fit file, replay it on the held-out runs and
     draw their figure. Independent of every other fold (folds may run in any order or in parallel)."""
     kind, label, held = spec
-    fold = fit_fold([r for r in runs if r.name not in held], smoothed, curve, dt=dt, max_free=max_free)
-    path = write_fold_file(fold, out / fold_file_name(kind, label))
-    rows = [evaluate(r, path) for r in runs if r.name in held]
-    res = {"kind": kind, "label": label, "held": held, "fold": fold, "file": path.name, "evaluations": rows}
+    fold = fit_fold([r for r in runs if r.name not in held], smoothed, curve, dt=dt, max_free=max_free,
+                    captive=captive)
+    # one file per facility of the held-out runs: a facility quantity (the neutral angle) is that
+    # facility's where the training had it, else the population value with the spread in the band
+    facilities = sorted({r.facility for r in runs if r.name in held})
+    base = out / fold_file_name(kind, label)
+    paths = {f: write_fold_file(fold, base if len(facilities) == 1 else base.with_name(f"{base.stem}_{f}.json"),
+                                facility=f) for f in facilities}
+    rows = [evaluate(r, paths[r.facility]) for r in runs if r.name in held]
+    res = {"kind": kind, "label": label, "held": held, "fold": fold, "file": ", ".join(p.name for p in paths.values()),
+           "evaluations": rows}
     res["figure"] = fold_figure(out, runs, res)
     return res
 
 
-def beside_discrepancy(everything, jack):
-    """The covariance the discrepancy ``q`` completes, over the parameters of ``jack``: the fit's robust
-    covariance as the fold files carry it (their bands are those ``q`` was estimated beside), zero for
-    the parameters they carry none of."""
-    robust = robust_uncertainty(everything) or everything.fit.uncertainty("robust")
-    C = np.zeros((len(jack.names),) * 2)
-    if robust is not None:
-        ours = [i for i, n in enumerate(jack.names) if n in robust.names]
-        theirs = [robust.names.index(jack.names[i]) for i in ours]
-        C[np.ix_(ours, ours)] = robust.covariance[np.ix_(theirs, theirs)]
-    return ParameterUncertainty(jack.names, jack.values, C, "robust (sandwich), as the fold files carry it "
-                                "(zero for parameters they carry no uncertainty of)")
-
-
 def in_sample(run, fit_path: Path) -> tuple[dict, dict]:
-    """A run replayed with the fit on all runs, and its mirror-image check (a case of the loop)."""
-    return evaluate(run, fit_path)["row"], mirror_check([run], fit_path, published_model())[run.name]
+    """A run replayed with the fit on all runs (with whether its predictive heading band is at least as
+    wide as its parameter band on every sample), and its mirror-image check (a case of the loop)."""
+    ev = evaluate(run, fit_path)
+    b = ev["bands"] or {}
+    row = dict(ev["row"], predictive_never_narrower=(bool(np.all(b["psi_std_predictive"] >= b["psi_std"]))
+                                                     if "psi_std_predictive" in b else None))
+    return row, mirror_check([run], fit_path, published_model())[run.name]
 
 
 def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None) -> dict:
@@ -123,6 +126,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     dt = QUICK["dt"] if quick else 2.0
     max_free = QUICK["max_free"] if quick else 15
     opts = {"dt": dt, "max_free": max_free}
+    folder = marin.parent / "kvlcc2_hmri_captive"
+    if JOIN_CAPTIVE and folder.is_dir():             # the captive tests in one objective with the runs
+        opts["captive"] = (str(folder), captive_fit(folder))
     # the fit on all runs first: the longest case starts at once
     cases = [(fit_fold, (runs, smoothed, curve), opts)]
     cases += [(run_fold, (spec, runs, smoothed, curve, out), opts) for spec in fold_specs(runs, quick)]
@@ -131,19 +137,21 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     loro = [res["fold"] for res in results if res["kind"] == "run"]
     jack = jackknife(everything, loro) if len(loro) > 2 else None
     calibration = calibration_table(everything, loro, jack) if jack is not None else {}
-    bands = band_check(runs, [res for res in results if res["kind"] == "run"]) if len(loro) > 2 else {}
+    loro_results = [res for res in results if res["kind"] == "run"]
+    bands = band_check(runs, loro_results) if len(loro) > 2 else {}
+    q_by_run = heading_growth(runs, loro_results)
+    coverage = predictive_coverage(runs, results, q_by_run) if len(q_by_run) > 1 else {}
     discrepancy = {"model_discrepancy": {
         "psi_variance_growth_deg2_per_s": bands["q_all_folds_deg2_per_s"],
         "meaning": "heading variance the parameter band misses, growing linearly with time (q t), least squares "
                    "over the leave-one-run-out held-out errors; replays of this file give the parameter band "
-                   "(param_covariance) and beside it the predictive band sqrt(s^2 + q t), s the heading band of "
-                   "estimated_with",
-        "estimated_with": beside_discrepancy(everything, jack).to_dict()}} if bands else {}
+                   "(param_covariance) and the predictive band sqrt(s^2 + q t) on the same covariance, so the "
+                   "predictive band is never the narrower"}} if bands else {}
     fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
     replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler,
                         blas_threads=1)
     model = study_model()
-    asym = asymmetry_check(runs, everything.fit.params, model, published_model())
+    asym = asymmetry_check(runs, everything.params("HSVA"), model, published_model())
     asym["mirror"] = {r.name: mirror for r, (_, mirror) in zip(runs, replays)}
     turns = {}
     for circle in (r for r in runs if r.kind == "turning"):
@@ -153,7 +161,9 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
         turns[circle.name] = {"turn": through_the_turn(circle, files, published_model()),
                               "balance": steady_turn_balance(circle, files, published_model())}
     return write_outputs(out, runs, everything, results, [row for row, _ in replays], calibration=calibration,
-                         jack=jack, asymmetry=asym, bands=bands, turns=turns, quick=quick)
+                         jack=jack, asymmetry=asym, bands=bands, turns=turns, quick=quick, coverage=coverage,
+                         variants={"this_round": len(VARIANTS), "declared": list(VARIANTS),
+                                   "earlier_rounds": VARIANTS_EARLIER})
 
 
 STUDY = Study("kvlcc2-marin", "KVLCC2 MMG identified on the MARIN and HSVA free-running runs, "

@@ -37,7 +37,7 @@ from casship.validation import replay
 from .validate import INDICES
 from .workflow import study_model
 
-__all__ = ["jackknife", "calibration_table", "band_check", "asymmetry_check", "mirror_check", "mirrored", "Z95"]
+__all__ = ["jackknife", "calibration_table", "band_check", "heading_growth", "predictive_coverage", "asymmetry_check", "mirror_check", "mirrored", "Z95"]
 
 Z95 = 1.959963984540054
 
@@ -46,13 +46,16 @@ def jackknife(everything, folds) -> ParameterUncertainty:
     """Run-level jackknife covariance of the moved parameters of ``everything`` over ``folds``
     (the leave-one-run-out :class:`.workflow.FoldFit` values)."""
     names = [n for n in everything.moved() if not n.startswith("k_")]
-    theta = np.array([[fold.fit.params[n] for n in names] for fold in folds])
+    theta = np.array([[fold.params()[n] for n in names] for fold in folds])
     n = len(folds)
     d = theta - theta.mean(axis=0)
     C = (n - 1) / n * d.T @ d
-    values = [everything.fit.params[k] for k in names]
-    return ParameterUncertainty(names, values, C, f"run-level jackknife over {n} leave-one-run-out folds",
-                                {"folds": n})
+    for q, pool in everything.ship.facility.items():       # a run of an unknown facility: the spread too
+        if q in names:
+            C[names.index(q), names.index(q)] += pool["spread"] ** 2
+    values = [everything.params()[k] for k in names]
+    return ParameterUncertainty(names, values, C, f"run-level jackknife over {n} leave-one-run-out folds (facility "
+                                "quantities: population value, with the between-facility spread added)", {"folds": n})
 
 
 def calibration_table(everything, folds, jack: ParameterUncertainty) -> dict:
@@ -61,7 +64,7 @@ def calibration_table(everything, folds, jack: ParameterUncertainty) -> dict:
     rows = {}
     for i, name in enumerate(jack.names):
         est = jack.values[i]
-        fold_values = np.array([f.fit.params[name] for f in folds])
+        fold_values = np.array([f.params()[name] for f in folds])
         ses = {"model-based": moved[name]["std_error"], "robust": moved[name].get("std_error_robust", np.nan),
                "jackknife": float(jack.std[i])}
         row = {"estimate": est, "published": moved[name]["published"], "stage": moved[name]["stage"],
@@ -135,6 +138,51 @@ def band_check(runs, loro_results, *, z: float = Z95) -> dict:
         summary[f"indices in interval, {how}"] = float(np.mean(v)) if v else np.nan
         summary[f"indices checked, {how}"] = len(v)
     return {"runs": rows, "summary": summary, "q_all_folds_deg2_per_s": float(np.degrees(np.degrees(np.mean(list(q.values())))))}
+
+
+def heading_growth(runs, loro_results) -> dict:
+    """``q`` [rad^2/s] of each leave-one-run-out held-out run: the heading variance its fold's parameter
+    band misses, growing linearly with time (least squares, floored at 0)."""
+    by_name = {r.name: r for r in runs}
+    out = {}
+    for res in loro_results:
+        ev = res["evaluations"][0]
+        if ev["bands"]:
+            out[ev["row"]["run"]] = max(_growth(*_heading_errors(by_name[ev["row"]["run"]], ev)), 0.0)
+    return out
+
+
+def predictive_coverage(runs, results, q_by_run: dict, *, z: float = Z95) -> dict:
+    """Coverage of every left-out run (every fold family) by its fold's 95 % predictive band.
+
+    The predictive band is the fold file's parameter band (its covariance) plus the model discrepancy
+    ``q t``, with ``q`` the mean over the leave-one-run-out held-out runs *not held out by that fold*
+    (a fold never sees its own held-out errors): ``sqrt(s^2 + q t) >= s`` on every sample. Returns
+    the share of heading samples inside the band per held-out run and fold, their mean over all folds
+    (``mean``) and per family (``by_kind``), and the parameter band's share beside it.
+    """
+    by_name = {r.name: r for r in runs}
+    rows = []
+    for res in results:
+        held = set(res["held"])
+        others = [q for name, q in q_by_run.items() if name not in held]
+        if not others:
+            continue
+        q = float(np.mean(others))
+        for ev in res["evaluations"]:
+            if not ev["bands"]:
+                continue
+            t, e, s = _heading_errors(by_name[ev["row"]["run"]], ev)
+            wide = np.sqrt(s**2 + q * t)
+            rows.append({"kind": res["kind"], "label": res["label"], "run": ev["row"]["run"],
+                         "predictive": float(np.mean(np.abs(e) <= z * wide)),
+                         "parameter": float(np.mean(np.abs(e) <= z * s)),
+                         "q_deg2_per_s": float(np.degrees(np.degrees(q))),
+                         "never_narrower": bool(np.all(wide >= s))})
+    kinds = sorted({r["kind"] for r in rows})
+    return {"rows": rows, "mean": float(np.mean([r["predictive"] for r in rows])) if rows else float("nan"),
+            "parameter_mean": float(np.mean([r["parameter"] for r in rows])) if rows else float("nan"),
+            "by_kind": {k: float(np.mean([r["predictive"] for r in rows if r["kind"] == k])) for k in kinds}}
 
 
 def asymmetry_check(runs, fit_file_params, model, published) -> dict:

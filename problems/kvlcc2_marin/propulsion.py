@@ -13,7 +13,8 @@ of the propeller (``J, K_T, 10 K_Q``):
    :func:`casship.models.mmg.mmg_propeller` at the smoothed ``u, v, r`` and the measured rate) to the
    measured thrust of the training HSVA runs, weighted by the same rule as the manoeuvring fit
    (RMS error at the start times the square root of its autocorrelation time), the free set chosen
-   by the same rule (:func:`.workflow.select_free`) from the candidates' prior.
+   by the prior-ratio rule of :meth:`casship.identify.Identifiability.propose` from the candidates' prior
+   (the direction-switched ``C_2_plus``/``C_2_minus`` only when the thrust runs hold a mirror pair).
 3. **Check with the torque**: ``Q = rho n^2 D_OW^5 K_Q(J_OW)`` at the fitted inflow, against the
    measured torque (the rudder inflow follows the fitted ``u_P`` and ``K_T``).
 
@@ -31,7 +32,8 @@ import casadi as ca
 import numpy as np
 
 import casship as cs
-from casship.identify.identifiability import Identifiability
+from casship.identify.asymmetry import mirror_pairs
+from casship.identify.identifiability import MAX_RATIO, Identifiability
 from casship.identify.uncertainty import effective_samples
 from casship.maneuvers import propeller_rate_for_speed
 from casship.models.mmg import SMOOTH_WIDTH, mmg_propeller
@@ -108,8 +110,6 @@ def _samples(runs, smoothed):
 def fit_propulsion(model: cs.Model, runs, smoothed: dict, curve: np.ndarray, *, max_iter: int = 30) -> PropulsionFit:
     """Fit ``k`` (open water) and the wake (measured thrust of ``runs``) as in the module text; without a
     run that measured the thrust, the published propeller is kept (an empty fit)."""
-    from .workflow import select_free
-
     runs = [r for r in runs if "thrust" in r.data]
     if not runs:                 # nothing measured the thrust: the published propeller stays
         return PropulsionFit({}, {}, [], [], math.nan, {}, {}, math.nan, [])
@@ -133,7 +133,9 @@ def fit_propulsion(model: cs.Model, runs, smoothed: dict, curve: np.ndarray, *, 
     sigma = float(np.sqrt(sum(np.sum(e**2) for e, _ in at_start) / neff))
     info = sum(J.T @ J for _, J in at_start) / sigma**2
     idf = Identifiability(list(WAKE_NAMES), dict(zip(WAKE_NAMES, mean)), np.abs(mean), info, 1.0 / prior_std**2)
-    chosen, rows = select_free(idf, max_count=len(WAKE_NAMES))
+    pairs = mirror_pairs([r.data for r in runs], within=[r.facility for r in runs])
+    cands = [n for n in WAKE_NAMES if pairs or n not in ("C_2_plus", "C_2_minus")]   # mirrored evidence only
+    chosen, rows = idf.propose(max_ratio=MAX_RATIO, candidates=cands, keep=[], explain=True)
     idx = [WAKE_NAMES.index(n) for n in chosen]
     theta = mean.copy()
     for _ in range(max_iter):                          # Gauss-Newton on the MAP cost of the chosen ones

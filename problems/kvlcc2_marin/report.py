@@ -60,7 +60,7 @@ def _moved_table(everything) -> str:
 
 def _propulsion(runs, everything) -> tuple[str, str, dict]:
     pub, model = study_model(), study_model()
-    p_fit = model.params(everything.fit.params)
+    p_fit = model.params(everything.params())
     rows = {}
     for r in runs:
         a, b = mismatch(pub, r), mismatch(model, r, p_fit)
@@ -227,6 +227,13 @@ _CHOICES = (
     "alone takes `N'_0` (thrust form) instead, both -1.08 deg; the port/starboard difference grows from the "
     "10 to the 20 deg pair while the measured 35/5 zig-zag holds its mean heading, so a neutral angle that "
     "depends on the rudder angle, determined by the pairs, would drift it further: not run.\n"
+    "* **This round** (declared before its first cross-validation run, one variant, `workflow.VARIANTS`): the "
+    "study calls the library workflow (`casship.identify.identify_ship`); the free set is chosen by run-level "
+    "evidence (posterior/prior std, the larger of the model-based one and the leave-one-run-out spread, <= 0.5) "
+    "instead of the Fisher information alone; the neutral angle is a facility's, pooled over facilities (a "
+    "run of a facility without a value gets the population value and the spread in its band); `gamma_R_plus/minus` "
+    "are estimated only on the mirror pairs; the predictive band rests on the file's own covariance; no variant "
+    "was chosen on this round's numbers.\n"
     "* Earlier workflow (before this one): the inverse-dynamics regression counts effective samples "
     "(`autocorrelation=True`); its per-facility asymmetry, kept inverse-dynamics values, resistance trim and "
     "psi/r/u cost are replaced by the rules above.")
@@ -250,10 +257,63 @@ def _coverage(calibration: dict) -> dict:
     return out
 
 
+FAMILIES = {"loro": "run", "loro_regime": "regime", "lodo": "direction", "lofo": "facility"}
+
+
+def family(rows) -> dict:
+    """Mean heading RMSE of the held-out runs of one fold family, published and fit, and how many the
+    fit predicts better."""
+    pub = [r["psi_rmse_deg_published"] for r in rows]
+    fit = [r["psi_rmse_deg_fit"] for r in rows]
+    return {"published_mean_deg": float(np.mean(pub)) if rows else math.nan,
+            "fit_mean_deg": float(np.mean(fit)) if rows else math.nan,
+            "better": int(sum(bool(r["psi_better"]) for r in rows)), "of": len(rows)}
+
+
+def circle_left_out(rows) -> dict:
+    """Advance and tactical diameter of the turning circle(s) left out one at a time, fit minus measured [%]."""
+    out = {}
+    circles = [r for r in rows if r["kind"] == "turning"]
+    for key, name in (("advance_m", "advance_pct"), ("tactical_diameter_m", "tactical_diameter_pct")):
+        v = [100.0 * (r[f"{key}_fit"] / r[f"{key}_measured"] - 1.0) for r in circles
+             if np.isfinite(r[f"{key}_measured"])]
+        out[name] = float(np.mean(v)) if v else math.nan
+        out[name.replace("_pct", "_published_pct")] = (float(np.mean(
+            [100.0 * (r[f"{key}_published"] / r[f"{key}_measured"] - 1.0) for r in circles])) if circles else math.nan)
+    out["runs"] = [r["run"] for r in circles]
+    return out
+
+
+def _headline(by_kind, coverage, variants) -> tuple[str, dict]:
+    fams = {k: family(by_kind[v]) for k, v in FAMILIES.items()}
+    circle = circle_left_out(by_kind["run"])
+    names = {"loro": "leave-one-run-out", "loro_regime": "leave-one-regime-out", "lodo": "leave-one-direction-out",
+             "lofo": "leave-one-facility-out"}
+    rows = {names[k]: {"published mean psi RMSE [deg]": f["published_mean_deg"], "fit mean psi RMSE [deg]":
+                       f["fit_mean_deg"], "runs better": f"{f['better']} of {f['of']}",
+                       "better in mean": "yes" if f["fit_mean_deg"] < f["published_mean_deg"] else "NO"}
+            for k, f in fams.items() if f["of"]}
+    text = [md_table(rows, first="fold family", spec=".3g") if rows else "(no folds)",
+            f"Turning circle left out: advance {fmt(circle['advance_pct'], '+.1f')} %, tactical diameter "
+            f"{fmt(circle['tactical_diameter_pct'], '+.1f')} % (published constants: "
+            f"{fmt(circle['advance_published_pct'], '+.1f')} %, {fmt(circle['tactical_diameter_published_pct'], '+.1f')} %).",
+            f"Predictive coverage of the left-out runs (share of heading samples inside the 95 % predictive band "
+            f"of the fold that did not see them, over all fold families): "
+            f"{fmt(coverage.get('mean', math.nan), '.2f')} (parameter band alone "
+            f"{fmt(coverage.get('parameter_mean', math.nan), '.2f')}); per family "
+            + ", ".join(f"{k} {v:.2f}" for k, v in coverage.get("by_kind", {}).items()) + ".",
+            f"Variants tried: {variants['this_round']} this round, declared before its first cross-validation run "
+            f"({'; '.join(variants['declared'])}); {variants['earlier_rounds']} in earlier rounds, chosen on the "
+            "leave-one-run-out means (see the choices below)."]
+    return "\n\n".join(text), {**fams, "circle_left_out": circle}
+
+
 def write_outputs(out: Path, runs, everything, results, in_sample, *, calibration, jack, asymmetry,
-                  quick: bool, bands=None, turns=None) -> dict:
+                  quick: bool, bands=None, turns=None, coverage=None, variants=None) -> dict:
     """Write the tables, figures and report (the fit files are written by the folds); return the summary."""
     out = Path(out)
+    coverage = coverage or {}
+    variants = variants or {"this_round": 1, "declared": [], "earlier_rounds": 0}
     by_kind = {k: [ev["row"] for res in results if res["kind"] == k for ev in res["evaluations"]]
                for k in ("run", "regime", "facility", "direction")}
     figs = [res["figure"] for res in results]      # drawn by each fold
@@ -269,12 +329,16 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     options = ", ".join(f"{k}={v}" for k, v in workflow.MODEL_OPTIONS.items())   # read when written
     rep.add(f"Model: `kvlcc2({options})` (full scale), fitted on {len(runs)} runs "
             f"({', '.join(r.name for r in runs)}). Workflow: propulsion from the measured thrust, EKF + RTS "
-            f"smoothing, free set from the Fisher information, MAP output-error refinement of {', '.join(MEASURED)} "
-            "with every run weighted the same (see `problems/kvlcc2_marin/workflow.py`). Every held-out run is "
+            f"smoothing, free set from run-level evidence, MAP output-error refinement of {', '.join(MEASURED)} "
+            "with every run weighted the same (`casship.identify.identify_ship`, see `problems/kvlcc2_marin/workflow.py`). Every held-out run is "
             "scored by replaying its fold's fit file with `casship.identify.replay_file`, the function behind "
-            "`casship simulate --model kvlcc2 --params FILE --inputs RUN`; every run, of any facility or "
-            "direction, gets the file's one parameter set. Indices of the fit carry the 95 % interval of "
-            "parameter draws from the file's covariance.")
+            "`casship simulate --model kvlcc2 --params FILE --inputs RUN`; every run gets the file's one set of "
+            "hull coefficients, and the neutral angle of its facility when the training had one (else the "
+            "population value, its band widened by the between-facility spread). Indices of the fit carry the "
+            "95 % interval of parameter draws from the file's covariance.")
+    head_text, head = _headline(by_kind, coverage, variants)
+    rep.section("Headline: every fold family, the circle left out, the predictive coverage")
+    rep.add(head_text)
     titles = {"run": "Leave-one-run-out: each run predicted by the fit file of a fold that did not see it",
               "regime": "Leave-one-regime-out: small-angle zig-zags, large-rudder zig-zags, turning circles",
               "facility": "Leave-one-facility-out: one facility's runs predicted by a fit on the other's",
@@ -296,17 +360,15 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
             "coefficients are the open-water curve's, rewritten for the model's diameter).",
             _moved_table(everything))
     rep.section("Free set, prior and estimates (fit on all runs)")
-    rep.add("Free set chosen by the rule of `workflow.select_free`, the asymmetry terms in a first stage on the "
-            "mirror-pair runs only (information at the preset), the symmetric ones on all runs with the asymmetry "
-            f"held: first from the Fisher information at the preset (chosen: {', '.join(everything.first_free)}), "
-            "then again from the information at that refinement's estimate (the table; start of the second "
-            f"refinement: {everything.guess_from}):",
-            md_table({f"{r['quantity']} ({'asymmetry' if r.get('stage', '').startswith('asym') else 'all runs'})": r
-                      for r in everything.selection}, first="candidate", spec=".3g",
-                     columns=["stage", "ratio_when_added", "max_corr", "ratio_alone", "confounded"],
-                     headers={"ratio_when_added": "posterior/prior std when chosen", "max_corr": "max |corr| then",
-                              "ratio_alone": "posterior/prior std if alone (not chosen)",
-                              "confounded": "confounded with the turning dynamics"}),
+    rep.add("Every choice of the workflow on all runs, with its reason (`fit.json`, key `workflow.choices`):",
+            md_table(everything.ship.choices, ["step", "choice", "reason"], spec=".3g"),
+            "Free set chosen by run-level evidence (`Identifiability.propose(evidence=\"runs\")`): first at the "
+            f"preset (chosen: {', '.join(everything.first_free)}), then again at that refinement's estimate (the table):",
+            md_table({r["quantity"]: r for r in everything.selection}, first="candidate", spec=".3g",
+                     columns=["chosen", "ratio_when_added", "max_corr", "ratio_if_added", "max_corr_if_added"],
+                     headers={"ratio_when_added": "run-level posterior/prior std when chosen",
+                              "max_corr": "max |corr| then", "ratio_if_added": "run-level posterior/prior std if added",
+                              "max_corr_if_added": "max |corr| if added"}),
             "Output sigmas (RMS error at the preset times sqrt of the autocorrelation time): "
             + ", ".join(f"{k} {v:.3g}" for k, v in everything.sigma.items()))
     rep.add("```", everything.fit.summary(), "```")
@@ -354,8 +416,8 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
             "on the sign of the drift):",
             md_table(asymmetry.get("mirror", {}), first="run", spec=".3g"),
             "Asymmetry terms of the fit on all runs: " + (", ".join(
-                f"{n} = {everything.fit.params[n]:.4g}" for n in ("delta_0", "Y_0_dash", "N_0_dash")))
-            + (f"; confounded (not estimated): {', '.join(everything.confounded)}" if everything.confounded else ""),
+                f"{n} = {everything.params()[n]:.4g}" for n in ("delta_0", "Y_0_dash", "N_0_dash")))
+            + " (delta_0: the population value; per facility in `asymmetry.facility_quantities` of `fit.json`)",
             f"Pair criterion (stated before the cross-validation of the asymmetry forms): RMS over the pairs and "
             f"the first and second overshoots of (fit - measured) starboard-first minus port-first difference: "
             f"{pair_error(asymmetry['pairs']):.3g} deg (published constants: "
@@ -392,7 +454,14 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
         rep.image(name, name)
     rep.departures(_departures(), "Reference approach: Alexandersson et al. (2022), Ocean Engineering.")
     rep.write(out)
-    summary = {"study": "kvlcc2-marin", "quick": quick, "runs": [r.name for r in runs],
+    summary = {"study": "kvlcc2-marin", "quick": quick, "runs": [r.name for r in runs], **head,
+               "predictive_coverage": coverage.get("mean", math.nan),
+               "predictive_band_never_narrower": (all(r.get("predictive_never_narrower") for r in in_sample)
+                                                  if in_sample and all(r.get("predictive_never_narrower") is not None
+                                                                       for r in in_sample) else None),
+               "predictive_coverage_detail": coverage,
+               "variants_tried": int(variants["this_round"] + variants["earlier_rounds"]),
+               "variants": variants,
                "model_options": workflow.MODEL_OPTIONS, "free": everything.free,
                "free_at_preset": everything.first_free,
                "moved": everything.moved(),

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from casship.identify import ParameterUncertainty
 from casship.io.jsonfile import write_json
 from casship.models import kvlcc2
 from casship.identify import replay_file
@@ -34,46 +33,18 @@ INDICES = {"turning": ("advance_m", "transfer_m", "tactical_diameter_m"),
 SAMPLES = 40                       # parameter draws per replay for the index intervals
 
 
-def robust_uncertainty(fold):
-    """The fold's robust (sandwich) covariance: the refinement's, with that of the asymmetry terms from
-    the mirror-pair stage beside it (the two stages' estimates taken as independent); None without
-    asymmetry terms (the fit file then carries the refinement's own)."""
-    from scipy.linalg import block_diag
+def write_fold_file(fold, path: Path, uncertainty=None, extra=None, facility: str | None = None) -> Path:
+    """Write the fold's fit as the fit file a user gets, for replaying runs of ``facility``.
 
-    if not fold.asymmetry:
-        return None
-    a, b = fold.asymmetry_fit.uncertainty("robust"), fold.fit.uncertainty("robust")
-    ia = [a.names.index(n) for n in fold.asymmetry]
-    names = [*fold.asymmetry, *(b.names if b is not None else [])]
-    values = [*a.values[ia], *(b.values if b is not None else [])]
-    C = block_diag(a.covariance[np.ix_(ia, ia)], *([b.covariance] if b is not None else []))
-    return ParameterUncertainty(names, values, C, "robust (sandwich), asymmetry stage and refinement")
-
-
-def write_fold_file(fold, path: Path, uncertainty=None, extra=None) -> Path:
-    """Write the fold's fit as the fit file a user gets.
-
-    Besides the fit (:meth:`~casship.identify.FitResult.to_dict`) the file says which asymmetry it
-    carries and from which evidence (key ``"asymmetry"``, :meth:`.workflow.FoldFit.asymmetry_record`),
-    and the entries of ``extra`` (e.g. the study's model-discrepancy estimate).
-
-    Its covariance is ``uncertainty`` (a :class:`~casship.identify.ParameterUncertainty`) when
-    given, else the robust (sandwich) covariance of the refinement with that of the asymmetry
-    terms from the mirror-pair stage beside it (the two stages' estimates taken as independent).
+    The file's parameters are the fit's with the facility quantities (the neutral angle) of
+    ``facility`` when the training had a value for it, else their population values; its covariance
+    is ``uncertainty`` when given, else the robust (sandwich) covariance of the refinement and the
+    mirror-pair stage with each facility quantity's standard error (or the population value's with
+    the between-facility spread) beside it (:meth:`casship.identify.ShipFit.uncertainty`). It also
+    says which asymmetry it carries and from which evidence (key ``"asymmetry"``), and the entries
+    of ``extra``.
     """
-    import dataclasses
-
-    fit = fold.fit
-    if uncertainty is None:
-        uncertainty = robust_uncertainty(fold)
-    if uncertainty is not None:
-        fit = dataclasses.replace(fit, param_covariance=uncertainty.to_dict())
-    content = fit.to_dict()
-    content["asymmetry"] = fold.asymmetry_record()
-    content.update(extra or {})
-    path = Path(path)
-    write_json(path, content, what="fit file")
-    return path
+    return fold.ship.to_json(path, facility, uncertainty, {"asymmetry": fold.asymmetry_record(), **(extra or {})})
 
 
 @functools.cache

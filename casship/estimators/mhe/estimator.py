@@ -11,7 +11,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ...runtime import DUPLICATE_NAMES, compile_function
+from ...runtime import DUPLICATE_NAMES, current_function, jit_function
 from ...data import Dataset
 from ...gaussian import Gaussian, as_cov
 from ...progress import track
@@ -66,7 +66,7 @@ class MHE(Estimator):
     failures raise :class:`MHEFailed` (a ``RuntimeError``) naming the row and the solver's return
     status. The MHE is not of the step family and has no ``step`` (each sample solves an
     optimisation problem): the window problem itself is :meth:`window`, the real-time-iteration step
-    as C is ``casship.runtime.export_mhe_rti``, and the EKF step that supplies the arrival cost is
+    as C is ``casship.estimators.export_mhe_rti``, and the EKF step that supplies the arrival cost is
     ``mhe.arrival_filter.step``. Time gaps longer than the one-step prediction limit raise or
     are bridged by prediction-only rows (options ``max_gap``, ``on_gap``), in batch and online alike.
 
@@ -145,8 +145,8 @@ class MHE(Estimator):
         key = tuple(outputs)
         if key not in self._arrival_steps:
             fun = self.arrival_filter.step_function(key)
-            self._arrival_steps[key] = compile_function(fun) if self.options.jit else fun
-        return self._arrival_steps[key]
+            self._arrival_steps[key] = jit_function(fun, self.options.jit)    # the runtime's policy
+        return current_function(self._arrival_steps[key])
 
     @property
     def horizon(self) -> int:

@@ -18,7 +18,7 @@ import casadi as ca
 import numpy as np
 
 from ...angles import wrap_sym
-from ...runtime import BufferedCall, compile_function
+from ...runtime import BufferedCall, current_function, is_compiled, jit_function
 from .riccati import riccati_step
 
 __all__: list[str] = []          # the package's own building blocks
@@ -237,7 +237,8 @@ def build_window(mhe, N: int, solver: str) -> Window:
         method = method or ("riccati" if o.jit or not expand else "kkt")
         fun = (riccati_step(stage, term, arrival, nx, nv, N, z, par, pieces, multipliers) if method == "riccati"
                else _kkt_step(z, par, res, nlp["g"], N, multipliers))
-        return BufferedCall(compile_function(fun) if o.jit else fun, cannot_fail=o.jit)
+        fun = current_function(jit_function(fun, o.jit))       # the runtime's policy (option jit)
+        return BufferedCall(fun, cannot_fail=is_compiled(fun))
 
     idx = np.arange(nz)
     blk_idx = idx[: N * (nx + nv)].reshape(N, nx + nv)

@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from ...runtime import BufferedCall
+from ...runtime import BufferedCall, is_compiled
 from ...gaussian import Gaussian
 from ..gaps import gap_pieces, gap_threshold
 from ..online import check_sample, first_input
@@ -66,7 +66,8 @@ class WindowEngine:
         self._started = False
         self.outputs = tuple(o for o in DIAGNOSTICS if o in outputs)
         needed = tuple(o for o in DIAGNOSTICS if o in (*ARRIVAL_OUTPUTS, *self.outputs))
-        self.ekf = ekf = BufferedCall(mhe.arrival_step(needed), cannot_fail=mhe.options.jit)
+        step = mhe.arrival_step(needed)
+        self.ekf = ekf = BufferedCall(step, cannot_fail=is_compiled(step))
         ekf["p"], ekf["Q"], ekf["R"], ekf["gate"] = p_aug, mhe.Q, mhe.R, np.inf
         self._ekf_in = {k: ekf.flat_in(k) for k in ("x", "P", "u_prev", "u", "y", "mask", "dt")}
         self._ekf_out = {k: (ekf.offsets[i], ekf.offsets[i + 1], ekf.out(k).shape)

@@ -1,0 +1,521 @@
+"""The ship identification workflow as one call: :func:`identify_ship`.
+
+What the KVLCC2 studies and the tutorial do by hand, with every choice returned and printed with
+its reason (:attr:`ShipFit.choices`). On free-running records of a manoeuvring model:
+
+1. **Propulsion first.** Values fitted to measured thrust before the manoeuvring fit are applied
+   (``propulsion=``); the measured propeller rate drives every replay. The straight-run resistance
+   ``R_0'`` starts at the value that holds each record's approach speed at its measured rate (the
+   surge equation is linear in it), and is a candidate of the free set like any other parameter.
+2. **Smooth and regress a start.** EKF + RTS smoothing of the pose into ``u, v, r`` and their rates,
+   then the coefficients the model is linear in by regularised least squares
+   (:func:`~casship.identify.inverse_dynamics`): *starting guesses only*, used when they lower the cost.
+3. **A cost that weighs by a stated rule.** Each channel's ``sigma`` is its RMS error at the preset
+   times the square root of its integrated autocorrelation time (``N`` correlated samples count as
+   their ``N / tau`` effective ones), so no channel's size decides the fit (surge cannot swallow
+   yaw); each record counts the same however long it is (``record_weights = N_mean / N_r``).
+4. **Priors around the preset** with its stated uncertainty (:data:`PRESET_UNCERTAINTY`: linear hull
+   derivatives 20 %, cubic 50 %, resistance 30 %, rudder and interaction factors 20-30 %, added
+   masses 20 %, a neutral angle 1 deg).
+5. **Asymmetry only from mirrored evidence.** Port/starboard terms (the propeller-induced side force
+   and yaw moment) and direction-switched coefficients (``gamma_R_plus/minus``) are estimated on
+   the records that form mirror pairs within one facility and nothing else. The rudder neutral
+   angle ``delta_0`` is a facility's, not the ship's: one value per facility with a pair, pooled
+   hierarchically (:func:`pool_facilities`: a population value and a between-facility spread); a
+   record from a facility without a value is run at the population value.
+6. **The free set from run-level evidence** (:meth:`~casship.identify.Identifiability.propose`,
+   ``evidence="runs"``): greedy D-optimal forward selection admitting a quantity only while every
+   chosen one has a posterior/prior standard deviation at most 0.5, where the standard deviation is
+   the larger of the model-based one and the spread of the leave-one-run-out estimates (a
+   linearised jackknife over the records, or over blocks of them when there are fewer than four).
+   Chosen at the preset, refined, chosen again at that estimate (where the replays follow the
+   runs) and refined again.
+
+``free=``, ``weights=`` and ``prior=`` override steps 6, 3 and 4.
+"""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..errors import InputError
+from .asymmetry import mirror_pairs
+from .identifiability import MAX_CORR, MAX_RATIO, RunEvidence
+from .inverse_dynamics import inverse_dynamics, smooth_trial
+from .output_error import OutputErrorProblem
+from .prior import Prior
+from .result import IdentificationWarning
+from .runlevel import MEASURED, approach_resistance, resample, run_evidence
+from .shipfit import ShipFit, pool_facilities
+from .uncertainty import effective_samples
+
+__all__ = ["identify_ship", "ShipFit", "PRESET_UNCERTAINTY", "preset_prior_std", "run_evidence", "pool_facilities",
+           "resample", "approach_resistance", "CANDIDATES", "ASYMMETRY", "DIRECTION_SWITCHED", "MEASURED"]
+
+HULL_LINEAR = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash")
+HULL_CUBIC = ("Y_vvv_dash", "Y_vvr_dash", "Y_vrr_dash", "Y_rrr_dash", "N_vvv_dash", "N_vvr_dash", "N_vrr_dash",
+              "N_rrr_dash", "X_vv_dash", "X_vr_dash", "X_rr_dash", "X_vvvv_dash")
+#: Port/starboard terms of the ship (estimated on mirror pairs only, applied to every record).
+ASYMMETRY = ("Y_0_dash", "N_0_dash")
+#: The rudder neutral angle: a facility's quantity (its model and rudder), pooled over facilities.
+FACILITY = ("delta_0",)
+#: Coefficients that switch with the sign of a drift angle: from mirrored evidence only.
+DIRECTION_SWITCHED = ("gamma_R_plus", "gamma_R_minus")
+#: Candidates of the free set (those the model has).
+CANDIDATES = (*HULL_LINEAR, *HULL_CUBIC, "R_0_dash", "l_R_dash", "epsilon", "kappa", "f_alpha", "a_H", "x_H_dash",
+              "t_R", "m_x_dash", "m_y_dash", "J_z_dash")
+#: Coefficients the inverse-dynamics start regresses (those the model has).
+REGRESSED = (*HULL_LINEAR, *HULL_CUBIC, "f_alpha")
+#: Outputs of the cost when the records hold them.
+#: The preset's stated uncertainty: relative prior standard deviations (``rel``), absolute ones
+#: (``abs``) and floors, by parameter.
+PRESET_UNCERTAINTY = {
+    "rel": {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "R_0_dash": 0.3,
+            "gamma_R_minus": 0.25, "gamma_R_plus": 0.25, "l_R_dash": 0.2, "epsilon": 0.2, "kappa": 0.2,
+            "f_alpha": 0.2, "a_H": 0.3, "x_H_dash": 0.2, "t_R": 0.3, "m_x_dash": 0.2, "m_y_dash": 0.2,
+            "J_z_dash": 0.2, "w_P0": 0.2, "C_1": 0.3, "C_2_plus": 0.2, "C_2_minus": 0.2},
+    "abs": {"delta_0": math.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025},
+    "floor": {"X_vr_dash": 0.01},
+}
+#: Smoother settings by default: positions, heading and the speed and yaw-rate columns a record holds,
+#: with the resolution of a full-scale trial log printed to three digits.
+SMOOTHER_SIGMA = {"x": 3.0, "y": 3.0, "psi": math.radians(0.3), "u": 0.01, "r": math.radians(0.002)}
+JERK = {"u": 1e-3, "v": 1e-3, "r": 1e-5}
+NEUTRAL_SPREAD = math.radians(1.0)   # between-facility spread of a neutral angle (its stated uncertainty)
+
+
+def preset_prior_std(model, names: Sequence[str], override: Mapping[str, float] | None = None) -> dict:
+    """Prior standard deviation of each named parameter: ``override`` first, else
+    :data:`PRESET_UNCERTAINTY` (relative to the preset value, or absolute).
+
+    Parameters
+    ----------
+    model : Model
+    names : sequence of str
+        The parameters.
+    override : mapping name -> std, optional
+        Standard deviations that take precedence.
+
+    Raises
+    ------
+    InputError
+        For a name the rule does not cover and ``override`` does not give.
+    """
+    nominal = model.param_dict()
+    override = dict(override or {})
+    out = {}
+    for n in names:
+        base = n.split("@")[0]
+        if base in override:
+            out[n] = float(override[base])
+        elif base in PRESET_UNCERTAINTY["abs"]:
+            out[n] = PRESET_UNCERTAINTY["abs"][base]
+        elif base in PRESET_UNCERTAINTY["rel"] and nominal[base] != 0:
+            out[n] = max(PRESET_UNCERTAINTY["rel"][base] * abs(nominal[base]), PRESET_UNCERTAINTY["floor"].get(base, 0))
+        else:
+            raise InputError(f"no stated prior uncertainty for {base!r}: give it (prior={{{base!r}: std}})")
+    return out
+
+
+def _labels(records, facility) -> list[str]:
+    if facility is None:
+        return [str(r.meta.get("facility", "records")) for r in records]
+    if isinstance(facility, str):
+        return [facility] * len(records)
+    labels = [str(f) for f in facility]
+    if len(labels) != len(records):
+        raise InputError(f"facility: {len(labels)} labels for {len(records)} records")
+    return labels
+
+
+def _with_rudder_offset(record, offset: float):
+    return record.with_columns(delta=np.asarray(record["delta"], dtype=float) - offset) if offset else record
+
+
+def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
+                  weights: Mapping[str, float] | None = None, prior: Mapping[str, float] | None = None,
+                  candidates: Sequence[str] | None = None, measured: Sequence[str] | None = None,
+                  facility=None, propulsion: Mapping[str, float] | None = None, smoothed=None, dt: float = 2.0,
+                  max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR, max_free: int = 15, passes: int = 2,
+                  record_weights: str = "equal", reweigh: bool = True, terms=None, show: bool = False, verbose: bool = False,
+                  verdict: str | None = "loo") -> ShipFit:
+    """Identify a ship from free-running records by the workflow of the module text, in one call.
+
+    Parameters
+    ----------
+    records : Dataset or sequence of Dataset
+        Free-running records (SI units, radians) with the model's inputs and some of its outputs.
+    model : str or Model
+        A registered model name or a model (its parameter values are the preset).
+    free : sequence of str, optional
+        The free set (skips the run-level choice).
+    weights : mapping output -> sigma, optional
+        Channel standard deviations of the cost (else the stated rule).
+    prior : mapping name -> std, optional
+        Prior standard deviations that override :data:`PRESET_UNCERTAINTY`.
+    candidates : sequence of str, optional
+        Candidates of the free set (default :data:`CANDIDATES` the model has, and the mirror-pair
+        terms when the records hold pairs; for a model with none of them, the names of ``prior``).
+    measured : sequence of str, optional
+        Outputs of the cost (default :data:`MEASURED` that every record holds).
+    facility : str or sequence of str, optional
+        Facility of each record (default ``meta["facility"]``, else one facility).
+    propulsion : mapping name -> value, optional
+        Values set before the fit (e.g. a propeller fitted to measured thrust).
+    smoothed : sequence of Dataset, optional
+        Smoothed records with ``u_dot, v_dot, r_dot`` (else smoothed here, when they hold ``x, y, psi``).
+    dt : float
+        Sampling period of the fit records [s].
+    max_ratio, max_corr, max_free, passes
+        The selection rule (posterior/prior std, correlation, count) and how often it is applied.
+    record_weights : {"equal", "samples"}
+        Each record the same weight (default), or each sample.
+    reweigh : bool
+        Re-estimate the channel sigmas (same rule) at the estimate before each later choice.
+    terms : sequence of CostTerm, optional
+        Further evidence joined to the records in one objective (e.g. captive tests,
+        :meth:`~casship.identify.CaptiveProblem.cost_term`): its shared quantities become candidates,
+        its information counts in every replicate of the run-level rule (never left out), the
+        refinements are :class:`~casship.identify.JointProblem` fits (its facility's own quantities,
+        ``name@facility``, free beside the chosen set; the shared ones not chosen held at one value
+        for both).
+    show, verbose : bool
+        Solver progress; print each choice as it is made.
+    verdict : {"loo", "replay"} or None
+        Judge the result (:func:`casship.identify.verdict.judge_records`): its records replayed with
+        the ship's parameters against the preset, and with ``"loo"`` (default) each record replayed by
+        the workflow run without it; sets ``fit.verdict`` and ``fit.model_discrepancy`` (the heading
+        discrepancy its replays draw in the predictive band). None: not judged.
+
+    Returns
+    -------
+    ShipFit
+        ``fit`` (FitResult), ``choices`` (step, choice, reason), ``summary()``, ``to_json(path)``.
+
+    Examples
+    --------
+    >>> fit = cs.identify_ship([zz10], model="kvlcc2")     # doctest: +SKIP
+    >>> print(fit.summary())                                 # doctest: +SKIP
+    """
+    from ..data import Dataset
+    from ..models import get_model
+
+    t0 = time.perf_counter()
+    if isinstance(records, Dataset):
+        records = [records]
+    records = list(records)
+    if not records:
+        raise InputError("identify_ship: no records")
+    model = get_model(model) if isinstance(model, str) else model
+    names = set(model.param_names)
+    choices = []
+
+    def note(step, choice, reason):
+        choices.append({"step": step, "choice": choice, "reason": reason})
+        if verbose:
+            print(f"[{step}] {choice}\n    because {reason}", flush=True)
+
+    fac = _labels(records, facility)
+    inputs = list(model.input_names)
+    for i, r in enumerate(records):
+        missing = [n for n in inputs if n not in r]
+        if missing:
+            raise InputError(f"record {i} lacks the input column(s) {missing} of {model.name!r}")
+    if measured is None:
+        measured = [n for n in MEASURED if n in model.output_names and all(n in r for r in records)]
+        if not measured:
+            measured = [n for n in model.output_names if all(n in r for r in records)]
+        note("cost", f"outputs {', '.join(measured)}", "the outputs every record holds (heading, yaw rate, speeds, "
+             "track where present)")
+    measured = list(measured)
+    if not measured:
+        raise InputError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
+
+    # 1. propulsion
+    preset = {k: float(v) for k, v in dict(propulsion or {}).items()}
+    unknown = sorted(set(preset) - names)
+    if unknown:
+        raise InputError(f"propulsion: {unknown} are not parameters of {model.name!r}")
+    if preset:
+        note("propulsion", ", ".join(f"{k} = {v:.4g}" for k, v in preset.items()),
+             "fitted to measured thrust before the manoeuvring fit (given)")
+    else:
+        note("propulsion", "the preset propeller", "no propeller values fitted to measured thrust were given")
+    fixed = model.params(preset)
+    start = {}
+    if "R_0_dash" in names and "n" in inputs and all("u" in r for r in records):
+        r0 = float(np.mean([approach_resistance(model, r, fixed) for r in records]))
+        start["R_0_dash"] = r0
+        note("propulsion", f"R_0' starts at {r0:.4g} (preset {model.param_dict()['R_0_dash']:.4g})",
+             "the value that holds the records' approach speeds at their measured propeller rates (mean over "
+             "records); a candidate with a 30 % prior, not a silent trim")
+
+    # 2. smooth and regress a start
+    regress = [n for n in REGRESSED if n in names]
+    if regress and smoothed is None and all(all(c in r for c in ("x", "y", "psi")) for r in records):
+        smoothed = []
+        for r in records:
+            chans = [c for c in ("x", "y", "psi", "u", "r") if c in r]
+            smoothed.append(smooth_trial(resample(r, 1.0, outputs=chans, inputs=inputs), SMOOTHER_SIGMA, JERK,
+                                         measured=chans))
+    if regress and smoothed is not None:
+        pstd = preset_prior_std(model, regress, prior)
+        idfit = inverse_dynamics(model, list(smoothed), regress, params=model.params({**preset, **start}),
+                                 prior=pstd, autocorrelation=True)
+        start.update({k: float(v) for k, v in idfit.estimates.items()})
+        note("start", f"inverse dynamics on {len(regress)} coefficients",
+             "the model is linear in them: one regularised least-squares solve on the smoothed accelerations "
+             "gives starting guesses (used only where they lower the cost; nothing is moved by them)")
+    else:
+        note("start", "the preset", "no pose (x, y, psi) to smooth, or no coefficient the model is linear in")
+
+    recs = [resample(r, dt, outputs=measured, inputs=inputs) for r in records]
+    note("cost", f"records resampled every {dt:g} s", "inputs averaged over each interval (the zero-order hold of "
+         "the full-rate signals), outputs sampled: the fit's time step")
+    rw = (np.full(len(recs), 1.0) if record_weights == "samples" else
+          np.mean([len(r) for r in recs]) / np.array([len(r) for r in recs], dtype=float))
+    note("cost", "record weights " + ("1 (every sample the same)" if record_weights == "samples" else
+                                      "N_mean / N_r (every record the same)"),
+         "a long record (a turning circle) must not swamp the short ones" if record_weights != "samples"
+         else "asked for")
+
+    # candidates and the prior
+    if candidates is None and not any(c in names for c in CANDIDATES):
+        if not prior:
+            raise InputError(f"the ship workflow has no candidates among the parameters of {model.name!r}: give "
+                             "the candidates (candidates=, or their prior: prior= / --prior name=std), or the free "
+                             "set (free= / --free)")
+        candidates = list(prior)
+        note("candidates", ", ".join(candidates), f"the parameters given a prior ({model.name!r} has none of the "
+             "workflow's manoeuvring candidates)")
+    if candidates is None:
+        cands = [c for c in CANDIDATES if c in names]
+        asym = [c for c in (*ASYMMETRY, *DIRECTION_SWITCHED) if c in names]
+        facq = [c for c in FACILITY if c in names]
+    else:
+        cands = [c for c in candidates if c not in (*ASYMMETRY, *DIRECTION_SWITCHED, *FACILITY)]
+        asym = [c for c in candidates if c in (*ASYMMETRY, *DIRECTION_SWITCHED)]
+        facq = [c for c in candidates if c in FACILITY]
+        bad = sorted(set(candidates) - names)
+        if bad:
+            raise InputError(f"candidates: {bad} are not parameters of {model.name!r}")
+    if free is not None:
+        bad = sorted(set(free) - names)
+        if bad:
+            raise InputError(f"free: {bad} are not parameters of {model.name!r}")
+    terms = list(terms or ())
+    if terms:
+        shared = [n for t in terms for n in t.names if "@" not in n and n in names and n not in preset]
+        extra = [n for n in dict.fromkeys(shared) if n not in cands and n not in facq and n not in asym]
+        cands = [*cands, *extra]
+        note("joined evidence", ", ".join(f"{t.label} ({t.n_obs} values)" for t in terms),
+             "one objective with the records: one set of hull coefficients, each facility its own quantities; "
+             + (f"its shared quantities {', '.join(extra)} become candidates" if extra else "no new candidates"))
+    all_std = preset_prior_std(model, list(dict.fromkeys([*cands, *asym, *facq, *(free or ())])), prior)
+    if prior:
+        note("prior", ", ".join(f"{k} std {v:.3g}" for k, v in prior.items()), "given (overrides the stated rule)")
+    note("prior", "Gaussian about the preset: linear hull derivatives 20 %, cubic 50 %, R_0' 30 %, rudder and "
+         "interaction factors 20-30 %, added masses 20 %, neutral angle 1 deg",
+         "the preset's stated uncertainty (PRESET_UNCERTAINTY): the data move a value only as far as they "
+         "outweigh it")
+
+    at0 = {k: float(v) for k, v in zip(model.param_names, fixed)}
+    # channel weights
+    if weights:
+        sigma = {c: float(weights[c]) for c in measured if c in weights}
+        rest = [c for c in measured if c not in sigma]
+        note("cost", "channel sigmas " + ", ".join(f"{k} {v:.3g}" for k, v in sigma.items()), "given")
+    else:
+        sigma, rest = {}, list(measured)
+    def channel_sigma(rs, params, where):
+        unit = OutputErrorProblem(model, rs, [model.param_names[0]], measured=measured,
+                                  sigma={c: 1.0 for c in measured}, params=params)
+        res = unit.residuals()           # at params (the one free value at its fixed value)
+        neff = effective_samples(res, measured)
+        out = {c: float(np.sqrt(sum(np.nansum(e[:, j] ** 2) for e in res) / max(neff[c]["n_eff"], 1.0)))
+               for j, c in enumerate(measured) if c in rest}
+        note("cost", "channel sigmas " + ", ".join(f"{k} {out[k]:.3g}" for k in rest),
+             f"each channel's RMS error at {where} times sqrt of its autocorrelation time: every channel counts by "
+             "its effective samples, none by its size (surge cannot swallow yaw)")
+        return out
+
+    if rest:
+        sigma.update(channel_sigma(recs, fixed, "the preset"))
+
+    def problem(rs, names_free, params, share=None, weights_=None):
+        pri = {n: all_std[n.split("@")[0]] for n in names_free}
+        return OutputErrorProblem(model, rs, names_free, measured=measured, sigma=sigma, params=params,
+                                  prior=Prior(pri), record_weights=weights_,
+                                  scale={k: v for k, v in PRESET_UNCERTAINTY["abs"].items() if k in names_free},
+                                  share=share)
+
+    def refine(prob, chosen, at, guess_pool, join=False):
+        from .cost_term import JointProblem
+
+        if join and terms:
+            prob = JointProblem(prob, terms, hold_fixed=True)
+        guess_id = {q: guess_pool.get(q.split("@")[0], at[q.split("@")[0]]) for q in chosen}
+        preset_guess = {q: at[q.split("@")[0]] for q in chosen}
+        use = bool(chosen) and prob.cost(guess_id) < prob.cost(preset_guess)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IdentificationWarning)
+            # the stages are not judged one by one: the workflow's result is (identify_ship(verdict=...))
+            extra = {} if isinstance(prob, JointProblem) else {"verdict": None}
+            return prob.solve(guess=guess_id if use else None, show=show, **extra), use
+
+    def with_terms(idf, prob, point):
+        """The identifiability with the joined evidence in its information and in every replicate."""
+        if not terms:
+            return idf
+        import dataclasses
+
+        fixed_p = dict(zip(model.param_names, np.asarray(prob.space.params(prob.space.theta(point))).ravel()))
+        k = len(prob.free)
+        Fc, gc = np.zeros((k, k)), np.zeros(k)
+        for t in terms:
+            vals = np.array([point.get(n, fixed_p.get(n, t.start[j])) for j, n in enumerate(t.names)])
+            r, J = t.residual(vals)
+            cols = [(j, prob.free.index(n)) for j, n in enumerate(t.names) if n in prob.free]
+            jt, jp = [c[0] for c in cols], [c[1] for c in cols]
+            Fc[np.ix_(jp, jp)] += J[:, jt].T @ J[:, jt]
+            gc[jp] += J[:, jt].T @ r
+        ev = idf.evidence
+        ev = RunEvidence(ev.labels, ev.information, ev.gradient, ev.prior_gradient, ev.kind, Fc, gc)
+        return dataclasses.replace(idf, information=idf.information + Fc, evidence=ev)
+
+    # 5. asymmetry and facility quantities from mirror pairs
+    pairs = mirror_pairs(recs, within=fac) if (asym or facq) and all("delta" in r for r in recs) else []
+    paired = sorted({i for p in pairs for i in p})
+    asym_values, asym_fit, pools, offsets, unpinned = {}, None, {}, {}, {}
+    if free is None and (asym or facq):
+        if not paired:
+            unpinned = {q: all_std[q] for q in asym}
+            for q in facq:
+                pools[q] = pool_facilities({}, spread=NEUTRAL_SPREAD, prior_std=all_std[q])
+            note("asymmetry", f"{', '.join([*asym, *facq])} at the preset, with their prior uncertainty in the bands",
+                 "no mirror pair (the same manoeuvre turning first to both sides) within a facility: a "
+                 "port/starboard term fitted on these records would absorb the turning dynamics, and a run "
+                 "turning the other way (or of another facility) is predicted with what the prior knows")
+        else:
+            sub = [recs[i] for i in paired]
+            labs = [fac[i] for i in paired]
+            share = {q: labs for q in facq} or None
+            names_a = [*cands, *asym, *facq]
+            prob_a = problem(sub, names_a, fixed, share=share, weights_=np.mean([len(r) for r in sub]) /
+                             np.array([len(r) for r in sub], dtype=float))
+            at_a = {q: at0[q.split("@")[0]] for q in prob_a.free}
+            idf = prob_a.identifiability(at=at_a, pairs_within=labs)
+            idf.evidence = run_evidence(prob_a, at_a)
+            chosen, rows = idf.propose(max_ratio=max_ratio, max_corr=max_corr, max_count=max_free,
+                                       evidence="runs", explain=True, candidates=prob_a.free, keep=[])
+            declared = list(dict.fromkeys(q.split("@")[0] for q in chosen))
+            prob_a2 = problem(sub, declared, fixed, share={q: [lab if f"{q}@{lab}" in chosen else None for lab in labs]
+                                                           for q in facq if q in declared} or None,
+                              weights_=prob_a.record_weights)
+            asym_fit, _ = refine(prob_a2, chosen, at0, start)
+            asym_values = {q: float(asym_fit.estimates[q]) for q in chosen if q in asym}
+            pair_names = ", ".join(str(r.meta.get("name", f"record {i}")) for i, r in zip(paired, sub))
+            note("asymmetry", ("applied: " + ", ".join(f"{k} = {v:.4g}" for k, v in asym_values.items()))
+                 if asym_values else "no ship asymmetry term chosen",
+                 f"estimated on the mirror-pair records only ({pair_names}), free set by the run-level rule; "
+                 "every other estimate of that stage is discarded")
+            for q in facq:
+                est = {lab: (float(asym_fit.estimates[f"{q}@{lab}"]), float(asym_fit.std_errors[f"{q}@{lab}"]))
+                       for lab in sorted(set(labs)) if f"{q}@{lab}" in asym_fit.estimates}
+                pools[q] = pool_facilities(est, spread=NEUTRAL_SPREAD, prior_std=all_std[q])
+                note("facility", f"{q}: " + (", ".join(f"{k} {math.degrees(v[0]):.3g} deg" for k, v in est.items())
+                                              or "no facility estimate") +
+                     f"; population {math.degrees(pools[q]['population']):.3g} deg, a new facility +- "
+                     f"{math.degrees(pools[q]['new_facility_std']):.3g} deg",
+                     "a neutral angle belongs to a facility's model and rudder: one value per facility with a "
+                     "mirror pair, pooled with a between-facility spread of 1 deg; records of other facilities "
+                     "run at the population value")
+            if "delta_0" in pools:
+                for lab in set(fac):
+                    own = pools["delta_0"]["facilities"].get(lab)
+                    offsets[lab] = own["value"] if own else pools["delta_0"]["population"]
+    fixed = model.params({**preset, **asym_values})
+    recs_b = [_with_rudder_offset(r, offsets.get(f, 0.0)) for r, f in zip(recs, fac)]
+
+    # 6. the free set and the refinement
+    if free is not None:
+        chosen, rows, first = list(free), [], list(free)
+        note("free set", ", ".join(chosen), "given (--free)")
+        fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at0, start, join=True)
+    else:
+        at, guess, first, fit, rows = dict(at0), dict(start), [], None, []
+        for k in range(max(1, passes)):
+            if k > 0 and rest and reweigh:
+                sigma.update(channel_sigma(recs_b, model.params({**dict(zip(model.param_names, fixed)), **{
+                    q: at[q] for q in cands}}), "the previous estimate"))
+            prob = problem(recs_b, cands, fixed, weights_=rw)
+            point = {q: at[q] for q in cands}
+            idf = prob.identifiability(at=point)
+            idf.evidence = run_evidence(prob, point)
+            idf = with_terms(idf, prob, point)
+            chosen, rows = idf.propose(max_ratio=max_ratio, max_corr=max_corr, max_count=max_free, evidence="runs",
+                                       explain=True, candidates=cands, keep=[])
+            where = "the preset" if k == 0 else "the previous estimate"
+            note("free set", ", ".join(chosen) or "nothing",
+                 f"chosen at {where} by run-level evidence ({idf.evidence.kind}, {len(idf.evidence.labels)} units): "
+                 f"each admitted while every chosen one's posterior/prior std (the larger of the model-based and "
+                 f"the leave-one-{'run' if idf.evidence.kind == 'records' else 'block'}-out spread) is <= "
+                 f"{max_ratio:g} and no two correlate beyond {max_corr:g}")
+            if k == 0:
+                first = list(chosen)
+            if not chosen:
+                break
+            fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at, guess, join=True)
+            note("refinement", f"MAP output error, status {fit.status}, started from the "
+                 + ("inverse-dynamics values" if use else "point of the choice"),
+                 "the start with the lower cost" if use else "the inverse-dynamics start did not lower the cost")
+            est = {q: float(v) for q, v in fit.estimates.items() if "@" not in q}
+            at.update(est)
+            guess.update(est)
+        if fit is None:               # nothing the runs determine: a result, said as one
+            from .result import IdentificationError
+
+            raise IdentificationError(
+                f"the records determine none of the candidates {cands} by the run-level rule (posterior/prior std "
+                f"<= {max_ratio:g}): the preset stays; widen the prior of the quantities you expect to move "
+                "(prior= / --prior) or give the free set (free= / --free)", "nothing determined")
+    ship = ShipFit(fit, model, list(chosen), choices, sigma, [float(w) for w in rw], rows, first,
+                   {**preset, **asym_values}, start, asym_fit, asym_values, pools, fac, time.perf_counter() - t0,
+                   unpinned)
+    if verdict is not None:
+        _judge_ship(ship, list(records), verdict, lambda train: identify_ship(
+            [records[i] for i in train], model, free=free, weights=weights, prior=prior, candidates=candidates,
+            measured=measured, facility=[fac[i] for i in train], propulsion=propulsion, dt=dt, max_ratio=max_ratio,
+            max_corr=max_corr, max_free=max_free, passes=passes, record_weights=record_weights, reweigh=reweigh,
+            terms=terms, verdict=None))
+        note("verdict", f"{ship.fit.verdict['verdict']}: replays of the records against the preset"
+             + (" and left-one-out" if verdict == "loo" and len(records) > 1 else ""), ship.fit.verdict["reason"])
+    return ship
+
+
+def _judge_ship(ship: ShipFit, records, verdict: str, refit) -> None:
+    """Set the verdict and the model discrepancy of ``ship.fit``: its records replayed with the ship's full
+    parameters (the workflow's presets, facility values and refinement) against the preset, and with
+    ``verdict="loo"`` each record replayed by the workflow run without it (``refit(train)``)."""
+    import dataclasses
+
+    from .verdict import judge_records
+
+    if verdict not in ("replay", "loo"):
+        raise InputError(f"verdict must be 'replay', 'loo' or None, got {verdict!r}")
+    labels = [str(d.meta.get("name", i)) for i, d in enumerate(records)]
+
+    def as_replayed(s: ShipFit, facility=None):
+        return dataclasses.replace(s.fit, params=s.params(facility))
+
+    def refit_full(train):
+        return as_replayed(refit(train), ship.facilities[[i for i in range(len(records)) if i not in train][0]])
+
+    one = ship.facilities[0] if len(set(ship.facilities)) == 1 else None
+    ship.fit.verdict, ship.fit.model_discrepancy = judge_records(
+        ship.model, records, as_replayed(ship, one), start=ship.model.params(), labels=labels,
+        loo=verdict == "loo" and len(records) > 1, refit=refit_full if len(records) > 1 else None)
