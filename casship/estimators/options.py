@@ -78,7 +78,7 @@ class EstimatorOptions:
         try:
             object.__setattr__(self, "jit", JitPolicy.of(self.jit))
         except ValueError:
-            raise ValueError(f"option 'jit' is True, False, None or one of 'off', 'now', 'background', "
+            raise InputError(f"option 'jit' is True, False, None or one of 'off', 'now', 'background', "
                              f"got {self.jit!r}") from None
         outputs = DIAGNOSTICS if self.outputs == "all" else self.outputs
         if isinstance(outputs, str):
