@@ -13,6 +13,7 @@ import numpy as np
 
 from .model import Model
 from .vessel import Limit, Vessel
+from .errors import InputError, InputTypeError
 
 __all__ = ["ModelBuilder", "Variable", "Parameter", "Declarations"]
 
@@ -117,20 +118,20 @@ RESERVED = ("t", "time")   # the time column of every Dataset
 
 def _check_name(name: str, taken: Mapping[str, str]) -> None:
     if not isinstance(name, str) or not name.isidentifier():
-        raise ValueError(f"name {name!r} is not a valid identifier")
+        raise InputError(f"name {name!r} is not a valid identifier")
     if name in RESERVED:
-        raise ValueError(f"name {name!r} is reserved for time stamps; choose another name")
+        raise InputError(f"name {name!r} is reserved for time stamps; choose another name")
     if name in taken:
-        raise ValueError(f"name {name!r} is already declared as a {taken[name]}")
+        raise InputError(f"name {name!r} is already declared as a {taken[name]}")
 
 
 def _as_sx(expr, what: str) -> ca.SX:
     try:
         value = ca.SX(expr)
     except Exception as exc:  # pragma: no cover - message path
-        raise TypeError(f"{what}: cannot convert {type(expr).__name__} to a CasADi expression") from exc
+        raise InputTypeError(f"{what}: cannot convert {type(expr).__name__} to a CasADi expression") from exc
     if value.shape != (1, 1):
-        raise ValueError(f"{what}: expected a scalar expression, got shape {value.shape}")
+        raise InputError(f"{what}: expected a scalar expression, got shape {value.shape}")
     return value
 
 
@@ -166,7 +167,7 @@ class ModelBuilder:
         self.name = name
         self.doc = doc
         if dt is not None and not (np.isfinite(float(dt)) and float(dt) > 0):
-            raise ValueError(f"model {name!r}: dt must be a positive sampling period, got {dt!r}")
+            raise InputError(f"model {name!r}: dt must be a positive sampling period, got {dt!r}")
         self.dt = None if dt is None else float(dt)
         self._kinds: dict[str, str] = {}
         self._symbols: dict[str, ca.SX] = {}
@@ -261,10 +262,10 @@ class ModelBuilder:
         """
         value = float(value)
         if not np.isfinite(value):
-            raise ValueError(f"parameter {name!r}: nominal value must be finite, got {value}")
+            raise InputError(f"parameter {name!r}: nominal value must be finite, got {value}")
         lower, upper = (-np.inf, np.inf) if bounds is None else (float(bounds[0]), float(bounds[1]))
         if not lower <= value <= upper:
-            raise ValueError(f"parameter {name!r}: nominal value {value} outside bounds {(lower, upper)}")
+            raise InputError(f"parameter {name!r}: nominal value {value} outside bounds {(lower, upper)}")
         par = Parameter(name, unit, False, doc, value, lower, upper, source)
         return self._declare("param", par, self._params)
 
@@ -289,7 +290,7 @@ class ModelBuilder:
             The symbol, to write equations with.
         """
         if self._kinds.get(name) != "param":
-            raise ValueError(f"param_as_state: {name!r} is not a declared parameter of {self.name!r}")
+            raise InputError(f"param_as_state: {name!r} is not a declared parameter of {self.name!r}")
         var = next(v for v in self._params if v.name == name)
         self._params = [v for v in self._params if v.name != name]
         self._kinds[name] = "state"
@@ -350,10 +351,10 @@ class ModelBuilder:
             Expression of the port's shape.
         """
         if port not in self._ports:
-            raise ValueError(f"unknown port {port!r}; ports: {sorted(self._ports)}")
+            raise InputError(f"unknown port {port!r}; ports: {sorted(self._ports)}")
         expr = ca.SX(expr)
         if expr.shape != self._ports[port].shape:
-            raise ValueError(f"port {port!r} has shape {self._ports[port].shape}, got {expr.shape}")
+            raise InputError(f"port {port!r} has shape {self._ports[port].shape}, got {expr.shape}")
         self._port_terms[port].append(expr)
 
     def limit(self, name: str, lower: float = -np.inf, upper: float = np.inf, *, why: str = "") -> None:
@@ -372,7 +373,7 @@ class ModelBuilder:
             The reason, shown in error messages (e.g. ``"rudder stop"``).
         """
         if self._kinds.get(name) not in ("state", "input"):
-            raise ValueError(f"limit: {name!r} is not a declared state or input of {self.name!r}")
+            raise InputError(f"limit: {name!r} is not a declared state or input of {self.name!r}")
         self._limits[name] = Limit(name, lower, upper, why)
 
     # -- equations ----------------------------------------------------------------------------
@@ -385,10 +386,10 @@ class ModelBuilder:
             State name -> expression of its time derivative.
         """
         if self.dt is not None:
-            raise ValueError(f"model {self.name!r} is discrete-time (dt = {self.dt:g} s): give x[k+1] with next(...)")
+            raise InputError(f"model {self.name!r} is discrete-time (dt = {self.dt:g} s): give x[k+1] with next(...)")
         for name, expr in rhs.items():
             if self._kinds.get(name) != "state":
-                raise ValueError(f"ode: {name!r} is not a declared state")
+                raise InputError(f"ode: {name!r} is not a declared state")
             self._ode[name] = _as_sx(expr, f"ode for {name!r}")
 
     def next(self, **rhs) -> None:
@@ -403,11 +404,11 @@ class ModelBuilder:
             State name -> expression of ``x[k+1]`` in the declared symbols.
         """
         if self.dt is None:
-            raise ValueError(f"model {self.name!r} is continuous-time: give derivatives with ode(...), or "
+            raise InputError(f"model {self.name!r} is continuous-time: give derivatives with ode(...), or "
                              "build a discrete-time model with ModelBuilder(name, dt=...)")
         for name, expr in rhs.items():
             if self._kinds.get(name) != "state":
-                raise ValueError(f"next: {name!r} is not a declared state")
+                raise InputError(f"next: {name!r} is not a declared state")
             self._ode[name] = (_as_sx(expr, f"next for {name!r}") - self._symbols[name]) / self.dt
 
     def add_to_ode(self, **rhs) -> None:
@@ -420,7 +421,7 @@ class ModelBuilder:
         """
         for name, expr in rhs.items():
             if name not in self._ode:
-                raise ValueError(f"add_to_ode: state {name!r} has no equation yet")
+                raise InputError(f"add_to_ode: state {name!r} has no equation yet")
             self._ode[name] = self._ode[name] + _as_sx(expr, f"add_to_ode for {name!r}")
 
     def output(self, name: str, expr, *, unit: str = "", angle: bool | None = None,
@@ -447,13 +448,13 @@ class ModelBuilder:
         if not unit and measured is not None:
             unit = measured.unit
         if not isinstance(name, str) or not name.isidentifier():
-            raise ValueError(f"output name {name!r} is not a valid identifier")
+            raise InputError(f"output name {name!r} is not a valid identifier")
         if name in RESERVED:
-            raise ValueError(f"output name {name!r} is reserved for time stamps; choose another name")
+            raise InputError(f"output name {name!r} is reserved for time stamps; choose another name")
         if name in self._output_expr:
-            raise ValueError(f"output {name!r} is already declared")
+            raise InputError(f"output {name!r} is already declared")
         if name in self._kinds and not (self._kinds[name] == "state" and ca.is_equal(expr, self._symbols[name])):
-            raise ValueError(f"output {name!r} clashes with the {self._kinds[name]} of that name; an output may "
+            raise InputError(f"output {name!r} clashes with the {self._kinds[name]} of that name; an output may "
                              "share a name only with the state it measures")
         self._outputs.append(Variable(name, unit, bool(angle), doc))
         self._output_expr[name] = expr
@@ -479,7 +480,7 @@ class ModelBuilder:
             return self._symbols[name]
         if name in self._ports:
             return self._ports[name]
-        raise ValueError(f"unknown name {name!r} in model {self.name!r}")
+        raise InputError(f"unknown name {name!r} in model {self.name!r}")
 
     def has(self, name: str) -> bool:
         """Whether ``name`` is declared (state, input, parameter, noise channel or port).
@@ -501,12 +502,12 @@ class ModelBuilder:
         """Freeze into an immutable :class:`~casship.model.Model` (checks that every state has an equation)."""
         missing = [v.name for v in self._states if v.name not in self._ode]
         if missing:
-            raise ValueError(f"model {self.name!r}: states without an equation: {missing}")
+            raise InputError(f"model {self.name!r}: states without an equation: {missing}")
         if not self._states:
-            raise ValueError(f"model {self.name!r} has no states")
+            raise InputError(f"model {self.name!r} has no states")
         if self.vessel is not None:
             if not isinstance(self.vessel, Vessel):
-                raise TypeError(f"model {self.name!r}: vessel must be a casship.Vessel, got {type(self.vessel).__name__}")
+                raise InputTypeError(f"model {self.name!r}: vessel must be a casship.Vessel, got {type(self.vessel).__name__}")
             self.vessel.check_inputs([v.name for v in self._inputs])
         return Model(self)
 

@@ -13,6 +13,8 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .errors import InputError, InputTypeError
+
 __all__ = ["Dataset", "check_time", "check_rows", "MAX_ROWS", "read_frame"]
 
 
@@ -35,7 +37,6 @@ def check_rows(n: float, what: str) -> int:
     -------
     int
     """
-    from .errors import InputError
 
     if np.isnan(n):
         raise InputError(f"{what}: the number of rows is not a number (a NaN duration or step)")
@@ -60,21 +61,21 @@ def check_time(t, name: str = "time") -> np.ndarray:
     numpy.ndarray
     """
     if np.ma.isMaskedArray(t) and np.ma.getmaskarray(t).any():
-        raise ValueError(f"{name}: masked time stamp at row {int(np.flatnonzero(np.ma.getmaskarray(t))[0])}; every "
+        raise InputError(f"{name}: masked time stamp at row {int(np.flatnonzero(np.ma.getmaskarray(t))[0])}; every "
                          "row needs its time")
     t = np.asarray(t, dtype=float)
     if t.ndim != 1:
-        raise ValueError(f"{name}: expected a 1-D array of time stamps, got shape {t.shape}")
+        raise InputError(f"{name}: expected a 1-D array of time stamps, got shape {t.shape}")
     if t.size == 0:
-        raise ValueError(f"{name}: no time stamps")
+        raise InputError(f"{name}: no time stamps")
     bad = np.flatnonzero(~np.isfinite(t))
     if bad.size:
-        raise ValueError(f"{name}: non-finite time stamp at row {bad[0]} ({t[bad[0]]})")
+        raise InputError(f"{name}: non-finite time stamp at row {bad[0]} ({t[bad[0]]})")
     step = np.diff(t)
     bad = np.flatnonzero(step <= 0)
     if bad.size:
         k = bad[0]
-        raise ValueError(f"{name}: time stamps must increase strictly; row {k + 1} ({t[k + 1]}) "
+        raise InputError(f"{name}: time stamps must increase strictly; row {k + 1} ({t[k + 1]}) "
                          f"is not after row {k} ({t[k]})")
     return t
 
@@ -103,14 +104,14 @@ class Dataset:
         cols = {}
         for name, values in columns.items():
             if not isinstance(name, str) or not name:
-                raise ValueError(f"column name {name!r} must be a non-empty string")
+                raise InputError(f"column name {name!r} must be a non-empty string")
             if name == "t" or name == "time":
-                raise ValueError(f"column name {name!r} is reserved for the time stamps")
+                raise InputError(f"column name {name!r} is reserved for the time stamps")
             if np.ma.isMaskedArray(values):      # masked = not measured (NaN)
                 values = np.ma.filled(np.ma.asarray(values, dtype=float), np.nan)
             arr = np.asarray(values, dtype=float).reshape(-1)
             if arr.size != self.t.size:
-                raise ValueError(f"column {name!r} has {arr.size} rows, time has {self.t.size}")
+                raise InputError(f"column {name!r} has {arr.size} rows, time has {self.t.size}")
             arr.setflags(write=False)
             cols[name] = arr
         self._columns = cols
@@ -140,7 +141,7 @@ class Dataset:
         try:
             return self._columns[name]
         except KeyError:
-            raise ValueError(f"unknown column {name!r}; columns: {list(self._columns)}") from None
+            raise InputError(f"unknown column {name!r}; columns: {list(self._columns)}") from None
 
     def matrix(self, names: Sequence[str], *, finite: bool = False, what: str = "column") -> np.ndarray:
         """Stack named columns into an (N, len(names)) array; ``finite=True`` rejects NaN/inf.
@@ -165,7 +166,7 @@ class Dataset:
             bad = ~np.isfinite(out)
             if bad.any():
                 row, col = np.argwhere(bad)[0]
-                raise ValueError(f"{what} {names[col]!r} is not finite at row {row} (t = {self.t[row]:g} s); "
+                raise InputError(f"{what} {names[col]!r} is not finite at row {row} (t = {self.t[row]:g} s); "
                                  "NaN is only allowed in measurements")
         return out
 
@@ -230,12 +231,12 @@ class Dataset:
         array([0., 3., 6., 9.])
         """
         if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-            raise ValueError(f"decimate: k must be an integer >= 1, got {k!r}")
+            raise InputError(f"decimate: k must be an integer >= 1, got {k!r}")
         if k == 1:
             return self
         idx = np.arange(0, len(self), int(k))
         if idx.size < 2:
-            raise ValueError(f"decimate: k = {k} leaves {idx.size} row(s) of {len(self)}")
+            raise InputError(f"decimate: k = {k} leaves {idx.size} row(s) of {len(self)}")
         meta = {**self.meta, "decimated": int(k) * int(self.meta.get("decimated", 1))}
         data = Dataset(self.t[idx], {n: v[idx] for n, v in self._columns.items()}, self.units, meta)
         return self._like(data)
@@ -276,16 +277,16 @@ class Dataset:
         try:
             rate = float(rate)
         except (TypeError, ValueError):
-            raise TypeError(f"resample: rate must be a number [Hz], got {rate!r}") from None
+            raise InputTypeError(f"resample: rate must be a number [Hz], got {rate!r}") from None
         if not np.isfinite(rate) or rate <= 0:
-            raise ValueError(f"resample: rate must be a positive finite number [Hz], got {rate}")
+            raise InputError(f"resample: rate must be a positive finite number [Hz], got {rate}")
         unknown = [n for n in hold if n not in self._columns]
         if unknown:
-            raise ValueError(f"resample: unknown column(s) {unknown} in hold; columns: {list(self._columns)}")
+            raise InputError(f"resample: unknown column(s) {unknown} in hold; columns: {list(self._columns)}")
         if len(self) > 1:
             own = 1.0 / float(np.median(self.dt))
             if rate < own * (1 - 1e-9):
-                raise ValueError(f"resample: rate {rate:g} Hz is below the record's rate {own:g} Hz (median step "
+                raise InputError(f"resample: rate {rate:g} Hz is below the record's rate {own:g} Hz (median step "
                                  f"{1 / own:g} s); that would drop samples: use decimate() to thin a record")
         rows = check_rows(np.floor((self.t[-1] - self.t[0]) * rate + 1e-9) + 1,
                           f"resample: {self.t[-1] - self.t[0]:g} s at {rate:g} Hz")
@@ -318,11 +319,11 @@ class Dataset:
         """
         unknown = [n for n in hold if n not in self._columns]
         if unknown:
-            raise ValueError(f"unknown column(s) {unknown} in hold; columns: {list(self._columns)}")
+            raise InputError(f"unknown column(s) {unknown} in hold; columns: {list(self._columns)}")
         times = np.asarray(times, dtype=float).reshape(-1)
         tol = 1e-9 * max(1.0, float(np.abs(self.t).max()))
         if times.size and (times.min() < self.t[0] - tol or times.max() > self.t[-1] + tol):
-            raise ValueError(f"with_rows: times must lie in [{self.t[0]:g}, {self.t[-1]:g}] s")
+            raise InputError(f"with_rows: times must lie in [{self.t[0]:g}, {self.t[-1]:g}] s")
         t = np.union1d(times, self.t)
         t = t[np.concatenate([[True], np.diff(t) > tol])]
         idx = np.searchsorted(self.t, t + tol, side="right") - 1
@@ -375,7 +376,7 @@ class Dataset:
         """
         idx = np.flatnonzero((self.t >= t0) & (self.t <= t1))
         if idx.size == 0:
-            raise ValueError(f"no samples between t = {t0} and {t1} s")
+            raise InputError(f"no samples between t = {t0} and {t1} s")
         return self.slice(idx[0], idx[-1] + 1)
 
     # -- I/O -----------------------------------------------------------------------------------------
@@ -412,17 +413,17 @@ class Dataset:
         """
         twice = sorted({str(c) for c in frame.columns if list(frame.columns).count(c) > 1})
         if twice:
-            raise ValueError(f"column(s) {twice} appear more than once in the frame; which one is meant cannot be told")
+            raise InputError(f"column(s) {twice} appear more than once in the frame; which one is meant cannot be told")
         if time not in frame.columns and frame.index.name == time:
             frame = frame.reset_index()
         if time not in frame.columns:
-            raise ValueError(f"no time column {time!r} (nor an index of that name); columns: {list(frame.columns)}, "
+            raise InputError(f"no time column {time!r} (nor an index of that name); columns: {list(frame.columns)}, "
                              f"index: {frame.index.name!r}; give time=NAME")
         from pandas.api.types import is_numeric_dtype
 
         non_numeric = [str(c) for c in frame.columns if not is_numeric_dtype(frame[c])]
         if non_numeric:
-            raise ValueError(f"non-numeric column(s) {non_numeric}")
+            raise InputError(f"non-numeric column(s) {non_numeric}")
         cols = {str(c): frame[c].to_numpy(dtype=float) for c in frame.columns if c != time}
         return cls(frame[time].to_numpy(dtype=float), cols, units or frame.attrs.get("units"))
 
@@ -464,16 +465,16 @@ class Dataset:
         if time is None:
             time = next((c for c in ("t", "time") if c in frame.columns), None)
             if time is None:
-                raise ValueError(f"{path}: no 't' or 'time' column; columns: {list(frame.columns)}")
+                raise InputError(f"{path}: no 't' or 'time' column; columns: {list(frame.columns)}")
         if rename:
             unknown = set(rename) - set(frame.columns)
             if unknown:
-                raise ValueError(f"{path}: cannot rename unknown column(s) {sorted(unknown)}")
+                raise InputError(f"{path}: cannot rename unknown column(s) {sorted(unknown)}")
             frame = frame.rename(columns=dict(rename))
         try:
             data = Dataset.from_pandas(frame, time=time)
         except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from None
+            raise InputError(f"{path}: {exc}") from None
         for name, factor in (scale or {}).items():
             data = data.with_columns(**{name: data[name] * factor})
         data.meta["source"] = str(path)
@@ -513,17 +514,17 @@ def read_frame(path, **read_options):
     try:
         frame = pd.read_csv(path, **read_options)
     except pd.errors.EmptyDataError:
-        raise ValueError(f"{name}: empty file (no header row with column names)") from None
+        raise InputError(f"{name}: empty file (no header row with column names)") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{name}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
+        raise InputError(f"{name}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
     if frame.shape[0] == 0:
-        raise ValueError(f"{name}: no data rows below the header {list(frame.columns)}")
+        raise InputError(f"{name}: no data rows below the header {list(frame.columns)}")
     if isinstance(path, (str, Path)) and not read_options:
         _refuse_short_rows(Path(path), frame.shape[1])
     header = _header(path, read_options)
     twice = sorted({c for c in header if header.count(c) > 1})
     if twice:
-        raise ValueError(f"{name}: column(s) {twice} appear more than once in the header; which one is meant "
+        raise InputError(f"{name}: column(s) {twice} appear more than once in the header; which one is meant "
                          "cannot be told: rename or remove the copies")
     return frame
 
@@ -536,7 +537,7 @@ def _refuse_short_rows(path: Path, width: int) -> None:
     with path.open(newline="") as f:
         for number, row in enumerate(csv.reader(f), start=1):
             if row and len(row) < width:
-                raise ValueError(f"{path}: line {number} has {len(row)} field(s), the header {width}: a truncated "
+                raise InputError(f"{path}: line {number} has {len(row)} field(s), the header {width}: a truncated "
                                  "row (write an empty field, a,,c, where a value is missing)")
 
 

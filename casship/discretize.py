@@ -12,6 +12,7 @@ import numpy as np
 import scipy.linalg
 
 from .model import Model
+from .errors import InputError
 
 __all__ = ["DiscreteModel", "discretize", "van_loan", "rk4"]
 
@@ -75,25 +76,25 @@ class DiscreteModel:
                  options: dict | None = None):
         if model.dt is not None:                      # a discrete-time model: its own step, exactly
             if dt is not None and not np.isclose(float(dt), model.dt, rtol=1e-12, atol=0.0):
-                raise ValueError(f"model {model.name!r} is discrete-time with dt = {model.dt:g} s; got dt = {dt}")
+                raise InputError(f"model {model.name!r} is discrete-time with dt = {model.dt:g} s; got dt = {dt}")
             if method not in (None, "discrete") or substeps != 1 or options:
-                raise ValueError(f"model {model.name!r} is discrete-time: it has its own step (no method, "
+                raise InputError(f"model {model.name!r} is discrete-time: it has its own step (no method, "
                                  f"substeps or integrator options), got method={method!r}")
             dt, method = model.dt, "discrete"
         else:
             method = "rk4" if method is None else method
             if method not in METHODS:
-                raise ValueError(f"unknown discretisation method {method!r}; use one of {METHODS}")
+                raise InputError(f"unknown discretisation method {method!r}; use one of {METHODS}")
             if dt is None:
-                raise ValueError(f"model {model.name!r} is continuous-time: give the step dt")
+                raise InputError(f"model {model.name!r} is continuous-time: give the step dt")
         dt = float(dt)
         if not np.isfinite(dt) or dt <= 0:
-            raise ValueError(f"dt must be a positive finite number, got {dt}")
+            raise InputError(f"dt must be a positive finite number, got {dt}")
         substeps = int(substeps)
         if substeps < 1:
-            raise ValueError(f"substeps must be >= 1, got {substeps}")
+            raise InputError(f"substeps must be >= 1, got {substeps}")
         if options and method != "cvodes":
-            raise ValueError(f"integrator options {sorted(options)} apply to method 'cvodes' only, not {method!r}")
+            raise InputError(f"integrator options {sorted(options)} apply to method 'cvodes' only, not {method!r}")
         self.model, self.dt, self.method, self.substeps = model, dt, method, substeps
         self._options = dict(options or {})
         self.symbolic = ca.MX if method == "cvodes" else ca.SX
@@ -157,7 +158,7 @@ class DiscreteModel:
             The feature that needs it, for the message.
         """
         if self.discrete:
-            raise ValueError(f"{what} needs a continuous-time model; {self.model.name!r} is discrete-time "
+            raise InputError(f"{what} needs a continuous-time model; {self.model.name!r} is discrete-time "
                              f"(dt = {self.dt:g} s)")
 
     def check_steps(self, dt, t=None) -> None:
@@ -178,7 +179,7 @@ class DiscreteModel:
         if bad.size:
             k = int(bad[0]) + 1
             when = f" (t = {t[k]:g} s)" if t is not None else ""
-            raise ValueError(f"discrete-time model {self.model.name!r} steps dt = {self.dt:g} s; row {k}{when} "
+            raise InputError(f"discrete-time model {self.model.name!r} steps dt = {self.dt:g} s; row {k}{when} "
                              f"comes {dt[k - 1]:g} s after the previous one")
 
     # -- convenience ----------------------------------------------------------------------------------
@@ -202,7 +203,7 @@ class DiscreteModel:
         """
         n = int(n)
         if n < 1:
-            raise ValueError(f"fold length must be >= 1, got {n}")
+            raise InputError(f"fold length must be >= 1, got {n}")
         if n not in self._folds:
             self._folds[n] = self.F.mapaccum(n)
         return self._folds[n]

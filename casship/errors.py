@@ -2,12 +2,15 @@
 
 Every error casship raises on purpose names the offending item (an option, a column, a state, a
 file) and says what would be accepted. They share the base :class:`CasshipError`; each also derives
-from the built-in exception a caller would expect (``ValueError`` for bad input, ``RuntimeError``
-for a solver that failed), so ``except ValueError`` keeps working.
+from the built-in exception a caller would expect (``ValueError`` for bad input, also ``TypeError``
+for input of the wrong kind, ``RuntimeError`` for a solver that failed), so ``except ValueError``
+keeps working. A check of an internal invariant (a casship bug if it fails) raises a plain built-in
+exception instead.
 
-The command line (:func:`casship.cli.main`) turns these, and ``OSError`` (a missing or unwritable
-file), into one line ``casship CMD: error: ...`` with exit code 2; anything else is a bug in casship
-and is reported as one (exit code 1), with ``--debug`` for the traceback.
+The command line (:func:`casship.cli.main`) classifies by type alone: these, and ``OSError`` (a
+missing or unwritable file), become one line ``casship CMD: error: ...`` with exit code 2; anything
+else, a plain ``ValueError`` included, is a bug in casship and is reported as one (exit code 1),
+with ``--debug`` for the traceback.
 
 Examples
 --------
@@ -20,7 +23,7 @@ True
 """
 from __future__ import annotations
 
-__all__ = ["CasshipError", "InputError", "SolverError", "DivergenceError", "SetupError"]
+__all__ = ["CasshipError", "InputError", "InputTypeError", "SolverError", "DivergenceError", "SetupError"]
 
 
 class CasshipError(Exception):
@@ -29,6 +32,12 @@ class CasshipError(Exception):
 
 class InputError(CasshipError, ValueError):
     """Bad input (a value, a name, a record, a setting), named in the message with what is accepted."""
+
+
+class InputTypeError(InputError, TypeError):
+    """Input of the wrong kind (a list where a :class:`~casship.Dataset` is needed, a model where a
+    discretised one is): an :class:`InputError`, and also a ``TypeError`` so that ``except TypeError``
+    keeps working."""
 
 
 class SolverError(CasshipError, RuntimeError):

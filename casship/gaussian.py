@@ -6,6 +6,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .errors import InputError, InputTypeError
+
 __all__ = ["Gaussian", "as_cov"]
 
 
@@ -28,40 +30,40 @@ def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_z
     """
     if isinstance(value, Mapping):
         if names is None:
-            raise TypeError(f"{name}: a mapping needs channel names")
+            raise InputTypeError(f"{name}: a mapping needs channel names")
         unknown = set(value) - set(names)
         if unknown:
-            raise ValueError(f"{name}: unknown channel name(s) {sorted(unknown)}; known: {list(names)}")
+            raise InputError(f"{name}: unknown channel name(s) {sorted(unknown)}; known: {list(names)}")
         missing = [c for c in names if c not in value]
         if missing:
-            raise ValueError(f"{name}: no variance given for channel(s) {missing}")
+            raise InputError(f"{name}: no variance given for channel(s) {missing}")
         value = [value[c] for c in names]
     m = np.asarray(value, dtype=float)
     if m.ndim == 0:
         m = np.eye(n) * float(m)
     elif m.ndim == 1:
         if m.size != n:
-            raise ValueError(f"{name}: expected {n} variances, got {m.size}")
+            raise InputError(f"{name}: expected {n} variances, got {m.size}")
         m = np.diag(m)
     if m.shape != (n, n):
-        raise ValueError(f"{name}: expected shape ({n}, {n}), got {m.shape}")
+        raise InputError(f"{name}: expected shape ({n}, {n}), got {m.shape}")
     label = (lambda i: repr(names[i])) if names is not None and len(names) == n else str   # noqa: E731
     if not np.all(np.isfinite(m)):
         i, j = (int(k) for k in np.argwhere(~np.isfinite(m))[0])
-        raise ValueError(f"{name}: contains non-finite entries: ({label(i)}, {label(j)}) is {m[i, j]}")
+        raise InputError(f"{name}: contains non-finite entries: ({label(i)}, {label(j)}) is {m[i, j]}")
     if not np.allclose(m, m.T, rtol=1e-10, atol=1e-12 * np.abs(m).max(initial=0.0)):   # relative to the scale
         i, j = (int(k) for k in np.unravel_index(np.argmax(np.abs(m - m.T)), m.shape))
-        raise ValueError(f"{name}: matrix is not symmetric: entry ({label(i)}, {label(j)}) is {m[i, j]:.6g}, "
+        raise InputError(f"{name}: matrix is not symmetric: entry ({label(i)}, {label(j)}) is {m[i, j]:.6g}, "
                          f"entry ({label(j)}, {label(i)}) is {m[j, i]:.6g}")
     m = 0.5 * (m + m.T)
     if n:
         eig = np.linalg.eigvalsh(m)
         tol = 1e-12 * abs(eig).max()     # relative: variances of lat/lon in rad are ~1e-14
         if eig.min() < -tol:
-            raise ValueError(f"{name}: not positive semi-definite (smallest eigenvalue {eig.min():.3g}); "
+            raise InputError(f"{name}: not positive semi-definite (smallest eigenvalue {eig.min():.3g}); "
                              "variances must be non-negative")
         if not allow_zero and eig.min() <= tol:
-            raise ValueError(f"{name}: must be positive definite (smallest eigenvalue {eig.min():.3g})")
+            raise InputError(f"{name}: must be positive definite (smallest eigenvalue {eig.min():.3g})")
     return m
 
 
@@ -103,13 +105,13 @@ class Gaussian:
         mean = np.asarray(self.mean, dtype=float).reshape(-1)
         if not np.all(np.isfinite(mean)):
             i = int(np.flatnonzero(~np.isfinite(mean))[0])
-            raise ValueError(f"Gaussian: mean contains non-finite entries: entry {i} is {mean[i]}")
+            raise InputError(f"Gaussian: mean contains non-finite entries: entry {i} is {mean[i]}")
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "cov", as_cov(self.cov, mean.size, "Gaussian covariance"))
         for key in ("names", "units"):
             value = tuple(str(v) for v in (getattr(self, key) or ()))
             if value and len(value) != mean.size:
-                raise ValueError(f"Gaussian: {len(value)} {key} {list(value)} for a mean of size {mean.size}")
+                raise InputError(f"Gaussian: {len(value)} {key} {list(value)} for a mean of size {mean.size}")
             object.__setattr__(self, key, value)
 
     def _rows(self) -> list[str]:

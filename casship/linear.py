@@ -15,6 +15,7 @@ import numpy as np
 
 from .runtime import BufferedCall
 from .model import Model
+from .errors import InputError
 
 __all__ = ["linearize", "to_iosys", "trim", "TrimResult", "output_map"]
 
@@ -28,9 +29,9 @@ def _vector(model: Model, value, kind: str) -> np.ndarray:
         return model.states(**value) if kind == "state" else model.inputs(**value)
     vec = np.asarray(value, dtype=float).reshape(-1)
     if vec.shape != (n,):
-        raise ValueError(f"expected {n} {kind} values for {list(names)}, got {vec.size}")
+        raise InputError(f"expected {n} {kind} values for {list(names)}, got {vec.size}")
     if not np.all(np.isfinite(vec)):
-        raise ValueError(f"{kind} values must be finite, got {vec}")
+        raise InputError(f"{kind} values must be finite, got {vec}")
     return vec
 
 
@@ -56,7 +57,7 @@ def output_map(model: Model, outputs: Sequence[str] | None = None) -> tuple[tupl
         outputs = model.output_names or model.state_names
     outputs = tuple(outputs)
     if not outputs:
-        raise ValueError("at least one output is needed")
+        raise InputError("at least one output is needed")
     y_all = model.h(model.x, model.u, model.p)
     exprs = []
     for name in outputs:
@@ -65,7 +66,7 @@ def output_map(model: Model, outputs: Sequence[str] | None = None) -> tuple[tupl
         elif name in model.state_names:
             exprs.append(model.x[model.index(name)])
         else:
-            raise ValueError(f"unknown output {name!r} of model {model.name!r}; outputs: "
+            raise InputError(f"unknown output {name!r} of model {model.name!r}; outputs: "
                              f"{list(model.output_names)}, states: {list(model.state_names)}")
     y = ca.vertcat(*exprs)
     jac = [ca.densify(ca.jacobian(y, model.x)), ca.densify(ca.jacobian(y, model.u))]
@@ -109,7 +110,7 @@ def linearize(model: Model, x=None, u=None, p=None, outputs: Sequence[str] | Non
     ([[0.0, 1.0], [0.0, -0.05]], [0.0, 0.005], ['psi', 'r'])
     """
     if model.nu == 0:
-        raise ValueError(f"linearize: model {model.name!r} has no inputs, and a python-control StateSpace needs "
+        raise InputError(f"linearize: model {model.name!r} has no inputs, and a python-control StateSpace needs "
                          "at least one; use model.f_jac for the Jacobian A, or declare an input")
     xv, uv = _vector(model, x, "state"), _vector(model, u, "input")
     pv = model.params(p) if p is not None else model.params()
@@ -257,7 +258,7 @@ def _free_slots(model: Model, free) -> tuple[list[str], list[list[tuple[str, int
     for entry in free:
         names = (entry,) if isinstance(entry, str) else tuple(entry)
         if not names:
-            raise ValueError("trim: an empty group in free")
+            raise InputError("trim: an empty group in free")
         group = []
         for n in names:
             if n in model.state_names:
@@ -265,7 +266,7 @@ def _free_slots(model: Model, free) -> tuple[list[str], list[list[tuple[str, int
             elif n in model.input_names:
                 group.append(("u", model.index(n, "input")))
             else:
-                raise ValueError(f"trim: unknown free variable {n!r}; states: {list(model.state_names)}, "
+                raise InputError(f"trim: unknown free variable {n!r}; states: {list(model.state_names)}, "
                                  f"inputs: {list(model.input_names)}")
         labels.append(names[0] if len(names) == 1 else "=".join(names))
         slots.append(group)
@@ -332,11 +333,11 @@ def trim(model: Model, x=None, u=None, p=None, *, free: Sequence, zero: Sequence
     pv = model.params(p) if p is not None else model.params()
     free = [free] if isinstance(free, str) else list(free)
     if not free:
-        raise ValueError("trim: name at least one free state or input")
+        raise InputError("trim: name at least one free state or input")
     zero = _default_zero(model) if zero is None else list(zero)
     z_idx = model.indices(zero, "state")
     if len(free) != len(zero):
-        raise ValueError(f"trim: {len(free)} free variable(s) {free} but {len(zero)} zeroed derivative(s) "
+        raise InputError(f"trim: {len(free)} free variable(s) {free} but {len(zero)} zeroed derivative(s) "
                          f"{zero}; pass zero=[...] naming as many states as free variables")
     labels, slots = _free_slots(model, free)
     freed = {(kind, i) for group in slots for kind, i in group}
@@ -358,13 +359,13 @@ def trim(model: Model, x=None, u=None, p=None, *, free: Sequence, zero: Sequence
     except RuntimeError as exc:
         reason = "the zeroed derivatives do not depend on the free variables" \
             if "singular" in str(exc) else str(exc).splitlines()[-1]
-        raise ValueError(f"trim of {model.name!r} failed for free {labels}, zero {zero}: {reason}") from None
+        raise InputError(f"trim of {model.name!r} failed for free {labels}, zero {zero}: {reason}") from None
     status = solver.stats().get("return_status", "")
     resid = np.array(g(zs)).reshape(-1)
     rnorm = float(np.max(np.abs(resid))) if resid.size else 0.0
     if not np.all(np.isfinite(zs)) or not np.isfinite(rnorm) or rnorm > max(tol * 100, 1e-8) \
             or not solver.stats().get("success", True):
-        raise ValueError(f"trim of {model.name!r} did not converge (status {status!r}, residual {rnorm:.3g}) "
+        raise InputError(f"trim of {model.name!r} did not converge (status {status!r}, residual {rnorm:.3g}) "
                          f"for free {labels} from {dict(zip(labels, z0))}; try another initial guess")
     for k, group in enumerate(slots):
         for kind, i in group:

@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING, Callable, Iterable, Mapping, Sequence
 import casadi as ca
 import numpy as np
 
+from .errors import InputError, InputTypeError
+
 if TYPE_CHECKING:       # the builder makes models (casship.builder imports this module)
     from .builder import ModelBuilder
 
@@ -30,7 +32,7 @@ __all__ = ["Model"]
 def _c_name(name: str) -> str:
     """``name`` as an identifier usable in CasADi Function names (``kvlcc2-l7+wind`` -> ``kvlcc2_l7_wind``)."""
     if not isinstance(name, str) or not name.strip():
-        raise ValueError(f"model name must be a non-empty string, got {name!r}")
+        raise InputError(f"model name must be a non-empty string, got {name!r}")
     ident = re.sub(r"\W", "_", name.strip())
     return ident if ident[0].isalpha() else f"m_{ident}"
 
@@ -42,7 +44,7 @@ def _check_finite_constants(model: str, kind: str, names: Sequence[str], exprs: 
         fun = ca.Function("check", args, [exprs[i]])
         for k in range(fun.n_instructions()):
             if fun.instruction_id(k) == ca.OP_CONST and not np.isfinite(fun.instruction_constant(k)):
-                raise ValueError(f"model {model!r}: the {kind} {name!r} contains the constant "
+                raise InputError(f"model {model!r}: the {kind} {name!r} contains the constant "
                                  f"{fun.instruction_constant(k)} (a math/numpy function applied to a CasADi symbol? "
                                  "use casadi's functions, e.g. ca.cos)")
 
@@ -120,10 +122,10 @@ class Model:
             xdot, y = ca.substitute([xdot, y], port_syms, port_vals)
         free = set(ca.symvar(ca.vertcat(xdot, y))) - set(ca.symvar(ca.vertcat(x, u, p, w)))
         if free:
-            raise ValueError(f"model {self.name!r}: expressions use undeclared symbols "
+            raise InputError(f"model {self.name!r}: expressions use undeclared symbols "
                              f"{sorted(str(s) for s in free)}")
         if ca.depends_on(y, w):
-            raise ValueError(f"model {self.name!r}: outputs must not depend on process noise")
+            raise InputError(f"model {self.name!r}: outputs must not depend on process noise")
         _check_finite_constants(self.name, "equation of state", self.state_names, xdot, [x, u, p, w])
         _check_finite_constants(self.name, "output", self.output_names, y, [x, u, p])
         self.x, self.u, self.p, self.w = x, u, p, w
@@ -191,7 +193,7 @@ class Model:
         index = {n: i for i, n in enumerate(names)}
         for key, val in values.items():
             if key not in index:
-                raise ValueError(f"unknown {kind} name {key!r}; known: {list(names)}")
+                raise InputError(f"unknown {kind} name {key!r}; known: {list(names)}")
             out[index[key]] = float(val)
         return out
 
@@ -249,7 +251,7 @@ class Model:
         else:
             vec = np.asarray(base, dtype=float)
             if vec.shape != (self.np,):
-                raise ValueError(f"params: expected a vector of {self.np} parameters, got shape {vec.shape}")
+                raise InputError(f"params: expected a vector of {self.np} parameters, got shape {vec.shape}")
         vec = self._named(self.param_names, overrides, "parameter", vec)
         if base is not None or overrides:
             self._check_params(vec)
@@ -257,7 +259,6 @@ class Model:
 
     def _check_params(self, vec: np.ndarray) -> None:
         """Every parameter finite and within its declared (physical) bounds, or ``InputError`` naming it."""
-        from .errors import InputError
 
         bad = np.flatnonzero(~np.isfinite(vec) | (vec < self.param_lower) | (vec > self.param_upper))
         if bad.size:
@@ -301,11 +302,11 @@ class Model:
         table = {"state": self.state_names, "input": self.input_names, "param": self.param_names,
                  "noise": self.noise_names, "output": self.output_names}
         if kind not in table:
-            raise ValueError(f"unknown kind {kind!r}; use one of {list(table)}")
+            raise InputError(f"unknown kind {kind!r}; use one of {list(table)}")
         try:
             return table[kind].index(name)
         except ValueError:
-            raise ValueError(f"unknown {kind} name {name!r} in model {self.name!r}; "
+            raise InputError(f"unknown {kind} name {name!r} in model {self.name!r}; "
                              f"known: {list(table[kind])}") from None
 
     def indices(self, names: Iterable[str], kind: str = "state") -> list[int]:
@@ -386,13 +387,13 @@ class Model:
         for out_name, spec in items:
             if isinstance(spec, str):
                 if spec not in self.state_names:
-                    raise ValueError(f"with_outputs: {spec!r} is not a state of {self.name!r}")
+                    raise InputError(f"with_outputs: {spec!r} is not a state of {self.name!r}")
                 b.output(out_name, b.sym(spec))
             elif callable(spec):
                 b.output(out_name, spec(b))
             else:
-                raise TypeError(f"with_outputs: output {out_name!r} must be given by a state name or a "
-                                f"callable builder -> expression, got {type(spec).__name__}")
+                raise InputTypeError(f"with_outputs: output {out_name!r} must be given by a state name or a "
+                                     f"callable builder -> expression, got {type(spec).__name__}")
         return b.build()
 
 

@@ -18,6 +18,8 @@ from contextlib import contextmanager
 from functools import partial
 from typing import Callable, Iterable, Iterator, Sequence
 
+from .errors import InputError
+
 __all__ = ["run_cases", "call", "blas_threads"]
 
 
@@ -57,7 +59,7 @@ def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, sc
     cases: Sequence = list(cases)
     if blas_threads is not None:
         if isinstance(blas_threads, bool) or not isinstance(blas_threads, int) or blas_threads < 1:
-            raise ValueError(f"blas_threads must be a positive int or None, got {blas_threads!r}")
+            raise InputError(f"blas_threads must be a positive int or None, got {blas_threads!r}")
         func = partial(_limited, func, blas_threads)
     if scheduler is not None:
         try:

@@ -23,6 +23,7 @@ from scipy import stats
 from .folds import sensitivity_fold
 from .runtime import Job, run_pieces
 from .model import Model
+from .errors import InputError
 
 __all__ = ["trajectory_sensitivities", "prediction_bands", "sampled_metrics", "band_z"]
 
@@ -39,7 +40,7 @@ def band_z(level: float) -> float:
     float
     """
     if not 0.0 < float(level) < 1.0:
-        raise ValueError(f"level must be in (0, 1), got {level}")
+        raise InputError(f"level must be in (0, 1), got {level}")
     return float(stats.norm.ppf(0.5 + 0.5 * float(level)))
 
 
@@ -170,7 +171,7 @@ def sampled_metrics(run: Callable, draws: np.ndarray, level: float = 0.95, *, ba
     if batch:
         outcomes = list(run(draws))
         if len(outcomes) != len(draws):
-            raise ValueError(f"sampled_metrics: run gave {len(outcomes)} outcome(s) for {len(draws)} draws")
+            raise InputError(f"sampled_metrics: run gave {len(outcomes)} outcome(s) for {len(draws)} draws")
     else:
         outcomes = []
         for p in draws:

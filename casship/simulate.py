@@ -8,7 +8,7 @@ import numpy as np
 from .runtime import BufferedCall
 from .angles import wrap
 from .data import Dataset, check_time
-from .errors import DivergenceError, SolverError
+from .errors import DivergenceError, InputError, SolverError
 from .folds import IntegrationError, fold_steps, padded, solver_status
 from .trajectory import Trajectory
 from .discretize import discretize
@@ -43,12 +43,12 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
         return None
     if inputs is None:
         if model.nu:
-            raise ValueError(f"model {model.name!r} needs inputs {list(model.input_names)}")
+            raise InputError(f"model {model.name!r} needs inputs {list(model.input_names)}")
         return np.zeros((n, 0))
     if isinstance(inputs, Dataset):
         missing = [k for k in model.input_names if k not in inputs]
         if missing:
-            raise ValueError(f"data has no column for input(s) {missing} of model {model.name!r}")
+            raise InputError(f"data has no column for input(s) {missing} of model {model.name!r}")
         U = inputs.matrix(model.input_names, finite=True, what="input")
         tol = 1e-9 * max(1.0, float(np.abs(t).max()))
         if len(inputs) == n and np.allclose(inputs.t, t, rtol=0.0, atol=tol):
@@ -56,7 +56,7 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
         else:
             # another grid: hold each recorded value until the next record (zero-order hold)
             if t[0] < inputs.t[0] - tol or t[-1] > inputs.t[-1] + tol:
-                raise ValueError(f"input data cover t = [{inputs.t[0]:g}, {inputs.t[-1]:g}] s, the simulation "
+                raise InputError(f"input data cover t = [{inputs.t[0]:g}, {inputs.t[-1]:g}] s, the simulation "
                                  f"needs [{t[0]:g}, {t[-1]:g}] s")
             rows = np.clip(np.searchsorted(inputs.t, t + tol, side="right") - 1, 0, len(inputs) - 1)
             U_out = U[rows]
@@ -65,17 +65,17 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
     if isinstance(inputs, Mapping):
         unknown = set(inputs) - set(model.input_names)
         if unknown:
-            raise ValueError(f"unknown input name(s) {sorted(unknown)}; model inputs: {list(model.input_names)}")
+            raise InputError(f"unknown input name(s) {sorted(unknown)}; model inputs: {list(model.input_names)}")
         missing = [k for k in model.input_names if k not in inputs]
         if missing:
-            raise ValueError(f"no value given for input(s) {missing}")
+            raise InputError(f"no value given for input(s) {missing}")
         cols = []
         for name in model.input_names:
             _refuse_masked(inputs[name], f"input {name!r}", t)
             v = np.broadcast_to(np.asarray(inputs[name], dtype=float), (n,)) if np.ndim(inputs[name]) == 0 \
                 else np.asarray(inputs[name], dtype=float)
             if v.shape != (n,):
-                raise ValueError(f"input {name!r} has shape {v.shape}, expected ({n},)")
+                raise InputError(f"input {name!r} has shape {v.shape}, expected ({n},)")
             cols.append(v)
         U = np.column_stack(cols) if cols else np.zeros((n, 0))
     else:
@@ -84,11 +84,11 @@ def input_matrix(model: Model, t: np.ndarray, inputs, x0=None) -> np.ndarray | N
         if U.ndim == 1 and model.nu == 1:
             U = U[:, None]
         if U.shape != (n, model.nu):
-            raise ValueError(f"inputs have shape {U.shape}, expected ({n}, {model.nu}) for {list(model.input_names)}")
+            raise InputError(f"inputs have shape {U.shape}, expected ({n}, {model.nu}) for {list(model.input_names)}")
     bad = np.argwhere(~np.isfinite(U))
     if bad.size:
         row, col = bad[0]
-        raise ValueError(f"input {model.input_names[col]!r} is not finite at row {row} (t = {t[row]:g} s)")
+        raise InputError(f"input {model.input_names[col]!r} is not finite at row {row} (t = {t[row]:g} s)")
     check_radians(model, U)
     return U
 
@@ -98,14 +98,14 @@ def _refuse_masked(values, what: str, t) -> None:
     mask = np.ma.getmaskarray(values) if np.ma.isMaskedArray(values) else None
     if mask is not None and mask.any():
         row = int(np.flatnonzero(mask.reshape(mask.shape[0], -1).any(axis=1))[0]) if mask.ndim else 0
-        raise ValueError(f"{what} is masked at row {row} (t = {t[row]:g} s); an input needs a value at every row")
+        raise InputError(f"{what} is masked at row {row} (t = {t[row]:g} s); an input needs a value at every row")
 
 
 def check_radians(model: Model, U: np.ndarray) -> None:
     """Reject inputs declared in radians whose magnitude exceeds 2 pi (degrees given by mistake)."""
     for j, var in enumerate(model.input_vars):
         if var.unit == "rad" and U.shape[0] and np.abs(U[:, j]).max() > 2 * np.pi:
-            raise ValueError(f"input {var.name!r} reaches {np.abs(U[:, j]).max():.4g} rad: angles are in "
+            raise InputError(f"input {var.name!r} reaches {np.abs(U[:, j]).max():.4g} rad: angles are in "
                              "radians (degrees given?)")
 
 
@@ -265,7 +265,7 @@ def simulate_many(model: Model, x0, t, inputs, params, *, method: str | None = N
     """
     P = np.atleast_2d(np.asarray(params, dtype=float))
     if P.ndim != 2 or P.shape[1] != model.np:
-        raise ValueError(f"params has shape {np.shape(params)}, expected (m, {model.np}) for model {model.name!r}")
+        raise InputError(f"params has shape {np.shape(params)}, expected (m, {model.np}) for model {model.name!r}")
     asked = method
     t, x0, _, dt, dmodel, method, substeps, W, U = _setup(model, x0, t, inputs, None, method, max_step, w, None)
     if check_limits:
@@ -307,16 +307,16 @@ def _setup(model: Model, x0, t, inputs, p, method, max_step, w, options):
     t = check_time(t, "t")
     x0 = model.states(**x0) if isinstance(x0, Mapping) else np.asarray(x0, dtype=float).reshape(-1)
     if x0.shape != (model.nx,):
-        raise ValueError(f"x0 has {x0.size} entries, model {model.name!r} has {model.nx} states")
+        raise InputError(f"x0 has {x0.size} entries, model {model.name!r} has {model.nx} states")
     if not np.all(np.isfinite(x0)):
-        raise ValueError("x0 contains non-finite entries")
+        raise InputError("x0 contains non-finite entries")
     p = model.params(p) if p is not None else model.params()
     dt = np.diff(t)
     if max_step is not None and not (np.isfinite(max_step) and max_step > 0):
-        raise ValueError(f"max_step must be a positive finite number, got {max_step}")
+        raise InputError(f"max_step must be a positive finite number, got {max_step}")
     if model.dt is not None:
         if method is not None or max_step is not None or options:
-            raise ValueError(f"model {model.name!r} is discrete-time: it steps x[k+1] = F(x, u, p, w) itself "
+            raise InputError(f"model {model.name!r} is discrete-time: it steps x[k+1] = F(x, u, p, w) itself "
                              "(no method, max_step or integrator options)")
         dmodel = model.derived(("discretize", "discrete"), lambda: discretize(model))
         dmodel.check_steps(dt, t)
@@ -415,11 +415,11 @@ def _noise_matrix(model: Model, t: np.ndarray, w) -> np.ndarray:
     if W.ndim == 1 and model.nw == 1:
         W = W[:, None]
     if W.shape != (t.size, model.nw):
-        raise ValueError(f"w has shape {W.shape}, expected ({t.size}, {model.nw}) for noise channels "
+        raise InputError(f"w has shape {W.shape}, expected ({t.size}, {model.nw}) for noise channels "
                          f"{list(model.noise_names)}")
     if not np.all(np.isfinite(W)):
         row, col = np.argwhere(~np.isfinite(W))[0]
-        raise ValueError(f"process noise {model.noise_names[col]!r} is not finite at row {row}")
+        raise InputError(f"process noise {model.noise_names[col]!r} is not finite at row {row}")
     return W
 
 
@@ -434,7 +434,7 @@ def _closed_loop(model, dmodel, x0, t, controller: Callable, p, W, dt, first=Non
     for k in range(t.size):
         u = np.asarray(controller(t[k], X[k]), dtype=float).reshape(-1)
         if u.shape != (model.nu,) or not np.all(np.isfinite(u)):
-            raise ValueError(f"input function returned {u!r} at t = {t[k]:g} s; expected {model.nu} finite values "
+            raise InputError(f"input function returned {u!r} at t = {t[k]:g} s; expected {model.nu} finite values "
                              f"for {list(model.input_names)}")
         U[k] = u
         if k == 0:
@@ -474,11 +474,11 @@ def measure(traj: Dataset, model: Model, std: Mapping[str, float], *, rates: Map
     rng = np.random.default_rng(seed)
     unknown = set(std) - set(model.output_names)
     if unknown:
-        raise ValueError(f"unknown output name(s) {sorted(unknown)}; outputs: {list(model.output_names)}")
+        raise InputError(f"unknown output name(s) {sorted(unknown)}; outputs: {list(model.output_names)}")
     rates = dict(rates or {})
     unknown = set(rates) - set(std)
     if unknown:
-        raise ValueError(f"rates given for unmeasured output(s) {sorted(unknown)}")
+        raise InputError(f"rates given for unmeasured output(s) {sorted(unknown)}")
     t = traj.t
     cols = {n: traj[n] for n in model.input_names}
     for name in model.output_names:
@@ -486,7 +486,7 @@ def measure(traj: Dataset, model: Model, std: Mapping[str, float], *, rates: Map
             continue
         sigma = float(std[name])
         if not np.isfinite(sigma) or sigma < 0:
-            raise ValueError(f"standard deviation of {name!r} must be finite and >= 0, got {sigma}")
+            raise InputError(f"standard deviation of {name!r} must be finite and >= 0, got {sigma}")
         y = traj[name] + sigma * rng.standard_normal(t.size)
         if model.angle_outputs[model.index(name, "output")]:
             y = wrap(y)
@@ -494,7 +494,7 @@ def measure(traj: Dataset, model: Model, std: Mapping[str, float], *, rates: Map
             try:
                 y = np.where(sample_mask(t, rates[name]), y, np.nan)
             except ValueError as exc:
-                raise ValueError(f"rate of {name!r}: {exc}") from None
+                raise InputError(f"rate of {name!r}: {exc}") from None
         cols[name] = y
     for name in keep:
         cols[f"true_{name}"] = traj[name]
@@ -510,7 +510,7 @@ def sample_mask(t: np.ndarray, rate_hz: float) -> np.ndarray:
     """
     rate_hz = float(rate_hz)
     if not np.isfinite(rate_hz) or rate_hz <= 0:
-        raise ValueError(f"sample rate must be a positive finite number [Hz], got {rate_hz}")
+        raise InputError(f"sample rate must be a positive finite number [Hz], got {rate_hz}")
     t = np.asarray(t, dtype=float)
     tick = np.floor((t - t[0]) * rate_hz + 1e-6)
     return np.concatenate([[True], np.diff(tick) > 0])

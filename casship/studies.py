@@ -27,6 +27,7 @@ from typing import Callable, Mapping
 from .io.jsonfile import write_json
 from .io.datadir import data_dir as _data_dir
 from .outdir import output_folder
+from .errors import InputError, InputTypeError
 
 __all__ = ["Study", "studies", "get_study", "run_study", "ENTRY_POINT_GROUP"]
 
@@ -85,12 +86,12 @@ def _collect(obj, origin: str, found: dict) -> None:
     if isinstance(items, Study):
         items = {items.name: items}
     if not isinstance(items, Mapping):
-        raise TypeError(f"studies entry point {origin!r} gave {type(items).__name__}, not a Study or a mapping")
+        raise InputTypeError(f"studies entry point {origin!r} gave {type(items).__name__}, not a Study or a mapping")
     for name, study in items.items():
         if not isinstance(study, Study):
-            raise TypeError(f"studies entry point {origin!r}: {name!r} is not a casship.studies.Study")
+            raise InputTypeError(f"studies entry point {origin!r}: {name!r} is not a casship.studies.Study")
         if study.name in found:
-            raise ValueError(f"two studies are named {study.name!r} (the second from {origin!r})")
+            raise InputError(f"two studies are named {study.name!r} (the second from {origin!r})")
         found[study.name] = study
 
 
@@ -133,7 +134,7 @@ def get_study(name: str) -> Study:
     """
     table = studies()
     if name not in table:
-        raise ValueError(f"unknown study {name!r}; known: {list(table)}")
+        raise InputError(f"unknown study {name!r}; known: {list(table)}")
     return table[name]
 
 
@@ -181,7 +182,7 @@ def run_study(study: Study | str, out, *, quick: bool = False, workers: int | No
         if "data_dir" in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
             kwargs["data_dir"] = folder
         elif study.needs_data:
-            raise TypeError(f"study {study.name!r} needs measured data but its run() takes no data_dir")
+            raise InputTypeError(f"study {study.name!r} needs measured data but its run() takes no data_dir")
         summary = study.run(staging, **kwargs)
         summary = write_json(staging / "summary.json", {"quick": bool(quick), **(summary or {})}, nonfinite="keep")
     return summary

@@ -7,6 +7,7 @@ from typing import Mapping
 import numpy as np
 
 from .data import Dataset
+from .errors import InputError
 
 __all__ = ["Trajectory"]
 
@@ -34,7 +35,7 @@ class Trajectory(Dataset):
         super().__init__(t, columns, units, meta)
         missing = [n for n in (*state_names, *input_names, *output_names) if n not in self._columns]
         if missing:
-            raise ValueError(f"trajectory of {model_name!r} has no column(s) {missing}")
+            raise InputError(f"trajectory of {model_name!r} has no column(s) {missing}")
         self.model_name = model_name
         self.state_names = tuple(state_names)
         self.input_names = tuple(input_names)
@@ -166,7 +167,7 @@ class Trajectory(Dataset):
         name = model.get("model_name", "") if isinstance(model, Mapping) else model.name
         missing = [n for n in (*names["state_names"], *names["input_names"]) if n not in data]
         if missing:
-            raise ValueError(f"record has no column(s) {missing} for the states/inputs of model {name!r}")
+            raise InputError(f"record has no column(s) {missing} for the states/inputs of model {name!r}")
         outputs = tuple(n for n in names["output_names"] if n in data)
         return cls(data.t, {n: data[n] for n in data.names}, model_name=name, state_names=names["state_names"],
                    input_names=names["input_names"], output_names=outputs, units=data.units, meta=data.meta)
@@ -193,7 +194,7 @@ class Trajectory(Dataset):
         """
         source = model if model is not None else frame.attrs
         if model is None and "state_names" not in frame.attrs:
-            raise ValueError("Trajectory.from_pandas: the frame carries no state names; pass model=")
+            raise InputError("Trajectory.from_pandas: the frame carries no state names; pass model=")
         return cls.from_dataset(Dataset.from_pandas(frame, time, units), source)
 
     @classmethod
@@ -215,7 +216,7 @@ class Trajectory(Dataset):
         Trajectory
         """
         if model is None:
-            raise ValueError("Trajectory.from_csv needs model= (a CSV file does not store the state names)")
+            raise InputError("Trajectory.from_csv needs model= (a CSV file does not store the state names)")
         return cls.from_dataset(Dataset.from_csv(path, time=time, rename=rename, scale=scale), model)
 
     @property

@@ -23,6 +23,7 @@ from .trajectory import Trajectory
 from .maneuvers import execute_time, turning_metrics, zigzag_metrics
 from .model import Model
 from .simulate import simulate, simulate_many
+from .errors import InputError
 
 __all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent", "COVERAGE_SLACK"]
 
@@ -425,14 +426,14 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     ReplayResult
     """
     if len(data) < 2:
-        raise ValueError(f"replay: the record has {len(data)} row(s); a replay compares at least two samples")
+        raise InputError(f"replay: the record has {len(data)} row(s); a replay compares at least two samples")
     if x0 is None:
         values = {}
         for name in model.state_names:
             if name in data:
                 v = float(data[name][0])
                 if not np.isfinite(v):
-                    raise ValueError(f"initial value of state {name!r} is missing (NaN) in the first row")
+                    raise InputError(f"initial value of state {name!r} is missing (NaN) in the first row")
                 values[name] = v
         x0 = model.states(**values)
         start = {n: "record" if n in values else "zero" for n in model.state_names}

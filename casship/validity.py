@@ -56,7 +56,7 @@ def _variable(model: Model, name: str):
     for var in (*model.state_vars, *model.input_vars):
         if var.name == name:
             return var
-    raise ValueError(f"unknown state or input {name!r} of model {model.name!r}")
+    raise InputError(f"unknown state or input {name!r} of model {model.name!r}")
 
 
 def describe_limit(model: Model, name: str) -> str:

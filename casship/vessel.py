@@ -15,6 +15,8 @@ from typing import Mapping
 
 import numpy as np
 
+from .errors import InputError
+
 __all__ = ["Vessel", "Limit"]
 
 
@@ -23,7 +25,7 @@ def _positive(value, what: str, vessel: str, optional: bool = False):
         return None
     value = float(value)
     if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"Vessel {vessel!r}: {what} must be a positive finite number, got {value}")
+        raise InputError(f"Vessel {vessel!r}: {what} must be a positive finite number, got {value}")
     return value
 
 
@@ -97,7 +99,7 @@ class Vessel:
     def __post_init__(self):
         set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
         if not isinstance(self.name, str) or not self.name:
-            raise ValueError(f"Vessel name must be a non-empty string, got {self.name!r}")
+            raise InputError(f"Vessel name must be a non-empty string, got {self.name!r}")
         set_("L_pp", _positive(self.L_pp, "L_pp", self.name))
         for key in ("B", "draught", "mass", "U0", "n0", "rudder_max", "rudder_rate"):
             set_(key, _positive(getattr(self, key), key, self.name, optional=True))
@@ -105,12 +107,12 @@ class Vessel:
         for key in ("rudders", "propellers"):
             names = tuple(getattr(self, key))
             if not all(isinstance(n, str) and n.isidentifier() for n in names):
-                raise ValueError(f"Vessel {self.name!r}: {key} must be input names, got {names!r}")
+                raise InputError(f"Vessel {self.name!r}: {key} must be input names, got {names!r}")
             set_(key, names)
         if self.propeller_range is not None:
             lo, hi = (float(v) for v in self.propeller_range)
             if not lo < hi:
-                raise ValueError(f"Vessel {self.name!r}: propeller_range must be (lower, upper) with "
+                raise InputError(f"Vessel {self.name!r}: propeller_range must be (lower, upper) with "
                                  f"lower < upper, got {self.propeller_range!r}")
             set_("propeller_range", (lo, hi))
         if self.wind is not None:
@@ -175,7 +177,7 @@ class Vessel:
         """
         missing = [n for n in (*self.rudders, *self.propellers) if n not in input_names]
         if missing:
-            raise ValueError(f"Vessel {self.name!r} names input(s) {missing} that the model does not have; "
+            raise InputError(f"Vessel {self.name!r} names input(s) {missing} that the model does not have; "
                              f"inputs: {list(input_names)}")
 
     def __repr__(self) -> str:
@@ -242,7 +244,7 @@ class Limit:
     def __post_init__(self):
         lo, hi = float(self.lower), float(self.upper)
         if np.isnan(lo) or np.isnan(hi) or not lo < hi:
-            raise ValueError(f"limit of {self.name!r}: need lower < upper, got ({self.lower}, {self.upper})")
+            raise InputError(f"limit of {self.name!r}: need lower < upper, got ({self.lower}, {self.upper})")
         object.__setattr__(self, "lower", lo)
         object.__setattr__(self, "upper", hi)
 

@@ -1,4 +1,4 @@
-"""casship's studies: seed-paper reproductions and real-data analyses on casship's public API.
+"""casship's studies: reproductions of published papers and real-data analyses on casship's public API.
 
 Installed as the package ``casship_studies`` (this folder is its source), registered in the entry
 point group ``casship.studies`` so that ``casship study NAME`` finds them. Each study is a module
@@ -12,14 +12,10 @@ import importlib
 import pkgutil
 
 from casship.studies import Study
+from casship.errors import InputError
 
-from .kit import resolve_data_dir
 
-__all__ = ["Study", "studies", "get_study", "DATA_DIR"]
-
-#: The measured-data folder by casship's rule at import time (None when absent). Kept for studies
-#: that have not moved to their ``data_dir`` argument; new code uses :func:`.kit.resolve_data_dir`.
-DATA_DIR = resolve_data_dir(None, quiet=True)
+__all__ = ["Study", "studies", "get_study"]
 
 
 def studies() -> dict[str, Study]:
@@ -41,5 +37,5 @@ def get_study(name: str) -> Study:
     """The study called ``name`` (``ValueError`` listing the known ones otherwise)."""
     table = studies()
     if name not in table:
-        raise ValueError(f"unknown study {name!r}; known: {list(table)}")
+        raise InputError(f"unknown study {name!r}; known: {list(table)}")
     return table[name]

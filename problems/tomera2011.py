@@ -50,6 +50,7 @@ from casship.progress import progress
 
 from . import Study
 from .kit import Departure, Report, effect, figure, md_table, write_json
+from casship.errors import InputError
 
 DT = 0.1
 R_XY = 0.01                          # m^2 (Eq. 61)
@@ -120,7 +121,7 @@ def kinematic_filters(data, reading: dict, r_reading: str = "sampled", substeps:
     discrete steady gain over ``dt`` and the Kalman-Bucy gain, and the Kalman-Bucy gain ``L``.
     """
     if r_reading not in R_READINGS:
-        raise ValueError(f"unknown R reading {r_reading!r}; use one of {R_READINGS}")
+        raise InputError(f"unknown R reading {r_reading!r}; use one of {R_READINGS}")
     m = tomera_kinematic(reading["g_xy"], reading["g_psi"])
     Qc = np.diag([*reading["q_xy"], *reading["q_xy"], *reading["q_psi"]])
     R = np.diag([R_XY, R_XY, R_PSI]) / (DT if r_reading == "continuous" else 1.0)

@@ -1,8 +1,9 @@
-"""The shape of the code: no import circles in casship, no module reading another's private state, no
-plotting backend switched by library code, papers cited by author and year, and no test that skips
-when one of casship's own modules fails to import.
+"""The shape of the code: no import circles in casship, the studies and the examples, no module reading
+another's private state, no plotting backend switched by library code, papers cited by author and
+year, and no test that skips when one of casship's own modules fails to import.
 
-**Import circles.** The modules of casship (a package's ``__init__`` is a module) form a graph with an
+**Import circles.** The modules of ``casship/``, ``problems/`` (installed as ``casship_studies``) and
+``examples/`` (a package's ``__init__`` is a module) form one graph with an
 edge ``A -> B`` when ``A`` imports ``B`` at run time, at module level *or inside a function*: a deferred
 import hides a circle from the interpreter, not from the design. ``from P import n`` is an edge to
 ``P.n`` when that is a module, else to ``P``. Importing ``a.b.c`` also runs the packages ``a.b`` and
@@ -29,8 +30,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "casship"
-# Where the rules on private names also hold: the studies and examples use the public API only.
+# Where the rules on circles and private names hold: the studies and examples use the public API only.
 USERS = ("casship", "problems", "examples")
+# The studies' installed name (pyproject.toml) -> their folder
+INSTALLED = {"casship_studies": "problems"}
 
 #: (module, private name) -> why it may be used there. Inside one subpackage only.
 PACKAGE_INTERNAL = {
@@ -68,7 +71,8 @@ def _files(tops=("casship",)) -> dict[str, Path]:
     return {_module_name(p): p for top in tops for p in sorted((ROOT / top).rglob("*.py"))}
 
 
-MODULES = _files()
+MODULES = _files(USERS)
+CASSHIP = {m: p for m, p in MODULES.items() if m.split(".")[0] == "casship"}
 
 
 def _private(name: str) -> bool:
@@ -95,12 +99,18 @@ def _imports(module: str, path: Path):
             continue
         if isinstance(node, ast.Import):
             for alias in node.names:
-                yield node, alias.name, None
+                yield node, _installed(alias.name), None
         elif isinstance(node, ast.ImportFrom):
             base = package[:len(package) - node.level + 1] if node.level else []
-            source = ".".join(base + ([node.module] if node.module else []))
+            source = _installed(".".join(base + ([node.module] if node.module else [])))
             for alias in node.names:
                 yield node, source, alias.name
+
+
+def _installed(name: str) -> str:
+    """A module's name under its folder (``casship_studies.kit`` is ``problems.kit``)."""
+    top, _, rest = name.partition(".")
+    return ".".join(filter(None, (INSTALLED.get(top, top), rest)))
 
 
 def _ancestors(module: str) -> list[str]:
@@ -166,17 +176,39 @@ def test_the_circle_finder_finds_circles():
     assert _circles(graph) == [["a", "b", "c"]]
 
 
-def test_no_import_circles_in_casship():
+def test_the_graph_covers_casship_the_studies_and_the_examples():
+    tops = {m.split(".")[0] for m in MODULES}
+    assert tops == set(USERS), tops
     graph = {m: _edges(m, p) for m, p in MODULES.items()}
-    circles = _circles(graph)
+    # the studies' own imports are edges (relative ones and those through the installed name)
+    assert any(t.startswith("problems.") for m, ts in graph.items() if m.startswith("problems.") for t in ts)
+    assert any(t.startswith("casship") for m, ts in graph.items() if m.startswith("examples.") for t in ts)
+
+
+#: Circles known and not yet taken apart -> why they are tolerated for now. The list only shrinks: a
+#: listed circle that is gone fails (remove it), and any other circle fails.
+KNOWN_CIRCLES = {
+    frozenset({"problems.kvlcc2_captive", "problems.kvlcc2_marin", "problems.kvlcc2_marin.calibration",
+               "problems.kvlcc2_marin.diagnose", "problems.kvlcc2_marin.report", "problems.kvlcc2_marin.validate",
+               "problems.kvlcc2_marin.workflow"}):
+        "kvlcc2_marin.workflow imports kvlcc2_captive.captive_problem inside a function, and kvlcc2_captive "
+        "imports kvlcc2_marin.data and .validate: the shared pieces belong in one module both import",
+}
+
+
+def test_no_import_circles_in_casship_the_studies_and_the_examples():
+    graph = {m: _edges(m, p) for m, p in MODULES.items()}
+    circles = [part for part in _circles(graph) if frozenset(part) not in KNOWN_CIRCLES]
     detail = [[f"{a} -> {b}" for a in part for b in sorted(graph[a] & set(part))] for part in circles]
     assert not circles, detail
+    stale = [sorted(k) for k in KNOWN_CIRCLES if list(k) and sorted(k) not in _circles(graph)]
+    assert not stale, f"no longer a circle: remove from KNOWN_CIRCLES: {stale}"
 
 
 def test_casship_never_imports_the_studies():
     """The studies use casship, never the other way round (they are found through an entry point)."""
-    bad = [f"{m}: {s}" for m, p in MODULES.items() for _, s, _ in _imports(m, p)
-           if s.split(".")[0] in ("problems", "casship_studies", "tests")]
+    bad = [f"{m}: {s}" for m, p in CASSHIP.items() for _, s, _ in _imports(m, p)
+           if s.split(".")[0] in ("problems", "casship_studies", "tests", "examples")]
     assert not bad, bad
 
 
@@ -229,7 +261,7 @@ def _reaches(module: str, path: Path):
 
 
 def _all_reaches():
-    return [(m, line, name, what) for m, p in _files(USERS).items() for line, name, what in _reaches(m, p)]
+    return [(m, line, name, what) for m, p in MODULES.items() for line, name, what in _reaches(m, p)]
 
 
 def test_no_module_reaches_into_another_modules_private_names():
@@ -243,14 +275,14 @@ def test_the_allowed_reaches_are_current_and_stay_inside_one_subpackage():
     stale = sorted(set(PACKAGE_INTERNAL) - used) + sorted(set(FOREIGN) - used)
     assert not stale, f"no longer used: remove from PACKAGE_INTERNAL or FOREIGN: {stale}"
     definers = {}
-    for m, p in MODULES.items():
+    for m, p in CASSHIP.items():
         for name in _own_names(ast.parse(p.read_text())):
             definers.setdefault(name, set()).add(m)
     for module, name in FOREIGN:
         assert name not in definers, f"{name} is casship's own (defined in {sorted(definers[name])}), not foreign"
     for module, name in PACKAGE_INTERNAL:
         subpackage = ".".join(module.split(".")[:2])
-        assert subpackage in MODULES and MODULES[subpackage].name == "__init__.py", \
+        assert subpackage in CASSHIP and CASSHIP[subpackage].name == "__init__.py", \
             f"{module} is not inside a subpackage of casship: {name} cannot be package-internal"
         assert any(d == subpackage or d.startswith(subpackage + ".") for d in definers.get(name, ())), \
             f"{name}, used by {module}, is not defined in {subpackage}"
@@ -276,9 +308,20 @@ def test_library_code_never_switches_the_plotting_backend():
     assert not hits, hits
 
 
+#: Internal ids of the reproduced papers, however spelt ("seed 002", "seed_003", "seed-paper", "seed papers").
+FILE_IDS = re.compile(r"seed[ _-]?00\d|seed[ _-]papers?", re.IGNORECASE)
+
+
+def test_the_file_id_pattern_sees_every_spelling():
+    for text in ("seed 002", "seed_003", "seed004", "seed-paper reproductions", "the Seed papers", "seed_paper"):
+        assert FILE_IDS.search(text), text
+    for text in ("seeded simulation", "seed=3", "a seed per paper"):
+        assert not FILE_IDS.search(text), text
+
+
 def test_papers_are_cited_by_author_and_year():
     """No internal file ids ("seed 002") for the papers reproduced; they are cited by author and year."""
-    pattern = re.compile(r"seed[ _-]?00\d|seed papers?", re.IGNORECASE)
+    pattern = FILE_IDS
     texts = [p for top in ("casship", "problems", "docs", "tests", "examples", "benchmarks")
              for p in (ROOT / top).rglob("*") if p.suffix in (".py", ".md") and p != Path(__file__)]
     hits = [f"{p.relative_to(ROOT)}:{n}: {line.strip()}" for p in [*texts, ROOT / "README.md"]

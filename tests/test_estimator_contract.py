@@ -9,10 +9,12 @@ nonlinear ship model, unknown names and options, results as values (frozen, repr
 save/load, plot), smoothing and prediction.
 
 The traits a check needs come from the class: ``continuous`` (Q and R enter as spectral densities;
-compared with ``lqe`` and not expected to equal a discrete filter sample by sample),
-``stochastic`` (draws random numbers: compared within Monte Carlo error) and ``has_step`` (false:
-``step`` is refused). ``FAST`` lists options that keep an expensive estimator quick here;
-everything else runs on its defaults.
+compared with ``lqe`` and not expected to equal a discrete filter sample by sample) and
+``stochastic`` (draws random numbers: compared within Monte Carlo error); the step family
+(``StepEstimator``) has ``step``, any other estimator (the MHE) has no ``step`` at all. Every sample,
+batch or online, means the same to every estimator: masked = NaN = not measured, infinite refused
+naming the item, gaps refused or bridged alike. ``FAST`` lists options that keep an expensive
+estimator quick here; everything else runs on its defaults.
 """
 from __future__ import annotations
 
@@ -24,7 +26,8 @@ import pytest
 from scipy import stats
 
 import casship as cs
-from casship.estimators import ESTIMATORS, EstimatorOptions, FilterResult, NoStepFunction
+from casship.errors import InputError
+from casship.estimators import ESTIMATORS, EstimatorOptions, FilterResult, StepEstimator
 from filter_models import oscillator_case
 
 FAST = {"mhe": {"solver": "rti", "horizon": 5}}
@@ -52,12 +55,18 @@ def test_every_registered_estimator_is_checked(linear):
     assert {"kf", "ekf", "ukf", "enkf", "kalman-bucy", "mhe"} <= set(ESTIMATORS)
     for cls in ESTIMATORS.values():
         assert issubclass(cls, cs.estimators.Estimator) and not cls.__abstractmethods__
-    # the contract itself is abstract: the five verbs are what an estimator must provide
-    assert set(cs.estimators.Estimator.__abstractmethods__) == {"filter", "online", "smooth", "predict", "step"}
+    # the contract itself is abstract: the four verbs (and the options) are what an estimator must provide,
+    # and nothing it promises is refused by one of them
+    assert set(cs.estimators.Estimator.__abstractmethods__) == {"filter", "online", "smooth", "predict"}
     with pytest.raises(TypeError, match="abstract"):
         cs.estimators.Estimator(linear[1], Q, R)
-    # the recursive filters share the step-based template, the MHE keeps the contract by itself
-    assert not issubclass(ESTIMATORS["mhe"], cs.estimators.StepEstimator)
+    assert not hasattr(cs.estimators.Estimator, "step")
+    for verb in ("prepare", "result", "gate_threshold"):        # the step family's, not the contract's
+        assert not hasattr(cs.estimators.Estimator, verb) and hasattr(StepEstimator, verb), verb
+    # the recursive filters share the step-based template, the MHE keeps the contract by itself, with no step
+    assert not issubclass(ESTIMATORS["mhe"], StepEstimator)
+    mhe = make("mhe", linear[1], Q, R)
+    assert not hasattr(mhe, "step") and isinstance(mhe.options, cs.estimators.MHEOptions)
 
 
 # -- constructor, options, step -----------------------------------------------------------------------
@@ -88,9 +97,7 @@ def test_typed_options(name, linear):
 def test_step_has_named_slots_and_matrix_shapes(name, linear):
     m, dm, *_ = linear
     est = make(name, dm, Q, R)
-    if not ESTIMATORS[name].has_step:       # refused, saying why and what to use instead
-        with pytest.raises(NoStepFunction, match=rf"{est.name} has no step Function: .*\.online"):
-            est.step
+    if not isinstance(est, StepEstimator):      # not of the step family: no step at all, nothing refused
         assert not hasattr(est, "step") and not hasattr(est, "step_function")
         return
     step, full = est.step, est.step_function("all")
@@ -202,6 +209,104 @@ def test_batch_equals_online_and_lean_equals_full(name, linear):
         runs[0].update([1.0], 0.1)
     with pytest.raises(ValueError, match="dt must be >= 0"):
         runs[0].update(Y[0], -0.1)
+
+
+# -- masked and infinite samples: the same meaning for every estimator, batch and online ----------------------
+
+def _hidden(data):
+    """Rows 20..29 of y1 and every third row of y2 masked, with a wild value hidden under the mask."""
+    k = np.arange(len(data))
+    masks = {"y1": (k >= 20) & (k < 30), "y2": k % 3 == 1}
+    masked = {n: np.ma.array(np.where(masks[n], 1e3, data[n]), mask=masks[n]) for n in masks}
+    nan = {n: np.where(masks[n], np.nan, data[n]) for n in masks}
+    return masks, masked, nan
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_masked_samples_are_not_measured_in_batch_and_online(name, linear):
+    """Masked = NaN = not measured, whatever the value under the mask (before: the MHE's online run used it)."""
+    m, dm, traj, data, prior = linear
+    data = data.slice(0, 60)
+    masks, masked, nan = _hidden(data)
+    est = make(name, dm, Q, R)
+    by_nan = est.filter(data.with_columns(**nan), prior, seed=2)
+    by_mask = est.filter(cs.Dataset(data.t, {"f": data["f"], **masked}), prior, seed=2)
+    np.testing.assert_array_equal(by_mask.x, by_nan.x)
+    np.testing.assert_array_equal(by_mask.n_measured, by_nan.n_measured)
+    assert (by_nan.n_measured[20:30] == [1, 1, 0, 1, 1, 0, 1, 1, 0, 1]).all()
+    U = data.matrix(["f"])
+    runs = [est.online(prior, seed=2, u=U[0]) for _ in range(2)]
+    for k in range(len(data)):
+        dt = data.t[k] - data.t[k - 1] if k else 0.0
+        hidden = np.ma.array([masked[n].data[k] for n in ("y1", "y2")], mask=[masks[n][k] for n in ("y1", "y2")])
+        xa = runs[0].update(hidden, dt, u_prev=U[max(k - 1, 0)], u=U[k])
+        xb = runs[1].update(np.array([nan["y1"][k], nan["y2"][k]]), dt, u_prev=U[max(k - 1, 0)], u=U[k])
+        np.testing.assert_array_equal(xa, xb)
+        np.testing.assert_allclose(xa, by_nan.x[k], rtol=1e-9, atol=1e-11)
+    with pytest.raises(InputError, match=r"u is masked for \['f'\]; inputs must be given"):
+        runs[0].update([0.1, 0.2], 0.1, u=np.ma.array([0.1], mask=[True]))
+
+
+def test_a_masked_heading_leaves_every_estimator_where_nothing_measured_does():
+    """The defect of the MHE: ``update(np.ma.array([5.0], mask=[True]), dt)`` moved psi on a Nomoto model."""
+    m = cs.models.nomoto_first_order()
+    dm = cs.discretize(m, 0.1)
+    prior = cs.Gaussian(m.states(), [1e-2, 1e-4])
+    for name in NAMES:
+        est = make(name, dm, 1e-6, 1e-4)
+        a, b = est.online(prior, seed=1), est.online(prior, seed=1)
+        xa = a.update(np.ma.array([5.0], mask=[True]), 0.1)
+        xb = b.update(np.array([np.nan]), 0.1)
+        np.testing.assert_array_equal(xa, xb, err_msg=name)
+        assert abs(xa[m.state_names.index("psi")]) < 0.05, name      # the hidden 5 rad pulls it to about -1.3
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_infinite_samples_are_refused_naming_the_item_in_batch_and_online(name, linear):
+    m, dm, traj, data, prior = linear
+    data = data.slice(0, 20)
+    est = make(name, dm, Q, R)
+    y2 = np.where(np.arange(20) == 7, -np.inf, data["y2"])
+    with pytest.raises(InputError, match=r"measurement 'y2' is infinite at row 7 \(NaN means not measured\)"):
+        est.filter(data.with_columns(y2=y2), prior, seed=1)
+    f = np.where(np.arange(20) == 4, np.inf, data["f"])
+    with pytest.raises(InputError, match=r"input 'f' is not finite at row 4"):
+        est.filter(data.with_columns(f=f), prior, seed=1)
+    run = est.online(prior, seed=1, u=[0.0])
+    run.update([0.1, 0.2], 0.0)
+    x, P = run.x, run.P
+    for args, message in ((([0.1, np.inf], 0.1), r"measurement\(s\) \['y2'\] infinite \(NaN means not measured\)"),
+                          (([0.1, 0.2], 0.1, [np.inf]), r"inputs \['f'\] must be finite, got u_prev = \[inf\]"),
+                          (([0.1, 0.2], 0.1, [0.0], [np.nan]), r"inputs \['f'\] must be finite, got u = \[nan\]"),
+                          (([0.1, 0.2], np.inf), r"dt must be >= 0 and finite, got inf")):
+        with pytest.raises(InputError, match=message):
+            run.update(*args)
+        np.testing.assert_array_equal(run.x, x)                   # a refused sample changes nothing
+        np.testing.assert_array_equal(run.P, P)
+    assert run.samples == 1
+    with pytest.raises(InputError, match=r"u must hold 1 value for \['f'\]"):
+        est.online(prior, u=[0.0, 1.0])
+    with pytest.raises(InputError, match=r"inputs \['f'\] must be finite, got u = \[nan\]"):
+        est.online(prior, u=[np.nan])
+
+
+def test_one_sample_check_for_every_engine(linear):
+    """The same bad sample is refused with the same words by every estimator's online run (one check)."""
+    m, dm, traj, data, prior = linear
+    bad = [(([0.1], 0.1), "y"), (([0.1, np.inf], 0.1), "infinite"), (("ab", 0.1), "numbers"),
+           (([[0.1, 0.2]], 0.1), "shape"), (([0.1, 0.2], -1.0), "dt"), (([0.1, 0.2], "0.1"), "dt"),
+           (([0.1, 0.2], 0.1, [np.nan]), "input"), (([0.1, 0.2], 0.1, None, [1.0, 2.0]), "u"),
+           (([0.1, 0.2], 0.1, np.ma.array([0.1], mask=[True])), "masked input")]
+    messages = {}
+    for name in NAMES:
+        run = make(name, dm, Q, R).online(prior, seed=1, u=[0.0])
+        run.update([0.1, 0.2], 0.0)
+        for k, (args, _) in enumerate(bad):
+            with pytest.raises(InputError) as info:
+                run.update(*args)
+            messages.setdefault(k, {})[name] = str(info.value)
+    for k, by_name in messages.items():
+        assert len(set(by_name.values())) == 1, (bad[k][1], by_name)
 
 
 # -- time gaps ------------------------------------------------------------------------------------------------

@@ -83,7 +83,7 @@ def test_online_runner_reproduces_filter():
         np.testing.assert_allclose(run.P, batch.P[k], atol=1e-14)
         assert np.isnan(run.info["e"]).all() == np.isnan(Y[k]).all()
         assert run.info["nis"] == pytest.approx(batch.nis[k], rel=1e-9, abs=1e-12)
-    with pytest.raises(ValueError, match="y must hold 1 values"):
+    with pytest.raises(ValueError, match=r"y must hold 1 value for \['psi'\]"):
         run.update([0.0, 0.0], 0.5)
 
 
@@ -205,8 +205,7 @@ def test_every_accepted_option_is_honoured_or_refused():
 def test_the_mhe_has_no_step_function():
     _, dm, _, data, prior = linear_case(duration=5.0)
     mhe = cs.MHE(dm, Q_LIN, R_LIN, options={"horizon": 4})
-    with pytest.raises(cs.estimators.NoStepFunction, match="MHE has no step Function"):
-        mhe.step
+    assert not hasattr(mhe, "step") and not hasattr(cs.MHE, "step")
     with pytest.raises(TypeError, match="MLEProblem folds a recursive estimator's step"):
         cs.MLEProblem(mhe, data, free=["K"])
     # the EKF that supplies the arrival cost is an estimator of its own, with its step

@@ -1,4 +1,4 @@
-"""The seed-paper tutorials in docs/ run as written, and their numbers say what the text says."""
+"""The tutorials that reproduce published papers in docs/ run as written, and their numbers say what the text says."""
 from __future__ import annotations
 
 import re

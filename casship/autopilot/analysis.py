@@ -21,6 +21,7 @@ from ..linear import linearize
 from .law import Actuator, PIDGains
 from .plants import SteeringPlant
 from .reference import ReferenceModel
+from ..errors import InputError
 
 __all__ = ["course_linearization", "loop_systems", "loop_transfer", "closed_loop_tf", "margins",
            "course_change_demand"]
@@ -52,7 +53,7 @@ def course_linearization(plant: SteeringPlant, x0=None) -> control.StateSpace:
     ix, iy = m.index(plant.north), m.index(plant.east)
     U2 = xd[ix] ** 2 + xd[iy] ** 2
     if U2 <= 0:
-        raise ValueError(f"the course over ground is undefined at zero speed ({m.name!r} at rest)")
+        raise InputError(f"the course over ground is undefined at zero speed ({m.name!r} at rest)")
     js = m.index(plant.steer, "input")
     c_chi = (xd[ix] * A[iy] - xd[iy] * A[ix]) / U2
     d_chi = (xd[ix] * B[iy, js] - xd[iy] * B[ix, js]) / U2
@@ -116,7 +117,7 @@ def loop_systems(plant_sys: control.StateSpace, gains: PIDGains, actuator: Actua
     """
     steer = plant_sys.input_labels[0]
     if controlled not in plant_sys.output_labels or "r" not in plant_sys.output_labels:
-        raise ValueError(f"plant outputs {plant_sys.output_labels} lack {controlled!r} or 'r'")
+        raise InputError(f"plant outputs {plant_sys.output_labels} lack {controlled!r} or 'r'")
     ctrl = gains.controller(steer=steer, name="autopilot")
     if filter_T > 0:
         lp = control.ss(control.tf([1.0], [filter_T, 1.0]), inputs=[f"{steer}_raw"], outputs=[f"{steer}_c"],
@@ -152,7 +153,7 @@ def loop_systems(plant_sys: control.StateSpace, gains: PIDGains, actuator: Actua
                 fb.append([f"estimator.{sig}", f"ship.{sig}"])
                 used.add(sig)
             else:
-                raise ValueError(f"estimator input {sig!r} is neither a plant output, the steering, nor 'y_n'")
+                raise InputError(f"estimator input {sig!r} is neither a plant output, the steering, nor 'y_n'")
     unused = [o for o in plant.output_labels if o not in used]
     opened = control.interconnect(
         systems, connections=fb, inplist=[f"steering_gear.{steer}_c"], inputs=["u"],

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..angles import wrap
 from ..data import Dataset, check_rows
-from ..errors import DivergenceError
+from ..errors import DivergenceError, InputError, InputTypeError
 from .components import DRAWS, MASKS, Layout, LoopEstimator, Sensors
 from .estimation import WaveYaw
 from .law import Actuator, Autopilot
@@ -77,20 +77,20 @@ class ClosedLoop:
                  mode: str = "course", rate: str = "gyro", estimator="truth", sensors: Sensors | None = None,
                  wave: WaveYaw | None = None, guidance=None):
         if mode not in ("course", "heading"):
-            raise ValueError(f"mode must be 'course' or 'heading', got {mode!r}")
+            raise InputError(f"mode must be 'course' or 'heading', got {mode!r}")
         if rate not in ("estimator", "gyro"):
-            raise ValueError(f"rate must be 'estimator' or 'gyro', got {rate!r}")
+            raise InputError(f"rate must be 'estimator' or 'gyro', got {rate!r}")
         if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be positive, got {dt}")
+            raise InputError(f"dt must be positive, got {dt}")
         if isinstance(estimator, str):
             if estimator not in ("truth", "raw"):
-                raise ValueError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {estimator!r}")
+                raise InputError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {estimator!r}")
             if estimator == "raw" and mode != "heading":
-                raise ValueError("estimator 'raw' (compass and gyro as read) is for heading mode")
+                raise InputError("estimator 'raw' (compass and gyro as read) is for heading mode")
         elif not isinstance(estimator, LoopEstimator):
-            raise TypeError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {type(estimator).__name__}")
+            raise InputTypeError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {type(estimator).__name__}")
         elif (estimator.kind == "course") != (mode == "course") and guidance is None:
-            raise ValueError(f"a {estimator.kind} estimator cannot feed a {mode} autopilot")
+            raise InputError(f"a {estimator.kind} estimator cannot feed a {mode} autopilot")
         self.plant, self.autopilot, self.actuator = plant, autopilot, actuator
         self.dt, self.mode, self.rate = float(dt), mode, rate
         self.estimator, self.sensors, self.wave, self.guidance = estimator, sensors or Sensors(), wave, guidance
@@ -343,7 +343,7 @@ class ClosedLoop:
         else:
             refs = np.broadcast_to(np.asarray(command, float), t.shape).copy()
         if not np.all(np.isfinite(refs)):
-            raise ValueError("the course command must be finite")
+            raise InputError("the course command must be finite")
         dt_est = np.full(n, self.dt)
         dt_est[0] = 0.0
         return t, refs, self.draws(n, seed), self.schedule(n), dt_est

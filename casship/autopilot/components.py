@@ -12,6 +12,7 @@ import numpy as np
 from ..data import Dataset
 
 from ..gaussian import Gaussian
+from ..errors import InputError, InputTypeError
 
 __all__ = ["Sensors", "LoopEstimator", "ClosedLoopResult", "DRAWS", "MASKS", "Layout"]
 
@@ -44,11 +45,11 @@ class Sensors:
     def __post_init__(self):
         for name in ("gnss_rate", "compass_rate"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"sensor {name} must be positive, got {getattr(self, name)}")
+                raise InputError(f"sensor {name} must be positive, got {getattr(self, name)}")
         for name in ("gnss_std", "compass_std", "gyro_std"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
-                raise ValueError(f"sensor {name} must be >= 0, got {v}")
+                raise InputError(f"sensor {name} must be >= 0, got {v}")
 
 
 @dataclass(frozen=True)
@@ -70,11 +71,16 @@ class LoopEstimator:
     kind: str = "course"
 
     def __post_init__(self):
+        from ..estimators.base import StepEstimator
+
+        if not isinstance(self.est, StepEstimator):   # the loop folds the estimator's step Function
+            raise InputTypeError(f"the loop runs an estimator's step Function: give a KF, EKF, UKF, EnKF or KalmanBucy, "
+                                 f"got {type(self.est).__name__}")
         if self.kind not in ("course", "heading"):
-            raise ValueError(f"estimator kind must be 'course' or 'heading', got {self.kind!r}")
+            raise InputError(f"estimator kind must be 'course' or 'heading', got {self.kind!r}")
         want = ("x_n", "y_n") if self.kind == "course" else ("psi_m", "r_m")
         if tuple(self.est.measured) != want:
-            raise ValueError(f"a {self.kind} estimator must measure {list(want)}, this one measures "
+            raise InputError(f"a {self.kind} estimator must measure {list(want)}, this one measures "
                              f"{list(self.est.measured)}")
 
     @property

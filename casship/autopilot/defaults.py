@@ -30,6 +30,7 @@ from .law import Actuator
 from .nomoto import Nomoto
 from .plants import SteeringPlant, steering_feedforward, twin_propeller_yaw_limit
 from .reference import ReferenceModel
+from ..errors import InputError
 
 __all__ = ["AutopilotSettings", "RULES", "derive_settings", "STANDARD_CHANGE_DEG", "WaveBudgetWarning"]
 
@@ -163,7 +164,7 @@ def _check_given(given: Mapping) -> dict:
     names = {f.name for f in fields(AutopilotSettings)} - {"sources"}
     unknown = sorted(set(given) - names)
     if unknown:
-        raise ValueError(f"unknown autopilot setting(s) {unknown}; known: {sorted(names)}")
+        raise InputError(f"unknown autopilot setting(s) {unknown}; known: {sorted(names)}")
     given = {k: v for k, v in given.items() if v is not None}
     for k, v in given.items():
         unit = RULES.get(k, ("", ""))[0]
@@ -175,7 +176,7 @@ def _check_given(given: Mapping) -> dict:
         if not np.all(finite) or low:
             need = ">= 0" if k in _NON_NEGATIVE else "positive"
             what = "finite (or inf: no limit)" if k in _UNBOUNDED else "finite"
-            raise ValueError(f"autopilot setting {k} = {v} [{unit}] must be {what} and {need}")
+            raise InputError(f"autopilot setting {k} = {v} [{unit}] must be {what} and {need}")
     return given
 
 
@@ -231,7 +232,7 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     given = dict(given or {})
     if isinstance(given.get("wave_filter"), str):
         if given["wave_filter"] not in ("on", "off"):
-            raise ValueError(f"autopilot setting wave_filter must be 'on' or 'off', got {given['wave_filter']!r}")
+            raise InputError(f"autopilot setting wave_filter must be 'on' or 'off', got {given['wave_filter']!r}")
         given["wave_filter"] = given["wave_filter"] == "on"
     g = _check_given(given)
     src = {k: "given" for k in g}
@@ -250,11 +251,11 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     speed = rule("speed", lambda: float(np.hypot(x0[m.index("u")], x0[m.index("v")]) if "u" in m.state_names
                                         else _vessel(plant, "U0")))
     if L is None and not ({"wn", "r_max", "dt", "segment"} <= set(val)):
-        raise ValueError(f"model {m.name!r} has no vessel length L_pp: give wn, r_max, dt and segment")
+        raise InputError(f"model {m.name!r} has no vessel length L_pp: give wn, r_max, dt and segment")
     LU = float(L) / speed if L is not None else None
     method = rule("method", lambda: "pid")
     if method not in ("pid", "lqr"):
-        raise ValueError(f"method must be 'pid' or 'lqr', got {method!r}")
+        raise InputError(f"method must be 'pid' or 'lqr', got {method!r}")
     mode = rule("mode", lambda: "heading")
     rule("rate", lambda: "gyro" if mode == "course" and nom.T < 0 else "estimator")
     zeta = rule("zeta", lambda: 1.0)
@@ -264,7 +265,7 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     rule("zeta_ref", lambda: 1.0)
     feedforward = rule("feedforward", lambda: "nonlinear")
     if feedforward not in ("nonlinear", "linear"):
-        raise ValueError(f"feedforward must be 'nonlinear' or 'linear', got {feedforward!r}")
+        raise InputError(f"feedforward must be 'nonlinear' or 'linear', got {feedforward!r}")
     if twin:
         t_n = float(plant.model.param_dict(plant.pvec).get("T_n", 0.1))
         steer_max = rule("steer_max", lambda: twin_propeller_yaw_limit(plant.model, plant.inputs["tau_X"], plant.pvec))
@@ -280,11 +281,9 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
 
         v = val["steer_max"]
         shown = f"{v:g} N m" if twin else f"{v:g} rad ({np.degrees(v):.4g} deg)"
-        raise ValueError(f"autopilot setting steer_max = {shown} is beyond the valid range "
+        raise InputError(f"autopilot setting steer_max = {shown} is beyond the valid range "
                          f"{describe_limit(m, plant.steer)} of {plant.steer!r} of model {m.name!r}")
     if LU is not None and np.isfinite(val["steer_max"]) and val["steer_max"] / val["steer_rate_max"] > 10 * LU:
-        from ..errors import InputError
-
         unit = "N m/s" if twin else "rad/s"
         raise InputError(f"autopilot setting steer_rate_max = {val['steer_rate_max']:g} {unit}: the steering gear would "
                          f"take {val['steer_max'] / val['steer_rate_max']:.3g} s from zero to its limit "
@@ -306,7 +305,7 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         val["feedforward"] = feedforward = "linear"
         src["feedforward"] = "'linear' (the model has no sway state for the steady turns)"
     if feedforward == "nonlinear" and steering is None:
-        raise ValueError(f"model {m.name!r} has no sway/surge states for the nonlinear feed-forward; use "
+        raise InputError(f"model {m.name!r} has no sway/surge states for the nonlinear feed-forward; use "
                          "feedforward='linear'")
     rule("filter_T", lambda: 0.0)
     rule("wave_w0", lambda: 0.0)
@@ -315,12 +314,12 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     val["wave_filter"] = bool(val["wave_filter"])
     wave = settings_wave(SimpleNamespace(**val))
     if (val["wave_w0"] > 0) != (val["wave_std"] > 0):
-        raise ValueError(f"autopilot settings wave_w0 = {val['wave_w0']:g} rad/s and wave_std = {val['wave_std']:g} rad "
+        raise InputError(f"autopilot settings wave_w0 = {val['wave_w0']:g} rad/s and wave_std = {val['wave_std']:g} rad "
                          "are given together (both positive: a sea state) or not at all")
     if val["wave_filter"] and wave is None:
-        raise ValueError("autopilot setting wave_filter needs the sea state: give wave_w0 and wave_std")
+        raise InputError("autopilot setting wave_filter needs the sea state: give wave_w0 and wave_std")
     if val["wave_filter"] and mode == "course":
-        raise ValueError("autopilot setting wave_filter is the heading observer's; mode 'course' has none")
+        raise InputError("autopilot setting wave_filter is the heading observer's; mode 'course' has none")
     rule("dt", lambda: _loop_period(LU, val["actuator_T"]))
     rule("gnss_rate", lambda: 5.0)
     rule("gnss_std", lambda: min(0.5, float(L) / 100.0) if L is not None else 0.5)
@@ -408,7 +407,7 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
             budget_wave[0] = None
             wn, best = search()
         if wn is None:
-            raise ValueError(f"no bandwidth below U/L = {1 / LU:.3g} rad/s stabilises {m.name!r} within the "
+            raise InputError(f"no bandwidth below U/L = {1 / LU:.3g} rad/s stabilises {m.name!r} within the "
                              "steering-noise budget; give wn")
         if best is not None:
             warnings.warn(f"{m.name}: no bandwidth below U/L gives PM >= {_PM_MIN} deg and GM >= {_GM_MIN} dB with "

@@ -16,6 +16,7 @@ import numpy as np
 
 from .law import PIDGains
 from .nomoto import Nomoto, nomoto_from_linear
+from ..errors import InputError, InputTypeError
 
 __all__ = ["as_nomoto", "pid_pole_placement", "lqr_design", "LQG", "lqg_design"]
 
@@ -33,12 +34,12 @@ def as_nomoto(target, *, steer: str = "delta") -> Nomoto:
         return target
     if isinstance(target, control.StateSpace):
         return nomoto_from_linear(target, steer=steer)
-    raise TypeError(f"expected a Nomoto model or a labelled control.StateSpace, got {type(target).__name__}")
+    raise InputTypeError(f"expected a Nomoto model or a labelled control.StateSpace, got {type(target).__name__}")
 
 
 def _positive(name, value):
     if not (np.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be positive, got {value}")
+        raise InputError(f"{name} must be positive, got {value}")
 
 
 def pid_pole_placement(target, wn: float, zeta: float = 1.0, *, integral: str | None = "fossen",
@@ -82,7 +83,7 @@ def pid_pole_placement(target, wn: float, zeta: float = 1.0, *, integral: str | 
     nom = as_nomoto(target, steer=steer)
     m, d = nom.m, nom.d
     if not m > 0:
-        raise ValueError(f"the Nomoto model has m = T/K = {m:.4g} <= 0 (K and T of opposite signs): no pole "
+        raise InputError(f"the Nomoto model has m = T/K = {m:.4g} <= 0 (K and T of opposite signs): no pole "
                          "placement on it makes the gains positive; check the steering sign")
     pd_poles = tuple(np.roots([1, 2 * zeta * wn, wn**2]))
     if integral is None:
@@ -96,7 +97,7 @@ def pid_pole_placement(target, wn: float, zeta: float = 1.0, *, integral: str | 
         Kp, Kd, Ki = m * (wn**2 + 2 * zeta * wn * wi), m * (2 * zeta * wn + wi) - d, m * wn**2 * wi
         method, poles = "pid-pole-placement-exact", pd_poles + (-wi,)
     else:
-        raise ValueError(f"integral must be 'fossen', 'exact' or None, got {integral!r}")
+        raise InputError(f"integral must be 'fossen', 'exact' or None, got {integral!r}")
     if Kd < 0:
         # the ship damps itself more than the placed poles ask: a negative derivative gain would take
         # damping away (and feed the rate noise back); keep Kd = 0, the loop then better damped
@@ -140,7 +141,7 @@ def lqr_design(target, *, q_int: float, q_e: float, q_r: float = 0.0, r_delta: f
     """
     for name, v in (("q_int", q_int), ("q_e", q_e), ("q_r", q_r)):
         if not (np.isfinite(v) and v >= 0):
-            raise ValueError(f"{name} must be >= 0, got {v}")
+            raise InputError(f"{name} must be >= 0, got {v}")
     _positive("r_delta", r_delta)
     nom = as_nomoto(target, steer=steer)
     aug = _integral_augmented(nom, steer)

@@ -22,6 +22,7 @@ from ..gaussian import Gaussian
 from ..discretize import discretize
 from ..builder import ModelBuilder
 from ..model import Model
+from ..errors import InputError
 
 __all__ = ["WaveYaw", "course_ekf", "course_prior", "heading_observer", "heading_kf", "heading_prior"]
 
@@ -56,9 +57,9 @@ class WaveYaw:
         for name in ("w0", "lam"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"wave {name} must be positive, got {v}")
+                raise InputError(f"wave {name} must be positive, got {v}")
         if not (np.isfinite(self.sigma) and self.sigma >= 0):
-            raise ValueError(f"wave sigma must be >= 0, got {self.sigma}")
+            raise InputError(f"wave sigma must be >= 0, got {self.sigma}")
 
     @property
     def K(self) -> float:

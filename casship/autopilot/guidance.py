@@ -28,6 +28,7 @@ import numpy as np
 
 from ..angles import wrap_sym
 from ..data import Dataset
+from ..errors import InputError
 
 __all__ = ["Waypoints", "LOSGuidance", "cross_track_metrics", "track_deviation"]
 
@@ -55,12 +56,12 @@ class Waypoints:
         n = np.asarray(self.north, dtype=float).reshape(-1)
         e = np.asarray(self.east, dtype=float).reshape(-1)
         if n.size != e.size or n.size < 2:
-            raise ValueError(f"waypoints need at least two North/East pairs of equal length, got {n.size} and {e.size}")
+            raise InputError(f"waypoints need at least two North/East pairs of equal length, got {n.size} and {e.size}")
         if not (np.all(np.isfinite(n)) and np.all(np.isfinite(e))):
-            raise ValueError("waypoint coordinates must be finite")
+            raise InputError("waypoint coordinates must be finite")
         lengths = np.hypot(np.diff(n), np.diff(e))
         if np.any(lengths <= 0):
-            raise ValueError(f"waypoint {int(np.argmin(lengths)) + 1} repeats the one before it")
+            raise InputError(f"waypoint {int(np.argmin(lengths)) + 1} repeats the one before it")
         object.__setattr__(self, "north", tuple(map(float, n)))
         object.__setattr__(self, "east", tuple(map(float, e)))
 
@@ -183,26 +184,26 @@ class LOSGuidance:
         for name in ("lookahead", "acceptance"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"LOS {name} must be positive, got {v}")
+                raise InputError(f"LOS {name} must be positive, got {v}")
         if not (np.isfinite(self.kappa) and self.kappa >= 0):
-            raise ValueError(f"ILOS kappa must be >= 0, got {self.kappa}")
+            raise InputError(f"ILOS kappa must be >= 0, got {self.kappa}")
         if self.integrate_within is not None and not (np.isfinite(self.integrate_within) and self.integrate_within > 0):
-            raise ValueError(f"ILOS integrate_within must be positive, got {self.integrate_within}")
+            raise InputError(f"ILOS integrate_within must be positive, got {self.integrate_within}")
         if self.at_switch not in ("keep", "reset", "project"):
-            raise ValueError(f"ILOS at_switch must be 'keep', 'reset' or 'project', got {self.at_switch!r}")
+            raise InputError(f"ILOS at_switch must be 'keep', 'reset' or 'project', got {self.at_switch!r}")
         if self.turn_radius is not None and not (np.isfinite(self.turn_radius) and self.turn_radius > 0):
-            raise ValueError(f"turn_radius must be positive, got {self.turn_radius}")
+            raise InputError(f"turn_radius must be positive, got {self.turn_radius}")
         if self.turn_radius is not None:
             turns = np.abs(np.angle(np.exp(1j * np.diff(self.waypoints.angles))))
             if np.any(turns > np.radians(170.0)):
-                raise ValueError(f"turns of more than 170 deg at waypoint(s) "
+                raise InputError(f"turns of more than 170 deg at waypoint(s) "
                                  f"{[int(k) + 1 for k in np.flatnonzero(turns > np.radians(170.0))]}: no wheel-over "
                                  "point for them; give turn_radius=None")
             d, lengths = self.wheel_over(), self.waypoints.lengths
             short = [k for k in range(len(d)) if d[k] >= lengths[k] or (k + 1 < len(d) and d[k] + d[k + 1]
                                                                           >= lengths[k + 1])]
             if short:
-                raise ValueError(f"leg(s) {[k + 1 for k in short]} are too short for turns of radius "
+                raise InputError(f"leg(s) {[k + 1 for k in short]} are too short for turns of radius "
                                  f"{self.turn_radius:.4g} m (wheel-over distances {np.round(d, 1).tolist()} m)")
 
     def wheel_over(self) -> np.ndarray:
@@ -422,7 +423,7 @@ def cross_track_metrics(data: Dataset, *, start: float = 0.0, end: float | None 
     """
     sel = (data.t >= start) & (data.t <= (data.t[-1] if end is None else end))
     if sel.sum() < 3:
-        raise ValueError(f"fewer than 3 samples between t = {start:g} s and {end} s")
+        raise InputError(f"fewer than 3 samples between t = {start:g} s and {end} s")
     y = data["cross_track"][sel]
     return {"cross_track_rms_m": float(np.sqrt(np.mean(y**2))), "cross_track_max_m": float(np.max(np.abs(y))),
             "cross_track_mean_m": float(np.mean(y)), "cross_track_final_m": float(y[-1])}

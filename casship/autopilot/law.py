@@ -18,6 +18,7 @@ import numpy as np
 
 from ..angles import wrap_sym
 from .reference import ReferenceModel
+from ..errors import InputError
 
 __all__ = ["PIDGains", "Autopilot", "Actuator"]
 
@@ -58,9 +59,9 @@ class PIDGains:
         for name in ("Kp", "Kd", "Ki", "m", "d"):
             v = getattr(self, name)
             if not np.isfinite(v):
-                raise ValueError(f"gain {name} must be finite, got {v}")
+                raise InputError(f"gain {name} must be finite, got {v}")
         if np.isfinite(self.T3) and not self.T3 > 0:
-            raise ValueError(f"T3 must be positive, got {self.T3}")
+            raise InputError(f"T3 must be positive, got {self.T3}")
 
     def controller(self, *, steer: str = "delta", feedforward: bool = True, name: str = "autopilot"):
         """The linear control law as a labelled :class:`control.StateSpace`.
@@ -131,9 +132,9 @@ class Autopilot:
 
     def __post_init__(self):
         if not self.steer_max > 0:
-            raise ValueError(f"steer_max must be positive, got {self.steer_max}")
+            raise InputError(f"steer_max must be positive, got {self.steer_max}")
         if not (np.isfinite(self.filter_T) and self.filter_T >= 0):
-            raise ValueError(f"filter_T must be >= 0, got {self.filter_T}")
+            raise InputError(f"filter_T must be >= 0, got {self.filter_T}")
 
     def memory0(self, chi0: float = 0.0) -> np.ndarray:
         """Initial memory: reference model at rest at ``chi0``, no integral, no command.
@@ -289,9 +290,9 @@ class Actuator:
 
     def __post_init__(self):
         if not self.steer_max > 0 or not self.rate_max > 0:
-            raise ValueError(f"steer_max and rate_max must be positive, got {self.steer_max}, {self.rate_max}")
+            raise InputError(f"steer_max and rate_max must be positive, got {self.steer_max}, {self.rate_max}")
         if not (np.isfinite(self.T) and self.T >= 0):
-            raise ValueError(f"actuator time constant T must be >= 0, got {self.T}")
+            raise InputError(f"actuator time constant T must be >= 0, got {self.T}")
 
     def symbolic_step(self, steer, command, dt) -> dict:
         """``{"steer": next steering, "rate_limited": 1 where the rate limit is active}``.

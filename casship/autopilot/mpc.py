@@ -32,6 +32,7 @@ from scipy.linalg import expm
 from ..angles import wrap
 from .nomoto import Nomoto
 from .reference import ReferenceModel
+from ..errors import InputError
 
 __all__ = ["MPCAutopilot", "MPCLaw", "mpc_for_design"]
 
@@ -79,11 +80,11 @@ class MPCAutopilot:
         for name in ("period", "steer_max", "rate_max", "r_max", "q_e", "r_u"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"MPC {name} must be positive and finite, got {v}")
+                raise InputError(f"MPC {name} must be positive and finite, got {v}")
         if self.replan is not None and not (np.isfinite(self.replan) and 0 < self.replan <= self.period):
-            raise ValueError(f"MPC replan must be in (0, period], got {self.replan}")
+            raise InputError(f"MPC replan must be in (0, period], got {self.replan}")
         if int(self.horizon) != self.horizon or self.horizon < 2:
-            raise ValueError(f"MPC horizon must be an integer >= 2, got {self.horizon}")
+            raise InputError(f"MPC horizon must be an integer >= 2, got {self.horizon}")
         self._solver = self._build()
 
     @property
@@ -301,7 +302,7 @@ class MPCLaw:
 
     def __init__(self, mpc: "MPCAutopilot", dt: float):
         if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be positive, got {dt}")
+            raise InputError(f"dt must be positive, got {dt}")
         self.mpc, self.dt = mpc, float(dt)
         self.every = max(1, int(round((mpc.replan or mpc.period) / dt)))
         N = int(mpc.horizon)
@@ -382,8 +383,6 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     """
     s = design.settings
     if s.mode == "course":
-        from ..errors import InputError
-
         raise InputError("the MPC is for heading control (mode 'heading'): its prediction model is the Nomoto "
                          "heading model, and the course over ground adds the drift angle of a turn, which it does "
                          "not predict (in course mode the KVLCC2's 60 deg change overshot 22-27 % and did not "

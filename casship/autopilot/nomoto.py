@@ -20,6 +20,7 @@ from ..gaussian import Gaussian
 from ..discretize import discretize
 from ..linear import linearize
 from ..model import Model
+from ..errors import InputError, InputTypeError
 
 __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto"]
 
@@ -61,7 +62,7 @@ class Nomoto:
         for name in ("K", "T"):
             v = getattr(self, name)
             if not np.isfinite(v) or v == 0:
-                raise ValueError(f"Nomoto {name} must be finite and non-zero, got {v}")
+                raise InputError(f"Nomoto {name} must be finite and non-zero, got {v}")
 
     @property
     def m(self) -> float:
@@ -88,11 +89,11 @@ class Nomoto:
         """
         if order == 2:
             if not self.second_order:
-                raise ValueError("this Nomoto model has no second-order time constants")
+                raise InputError("this Nomoto model has no second-order time constants")
             return control.tf([self.K * self.T3, self.K], np.polymul([self.T1, 1], [self.T2, 1]),
                               inputs="delta", outputs="r")
         if order != 1:
-            raise ValueError(f"order must be 1 or 2, got {order}")
+            raise InputError(f"order must be 1 or 2, got {order}")
         return control.tf([self.K], [self.T, 1], inputs="delta", outputs="r")
 
     def system(self, order: int = 1, *, steer: str = "delta", name: str = "nomoto") -> control.StateSpace:
@@ -114,7 +115,7 @@ class Nomoto:
             states = ["psi", "r"]
         else:
             if not self.second_order:
-                raise ValueError("this Nomoto model has no second-order time constants")
+                raise InputError("this Nomoto model has no second-order time constants")
             T1, T2, T3 = self.T1, self.T2, self.T3
             # observer form of r/delta (as casship.models.nomoto_second_order)
             A = np.array([[0.0, 1.0, 0.0], [0.0, -(T1 + T2) / (T1 * T2), 1.0], [0.0, -1.0 / (T1 * T2), 0.0]])
@@ -160,23 +161,23 @@ def nomoto_from_linear(sys: control.StateSpace, *, steer: str = "delta", yaw_rat
         rudder actuator state: linearise with the actual rudder angle as input), or a zero gain.
     """
     if not isinstance(sys, control.StateSpace):
-        raise TypeError(f"nomoto_from_linear needs a control.StateSpace, got {type(sys).__name__}")
+        raise InputTypeError(f"nomoto_from_linear needs a control.StateSpace, got {type(sys).__name__}")
     if steer not in sys.input_labels:
-        raise ValueError(f"the linearisation has no input {steer!r}; inputs: {sys.input_labels}")
+        raise InputError(f"the linearisation has no input {steer!r}; inputs: {sys.input_labels}")
     if yaw_rate not in sys.output_labels:
-        raise ValueError(f"the linearisation has no output {yaw_rate!r}; outputs: {sys.output_labels} "
+        raise InputError(f"the linearisation has no output {yaw_rate!r}; outputs: {sys.output_labels} "
                          f"(linearise with outputs=[{yaw_rate!r}, ...])")
     siso = sys[sys.output_labels.index(yaw_rate), sys.input_labels.index(steer)]
     tf = control.minreal(control.ss2tf(siso), tol=tol, verbose=False)
     num, den = np.ravel(tf.num[0][0]), np.ravel(tf.den[0][0])
     if not np.any(np.abs(num) > 0):
-        raise ValueError(f"{steer!r} does not move {yaw_rate!r} at this operating point")
+        raise InputError(f"{steer!r} does not move {yaw_rate!r} at this operating point")
     poles, zeros = np.real_if_close(tf.poles()), np.real_if_close(tf.zeros())
     K = float(num[-1] / den[-1]) if den[-1] != 0 else float("nan")
     source = f"linearisation of {sys.name}"
     if not (np.isfinite(K) and K != 0):
         # e.g. a ship at (nearly) zero speed: no hydrodynamic damping of the yaw rate, no steady turn rate
-        raise ValueError(f"the {steer!r} -> {yaw_rate!r} response of {sys.name!r} has no finite steady gain "
+        raise InputError(f"the {steer!r} -> {yaw_rate!r} response of {sys.name!r} has no finite steady gain "
                          f"(K = {K:.4g}: the yaw rate is not damped at this operating point, e.g. a speed "
                          "near zero); no Nomoto model there")
     if poles.size == 1:
@@ -189,7 +190,7 @@ def nomoto_from_linear(sys: control.StateSpace, *, steer: str = "delta", yaw_rat
         a1, a0 = den[-2] / den[-3], den[-1] / den[-3]
         T3 = float(num[-2] / num[-1]) if num.size > 1 else 0.0
         return Nomoto(K=K, T=float(a1 / a0) - T3, T3=T3, source=source + " (complex poles)")
-    raise ValueError(f"the reduced {steer!r} -> {yaw_rate!r} transfer function of {sys.name!r} has poles "
+    raise InputError(f"the reduced {steer!r} -> {yaw_rate!r} transfer function of {sys.name!r} has poles "
                      f"{np.round(poles, 6).tolist()} and zeros {np.round(zeros, 6).tolist()}; a Nomoto model "
                      "needs one pole, or two poles and at most one zero")
 
@@ -251,12 +252,12 @@ def fit_nomoto(data: Dataset | Sequence[Dataset], *, steer: str = "delta", headi
 
     records = [data] if isinstance(data, Dataset) else list(data)
     if not records:
-        raise ValueError("fit_nomoto needs at least one record")
+        raise InputError("fit_nomoto needs at least one record")
     renamed = []
     for rec in records:
         for col in (steer, heading):
             if col not in rec:
-                raise ValueError(f"record has no column {col!r}; columns: {list(rec.names)}")
+                raise InputError(f"record has no column {col!r}; columns: {list(rec.names)}")
         renamed.append(Dataset(rec.t, {"delta": rec[steer], "psi": rec[heading]}))
     g = guess or Nomoto(K=0.1, T=50.0)
     model = nomoto_first_order(K=g.K, T=g.T, rudder_bias=bias)

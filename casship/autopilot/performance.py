@@ -37,6 +37,7 @@ import numpy as np
 
 from ..angles import wrap
 from ..data import Dataset
+from ..errors import InputError
 
 __all__ = ["step_metrics", "course_change_metrics", "course_keeping_metrics", "performance_report", "CRITERIA",
            "course_scenario"]
@@ -97,7 +98,7 @@ def step_metrics(t, y, target: float, steer=None, *, band: float = 0.02, abs_ban
     t = np.asarray(t, dtype=float)
     y = np.asarray(y, dtype=float)
     if t.size < 3:
-        raise ValueError("step_metrics needs at least 3 samples")
+        raise InputError("step_metrics needs at least 3 samples")
     y = y[0] + np.unwrap(wrap(y - y[0]))          # continuous around the start value
     change = float(wrap(target - y[0]))
     goal = y[0] + change
@@ -154,7 +155,7 @@ def course_change_metrics(data: Dataset, step_times: Sequence[float], *, control
     for t0, t1 in zip(bounds[:-1], bounds[1:]):
         sel = (t >= t0) & (t < t1)
         if sel.sum() < 3:
-            raise ValueError(f"command segment [{t0:g}, {t1:g}) s has fewer than 3 samples")
+            raise InputError(f"command segment [{t0:g}, {t1:g}) s has fewer than 3 samples")
         target = float(data["ref"][sel][-1])
         mt = step_metrics(t[sel], y[sel], target, data["steer"][sel], abs_band=settle_band)
         if "rate_limited" in data:
@@ -182,7 +183,7 @@ def course_keeping_metrics(data: Dataset, *, controlled: str = "chi", start: flo
     t = data.t
     sel = t >= start
     if sel.sum() < 3:
-        raise ValueError(f"fewer than 3 samples after t = {start:g} s")
+        raise InputError(f"fewer than 3 samples after t = {start:g} s")
     err = wrap(data[controlled][sel] - data["ref"][sel])
     s = data["steer"][sel]
     rate = np.diff(s) / np.diff(t[sel])
@@ -280,20 +281,20 @@ def course_scenario(name: str, t_end: float | None = None, *, segment: float | N
         kind, angle = name.rsplit("-", 1)
         a = float(np.radians(float(angle)))
     except ValueError:
-        raise ValueError(f"unknown scenario {name!r}; use course-A, step-A (A in degrees) or rot-R (R in "
+        raise InputError(f"unknown scenario {name!r}; use course-A, step-A (A in degrees) or rot-R (R in "
                          "deg/min)") from None
     if kind not in ("course", "step", "rot"):
-        raise ValueError(f"unknown scenario {name!r}; use course-A, step-A (A in degrees) or rot-R (R in deg/min)")
+        raise InputError(f"unknown scenario {name!r}; use course-A, step-A (A in degrees) or rot-R (R in deg/min)")
     if kind != "rot" and not (np.isfinite(a) and 0 < abs(a) <= np.pi):
-        raise ValueError(f"scenario {name!r}: the course change {angle} deg must be non-zero and within +-180 deg "
+        raise InputError(f"scenario {name!r}: the course change {angle} deg must be non-zero and within +-180 deg "
                          "(a course is an angle: a larger change wraps to a smaller one)")
     if kind == "rot" and not (np.isfinite(a) and a != 0):
-        raise ValueError(f"scenario {name!r}: the rate of turn {angle} deg/min must be non-zero and finite")
+        raise InputError(f"scenario {name!r}: the rate of turn {angle} deg/min must be non-zero and finite")
     if t_end is None:
         t_end = (2 * segment if kind in ("course", "rot") else segment) if segment is not None else 40.0
     t_end = float(t_end)
     if not t_end > 0:
-        raise ValueError(f"t_end must be positive, got {t_end}")
+        raise InputError(f"t_end must be positive, got {t_end}")
     if kind == "rot":
         rate, stop = a / 60.0, t_end / 2
         return (lambda t: float(np.angle(np.exp(1j * rate * min(t, stop))))), t_end, [0.0, stop]

@@ -19,6 +19,7 @@ from ..discretize import discretize
 from ..linear import trim
 from ..builder import ModelBuilder
 from ..model import Model
+from ..errors import InputError
 
 __all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation", "SteeringFeedforward",
            "steering_feedforward", "piecewise_linear", "speed_profile",
@@ -62,10 +63,10 @@ class SteeringPlant:
             m.index(n)
         unknown = set(self.inputs) - set(m.input_names)
         if unknown:
-            raise ValueError(f"unknown input(s) {sorted(unknown)} of {m.name!r}; inputs: {list(m.input_names)}")
+            raise InputError(f"unknown input(s) {sorted(unknown)} of {m.name!r}; inputs: {list(m.input_names)}")
         missing = [n for n in m.input_names if n != self.steer and n not in self.inputs]
         if missing:
-            raise ValueError(f"give values for the input(s) {missing} of {m.name!r}")
+            raise InputError(f"give values for the input(s) {missing} of {m.name!r}")
         object.__setattr__(self, "inputs", {k: float(v) for k, v in self.inputs.items()})
         object.__setattr__(self, "pvec", m.params(self.p) if self.p is not None else m.params())
         if self.x0 is not None:
@@ -177,7 +178,7 @@ def steering_model(model: Model, new_inputs: Sequence[str], allocation: Callable
     replaced = set(mapping)
     unknown = [n for n in mapping if n not in model.input_names]
     if unknown:
-        raise ValueError(f"allocation gives input(s) {unknown} that {model.name!r} does not have")
+        raise InputError(f"allocation gives input(s) {unknown} that {model.name!r} does not have")
     for v in model.input_vars:
         if v.name not in mapping:
             mapping[v.name] = b.input(v.name, unit=v.unit, angle=v.angle, doc=v.doc)
@@ -222,14 +223,14 @@ def speed_profile(plant: SteeringPlant, times: Sequence[float], speeds: Sequence
     m = plant.model
     times, speeds = [float(t) for t in times], [float(v) for v in speeds]
     if len(times) != len(speeds) or len(times) < 2 or np.any(np.diff(times) <= 0):
-        raise ValueError("speed_profile needs at least two increasing times and one speed for each")
+        raise InputError("speed_profile needs at least two increasing times and one speed for each")
     if propulsion is None:
         props = [n for n in ("tau_X",) + tuple(m.vessel.propellers if m.vessel else ()) if n in plant.inputs]
         if not props:
-            raise ValueError(f"no propulsion input among {sorted(plant.inputs)} of {m.name!r}; give propulsion")
+            raise InputError(f"no propulsion input among {sorted(plant.inputs)} of {m.name!r}; give propulsion")
         propulsion = props[0]
     if propulsion not in plant.inputs:
-        raise ValueError(f"{propulsion!r} is not a bound input of the plant; inputs: {sorted(plant.inputs)}")
+        raise InputError(f"{propulsion!r} is not a bound input of the plant; inputs: {sorted(plant.inputs)}")
     values = []
     for v in speeds:
         tr = trim(m, m.states(u=v), plant.input_vector(0.0), plant.pvec, free=[propulsion], zero=["u"])
@@ -261,7 +262,7 @@ def twin_propeller_allocation(model: Model, names: tuple[str, str] = ("n1", "n2"
     missing = [n for n in names if n not in model.input_names]
     missing += [k for k in ("k_pos", "k_neg", "y_pont") if k not in model.param_names]
     if missing:
-        raise ValueError(f"twin-propeller allocation needs inputs {list(names)} and parameters k_pos, k_neg, "
+        raise InputError(f"twin-propeller allocation needs inputs {list(names)} and parameters k_pos, k_neg, "
                          f"y_pont; model {model.name!r} lacks {missing}")
 
     def alloc(new, p):
@@ -289,14 +290,14 @@ def twin_propeller_yaw_limit(model: Model, tau_X: float, p=None) -> float:
     """
     pd = model.param_dict(model.params(p) if p is not None else None)
     if model.vessel is None or model.vessel.propeller_range is None:
-        raise ValueError(f"model {model.name!r} has no vessel propeller_range")
+        raise InputError(f"model {model.name!r} has no vessel propeller_range")
     n_min, n_max = model.vessel.propeller_range
     lever = pd["y_pont"]
     ahead = pd["k_pos"] * n_max**2
     astern = pd["k_neg"] * n_min**2
     limit = 2 * lever * min(ahead - tau_X / 2, tau_X / 2 + astern)
     if limit <= 0:
-        raise ValueError(f"surge force {tau_X} N leaves no yaw moment within the propeller limits")
+        raise InputError(f"surge force {tau_X} N leaves no yaw moment within the propeller limits")
     return float(limit)
 
 
@@ -346,11 +347,11 @@ def steering_plant(model: Model, speed: float | None = None, *, p=None, steer: s
     inputs = dict(inputs or {})
     if speed is None:
         if vessel is None or vessel.U0 is None:
-            raise ValueError(f"model {model.name!r} has no vessel speed U0; give speed")
+            raise InputError(f"model {model.name!r} has no vessel speed U0; give speed")
         speed = vessel.U0
     speed = float(speed)
     if not (np.isfinite(speed) and speed > 0):
-        raise ValueError(f"speed must be positive, got {speed}")
+        raise InputError(f"speed must be positive, got {speed}")
     free = None
     if steer is None and _is_twin_propeller(model):
         model = steering_model(model, ["tau_X", "tau_N"], twin_propeller_allocation(model, vessel.propellers),
@@ -360,13 +361,13 @@ def steering_plant(model: Model, speed: float | None = None, *, p=None, steer: s
             free, inputs["tau_X"] = "tau_X", 10.0
     elif steer is None:
         if vessel is None or not vessel.rudders:
-            raise ValueError(f"model {model.name!r} names no rudder (vessel.rudders); give steer")
+            raise InputError(f"model {model.name!r} names no rudder (vessel.rudders); give steer")
         steer = vessel.rudders[0]
         props = vessel.propellers
         if len(props) == 1 and props[0] not in inputs:
             free, inputs[props[0]] = props[0], float(vessel.n0 or 1.0)
     if surge not in model.state_names:
-        raise ValueError(f"model {model.name!r} has no surge state {surge!r}; states: {list(model.state_names)}")
+        raise InputError(f"model {model.name!r} has no surge state {surge!r}; states: {list(model.state_names)}")
     pv = model.params(p) if p is not None else model.params()
     x = model.states(**{surge: speed})
     u = model.inputs(**{k: v for k, v in inputs.items() if k != steer})
@@ -465,7 +466,7 @@ def piecewise_linear(x, xs, ys):
     """
     xs = [float(v) for v in xs]
     if len(xs) != len(ys) or len(xs) < 2 or np.any(np.diff(xs) <= 0):
-        raise ValueError("piecewise_linear needs at least two increasing breakpoints and one value for each")
+        raise InputError("piecewise_linear needs at least two increasing breakpoints and one value for each")
     out = ys[0]
     for i in range(len(xs) - 1):
         w = (x - xs[i]) / (xs[i + 1] - xs[i])
@@ -524,7 +525,7 @@ def steering_feedforward(plant: SteeringPlant, steer_max: float, *, x0=None) -> 
                 break
             prev = (r, s)
         else:
-            raise ValueError(f"{m.name!r}: no steady turn reaches the steering limit {steer_max:.4g} below "
+            raise InputError(f"{m.name!r}: no steady turn reaches the steering limit {steer_max:.4g} below "
                              f"{160 * step:.3g} rad/s")
     r_top = float(min(tops))
     rates = [f * r_top for f in SteeringFeedforward.FRACTIONS]

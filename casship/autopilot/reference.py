@@ -14,6 +14,7 @@ import control
 import numpy as np
 
 from ..angles import wrap_sym
+from ..errors import InputError
 
 __all__ = ["ReferenceModel", "reference_step"]
 
@@ -84,11 +85,11 @@ class ReferenceModel:
 
     def __post_init__(self):
         if not (np.isfinite(self.wn) and self.wn > 0):
-            raise ValueError(f"reference model wn must be positive, got {self.wn}")
+            raise InputError(f"reference model wn must be positive, got {self.wn}")
         if not (np.isfinite(self.zeta) and self.zeta > 0):
-            raise ValueError(f"reference model zeta must be positive, got {self.zeta}")
+            raise InputError(f"reference model zeta must be positive, got {self.zeta}")
         if not self.r_max > 0:
-            raise ValueError(f"r_max must be positive, got {self.r_max}")
+            raise InputError(f"r_max must be positive, got {self.r_max}")
 
     def symbolic_step(self, xd, ref, dt):
         """One Euler step of ``[chi_d, r_d, a_d]`` (CasADi expressions) with this model's numbers.
@@ -137,7 +138,7 @@ class ReferenceModel:
         """
         t = np.asarray(t, dtype=float)
         if t.ndim != 1 or t.size < 2:
-            raise ValueError("response needs a time grid of at least 2 samples")
+            raise InputError("response needs a time grid of at least 2 samples")
         dt = float(t[1] - t[0])
         xd, r, h = ca.SX.sym("xd", 3), ca.SX.sym("ref"), ca.SX.sym("dt")
         F = ca.Function("ref_step", [xd, r, h], [self.symbolic_step(xd, r, h)], ["xd", "ref", "dt"], ["xd_next"])

@@ -19,6 +19,7 @@ import numpy as np
 from .law import Autopilot, PIDGains, law_step
 from .plants import SteeringFeedforward, piecewise_linear
 from .reference import ReferenceModel
+from ..errors import InputError, InputTypeError
 
 __all__ = ["ScheduledAutopilot", "default_schedule"]
 
@@ -77,17 +78,17 @@ class ScheduledAutopilot:
     def __post_init__(self):
         speeds = np.asarray(self.speeds, float)
         if speeds.ndim != 1 or speeds.size < 2 or np.any(np.diff(speeds) <= 0) or not np.all(speeds > 0):
-            raise ValueError(f"schedule speeds must be at least two positive, increasing speeds, got {self.speeds}")
+            raise InputError(f"schedule speeds must be at least two positive, increasing speeds, got {self.speeds}")
         if len(self.laws) != speeds.size:
-            raise ValueError(f"{len(self.laws)} laws for {speeds.size} schedule speeds")
+            raise InputError(f"{len(self.laws)} laws for {speeds.size} schedule speeds")
         first = self.laws[0]
         for k, law in enumerate(self.laws):
             if not isinstance(law, Autopilot):
-                raise TypeError(f"schedule law {k} is a {type(law).__name__}, not an Autopilot")
+                raise InputTypeError(f"schedule law {k} is a {type(law).__name__}, not an Autopilot")
             same = (law.feedforward, law.anti_windup, law.filter_T, law.steering is None) == \
                 (first.feedforward, first.anti_windup, first.filter_T, first.steering is None)
             if not same:
-                raise ValueError(f"schedule law {k} (at {speeds[k]:g} m/s) differs in structure from the first")
+                raise InputError(f"schedule law {k} (at {speeds[k]:g} m/s) differs in structure from the first")
         object.__setattr__(self, "speeds", tuple(map(float, speeds)))
 
     # the structure of the law (law_step reads these)
@@ -131,7 +132,7 @@ class ScheduledAutopilot:
             Measured speed [m/s].
         """
         if speed is None:
-            raise ValueError("a scheduled autopilot needs the speed")
+            raise InputError("a scheduled autopilot needs the speed")
         tables = [law.parameters() for law in self.laws]
         return {k: piecewise_linear(speed, self.speeds, [t[k] for t in tables]) for k in tables[0]}
 

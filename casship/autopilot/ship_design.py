@@ -25,6 +25,7 @@ from .plants import SteeringPlant, steering_plant
 from .reference import ReferenceModel
 from .slot import LinearController
 from .mpc import MPCAutopilot, MPCLaw
+from ..errors import InputError, InputTypeError
 
 __all__ = ["Design", "design_autopilot", "simulate_autopilot", "RateLimitWarning"]
 
@@ -174,7 +175,7 @@ class Design:
         if estimator == "ekf":
             model_wave = (wave if wave is not None else settings_wave(s)) if wave_filter else None
             if wave_filter and model_wave is None:
-                raise ValueError("wave_filter needs a wave model: give wave, or design with wave_w0 and wave_std")
+                raise InputError("wave_filter needs a wave model: give wave, or design with wave_w0 and wave_std")
             estimator = self.estimator("course" if mode == "course" else "heading", wave=model_wave, x0=pl.x0)
         law = self.autopilot
         if isinstance(controller, (control.StateSpace, control.TransferFunction)):
@@ -183,8 +184,8 @@ class Design:
             law = controller.law(s.dt)
         elif controller is not None:
             if not isinstance(controller, (LinearController, MPCLaw)):
-                raise TypeError(f"controller must be a python-control system, a LinearController or an "
-                                f"MPCAutopilot, got {type(controller).__name__}")
+                raise InputTypeError(f"controller must be a python-control system, a LinearController or an "
+                                     f"MPCAutopilot, got {type(controller).__name__}")
             law = controller
         return ClosedLoop(pl, law, self.actuator, dt=s.dt, mode=mode, rate=rate, estimator=estimator,
                           sensors=sensors or self.sensors(), wave=wave, guidance=guidance)
@@ -235,7 +236,7 @@ class Design:
         if scenario.startswith("rot-"):
             rate = abs(np.radians(float(scenario.rsplit("-", 1)[1])) / 60.0)
             if rate > self.settings.r_max * (1 + 1e-9):
-                raise ValueError(f"scenario {scenario!r}: the rate of turn {np.degrees(rate) * 60:g} deg/min is above "
+                raise InputError(f"scenario {scenario!r}: the rate of turn {np.degrees(rate) * 60:g} deg/min is above "
                                  f"the preset rate of turn r_max = {np.degrees(self.settings.r_max) * 60:.4g} deg/min "
                                  "the reference model holds the turn to (give a lower rate, or r_max within what "
                                  f"the ship turns: {np.degrees(self.settings.turn_rate_top) * 60:.4g} deg/min at its "
@@ -316,7 +317,7 @@ def design_autopilot(model: Model, speed: float | None = None, *, p=None, steer:
     """
     if settings.get("speed") is not None:      # the speed setting is the operating point
         if speed is not None and float(settings["speed"]) != float(speed):
-            raise ValueError(f"speed {speed} and the speed setting {settings['speed']} disagree")
+            raise InputError(f"speed {speed} and the speed setting {settings['speed']} disagree")
         speed = settings.pop("speed")
     if schedule is not None:
         return _scheduled_design(model, speed, schedule, p=p, steer=steer, inputs=inputs, nomoto=nomoto,
@@ -347,7 +348,7 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
     from .schedule import ScheduledAutopilot, default_schedule
 
     if nomoto is not None:
-        raise ValueError("a gain schedule designs on each speed's own linearisation; do not give nomoto")
+        raise InputError("a gain schedule designs on each speed's own linearisation; do not give nomoto")
     vessel = model.vessel
     if speed is None:
         point = design_autopilot(model, speed, p=p, steer=steer, inputs=inputs, **settings)
@@ -359,7 +360,7 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
     try:
         speeds = sorted(float(v) for v in speeds)
     except (TypeError, ValueError):
-        raise ValueError(f"schedule must be a sequence of speeds [m/s] or 'default', got {schedule!r}") from None
+        raise InputError(f"schedule must be a sequence of speeds [m/s] or 'default', got {schedule!r}") from None
     designs = tuple(_schedule_point(model, v, p=p, steer=steer, inputs=inputs, settings=settings) for v in speeds)
     law = ScheduledAutopilot(tuple(speeds), tuple(d.autopilot for d in designs))
     s0 = point.settings
@@ -379,7 +380,6 @@ def _scheduled_design(model, speed, schedule, *, p, steer, inputs, nomoto, setti
 def _schedule_point(model, speed, *, p, steer, inputs, settings) -> Design:
     """The point design of a schedule at ``speed``; a speed where the model is not valid, or where no
     design exists, is refused naming the speed and the model's range."""
-    from ..errors import InputError
 
     limit = model.limits.get("u")
     if not (np.isfinite(speed) and speed > 0):

@@ -26,6 +26,7 @@ import numpy as np
 from ..angles import wrap_sym
 from .law import Actuator, law_function
 from .reference import ReferenceModel
+from ..errors import InputError, InputTypeError
 
 __all__ = ["LinearController", "SIGNALS"]
 
@@ -71,20 +72,20 @@ class LinearController:
                 labels = ["e"]
             sys = control.ss(sys, inputs=labels, outputs=list(sys.output_labels))
         if not isinstance(sys, control.StateSpace):
-            raise TypeError(f"the controller must be a control.StateSpace or TransferFunction, got "
-                            f"{type(sys).__name__}")
+            raise InputTypeError(f"the controller must be a control.StateSpace or TransferFunction, got "
+                                 f"{type(sys).__name__}")
         if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt must be positive, got {dt}")
+            raise InputError(f"dt must be positive, got {dt}")
         if sys.noutputs != 1:
-            raise ValueError(f"the controller must have one output (the steering command), it has {sys.noutputs}: "
+            raise InputError(f"the controller must have one output (the steering command), it has {sys.noutputs}: "
                              f"{list(sys.output_labels)}")
         unknown = [n for n in sys.input_labels if n not in SIGNALS]
         if unknown:
-            raise ValueError(f"controller input(s) {unknown} are not loop signals; use {list(SIGNALS)}")
+            raise InputError(f"controller input(s) {unknown} are not loop signals; use {list(SIGNALS)}")
         if sys.isctime():
             sys = control.sample_system(sys, dt, method=method)
         elif not np.isclose(float(sys.dt), dt, rtol=1e-9):
-            raise ValueError(f"the discrete controller's sample time {sys.dt} differs from the loop period {dt}")
+            raise InputError(f"the discrete controller's sample time {sys.dt} differs from the loop period {dt}")
         self.sys, self.dt, self.reference, self.actuator = sys, float(dt), reference, actuator
         self.A, self.B = np.asarray(sys.A, float), np.asarray(sys.B, float)
         self.C, self.D = np.asarray(sys.C, float), np.asarray(sys.D, float)
@@ -96,7 +97,7 @@ class LinearController:
             try:
                 K, _, _ = control.dlqr(self.A.T, self.C.T, np.eye(n), np.eye(1))
             except Exception as err:          # python-control raises several types here
-                raise ValueError(f"anti-windup needs (A, C) of the controller detectable: {err}") from None
+                raise InputError(f"anti-windup needs (A, C) of the controller detectable: {err}") from None
             self.L = np.asarray(K, float).T
         self.MEMORY = ("chi_d", "r_d", "a_d") + tuple(f"x{i}" for i in range(n))
 

@@ -5,11 +5,12 @@ adds its parser and sets ``func``; only the command being run is registered in f
 ``--help`` and argument errors answer without loading CasADi. Every sub-command shows its defaults
 in ``--help``.
 
-Errors: casship's own errors (:mod:`casship.errors`, ``ValueError`` raised by casship's checks)
-and ``OSError`` (a missing or unwritable file) end with exit code 2 and one line
-``casship CMD: error: ...`` naming the item. Anything else is a bug in casship: it is reported as
-one (``casship CMD: internal error: ...``, exit code 1). ``--debug`` shows the Python traceback of
-either. Warnings print as one line ``casship CMD: warning: ...``.
+Errors are classified by their type alone: casship's own errors (:class:`casship.errors.CasshipError`:
+``InputError``, ``SolverError``, ``SetupError``, ...) and ``OSError`` (a missing or unwritable file)
+end with exit code 2 and one line ``casship CMD: error: ...`` naming the item. Anything else, a plain
+``ValueError`` included, is a bug in casship: it is reported as one (``casship CMD: internal error:
+...``, exit code 1). ``--debug`` shows the Python traceback of either. Warnings print as one line
+``casship CMD: warning: ...``.
 
 Ctrl-C: exit code 130 at once, the compilers this process runs stopped (their process groups) and
 their build folders removed; an error raised while the interrupt unwinds is still an interrupt. A
@@ -24,14 +25,10 @@ import signal
 import sys
 import threading
 import warnings
-from pathlib import Path
 
 from ._common import HelpFormatter, Parser, UsageError
 
 __all__ = ["main", "build_parser", "is_user_error"]
-
-_PACKAGE_ROOT = Path(__file__).resolve().parents[1]
-
 
 def _commands() -> dict[str, str]:
     """Command name -> module name, from the ``cmd_*`` modules (nothing imported; ``cmd_design_trial``
@@ -99,27 +96,13 @@ def _one_line(exc: BaseException) -> str:
     return "; ".join(lines) or type(exc).__name__
 
 
-def _raised_by_casship(exc: BaseException) -> bool:
-    """Whether the innermost frame of ``exc``'s traceback is casship's own code (a deliberate check)."""
-    tb = exc.__traceback__
-    if tb is None:
-        return False
-    while tb.tb_next is not None:
-        tb = tb.tb_next
-    try:
-        Path(tb.tb_frame.f_code.co_filename).resolve().relative_to(_PACKAGE_ROOT)
-    except ValueError:
-        return False
-    return True
-
-
 def is_user_error(exc: BaseException) -> bool:
-    """Whether ``exc`` is a user's error (one line, exit 2) rather than a bug in casship.
+    """Whether ``exc`` is a user's error (one line, exit 2) rather than a bug in casship, by its type alone.
 
-    casship's own error types (:class:`casship.errors.CasshipError` and its subclasses), ``OSError``
-    (files), and a ``ValueError`` raised by one of casship's checks (casship's convention for bad
-    input) are user errors. Anything else (a ``TypeError``, ``KeyError``, a ``ValueError`` from
-    inside NumPy or CasADi, ...) is a bug.
+    casship's own error types (:class:`casship.errors.CasshipError` and its subclasses: what casship
+    raises on purpose about its input, its solvers and its environment) and ``OSError`` (files) are
+    user errors. Anything else (a plain ``ValueError``, ``TypeError``, ``KeyError``, whoever raised
+    it) is a bug: casship raises its own types for what the user can fix.
 
     Parameters
     ----------
@@ -131,9 +114,7 @@ def is_user_error(exc: BaseException) -> bool:
     """
     from ..errors import CasshipError
 
-    if isinstance(exc, (CasshipError, OSError)):
-        return True
-    return type(exc) is ValueError and _raised_by_casship(exc)
+    return isinstance(exc, (CasshipError, OSError))
 
 
 def _usage(exc: UsageError) -> int:

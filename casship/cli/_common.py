@@ -207,16 +207,10 @@ def parse_pairs(text: str | None, what: str, *, numbers: bool = True, names=None
 
 
 # -- options ----------------------------------------------------------------------------------------------
-def add_model_option(parser: argparse.ArgumentParser, legacy_positional: bool = False) -> None:
-    """``--model NAME``, the one way every sub-command takes the model.
-
-    ``legacy_positional`` adds a hidden positional slot so that the old spelling
-    ``casship CMD NAME`` gets a helpful error instead of "unrecognized arguments".
-    """
+def add_model_option(parser: argparse.ArgumentParser) -> None:
+    """``--model NAME``, the one way every sub-command takes the model."""
     parser.add_argument("--model", default=None, metavar="NAME",
                         help="registered model name (casship simulate --list shows them)")
-    if legacy_positional:
-        parser.add_argument("legacy_model", nargs="?", default=None, help=argparse.SUPPRESS)
 
 
 def require(parser: argparse.ArgumentParser, args, needed: dict[str, object]) -> None:
@@ -224,9 +218,6 @@ def require(parser: argparse.ArgumentParser, args, needed: dict[str, object]) ->
 
     ``needed`` maps the option as the user types it (``"--model"``, ``"DATA"``) to its value.
     """
-    legacy = getattr(args, "legacy_model", None)
-    if legacy is not None:
-        parser.error(f"the model is given with --model: casship {parser.prog.split()[-1]} --model {legacy} ...")
     missing = [name for name, value in needed.items() if value is None or value == [] or value == ""]
     if missing:
         parser.error(f"the following arguments are required: {', '.join(missing)}")

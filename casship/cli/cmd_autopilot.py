@@ -80,7 +80,7 @@ def register(sub) -> None:
                                    "nonlinear closed loop (sensors, estimator, steering gear) through a course "
                                    "change. Every setting defaults to the rule shown, derived from the ship; the "
                                    "Python API (casship.autopilot.design_autopilot) uses the same rules.")
-    add_model_option(p, legacy_positional=True)
+    add_model_option(p)
     p.add_argument("--scenario", default="course-20",
                    help="course-A (A deg, back to 0 at half the run; course-20 = Fossen & Fossen 2021), step-A, "
                         "rot-R (R deg/min), or track (LOS track control through --waypoints)")

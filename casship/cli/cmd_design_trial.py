@@ -22,6 +22,7 @@ import math
 from ._vocabulary import add_deprecated_alias
 from ._common import (add_overwrite_option, check_input_files, check_outputs, check_ship, count, parse_pairs,
                       print_json, refuse_unused, write_output)
+from ..errors import InputError
 
 
 #: The targets of :data:`casship.design.TARGETS` (listed here so that the command line starts without CasADi).
@@ -86,10 +87,10 @@ def _angles(text, what: str) -> list[float]:
     try:
         out = [float(s) for s in (text or "").split(",") if s.strip()]
     except ValueError:
-        raise ValueError(f"{what}: expected comma-separated angles in degrees, got {text!r}") from None
+        raise InputError(f"{what}: expected comma-separated angles in degrees, got {text!r}") from None
     bad = [a for a in out if not (0 < a <= 90)]
     if bad:
-        raise ValueError(f"{what}: angles must be in (0, 90] deg, got {bad}")
+        raise InputError(f"{what}: angles must be in (0, 90] deg, got {bad}")
     return out
 
 
@@ -98,7 +99,6 @@ def _discrepancy(args) -> tuple[float, str]:
     file's ``model_discrepancy``, else none."""
     import numpy as np
 
-    from ..errors import InputError
     from ..identify import read_params
 
     if args.discrepancy is not None:
@@ -132,15 +132,15 @@ def _belief_and_noise(args, model):
         elif extra and not args.covariance:
             belief = ParameterBelief.from_std(extra, model.param_dict(p), source=f"prior around {args.params}")
         else:
-            raise ValueError(f"--params {args.params} estimates no model parameter; give --prior-std")
+            raise InputError(f"--params {args.params} estimates no model parameter; give --prior-std")
         sigma = sigma or fit_noise(fit)
     else:
         if args.covariance:
-            raise ValueError("--covariance chooses among a fit file's covariances: give --params")
+            raise InputError("--covariance chooses among a fit file's covariances: give --params")
         if not extra:
-            raise ValueError("give --params (a fit file) or --prior-std (what is uncertain now)")
+            raise InputError("give --params (a fit file) or --prior-std (what is uncertain now)")
         if not sigma:
-            raise ValueError("without --params give --sigma: the noise of each measured output")
+            raise InputError("without --params give --sigma: the noise of each measured output")
         p = model.params()
         belief = ParameterBelief.from_std(extra, model.param_dict(), source="prior around the published values")
     return model, p, belief, sigma

@@ -45,6 +45,7 @@ from ._vocabulary import add_deprecated_alias
 from ._common import (add_record_options, check_input_files, check_outputs, count, number, parse_items, parse_pairs,
                       positive, print_json, read_records, refuse_unused, write_output)
 from .cmd_filter import DEFAULT_Q
+from ..errors import InputError
 
 #: Exit code for a fit worse than its start or stalled (:data:`casship.identify.verdict.EXIT_WORSE`; a literal
 #: here so that ``--help`` loads no numerics).
@@ -118,8 +119,6 @@ def register(sub) -> None:
 
 
 def _bounds(text: str | None) -> dict:
-    from ..errors import InputError
-
     out = {}
     for name, rng in parse_pairs(text, "--bounds", numbers=False).items():
         lo, sep, hi = rng.partition(":")
@@ -144,7 +143,7 @@ def _problem(args, model, records, free, measured):
     labels = parse_items(args.group, "--group", unique=False)
     groups = {"group": labels} if labels else None
     if any(h == "group" for h in share.values()) and not labels:
-        raise ValueError("--share name=group needs --group with one label per record")
+        raise InputError("--share name=group needs --group with one label per record")
     prior = Prior(parse_pairs(args.prior, "--prior-std"), weight=args.prior_weight) if args.prior else None
     params = read_params(args.params, model)[1] if args.params else None
     common = dict(share=share or None, groups=groups, prior=prior, params=params, bounds=_bounds(args.bounds) or None,
@@ -156,14 +155,14 @@ def _problem(args, model, records, free, measured):
     R = parse_pairs(args.R, "--R")
     unknown = set(R) - set(measured)
     if unknown:
-        raise ValueError(f"--R names {sorted(unknown)} not among measured outputs {measured}")
+        raise InputError(f"--R names {sorted(unknown)} not among measured outputs {measured}")
     rest = [n for n in measured if n not in R]
     start = {}
     for n in rest:              # the record's noise, the median over the records, as the starting value
         start[n] = float(np.median([noise_from_data(model, d, [n])[0][n] for d in records]))
     estimate = set(parse_items(args.estimate_noise, "--estimate-noise"))
     if estimate - {"Q", "R"}:
-        raise ValueError(f"--estimate-noise: unknown {sorted(estimate - {'Q', 'R'})}; use Q, R or Q,R")
+        raise InputError(f"--estimate-noise: unknown {sorted(estimate - {'Q', 'R'})}; use Q, R or Q,R")
     noise = {}
     if "R" in estimate:
         noise["R"] = True
@@ -178,7 +177,6 @@ def _problem(args, model, records, free, measured):
 
 
 def run(args) -> int:
-    from ..errors import InputError
     from ..models import get_model
     from ..progress import stage
 

@@ -38,7 +38,7 @@ def register(sub) -> None:
                                    "(or replay the measured inputs of a record) and print the metrics. Inputs, "
                                    "speed and time step are checked against the model's validity ranges.\n\n"
                                    + __doc__.split("\n\n", 1)[1])
-    add_model_option(p, legacy_positional=True)
+    add_model_option(p)
     p.add_argument("--list", action="store_true", help="list the registered models")
     p.add_argument("--maneuver", default="turning", choices=("turning", "zigzag", "pullout", "spiral", "random"),
                    help="manoeuvre")

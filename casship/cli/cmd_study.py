@@ -7,7 +7,7 @@ from ._common import count
 
 
 #: One-line description (the command list of ``casship --help``).
-HELP = "run a study (seed-paper reproductions, real-data studies)"
+HELP = "run a study (reproductions of published papers, real-data studies)"
 
 
 def register(sub) -> None:

@@ -20,6 +20,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..gaussian import Gaussian
+from ..errors import InputError
 
 __all__ = ["ParameterBelief", "COVARIANCES", "covariance_kind"]
 
@@ -91,11 +92,11 @@ class ParameterBelief:
         names = tuple(str(n) for n in self.names)
         if len(set(names)) != len(names):
             dup = sorted({n for n in names if names.count(n) > 1})
-            raise ValueError(f"parameter belief: duplicate name(s) {dup}")
+            raise InputError(f"parameter belief: duplicate name(s) {dup}")
         if len(names) != self.gaussian.mean.size:
-            raise ValueError(f"parameter belief: {len(names)} names for a Gaussian of size {self.gaussian.mean.size}")
+            raise InputError(f"parameter belief: {len(names)} names for a Gaussian of size {self.gaussian.mean.size}")
         if not names:
-            raise ValueError("parameter belief: no parameters (nothing to learn from a trial)")
+            raise InputError("parameter belief: no parameters (nothing to learn from a trial)")
         object.__setattr__(self, "names", names)
 
     # -- construction ------------------------------------------------------------------------------
@@ -125,11 +126,11 @@ class ParameterBelief:
         names = list(std)
         bad = [n for n in names if not (np.isfinite(float(std[n])) and float(std[n]) > 0)]
         if bad:
-            raise ValueError(f"standard deviations must be positive and finite: {bad}")
+            raise InputError(f"standard deviations must be positive and finite: {bad}")
         missing = [n for n in names if n not in mean]
         if missing:
             known = list(mean)
-            raise ValueError(f"unknown parameter(s) {missing}: no mean value for them among the {len(known)} "
+            raise InputError(f"unknown parameter(s) {missing}: no mean value for them among the {len(known)} "
                              f"parameters given ({', '.join(map(str, known[:12]))}"
                              f"{', ...' if len(known) > 12 else ''})")
         s = np.array([float(std[n]) for n in names])
@@ -230,7 +231,7 @@ class ParameterBelief:
             where = Path(fit).name
             fit = FitResult.from_json(fit)
         if covariance not in (None, *COVARIANCES):
-            raise ValueError(f"unknown covariance {covariance!r}; use one of {COVARIANCES} (or None: the file's own)")
+            raise InputError(f"unknown covariance {covariance!r}; use one of {COVARIANCES} (or None: the file's own)")
         values = dict(params or fit.params)
         carried = ParameterUncertainty.from_dict(fit.param_covariance, where) if fit.param_covariance else None
         kind = covariance_kind(carried.source) if carried is not None else None
@@ -239,17 +240,17 @@ class ParameterBelief:
             bad = [n for n, v in zip(carried.names, carried.values)
                    if not np.isclose(v, values.get(n, np.nan), rtol=1e-12, atol=0.0)]
             if bad:
-                raise ValueError(f"{where}: the values of {bad} in its covariance differ from its parameters")
+                raise InputError(f"{where}: the values of {bad} in its covariance differ from its parameters")
             belief = cls.from_uncertainty(carried)
         elif covariance == "jackknife":
             has = f"it carries a {kind} one ({carried.source})" if carried is not None else "it carries none"
-            raise ValueError(f"{where} has no calibrated (jackknife) covariance: {has}; ask for the robust or the "
+            raise InputError(f"{where} has no calibrated (jackknife) covariance: {has}; ask for the robust or the "
                              "model-based one")
         else:
             belief = cls._free_block(fit, values, robust={None: None, "robust": True, "model": False}[covariance])
             if belief is None:
                 if not extra_std:
-                    raise ValueError(f"{where} has no free model parameter among {list(fit.free)}; give prior "
+                    raise InputError(f"{where} has no free model parameter among {list(fit.free)}; give prior "
                                      "standard deviations (extra_std)")
                 return cls.from_std(extra_std, values, source=source or f"prior around the values of {where}")
         belief = ParameterBelief(belief.names, belief.gaussian, f"{where}: {belief.source}", belief.kind)
@@ -274,17 +275,17 @@ class ParameterBelief:
             robust = (fit.covariance_robust is not None
                       and bool(np.all(np.isfinite(np.asarray(fit.covariance_robust)[np.ix_(pick, pick)]))))
         if robust and fit.covariance_robust is None:
-            raise ValueError("the fit has no robust covariance; use covariance='model'")
+            raise InputError("the fit has no robust covariance; use covariance='model'")
         full = np.asarray(fit.covariance_robust if robust else fit.covariance, dtype=float)
         block = full[np.ix_(pick, pick)]
         kind = "robust" if robust else "model-based"
         if not np.all(np.isfinite(block)):
             if robust:
-                raise ValueError(f"the fit's robust covariance is not finite for {names}; use covariance='model'")
+                raise InputError(f"the fit's robust covariance is not finite for {names}; use covariance='model'")
             se = np.array([fit.std_errors[fit.free[i]] for i in pick])
             bad = [n for n, s in zip(names, se) if not (np.isfinite(s) and s > 0)]
             if bad:
-                raise ValueError(f"the fit does not determine {bad} (standard error not finite); give them a "
+                raise InputError(f"the fit does not determine {bad} (standard error not finite); give them a "
                                  "prior standard deviation instead")
             block, kind = np.diag(se**2), "standard errors"
         how = {"robust": "robust (sandwich) covariance", "model-based": "model-based covariance",
@@ -318,9 +319,9 @@ class ParameterBelief:
             return self if source is None else ParameterBelief(self.names, self.gaussian, source, self.kind)
         both = sorted(set(extra) & set(self.names))
         if both:
-            raise ValueError(f"extra_std given for {both}, which {clash} (their covariance comes from it)")
+            raise InputError(f"extra_std given for {both}, which {clash} (their covariance comes from it)")
         if values is None:
-            raise ValueError("extra_std needs the parameters' values (params)")
+            raise InputError("extra_std needs the parameters' values (params)")
         e = ParameterBelief.from_std(extra, values)
         k, n = len(self.names), len(self.names) + len(e.names)
         big = np.zeros((n, n))
@@ -359,7 +360,7 @@ class ParameterBelief:
         """
         g = np.asarray(gradient, dtype=float).reshape(-1)
         if g.size != len(self.names):
-            raise ValueError(f"gradient has {g.size} entries for {len(self.names)} parameters")
+            raise InputError(f"gradient has {g.size} entries for {len(self.names)} parameters")
         return float(g @ self.cov @ g)
 
     def after(self, information: np.ndarray) -> "ParameterBelief":
@@ -381,9 +382,9 @@ class ParameterBelief:
         info = np.asarray(information, dtype=float)
         k = len(self.names)
         if info.shape != (k, k):
-            raise ValueError(f"information has shape {info.shape}, expected ({k}, {k})")
+            raise InputError(f"information has shape {info.shape}, expected ({k}, {k})")
         if not np.all(np.isfinite(info)):
-            raise ValueError("information contains non-finite entries (did the trial's simulation diverge?)")
+            raise InputError("information contains non-finite entries (did the trial's simulation diverge?)")
         w, v = np.linalg.eigh(self.cov)
         S = v * np.sqrt(np.clip(w, 0.0, None))
         inner = np.eye(k) + S.T @ (0.5 * (info + info.T)) @ S

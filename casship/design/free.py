@@ -88,26 +88,26 @@ class TrialLimits:
         rmax = approach.rudder_max if self.rudder_max is None else float(self.rudder_max)
         rate = approach.rudder_rate if self.rudder_rate is None else float(self.rudder_rate)
         if rate is None:
-            raise ValueError("rudder_rate: the vessel states no rudder rate; give one [rad/s]")
+            raise InputError("rudder_rate: the vessel states no rudder rate; give one [rad/s]")
         knot = self.knot if self.knot is not None else max(dt, round(approach.time_scale / 4 / dt) * dt)
         for what, v in (("duration", self.duration), ("rudder_max", rmax), ("rudder_rate", rate), ("knot", knot),
                         ("corridor", self.corridor), ("speed_min", self.speed_min)):
             if v is not None and not (np.isfinite(float(v)) and float(v) > 0):
-                raise ValueError(f"{what} must be positive and finite, got {v}")
+                raise InputError(f"{what} must be positive and finite, got {v}")
         if approach.rudder_max is not None and rmax > approach.rudder_max * (1 + 1e-12):
-            raise ValueError(f"rudder_max = {np.degrees(rmax):.4g} deg is beyond the rudder stop "
+            raise InputError(f"rudder_max = {np.degrees(rmax):.4g} deg is beyond the rudder stop "
                              f"({np.degrees(approach.rudder_max):.4g} deg)")
         if abs(knot / dt - round(knot / dt)) > 1e-9:
-            raise ValueError(f"knot = {knot:g} s must be a whole number of design steps ({dt:g} s)")
+            raise InputError(f"knot = {knot:g} s must be a whole number of design steps ({dt:g} s)")
         if self.duration < 2 * knot:
-            raise ValueError(f"duration = {self.duration:g} s is shorter than two rudder knots ({knot:g} s apart)")
+            raise InputError(f"duration = {self.duration:g} s is shorter than two rudder knots ({knot:g} s apart)")
         steps, knots = self.duration / dt, self.duration / knot
         if steps > MAX_STEPS or knots > MAX_KNOTS:
             raise InputError(f"duration = {self.duration:g} s is {steps:.4g} design steps of {dt:g} s and {knots:.4g} "
                              f"rudder knots; a free trial is designed over at most {MAX_STEPS} steps and {MAX_KNOTS} "
                              "knots (a shorter duration, a longer step or a longer knot interval)")
         if self.speed_min is not None and self.speed_min >= approach.speed:
-            raise ValueError(f"speed_min = {self.speed_min:g} m/s is not below the approach speed "
+            raise InputError(f"speed_min = {self.speed_min:g} m/s is not below the approach speed "
                              f"{approach.speed:.4g} m/s: no trial can keep it")
         return replace(self, rudder_max=rmax, rudder_rate=rate, knot=float(knot))
 

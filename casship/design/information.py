@@ -46,13 +46,13 @@ def check_noise(model, noise: Mapping[str, float]) -> dict:
     """
     noise = {str(k): float(v) for k, v in dict(noise).items()}
     if not noise:
-        raise ValueError("no measured channel: give the noise standard deviation of at least one output")
+        raise InputError("no measured channel: give the noise standard deviation of at least one output")
     unknown = [k for k in noise if k not in model.output_names]
     if unknown:
-        raise ValueError(f"noise given for {unknown}, which are not outputs of {model.name!r}: {list(model.output_names)}")
+        raise InputError(f"noise given for {unknown}, which are not outputs of {model.name!r}: {list(model.output_names)}")
     bad = [k for k, v in noise.items() if not (np.isfinite(v) and v > 0)]
     if bad:
-        raise ValueError(f"noise standard deviations must be positive and finite: {bad}")
+        raise InputError(f"noise standard deviations must be positive and finite: {bad}")
     return noise
 
 
@@ -91,7 +91,7 @@ def fit_noise(fit) -> dict:
         return {str(k): float(v) * scale for k, v in noise["sigma"].items()}
     if noise.get("R"):
         return {str(k): float(np.sqrt(v)) for k, v in noise["R"].items()}
-    raise ValueError(f"{where} holds no output noise (an output-error fit's sigma or a likelihood fit's R); give the "
+    raise InputError(f"{where} holds no output noise (an output-error fit's sigma or a likelihood fit's R); give the "
                      "noise explicitly")
 
 
@@ -154,7 +154,7 @@ def criterion_value(after: ParameterBelief, prior: ParameterBelief, criterion: s
         Smaller is better (0 and 1 for a trial that teaches nothing).
     """
     if criterion not in CRITERIA:
-        raise ValueError(f"unknown criterion {criterion!r}; use one of {CRITERIA}")
+        raise InputError(f"unknown criterion {criterion!r}; use one of {CRITERIA}")
     if criterion == "D":
         return float(np.linalg.slogdet(after.cov)[1] - np.linalg.slogdet(prior.cov)[1])
     return float(np.mean(np.diag(after.cov) / np.diag(prior.cov)))

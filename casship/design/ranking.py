@@ -103,7 +103,7 @@ class DesignResult:
         for r in self.rows:
             if r["trial"] == name:
                 return r
-        raise ValueError(f"no trial {name!r}; trials: {[r['trial'] for r in self.rows]}")
+        raise InputError(f"no trial {name!r}; trials: {[r['trial'] for r in self.rows]}")
 
     def table(self) -> str:
         """The ranking as a Markdown table (lengths in the target's unit, angles in degrees)."""
@@ -302,7 +302,7 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
     from ..progress import progress
 
     if criterion is not None and criterion not in CRITERIA:
-        raise ValueError(f"unknown criterion {criterion!r}; use one of {CRITERIA}")
+        raise InputError(f"unknown criterion {criterion!r}; use one of {CRITERIA}")
     tgt = get_target(target)
     noise = check_noise(model, noise)
     pv = model.params(p) if p is not None else model.params(belief.mean)
@@ -319,7 +319,7 @@ def design_trials(model, belief: ParameterBelief, noise: Mapping[str, float], ta
         raise InputError("no candidate trials and no free trial (limits): nothing to rank")
     names = [t.name for t in trials]
     if len(set(names)) != len(names):
-        raise ValueError(f"candidate trials need distinct names, got {names}")
+        raise InputError(f"candidate trials need distinct names, got {names}")
     next(steps)
     floor = tv.floor(discrepancy)
     fold = InformationFold(approach, belief.names, list(noise), jit=jit)

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..discretize import discretize
 from ..model import Model
+from ..errors import InputError
 
 __all__ = ["ManoeuvreFold"]
 
@@ -43,9 +44,9 @@ class ManoeuvreFold:
     def __init__(self, model: Model, names: Sequence[str], p, dt: float, n: int, x0, method: str = "rk4"):
         unknown = [q for q in names if q not in model.param_names]
         if unknown:
-            raise ValueError(f"model {model.name!r} has no parameter(s) {unknown}")
+            raise InputError(f"model {model.name!r} has no parameter(s) {unknown}")
         if n < 1:
-            raise ValueError(f"a manoeuvre needs at least one step, got n = {n}")
+            raise InputError(f"a manoeuvre needs at least one step, got n = {n}")
         self.model, self.names, self.dt, self.n = model, tuple(names), float(dt), int(n)
         self.p = np.asarray(model.params(p), dtype=float)
         self.x0 = np.asarray(x0, dtype=float).reshape(-1)
@@ -163,16 +164,16 @@ class Approach:
         self.rudders, self.propellers = rudder_inputs(model), propeller_inputs(model)
         speed = vessel.U0 if speed is None else speed
         if speed is None or not np.isfinite(speed) or speed <= 0:
-            raise ValueError(f"approach speed must be a positive number [m/s], got {speed}")
+            raise InputError(f"approach speed must be a positive number [m/s], got {speed}")
         self.model, self.speed = model, float(speed)
         self.p = np.asarray(model.params(p), dtype=float)
         self.L = float(vessel.L_pp)
         self.time_scale = self.L / self.speed
         self.dt = float(dt) if dt is not None else nice_step(self.time_scale / 40)
         if not (np.isfinite(self.dt) and self.dt > 0):
-            raise ValueError(f"dt must be a positive number [s], got {dt}")
+            raise InputError(f"dt must be a positive number [s], got {dt}")
         if n is not None and not (np.isfinite(n) and self.propellers):
-            raise ValueError(f"n = {n}: a finite propeller rate for a model with a propeller input")
+            raise InputError(f"n = {n}: a finite propeller rate for a model with a propeller input")
         self.n = None if not self.propellers else (float(n) if n is not None else
                                                   propeller_rate_for_speed(model, self.speed, self.p))
         self.x0 = straight_run_state(model, self.speed)

@@ -127,7 +127,7 @@ def _crossing(s: np.ndarray, ds: np.ndarray, level: float, start: int, what: str
     the step and its derivative (implicit function on the linear interpolation)."""
     idx = np.flatnonzero(s[start:] >= level)
     if idx.size == 0 or start + idx[0] == 0:
-        raise ValueError(f"{what}: the heading change never reaches {np.degrees(level):.4g} deg in the simulated "
+        raise InputError(f"{what}: the heading change never reaches {np.degrees(level):.4g} deg in the simulated "
                          "time (a larger rudder angle, or a longer record?)")
     k = start + idx[0]
     span = s[k] - s[k - 1]
@@ -161,7 +161,7 @@ def _steps_to(approach: Approach, rudder_row, level: float, start_frac: float = 
 
 def _check_side(side) -> None:
     if side not in (1, -1):
-        raise ValueError(f"side must be +1 (starboard) or -1 (port), got {side}")
+        raise InputError(f"side must be +1 (starboard) or -1 (port), got {side}")
 
 
 def _to_heading(approach: Approach, names: Sequence[str], law, level: float, side: int, what: str, extra: int = 3):
@@ -198,10 +198,10 @@ class Turning(Target):
 
     def __post_init__(self):
         if self.quantity not in ("advance", "transfer", "tactical_diameter"):
-            raise ValueError(f"unknown turning quantity {self.quantity!r}; use advance, transfer or tactical_diameter")
+            raise InputError(f"unknown turning quantity {self.quantity!r}; use advance, transfer or tactical_diameter")
         _check_side(self.side)
         if not (0 < self.rudder_deg <= 90):
-            raise ValueError(f"rudder_deg must be in (0, 90], got {self.rudder_deg}")
+            raise InputError(f"rudder_deg must be in (0, 90], got {self.rudder_deg}")
 
     @property
     def name(self) -> str:
@@ -264,7 +264,7 @@ class FirstOvershoot(Target):
     def __post_init__(self):
         _check_side(self.side)
         if not (0 < self.rudder_deg <= 90 and 0 < self.heading_deg < 180):
-            raise ValueError(f"zig-zag angles must be positive degrees, got {self.rudder_deg}/{self.heading_deg}")
+            raise InputError(f"zig-zag angles must be positive degrees, got {self.rudder_deg}/{self.heading_deg}")
 
     @property
     def name(self) -> str:
@@ -305,7 +305,7 @@ class FirstOvershoot(Target):
         dt1 = approach.dt * dfrac
         rate = approach.rudder_rate
         if rate and rate * t1 < np.radians(self.rudder_deg):
-            raise ValueError(f"{self.name}: the heading reaches the switch angle at {t1:.3g} s, before the rudder "
+            raise InputError(f"{self.name}: the heading reaches the switch angle at {t1:.3g} s, before the rudder "
                              f"reached {self.rudder_deg:g} deg")
         # after the switch: simulate to the first peak of the heading change, t1 a symbol
         n = int(n_switch + np.ceil(4 * approach.time_scale / approach.dt))
@@ -317,7 +317,7 @@ class FirstOvershoot(Target):
         after = np.arange(k, n + 1)
         j = int(after[np.argmax(s[after])])
         if j == n:
-            raise ValueError(f"{self.name}: no first overshoot within {n * approach.dt:g} s after the execute")
+            raise InputError(f"{self.name}: no first overshoot within {n * approach.dt:g} s after the execute")
         ds = self.side * dX[j, ipsi]
         grad = ds[:-1] + ds[-1] * dt1
         # the heading error from the switch to the peak is what the model cannot predict of the overshoot
@@ -393,5 +393,5 @@ def get_target(target) -> Target:
     if isinstance(target, Target):
         return target
     if target not in TARGETS:
-        raise ValueError(f"unknown target {target!r}; known: {list(TARGETS)}")
+        raise InputError(f"unknown target {target!r}; known: {list(TARGETS)}")
     return TARGETS[target]

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..data import Dataset
 from .sensitivity import Approach
+from ..errors import InputError
 
 __all__ = ["Trial", "standard_trials"]
 
@@ -49,7 +50,7 @@ class Trial:
     def __post_init__(self):
         r = np.asarray(self.rudder, dtype=float).reshape(-1)
         if r.size < 2 or not np.all(np.isfinite(r)):
-            raise ValueError(f"trial {self.name!r}: the rudder record must have at least two finite values")
+            raise InputError(f"trial {self.name!r}: the rudder record must have at least two finite values")
         r.setflags(write=False)
         object.__setattr__(self, "rudder", r)
 
@@ -154,11 +155,11 @@ def standard_trials(approach: Approach, *, turning: Sequence[float] = (35.0,), z
     spans = {"turning": 25.0, "zigzag": 16.0, "pullout": 30.0, "spiral": 8.0}
     unknown = set(durations or {}) - set(spans)
     if unknown:
-        raise ValueError(f"durations given for unknown kind(s) {sorted(unknown)}; known: {list(spans)}")
+        raise InputError(f"durations given for unknown kind(s) {sorted(unknown)}; known: {list(spans)}")
     spans.update(durations or {})
     bad = [s for s in sides if s not in (1, -1)]
     if bad:
-        raise ValueError(f"sides must be +1 (starboard) or -1 (port), got {bad}")
+        raise InputError(f"sides must be +1 (starboard) or -1 (port), got {bad}")
     T, dt = approach.time_scale, approach.dt
     common = dict(speed=approach.speed, n=approach.n, p=approach.p, dt=dt / 10)
     jobs = []

@@ -19,6 +19,7 @@ from ..discretize import discretize
 from ..model import Model
 from .result import FilterResult
 from .ekf import EKF
+from ..errors import InputError
 
 __all__ = ["augment", "augmented_ekf", "AugmentedResult", "per_name", "augmented_prior", "augmented_noise"]
 
@@ -57,19 +58,19 @@ def augment(model: Model, params: Sequence[str] = (), *, disturbances: Sequence[
     """
     params, disturbances = list(params), list(disturbances)
     if not params and not disturbances:
-        raise ValueError("augment: name at least one parameter or disturbance")
+        raise InputError("augment: name at least one parameter or disturbance")
     unknown = [p for p in params if p not in model.param_names]
     if unknown:
-        raise ValueError(f"augment: unknown parameter(s) {unknown} of model {model.name!r}; "
+        raise InputError(f"augment: unknown parameter(s) {unknown} of model {model.name!r}; "
                          f"parameters: {list(model.param_names)}")
     if len(set(params)) != len(params):
-        raise ValueError(f"augment: parameter names repeated in {params}")
+        raise InputError(f"augment: parameter names repeated in {params}")
     for state in disturbances:
         if state not in model.state_names:
-            raise ValueError(f"cannot add a disturbance to {state!r}: not a state of {model.name!r}; "
+            raise InputError(f"cannot add a disturbance to {state!r}: not a state of {model.name!r}; "
                              f"states: {list(model.state_names)}")
     if len(set(disturbances)) != len(disturbances):
-        raise ValueError(f"disturbances repeat a state: {disturbances}")
+        raise InputError(f"disturbances repeat a state: {disturbances}")
     b = model.builder(name or f"{model.name}_aug")
     docs = {v.name: v.doc for v in model.param_vars}
     for pname in params:
@@ -99,14 +100,14 @@ def per_name(value, names: Sequence[str], what: str) -> np.ndarray:
     if isinstance(value, Mapping):
         missing, extra = [n for n in names if n not in value], sorted(set(value) - set(names))
         if missing or extra:
-            raise ValueError(f"{what}: give exactly the names {names} (missing {missing}, unknown {extra})")
+            raise InputError(f"{what}: give exactly the names {names} (missing {missing}, unknown {extra})")
         return np.array([float(value[n]) for n in names])
     arr = np.asarray(value, dtype=float)
     if arr.ndim and arr.size != len(names):
-        raise ValueError(f"{what}: expected {len(names)} values for {names}, got {arr.size}")
+        raise InputError(f"{what}: expected {len(names)} values for {names}, got {arr.size}")
     arr = np.broadcast_to(arr, (len(names),)).astype(float)
     if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise ValueError(f"{what}: values must be finite and >= 0, got {arr.tolist()}")
+        raise InputError(f"{what}: values must be finite and >= 0, got {arr.tolist()}")
     return arr
 
 
@@ -164,7 +165,7 @@ class AugmentedResult:
         name : str
         """
         if name not in self.params:
-            raise ValueError(f"unknown augmented parameter {name!r}; estimated: {list(self.params)}")
+            raise InputError(f"unknown augmented parameter {name!r}; estimated: {list(self.params)}")
         return self.result[name]
 
     def plot(self, ax=None, path=None):
@@ -235,7 +236,7 @@ def augmented_ekf(model: Model, params: Sequence[str], data: Dataset, *, dt: flo
     guess = dict(guess or {})
     unknown = set(guess) - set(names)
     if unknown:
-        raise ValueError(f"guess: unknown parameter(s) {sorted(unknown)}; estimated: {names}")
+        raise InputError(f"guess: unknown parameter(s) {sorted(unknown)}; estimated: {names}")
     prior_a = augmented_prior(prior, [guess.get(n, 0.0) for n in names], per_name(p0_params, names, "p0_params"))
     rest = model.params() if p is None else model.params(p)
     p_aug = aug.params({k: v for k, v in zip(model.param_names, rest) if k not in names})

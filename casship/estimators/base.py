@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from ..data import Dataset, check_rows
-from ..errors import InputError
+from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..runtime import DUPLICATE_NAMES, Job, NativeFold, current_function, jit_function, record_loop, run_pieces
@@ -147,7 +147,7 @@ class StepEstimator(Estimator):
         memory = self.memory
         unknown = [o for o in outputs if o not in DIAGNOSTICS and o not in memory]
         if unknown:
-            raise ValueError(f"unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)}")
+            raise InputError(f"unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)}")
         names = (*memory, *(o for o in DIAGNOSTICS if o in outputs and o not in memory))
         if key is not None:
             self._names[key] = names
@@ -219,6 +219,46 @@ class StepEstimator(Estimator):
             if loop is not None:
                 self._jitted[key] = loop
         return loop
+
+    # -- records: the step's per-sample slots ------------------------------------------------------
+    def gate_threshold(self, n_measured: int) -> float:
+        """Chi-square threshold of the gate for ``n_measured`` scalar measurements (inf: no gate).
+
+        Parameters
+        ----------
+        n_measured : int
+        """
+        return self.records.gate_threshold(n_measured)
+
+    def prepare(self, data: Dataset, p=None) -> dict:
+        """Check a record and turn it into the step's per-sample and constant slots.
+
+        Parameters
+        ----------
+        data : Dataset
+            Inputs (finite) and measured outputs (NaN or masked = not measured).
+        p : array or mapping, optional
+            Model parameters (nominal by default).
+
+        Returns
+        -------
+        dict
+            ``u_prev, u, y, mask, dt, gate`` with one column per sample (see
+            :meth:`Records.prepare <casship.estimators.records.Records.prepare>`), and ``p, Q, R``.
+        """
+        m = self.model
+        return {**self.records.prepare(data, m.params() if p is None else m.params(p)), "Q": self.Q, "R": self.R}
+
+    def result(self, data: Dataset, arrays: dict, out: dict, estimator: str | None = None) -> FilterResult:
+        """The :class:`FilterResult` of a run (see :meth:`Records.result
+        <casship.estimators.records.Records.result>`).
+
+        Parameters
+        ----------
+        data, arrays, out, estimator
+            The record, its prepared arrays, the per-sample diagnostics and the name to record.
+        """
+        return self.records.result(data, arrays, out, estimator)
 
     # -- data ------------------------------------------------------------------------------------
     def sample_draws(self, n: int, rng) -> dict:
@@ -358,28 +398,28 @@ class StepEstimator(Estimator):
         """
         m = self.model
         if not isinstance(result, FilterResult):
-            raise TypeError(f"predict needs a FilterResult, got {type(result).__name__}")
+            raise InputTypeError(f"predict needs a FilterResult, got {type(result).__name__}")
         if result.state_names != m.state_names:
-            raise ValueError(f"result has states {list(result.state_names)}; {self.name} on {m.name!r} has "
+            raise InputError(f"result has states {list(result.state_names)}; {self.name} on {m.name!r} has "
                              f"{list(m.state_names)}")
         t_last = float(result.t[-1])
         if np.ndim(t) == 0:
             steps = check_rows(np.floor(float(t) / self.dmodel.dt + 1e-9),
                                f"{self.name} prediction: {float(t):g} s at steps of {self.dmodel.dt:g} s")
             if steps < 1:
-                raise ValueError(f"prediction horizon {t} s is shorter than one step ({self.dmodel.dt:g} s)")
+                raise InputError(f"prediction horizon {t} s is shorter than one step ({self.dmodel.dt:g} s)")
             times = t_last + self.dmodel.dt * np.arange(1, steps + 1)
         else:
             times = np.asarray(t, dtype=float).reshape(-1)
             if times.size == 0 or not times[0] > t_last:
-                raise ValueError(f"prediction times must start after the last sample t = {t_last:g} s")
+                raise InputError(f"prediction times must start after the last sample t = {t_last:g} s")
         n = times.size
         if u is None:
             U = np.tile(result.inputs[-1], (n, 1))
         elif isinstance(u, Mapping):
             unknown = sorted(set(u) - set(m.input_names))
             if unknown:
-                raise ValueError(f"unknown input(s) {unknown}; inputs: {list(m.input_names)}")
+                raise InputError(f"unknown input(s) {unknown}; inputs: {list(m.input_names)}")
             U = np.tile(result.inputs[-1], (n, 1))
             for k, v in u.items():
                 U[:, m.index(k, "input")] = np.broadcast_to(np.asarray(v, dtype=float), (n,))

@@ -1,50 +1,46 @@
-"""The estimator contract: one constructor, typed options and five verbs, whatever the algorithm.
+"""The estimator contract: one constructor, typed options and four verbs, whatever the algorithm.
 
-:class:`Estimator` is the abstract base every estimator derives from (``docs/architecture.md``)::
+:class:`Estimator` is the abstract base every estimator derives from (``docs/estimators.md``)::
 
     est = Est(dmodel, Q, R, *, measured=None, options=None)
     est.filter(data, prior, p=None, *, seed=None) -> FilterResult
     est.online(prior, p=None, *, u=None, seed=None) -> OnlineRun      # run.update(y, dt, u_prev, u)
     est.smooth(data, prior, p=None, *, seed=None) -> FilterResult
     est.predict(result, t, u=None, p=None, *, seed=None) -> FilterResult
-    est.step                                                          # a casadi.Function, or a refusal
+    est.options                                                       # the typed options
 
-The constructor rule (a :class:`~casship.discretize.DiscreteModel`, the one meaning of ``Q`` and
-``R``, measured outputs by name, typed options whose unknown keys raise) and the checks of records
-and priors live here once. How an estimator does its work is its own: the recursive filters share
-the step-based template :class:`~casship.estimators.base.StepEstimator` (one step Function with
-named slots, folded over a record); the moving-horizon estimator solves a window problem per sample
-and, having no step Function, refuses :attr:`step` with :class:`NoStepFunction`.
+Nothing else is promised of every estimator. The constructor rule (a
+:class:`~casship.discretize.DiscreteModel`, the one meaning of ``Q`` and ``R``, measured outputs by
+name, typed options whose unknown keys raise) and the check of priors live here once; records are
+checked and results assembled by the shared helper :class:`~casship.estimators.records.Records`
+(``est.records``), and online samples by :func:`~casship.estimators.online.check_sample`. How an
+estimator does its work is its own: the recursive filters share the step-based template
+:class:`~casship.estimators.base.StepEstimator`, which adds ``step`` (one step Function with named
+slots, folded over a record, exported as C); the moving-horizon estimator solves a window problem
+per sample and has no ``step`` at all.
 """
 from __future__ import annotations
 
 import abc
-import weakref
 from typing import Sequence
 
 import numpy as np
-from scipy import stats
 
 from ..data import Dataset
 from ..discretize import DiscreteModel
+from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian, as_cov
 from ..validity import check_start
 from .options import EstimatorOptions
+from .records import Records
 from .result import FilterResult
 from .update import residual
 
-__all__ = ["Estimator", "NoStepFunction"]
-
-
-class NoStepFunction(AttributeError):
-    """An estimator without a step Function was asked for one (the message says why and what to use).
-
-    An ``AttributeError``, so ``hasattr(est, "step")`` is false for such an estimator.
-    """
+__all__ = ["Estimator"]
 
 
 class Estimator(abc.ABC):
-    """The contract of every estimator (abstract; see ``docs/architecture.md``).
+    """The contract of every estimator (abstract; see ``docs/estimators.md``).
 
     Parameters
     ----------
@@ -56,15 +52,23 @@ class Estimator(abc.ABC):
     measured : sequence of str, optional
         Output names that are measured (default: all outputs of the model).
     options : EstimatorOptions subclass or mapping, optional
-        The estimator's typed options (``Est.Options``); an unknown key raises ``ValueError``.
+        The estimator's typed options (``Est.Options``); an unknown key raises ``InputError``.
+
+    Attributes
+    ----------
+    options : EstimatorOptions
+        The typed options (frozen).
+    records : Records
+        The shared record checks and result assembly for this estimator's model and measured outputs.
 
     Notes
     -----
-    Subclasses implement :meth:`filter`, :meth:`online`, :meth:`smooth`, :meth:`predict` and
-    :attr:`step`, honour or refuse every option they accept (a refused option raises in the
-    constructor, naming it), and are registered in ``casship.estimators.ESTIMATORS`` so that the
-    conformance suite checks them. The traits ``continuous``, ``stochastic``, ``linear`` and
-    ``has_step`` tell the suite what to expect.
+    Subclasses implement :meth:`filter`, :meth:`online`, :meth:`smooth` and :meth:`predict`,
+    honour or refuse every option they accept (a refused option raises in the constructor, naming
+    it), and are registered in ``casship.estimators.ESTIMATORS`` so that the conformance suite
+    checks them. The traits ``continuous``, ``stochastic`` and ``linear`` tell the suite what to
+    expect; an estimator of the step family (a :class:`~casship.estimators.base.StepEstimator`)
+    also has ``step``.
     """
 
     name = "estimator"
@@ -72,23 +76,22 @@ class Estimator(abc.ABC):
     continuous = False       # Q and R enter as spectral densities Q dt, R dt
     stochastic = False       # draws random numbers (reproducible with ``seed``)
     linear = False           # needs a model linear in states, inputs and noise
-    has_step = True          # False: ``step`` raises NoStepFunction
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured: Sequence[str] | None = None, options=None):
         if not isinstance(dmodel, DiscreteModel):
-            raise TypeError(f"{type(self).__name__} needs a DiscreteModel (use casship.discretize), "
-                            f"got {type(dmodel).__name__}")
+            raise InputTypeError(f"{type(self).__name__} needs a DiscreteModel (use casship.discretize), "
+                                 f"got {type(dmodel).__name__}")
         model = dmodel.model
         self.dmodel, self.model = dmodel, model
         measured = tuple(model.output_names if measured is None else measured)
         unknown = [n for n in measured if n not in model.output_names]
         if unknown:
-            raise ValueError(f"unknown measured output(s) {unknown}; outputs: {list(model.output_names)}")
+            raise InputError(f"unknown measured output(s) {unknown}; outputs: {list(model.output_names)}")
         if not measured:
-            raise ValueError("at least one output must be measured")
+            raise InputError("at least one output must be measured")
         twice = sorted({n for n in measured if measured.count(n) > 1})
         if twice:
-            raise ValueError(f"measured output(s) {twice} given more than once (each sample would be used twice)")
+            raise InputError(f"measured output(s) {twice} given more than once (each sample would be used twice)")
         self.measured = measured
         self.meas_index = [model.index(n, "output") for n in measured]
         self.ny = len(measured)
@@ -96,17 +99,15 @@ class Estimator(abc.ABC):
         self.Q = as_cov(Q, model.nw, "Q", model.noise_names)
         self.R = as_cov(R, self.ny, "R", measured, allow_zero=False)
         self.options = self.Options.from_value(options, type(self).__name__)
-        self._gate_cache: dict[int, float] = {}
-        # the last record prepared (a Dataset is immutable: its arrays are reused while it lives) and the
-        # starts already found finite: a filter run again on the same record skips both checks' work
-        self._record: tuple | None = None
+        self.records = Records(dmodel, measured, self.options.gate, self.name)
+        # the starts already found finite: a filter run again from the same start skips the check's work
         self._finite_starts: dict[bytes, None] = {}
         self._check_options()
 
     def _check_options(self) -> None:
-        """Checks of the options against the model (raise ``ValueError`` naming the option)."""
+        """Checks of the options against the model (raise ``InputError`` naming the option)."""
 
-    # -- the five verbs ------------------------------------------------------------------------------
+    # -- the four verbs ------------------------------------------------------------------------------
     @abc.abstractmethod
     def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
         """Estimates over a whole record (filtered: each row uses the rows up to it).
@@ -146,7 +147,7 @@ class Estimator(abc.ABC):
 
     @abc.abstractmethod
     def smooth(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
-        """Fixed-interval smoothing of a record (each row uses the whole record), or a ``ValueError``
+        """Fixed-interval smoothing of a record (each row uses the whole record), or an ``InputError``
         saying why the estimator has none.
 
         Parameters
@@ -171,85 +172,7 @@ class Estimator(abc.ABC):
         seed : int or Generator, optional
         """
 
-    @property
-    @abc.abstractmethod
-    def step(self):
-        """The step ``casadi.Function`` with named slots, or :class:`NoStepFunction` saying why there is
-        none and what to use instead."""
-
-    # -- records and priors: checked once for every estimator -------------------------------------------
-    def gate_threshold(self, n_measured: int) -> float:
-        """Chi-square threshold of the gate for ``n_measured`` scalar measurements (inf: no gate).
-
-        Parameters
-        ----------
-        n_measured : int
-        """
-        if self.options.gate is None or n_measured == 0:
-            return np.inf
-        if n_measured not in self._gate_cache:
-            self._gate_cache[n_measured] = float(stats.chi2.ppf(self.options.gate, n_measured))
-        return self._gate_cache[n_measured]
-
-    def prepare(self, data: Dataset, p=None) -> dict:
-        """Check a record and turn it into named per-sample arrays (one column per sample).
-
-        Parameters
-        ----------
-        data : Dataset
-            Inputs (finite) and measured outputs (NaN = not measured).
-        p : array or mapping, optional
-            Model parameters (nominal by default).
-
-        Returns
-        -------
-        dict
-            ``u_prev, u, y, mask, dt, gate`` with one column per sample, and ``p, Q, R``.
-        """
-        if not isinstance(data, Dataset):
-            raise TypeError(f"data must be a casship.Dataset, got {type(data).__name__}")
-        cached = self._record
-        if cached is not None and cached[0]() is data:
-            arrays = cached[1]
-        else:
-            arrays = self._record_arrays(data)
-            self._record = (weakref.ref(data), arrays)
-        m = self.model
-        return {**arrays, "p": m.params() if p is None else m.params(p), "Q": self.Q, "R": self.R}
-
-    def _record_arrays(self, data: Dataset) -> dict:
-        """The checks and per-sample arrays of :meth:`prepare` that depend on the record alone (read-only)."""
-        m = self.model
-        missing = [n for n in (*m.input_names, *self.measured) if n not in data]
-        if missing:
-            raise ValueError(f"data has no column(s) {missing} needed by {self.name} on {m.name!r}; "
-                             f"columns: {list(data.names)}")
-        U = data.matrix(m.input_names, finite=True, what="input")
-        Y = data.matrix(self.measured)
-        if np.isinf(Y).any():
-            row, col = np.argwhere(np.isinf(Y))[0]
-            raise ValueError(f"measurement {self.measured[col]!r} is infinite at row {row}")
-        for j in np.flatnonzero(self.angle_meas):
-            col = Y[:, j]
-            big = np.abs(col[np.isfinite(col)])
-            if big.size and big.max() > 2 * np.pi + 1e-9:
-                raise ValueError(f"angle measurement {self.measured[j]!r} reaches {big.max():.4g}: "
-                                 "angles are in radians (degrees given?)")
-        dt = np.concatenate([[0.0], np.diff(data.t)])
-        self.dmodel.check_steps(dt[1:], data.t)
-        mask = np.isfinite(Y)
-        maskf = mask.astype(float)
-        if self.options.gate:                  # the threshold per number of measured channels
-            thresholds = np.array([self.gate_threshold(c) for c in range(self.ny + 1)])
-            gate = thresholds[(maskf @ np.ones(self.ny)).astype(np.intp)]
-        else:
-            gate = np.full(len(data), np.inf)
-        arrays = {"u_prev": np.vstack([U[:1], U[:-1]]).T, "u": U.T, "y": np.where(mask, Y, 0.0).T,
-                  "mask": maskf.T, "dt": dt[None, :], "gate": gate[None, :]}
-        for a in arrays.values():
-            a.setflags(write=False)
-        return arrays
-
+    # -- priors: checked once for every estimator ---------------------------------------------------
     def check_prior(self, prior: Gaussian) -> None:
         """Check a prior belief of the state: a :class:`~casship.Gaussian` of the model's size, angles in radians.
 
@@ -259,49 +182,20 @@ class Estimator(abc.ABC):
 
         Raises
         ------
-        TypeError
+        InputTypeError
             Not a Gaussian.
-        ValueError
+        InputError
             The wrong number of entries, or an angle's mean beyond 2 pi (degrees given?).
         """
         if not isinstance(prior, Gaussian):
-            raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
+            raise InputTypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
         if prior.mean.size != self.model.nx:
-            raise ValueError(f"prior has {prior.mean.size} entries, model {self.model.name!r} has "
+            raise InputError(f"prior has {prior.mean.size} entries, model {self.model.name!r} has "
                              f"{self.model.nx} states {list(self.model.state_names)}")
         for i in np.flatnonzero(self.model.angle_states):
             if abs(prior.mean[i]) > 2 * np.pi + 1e-9:
-                raise ValueError(f"prior mean of angle state {self.model.state_names[i]!r} is {prior.mean[i]:.4g}: "
+                raise InputError(f"prior mean of angle state {self.model.state_names[i]!r} is {prior.mean[i]:.4g}: "
                                  "angles are in radians (degrees given?)")
-
-    def result(self, data: Dataset, arrays: dict, out: dict, estimator: str | None = None) -> FilterResult:
-        """Assemble a :class:`FilterResult` from the per-sample diagnostics of a run.
-
-        Parameters
-        ----------
-        data : Dataset
-            The record.
-        arrays : dict
-            The record as prepared by :meth:`prepare`.
-        out : dict
-            Diagnostic name -> array indexed by sample (``x, P, x_pred, P_pred, C, e, S, K, nis, ll,
-            accepted``).
-        estimator : str, optional
-            Name recorded in the result (default: the estimator's).
-        """
-        m, n = self.model, len(data)
-        mask = arrays["mask"].T
-        e = np.where(mask > 0, np.reshape(out["e"], (n, self.ny)), np.nan)
-        e.setflags(write=False)                  # the result's own array: kept without a copy
-        mat = lambda k, r, c: np.reshape(out[k], (n, r, c))  # noqa: E731
-        nx, ny = m.nx, self.ny
-        return FilterResult(
-            t=data.t, x=np.reshape(out["x"], (n, nx)), P=mat("P", nx, nx), x_pred=np.reshape(out["x_pred"], (n, nx)),
-            P_pred=mat("P_pred", nx, nx), C=mat("C", nx, nx), K=mat("K", nx, ny), innovations=e, S=mat("S", ny, ny),
-            nis=np.reshape(out["nis"], n), n_measured=(mask @ np.ones(ny)).astype(int), loglik_terms=np.reshape(out["ll"], n),
-            rejected=np.reshape(out["accepted"], n) < 0.5, inputs=arrays["u"].T, state_names=m.state_names,
-            state_units=tuple(v.unit for v in m.state_vars), output_names=self.measured, input_names=m.input_names,
-            estimator=estimator or self.name, angle_states=m.angle_states)
 
     def _check_start(self, prior: Gaussian, u, p) -> None:
         """Refuse a prior where the model's equations are not finite (e.g. an MMG ship at rest); ``u`` is

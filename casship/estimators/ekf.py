@@ -11,6 +11,7 @@ from ..discretize import rk4
 from .base import StepEstimator
 from .options import EstimatorOptions, check_int
 from .update import joseph_update, sandwich, symmetric
+from ..errors import InputError
 
 __all__ = ["EKF", "KF", "EKFOptions", "persistence_model"]
 
@@ -46,13 +47,13 @@ class EKFOptions(EstimatorOptions):
     def __post_init__(self):
         super().__post_init__()
         if self.covariance not in ("discrete", "continuous"):
-            raise ValueError(f"option 'covariance' must be 'discrete' or 'continuous', got {self.covariance!r}")
+            raise InputError(f"option 'covariance' must be 'discrete' or 'continuous', got {self.covariance!r}")
         object.__setattr__(self, "substeps", check_int(self.substeps, "substeps", 1))
         if self.reacquire is not None:
             if isinstance(self.reacquire, bool) or not float(self.reacquire).is_integer() or self.reacquire < 1:
-                raise ValueError(f"option 'reacquire' is a positive number of samples, got {self.reacquire!r}")
+                raise InputError(f"option 'reacquire' is a positive number of samples, got {self.reacquire!r}")
             if self.gate is None:
-                raise ValueError("option 'reacquire' needs a 'gate'")
+                raise InputError("option 'reacquire' needs a 'gate'")
             object.__setattr__(self, "reacquire", int(self.reacquire))
 
 
@@ -165,7 +166,7 @@ class EKF(StepEstimator):
         import control
 
         if self.options.covariance != "discrete":
-            raise ValueError("steady_state: a continuous-discrete EKF has no constant discrete gain; "
+            raise InputError("steady_state: a continuous-discrete EKF has no constant discrete gain; "
                              "use covariance='discrete' or KalmanBucy.steady_state")
         m = self.model
         x, u, p = self._operating_point(x, u, p)
@@ -205,7 +206,7 @@ class KF(EKF):
         z = ca.vertcat(x, u, w)
         for what, expr in (("dynamics", dm.F(x, u, p, w, dt)), ("outputs", m.h(x, u, p))):
             if ca.depends_on(ca.jacobian(expr, z), z):
-                raise ValueError(f"KF: the {what} of model {m.name!r} are not linear in states, inputs and "
+                raise InputError(f"KF: the {what} of model {m.name!r} are not linear in states, inputs and "
                                  "noise; use EKF, UKF or EnKF")
 
 def persistence_model(names, name: str = "persistence"):

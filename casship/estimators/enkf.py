@@ -23,6 +23,7 @@ from .base import StepEstimator
 from .options import EstimatorOptions, check_int
 from .ukf import psd_sqrt, wrap_fast
 from .update import from_lower, gain_and_terms, masked_innovation_cov, residual
+from ..errors import InputError
 
 __all__ = ["EnKF", "EnKFOptions"]
 
@@ -45,7 +46,7 @@ class EnKFOptions(EstimatorOptions):
         super().__post_init__()
         object.__setattr__(self, "members", check_int(self.members, "members", 2))
         if self.members > MAX_MEMBERS:
-            raise ValueError(f"option 'members' = {self.members} is more than {MAX_MEMBERS} "
+            raise InputError(f"option 'members' = {self.members} is more than {MAX_MEMBERS} "
                              "(casship.estimators.enkf.MAX_MEMBERS), refused before it exhausts the memory")
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from ..runtime import CFiles, c_array, check_c_name, generate_c
 from .mhe import MHE
+from ..errors import InputTypeError
 
 __all__ = ["export_estimator", "export_mhe_rti"]
 
@@ -40,7 +41,7 @@ def export_estimator(estimator, directory, name: str | None = None, p=None, outp
     """
     step_function = getattr(estimator, "step_function", None)
     if not callable(step_function):
-        raise TypeError(f"{type(estimator).__name__} has no step Function to export")
+        raise InputTypeError(f"{type(estimator).__name__} has no step Function to export")
     fun = step_function(outputs)
     model = estimator.model
     name = check_c_name(name or f"{type(estimator).__name__.lower()}_step")
@@ -96,7 +97,7 @@ def export_mhe_rti(mhe, directory, name: str | None = None) -> CFiles:
     solver and are not part of this export.
     """
     if not isinstance(mhe, MHE):
-        raise TypeError(f"export_mhe_rti needs a casship.MHE, got {type(mhe).__name__}")
+        raise InputTypeError(f"export_mhe_rti needs a casship.MHE, got {type(mhe).__name__}")
     N = mhe.horizon
     window = mhe.window(N, "rti")
     name = check_c_name(name or f"mhe_rti_step_{N}")

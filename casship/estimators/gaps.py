@@ -152,7 +152,7 @@ def gap_pieces(est, x, u, p, dt: float, where: str) -> int:
             return 1
     limit = gap_limit(est, x, u, p)
     if est.options.on_gap == "raise":
-        raise ValueError(_message(est, where, float(dt), limit))
+        raise InputError(_message(est, where, float(dt), limit))
     return bridge_pieces(float(dt), limit)
 
 

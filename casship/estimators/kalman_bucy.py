@@ -22,6 +22,7 @@ from ..discretize import rk4
 from .base import StepEstimator
 from .options import EstimatorOptions, check_int
 from .update import gaussian_terms, joseph_update, masked_innovation_cov, symmetric
+from ..errors import InputError
 
 __all__ = ["KalmanBucy", "KalmanBucyOptions"]
 
@@ -60,12 +61,12 @@ class KalmanBucyOptions(EstimatorOptions):
     def __post_init__(self):
         super().__post_init__()
         if self.gate is not None:
-            raise ValueError("KalmanBucy: option 'gate' is not available for a continuous filter")
+            raise InputError("KalmanBucy: option 'gate' is not available for a continuous filter")
         object.__setattr__(self, "substeps", check_int(self.substeps, "substeps", 1))
         if self.integrator not in _INTEGRATORS:
-            raise ValueError(f"option 'integrator' must be one of {_INTEGRATORS}, got {self.integrator!r}")
+            raise InputError(f"option 'integrator' must be one of {_INTEGRATORS}, got {self.integrator!r}")
         if not isinstance(self.steady_state, bool):
-            raise ValueError(f"option 'steady_state' is True or False, got {self.steady_state!r}")
+            raise InputError(f"option 'steady_state' is True or False, got {self.steady_state!r}")
 
 
 class KalmanBucy(StepEstimator):
@@ -179,7 +180,7 @@ class KalmanBucy(StepEstimator):
         data, prior, p, seed
             As for :meth:`filter`.
         """
-        raise ValueError("KalmanBucy has no smoother: a continuous filter has no one-step predictions to "
+        raise InputError("KalmanBucy has no smoother: a continuous filter has no one-step predictions to "
                          "smooth; use KF, EKF, UKF, EnKF or MHE")
 
     def steady_state(self, x=None, u=None, p=None):

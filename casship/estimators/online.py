@@ -1,10 +1,13 @@
 """The one online protocol: ``run = est.online(prior, p); x = run.update(y, dt, u_prev=None, u=None)``.
 
-:class:`OnlineRun` is what every estimator's ``online`` returns. For the recursive estimators it is
-a :class:`StepRun` (one evaluation of the step per update through CasADi's buffers, the memory kept
-in them); the MHE's run hands each sample to its window engine. A run holds a lock around every
-update and every read of its state, so calls from several threads are taken one at a time, each
-one whole.
+:class:`OnlineRun` is what every estimator's ``online`` returns. It hands each sample to an
+engine, anything that keeps the :class:`OnlineEngine` protocol: for the recursive estimators a
+:class:`StepRun` (one evaluation of the step per update through CasADi's buffers, the memory kept
+in them), for the MHE its window engine. Every engine checks a sample with the one
+:func:`check_sample` (masked = NaN = not measured; an infinite measurement, a masked or non-finite
+input, a ``dt`` that is not a finite number >= 0 refused by name), so that a sample means the same
+to every estimator. A run holds a lock around every update and every read of its state, so calls
+from several threads are taken one at a time, each one whole.
 """
 from __future__ import annotations
 
@@ -13,18 +16,182 @@ import numbers
 import threading
 import warnings
 from collections.abc import Mapping
+from typing import Protocol, Sequence, runtime_checkable
 
 import casadi as ca
 import numpy as np
 
+from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian
 from ..runtime import DUPLICATE_NAMES, BufferedCall, is_compiled
 from .gaps import gap_pieces, gap_threshold
 from .options import DIAGNOSTICS
 
-__all__ = ["OnlineRun", "StepRun", "online_step"]
+__all__ = ["OnlineRun", "OnlineEngine", "StepRun", "online_step", "check_sample", "sample_vector",
+           "sample_interval", "first_input"]
 
 _ONLINE_EXTRAS = ("mask", "u_held", "status")       # outputs of online_step beyond the step's
+
+
+# -- the one sample check ------------------------------------------------------------------------------
+def sample_vector(value, names: Sequence[str], what: str) -> np.ndarray:
+    """One sample of ``what`` (``"y"``, ``"u_prev"`` or ``"u"``) as a float vector, one entry per name.
+
+    A masked entry of a measurement ``y`` is NaN (not measured); a masked input is refused. A single
+    number stands for a vector of one.
+
+    Parameters
+    ----------
+    value : array-like or numpy.ma.MaskedArray
+    names : sequence of str
+        The measured outputs or the inputs, in order.
+    what : str
+        The argument's name, for messages.
+
+    Returns
+    -------
+    numpy.ndarray of shape (len(names),)
+
+    Raises
+    ------
+    InputError
+        Not numbers, the wrong number of values, or a masked input (named).
+    """
+    size = len(names)
+    if np.ma.isMaskedArray(value):                  # masked = not measured; an input must be there
+        hidden = np.ma.getmaskarray(value).ravel()
+        if what != "y" and hidden.any():
+            raise InputError(f"{what} is masked for {[n for n, m in zip(names, hidden) if m]}; inputs must be "
+                             "given")
+        value = np.ma.filled(np.ma.asarray(value, dtype=float), np.nan)
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be {size} number{'s' * (size != 1)} for {list(names)}, "
+                         f"got {value!r}") from None
+    if v.ndim == 0 and size == 1:                   # one value: a scalar is that value
+        v = v.reshape(1)
+    if v.shape != (size,):
+        raise InputError(f"{what} must hold {size} value{'s' * (size != 1)} for {list(names)}, got shape {v.shape}")
+    return v
+
+
+def sample_interval(dt) -> float:
+    """The time since the previous sample as a float, or ``InputError`` if it is not a finite number >= 0.
+
+    Parameters
+    ----------
+    dt : number or array of one number
+    """
+    if isinstance(dt, numbers.Real) and not isinstance(dt, bool):
+        value = float(dt)
+    elif isinstance(dt, np.ndarray) and dt.size == 1 and dt.dtype.kind in "fiu":
+        value = float(dt.item())
+    else:
+        raise InputError(f"dt must be a number >= 0 (seconds), got {dt!r}")
+    if not (value >= 0 and math.isfinite(value)):
+        raise InputError(f"dt must be >= 0 and finite, got {dt}")
+    return value
+
+
+def check_sample(y, dt, u_prev, u, measured: Sequence[str], inputs: Sequence[str]):
+    """The one check of an online sample, used by every engine before it changes anything.
+
+    Parameters
+    ----------
+    y : array-like (ny,)
+        The measured outputs, NaN (or masked) where not measured.
+    dt : float
+        Time since the previous sample [s].
+    u_prev, u : array-like (nu,) or None
+        Inputs held since the previous sample, and now (None: the engine's default).
+    measured, inputs : sequence of str
+        The names of the measured outputs and of the inputs.
+
+    Returns
+    -------
+    tuple
+        ``(y, dt, u_prev, u)``: float vectors (masked entries of ``y`` NaN), ``dt`` a float, ``u_prev`` and
+        ``u`` None where not given.
+
+    Raises
+    ------
+    InputError
+        Naming the item: a measurement that is infinite, an input that is masked or not finite, a
+        vector of the wrong length, a ``dt`` that is not a finite number >= 0.
+    """
+    y = sample_vector(y, measured, "y")
+    dt = sample_interval(dt)
+    infinite = [n for n, v in zip(measured, y) if np.isinf(v)]
+    if infinite:
+        raise InputError(f"measurement(s) {infinite} infinite (NaN means not measured)")
+    vectors = []
+    for what, value in (("u_prev", u_prev), ("u", u)):
+        if value is not None:
+            value = sample_vector(value, inputs, what)
+            bad = [n for n, v in zip(inputs, value) if not np.isfinite(v)]
+            if bad:
+                raise InputError(f"inputs {bad} must be finite, got {what} = {value}")
+        vectors.append(value)
+    return (y, dt, *vectors)
+
+
+def first_input(u, inputs: Sequence[str]) -> np.ndarray:
+    """The inputs before the first update of a run: zeros when None, else finite values, one per input.
+
+    Parameters
+    ----------
+    u : array-like or None
+    inputs : sequence of str
+    """
+    if u is None:
+        return np.zeros(len(inputs))
+    return check_sample(np.zeros(0), 0.0, None, u, (), inputs)[3]
+
+
+@runtime_checkable
+class OnlineEngine(Protocol):
+    """What does the work of an :class:`OnlineRun` per sample (a recursive estimator's step, the MHE's
+    window). ``update`` checks its sample with :func:`check_sample` before it changes anything, so a
+    refused sample leaves the engine as it was.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        None: a protocol is not instantiated; an engine is any object with these members.
+
+    Attributes
+    ----------
+    name : str
+        The estimator's name (in messages).
+    """
+
+    name: str
+
+    @property
+    def samples(self) -> int:
+        """Samples taken so far."""
+
+    def update(self, y, dt, u_prev, u) -> np.ndarray:
+        """Take one sample; return a copy of the new mean.
+
+        Parameters
+        ----------
+        y, dt, u_prev, u
+            As for :meth:`OnlineRun.update` (``u_prev`` and ``u`` None: the engine's defaults).
+        """
+
+    @property
+    def x(self) -> np.ndarray:
+        """Current mean (copy)."""
+
+    @property
+    def P(self) -> np.ndarray:
+        """Current covariance (copy)."""
+
+    @property
+    def info(self) -> Mapping:
+        """Named diagnostics of the last update."""
 
 
 class OnlineRun:
@@ -37,7 +204,7 @@ class OnlineRun:
 
     Parameters
     ----------
-    engine : object
+    engine : OnlineEngine
         Does the work per sample (the step of a recursive estimator, the window of the MHE).
 
     Examples
@@ -48,7 +215,9 @@ class OnlineRun:
     >>> run.P, run.info["nis"]                        # doctest: +SKIP
     """
 
-    def __init__(self, engine):
+    def __init__(self, engine: OnlineEngine):
+        if not isinstance(engine, OnlineEngine):     # a casship bug, not the user's
+            raise TypeError(f"OnlineRun needs an OnlineEngine, got {type(engine).__name__}")
         self._engine = engine
         self._lock = threading.RLock()
 
@@ -106,9 +275,9 @@ class OnlineRun:
     # nor lock pickle. Said plainly rather than left to copy and pickle.
     def _refuse(self, what: str):
         name = self.__dict__.get("name") or getattr(self.__dict__.get("_engine"), "name", "estimator")
-        raise TypeError(f"an online {name} run cannot be {what}: its memory lives in the "
-                        "estimator's buffers; keep its state (run.x, run.P) and start another run with "
-                        "est.online(casship.Gaussian(run.x, run.P), p)")
+        raise InputTypeError(f"an online {name} run cannot be {what}: its memory lives in the "
+                             "estimator's buffers; keep its state (run.x, run.P) and start another run with "
+                             "est.online(casship.Gaussian(run.x, run.P), p)")
 
     def __copy__(self):
         self._refuse("copied (a copy would share its buffers with this run)")
@@ -212,9 +381,7 @@ class StepRun(OnlineRun):
             first[k] = v
         self._p = m.params() if p is None else m.params(p)
         first["p"] = self._p
-        u0 = np.zeros(m.nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
-        if u0.size != m.nu or not np.all(np.isfinite(u0)):
-            raise ValueError(f"u must be {m.nu} finite values for the inputs {list(m.input_names)}, got {u0}")
+        u0 = first_input(u, m.input_names)
         # intervals beyond it are checked at the state where they happen (casship.estimators.gaps)
         self._limit = float(gap_threshold(est))
         first["Q"], first["R"] = est.Q, est.R
@@ -251,33 +418,33 @@ class StepRun(OnlineRun):
             cur = self._cur
             evaluate, status, x = self._sets[cur]
             if isinstance(y, np.ma.MaskedArray):        # its buffer holds no mask: the long way
-                y = self._vector(y, self._ny, "y", self._est.measured)
+                y = sample_vector(y, self._est.measured, "y")
             try:
                 self._y[:] = y
             except (TypeError, ValueError):
-                self._y[:] = self._vector(y, self._ny, "y", self._est.measured)
+                self._y[:] = sample_vector(y, self._est.measured, "y")
             if self._nu:
                 if u_prev is None:
                     u_prev = self._held[1 - cur]
                 elif isinstance(u_prev, np.ma.MaskedArray):
-                    u_prev = self._vector(u_prev, self._nu, "u_prev", self._est.model.input_names)
+                    u_prev = sample_vector(u_prev, self._est.model.input_names, "u_prev")
                 if isinstance(u, np.ma.MaskedArray):
-                    u = self._vector(u, self._nu, "u", self._est.model.input_names)
+                    u = sample_vector(u, self._est.model.input_names, "u")
                 try:
                     self._u_prev[:] = u_prev
                 except (TypeError, ValueError):
-                    self._u_prev[:] = self._vector(u_prev, self._nu, "u_prev", self._est.model.input_names)
+                    self._u_prev[:] = sample_vector(u_prev, self._est.model.input_names, "u_prev")
                 try:
                     self._u[:] = self._u_prev if u is None else u
                 except (TypeError, ValueError):
-                    self._u[:] = self._vector(u, self._nu, "u", self._est.model.input_names)
+                    self._u[:] = sample_vector(u, self._est.model.input_names, "u")
             self._dt[0] = dt
             rng_state = self._draw() if self._n_draws else None
             evaluate()
             if status[0]:
                 if rng_state is not None:                   # a refused update draws nothing
                     self._rng.bit_generator.state = rng_state
-                raise self._refusal(self._y, self._u_prev, self._u)
+                self._refuse_sample(dt)
             self._cur = 1 - cur
             self._samples += 1
             return x.copy()
@@ -296,15 +463,8 @@ class StepRun(OnlineRun):
 
     def _irregular_dt(self, dt, y, u_prev, u) -> float | None:
         """``dt`` as a float within the one-step limit, or None when the gap was bridged here;
-        ``ValueError`` for a ``dt`` that is not a number >= 0 or a gap that is refused."""
-        if isinstance(dt, numbers.Real):
-            value = float(dt)
-        elif isinstance(dt, np.ndarray) and dt.size == 1 and dt.dtype.kind in "fiu":
-            value = float(dt.item())
-        else:
-            raise ValueError(f"dt must be a number >= 0 (seconds), got {dt!r}")
-        if not (value >= 0 and math.isfinite(value)):
-            raise ValueError(f"dt must be >= 0 and finite, got {dt}")
+        ``InputError`` for a ``dt`` that is not a number >= 0 or a gap that is refused."""
+        value = sample_interval(dt)
         if value <= self._limit or not self._bridged(y, value, u_prev, u):
             return value
         return None
@@ -312,8 +472,8 @@ class StepRun(OnlineRun):
     def _bridged(self, y, dt, u_prev, u) -> bool:
         """A gap: checked at the current estimate; raise, or predict across it in shorter steps."""
         x = self._x[1 - self._cur] if self._samples else self._prior.mean
-        held = np.array(self._held[1 - self._cur]) if u_prev is None else self._vector(u_prev, self._nu, "u_prev",
-                                                                                         self._est.model.input_names)
+        held = np.array(self._held[1 - self._cur]) if u_prev is None else sample_vector(u_prev, self._est.model.input_names,
+                                                                                        "u_prev")
         where = f"before update {self._samples + 1}"
         pieces = gap_pieces(self._est, x, held, self._p, float(dt), where)
         if pieces == 1:
@@ -327,34 +487,13 @@ class StepRun(OnlineRun):
         self.update(y, dt / pieces, u_held, u)
         return True
 
-    def _vector(self, value, size: int, what: str, names) -> np.ndarray:
-        """``value`` as a float vector of ``size``, or ``ValueError`` naming ``what`` (the long way:
-        :meth:`update` takes a float64 array of the right shape as it is)."""
-        if np.ma.isMaskedArray(value):              # masked = not measured; an input must be there
-            hidden = np.ma.getmaskarray(value).ravel()
-            if what != "y" and hidden.any():
-                raise ValueError(f"{what} is masked for {[n for n, m in zip(names, hidden) if m]}; inputs must be "
-                                 "given")
-            value = np.ma.filled(np.ma.asarray(value, dtype=float), np.nan)
-        try:
-            v = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f"{what} must be {size} number{'s' * (size != 1)} for {list(names)}, "
-                             f"got {value!r}") from None
-        if v.ndim == 0 and size == 1:               # one value: a scalar is that value
-            v = v.reshape(1)
-        if v.shape != (size,):
-            raise ValueError(f"{what} must hold {size} value{'s' * (size != 1)} for {list(names)}, got shape {v.shape}")
-        return v
-
-    def _refusal(self, y, u_prev, u) -> ValueError:
-        """What made the evaluation report an invalid sample (its outputs are not used)."""
+    def _refuse_sample(self, dt) -> None:
+        """Raise what made the evaluation report an invalid sample (its outputs are not used): the
+        sample as written into the buffers, through the one :func:`check_sample`."""
         est = self._est
-        y, u_prev, u = (np.array(v) for v in (y, u_prev, u))
-        bad = [n for n, v in zip(est.measured, y) if np.isinf(v)]
-        if bad:
-            return ValueError(f"measurement(s) {bad} infinite (NaN means not measured)")
-        return ValueError(f"inputs {list(est.model.input_names)} must be finite, got u_prev = {u_prev}, u = {u}")
+        check_sample(np.array(self._y), dt, np.array(self._u_prev), np.array(self._u), est.measured,
+                     est.model.input_names)
+        raise RuntimeError(f"{est.name}: the online step reported an invalid sample that check_sample accepts")
 
     @property
     def samples(self) -> int:

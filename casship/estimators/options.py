@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 from typing import Mapping
 
+from ..errors import InputError, InputTypeError
+
 __all__ = ["EstimatorOptions", "DIAGNOSTICS", "check_int"]
 
 # Diagnostics a step Function can return besides its memory slots, in their fixed order.
@@ -27,7 +29,7 @@ def check_int(value, name: str, low: int) -> int:
         Smallest value allowed.
     """
     if isinstance(value, bool) or not float(value).is_integer() or int(value) < low:
-        raise ValueError(f"option {name!r} must be an integer >= {low}, got {value!r}")
+        raise InputError(f"option {name!r} must be an integer >= {low}, got {value!r}")
     return int(value)
 
 
@@ -47,7 +49,7 @@ class EstimatorOptions:
         cache or in the background while the first runs go interpreted (the same numbers: the
         default flags keep them to the last bit). Stored as a :class:`~casship.runtime.JitPolicy`.
     outputs : tuple of str or "all"
-        Diagnostics the step Function :attr:`Estimator.step` (and the online runner) returns
+        Diagnostics the step Function :attr:`StepEstimator.step` (and the online runner) returns
         besides the memory: a subset of ``x, P, x_pred, P_pred, C, e, S, K, nis, ll, accepted``
         that contains ``x`` and ``P``. The compiled code computes only what is asked for; the
         default is the lean ``("x", "P")``. ``filter`` always computes every diagnostic.
@@ -69,14 +71,14 @@ class EstimatorOptions:
         if self.gate is not None:
             gate = _number(self.gate, "gate")
             if not 0 < gate < 1:
-                raise ValueError(f"option 'gate' is a probability in (0, 1), got {self.gate!r}")
+                raise InputError(f"option 'gate' is a probability in (0, 1), got {self.gate!r}")
             object.__setattr__(self, "gate", gate)
         from ..runtime import JitPolicy
 
         try:
             object.__setattr__(self, "jit", JitPolicy.of(self.jit))
         except ValueError:
-            raise ValueError(f"option 'jit' is True, False, None or one of 'off', 'now', 'background', "
+            raise InputError(f"option 'jit' is True, False, None or one of 'off', 'now', 'background', "
                              f"got {self.jit!r}") from None
         outputs = DIAGNOSTICS if self.outputs == "all" else self.outputs
         if isinstance(outputs, str):
@@ -84,17 +86,17 @@ class EstimatorOptions:
         outputs = tuple(outputs)
         unknown = [o for o in outputs if o not in DIAGNOSTICS]
         if unknown:
-            raise ValueError(f"option 'outputs': unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)} or 'all'")
+            raise InputError(f"option 'outputs': unknown diagnostic(s) {unknown}; known: {list(DIAGNOSTICS)} or 'all'")
         if "x" not in outputs or "P" not in outputs:
-            raise ValueError(f"option 'outputs' must contain 'x' and 'P', got {list(outputs)}")
+            raise InputError(f"option 'outputs' must contain 'x' and 'P', got {list(outputs)}")
         object.__setattr__(self, "outputs", tuple(o for o in DIAGNOSTICS if o in outputs))
         if self.max_gap is not None:
             gap = _number(self.max_gap, "max_gap")
             if not (gap > 0 and gap < float("inf")):
-                raise ValueError(f"option 'max_gap' is a positive time [s] (or None), got {self.max_gap!r}")
+                raise InputError(f"option 'max_gap' is a positive time [s] (or None), got {self.max_gap!r}")
             object.__setattr__(self, "max_gap", gap)
         if self.on_gap not in ("raise", "bridge"):
-            raise ValueError(f"option 'on_gap' is 'raise' or 'bridge', got {self.on_gap!r}")
+            raise InputError(f"option 'on_gap' is 'raise' or 'bridge', got {self.on_gap!r}")
 
     @classmethod
     def known(cls) -> list[str]:
@@ -116,12 +118,12 @@ class EstimatorOptions:
         if isinstance(value, cls):
             return value
         if isinstance(value, EstimatorOptions):
-            raise TypeError(f"{owner} takes {cls.__name__}, got {type(value).__name__}")
+            raise InputTypeError(f"{owner} takes {cls.__name__}, got {type(value).__name__}")
         if not isinstance(value, Mapping):
-            raise TypeError(f"options of {owner} must be a {cls.__name__} or a mapping, got {type(value).__name__}")
+            raise InputTypeError(f"options of {owner} must be a {cls.__name__} or a mapping, got {type(value).__name__}")
         unknown = sorted(set(value) - set(cls.known()))
         if unknown:
-            raise ValueError(f"unknown option(s) {unknown} for {owner}; known: {sorted(cls.known())}")
+            raise InputError(f"unknown option(s) {unknown} for {owner}; known: {sorted(cls.known())}")
         return cls(**dict(value))
 
     def replace(self, **changes) -> "EstimatorOptions":
@@ -134,7 +136,7 @@ class EstimatorOptions:
         """
         unknown = sorted(set(changes) - set(self.known()))
         if unknown:
-            raise ValueError(f"unknown option(s) {unknown}; known: {sorted(self.known())}")
+            raise InputError(f"unknown option(s) {unknown}; known: {sorted(self.known())}")
         return replace(self, **changes)
 
 
@@ -143,4 +145,4 @@ def _number(value, name: str) -> float:
     try:
         return float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"option {name!r} is a number, got {value!r}") from None
+        raise InputError(f"option {name!r} is a number, got {value!r}") from None

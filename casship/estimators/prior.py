@@ -26,7 +26,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..data import Dataset
-from ..errors import InputError
+from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian, as_cov
 
 __all__ = ["prior_from_data", "noise_from_data", "DataPrior", "TRACK_POSITIONS", "second_difference_std"]
@@ -145,7 +145,7 @@ def prior_from_data(model, data: Dataset, *, measured: Sequence[str] = (), R=Non
     (5.0, 'speed over ground of the track x_n, y_n (first 5 s)')
     """
     if not isinstance(data, Dataset):
-        raise TypeError(f"data must be a casship.Dataset, got {type(data).__name__}")
+        raise InputTypeError(f"data must be a casship.Dataset, got {type(data).__name__}")
     var, window = float(var), float(window)
     if not (np.isfinite(var) and var > 0):
         raise InputError(f"var must be a positive variance, got {var}")

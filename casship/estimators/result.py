@@ -10,6 +10,7 @@ from scipy import stats
 
 from ..angles import wrap
 from ..data import Dataset
+from ..errors import InputError
 
 __all__ = ["FilterResult", "Health", "not_positive_definite"]
 
@@ -32,7 +33,7 @@ def not_positive_definite(P: np.ndarray) -> np.ndarray:
     """
     P = np.asarray(P, dtype=float)
     if P.ndim != 3 or P.shape[1] != P.shape[2]:
-        raise ValueError(f"expected covariances of shape (N, n, n), got {P.shape}")
+        raise InputError(f"expected covariances of shape (N, n, n), got {P.shape}")
     d = np.einsum("kii->ki", P)
     bad = ~np.all(np.isfinite(P), axis=(1, 2)) | np.any(d < 0, axis=1)
     bad |= np.abs(P - P.transpose(0, 2, 1)).max(axis=(1, 2), initial=0.0) > 1e-12 * np.abs(P).max(axis=(1, 2), initial=0.0)
@@ -189,7 +190,7 @@ class FilterResult:
             if not _frozen(a, dtype):
                 a = np.array(a, dtype=dtype)                         # an own, read-only copy
             if name != "angle_states" and a.shape[:1] != (n,):
-                raise ValueError(f"FilterResult: {name} has {a.shape[0] if a.ndim else 0} rows, t has {n}")
+                raise InputError(f"FilterResult: {name} has {a.shape[0] if a.ndim else 0} rows, t has {n}")
             a.setflags(write=False)
             object.__setattr__(self, name, a)
         for name in _NAMES:
@@ -208,7 +209,7 @@ class FilterResult:
         try:
             return self.x[:, self.state_names.index(name)]
         except ValueError:
-            raise ValueError(f"unknown state {name!r}; states: {list(self.state_names)}") from None
+            raise InputError(f"unknown state {name!r}; states: {list(self.state_names)}") from None
 
     @property
     def loglik(self) -> float:
@@ -226,7 +227,7 @@ class FilterResult:
         bad = np.argwhere(~(var >= 0))
         if bad.size:
             k, i = bad[0]
-            raise ValueError(f"variance of {self.state_names[i]!r} at row {k} is {var[k, i]:.3g}: the covariance is not "
+            raise InputError(f"variance of {self.state_names[i]!r} at row {k} is {var[k, i]:.3g}: the covariance is not "
                              f"positive definite ({len(not_positive_definite(self.P))} such rows; see health())")
         return np.sqrt(var)
 
@@ -239,7 +240,7 @@ class FilterResult:
         """
         x_true = np.asarray(x_true, dtype=float)
         if x_true.shape != self.x.shape:
-            raise ValueError(f"nees: x_true has shape {x_true.shape}, the estimates {self.x.shape} (rows, states "
+            raise InputError(f"nees: x_true has shape {x_true.shape}, the estimates {self.x.shape} (rows, states "
                              f"{list(self.state_names)})")
         err = x_true - self.x
         if self.angle_states.any():
@@ -325,11 +326,11 @@ class FilterResult:
         names = list(self.state_names if states is None else states)
         unknown = [n for n in names if n not in self.state_names]
         if unknown:
-            raise ValueError(f"unknown state(s) {unknown}; states: {list(self.state_names)}")
+            raise InputError(f"unknown state(s) {unknown}; states: {list(self.state_names)}")
         measured = dict(measured or {})
         unknown = [n for n in measured if n not in self.state_names]
         if unknown:
-            raise ValueError(f"measured: unknown state(s) {unknown}; states: {list(self.state_names)}")
+            raise InputError(f"measured: unknown state(s) {unknown}; states: {list(self.state_names)}")
         t_meas = self.t if t_measured is None else np.asarray(t_measured, dtype=float)
         idx = [self.state_names.index(n) for n in names]
         std = self.std
@@ -404,13 +405,13 @@ class FilterResult:
         try:
             f = np.load(Path(path), allow_pickle=False)
         except ValueError:          # numpy's answer to a file that is not .npy/.npz speaks of pickles
-            raise ValueError(f"{path}: not a saved FilterResult (not a numpy .npz file)") from None
+            raise InputError(f"{path}: not a saved FilterResult (not a numpy .npz file)") from None
         if not hasattr(f, "files"):
-            raise ValueError(f"{path}: not a saved FilterResult (a single .npy array, not an .npz archive)")
+            raise InputError(f"{path}: not a saved FilterResult (a single .npy array, not an .npz archive)")
         with f:
             missing = [k for k in (*_ARRAYS, "meta") if k not in f.files]
             if missing:
-                raise ValueError(f"{path}: not a saved FilterResult (missing {missing})")
+                raise InputError(f"{path}: not a saved FilterResult (missing {missing})")
             meta = json.loads(str(f["meta"]))
             return cls(**{k: f[k] for k in _ARRAYS}, **{k: tuple(meta[k]) for k in _NAMES}, estimator=meta["estimator"])
 
@@ -425,5 +426,5 @@ class FilterResult:
         known = {f.name for f in fields(self)}
         unknown = sorted(set(changes) - known)
         if unknown:
-            raise ValueError(f"FilterResult has no field(s) {unknown}")
+            raise InputError(f"FilterResult has no field(s) {unknown}")
         return type(self)(**{**{k: getattr(self, k) for k in known}, **changes})

@@ -24,6 +24,7 @@ import numpy as np
 from ..runtime import DUPLICATE_NAMES, Job, record_loop, run_pieces
 from .result import FilterResult
 from .update import from_lower, sandwich, spd_solve, wrap_residual
+from ..errors import InputError, InputTypeError
 
 __all__ = ["rts_smooth", "backward_step"]
 
@@ -69,12 +70,12 @@ def rts_smooth(result: FilterResult, *, jit=False) -> FilterResult:
         those of the forward filter.
     """
     if not isinstance(result, FilterResult):
-        raise TypeError(f"rts_smooth needs a FilterResult, got {type(result).__name__}")
+        raise InputTypeError(f"rts_smooth needs a FilterResult, got {type(result).__name__}")
     if result.estimator.split("+")[0].split(" ")[0] == "KalmanBucy":
-        raise ValueError(f"rts_smooth: a {result.estimator} result has no one-step predictions to smooth; "
+        raise InputError(f"rts_smooth: a {result.estimator} result has no one-step predictions to smooth; "
                          "use KF, EKF, UKF or EnKF")
     if result.estimator.endswith("+RTS"):
-        raise ValueError("rts_smooth: the result is already smoothed")
+        raise InputError("rts_smooth: the result is already smoothed")
     n, nx = result.x.shape
     if n == 1:
         return result.replace(estimator=f"{result.estimator}+RTS")

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from .base import StepEstimator
 from .options import EstimatorOptions
 from .update import gain_and_terms, masked_innovation_cov, outer_sum, sandwich
+from ..errors import InputError
 
 __all__ = ["UKF", "UKFOptions", "psd_sqrt", "sigma_weights", "circular_mean", "deviations", "wrap_fast"]
 
@@ -60,7 +61,7 @@ def sigma_weights(n: int, alpha: float, beta: float, kappa: float):
     lam = alpha**2 * (n + kappa) - n
     c = n + lam
     if c <= 0:
-        raise ValueError(f"UKF: n + lambda = {c:g} must be positive (n = {n}, alpha = {alpha}, kappa = {kappa})")
+        raise InputError(f"UKF: n + lambda = {c:g} must be positive (n = {n}, alpha = {alpha}, kappa = {kappa})")
     wm = np.full(2 * n + 1, 1.0 / (2 * c))
     wm[0] = lam / c
     wc = wm.copy()
@@ -142,10 +143,10 @@ class UKFOptions(EstimatorOptions):
         for name in ("alpha", "beta", "kappa"):
             v = getattr(self, name)
             if isinstance(v, bool) or not np.isfinite(float(v)):
-                raise ValueError(f"option {name!r} must be a finite number, got {v!r}")
+                raise InputError(f"option {name!r} must be a finite number, got {v!r}")
             object.__setattr__(self, name, float(v))
         if self.alpha <= 0:
-            raise ValueError(f"option 'alpha' must be positive, got {self.alpha}")
+            raise InputError(f"option 'alpha' must be positive, got {self.alpha}")
 
 
 class UKF(StepEstimator):

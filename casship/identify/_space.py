@@ -27,6 +27,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..model import Model
+from ..errors import InputError
 
 __all__ = ["Quantity", "ParamSpace", "RecordMap", "KINDS", "VAR_FLOOR"]
 
@@ -127,13 +128,13 @@ class ParamSpace:
         free = list(free)
         twice = sorted({n for n in free if free.count(n) > 1})
         if twice:
-            raise ValueError(f"free quantities listed twice: {twice}")
+            raise InputError(f"free quantities listed twice: {twice}")
         self.model, self.n_records, self.measured = model, int(n_records), tuple(measured)
         self.base = np.asarray(model.params() if base is None else base, dtype=float)
         copies = dict(copies or {})
         unknown = set(copies) - set(free)
         if unknown:
-            raise ValueError(f"sharing declared for {sorted(unknown)}, which are not free; free: {free}")
+            raise InputError(f"sharing declared for {sorted(unknown)}, which are not free; free: {free}")
         self.Q = np.zeros((model.nw, model.nw)) if Q is None else np.asarray(Q, dtype=float)
         self.R = np.zeros((len(self.measured),) * 2) if R is None else np.asarray(R, dtype=float)
         self.x0_fixed = [np.zeros(model.nx)] * self.n_records if x0_fixed is None else \
@@ -147,7 +148,7 @@ class ParamSpace:
                 raw.append(Quantity(n, kind, index, everyone, n, start))
                 continue
             if len(labels) != self.n_records:
-                raise ValueError(f"sharing of {n!r}: {len(labels)} labels for {self.n_records} records")
+                raise InputError(f"sharing of {n!r}: {len(labels)} labels for {self.n_records} records")
             for label in dict.fromkeys(lab for lab in labels if lab is not None):
                 recs = tuple(i for i, lab in enumerate(labels) if lab == label)
                 raw.append(Quantity(f"{n}@{label}", kind, index, recs, n, start))
@@ -170,7 +171,7 @@ class ParamSpace:
                 return "bias_in", m.index(ch, "input"), 0.0
             if ch in self.measured:
                 return "bias_out", self.measured.index(ch), 0.0
-            raise ValueError(f"{name!r}: {ch!r} is neither an input {list(m.input_names)} nor a measured "
+            raise InputError(f"{name!r}: {ch!r} is neither an input {list(m.input_names)} nor a measured "
                              f"output {list(self.measured)} of {m.name!r}")
         i = m.index(name, "param")
         return "param", i, float(self.base[i])
@@ -181,22 +182,22 @@ class ParamSpace:
         declared = {q.declared for q in raw}
         unknown = (set(bounds) | set(scale)) - set(names) - declared
         if unknown:
-            raise ValueError(f"bounds/scale given for {sorted(unknown)}, which are not free; free: {names}")
+            raise InputError(f"bounds/scale given for {sorted(unknown)}, which are not free; free: {names}")
         out = []
         for q in raw:
             lo, hi = (m.param_lower[q.index], m.param_upper[q.index]) if q.kind == "param" else (-np.inf, np.inf)
             b = bounds.get(q.name, bounds.get(q.declared))
             if b is not None:
                 if len(b) != 2 or not float(b[0]) < float(b[1]):
-                    raise ValueError(f"bounds of {q.name!r} must be (lower, upper) with lower < upper, got {b}")
+                    raise InputError(f"bounds of {q.name!r} must be (lower, upper) with lower < upper, got {b}")
                 lo, hi = max(lo, float(b[0])), min(hi, float(b[1]))
             if q.log:
                 if not q.start > 0:
-                    raise ValueError(f"starting value of variance {q.name!r} must be positive, got {q.start}")
+                    raise InputError(f"starting value of variance {q.name!r} must be positive, got {q.start}")
                 lo = max(lo, VAR_FLOOR * q.start)   # a variance the data cannot tell from 0 stops here
             s = scale.get(q.name, scale.get(q.declared))
             if s is not None and not (np.isfinite(float(s)) and float(s) > 0):
-                raise ValueError(f"scale of {q.name!r} must be positive, got {s}")
+                raise InputError(f"scale of {q.name!r} must be positive, got {s}")
             if s is None:
                 nominal = m.params()[q.index] if q.kind == "param" else 0.0
                 s = abs(q.start) or abs(nominal) or 1.0
@@ -249,7 +250,7 @@ class ParamSpace:
         for e, v in zip(self.entries, values):
             if e.log:
                 if not v > 0:
-                    raise ValueError(f"value of variance {e.name!r} must be positive, got {v}")
+                    raise InputError(f"value of variance {e.name!r} must be positive, got {v}")
                 z.append(np.log(v))
             else:
                 z.append(v / e.scale)
@@ -262,21 +263,21 @@ class ParamSpace:
             values = dict(values or {})
             unknown = set(values) - set(self.names)
             if unknown:
-                raise ValueError(f"values for {sorted(unknown)}, which are not free; free: {self.names}")
+                raise InputError(f"values for {sorted(unknown)}, which are not free; free: {self.names}")
             merged = {**self.default_guess, **{k: float(v) for k, v in values.items()}}
             theta = np.array([merged[n] for n in self.names])
         else:
             theta = np.asarray(values, dtype=float).reshape(-1)
             if theta.size != len(self):
-                raise ValueError(f"expected {len(self)} values for {self.names}, got {theta.size}")
+                raise InputError(f"expected {len(self)} values for {self.names}, got {theta.size}")
         return theta
 
     def check_bounds(self, theta) -> None:
         for e, v in zip(self.entries, theta):
             if not np.isfinite(v):
-                raise ValueError(f"value of {e.name!r} is not finite")
+                raise InputError(f"value of {e.name!r} is not finite")
             if not e.lower <= v <= e.upper:
-                raise ValueError(f"value {v:g} of {e.name!r} is outside its bounds [{e.lower:g}, {e.upper:g}]")
+                raise InputError(f"value {v:g} of {e.name!r} is outside its bounds [{e.lower:g}, {e.upper:g}]")
 
     def z_bounds(self):
         lo, hi = [], []

@@ -26,6 +26,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["turn_side", "maneuver_signature", "mirror_pairs", "confounded_asymmetry", "asymmetric_quantities",
            "ANGLE_TOL_DEG"]
 
@@ -57,12 +59,12 @@ def turn_side(data, rudder: str = "delta") -> str:
         For a record without the column or whose rudder does not move.
     """
     if rudder not in data:
-        raise ValueError(f"record has no rudder column {rudder!r}")
+        raise InputError(f"record has no rudder column {rudder!r}")
     d = np.asarray(data[rudder], dtype=float)
     d = d - d[0]
     big = np.abs(d) > 0.5 * np.abs(d).max() if np.abs(d).max() > 0 else np.zeros(d.size, bool)
     if not big.any():
-        raise ValueError(f"the rudder {rudder!r} of the record does not move")
+        raise InputError(f"the rudder {rudder!r} of the record does not move")
     return "+" if d[np.flatnonzero(big)[0]] > 0 else "-"
 
 

@@ -16,6 +16,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .records import share_labels
+from ..errors import InputError
 
 __all__ = ["cross_validate", "CrossValidation", "METRICS", "ERRORS"]
 
@@ -33,12 +34,12 @@ def _labels(problem, by) -> list:
             return [str(v) for v in groups[by]]
         missing = [problem.labels[i] for i, d in enumerate(problem.records) if by not in d.meta]
         if missing:
-            raise ValueError(f"cross-validation by {by!r}: not a grouping of the problem and records {missing} "
+            raise InputError(f"cross-validation by {by!r}: not a grouping of the problem and records {missing} "
                              f"have no meta[{by!r}]")
         return [str(d.meta[by]) for d in problem.records]
     labels = [str(v) for v in by]
     if len(labels) != n:
-        raise ValueError(f"cross-validation: {len(labels)} labels for {n} records")
+        raise InputError(f"cross-validation: {len(labels)} labels for {n} records")
     return labels
 
 
@@ -151,7 +152,7 @@ def cross_validate(problem, *, by="record", guess: Mapping[str, float] | None = 
         held = [i for i, v in enumerate(labels) if v == label]
         train = [i for i, v in enumerate(labels) if v != label]
         if not train:
-            raise ValueError(f"cross-validation by {by!r}: fold {label!r} leaves no record to train on")
+            raise InputError(f"cross-validation by {by!r}: fold {label!r} leaves no record to train on")
         fit = problem.subset(train).solve(guess=guess, **{"show": False, **dict(solve or {})})
         fold = {"label": label, "held_out": held, "train": train, "fit": fit}
         folds.append(fold)
@@ -286,14 +287,14 @@ class CrossValidation:
 
         names = list(records or list(self.replays))
         if ax is not None and len(names) != 1:
-            raise ValueError(f"ax: draws one record's figure; name one in records (got {len(names)})")
+            raise InputError(f"ax: draws one record's figure; name one in records (got {len(names)})")
         if directory is not None:
             directory = Path(directory)
             directory.mkdir(parents=True, exist_ok=True)
         out = []
         for i, name in enumerate(names):
             if name not in self.replays:
-                raise ValueError(f"records: {name!r} was not held out; held out: {list(self.replays)}")
+                raise InputError(f"records: {name!r} was not held out; held out: {list(self.replays)}")
             fig, axes = panels(ax, 1, 3, figsize=(14, 4.2), what="the cross-validation plot of one record")
             self._draw(name, axes.ravel(), fig if ax is None else None)
             path = None

@@ -18,6 +18,7 @@ from typing import Sequence
 import numpy as np
 
 from .uncertainty import covariance_from_information
+from ..errors import InputError
 
 __all__ = ["Identifiability", "MAX_REL_STD", "MAX_CORR", "MAX_RATIO", "RunEvidence"]
 
@@ -62,10 +63,10 @@ class RunEvidence:
         self.prior_gradient = np.asarray(self.prior_gradient, dtype=float).reshape(-1)
         n, k = self.gradient.shape
         if self.information.shape != (n, k, k) or len(self.labels) != n or self.prior_gradient.size != k:
-            raise ValueError(f"RunEvidence: {len(self.labels)} labels, information {self.information.shape}, "
+            raise InputError(f"RunEvidence: {len(self.labels)} labels, information {self.information.shape}, "
                              f"gradient {self.gradient.shape}, prior_gradient {self.prior_gradient.shape}")
         if n < 3:
-            raise ValueError(f"RunEvidence: a jackknife needs at least 3 units, got {n}")
+            raise InputError(f"RunEvidence: a jackknife needs at least 3 units, got {n}")
         self.fixed_information = (np.zeros((k, k)) if self.fixed_information is None
                                   else np.asarray(self.fixed_information, dtype=float))
         self.fixed_gradient = np.zeros(k) if self.fixed_gradient is None else np.asarray(self.fixed_gradient, dtype=float)
@@ -257,9 +258,9 @@ class Identifiability:
         tol_s = self.max_rel_std if max_rel_std is None else float(max_rel_std)
         tol_c = self.max_corr if max_corr is None else float(max_corr)
         if evidence not in ("fisher", "runs"):
-            raise ValueError(f"evidence must be 'fisher' or 'runs', got {evidence!r}")
+            raise InputError(f"evidence must be 'fisher' or 'runs', got {evidence!r}")
         if evidence == "runs" and (self.evidence is None or max_ratio is None):
-            raise ValueError("evidence='runs' needs max_ratio and the run-level evidence (Identifiability.evidence)")
+            raise InputError("evidence='runs' needs max_ratio and the run-level evidence (Identifiability.evidence)")
         index = {n: i for i, n in enumerate(self.names)}
         if keep is None:
             keep = [n for n, k in zip(self.names, self.kinds) if k != "param"]
@@ -270,7 +271,7 @@ class Identifiability:
         after = dict(after or {})
         unknown = [n for n in (*keep, *candidates, *after, *(m for v in after.values() for m in v)) if n not in index]
         if unknown:
-            raise ValueError(f"unknown quantities {sorted(set(unknown))}; free: {self.names}")
+            raise InputError(f"unknown quantities {sorted(set(unknown))}; free: {self.names}")
         chosen = [index[n] for n in keep]
         fixed = set(chosen)
         pool = [index[n] for n in candidates if n not in keep]
@@ -279,7 +280,7 @@ class Identifiability:
             prec = np.asarray(self.prior_precision, dtype=float)
             need = [self.names[i] for i in (*chosen, *pool) if not prec[i] > 0]
             if need:
-                raise ValueError(f"the prior-ratio rule needs a prior on every quantity; none on {need}")
+                raise InputError(f"the prior-ratio rule needs a prior on every quantity; none on {need}")
             trial = self._ratio_trial(float(max_ratio), tol_c, fixed, evidence)
         else:
             trial = lambda S, c: self._relative_trial(S, c, tol_s, tol_c, with_prior, fixed)  # noqa: E731

@@ -35,6 +35,7 @@ from ..model import Model
 from .result import FitResult
 from .records import record_label
 from .uncertainty import covariance_from_information, effective_samples, whiteness
+from ..errors import InputError
 
 __all__ = ["rates_model", "smooth_trial", "inverse_dynamics", "linear_in"]
 
@@ -104,19 +105,19 @@ def smooth_trial(data: Dataset, sigma: Mapping[str, float], jerk: Mapping[str, f
     measured = tuple(measured or ("x", "y", "psi"))
     unknown = [c for c in measured if c not in m.output_names]
     if unknown:
-        raise ValueError(f"smooth_trial: cannot measure {unknown}; choose from {list(m.output_names)}")
+        raise InputError(f"smooth_trial: cannot measure {unknown}; choose from {list(m.output_names)}")
     missing = [c for c in measured if c not in data]
     if missing:
-        raise ValueError(f"smooth_trial: the record has no column(s) {missing}")
+        raise InputError(f"smooth_trial: the record has no column(s) {missing}")
     for what, given, need in (("sigma", sigma, measured), ("jerk", jerk, _BODY)):
         lacking = [c for c in need if c not in given]
         extra = sorted(set(given) - set(need))
         if lacking or extra:
-            raise ValueError(f"smooth_trial: {what} must give exactly {list(need)}; "
+            raise InputError(f"smooth_trial: {what} must give exactly {list(need)}; "
                              f"missing {lacking}, not used {extra}")
         bad = [c for c in need if not (np.isfinite(given[c]) and given[c] > 0)]
         if bad:
-            raise ValueError(f"smooth_trial: {what} of {bad} must be positive")
+            raise InputError(f"smooth_trial: {what} of {bad} must be positive")
     psi_cont = np.unwrap(np.asarray(data["psi"], dtype=float))
     cols = {c: np.asarray(data[c], dtype=float) for c in measured}
     cols["psi"] = wrap(psi_cont) if "psi" in cols else None
@@ -250,23 +251,23 @@ def inverse_dynamics(model: Model, data, free: Sequence[str], *, sigma: Mapping[
     t0 = time.perf_counter()
     records = [data] if isinstance(data, Dataset) else list(data)
     if not records:
-        raise ValueError("inverse_dynamics: no records")
+        raise InputError("inverse_dynamics: no records")
     free, states = list(free), list(states)
     if not free:
-        raise ValueError("inverse_dynamics: no free parameters")
+        raise InputError("inverse_dynamics: no free parameters")
     model.indices(free, "param")
     linear = linear_in(model, free, states)
     bad = [n for n, ok in linear.items() if not ok]
     if bad:
-        raise ValueError(f"inverse_dynamics: the rates of {states} are not linear in {bad} (with the other free "
+        raise InputError(f"inverse_dynamics: the rates of {states} are not linear in {bad} (with the other free "
                          "parameters fixed); regress them by output error instead, or fix them")
     base = model.params() if params is None else model.params(params)
     prior = dict(prior or {})
     unknown = sorted(set(prior) - set(free))
     if unknown:
-        raise ValueError(f"inverse_dynamics: prior given for {unknown}, which are not free {free}")
+        raise InputError(f"inverse_dynamics: prior given for {unknown}, which are not free {free}")
     if any(not (np.isfinite(prior[n]) and prior[n] > 0) for n in prior):
-        raise ValueError("inverse_dynamics: prior standard deviations must be positive")
+        raise InputError("inverse_dynamics: prior standard deviations must be positive")
     A, y, sizes = _regression(model, records, free, states, base)
     sig = _equation_sigma(records, states, sigma)
     idx = model.indices(free, "param")
@@ -374,7 +375,7 @@ def _equation_sigma(records, states, sigma) -> np.ndarray:
     sigma = dict(sigma or {})
     unknown = sorted(set(sigma) - set(states))
     if unknown:
-        raise ValueError(f"inverse_dynamics: sigma given for {unknown}, not among the states {list(states)}")
+        raise InputError(f"inverse_dynamics: sigma given for {unknown}, not among the states {list(states)}")
     out = []
     for s in states:
         if s in sigma:
@@ -383,7 +384,7 @@ def _equation_sigma(records, states, sigma) -> np.ndarray:
             cols = [np.asarray(d[f"{s}_dot_std"]) for d in records if f"{s}_dot_std" in d]
             v = float(np.median(np.concatenate(cols))) if cols else 1.0
         if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"inverse_dynamics: sigma of {s!r} must be positive, got {v}")
+            raise InputError(f"inverse_dynamics: sigma of {s!r} must be positive, got {v}")
         out.append(v)
     return np.array(out)
 
@@ -392,13 +393,13 @@ def _record_arrays(model: Model, d: Dataset, states, k: int):
     need = [*model.state_names, *model.input_names, *[f"{s}_dot" for s in states]]
     missing = [c for c in need if c not in d]
     if missing:
-        raise ValueError(f"inverse_dynamics: record {k} has no column(s) {missing} (smooth it with smooth_trial)")
+        raise InputError(f"inverse_dynamics: record {k} has no column(s) {missing} (smooth it with smooth_trial)")
     X = d.matrix(model.state_names)
     U = d.matrix(model.input_names, finite=True, what="input")
     Y = d.matrix([f"{s}_dot" for s in states])
     for name, M, names in (("state", X, model.state_names), ("rate", Y, [f"{s}_dot" for s in states])):
         bad = np.argwhere(~np.isfinite(M))
         if bad.size:
-            raise ValueError(f"inverse_dynamics: record {k}: {name} column {names[bad[0][1]]!r} is not finite "
+            raise InputError(f"inverse_dynamics: record {k}: {name} column {names[bad[0][1]]!r} is not finite "
                              f"at row {bad[0][0]}")
     return X, U, Y

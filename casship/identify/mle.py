@@ -26,6 +26,7 @@ from ._solver import SolverReport
 from .problem import IdentificationProblem
 from .records import as_records, initial_states
 from .result import FitResult
+from ..errors import InputError, InputTypeError
 
 __all__ = ["MLEProblem", "default_prior"]
 
@@ -136,21 +137,21 @@ class MLEProblem(IdentificationProblem):
             from ..estimators import EKF
 
             if Q is None or R is None:
-                raise ValueError("with a DiscreteModel give the noise covariances Q and R (or pass an estimator)")
+                raise InputError("with a DiscreteModel give the noise covariances Q and R (or pass an estimator)")
             estimator = EKF(estimator, Q, R, measured=measured)
             kwargs.update(estimator=estimator, Q=None, R=None, measured=None)
         elif not isinstance(estimator, StepEstimator):
-            raise TypeError(f"MLEProblem folds a recursive estimator's step into the likelihood (KF, EKF, UKF, EnKF, "
-                            f"KalmanBucy) or takes a DiscreteModel, got {type(estimator).__name__}")
+            raise InputTypeError(f"MLEProblem folds a recursive estimator's step into the likelihood (KF, EKF, UKF, EnKF, "
+                                 f"KalmanBucy) or takes a DiscreteModel, got {type(estimator).__name__}")
         elif Q is not None or R is not None or measured is not None:
-            raise ValueError("Q, R and measured are given to the estimator, not to MLEProblem")
+            raise InputError("Q, R and measured are given to the estimator, not to MLEProblem")
         self.estimator = est = estimator
         m = est.model
         records = as_records(datasets)
         self.method = f"mle-{est.name.lower()}"
         slots = StepSlots(est)
         if list(estimate_x0) and slots.mean is None:
-            raise ValueError(f"estimate_x0 needs a mean/covariance filter; {est.name} carries an ensemble")
+            raise InputError(f"estimate_x0 needs a mean/covariance filter; {est.name} carries an ensemble")
         self._priors = self._make_priors(m, records, x0, prior_var, estimate_x0)
         self._setup(m, records, free, kwargs=kwargs, share=share, groups=groups, prior=prior, params=params,
                     x0=[g.mean for g in self._priors], estimate_x0=estimate_x0, bounds=bounds, scale=scale,
@@ -178,7 +179,7 @@ class MLEProblem(IdentificationProblem):
             return priors
         priors = [x0] * n if isinstance(x0, Gaussian) else list(x0)
         if len(priors) != n:
-            raise ValueError(f"x0: {len(priors)} priors for {n} records")
+            raise InputError(f"x0: {len(priors)} priors for {n} records")
         for g in priors:
             est.check_prior(g)
         return priors
@@ -188,14 +189,14 @@ class MLEProblem(IdentificationProblem):
         noise = dict(noise or {})
         unknown = set(noise) - {"Q", "R"}
         if unknown:
-            raise ValueError(f"noise: unknown key(s) {sorted(unknown)}; use 'Q' and/or 'R'")
+            raise InputError(f"noise: unknown key(s) {sorted(unknown)}; use 'Q' and/or 'R'")
         out = []
         for kind, channels, mat in (("Q", m.noise_names, est.Q), ("R", est.measured, est.R)):
             sel = noise.get(kind, ())
             sel = list(channels) if sel is True else list(sel)
             bad = [c for c in sel if c not in channels]
             if bad:
-                raise ValueError(f"noise {kind}: unknown channel(s) {bad}; channels: {list(channels)}")
+                raise InputError(f"noise {kind}: unknown channel(s) {bad}; channels: {list(channels)}")
             for c in sel:
                 i = list(channels).index(c)
                 out.append((kind, i, f"{kind}[{c}]", mat[i, i] if mat[i, i] > 0 else 1e-6))
@@ -310,9 +311,9 @@ class MLEProblem(IdentificationProblem):
             A fit that stops early returns its iterate with the status and a warning.
         """
         if hessian not in ("fisher", "exact", "limited-memory"):
-            raise ValueError(f"unknown hessian {hessian!r}; use 'fisher', 'exact' or 'limited-memory'")
+            raise InputError(f"unknown hessian {hessian!r}; use 'fisher', 'exact' or 'limited-memory'")
         if information not in ("fisher", "hessian"):
-            raise ValueError(f"information must be 'fisher' or 'hessian', got {information!r}")
+            raise InputError(f"information must be 'fisher' or 'hessian', got {information!r}")
         if hessian == "fisher":
             fit = super().solve(guess, max_iter=max_iter, tol=tol, show=show)
         else:

@@ -21,6 +21,7 @@ from ._solver import SolverReport
 from .problem import IdentificationProblem
 from .records import as_records, check_gaps, noise_std
 from .result import FitResult
+from ..errors import InputError, InputTypeError
 
 __all__ = ["OutputErrorProblem"]
 
@@ -30,10 +31,10 @@ def _record_weights(weights, records) -> np.ndarray:
         return np.ones(len(records))
     w = np.asarray(weights, dtype=float).ravel()
     if w.size != len(records):
-        raise ValueError(f"record_weights: {w.size} weight(s) for {len(records)} record(s)")
+        raise InputError(f"record_weights: {w.size} weight(s) for {len(records)} record(s)")
     bad = [i for i, v in enumerate(w) if not (np.isfinite(v) and v > 0)]
     if bad:
-        raise ValueError(f"record_weights must be positive and finite; record(s) {bad} have {w[bad].tolist()}")
+        raise InputError(f"record_weights must be positive and finite; record(s) {bad} have {w[bad].tolist()}")
     return w
 
 
@@ -119,29 +120,29 @@ class OutputErrorProblem(IdentificationProblem):
             model = cont.derived(("discretize", method, dt), lambda: discretize(cont) if dt is None
                                  else discretize(cont, dt, method=method))
         if not isinstance(model, DiscreteModel):
-            raise TypeError(f"OutputErrorProblem needs a Model or DiscreteModel, got {type(model).__name__}")
+            raise InputTypeError(f"OutputErrorProblem needs a Model or DiscreteModel, got {type(model).__name__}")
         for d in records:                      # a discrete-time model steps its own dt, nothing else
             model.check_steps(np.diff(d.t), d.t)
         if shooting not in ("single", "multiple"):
-            raise ValueError(f"shooting must be 'single' or 'multiple', got {shooting!r}")
+            raise InputError(f"shooting must be 'single' or 'multiple', got {shooting!r}")
         self.dmodel = model
         m = model.model
         if measured is None:
             measured = [n for n in m.output_names if all(n in d for d in records)]
             if not measured:
-                raise ValueError(f"no output of {m.name!r} {list(m.output_names)} is a column of every record")
+                raise InputError(f"no output of {m.name!r} {list(m.output_names)} is a column of every record")
         self.meas_index = m.indices(measured, "output")
         self.angle_meas = m.angle_outputs[self.meas_index]
         self.sigma = self._sigma(records, list(measured), sigma)
         self.shooting, self.segment = shooting, int(segment)
         if self.segment < 2:
-            raise ValueError(f"segment must be >= 2 samples, got {segment}")
+            raise InputError(f"segment must be >= 2 samples, got {segment}")
         self._setup(m, records, free, kwargs=kwargs, share=share, groups=groups, prior=prior, params=params, x0=x0,
                     estimate_x0=estimate_x0, bounds=bounds, scale=scale, measured=measured)
         check_gaps(self.dmodel, self.records, self.x0, self.space.base, self.labels)
         self._arrays = [self._arrays_of(d) for d in self.records]
         if shooting == "multiple" and np.any(self.record_weights != 1.0):
-            raise ValueError("record_weights are supported with single shooting only")
+            raise InputError("record_weights are supported with single shooting only")
         self.engine = OutputErrorEngine(self.dmodel, self.space, self._arrays, self.meas_index, 1.0 / self.sigma, jit,
                                         record_scale=np.sqrt(self.record_weights))
         self._check_data_amount()
@@ -150,13 +151,13 @@ class OutputErrorProblem(IdentificationProblem):
         m = self.dmodel.model
         given = {} if sigma is None or isinstance(sigma, str) else dict(sigma)
         if isinstance(sigma, str) and sigma != "estimate":
-            raise ValueError(f"sigma must be a mapping output -> std or 'estimate', got {sigma!r}")
+            raise InputError(f"sigma must be a mapping output -> std or 'estimate', got {sigma!r}")
         unknown = set(given) - set(measured)
         if unknown:
-            raise ValueError(f"sigma given for {sorted(unknown)}, not among measured {list(measured)}")
+            raise InputError(f"sigma given for {sorted(unknown)}, not among measured {list(measured)}")
         bad = [n for n, v in given.items() if not (np.isfinite(float(v)) and float(v) > 0)]
         if bad:
-            raise ValueError(f"sigma values must be positive: {bad}")
+            raise InputError(f"sigma values must be positive: {bad}")
         rest = [n for n in measured if n not in given]
         angles = [n for n in rest if m.angle_outputs[m.index(n, "output")]]
         est = noise_std(records, rest, angles) if rest else {}
@@ -167,7 +168,7 @@ class OutputErrorProblem(IdentificationProblem):
         m = self.model
         missing = [n for n in (*m.input_names, *self.measured) if n not in d]
         if missing:
-            raise ValueError(f"data has no column(s) {missing}; columns: {list(d.names)}")
+            raise InputError(f"data has no column(s) {missing}; columns: {list(d.names)}")
         U = d.matrix(m.input_names, finite=True, what="input")
         Y = d.matrix(self.measured)
         mask = np.isfinite(Y)

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError, InputTypeError
+
 __all__ = ["read_params", "replay_file", "check_model", "ParameterUncertainty", "load_fit_json", "SYMMETRY_TOL",
            "Q_MAX_DEG2_PER_S"]
 
@@ -36,7 +38,7 @@ def _refuse_duplicate_keys(pairs):
     seen = {}
     for key, value in pairs:
         if key in seen:
-            raise ValueError(f"the key {key!r} is given more than once in one object")
+            raise InputError(f"the key {key!r} is given more than once in one object")
         seen[key] = value
     return seen
 
@@ -62,14 +64,14 @@ def load_fit_json(path) -> dict:
     try:
         obj = json.loads(path.read_text(), object_pairs_hook=_refuse_duplicate_keys)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+        raise InputError(f"{path}: not valid JSON ({exc})") from None
     except ValueError as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise InputError(f"{path}: {exc}") from None
     if not isinstance(obj, dict) or not isinstance(obj.get("params"), dict):
-        raise ValueError(f'{path}: expected a JSON object with key "params": {{name: value}}')
+        raise InputError(f'{path}: expected a JSON object with key "params": {{name: value}}')
     bad = [k for k, v in obj["params"].items() if isinstance(v, bool) or not isinstance(v, (int, float))]
     if bad:
-        raise ValueError(f"{path}: params {bad} are not numbers")
+        raise InputError(f"{path}: params {bad} are not numbers")
     return obj
 
 
@@ -117,15 +119,15 @@ class ParameterUncertainty:
         self.psi_variance_rate = float(self.psi_variance_rate)
         q_max = float(np.radians(np.radians(Q_MAX_DEG2_PER_S)))
         if not (np.isfinite(self.psi_variance_rate) and 0.0 <= self.psi_variance_rate <= q_max):
-            raise ValueError(f"ParameterUncertainty: psi_variance_rate must be finite, >= 0 and <= {q_max:.4g} rad^2/s "
+            raise InputError(f"ParameterUncertainty: psi_variance_rate must be finite, >= 0 and <= {q_max:.4g} rad^2/s "
                              f"({Q_MAX_DEG2_PER_S:g} deg^2/s), got {self.psi_variance_rate}")
         self.names = [str(n) for n in self.names]
         twice = sorted({n for n in self.names if self.names.count(n) > 1})
         if twice:
-            raise ValueError(f"ParameterUncertainty: parameter name(s) {twice} given more than once")
+            raise InputError(f"ParameterUncertainty: parameter name(s) {twice} given more than once")
         self.values = np.asarray(self.values, dtype=float).reshape(-1)
         if self.values.size != len(self.names):
-            raise ValueError(f"ParameterUncertainty: {self.values.size} values for {len(self.names)} names")
+            raise InputError(f"ParameterUncertainty: {self.values.size} values for {len(self.names)} names")
         self.covariance = _checked_covariance(self.covariance, self.names, "covariance")
         if self.discrepancy_covariance is not None:
             self.discrepancy_covariance = _checked_covariance(self.discrepancy_covariance, self.names,
@@ -192,36 +194,36 @@ class ParameterUncertainty:
         """
         field_ = f"{where}: {key}"
         if not isinstance(d, Mapping):
-            raise ValueError(f"{field_}: expected an object with names, values and matrix, got {type(d).__name__}")
+            raise InputError(f"{field_}: expected an object with names, values and matrix, got {type(d).__name__}")
         missing = [k for k in ("names", "matrix") if k not in d]
         if missing:
-            raise ValueError(f"{field_} lacks {missing}")
+            raise InputError(f"{field_} lacks {missing}")
         names = d["names"]
         if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-            raise ValueError(f"{field_}.names: expected a list of parameter names, got {names!r}")
+            raise InputError(f"{field_}.names: expected a list of parameter names, got {names!r}")
         values = d.get("values")
         if values is None:
-            raise ValueError(f"{field_} lacks the values of {names}")
+            raise InputError(f"{field_} lacks the values of {names}")
         _numbers(values, (len(names),), f"{field_}.values")
         _numbers(d["matrix"], (len(names), len(names)), f"{field_}.matrix")
         try:
             return cls(names, values, d["matrix"], str(d.get("source", "")), dict(d.get("info") or {}))
         except ValueError as exc:
             msg = str(exc).removeprefix("ParameterUncertainty: ")
-            raise ValueError(f"{field_}.matrix {msg.removeprefix('covariance ')}" if msg.startswith("covariance ")
+            raise InputError(f"{field_}.matrix {msg.removeprefix('covariance ')}" if msg.startswith("covariance ")
                              else f"{field_}: {msg}") from None
 
 
 def _numbers(value, shape: tuple, what: str) -> None:
     """Refuse a JSON value that is not a (nested) list of numbers of ``shape``, naming ``what``."""
     if value is None:
-        raise ValueError(f"{what} is null; a fit file carries a {' x '.join(map(str, shape))} list of numbers there")
+        raise InputError(f"{what} is null; a fit file carries a {' x '.join(map(str, shape))} list of numbers there")
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{what}: expected a {' x '.join(map(str, shape))} list of numbers, got {value!r:.80}") from None
+        raise InputError(f"{what}: expected a {' x '.join(map(str, shape))} list of numbers, got {value!r:.80}") from None
     if a.shape != shape:
-        raise ValueError(f"{what}: shape {a.shape}, {' x '.join(map(str, shape))} wanted")
+        raise InputError(f"{what}: shape {a.shape}, {' x '.join(map(str, shape))} wanted")
 
 
 #: Relative asymmetry of a covariance entry tolerated as round-off (``|a_ij - a_ji| / sqrt(a_ii a_jj)``).
@@ -235,27 +237,27 @@ def _checked_covariance(matrix, names, what: str) -> np.ndarray:
     """
     k = len(names)
     if matrix is None:
-        raise ValueError(f"ParameterUncertainty: {what} is null ({k} x {k} wanted for {list(names)})")
+        raise InputError(f"ParameterUncertainty: {what} is null ({k} x {k} wanted for {list(names)})")
     try:
         a = np.asarray(matrix, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"ParameterUncertainty: {what} is not a matrix of numbers") from None
+        raise InputError(f"ParameterUncertainty: {what} is not a matrix of numbers") from None
     if a.size != k * k:
-        raise ValueError(f"ParameterUncertainty: {what} has {a.size} entries, {k} x {k} wanted for {list(names)}")
+        raise InputError(f"ParameterUncertainty: {what} has {a.size} entries, {k} x {k} wanted for {list(names)}")
     a = a.reshape(k, k)
     if not np.all(np.isfinite(a)):
         bad = [n for n, d in zip(names, np.diag(a)) if not np.isfinite(d)]
-        raise ValueError(f"ParameterUncertainty: {what} not finite for {bad or list(names)}")
+        raise InputError(f"ParameterUncertainty: {what} not finite for {bad or list(names)}")
     scale = np.sqrt(np.abs(np.outer(np.diag(a), np.diag(a))))
     gap = np.abs(a - a.T)
     bad = gap > SYMMETRY_TOL * np.maximum(scale, np.abs(a).max(initial=0.0) * 1e-12) + 1e-300
     if bad.any():
         i, j = (int(x) for x in np.argwhere(np.triu(bad, 1))[0])
-        raise ValueError(f"ParameterUncertainty: {what} is not symmetric: entry ({names[i]}, {names[j]}) = {a[i, j]:.6g} "
+        raise InputError(f"ParameterUncertainty: {what} is not symmetric: entry ({names[i]}, {names[j]}) = {a[i, j]:.6g} "
                          f"but ({names[j]}, {names[i]}) = {a[j, i]:.6g} (beyond round-off)")
     a = 0.5 * (a + a.T)
     if np.linalg.eigvalsh(a).min(initial=0.0) < -1e-9 * max(1.0, np.abs(a).max()):
-        raise ValueError(f"ParameterUncertainty: {what} is not positive semi-definite")
+        raise InputError(f"ParameterUncertainty: {what} is not positive semi-definite")
     return a
 
 
@@ -300,12 +302,12 @@ def read_params(path, model=None, *, uncertainty: bool = False):
     if model is None or isinstance(model, str):
         wanted = model or name
         if wanted is None:
-            raise ValueError(f"{path} names no model; give the model to apply it to")
+            raise InputError(f"{path} names no model; give the model to apply it to")
         if name is not None and wanted != name:
-            raise ValueError(f"{path} holds parameters of model {name!r}, not {wanted!r}")
+            raise InputError(f"{path} holds parameters of model {name!r}, not {wanted!r}")
         model = get_model(wanted, **(options if wanted == name else {}))
     elif not isinstance(model, Model):
-        raise TypeError(f"model must be a casship Model, a registered name or None, got {type(model).__name__}")
+        raise InputTypeError(f"model must be a casship Model, a registered name or None, got {type(model).__name__}")
     p = check_model(model, params, name=name, options=options, param_set=pset, source=str(path))
     if not uncertainty:
         return model, p
@@ -317,14 +319,14 @@ def read_params(path, model=None, *, uncertainty: bool = False):
                 source=f"{path} (param_covariance)")
     mismatch = [n for n, v in zip(unc.names, unc.values) if not np.isclose(v, params.get(n, np.nan), rtol=1e-12)]
     if mismatch:
-        raise ValueError(f"{path}: param_covariance values of {mismatch} differ from the file's params")
+        raise InputError(f"{path}: param_covariance values of {mismatch} differ from the file's params")
     discrepancy = obj.get("model_discrepancy") or {}
     if discrepancy:
         if not isinstance(discrepancy, dict):
-            raise ValueError(f"{path}: model_discrepancy must be an object, got {discrepancy!r:.60}")
+            raise InputError(f"{path}: model_discrepancy must be an object, got {discrepancy!r:.60}")
         q = discrepancy.get("psi_variance_growth_deg2_per_s")
         if not isinstance(q, (int, float)) or isinstance(q, bool) or not np.isfinite(q) or not 0 <= q <= Q_MAX_DEG2_PER_S:
-            raise ValueError(f"{path}: model_discrepancy.psi_variance_growth_deg2_per_s must be a number in "
+            raise InputError(f"{path}: model_discrepancy.psi_variance_growth_deg2_per_s must be a number in "
                              f"[0, {Q_MAX_DEG2_PER_S:g}] deg^2/s (beyond, the 95 % heading band spans a full turn within "
                              f"about 10 s), got {q!r}")
         unc.psi_variance_rate = float(np.radians(np.radians(q)))
@@ -332,7 +334,7 @@ def read_params(path, model=None, *, uncertainty: bool = False):
         if beside is not None:      # the covariance whose band q completes (same parameters, same order)
             base = ParameterUncertainty.from_dict(beside, str(path), key="model_discrepancy.estimated_with")
             if base.names != unc.names:
-                raise ValueError(f"{path}: model_discrepancy.estimated_with has parameters {base.names}, "
+                raise InputError(f"{path}: model_discrepancy.estimated_with has parameters {base.names}, "
                                  f"param_covariance {unc.names}; they must be the same, in the same order")
             unc.discrepancy_covariance = base.covariance          # checked as it was read
     return model, p, unc
@@ -366,15 +368,15 @@ def check_model(model, params: dict, *, name=None, options=None, param_set: str 
         Naming both models, both parameter sets, or the parameters the model lacks.
     """
     if name is not None and model.name != name:
-        raise ValueError(f"{source} holds parameters of model {name!r}, not {model.name!r}")
+        raise InputError(f"{source} holds parameters of model {name!r}, not {model.name!r}")
     own = model.vessel.param_set if getattr(model, "vessel", None) is not None else ""
     if param_set and own and param_set != own:
-        raise ValueError(f"{source} was fitted on parameter set {param_set!r}; model {model.name!r} has "
+        raise InputError(f"{source} was fitted on parameter set {param_set!r}; model {model.name!r} has "
                          f"parameter set {own!r}")
     unknown = [n for n in params if n not in model.param_names]
     if unknown:
         built = f" built with options {options}" if options else ""
-        raise ValueError(f"{source} has parameter(s) {unknown} that model {model.name!r} lacks"
+        raise InputError(f"{source} has parameter(s) {unknown} that model {model.name!r} lacks"
                          + (f" (it was fitted on {name!r}{built})" if name else ""))
     return np.asarray(model.params(params))
 

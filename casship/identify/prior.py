@@ -13,6 +13,8 @@ from typing import Mapping
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["Prior"]
 
 
@@ -47,14 +49,14 @@ class Prior:
         std = {str(k): float(v) for k, v in dict(self.std).items()}
         bad = [k for k, v in std.items() if not (np.isfinite(v) and v > 0)]
         if bad:
-            raise ValueError(f"prior standard deviations must be positive and finite: {bad}")
+            raise InputError(f"prior standard deviations must be positive and finite: {bad}")
         mean = {str(k): float(v) for k, v in dict(self.mean or {}).items()}
         nan = [k for k, v in mean.items() if not np.isfinite(v)]
         if nan:
-            raise ValueError(f"prior means must be finite: {nan}")
+            raise InputError(f"prior means must be finite: {nan}")
         w = float(self.weight)
         if not (np.isfinite(w) and w >= 0):
-            raise ValueError(f"prior weight must be >= 0, got {self.weight}")
+            raise InputError(f"prior weight must be >= 0, got {self.weight}")
         object.__setattr__(self, "std", std)
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "weight", w)
@@ -81,7 +83,7 @@ class Prior:
         names = set(space.names) | {e.declared for e in space.entries}
         unknown = (set(self.std) | set(self.mean)) - names
         if unknown:
-            raise ValueError(f"prior given for {sorted(unknown)}, which are not free; free: {space.names}")
+            raise InputError(f"prior given for {sorted(unknown)}, which are not free; free: {space.names}")
         nominal = model.params()
         mu, prec = np.zeros(len(space)), np.zeros(len(space))
         for j, e in enumerate(space.entries):

@@ -19,6 +19,7 @@ from .prior import Prior
 from .records import as_records, initial_states, record_label, share_labels
 from .result import FitResult, IdentificationError, IdentificationWarning
 from .uncertainty import covariance_from_information, effective_samples, sandwich_covariance, whiteness
+from ..errors import InputError, InputTypeError
 
 __all__ = ["IdentificationProblem"]
 
@@ -33,7 +34,7 @@ def _as_prior(prior) -> Prior:
         return prior
     if isinstance(prior, Mapping):
         return Prior(std=prior)
-    raise TypeError(f"prior must be a casship.identify.Prior or a mapping name -> std, got {type(prior).__name__}")
+    raise InputTypeError(f"prior must be a casship.identify.Prior or a mapping name -> std, got {type(prior).__name__}")
 
 
 def whiteness_warning(coloured, ratio) -> str:
@@ -93,7 +94,7 @@ class IdentificationProblem:
                                 base=base, measured=self.measured, noise=noise, x0=x0_entries, x0_fixed=self.x0,
                                 Q=Q, R=R, bounds=bounds, scale=scale)
         if not len(self.space):
-            raise ValueError("nothing to estimate: give free parameters, biases, noise or estimate_x0")
+            raise InputError("nothing to estimate: give free parameters, biases, noise or estimate_x0")
         self.prior = _as_prior(prior)
         self._mu, self._prec = self.prior.vectors(self.space, model)
         left_out = [n for n, a in zip(model.output_names, model.angle_outputs)
@@ -106,7 +107,7 @@ class IdentificationProblem:
         """Refuse a problem with no more measured values than free quantities the prior leaves open."""
         n_obs, open_ = self._n_obs(), int(np.sum(self._prec == 0))
         if n_obs <= open_:
-            raise ValueError(f"{self.method}: {n_obs} measured value(s) in {len(self.records)} record(s) for "
+            raise InputError(f"{self.method}: {n_obs} measured value(s) in {len(self.records)} record(s) for "
                              f"{open_} free quantities without a prior ({', '.join(self.free)}): the data cannot "
                              "determine them; give longer records, fewer free quantities or a prior")
 
@@ -356,7 +357,7 @@ class IdentificationProblem:
         if verdict is None:
             return fit
         if verdict not in ("replay", "loo"):
-            raise ValueError(f"verdict must be 'replay', 'loo' or None, got {verdict!r}")
+            raise InputError(f"verdict must be 'replay', 'loo' or None, got {verdict!r}")
         return self._judge(fit, loo=verdict == "loo", refit=None, guess=guess, solve=None, stacklevel=4)
 
     def _result(self, rep, at: dict, start_shares: dict) -> FitResult:
@@ -531,7 +532,7 @@ class IdentificationProblem:
         """
         idx = [int(i) for i in indices]
         if not idx or any(not 0 <= i < len(self.records) for i in idx):
-            raise ValueError(f"record indices must be in 0..{len(self.records) - 1}, got {list(indices)}")
+            raise InputError(f"record indices must be in 0..{len(self.records) - 1}, got {list(indices)}")
         kw = dict(self._kwargs)
         kw["datasets"] = [self.records[i] for i in idx]
         for key in self._PER_RECORD:

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..data import Dataset
 from ..estimators.prior import second_difference_std
+from ..errors import InputError, InputTypeError
 
 __all__ = ["check_gaps", "noise_std", "initial_states", "share_labels", "record_label", "as_records"]
 
@@ -38,12 +39,12 @@ def as_records(datasets) -> list[Dataset]:
     """
     records = [datasets] if isinstance(datasets, Dataset) else list(datasets)
     if not records:
-        raise ValueError("no data records given")
+        raise InputError("no data records given")
     for i, d in enumerate(records):
         if not isinstance(d, Dataset):
-            raise TypeError(f"record {i} is a {type(d).__name__}, not a casship.Dataset")
+            raise InputTypeError(f"record {i} is a {type(d).__name__}, not a casship.Dataset")
         if len(d) < 2:
-            raise ValueError(f"record {record_label(d, i)!r} has {len(d)} row(s); an identification record "
+            raise InputError(f"record {record_label(d, i)!r} has {len(d)} row(s); an identification record "
                              "needs at least two samples")
     return records
 
@@ -98,15 +99,15 @@ def noise_std(records, names: Sequence[str], angles: Sequence[str] = ()) -> dict
         per = []
         for d in as_records(records):
             if n not in d:
-                raise ValueError(f"no column {n!r} in record {record_label(d, 0)!r}; columns: {list(d.names)}")
+                raise InputError(f"no column {n!r} in record {record_label(d, 0)!r}; columns: {list(d.names)}")
             std = second_difference_std(d[n], n in angles)
             if std is not None:
                 per.append(std)
         if not per:
-            raise ValueError(f"channel {n!r}: fewer than 5 finite samples in every record; give its noise level")
+            raise InputError(f"channel {n!r}: fewer than 5 finite samples in every record; give its noise level")
         s = float(np.median(per))
         if not s > 0:
-            raise ValueError(f"channel {n!r}: noise estimate is zero (constant or quantised channel); "
+            raise InputError(f"channel {n!r}: noise estimate is zero (constant or quantised channel); "
                              "give its standard deviation")
         out[n] = s
     return out
@@ -141,14 +142,14 @@ def initial_states(model, records, x0=None, estimated: Sequence[str] = ()) -> li
     if x0 is not None and not isinstance(x0, Mapping):
         x0 = list(x0)
         if len(x0) != len(records):
-            raise ValueError(f"x0: {len(x0)} initial states for {len(records)} records")
+            raise InputError(f"x0: {len(x0)} initial states for {len(records)} records")
         out = []
         for i, v in enumerate(x0):
             v = model.states(**v) if isinstance(v, Mapping) else np.asarray(v, dtype=float).reshape(-1)
             if v.shape != (model.nx,):
-                raise ValueError(f"x0 of record {i} has {v.size} values, model {model.name!r} has {model.nx} states")
+                raise InputError(f"x0 of record {i} has {v.size} values, model {model.name!r} has {model.nx} states")
             if not np.all(np.isfinite(v)):
-                raise ValueError(f"x0 of record {i} is not finite: {v}")
+                raise InputError(f"x0 of record {i} is not finite: {v}")
             out.append(v)
         return out
     given = dict(x0 or {})
@@ -166,7 +167,7 @@ def initial_states(model, records, x0=None, estimated: Sequence[str] = ()) -> li
                         ok = np.flatnonzero(np.isfinite(d[s]))
                         first = float(d[s][ok[0]]) if ok.size else 0.0
                     else:
-                        raise ValueError(f"record {record_label(d, i)!r}: state {s!r} is NaN in the first row "
+                        raise InputError(f"record {record_label(d, i)!r}: state {s!r} is NaN in the first row "
                                          f"(t = {d.t[0]:g} s); give x0 for it, estimate it (estimate_x0) "
                                          "or start the record where it is measured")
                 v[j] = first
@@ -204,7 +205,7 @@ def share_labels(records, share: Mapping | None, groups: Mapping | None = None) 
     groups = dict(groups or {})
     for key, labels in groups.items():
         if len(labels) != len(records):
-            raise ValueError(f"grouping {key!r}: {len(labels)} labels for {len(records)} records")
+            raise InputError(f"grouping {key!r}: {len(labels)} labels for {len(records)} records")
     out = {}
     for name, how in dict(share or {}).items():
         if isinstance(how, str):
@@ -217,19 +218,19 @@ def share_labels(records, share: Mapping | None, groups: Mapping | None = None) 
             else:
                 missing = [record_label(d, i) for i, d in enumerate(records) if how not in d.meta]
                 if missing:
-                    raise ValueError(f"share[{name!r}] = {how!r}: not a grouping given in groups "
+                    raise InputError(f"share[{name!r}] = {how!r}: not a grouping given in groups "
                                      f"{sorted(groups)} and records {missing} have no meta[{how!r}]")
                 labels = [d.meta[how] for d in records]
         else:
             labels = list(how)
             if len(labels) != len(records):
-                raise ValueError(f"share[{name!r}]: {len(labels)} labels for {len(records)} records")
+                raise InputError(f"share[{name!r}]: {len(labels)} labels for {len(records)} records")
         labels = [None if lab is None else str(lab) for lab in labels]
         bad = [lab for lab in labels if lab is not None and (not lab or any(c in lab for c in "@[], "))]
         if bad:
-            raise ValueError(f"share[{name!r}]: labels must be non-empty without '@[], ', got {bad}")
+            raise InputError(f"share[{name!r}]: labels must be non-empty without '@[], ', got {bad}")
         if how != "record" and any(lab is not None and lab.isdigit() for lab in labels):
-            raise ValueError(f"share[{name!r}]: group labels must not be plain numbers (those name records)")
+            raise InputError(f"share[{name!r}]: group labels must not be plain numbers (those name records)")
         out[name] = labels
     return out
 
@@ -270,6 +271,6 @@ def check_gaps(dmodel, records, x0, params, labels) -> None:
         long = np.flatnonzero(d.dt > limit)
         if long.size:
             k = int(long[0])
-            raise ValueError(f"record {label!r}: time gap of {d.dt[k]:.4g} s between t = {d.t[k]:g} and "
+            raise InputError(f"record {label!r}: time gap of {d.dt[k]:.4g} s between t = {d.t[k]:g} and "
                              f"{d.t[k + 1]:g} s (rows {k} and {k + 1}) is longer than {limit:.4g} s, the longest "
                              f"step the {dmodel.method} simulation takes stably; split the record there")

@@ -15,7 +15,7 @@ from typing import Mapping
 import numpy as np
 from scipy import stats
 
-from ..errors import SolverError
+from ..errors import InputError, SolverError
 
 __all__ = ["FitResult", "IdentificationError", "IdentificationWarning"]
 
@@ -194,7 +194,7 @@ class FitResult:
         (float, float)
         """
         if name not in self.estimates:
-            raise ValueError(f"{name!r} was not estimated; free: {self.free}")
+            raise InputError(f"{name!r} was not estimated; free: {self.free}")
         se = (self.std_errors_robust if robust else self.std_errors)[name]
         z = stats.norm.ppf(0.5 + level / 2)
         return self.estimates[name] - z * se, self.estimates[name] + z * se
@@ -223,7 +223,7 @@ class FitResult:
             unc.psi_variance_rate = q
             return unc
         if kind not in (None, "model", "robust"):
-            raise ValueError(f"kind must be None, 'model' or 'robust', got {kind!r}")
+            raise InputError(f"kind must be None, 'model' or 'robust', got {kind!r}")
         robust = kind != "model" and self.covariance_robust is not None
         C = np.asarray(self.covariance_robust if robust else self.covariance, dtype=float)
         idx = [i for i, n in enumerate(self.free) if n in self.params and "@" not in n]
@@ -379,23 +379,23 @@ class FitResult:
         d = _unclean(dict(d))
         missing = [k for k in ("model", "params", "free", "estimates", "std_errors") if k not in d]
         if missing:
-            raise ValueError(f"fit JSON lacks key(s) {missing}")
+            raise InputError(f"fit JSON lacks key(s) {missing}")
         k = len(d["free"])
         twice = sorted({n for n in d["free"] if list(d["free"]).count(n) > 1})
         if twice:
-            raise ValueError(f"fit JSON: free names {twice} given more than once")
+            raise InputError(f"fit JSON: free names {twice} given more than once")
 
         def mat(key):
             value = d.get(key, np.full((k, k), np.nan))
             if value is None:
-                raise ValueError(f"fit JSON: {key} is null; a {k} x {k} matrix of the free quantities {d['free']} "
+                raise InputError(f"fit JSON: {key} is null; a {k} x {k} matrix of the free quantities {d['free']} "
                                  "is wanted (or leave the key out)")
             try:
                 a = np.asarray(value, dtype=float)
             except (TypeError, ValueError):
-                raise ValueError(f"fit JSON: {key} is not a matrix of numbers") from None
+                raise InputError(f"fit JSON: {key} is not a matrix of numbers") from None
             if a.size != k * k:
-                raise ValueError(f"fit JSON: {key} has {a.size} entries, {k} x {k} wanted for {d['free']}")
+                raise InputError(f"fit JSON: {key} has {a.size} entries, {k} x {k} wanted for {d['free']}")
             return a.reshape(k, k)
         kw = {key: d[key] for key in (*cls._SCALARS, *cls._DICTS, *cls._LISTS) if key in d}
         if "covariance_robust" in d:
@@ -427,7 +427,7 @@ class FitResult:
             return cls.from_dict(load_fit_json(path))
         except ValueError as exc:
             text = str(exc)
-            raise ValueError(text if text.startswith(str(path)) else f"{path}: {text}") from None
+            raise InputError(text if text.startswith(str(path)) else f"{path}: {text}") from None
 
     # -- plot --------------------------------------------------------------------------------------
     def plot(self, ax=None, path=None):
@@ -448,7 +448,7 @@ class FitResult:
             See :mod:`casship.plotting`.
         """
         if not self.predictions:
-            raise ValueError("this FitResult holds no predictions (read from JSON?); nothing to plot")
+            raise InputError("this FitResult holds no predictions (read from JSON?); nothing to plot")
         from ..plotting import finish, panels, split_args
 
         ax, path = split_args(ax, path)

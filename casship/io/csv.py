@@ -21,6 +21,7 @@ import numpy as np
 from ..angles import wrap as _wrap
 from ..data import Dataset, read_frame
 from .geodesy import geodetic_to_ne
+from ..errors import InputError, InputTypeError
 
 __all__ = ["read_csv", "from_frame", "UNITS"]
 
@@ -44,12 +45,12 @@ UNITS: dict[str, tuple[str, float, float]] = {
 
 def _spec(spec: str, what: str) -> tuple[str, str]:
     if not isinstance(spec, str) or not spec:
-        raise TypeError(f"{what}: expected 'source_column' or 'source_column:unit', got {spec!r}")
+        raise InputTypeError(f"{what}: expected 'source_column' or 'source_column:unit', got {spec!r}")
     source, sep, unit = spec.rpartition(":")
     if not sep:
         source, unit = spec, ""
     if unit not in UNITS:
-        raise ValueError(f"{what}: unknown unit {unit!r}; known units: {sorted(u for u in UNITS if u)}")
+        raise InputError(f"{what}: unknown unit {unit!r}; known units: {sorted(u for u in UNITS if u)}")
     return source, unit
 
 
@@ -84,9 +85,9 @@ def from_frame(frame, columns: Mapping[str, str] | None = None, *, time: str = "
     """
     t_source, t_unit = _spec(time, "time")
     if t_source not in frame.columns:
-        raise ValueError(f"{name}: no time column {t_source!r}; columns: {list(frame.columns)}")
+        raise InputError(f"{name}: no time column {t_source!r}; columns: {list(frame.columns)}")
     if UNITS[t_unit][0] != "s":
-        raise ValueError(f"{name}: time unit {t_unit!r} is not a unit of time")
+        raise InputError(f"{name}: time unit {t_unit!r} is not a unit of time")
     if columns is None:
         columns = {str(c): str(c) for c in frame.columns
                    if c != t_source and np.issubdtype(frame[c].dtype, np.number)}
@@ -94,34 +95,34 @@ def from_frame(frame, columns: Mapping[str, str] | None = None, *, time: str = "
     for new, spec in columns.items():
         source, unit = _spec(spec, f"{name}: column {new!r}")
         if source not in frame.columns:
-            raise ValueError(f"{name}: column {new!r} refers to unknown source column {source!r}; "
+            raise InputError(f"{name}: column {new!r} refers to unknown source column {source!r}; "
                              f"columns: {list(frame.columns)}")
         try:
             values = frame[source].to_numpy(dtype=float)
         except (TypeError, ValueError):
-            raise ValueError(f"{name}: source column {source!r} is not numeric") from None
+            raise InputError(f"{name}: source column {source!r} is not numeric") from None
         si, factor, offset = UNITS[unit]
         out[new] = values * factor + offset
         units[new] = si
     for c in wrap:
         if c not in out:
-            raise ValueError(f"{name}: cannot wrap unknown column {c!r}; columns: {list(out)}")
+            raise InputError(f"{name}: cannot wrap unknown column {c!r}; columns: {list(out)}")
         if units[c] != "rad":
-            raise ValueError(f"{name}: column {c!r} is in {units[c]!r}, not an angle in rad")
+            raise InputError(f"{name}: column {c!r} is in {units[c]!r}, not an angle in rad")
         out[c] = _wrap(out[c])
     meta = {"source": name}
     if latlon is not None:
         lat_name, lon_name = latlon
         for c in latlon:
             if c not in out:
-                raise ValueError(f"{name}: latlon column {c!r} is not among the columns {list(out)}")
+                raise InputError(f"{name}: latlon column {c!r} is not among the columns {list(out)}")
             if units[c] != "rad":
-                raise ValueError(f"{name}: latlon column {c!r} must be an angle (give ':deg' or ':rad')")
+                raise InputError(f"{name}: latlon column {c!r} must be an angle (give ':deg' or ':rad')")
         lat, lon = out[lat_name], out[lon_name]
         if origin_deg is None:
             ok = np.flatnonzero(np.isfinite(lat) & np.isfinite(lon))
             if not ok.size:
-                raise ValueError(f"{name}: no finite position to take as origin")
+                raise InputError(f"{name}: no finite position to take as origin")
             lat0, lon0 = lat[ok[0]], lon[ok[0]]
         else:
             lat0, lon0 = np.radians(origin_deg[0]), np.radians(origin_deg[1])
@@ -131,11 +132,11 @@ def from_frame(frame, columns: Mapping[str, str] | None = None, *, time: str = "
     try:
         t = frame[t_source].to_numpy(dtype=float) * UNITS[t_unit][1]
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: time column {t_source!r} is not numeric") from None
+        raise InputError(f"{name}: time column {t_source!r} is not numeric") from None
     try:
         return Dataset(t, out, units, meta)
     except ValueError as exc:
-        raise ValueError(f"{name}: {exc}") from None
+        raise InputError(f"{name}: {exc}") from None
 
 
 def read_csv(path, columns: Mapping[str, str] | None = None, *, time: str = "t:s", wrap: Sequence[str] = (),

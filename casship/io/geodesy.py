@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["geodetic_to_ne", "ne_to_geodetic"]
 
 
@@ -10,11 +12,11 @@ def _check(lat, lon, what: str):
     lat = np.asarray(lat, dtype=float)
     lon = np.asarray(lon, dtype=float)
     if lat.shape != lon.shape:
-        raise ValueError(f"{what}: latitude has shape {lat.shape}, longitude {lon.shape}")
+        raise InputError(f"{what}: latitude has shape {lat.shape}, longitude {lon.shape}")
     ok = np.isfinite(lat)
     if np.any(np.abs(lat[ok]) > np.pi / 2 + 1e-12):
         i = int(np.flatnonzero(np.abs(np.where(ok, lat, 0.0)).ravel() > np.pi / 2 + 1e-12)[0])
-        raise ValueError(f"{what}: latitude {lat.ravel()[i]:.6g} (element {i}) outside [-pi/2, pi/2] rad "
+        raise InputError(f"{what}: latitude {lat.ravel()[i]:.6g} (element {i}) outside [-pi/2, pi/2] rad "
                          "(degrees given?)")
     return lat, lon
 
@@ -48,7 +50,7 @@ def geodetic_to_ne(lat, lon, lat0: float, lon0: float):
 
     lat, lon = _check(lat, lon, "geodetic_to_ne")
     if not (np.isfinite(lat0) and np.isfinite(lon0)):
-        raise ValueError(f"geodetic_to_ne: origin ({lat0}, {lon0}) is not finite")
+        raise InputError(f"geodetic_to_ne: origin ({lat0}, {lon0}) is not finite")
     north, east, _ = pymap3d.geodetic2ned(lat, lon, np.zeros_like(lat), lat0, lon0, 0.0, deg=False)
     return np.asarray(north, dtype=float), np.asarray(east, dtype=float)
 

@@ -54,6 +54,7 @@ import numpy as np
 
 from ..data import Dataset
 from .table import read_numeric_rows
+from ..errors import InputError
 
 __all__ = ["read_hsva", "hsva_runs", "HSVA_COLUMNS", "HSVA_SCALE"]
 
@@ -117,17 +118,17 @@ def read_hsva(path, *, full_scale: bool = False, flip_rudder: bool = True, scale
     if not path.is_file():
         raise FileNotFoundError(f"HSVA file {path} does not exist")
     if not (np.isfinite(scale) and scale > 0):
-        raise ValueError(f"scale must be a positive number, got {scale}")
+        raise InputError(f"scale must be a positive number, got {scale}")
     lines = path.read_text(encoding="cp1252").splitlines()
     if len(lines) < 5:
-        raise ValueError(f"{path}: expected 4 title lines and data rows, got {len(lines)} lines")
+        raise InputError(f"{path}: expected 4 title lines and data rows, got {len(lines)} lines")
     title = " | ".join(s.strip() for s in lines[:4] if s.strip())
     data = read_numeric_rows(path, lines, 4, HSVA_COLUMNS)
     col = {name: data[:, i] for i, name in enumerate(HSVA_COLUMNS) if name is not None}
     t = col["time"]
     if np.any(np.diff(t) <= 0):
         k = int(np.flatnonzero(np.diff(t) <= 0)[0])
-        raise ValueError(f"{path}: time stamps must increase; data row {k + 1} ({t[k + 1]}) is not after {t[k]}")
+        raise InputError(f"{path}: time stamps must increase; data row {k + 1} ({t[k + 1]}) is not after {t[k]}")
     sign = -1.0 if flip_rudder else 1.0
     cols = {"u": col["u"], "r": np.radians(col["r"]), "x": col["x"], "y": col["y"], "psi": np.radians(col["psi"]),
             "delta": sign * np.radians(col["delta"]), "n": col["n"], "thrust": col["thrust"],

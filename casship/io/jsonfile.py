@@ -20,6 +20,8 @@ import json
 import math
 from pathlib import PurePath
 
+from ..errors import InputError
+
 __all__ = ["json_ready", "dumps", "write_json"]
 
 
@@ -43,7 +45,7 @@ def json_ready(value, nonfinite: str = "text"):
         A value of another type (naming it), rather than writing its ``repr``.
     """
     if nonfinite not in ("text", "keep"):
-        raise ValueError(f"nonfinite must be 'text' or 'keep', got {nonfinite!r}")
+        raise InputError(f"nonfinite must be 'text' or 'keep', got {nonfinite!r}")
     if isinstance(value, dict):
         return {str(k): json_ready(v, nonfinite) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..data import Dataset
 from .table import read_numeric_rows
+from ..errors import InputError
 
 __all__ = ["read_marin", "MARIN_COLUMNS", "marin_runs"]
 
@@ -80,7 +81,7 @@ def read_marin(path, *, flip_rudder: bool = True) -> Dataset:
         bad = np.flatnonzero(np.diff(col["time"]) <= 0)
         where = f"; data row {bad[0] + 1} ({col['time'][bad[0] + 1]:g}) is not after {col['time'][bad[0]]:g}" \
             if bad.size else ""
-        raise ValueError(f"{path}: time stamps do not increase (step fitted to the stamps: {dt:g} s){where}")
+        raise InputError(f"{path}: time stamps do not increase (step fitted to the stamps: {dt:g} s){where}")
     t = col["time"][0] + k * dt
     residual = float(np.max(np.abs(t - col["time"]) / _quantum(np.abs(col["time"]))))
     psi = np.radians(col["psi"])

@@ -250,7 +250,7 @@ def _first_text(exc: Exception) -> str:
 
 def _lines(source) -> tuple[str, Iterable[tuple[int, str]]]:
     if isinstance(source, str) and not source.strip():
-        raise ValueError("read_nmea: the source is an empty string; give a file name or the log text")
+        raise InputError("read_nmea: the source is an empty string; give a file name or the log text")
     is_text = isinstance(source, str) and ("\n" in source or source.lstrip().startswith(("$", "!")))
     if isinstance(source, (str, Path)) and not is_text:
         path = Path(source)
@@ -389,7 +389,7 @@ def read_nmea(source, *, origin_deg: tuple[float, float] | None = None, skip_bad
                 report.superseded[col] = report.superseded.get(col, 0) + 1
             row[col] = val
     if not rows:
-        raise ValueError(f"{name}: no time-stamped (GGA or RMC) sentence found")
+        raise InputError(f"{name}: no time-stamped (GGA or RMC) sentence found")
     if report.skipped:
         first = report.skipped[0]
         warnings.warn(f"{name}: skipped {len(report.skipped)} malformed line(s); first: line {first[0]}: {first[1]} "

@@ -18,6 +18,7 @@ from ..data import Dataset
 from .hsva import read_hsva
 from .marin import read_marin
 from .nmea import read_nmea
+from ..errors import InputError
 
 __all__ = ["read_record", "RECORD_FORMATS"]
 
@@ -78,7 +79,7 @@ def read_record(path, *, format: str | None = None) -> Dataset:
     if format is None:
         format = _sniff(path)
     if format not in RECORD_FORMATS:
-        raise ValueError(f"record {path}: unknown format {format!r}; use one of {RECORD_FORMATS}")
+        raise InputError(f"record {path}: unknown format {format!r}; use one of {RECORD_FORMATS}")
     if format == "csv":
         data = Dataset.from_csv(path)
     elif format == "marin":

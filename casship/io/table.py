@@ -6,6 +6,8 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["read_numeric_rows"]
 
 
@@ -39,17 +41,17 @@ def read_numeric_rows(path: Path, lines: Sequence[str], first: int, columns: Seq
         if not fields:
             continue
         if len(fields) != len(columns):
-            raise ValueError(f"{path}: line {number} has {len(fields)} fields, expected {len(columns)} "
+            raise InputError(f"{path}: line {number} has {len(fields)} fields, expected {len(columns)} "
                              f"({' '.join(c or '?' for c in columns)})")
         try:
             rows.append([float(f) for f in fields])
         except ValueError:
-            raise ValueError(f"{path}: line {number} is not numeric: {line!r}") from None
+            raise InputError(f"{path}: line {number} is not numeric: {line!r}") from None
     if len(rows) < 3:
-        raise ValueError(f"{path}: {len(rows)} data row(s); a record needs at least 3")
+        raise InputError(f"{path}: {len(rows)} data row(s); a record needs at least 3")
     data = np.asarray(rows)
     if not np.all(np.isfinite(data)):
         row, col = np.argwhere(~np.isfinite(data))[0]
-        raise ValueError(f"{path}: non-finite value in column {col} ({columns[col] or 'unestablished'}) "
+        raise InputError(f"{path}: non-finite value in column {col} ({columns[col] or 'unestablished'}) "
                          f"at data row {row}")
     return data

@@ -15,6 +15,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..model import Model
+from ..errors import InputError
 
 __all__ = ["vessel_of", "rudder_inputs", "propeller_inputs", "straight_run_state", "turning_inputs", "pullout_inputs",
            "spiral_inputs", "random_rudder_inputs", "ZigZag", "ReverseSpiral"]
@@ -39,7 +40,7 @@ def vessel_of(model: Model):
         Naming the model, if it has no vessel.
     """
     if model.vessel is None:
-        raise ValueError(f"model {model.name!r} has no vessel (particulars, rudder and propeller inputs); "
+        raise InputError(f"model {model.name!r} has no vessel (particulars, rudder and propeller inputs); "
                          "build it with ModelBuilder.vessel = casship.Vessel(...)")
     return model.vessel
 
@@ -63,7 +64,7 @@ def rudder_inputs(model: Model) -> tuple[str, ...]:
     """
     names = vessel_of(model).rudders
     if not names:
-        raise ValueError(f"model {model.name!r} has no rudder input (vessel {model.vessel.name!r} names none)")
+        raise InputError(f"model {model.name!r} has no rudder input (vessel {model.vessel.name!r} names none)")
     return names
 
 
@@ -119,7 +120,7 @@ def _ramp(t: np.ndarray, t0: float, start: float, target: float, rate: float | N
     if rate is None or not np.isfinite(rate):
         return np.where(t >= t0, target, start)
     if rate <= 0:
-        raise ValueError(f"rudder rate must be positive, got {rate}")
+        raise InputError(f"rudder rate must be positive, got {rate}")
     step = np.clip(rate * (t - t0), 0.0, abs(target - start))
     return start + np.sign(target - start) * step
 
@@ -234,7 +235,7 @@ def spiral_inputs(model: Model, t, rudders: Sequence[float], n: float | None = N
     """
     t = np.asarray(t, dtype=float)
     if t[-1] - t[0] <= (len(rudders) - 1) * hold:
-        raise ValueError(f"time grid covers {t[-1] - t[0]:g} s, the spiral needs more than "
+        raise InputError(f"time grid covers {t[-1] - t[0]:g} s, the spiral needs more than "
                          f"{(len(rudders) - 1) * hold:g} s")
     r = _rate(model, rate)
     delta = np.zeros_like(t)
@@ -289,12 +290,12 @@ def random_rudder_inputs(model: Model, t, n: float | None = None, *, hold: float
     ranges = {name: defaults.get(name, (-35.0, 35.0)) for name in names}
     for key, val in (ranges_deg or {}).items():
         if key not in names:
-            raise ValueError(f"range given for unknown rudder {key!r}; rudders: {list(names)}")
+            raise InputError(f"range given for unknown rudder {key!r}; rudders: {list(names)}")
         ranges[key] = tuple(val)
     if hold <= 0:
-        raise ValueError(f"hold must be positive, got {hold}")
+        raise InputError(f"hold must be positive, got {hold}")
     if hold >= t[-1] - t[0]:
-        raise ValueError(f"hold {hold:g} s is not shorter than the record ({t[-1] - t[0]:g} s): the random sequence "
+        raise InputError(f"hold {hold:g} s is not shorter than the record ({t[-1] - t[0]:g} s): the random sequence "
                          "would be one rudder angle held throughout")
     segment = np.floor((t - t[0]) / hold).astype(int)
     count = segment[-1] + 1
@@ -302,7 +303,7 @@ def random_rudder_inputs(model: Model, t, n: float | None = None, *, hold: float
     for name in names:
         lo, hi = np.radians(ranges[name][0]), np.radians(ranges[name][1])
         if not lo < hi:
-            raise ValueError(f"range of {name!r} must have low < high, got {ranges[name]}")
+            raise InputError(f"range of {name!r} must have low < high, got {ranges[name]}")
         values[name] = _rate_limited(t, rng.uniform(lo, hi, count)[segment], _rate(model, rate))
     out = _open_loop(model, t, None, n, extra)
     out.update(values)
@@ -314,7 +315,7 @@ def _rate_limited(t: np.ndarray, target: np.ndarray, rate: float | None) -> np.n
     if rate is None or not np.isfinite(rate):
         return target
     if rate <= 0:
-        raise ValueError(f"rudder rate must be positive, got {rate}")
+        raise InputError(f"rudder rate must be positive, got {rate}")
     followed = np.empty_like(target)
     followed[0] = target[0]
     steps = rate * np.diff(t)
@@ -335,7 +336,7 @@ def _open_loop(model: Model, t, delta, n, extra) -> dict[str, np.ndarray]:
             out[name] = np.full_like(t, float(n))
     for key, val in extra.items():
         if key not in out:
-            raise ValueError(f"unknown input name {key!r}; model inputs: {list(model.input_names)}")
+            raise InputError(f"unknown input name {key!r}; model inputs: {list(model.input_names)}")
         out[key] = np.broadcast_to(np.asarray(val, dtype=float), t.shape).copy()
     return out
 
@@ -368,7 +369,7 @@ class ZigZag:
     def __init__(self, model: Model, rudder: float, heading: float, n: float | None = None, *,
                  t_exec: float = 0.0, rate: float | None | str = "model", **extra):
         if rudder == 0 or heading <= 0:
-            raise ValueError(f"zig-zag needs a non-zero rudder and a positive switch heading, got {rudder}, {heading}")
+            raise InputError(f"zig-zag needs a non-zero rudder and a positive switch heading, got {rudder}, {heading}")
         self.model, self.rudder, self.heading, self.t_exec = model, float(rudder), float(heading), float(t_exec)
         self.rate = _rate(model, rate)
         self.base = _input_vector(model, 0.0, n, **extra)
@@ -383,7 +384,7 @@ class ZigZag:
 
     def __call__(self, t: float, x: np.ndarray) -> np.ndarray:
         if self.t_prev is not None and t < self.t_prev:
-            raise ValueError(f"ZigZag instances are single-use: time went backwards from {self.t_prev:g} s to "
+            raise InputError(f"ZigZag instances are single-use: time went backwards from {self.t_prev:g} s to "
                              f"{t:g} s (create a new instance per run)")
         if t >= self.t_exec:
             if self.psi0 is None:
@@ -438,7 +439,7 @@ class ReverseSpiral:
                  gain: float = 20.0, rudder_max: float | None = None, rate: float | None | str = "model",
                  t0: float = 0.0, **extra):
         if hold <= 0:
-            raise ValueError(f"hold must be positive, got {hold}")
+            raise InputError(f"hold must be positive, got {hold}")
         self.model, self.yaw_rates, self.hold, self.gain, self.t0 = model, list(yaw_rates), hold, gain, t0
         vessel_max = vessel_of(model).rudder_max
         self.rudder_max = rudder_max if rudder_max is not None else vessel_max if vessel_max else np.radians(35)

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..angles import unwrap
 from ..data import Dataset
+from ..errors import InputError
 
 __all__ = ["execute_time", "turning_metrics", "zigzag_metrics", "imo_check", "imo_table"]
 
@@ -41,11 +42,11 @@ def execute_time(data: Dataset, rudder: str = "delta", threshold_deg: float = 1.
         No rudder column, or the rudder never moves by the threshold.
     """
     if rudder not in data:
-        raise ValueError(f"no rudder column {rudder!r} to find the execute time; give t_exec")
+        raise InputError(f"no rudder column {rudder!r} to find the execute time; give t_exec")
     d = np.asarray(data[rudder])
     moved = np.flatnonzero(np.abs(d - d[0]) > np.radians(threshold_deg))
     if moved.size == 0:
-        raise ValueError(f"rudder column {rudder!r} never moves by more than {threshold_deg} deg")
+        raise InputError(f"rudder column {rudder!r} never moves by more than {threshold_deg} deg")
     return float(data.t[moved[0]])
 
 
@@ -111,7 +112,7 @@ def turning_metrics(data: Dataset, *, t_exec: float | None = None, L: float | No
         t_exec = execute_time(data, rudder)
     k0 = int(np.searchsorted(t, t_exec))
     if k0 >= t.size - 2:
-        raise ValueError(f"execute time {t_exec} s is at the end of the record")
+        raise InputError(f"execute time {t_exec} s is at the end of the record")
     x, y = np.asarray(data["x"], dtype=float), np.asarray(data["y"], dtype=float)
     psi = unwrap(np.asarray(data["psi"], dtype=float))
     psi0 = float(np.interp(t_exec, t, psi))
@@ -194,7 +195,7 @@ def zigzag_metrics(data: Dataset, heading_deg: float, *, t_exec: float | None = 
     """
     heading = np.radians(float(heading_deg))
     if not heading > 0:
-        raise ValueError(f"heading_deg must be positive, got {heading_deg}")
+        raise InputError(f"heading_deg must be positive, got {heading_deg}")
     t = data.t
     if t_exec is None:
         t_exec = execute_time(data, rudder)
@@ -204,7 +205,7 @@ def zigzag_metrics(data: Dataset, heading_deg: float, *, t_exec: float | None = 
     up, ku = _crossing(t, change, heading, k0)
     down, kd = _crossing(t, -change, heading, k0)
     if up is None and down is None:
-        raise ValueError(f"the heading never changes by {heading_deg} deg after the execute")
+        raise InputError(f"the heading never changes by {heading_deg} deg after the execute")
     side = 1.0 if down is None or (up is not None and up <= down) else -1.0
     out = {"first_side": int(side), "t_exec_s": float(t_exec)}
     reversals, k = [], k0
@@ -281,7 +282,7 @@ def imo_check(L: float, V: float, *, turning: Mapping | None = None, zz10: Mappi
         Rows ``{"criterion", "value", "limit", "unit", "pass"}``.
     """
     if not (L > 0 and V > 0):
-        raise ValueError(f"L and V must be positive, got {L}, {V}")
+        raise InputError(f"L and V must be positive, got {L}, {V}")
     L_over_V = L / V
     first, second = _zz10_limits(L_over_V)
     rows = []

@@ -22,6 +22,7 @@ from ..validity import check_inputs, check_states
 from .inputs import (ZigZag, _input_vector, propeller_inputs, pullout_inputs, random_rudder_inputs, rudder_inputs,
                      spiral_inputs, straight_run_state, turning_inputs, vessel_of)
 from .metrics import turning_metrics, zigzag_metrics
+from ..errors import InputError, InputTypeError
 
 __all__ = ["MANEUVERS", "propeller_rate_for_speed", "ManeuverResult", "run_maneuver"]
 
@@ -69,10 +70,10 @@ def propeller_rate_for_speed(model: Model, speed: float, p=None, *, guess: float
 
     props = propeller_inputs(model)
     if not props:
-        raise ValueError(f"model {model.name!r} has no propeller input; its speed is not set by a propeller rate")
+        raise InputError(f"model {model.name!r} has no propeller input; its speed is not set by a propeller rate")
     speed = float(speed)
     if not np.isfinite(speed) or speed <= 0:
-        raise ValueError(f"speed must be a positive finite number [m/s], got {speed}")
+        raise InputError(f"speed must be a positive finite number [m/s], got {speed}")
     if check_limits:
         check_states(model, {"u": speed}, "speed: state")
     pv = model.params(p) if p is not None else model.params()
@@ -100,7 +101,7 @@ def _scan_rate(model: Model, x, u, p, props, speed: float) -> float:
     vals = xdot[model.index("u"), :]
     change = np.flatnonzero(np.sign(vals[:-1]) != np.sign(vals[1:]))
     if change.size == 0:
-        raise ValueError(f"no propeller rate in [{grid[0]:.4g}, {grid[-1]:.4g}] holds {speed} m/s for model "
+        raise InputError(f"no propeller rate in [{grid[0]:.4g}, {grid[-1]:.4g}] holds {speed} m/s for model "
                          f"{model.name!r}")
     return 0.5 * (grid[change[0]] + grid[change[0] + 1])
 
@@ -209,11 +210,11 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
         circle whose heading never changes by 90 deg.
     """
     if kind not in MANEUVERS:
-        raise ValueError(f"unknown manoeuvre {kind!r}; use one of {MANEUVERS}")
+        raise InputError(f"unknown manoeuvre {kind!r}; use one of {MANEUVERS}")
     vessel = vessel_of(model)
     L = vessel.L_pp
     if speed is None and vessel.U0 is None:
-        raise ValueError(f"model {model.name!r}: vessel {vessel.name!r} has no approach speed U0; give speed")
+        raise InputError(f"model {model.name!r}: vessel {vessel.name!r} has no approach speed U0; give speed")
     speed = _positive(vessel.U0 if speed is None else speed, "speed", "m/s")
     rudder_deg = _finite(rudder_deg, "rudder_deg")
     _check_settings(kind, rudder_deg, heading_deg, duration, dt, t_exec, hold)
@@ -233,7 +234,7 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
     dt = float(dt if dt is not None else nice_step(T / 400))
     t_exec = float(t_exec if t_exec is not None else round(T / 4 / dt) * dt)
     if duration is not None and dt >= duration:
-        raise ValueError(f"dt = {dt:g} s must be shorter than the duration {duration:g} s")
+        raise InputError(f"dt = {dt:g} s must be shorter than the duration {duration:g} s")
     rudder = np.radians(rudder_deg)
     defaults = {"turning": 50 * T, "zigzag": 16 * T, "pullout": 40 * T, "spiral": None, "random": 20 * T}
     span = 15 * float(hold or 12 * T) if kind == "spiral" else (duration or defaults[kind])
@@ -241,7 +242,7 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
     x0 = straight_run_state(model, speed)
     settings = {"kind": kind, "rudder_deg": rudder_deg, "speed_mps": speed, "n": n, "dt_s": dt, "t_exec_s": t_exec}
     if first is not None and kind != "zigzag":
-        raise ValueError(f"first (the side of a zig-zag's first rudder) means nothing for a {kind} manoeuvre")
+        raise InputError(f"first (the side of a zig-zag's first rudder) means nothing for a {kind} manoeuvre")
     if kind == "zigzag":
         heading = np.radians(abs(heading_deg) if heading_deg is not None else abs(rudder_deg))
         sign = _first_side(rudder_deg, heading_deg, first)
@@ -264,7 +265,7 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
             inputs = turning_inputs(model, t, rudder, n, t_exec=t_exec, rate=rate)
         elif kind == "pullout":
             if t_exec + float(hold or 20 * T) >= t[-1]:
-                raise ValueError(f"pull-out: the rudder would return at t = {t_exec + float(hold or 20 * T):g} s, not "
+                raise InputError(f"pull-out: the rudder would return at t = {t_exec + float(hold or 20 * T):g} s, not "
                                  f"before the end of the record ({t[-1]:g} s): a shorter hold or a longer duration")
             inputs = pullout_inputs(model, t, rudder, n, t_exec=t_exec, hold=float(hold or 20 * T), rate=rate)
         else:
@@ -287,9 +288,9 @@ def _first_side(rudder_deg: float, heading_deg: float | None, first: str | None)
     if first is None:
         return -1.0 if negative else 1.0
     if first not in ("port", "starboard"):
-        raise ValueError(f"first must be 'port' or 'starboard', got {first!r}")
+        raise InputError(f"first must be 'port' or 'starboard', got {first!r}")
     if first == "starboard" and negative:
-        raise ValueError(f"first='starboard' but {negative[0]} is negative (port first): give magnitudes with first")
+        raise InputError(f"first='starboard' but {negative[0]} is negative (port first): give magnitudes with first")
     return 1.0 if first == "starboard" else -1.0
 
 
@@ -297,33 +298,33 @@ def _finite(value, what: str) -> float:
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise TypeError(f"{what} must be a number, got {value!r}") from None
+        raise InputTypeError(f"{what} must be a number, got {value!r}") from None
     if not np.isfinite(value):
-        raise ValueError(f"{what} must be finite, got {value}")
+        raise InputError(f"{what} must be finite, got {value}")
     return value
 
 
 def _positive(value, what: str, unit: str) -> float:
     value = _finite(value, what)
     if value <= 0:
-        raise ValueError(f"{what} must be positive, got {value:g} {unit}")
+        raise InputError(f"{what} must be positive, got {value:g} {unit}")
     return value
 
 
 def _check_settings(kind, rudder_deg, heading_deg, duration, dt, t_exec, hold) -> None:
     """Plausibility of the manoeuvre settings (each named in its error)."""
     if kind != "random" and rudder_deg == 0:
-        raise ValueError(f"rudder_deg must be non-zero for a {kind} manoeuvre")
+        raise InputError(f"rudder_deg must be non-zero for a {kind} manoeuvre")
     if kind != "random" and abs(rudder_deg) < 1.0:
         warnings.warn(f"rudder_deg={rudder_deg:g} is below 1 deg: the angle is in degrees (np.radians(35) = "
                       f"{np.radians(35):.4f} would be a mistake); pass e.g. rudder_deg=35", UserWarning, stacklevel=3)
     if heading_deg is not None and (not np.isfinite(heading_deg) or heading_deg == 0):
-        raise ValueError(f"heading_deg must be finite and non-zero, got {heading_deg}")
+        raise InputError(f"heading_deg must be finite and non-zero, got {heading_deg}")
     for what, value in (("duration", duration), ("dt", dt), ("hold", hold)):
         if value is not None:
             _positive(value, what, "s")
     if t_exec is not None and (_finite(t_exec, "t_exec") < 0 or (duration is not None and t_exec >= duration)):
-        raise ValueError(f"t_exec = {t_exec:g} s must lie in [0, duration)")
+        raise InputError(f"t_exec = {t_exec:g} s must lie in [0, duration)")
 
 
 def nice_step(value: float) -> float:

@@ -36,6 +36,7 @@ import numpy as np
 from ..model import Model
 from ..vessel import Vessel
 from .mmg import MMG_ASYMMETRY_PARAMS, MMG_PARAMS, MMG_RUDDER_LIFT_PARAMS, mmg_standard
+from ..errors import InputError
 
 __all__ = ["kvlcc2", "kvlcc2_l7", "KVLCC2_COMMON", "KVLCC2_FULL", "KVLCC2_L7", "KVLCC2_SOURCES"]
 
@@ -122,7 +123,7 @@ def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | No
         if key not in known:
             hint = (" (an asymmetry term: build with asymmetry=True)" if key in MMG_ASYMMETRY_PARAMS else
                     " (build with rudder_lift='cubic')" if key in MMG_RUDDER_LIFT_PARAMS else "")
-            raise ValueError(f"unknown KVLCC2 parameter {key!r}{hint}; known: {list(known)}")
+            raise InputError(f"unknown KVLCC2 parameter {key!r}{hint}; known: {list(known)}")
         values[key] = float(val)
     vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth, rudder_inflow, rudder_lift))
     return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, vessel=vessel, asymmetry=asymmetry,

@@ -41,6 +41,7 @@ from ..builder import ModelBuilder
 from ..model import Model
 from ..vessel import Vessel
 from .mmg import _param, declare_ship_limits, declare_ship_states, rigid_body_3dof
+from ..errors import InputError
 
 __all__ = ["yoshimura_twin_rudder", "esso_osaka_twin", "crossflow_integrals", "LOWSPEED_PARAMS",
            "ESSO_OSAKA_TWIN", "ESSO_OSAKA_SOURCES"]
@@ -190,7 +191,7 @@ def yoshimura_twin_rudder(values: Mapping[str, float], *, name: str = "mmg-twin-
     """
     unknown = set(values) - set(LOWSPEED_PARAMS)
     if unknown:
-        raise ValueError(f"unknown low-speed parameter(s) {sorted(unknown)}; known: {list(LOWSPEED_PARAMS)}")
+        raise InputError(f"unknown low-speed parameter(s) {sorted(unknown)}; known: {list(LOWSPEED_PARAMS)}")
     sources = dict(sources or {})
     b = ModelBuilder(name, doc or "Yoshimura low-speed MMG model, single propeller, twin rudders "
                                   "(Koike et al. 2023, Eq. 20-22)")
@@ -269,7 +270,7 @@ def esso_osaka_twin(params: Mapping[str, float] | None = None, *, smooth_speed: 
     values = dict(ESSO_OSAKA_TWIN)
     for key, val in (params or {}).items():
         if key not in LOWSPEED_PARAMS:
-            raise ValueError(f"unknown low-speed parameter {key!r}; known: {list(LOWSPEED_PARAMS)}")
+            raise InputError(f"unknown low-speed parameter {key!r}; known: {list(LOWSPEED_PARAMS)}")
         values[key] = float(val)
     vessel = Vessel("Esso Osaka 3 m model, single propeller, twin rudders", L_pp=values["L_pp"], B=values["B"],
                     draught=values["d"], scale=1.0, U0=0.4, rudder_rate=np.radians(20.0),

@@ -23,6 +23,7 @@ from ..builder import ModelBuilder
 from ..model import Model
 from ..vessel import Vessel
 from .mmg import add_rudder_actuator, declare_ship_limits, declare_ship_states
+from ..errors import InputError
 
 __all__ = ["mariner", "MARINER"]
 
@@ -68,7 +69,7 @@ def mariner(params: Mapping[str, float] | None = None, *, U0: float = U0_MARINER
     values.update({"L": L_MARINER, "U0": U0, "rho": 1025.0})
     for key, val in (params or {}).items():
         if key not in values:
-            raise ValueError(f"unknown Mariner parameter {key!r}; known: {sorted(values)}")
+            raise InputError(f"unknown Mariner parameter {key!r}; known: {sorted(values)}")
         values[key] = float(val)
     b = ModelBuilder("mariner", "Mariner-class cargo ship (Chislett & Strom-Tejsen 1965; MSS mariner.m)")
     P = {}

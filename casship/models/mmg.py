@@ -33,6 +33,7 @@ from ..frames import body_to_ned
 from ..builder import ModelBuilder
 from ..model import Model
 from ..vessel import Vessel
+from ..errors import InputError
 
 __all__ = ["mmg_standard", "MMG_PARAMS", "MMG_ASYMMETRY_PARAMS", "MMG_RUDDER_LIFT_PARAMS", "MMG_BOUNDS", "SMOOTH_WIDTH",
            "RUDDER_INFLOWS", "RUDDER_LIFTS",
@@ -273,7 +274,7 @@ def rigid_body_3dof(b: ModelBuilder, force: tuple, *, m, m_x, m_y, I_zG, J_z, x_
 def _param(b: ModelBuilder, name: str, values: Mapping[str, float], sources: Mapping[str, str],
            table: Mapping[str, tuple[str, str]], default: float | None = None):
     if name not in values and default is None:
-        raise ValueError(f"no value given for parameter {name!r}")
+        raise InputError(f"no value given for parameter {name!r}")
     unit, doc = table[name]
     return b.param(name, values.get(name, default), bounds=MMG_BOUNDS.get(name), unit=unit, doc=doc,
                    source=sources.get(name, "extended MMG (asymmetry), zero in the published model"
@@ -381,9 +382,9 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     Model
     """
     if rudder_inflow not in RUDDER_INFLOWS:
-        raise ValueError(f"rudder_inflow must be one of {RUDDER_INFLOWS}, got {rudder_inflow!r}")
+        raise InputError(f"rudder_inflow must be one of {RUDDER_INFLOWS}, got {rudder_inflow!r}")
     if rudder_lift not in RUDDER_LIFTS:
-        raise ValueError(f"rudder_lift must be one of {RUDDER_LIFTS}, got {rudder_lift!r}")
+        raise InputError(f"rudder_lift must be one of {RUDDER_LIFTS}, got {rudder_lift!r}")
     cubic = rudder_lift == "cubic"
     sources = {"c_alpha3": "rudder-lift variant; 0 gives the published model", **(sources or {})}
     known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {}), **(MMG_RUDDER_LIFT_PARAMS if cubic else {})}
@@ -391,7 +392,7 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     if unknown:
         hint = (" (the asymmetry terms need asymmetry=True)" if unknown & set(MMG_ASYMMETRY_PARAMS) else
                 " (c_alpha3 needs rudder_lift='cubic')" if unknown & set(MMG_RUDDER_LIFT_PARAMS) else "")
-        raise ValueError(f"unknown MMG parameter(s) {sorted(unknown)}{hint}; known: {list(known)}")
+        raise InputError(f"unknown MMG parameter(s) {sorted(unknown)}{hint}; known: {list(known)}")
     b = ModelBuilder(name, doc or "MMG standard method (Yasukawa & Yoshimura 2015)")
     P = {k: _param(b, k, values, sources, MMG_PARAMS) for k in MMG_PARAMS}
     if asymmetry:

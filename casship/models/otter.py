@@ -47,6 +47,7 @@ from ..model import Model
 from ..vessel import Vessel
 from .lowspeed import crossflow_integrals
 from .mmg import declare_ship_states
+from ..errors import InputError
 
 __all__ = ["otter", "OTTER", "hoerner_cd"]
 
@@ -120,7 +121,7 @@ def otter(params: Mapping[str, float] | None = None, *, propeller_dynamics: bool
     values = dict(OTTER)
     for key, val in (params or {}).items():
         if key not in values:
-            raise ValueError(f"unknown Otter parameter {key!r}; known: {sorted(values)}")
+            raise InputError(f"unknown Otter parameter {key!r}; known: {sorted(values)}")
         values[key] = float(val)
     m_tot = values["m_hull"] + values["m_p"]
     nabla = m_tot / values["rho"]

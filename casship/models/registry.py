@@ -5,6 +5,7 @@ import json
 from typing import Callable
 
 from ..model import Model
+from ..errors import InputError
 
 __all__ = ["register", "get_model", "model_names"]
 
@@ -38,7 +39,7 @@ def register(name: str, factory: Callable[..., Model], doc: str) -> None:
     ValueError: model name 'nomoto1' is already registered
     """
     if name in _FACTORIES:
-        raise ValueError(f"model name {name!r} is already registered")
+        raise InputError(f"model name {name!r} is already registered")
     _FACTORIES[name] = (factory, doc)
 
 
@@ -78,7 +79,7 @@ def get_model(name: str, **options) -> Model:
     try:
         factory = _FACTORIES[name][0]
     except KeyError:
-        raise ValueError(f"unknown model {name!r}; known models: {sorted(_FACTORIES)}") from None
+        raise InputError(f"unknown model {name!r}; known models: {sorted(_FACTORIES)}") from None
     model = factory(**options)
     if model.name != name:
         raise RuntimeError(f"registered model {name!r} builds a model named {model.name!r}; "

@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from typing import Mapping
 
+from ..errors import InputError
+
 __all__ = ["froude_scale", "froude_speed", "froude_rate", "LENGTHS", "AREAS", "VOLUMES"]
 
 #: Names scaled as lengths (MMG particulars and wind geometry).
@@ -27,7 +29,7 @@ VOLUMES = frozenset({"nabla"})
 def _check_scale(scale: float) -> float:
     scale = float(scale)
     if not math.isfinite(scale) or scale <= 0:
-        raise ValueError(f"scale ratio must be a positive finite number, got {scale}")
+        raise InputError(f"scale ratio must be a positive finite number, got {scale}")
     return scale
 
 

@@ -6,6 +6,7 @@ from ..frames import body_to_ned
 from ..builder import ModelBuilder
 from ..model import Model
 from ..vessel import Vessel
+from ..errors import InputError
 
 __all__ = ["shi_taylor", "shi_taylor_preset", "SHI_PARAM_NAMES", "SHI_DEFAULTS", "SHI_ILLUSTRATIVE_VESSEL"]
 
@@ -78,7 +79,7 @@ def shi_taylor(params: dict | None = None, *, kinematics: bool = True, vessel: V
     values = dict(SHI_DEFAULTS)
     for k, v in (params or {}).items():
         if k not in values:
-            raise ValueError(f"unknown Shi et al. parameter {k!r}; known: {list(SHI_PARAM_NAMES)}")
+            raise InputError(f"unknown Shi et al. parameter {k!r}; known: {list(SHI_PARAM_NAMES)}")
         values[k] = v
     b = ModelBuilder("shi-taylor", "3-DOF second-order Taylor response model (Shi et al. 2009, Eq. 2)")
     u, v, r = b.state("u", unit="m/s"), b.state("v", unit="m/s"), b.state("r", unit="rad/s")

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..builder import ModelBuilder
 from ..model import Model
+from ..errors import InputError
 
 __all__ = ["add_wind", "add_current", "fujiwara_coefficients", "fujiwara_loads", "relative_wind", "wind_term_model",
            "WIND_GEOMETRY_NAMES"]
@@ -174,7 +175,7 @@ def fujiwara_loads(U_A, gamma, g: Mapping, rho_air: float = 1.225):
 def _check_ship(b: ModelBuilder, what: str) -> None:
     for name in ("u", "v", "psi", "x", "y"):
         if not b.has(name):
-            raise ValueError(f"{what}: the model has no state {name!r} (needs a 3-DOF ship model)")
+            raise InputError(f"{what}: the model has no state {name!r} (needs a 3-DOF ship model)")
 
 
 def add_wind(model: Model, geometry: Mapping[str, float] | None = None, *, rho_air: float = 1.225,
@@ -247,11 +248,11 @@ def wind_term_model(model: Model, geometry: Mapping[str, float] | None, names, u
     geometry.pop("source", None)
     missing = [k for k in names if k not in geometry]
     if missing:
-        raise ValueError(f"{what}: no value for wind geometry {missing} (model {model.name!r} has no "
+        raise InputError(f"{what}: no value for wind geometry {missing} (model {model.name!r} has no "
                          "vessel wind geometry; pass geometry=...)")
     unknown = set(geometry) - set(names)
     if unknown:
-        raise ValueError(f"{what}: unknown wind geometry name(s) {sorted(unknown)}; known: {tuple(names)}")
+        raise InputError(f"{what}: unknown wind geometry name(s) {sorted(unknown)}; known: {tuple(names)}")
 
     def term(b: ModelBuilder) -> None:
         _check_ship(b, what)

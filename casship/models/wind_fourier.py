@@ -32,6 +32,7 @@ import numpy as np
 
 from ..model import Model
 from .wind import _lib, wind_term_model
+from ..errors import InputError
 
 __all__ = ["FOURIER_GEOMETRY_NAMES", "REGRESSION", "ESSO_OSAKA_3M_WIND", "fujiwara1998_coefficients",
            "fourier_wind_coefficients", "fourier_wind_loads", "add_fourier_wind"]
@@ -116,7 +117,7 @@ def fujiwara1998_coefficients(g: Mapping) -> dict:
     """
     missing = [k for k in FOURIER_GEOMETRY_NAMES if k not in g]
     if missing:
-        raise ValueError(f"Fourier wind: no value for geometry {missing}")
+        raise InputError(f"Fourier wind: no value for geometry {missing}")
     return {name: const + sum(c * _RATIOS[ratio](g) for c, ratio in terms)
             for name, (const, terms) in REGRESSION.items()}
 

@@ -31,6 +31,7 @@ import casadi as ca
 from ._cache import compile_function
 from ._compiler import stopping
 from ._settings import ENV_AFTER_EXIT
+from ..errors import InputTypeError
 
 __all__ = ["Compiling", "compile_in_background", "hand_off"]
 
@@ -76,7 +77,7 @@ class Compiling:
     def __init__(self, fun: ca.Function, flags: Sequence[str] | None = None, on_done: Callable | None = None,
                  extra_source: str = ""):
         if not isinstance(fun, ca.Function):
-            raise TypeError(f"compile_in_background needs a casadi.Function, got {type(fun).__name__}")
+            raise InputTypeError(f"compile_in_background needs a casadi.Function, got {type(fun).__name__}")
         self.interpreted = fun
         self.flags = None if flags is None else tuple(flags)
         self.extra_source = extra_source

@@ -50,6 +50,7 @@ import casadi as ca
 
 from ._compiler import SUFFIX, CompileError, build_library, building, find_compiler
 from ._settings import ENV_CACHE, chosen_flags, compile_timeout
+from ..errors import InputError, InputTypeError
 
 try:                                    # file locks: fcntl on POSIX, msvcrt on Windows
     import fcntl
@@ -366,9 +367,9 @@ def compile_function(fun: ca.Function, *, flags: Sequence[str] | str | None = No
     DM([2, 4])
     """
     if not isinstance(fun, ca.Function):
-        raise TypeError(f"compile_function needs a casadi.Function, got {type(fun).__name__}")
+        raise InputTypeError(f"compile_function needs a casadi.Function, got {type(fun).__name__}")
     if library and not extra_source:
-        raise ValueError("compile_function: library=True is for calling extra_source; none given")
+        raise InputError("compile_function: library=True is for calling extra_source; none given")
     try:
         cc = find_compiler(compiler)
     except CompileError as exc:

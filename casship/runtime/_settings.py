@@ -20,7 +20,7 @@ import os
 import shlex
 from typing import Sequence
 
-from ..errors import InputError
+from ..errors import InputError, InputTypeError
 
 __all__ = ["ENV_CACHE", "ENV_FLAGS", "ENV_TIMEOUT", "ENV_CHUNK", "ENV_AFTER_EXIT", "DEFAULT_FLAGS", "NATIVE_FLAGS", "DEFAULT_TIMEOUT",
            "DEFAULT_CHUNK", "chosen_flags", "compile_timeout", "fold_chunk"]
@@ -68,7 +68,7 @@ def chosen_flags(flags: Sequence[str] | str | None) -> tuple[str, ...]:
     flags = tuple(flags)
     bad = [f for f in flags if not isinstance(f, str)]
     if bad:
-        raise TypeError(f"compiler flags must be strings, got {bad}")
+        raise InputTypeError(f"compiler flags must be strings, got {bad}")
     return flags
 
 

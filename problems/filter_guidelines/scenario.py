@@ -16,6 +16,7 @@ import casship as cs
 from casship.maneuvers import propeller_rate_for_speed
 from casship.models.wind import add_wind
 from casship.models.wind_fourier import ESSO_OSAKA_3M_WIND, add_fourier_wind
+from casship.errors import InputError
 
 DT = 0.1
 R_FILTER = 5e-2                     # Koike et al. (2023) Eq. 30: R = diag(5e-2) (a variance), every state
@@ -61,7 +62,7 @@ def ship_models(wind_form: str = "eq34"):
     if wind_form == "fujiwara2005":
         geometry = {k: v for k, v in ESSO_OSAKA_3M_WIND.items() if k not in ("C_BR", "source")}
         return add_wind(ship, geometry), ship
-    raise ValueError(f"unknown wind form {wind_form!r}; use one of {WIND_FORMS}")
+    raise InputError(f"unknown wind form {wind_form!r}; use one of {WIND_FORMS}")
 
 
 def propeller_rate(ship) -> float:
@@ -133,7 +134,7 @@ def rudder_inputs(kind: str, t: np.ndarray, ship, n: float, seed: int = 7) -> di
 
         u = random_rudder_inputs(ship, t, n, hold=5.0, seed=seed)       # Koike et al. (2023) ranges by default
         return {"delta_s": u["delta_s"], "delta_p": u["delta_p"]}
-    raise ValueError(f"unknown manoeuvre {kind!r}; use 'zigzag' or 'random'")
+    raise InputError(f"unknown manoeuvre {kind!r}; use 'zigzag' or 'random'")
 
 
 def truth_record(truth, ship, kind: str, wind_mean: float, duration: float):

@@ -13,6 +13,7 @@ import numpy as np
 import casship as cs
 from casship.maneuvers import run_maneuver
 from casship.models import SHI_PARAM_NAMES
+from casship.errors import InputError
 
 T = 2.0                                # sampling period of the raw data (paper)
 POS_STD, PSI_STD = 1.0, np.radians(0.2)
@@ -47,9 +48,9 @@ class Reading:
 
     def __post_init__(self):
         if self.inputs not in ("average", "hold"):
-            raise ValueError(f"Reading.inputs must be 'average' or 'hold', got {self.inputs!r}")
+            raise InputError(f"Reading.inputs must be 'average' or 'hold', got {self.inputs!r}")
         if self.r_from not in ("smoother", "truth"):
-            raise ValueError(f"Reading.r_from must be 'smoother' or 'truth', got {self.r_from!r}")
+            raise InputError(f"Reading.r_from must be 'smoother' or 'truth', got {self.r_from!r}")
 
 
 PAPER = Reading()
@@ -91,7 +92,7 @@ def straight_speed(p: dict, n: float) -> float:
     real = roots[np.isreal(roots)].real
     real = real[real > 0]
     if real.size == 0:
-        raise ValueError("the Taylor model has no positive straight-run speed at this propeller rate")
+        raise InputError("the Taylor model has no positive straight-run speed at this propeller rate")
     return float(real.min())
 
 

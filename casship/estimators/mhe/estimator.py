@@ -18,7 +18,7 @@ from ...progress import track
 from ...discretize import DiscreteModel, discretize
 from ..augmented import augment, augmented_noise, augmented_prior
 from ..base import per_sample
-from ..contract import Estimator, NoStepFunction
+from ..contract import Estimator
 from ..ekf import EKF
 from ..gaps import bridge_gaps
 from ..online import OnlineRun
@@ -31,6 +31,7 @@ from .problem import Window, build_window, params_vector, sqrt_factor
 from .arrival import inv_sqrt
 from .runner import WindowEngine
 from .solvers import solve_window
+from ...errors import InputError, InputTypeError
 
 __all__ = ["MHE"]
 
@@ -63,9 +64,10 @@ class MHE(Estimator):
     original states, then the estimated parameters, then the disturbances ``d_<state>``. The ``p``
     given to :meth:`filter` is a parameter vector (or mapping) of the original model. Solver
     failures raise :class:`MHEFailed` (a ``RuntimeError``) naming the row and the solver's return
-    status. The MHE has no step Function (each sample solves an optimisation problem):
-    :attr:`step` raises :class:`~casship.estimators.NoStepFunction` saying what to use; the window
-    problem itself is :meth:`window`. Time gaps longer than the one-step prediction limit raise or
+    status. The MHE is not of the step family and has no ``step`` (each sample solves an
+    optimisation problem): the window problem itself is :meth:`window`, the real-time-iteration step
+    as C is ``casship.estimators.export_mhe_rti``, and the EKF step that supplies the arrival cost is
+    ``mhe.arrival_filter.step``. Time gaps longer than the one-step prediction limit raise or
     are bridged by prediction-only rows (options ``max_gap``, ``on_gap``), in batch and online alike.
 
     Examples
@@ -77,11 +79,10 @@ class MHE(Estimator):
 
     name = "MHE"
     Options = MHEOptions
-    has_step = False
 
     def __init__(self, dmodel: DiscreteModel, Q, R, *, measured=None, options=None):
         if not isinstance(dmodel, DiscreteModel):
-            raise TypeError(f"MHE needs a DiscreteModel (use casship.discretize), got {type(dmodel).__name__}")
+            raise InputTypeError(f"MHE needs a DiscreteModel (use casship.discretize), got {type(dmodel).__name__}")
         opts = MHEOptions.from_value(options, "MHE")
         base = dmodel.model
         self.base_model = base
@@ -104,7 +105,7 @@ class MHE(Estimator):
     def _check_options(self) -> None:
         o, m, b = self.options, self.model, self.base_model
         if self.dmodel.symbolic is ca.MX:
-            raise ValueError(f"MHE needs an explicit discretisation ('euler' or 'rk4'), got {self.dmodel.method!r}")
+            raise InputError(f"MHE needs an explicit discretisation ('euler' or 'rk4'), got {self.dmodel.method!r}")
         self.LQ, q_diag = sqrt_factor(self.Q)
         self.nv = self.LQ.shape[1]
         lo, hi = np.full(m.nx, -np.inf), np.full(m.nx, np.inf)
@@ -117,29 +118,20 @@ class MHE(Estimator):
         self.x_bounds = (lo, hi)
         vlo, vhi = np.full(self.nv, -np.inf), np.full(self.nv, np.inf)
         if o.noise_bounds and not q_diag:
-            raise ValueError("option 'noise_bounds' needs a diagonal Q")
+            raise InputError("option 'noise_bounds' needs a diagonal Q")
         cols = np.flatnonzero(np.diag(self.Q) > 0) if q_diag else np.arange(self.nv)
         for n, (a, c) in o.noise_bounds.items():
             i = m.index(n, "noise")
             a, c = bound_pair(n, a, c)
             if i not in cols:
                 if a > 0 or c < 0:
-                    raise ValueError(f"noise bound on {n!r} excludes 0, but Q gives it zero variance")
+                    raise InputError(f"noise bound on {n!r} excludes 0, but Q gives it zero variance")
                 continue
             j = int(np.flatnonzero(cols == i)[0])
             s = np.sqrt(self.Q[i, i])
             vlo[j], vhi[j] = a / s, c / s
         self.v_bounds = (vlo, vhi)
         self.R_diagonal = np.count_nonzero(self.R - np.diag(np.diag(self.R))) == 0
-
-    @property
-    def step(self):
-        """The MHE has no step Function: this raises :class:`~casship.estimators.NoStepFunction`."""
-        raise NoStepFunction(
-            "MHE has no step Function: each sample solves the window's optimisation problem (MHE.window). "
-            "Use MHE.online(prior).update(y, dt) sample by sample, casship.estimators.export_mhe_rti for the "
-            "real-time-iteration step as C, or mhe.arrival_filter.step for the EKF step that supplies the "
-            "arrival cost")
 
     def arrival_step(self, outputs) -> ca.Function:
         """The step of :attr:`arrival_filter` returning its memory and ``outputs`` (compiled with option
@@ -198,12 +190,12 @@ class MHE(Estimator):
             Parameters of the original model (the prior means of the estimated ones).
         """
         if not isinstance(prior, Gaussian):
-            raise TypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
+            raise InputTypeError(f"prior must be a casship.Gaussian, got {type(prior).__name__}")
         m, b = self.model, self.base_model
         if prior.mean.size == m.nx:
             return prior
         if prior.mean.size != b.nx:
-            raise ValueError(f"prior has {prior.mean.size} entries; expected {b.nx} (states of {b.name!r}) "
+            raise InputError(f"prior has {prior.mean.size} entries; expected {b.nx} (states of {b.name!r}) "
                              f"or {m.nx} (augmented states {list(m.state_names)})")
         pf = self._full_params(p)
         mean = np.concatenate([pf[[b.index(n, "param") for n in self._est_names]],
@@ -219,15 +211,9 @@ class MHE(Estimator):
         """
         super().check_prior(self.augmented_prior(prior))
 
-    def prepare(self, data: Dataset, p=None) -> dict:
-        """The per-sample arrays of a record (``p`` of the original model; estimated parameters dropped).
-
-        Parameters
-        ----------
-        data : Dataset
-        p : array or mapping, optional
-        """
-        return super().prepare(data, self._params(p))
+    def _prepare(self, data: Dataset, p=None) -> dict:
+        """The per-sample arrays of a record (``p`` of the original model; estimated parameters dropped)."""
+        return self.records.prepare(data, self._params(p))
 
     # -- the estimator contract ---------------------------------------------------------------------
     def filter(self, data: Dataset, prior: Gaussian, p=None, *, seed=None) -> FilterResult:
@@ -253,7 +239,7 @@ class MHE(Estimator):
         self.check_prior(prior)
         prior = self.augmented_prior(prior, p)
         data = bridge_gaps(self, data, prior, self._params(p), through=self.arrival_filter)
-        arrays = self.prepare(data, p)
+        arrays = self._prepare(data, p)
         n = len(data)
         engine = WindowEngine(self, prior, arrays["p"], outputs=DIAGNOSTICS)
         nx = self.model.nx
@@ -268,7 +254,7 @@ class MHE(Estimator):
                 out[key].append(info[key])
         out = {k: np.array(v) for k, v in out.items()}
         out["accepted"] = np.ones(n)
-        return self.result(data, arrays, out)
+        return self.records.result(data, arrays, out)
 
     def online(self, prior: Gaussian, p=None, *, u=None, seed=None) -> OnlineRun:
         """A stateful runner on a stream (``update(y, dt, u_prev=None, u=None) -> x``), started from
@@ -330,10 +316,10 @@ class MHE(Estimator):
         self.check_prior(prior)
         prior = self.augmented_prior(prior, p)
         data = bridge_gaps(self, data, prior, self._params(p), through=self.arrival_filter)
-        arrays = self.prepare(data, p)
+        arrays = self._prepare(data, p)
         n = len(data)
         if n < 2:
-            raise ValueError("smooth needs at least two samples")
+            raise InputError("smooth needs at least two samples")
         win = self.window(n - 1, "sqp" if self.options.solver == "rti" else None)
         if guess is None:
             guess = self.arrival_filter.filter(data, prior, arrays["p"])
@@ -354,10 +340,10 @@ class MHE(Estimator):
             W[1:] = Vv @ self.LQ.T
         fold = self._linearised_step().mapaccum("mhe_gn_fold", n, ["P"], ["P"], DUPLICATE_NAMES)
         res = fold(P=prior.cov, x_prev=np.vstack([X[:1], X[:-1]]).T, w_prev=W.T, x_map=X.T,
-                   **{k: arrays[k] for k in ("u_prev", "u", "y", "mask", "dt", "p", "R")})
+                   R=self.R, **{k: arrays[k] for k in ("u_prev", "u", "y", "mask", "dt", "p")})
         out = {k: per_sample(np.asarray(v), n) for k, v in res.items()}
         out["x"], out["accepted"] = X, np.ones(n)
-        forward = self.result(data, arrays, out, estimator="MHE-full")
+        forward = self.records.result(data, arrays, out, estimator="MHE-full")
         return forward.replace(P=rts_smooth(forward).P)
 
     def _linearised_step(self) -> ca.Function:

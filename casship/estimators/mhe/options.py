@@ -8,6 +8,7 @@ from typing import Mapping
 import numpy as np
 
 from ..options import EstimatorOptions, check_int
+from ...errors import InputError, InputTypeError
 
 __all__ = ["MHEOptions", "SOLVERS", "ARRIVALS"]
 
@@ -19,14 +20,14 @@ QP_SOLVERS = ("qrqp", "osqp")
 def _positive(value, what: str) -> float:
     v = float(value)
     if not np.isfinite(v) or v <= 0:
-        raise ValueError(f"{what} must be positive and finite, got {value!r}")
+        raise InputError(f"{what} must be positive and finite, got {value!r}")
     return v
 
 
 def _nonneg(value, what: str) -> float:
     v = float(value)
     if not np.isfinite(v) or v < 0:
-        raise ValueError(f"{what} must be >= 0 and finite, got {value!r}")
+        raise InputError(f"{what} must be >= 0 and finite, got {value!r}")
     return v
 
 
@@ -35,7 +36,7 @@ def bound_pair(name: str, lo, hi) -> tuple[float, float]:
     lo = -np.inf if lo is None else float(lo)
     hi = np.inf if hi is None else float(hi)
     if np.isnan(lo) or np.isnan(hi) or lo > hi:
-        raise ValueError(f"bounds of {name!r} must satisfy lower <= upper, got ({lo}, {hi})")
+        raise InputError(f"bounds of {name!r} must satisfy lower <= upper, got ({lo}, {hi})")
     return lo, hi
 
 
@@ -43,7 +44,7 @@ def _frozen_mapping(value, name: str, what: str):
     if value is None:
         return MappingProxyType({})
     if not isinstance(value, Mapping):
-        raise TypeError(f"option {name!r} maps {what}, got {type(value).__name__}")
+        raise InputTypeError(f"option {name!r} maps {what}, got {type(value).__name__}")
     return MappingProxyType(dict(value))
 
 
@@ -110,25 +111,25 @@ class MHEOptions(EstimatorOptions):
     def __post_init__(self):
         super().__post_init__()
         if self.gate is not None:
-            raise ValueError("MHE has no innovation gate; use option 'huber' against outliers")
+            raise InputError("MHE has no innovation gate; use option 'huber' against outliers")
         object.__setattr__(self, "horizon", check_int(self.horizon, "horizon", 1))
         for name, allowed in (("solver", SOLVERS), ("arrival", ARRIVALS)):
             if getattr(self, name) not in allowed:
-                raise ValueError(f"option {name!r} must be one of {allowed}, got {getattr(self, name)!r}")
+                raise InputError(f"option {name!r} must be one of {allowed}, got {getattr(self, name)!r}")
         if self.qpsol is None:
             object.__setattr__(self, "qpsol", "qrqp" if self.solver in ("sqp", "rti") else None)
         elif self.solver not in ("sqp", "rti"):
-            raise ValueError(f"option 'qpsol' is the QP solver of solvers 'sqp' and 'rti'; solver {self.solver!r} "
+            raise InputError(f"option 'qpsol' is the QP solver of solvers 'sqp' and 'rti'; solver {self.solver!r} "
                              "has none")
         elif self.qpsol not in QP_SOLVERS:
-            raise ValueError(f"option 'qpsol' must be one of {QP_SOLVERS}, got {self.qpsol!r}")
+            raise InputError(f"option 'qpsol' must be one of {QP_SOLVERS}, got {self.qpsol!r}")
         if self.huber is not None:
             object.__setattr__(self, "huber", _positive(self.huber, "option 'huber' (a threshold)"))
         if self.max_iter is not None:
             object.__setattr__(self, "max_iter", check_int(self.max_iter, "max_iter", 0))
         object.__setattr__(self, "tol", _positive(self.tol, "option 'tol'"))
         if self.expand is not None and not isinstance(self.expand, bool):
-            raise ValueError(f"option 'expand' is True, False or None, got {self.expand!r}")
+            raise InputError(f"option 'expand' is True, False or None, got {self.expand!r}")
         object.__setattr__(self, "bounds", _frozen_mapping(self.bounds, "bounds", "state names to (lower, upper)"))
         for n, pair in self.bounds.items():
             bound_pair(n, *pair)

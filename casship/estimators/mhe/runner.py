@@ -7,7 +7,6 @@ samples, as ``filter`` bridges it by prediction-only rows (:mod:`casship.estimat
 """
 from __future__ import annotations
 
-import math
 import time
 import warnings
 
@@ -16,6 +15,7 @@ import numpy as np
 from ...runtime import BufferedCall, is_compiled
 from ...gaussian import Gaussian
 from ..gaps import gap_pieces, gap_threshold
+from ..online import check_sample, first_input
 from ..options import DIAGNOSTICS
 from .arrival import arrival_prior
 from .solvers import gauss_newton_start, solve_window
@@ -36,7 +36,8 @@ class WindowEngine:
 
     ``advance`` takes one sample (masked measurement) and returns the new estimate, the EKF
     covariance run alongside and that step's diagnostics (``outputs``, at least those the recursion
-    needs); ``update`` is the online protocol.
+    needs); ``update`` is the online protocol (an :class:`~casship.estimators.online.OnlineEngine`,
+    its sample checked by :func:`~casship.estimators.online.check_sample`: masked = NaN = not measured).
     """
 
     def __init__(self, mhe, prior: Gaussian, p_aug: np.ndarray, u=None, outputs=DIAGNOSTICS):
@@ -72,9 +73,7 @@ class WindowEngine:
         self._ekf_out = {k: (ekf.offsets[i], ekf.offsets[i + 1], ekf.out(k).shape)
                          for i, k in enumerate(ekf.names_out)}
         self._stage = nx + mhe.nv
-        u0 = np.zeros(nu) if u is None else np.asarray(u, dtype=float).reshape(-1)
-        if u0.size != nu or not np.all(np.isfinite(u0)):
-            raise ValueError(f"u must be {nu} finite values for the inputs {list(m.input_names)}, got {u0}")
+        u0 = first_input(u, m.input_names)
         self._u_prev, self._u = u0.copy(), u0.copy()
         self._info: dict = {}
         self._gap_limit = gap_threshold(mhe)      # longer intervals are checked at the estimate there
@@ -123,29 +122,13 @@ class WindowEngine:
         self.samples += 1
         return self._x, self._P, info
 
-    # -- the online protocol ------------------------------------------------------------------------
-    def _vector(self, value, size: int, what: str, names) -> np.ndarray:
-        try:
-            v = np.asarray(value, dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise ValueError(f"{what} must be {size} numbers for {list(names)}, got {value!r}") from None
-        if v.size != size:
-            raise ValueError(f"{what} must hold {size} values for {list(names)}, got {v.size}")
-        return v
-
+    # -- the online protocol (casship.estimators.online.OnlineEngine) --------------------------------------
     def update(self, y, dt, u_prev, u):
         # everything is checked before anything changes: a refused update leaves the run as it was
         mhe, m = self.mhe, self.mhe.model
-        if not (dt >= 0 and math.isfinite(dt)):
-            raise ValueError(f"dt must be >= 0 and finite, got {dt}")
-        u_prev = self._u if u_prev is None else self._vector(u_prev, m.nu, "u_prev", m.input_names)
-        u = u_prev if u is None else self._vector(u, m.nu, "u", m.input_names)
-        if not np.isfinite(u_prev.sum() + u.sum()):
-            raise ValueError(f"inputs {list(m.input_names)} must be finite, got u_prev = {u_prev}, u = {u}")
-        y = self._vector(y, mhe.ny, "y", mhe.measured)
-        infinite = [n for n, v in zip(mhe.measured, y) if np.isinf(v)]
-        if infinite:
-            raise ValueError(f"measurement(s) {infinite} infinite (NaN means not measured)")
+        y, dt, u_prev, u = check_sample(y, dt, u_prev, u, mhe.measured, m.input_names)
+        u_prev = self._u if u_prev is None else u_prev
+        u = u_prev if u is None else u
         where = f"before update {self.samples + 1}"
         pieces = 1
         if dt > self._gap_limit:
