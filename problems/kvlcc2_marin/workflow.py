@@ -169,7 +169,7 @@ class FoldFit:
 def _captive_problem(folder: str):
     from casship.io import read_captive
 
-    from ..kvlcc2_captive import captive_problem
+    from ..hmri import captive_problem
 
     return captive_problem(read_captive(folder))
 
