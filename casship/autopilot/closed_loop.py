@@ -89,7 +89,7 @@ class ClosedLoop:
                 raise InputError("estimator 'raw' (compass and gyro as read) is for heading mode")
         elif not isinstance(estimator, LoopEstimator):
             raise InputTypeError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {type(estimator).__name__}")
-        elif (estimator.kind == "course") != (mode == "course") and guidance is None:
+        elif estimator.kind != mode and guidance is None:   # both kinds and modes: "course" or "heading"
             raise InputError(f"a {estimator.kind} estimator cannot feed a {mode} autopilot")
         self.plant, self.autopilot, self.actuator = plant, autopilot, actuator
         self.dt, self.mode, self.rate = float(dt), mode, rate
@@ -163,12 +163,8 @@ class ClosedLoop:
         fun = est.step
         call = {n: ca.reshape(parts[f"est_{n}"], fun.size_in(n)) for n in est.memory}
         model = est.est.model
-        if est.kind == "course":
-            y, msk = meas["gnss"], ca.vertcat(mask[0], mask[0])
-            u = ca.SX(0, 1)
-        else:
-            y, msk = ca.vertcat(meas["compass"], meas["gyro"]), ca.vertcat(mask[1], 1)
-            u = steer_prev
+        rd = est.reading
+        y, msk, u = rd.symbolic_input(meas, mask, steer_prev)
         call.update(u_prev=u, u=u, y=y * msk, mask=msk, dt=dt_est, p=ca.DM(model.params()),
                     Q=ca.DM(est.est.Q), R=ca.DM(est.est.R), gate=ca.inf)
         out = fun.call(call)
@@ -176,15 +172,9 @@ class ClosedLoop:
         P = ca.reshape(out["P"], model.nx, model.nx)
         memory = {n: out[n] for n in est.memory}
         ix = est.state_index
-        if est.kind == "course":
-            angle, rate_est = xh[ix("chi")], xh[ix("omega_chi")]
-            north, east, U = xh[ix("x_n")], xh[ix("y_n")], xh[ix("U")]
-            std = ca.sqrt(P[ix("chi"), ix("chi")])
-        else:
-            angle, rate_est = xh[ix("psi")], xh[ix("r")]
-            north, east, U = fix[0], fix[1], U_true
-            std = ca.sqrt(P[ix("psi"), ix("psi")])
-        bias = xh[ix("b")] if est.kind == "heading" and "b" in model.state_names else ca.SX(0)
+        angle, rate_est, north, east, U = rd.read(xh, ix, fix, U_true)
+        std = ca.sqrt(P[ix(rd.angle_state), ix(rd.angle_state)])
+        bias = rd.bias(xh, ix, model.state_names, ca.SX(0))
         rate = rate_est if self.rate == "estimator" else meas["gyro"]
         return {"angle": angle, "rate": rate, "north": north, "east": east, "U": U, "angle_std": std, "bias": bias,
                 "memory": memory, "compass_hold": parts["compass_hold"], "gnss_hold": fix}
@@ -446,20 +436,13 @@ class ClosedLoop:
             if masks[0, k]:
                 fix = np.array([gn, ge])
             if online is not None:
-                if self.estimator.kind == "course":
-                    y = np.array([gn, ge]) if masks[0, k] else np.full(2, np.nan)
-                    xh = online.update(y, dt_est[k])
-                else:
-                    y = np.array([compass if masks[1, k] else np.nan, gyro])
-                    xh = online.update(y, dt_est[k], u_prev=np.array([steer_prev]))
+                rd = self.estimator.reading
+                y, extra = rd.online_input((gn, ge), compass, gyro, masks[:, k], steer_prev)
+                xh = online.update(y, dt_est[k], **extra)
                 ixh = self.estimator.state_index
-                P = online.P
-                if self.estimator.kind == "course":
-                    angle, rate = xh[ixh("chi")], xh[ixh("omega_chi")]
-                    north, east, U_hat, std = xh[ixh("x_n")], xh[ixh("y_n")], xh[ixh("U")], np.sqrt(P[ixh("chi"), ixh("chi")])
-                else:
-                    angle, rate, std = xh[ixh("psi")], xh[ixh("r")], np.sqrt(P[ixh("psi"), ixh("psi")])
-                    north, east, bias = fix[0], fix[1], xh[ixh("b")]
+                angle, rate, north, east, U_hat = rd.read(xh, ixh, fix, U)
+                std = np.sqrt(online.P[ixh(rd.angle_state), ixh(rd.angle_state)])
+                bias = rd.bias(xh, ixh, self.estimator.est.model.state_names, 0.0)
                 if self.rate == "gyro":
                     rate = gyro
             elif self.estimator == "raw":

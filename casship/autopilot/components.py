@@ -78,10 +78,17 @@ class LoopEstimator:
                                  f"got {type(self.est).__name__}")
         if self.kind not in ("course", "heading"):
             raise InputError(f"estimator kind must be 'course' or 'heading', got {self.kind!r}")
-        want = ("x_n", "y_n") if self.kind == "course" else ("psi_m", "r_m")
+        want = self.reading.measured
         if tuple(self.est.measured) != want:
             raise InputError(f"a {self.kind} estimator must measure {list(want)}, this one measures "
                              f"{list(self.est.measured)}")
+
+    @property
+    def reading(self):
+        """How the loop reads this estimator (:mod:`casship.autopilot.loop_variants`)."""
+        from .loop_variants import reading
+
+        return reading(self.kind)
 
     @property
     def step(self) -> ca.Function:
@@ -111,11 +118,7 @@ class LoopEstimator:
         Gaussian
         """
         mean = np.array(self.prior.mean, dtype=float)
-        ix = self.state_index
-        if self.kind == "course":
-            mean[ix("x_n")], mean[ix("y_n")], mean[ix("chi")] = north, east, chi
-        else:
-            mean[ix("psi")], mean[ix("r")] = psi, r
+        self.reading.place(mean, self.state_index, north, east, psi, r, chi)
         return Gaussian(mean, self.prior.cov)
 
     def state_index(self, name: str) -> int:
