@@ -13,6 +13,7 @@ from ..data import Dataset
 
 from ..gaussian import Gaussian
 from ..errors import InputError, InputTypeError
+from .loop_variants import READINGS
 
 __all__ = ["Sensors", "LoopEstimator", "ClosedLoopResult", "DRAWS", "MASKS", "Layout"]
 
@@ -76,7 +77,7 @@ class LoopEstimator:
         if not isinstance(self.est, StepEstimator):   # the loop folds the estimator's step Function
             raise InputTypeError(f"the loop runs an estimator's step Function: give a KF, EKF, UKF, EnKF or KalmanBucy, "
                                  f"got {type(self.est).__name__}")
-        if self.kind not in ("course", "heading"):
+        if self.kind not in READINGS:
             raise InputError(f"estimator kind must be 'course' or 'heading', got {self.kind!r}")
         want = self.reading.measured
         if tuple(self.est.measured) != want:
@@ -86,9 +87,7 @@ class LoopEstimator:
     @property
     def reading(self):
         """How the loop reads this estimator (:mod:`casship.autopilot.loop_variants`)."""
-        from .loop_variants import reading
-
-        return reading(self.kind)
+        return READINGS[self.kind]
 
     @property
     def step(self) -> ca.Function:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-__all__ = ["CourseReading", "HeadingReading", "READINGS", "reading"]
+__all__ = ["CourseReading", "HeadingReading", "READINGS"]
 
 
 class CourseReading:
@@ -72,8 +72,3 @@ class HeadingReading:
 
 #: The reading of each estimator kind.
 READINGS = {"course": CourseReading(), "heading": HeadingReading()}
-
-
-def reading(kind: str):
-    """The reading of estimator ``kind`` (``"course"`` or ``"heading"``)."""
-    return READINGS[kind]
