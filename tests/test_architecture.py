@@ -43,8 +43,6 @@ PACKAGE_INTERNAL = {
         "the gap check runs the estimator's (or the MHE's arrival EKF's) run over the record it has checked",
     ("casship.estimators.online", "_draw_shapes"):
         "StepRun fills the draw slots of a stochastic estimator's step",
-    ("casship.identify.crossval", "_kwargs"):
-        "cross-validation rebuilds a problem of the same class with the same settings on other records",
     ("casship.identify.mle", "_value_raw"): "the likelihood engine's unscaled value for the MLE problem",
     ("casship.maneuvers.runners", "_input_vector"): "the manoeuvres' input vector of maneuvers.inputs",
     ("casship.models.lowspeed", "_param"): "the ship models' parameter declaration of models.mmg",

@@ -29,7 +29,7 @@ def _labels(problem, by) -> list:
     if by == "record":
         return [str(i) for i in range(n)]
     if isinstance(by, str):
-        groups = dict(problem._kwargs.get("groups") or {})
+        groups = dict(problem.spec.groups or {})
         if by in groups:
             return [str(v) for v in groups[by]]
         missing = [problem.labels[i] for i, d in enumerate(problem.records) if by not in d.meta]
@@ -49,8 +49,8 @@ def _held_out_values(fit, problem, r: int) -> tuple[dict, dict]:
     model = problem.model
     params = dict(fit.params)
     biases = {}
-    share = dict(problem._kwargs.get("share") or {})
-    labels = share_labels(problem.records, share, problem._kwargs.get("groups"))
+    share = dict(problem.spec.share or {})
+    labels = share_labels(problem.records, share, problem.spec.groups)
     declared = dict.fromkeys(e.declared for e in problem.space.entries if e.kind in ("param", "bias_in", "bias_out"))
     for name in declared:
         value = fit.estimates.get(name)

@@ -126,6 +126,8 @@ class MLEProblem(IdentificationProblem):
 
     method = "mle"
 
+    _SUBJECT = "estimator"
+
     def __init__(self, estimator, datasets, free: Sequence[str] = (), *, params=None, noise: Mapping | None = None,
                  x0=None, estimate_x0: Sequence[str] = (), prior_var: float = 1.0, share: Mapping | None = None,
                  groups: Mapping | None = None, prior=None, bounds: Mapping | None = None,

@@ -16,6 +16,7 @@ from ._solver import trust_region
 from ._space import ParamSpace
 from .identifiability import Identifiability
 from .prior import Prior
+from .spec import ProblemSpec
 from .records import as_records, initial_states, record_label, share_labels
 from .result import FitResult, IdentificationError, IdentificationWarning
 from .uncertainty import covariance_from_information, effective_samples, sandwich_covariance, whiteness
@@ -73,13 +74,13 @@ class IdentificationProblem:
     """Base class of the identification problems (not used directly)."""
 
     method = "identification"
-    #: constructor arguments that hold one item per record (subset by :meth:`subset`)
-    _PER_RECORD = ("x0", "record_weights")
+    #: the constructor's name of its first argument (the model or the estimator)
+    _SUBJECT = "model"
 
     # -- set-up (called by the subclasses) ---------------------------------------------------------
     def _setup(self, model, records, free, *, kwargs: dict, share, groups, prior, params, x0, estimate_x0,
                bounds, scale, measured, noise=(), Q=None, R=None) -> None:
-        self._kwargs = dict(kwargs)
+        self.spec = ProblemSpec.from_arguments(type(self), kwargs, self._SUBJECT)
         self.records = as_records(records)
         self.model = model
         self.measured = tuple(measured)
@@ -491,10 +492,10 @@ class IdentificationProblem:
         flagged = [q for q in self.free if q.split("@")[0] in names]
         confounded = {}
         if flagged and rudders[0] in self.records[0]:
-            copies = share_labels(self.records, self._kwargs.get("share"), self._kwargs.get("groups"))
+            copies = share_labels(self.records, self.spec.share, self.spec.groups)
             within = None
             if pairs_within is not None:
-                within = share_labels(self.records, {"_": pairs_within}, self._kwargs.get("groups")).get("_")
+                within = share_labels(self.records, {"_": pairs_within}, self.spec.groups).get("_")
             confounded = confounded_asymmetry(self.records, flagged, copies, rudder=rudders[0], within=within)
         return Identifiability(self.free, dict(zip(self.free, theta.tolist())), mags, H, self._prec.copy(),
                                kinds=[e.kind for e in self.space.entries],
@@ -515,8 +516,7 @@ class IdentificationProblem:
         IdentificationProblem
             A new problem of the same class.
         """
-        kwargs = {**self._kwargs, **changes}
-        return type(self)(**kwargs)
+        return self.spec.replace(**changes).build()
 
     def subset(self, indices: Sequence[int]) -> "IdentificationProblem":
         """The same problem on some of its records (per-record arguments are subset alike).
@@ -533,14 +533,4 @@ class IdentificationProblem:
         idx = [int(i) for i in indices]
         if not idx or any(not 0 <= i < len(self.records) for i in idx):
             raise InputError(f"record indices must be in 0..{len(self.records) - 1}, got {list(indices)}")
-        kw = dict(self._kwargs)
-        kw["datasets"] = [self.records[i] for i in idx]
-        for key in self._PER_RECORD:
-            v = kw.get(key)
-            if isinstance(v, (list, tuple)):
-                kw[key] = [v[i] for i in idx]
-        if kw.get("share"):
-            kw["share"] = {n: (h if isinstance(h, str) else [list(h)[i] for i in idx]) for n, h in kw["share"].items()}
-        if kw.get("groups"):
-            kw["groups"] = {g: [list(v)[i] for i in idx] for g, v in kw["groups"].items()}
-        return type(self)(**kw)
+        return self.spec.with_records([self.records[i] for i in idx], idx).build()
