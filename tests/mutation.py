@@ -64,6 +64,7 @@ ARR, RUN = "casship/estimators/mhe/arrival.py", "casship/estimators/mhe/runner.p
 SCH, PLANTS, MPC = "casship/autopilot/schedule.py", "casship/autopilot/plants.py", "casship/autopilot/mpc.py"
 T_RMET, T_RID = "tests/test_reference_metrics.py", "tests/test_reference_identify.py"
 T_RMHE, T_RAP = "tests/test_reference_mhe_arrival.py", "tests/test_reference_autopilot.py"
+T_GUID = "tests/test_autopilot_guidance.py"
 
 MUTANTS = [
     # -- the statistics of the filters and the fits -------------------------------------------------------------
@@ -169,12 +170,14 @@ MUTANTS = [
     # -- predictive band and integral LOS ---------------------------------------------------------------------
     M("band: one-sided quantile (z 1.645 for 95 %)", PRED, "stats.norm.ppf(0.5 + 0.5 * float(level))",
       "stats.norm.ppf(float(level))", (T_RMET,)),
-    M("ILOS: integral rate without Delta (legs)", GUID,
-      "chi = wrap_sym(a - ca.atan((y_e + kappa * y_int) / Delta))\n        y_int_next = y_int + dt * Delta * y_e",
-      "chi = wrap_sym(a - ca.atan((y_e + kappa * y_int) / Delta))\n        y_int_next = y_int + dt * y_e",
-      (T_RMET,)),
-    M("ILOS: integral rate halved (turns)", GUID, "pick(along)\n        y_int_next = y_int + dt * Delta * y_e",
-      "pick(along)\n        y_int_next = y_int + 0.5 * dt * Delta * y_e", (T_RMET,)),
+    M("ILOS: integral rate without Delta", GUID,
+      "step = dt * Delta * y_e / (Delta**2 + (y_e + kappa * y_int) ** 2)",
+      "step = dt * y_e / (Delta**2 + (y_e + kappa * y_int) ** 2)", (T_RMET,)),
+    M("ILOS: integral rate halved", GUID,
+      "step = dt * Delta * y_e / (Delta**2 + (y_e + kappa * y_int) ** 2)",
+      "step = 0.5 * dt * Delta * y_e / (Delta**2 + (y_e + kappa * y_int) ** 2)", (T_RMET,)),
+    M("ILOS: integrates outside its linear region", GUID,
+      "ca.fabs(y_e) <= self.integrate_within * Delta", "ca.fabs(y_e) <= 1e9 * Delta", (T_GUID,)),
     # -- robust (HAC) covariance ------------------------------------------------------------------------------
     M("HAC: Bartlett weight 1 - l/L", UNC, "w = 1.0 - lag / (L + 1.0)", "w = 1.0 - lag / L", (T_RID,)),
     M("HAC: one side of the lagged covariance", UNC, "G += w * (C + C.T)", "G += w * C", (T_RID,)),
