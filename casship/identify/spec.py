@@ -66,7 +66,17 @@ class ProblemSpec:
 
     @classmethod
     def from_arguments(cls, problem: type, arguments: Mapping, subject_name: str) -> "ProblemSpec":
-        """The spec of a constructor call ``problem(**arguments)`` (records given as ``datasets``)."""
+        """The spec of a constructor call ``problem(**arguments)``.
+
+        Parameters
+        ----------
+        problem : type
+            The problem class.
+        arguments : mapping
+            Its constructor's arguments by name (the records as ``datasets``).
+        subject_name : str
+            The name of its first argument (``"model"`` or ``"estimator"``).
+        """
         args = dict(arguments)
         subject, records = args.pop(subject_name), args.pop("datasets")
         common = {k: args.pop(k) for k in COMMON if k in args}
