@@ -30,14 +30,14 @@ def test_output_error_spec_holds_the_arguments_and_subsets_per_record_settings()
                               share={"bias[delta]": "facility"}, record_weights=[1.0, 2.0, 3.0])
     spec = prob.spec
     assert spec.problem is OutputErrorProblem and spec.subject is model and list(spec.free) == ["K", "T", "bias[delta]"]
-    assert dict(spec.options)["record_weights"] == [1.0, 2.0, 3.0] and spec.options["sigma"] == {"psi": 0.005}
+    assert spec.options.record_weights == [1.0, 2.0, 3.0] and spec.options.sigma == {"psi": 0.005}
     with pytest.raises(dataclasses.FrozenInstanceError):
         spec.free = ["K"]
-    with pytest.raises(TypeError):
-        spec.options["segment"] = 3               # the options are read-only too
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        spec.options.segment = 3                  # the options are read-only too
     part = spec.with_records([runs[2], runs[0]], [2, 0])
-    assert part.options["record_weights"] == [3.0, 1.0] and [v[0] for v in part.x0] == [0.02, 0.0]
-    assert spec.options["record_weights"] == [1.0, 2.0, 3.0]           # the original is untouched
+    assert part.options.record_weights == [3.0, 1.0] and [v[0] for v in part.x0] == [0.02, 0.0]
+    assert spec.options.record_weights == [1.0, 2.0, 3.0]           # the original is untouched
     sub = prob.subset([2, 0])
     assert list(sub.record_weights) == [3.0, 1.0] and sub.labels == ["run 2", "run 0"]
     assert sub.spec.share == {"bias[delta]": "facility"}
@@ -55,7 +55,7 @@ def test_mle_spec_names_its_estimator_and_rebuilds():
                       measured=["psi"])
     spec = prob.spec
     assert isinstance(spec, ProblemSpec) and spec.subject_name == "estimator"
-    assert spec.subject is prob.estimator and spec.options["Q"] is None   # the EKF it built carries Q, R
+    assert spec.subject is prob.estimator and spec.options.Q is None   # the EKF it built carries Q, R
     assert "estimator" in spec.arguments() and "model" not in spec.arguments()
     assert spec.build().cost() == pytest.approx(prob.cost(), rel=1e-12)
     assert prob.subset([1]).labels == ["run 1"]

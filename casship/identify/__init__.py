@@ -34,7 +34,7 @@ from .result import FitResult, IdentificationError, IdentificationWarning
 from .cost_term import CostTerm, JointProblem
 from .captive import CaptiveProblem, linear_derivatives
 from .workflow import ShipFit, identify_ship
-from .spec import ProblemSpec
+from .spec import LikelihoodOptions, OutputErrorOptions, ProblemSpec
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
            "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std",
@@ -42,4 +42,4 @@ __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResu
 __all__ += ["identify_ship", "ShipFit"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]
 __all__ += ["CaptiveProblem", "CostTerm", "JointProblem", "linear_derivatives"]
-__all__ += ["ProblemSpec"]
+__all__ += ["ProblemSpec", "OutputErrorOptions", "LikelihoodOptions"]

@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from ..data import Dataset
+from .spec import LikelihoodOptions
 from ..gaussian import Gaussian
 from ..discretize import DiscreteModel
 from ..estimators.base import StepEstimator
@@ -127,6 +128,7 @@ class MLEProblem(IdentificationProblem):
     method = "mle"
 
     _SUBJECT = "estimator"
+    OPTIONS = LikelihoodOptions
 
     def __init__(self, estimator, datasets, free: Sequence[str] = (), *, params=None, noise: Mapping | None = None,
                  x0=None, estimate_x0: Sequence[str] = (), prior_var: float = 1.0, share: Mapping | None = None,

@@ -14,6 +14,7 @@ import casadi as ca
 import numpy as np
 
 from ..angles import unwrap, wrap_sym
+from .spec import OutputErrorOptions
 from ..discretize import DiscreteModel, discretize
 from ..model import Model
 from ._engine import OutputErrorEngine
@@ -103,6 +104,8 @@ class OutputErrorProblem(IdentificationProblem):
     """
 
     method = "output-error"
+
+    OPTIONS = OutputErrorOptions
 
     def __init__(self, model, datasets, free: Sequence[str] = (), *, measured: Sequence[str] | None = None,
                  sigma: Mapping[str, float] | str | None = "estimate", params=None, x0=None,

@@ -76,6 +76,8 @@ class IdentificationProblem:
     method = "identification"
     #: the constructor's name of its first argument (the model or the estimator)
     _SUBJECT = "model"
+    #: the type of the method's own options in :attr:`spec` (set by each method)
+    OPTIONS: type
 
     # -- set-up (called by the subclasses) ---------------------------------------------------------
     def _setup(self, model, records, free, *, kwargs: dict, share, groups, prior, params, x0, estimate_x0,

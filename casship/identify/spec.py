@@ -11,17 +11,57 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from types import MappingProxyType
 from typing import Any, Mapping, Sequence
 
 from ..errors import InputError
 
-__all__ = ["ProblemSpec"]
+__all__ = ["ProblemSpec", "OutputErrorOptions", "LikelihoodOptions"]
 
 #: Settings every problem takes (keyword arguments of both constructors).
 COMMON = ("free", "params", "x0", "estimate_x0", "share", "groups", "prior", "bounds", "scale", "jit")
 #: Settings that hold one item per record (subset with the records).
 PER_RECORD = ("x0", "record_weights")
+
+
+@dataclass(frozen=True)
+class OutputErrorOptions:
+    """The output-error method's own options (see :class:`~casship.identify.OutputErrorProblem`).
+
+    Parameters
+    ----------
+    measured, sigma, record_weights, shooting, segment, method
+        As the constructor takes them.
+    """
+
+    measured: Sequence[str] | None = None
+    sigma: Any = "estimate"
+    record_weights: Sequence[float] | None = None
+    shooting: str = "single"
+    segment: int = 50
+    method: str = "rk4"
+
+
+@dataclass(frozen=True)
+class LikelihoodOptions:
+    """The likelihood method's own options (see :class:`~casship.identify.MLEProblem`).
+
+    Parameters
+    ----------
+    noise, prior_var, Q, R, measured, seed
+        As the constructor takes them.
+    """
+
+    noise: Mapping | None = None
+    prior_var: float = 1.0
+    Q: Any = None
+    R: Any = None
+    measured: Sequence[str] | None = None
+    seed: Any = 0
+
+
+def _fields(value) -> dict:
+    """A dataclass's fields by name, shallow (the values themselves, not copies)."""
+    return {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
 
 
 @dataclass(frozen=True)
@@ -38,9 +78,8 @@ class ProblemSpec:
         The records.
     free, params, x0, estimate_x0, share, groups, prior, bounds, scale, jit
         The settings both problems take (see their constructors).
-    options : mapping
-        The method's own options (output error: ``measured, sigma, record_weights, shooting,
-        segment, method``; likelihood: ``noise, prior_var, Q, R, measured, seed``).
+    options : OutputErrorOptions or LikelihoodOptions
+        The method's own options (the problem class's ``OPTIONS`` type).
     subject_name : str
         The constructor's name of :attr:`subject` (``"model"`` or ``"estimator"``).
     """
@@ -58,11 +97,8 @@ class ProblemSpec:
     bounds: Mapping | None = None
     scale: Mapping | None = None
     jit: bool | None = None
-    options: Mapping = field(default_factory=dict)
+    options: Any = field(default_factory=OutputErrorOptions)
     subject_name: str = "model"
-
-    def __post_init__(self):
-        object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
 
     @classmethod
     def from_arguments(cls, problem: type, arguments: Mapping, subject_name: str) -> "ProblemSpec":
@@ -80,12 +116,12 @@ class ProblemSpec:
         args = dict(arguments)
         subject, records = args.pop(subject_name), args.pop("datasets")
         common = {k: args.pop(k) for k in COMMON if k in args}
-        return cls(problem, subject, records, **common, options=args, subject_name=subject_name)
+        return cls(problem, subject, records, **common, options=problem.OPTIONS(**args), subject_name=subject_name)
 
     def arguments(self) -> dict:
         """The constructor's keyword arguments that rebuild the problem."""
         return {self.subject_name: self.subject, "datasets": self.records,
-                **{k: getattr(self, k) for k in COMMON}, **self.options}
+                **{k: getattr(self, k) for k in COMMON}, **_fields(self.options)}
 
     def build(self):
         """The problem this spec describes (built anew: it folds and checks its records)."""
@@ -120,11 +156,9 @@ class ProblemSpec:
         kw = {"records": list(records)}
         if isinstance(self.x0, (list, tuple)):
             kw["x0"] = [self.x0[i] for i in idx]
-        options = dict(self.options)
-        for key in PER_RECORD:
-            if isinstance(options.get(key), (list, tuple)):
-                options[key] = [options[key][i] for i in idx]
-        kw["options"] = options
+        per = {k: [v[i] for i in idx] for k, v in _fields(self.options).items()
+               if k in PER_RECORD and isinstance(v, (list, tuple))}
+        kw["options"] = dataclasses.replace(self.options, **per)
         if self.share:
             kw["share"] = {n: (h if isinstance(h, str) else [list(h)[i] for i in idx]) for n, h in self.share.items()}
         if self.groups:
