@@ -206,3 +206,26 @@ def test_the_covariance_kind_is_typed_and_travels_with_the_file(fit_files, tmp_p
         ParameterUncertainty.from_dict(dict(carried, kind="sandwich"))
     with pytest.raises(ValueError, match="covariance kind"):
         ParameterBelief(("K",), Gaussian([0.1], [[1.0]]), kind="guess")
+
+
+def test_one_belief_converts_to_a_prior_and_an_uncertainty_and_back(fit_files):
+    from casship.identify import Prior
+    (path, made), _ = fit_files
+    belief = ParameterBelief.from_fit(path)
+    unc = belief.to_uncertainty()
+    assert (unc.names, unc.kind, unc.source) == (list(belief.names), "calibrated", belief.source)
+    np.testing.assert_array_equal(unc.covariance, belief.cov)
+    again = ParameterBelief.from_uncertainty(unc, source=belief.source)
+    assert (again.names, again.mean, again.source, again.kind) == (belief.names, belief.mean, belief.source, belief.kind)
+    np.testing.assert_array_equal(again.cov, belief.cov)
+    with pytest.raises(ValueError, match="correlates"):
+        belief.to_prior()                                    # the jackknife covariance is not diagonal
+    prior = belief.to_prior(marginal=True, weight=0.5)
+    assert prior.weight == 0.5
+    assert prior.std == pytest.approx(dict(zip(JACK, np.sqrt(np.diag(made["jackknife"])))), rel=1e-14)
+    assert prior.mean == pytest.approx({n: made["params"][n] for n in JACK}, rel=1e-14)
+    independent = ParameterBelief.from_std({"K": 0.02, "T": 5.0}, {"K": 0.1, "T": 20.0})
+    assert Prior.from_belief(independent) == Prior({"K": 0.02, "T": 5.0}, {"K": 0.1, "T": 20.0})
+    back = ParameterBelief.from_prior(Prior({"K": 0.02, "T": 5.0}, {"K": 0.1}), {"T": 20.0, "other": 1.0})
+    assert (back.names, back.mean, back.std, back.kind) == (("K", "T"), {"K": 0.1, "T": 20.0}, {"K": 0.02, "T": 5.0},
+                                                             "prior")

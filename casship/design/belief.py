@@ -139,6 +139,65 @@ class ParameterBelief:
         return cls(tuple(names), Gaussian([float(mean[n]) for n in names], np.diag(s**2)), source, "prior")
 
     @classmethod
+    def from_prior(cls, prior, params: Mapping[str, float] | None = None, *,
+                   source: str = "prior") -> "ParameterBelief":
+        """The belief an identification :class:`~casship.identify.Prior` states (independent parameters).
+
+        Parameters
+        ----------
+        prior : casship.identify.Prior
+            Its ``std`` names the parameters; its ``mean`` gives their means.
+        params : mapping, optional
+            Means of the parameters the prior gives none for (a Prior defaults to the model's
+            nominal values: give ``model.param_dict(p)``).
+        source : str
+            Description for reports.
+
+        Returns
+        -------
+        ParameterBelief
+            With :attr:`kind` ``"prior"``.
+
+        Examples
+        --------
+        >>> from casship.identify import Prior
+        >>> ParameterBelief.from_prior(Prior({"K": 0.02}, {"K": 0.1})).std
+        {'K': 0.02}
+        """
+        mean = {**dict(params or {}), **dict(prior.mean)}
+        return cls.from_std(prior.std, mean, source=source)
+
+    def to_prior(self, *, weight: float = 1.0, marginal: bool = False):
+        """This belief as an identification :class:`~casship.identify.Prior` (see ``Prior.from_belief``).
+
+        Parameters
+        ----------
+        weight : float
+            Multiplies the prior's cost.
+        marginal : bool
+            Accept correlated parameters, keeping their marginal standard deviations only.
+
+        Returns
+        -------
+        casship.identify.Prior
+        """
+        from ..identify import Prior
+
+        return Prior.from_belief(self, weight=weight, marginal=marginal)
+
+    def to_uncertainty(self):
+        """This belief as a :class:`~casship.identify.ParameterUncertainty` (same names, means,
+        covariance, source and kind), e.g. to draw replays' bands from it.
+
+        Returns
+        -------
+        casship.identify.ParameterUncertainty
+        """
+        from ..identify import ParameterUncertainty
+
+        return ParameterUncertainty(list(self.names), self.gaussian.mean, self.cov, self.source, kind=self.kind)
+
+    @classmethod
     def from_uncertainty(cls, uncertainty, *, extra_std: Mapping[str, float] | None = None,
                          params: Mapping[str, float] | None = None, source: str | None = None) -> "ParameterBelief":
         """The belief a parameter file's uncertainty states: its parameters, values and covariance.
