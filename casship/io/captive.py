@@ -49,8 +49,34 @@ _DYN_FILES = {"pure_sway": ("vdot_prime",), "pure_yaw": ("r_prime", "rdot_prime"
               "yaw_drift": ("beta_deg", "r_prime", "rdot_prime")}
 
 
+class _TestTable:
+    """What the static and the dynamic tables share: their length and the selection of one test kind."""
+
+    _KINDS: tuple = ()
+    _WHAT = ""
+
+    def __len__(self) -> int:
+        return len(self.run)
+
+    def select(self, kind: str) -> np.ndarray:
+        """Indices of the tests of one kind.
+
+        Parameters
+        ----------
+        kind : str
+            One of the table's kinds (:data:`STATIC_KINDS` or :data:`DYNAMIC_KINDS`).
+
+        Returns
+        -------
+        array of int
+        """
+        if kind not in self._KINDS:
+            raise InputError(f"{self._WHAT} test kind must be one of {self._KINDS}, got {kind!r}")
+        return np.array([i for i, k in enumerate(self.kind) if k == kind], dtype=int)
+
+
 @dataclass(frozen=True)
-class StaticTests:
+class StaticTests(_TestTable):
     """Static captive points (steady drift and rudder angle, no rotation).
 
     Parameters
@@ -69,6 +95,9 @@ class StaticTests:
         Non-dimensional forces (:data:`CHANNELS`; scales in :data:`FORCE_SCALES`).
     """
 
+    _KINDS = STATIC_KINDS
+    _WHAT = "static"
+
     run: np.ndarray
     kind: tuple
     beta: np.ndarray
@@ -77,28 +106,10 @@ class StaticTests:
     rps: np.ndarray
     forces: dict
 
-    def __len__(self) -> int:
-        return len(self.run)
-
-    def select(self, kind: str) -> np.ndarray:
-        """Indices of the points of one test kind.
-
-        Parameters
-        ----------
-        kind : str
-            One of :data:`STATIC_KINDS`.
-
-        Returns
-        -------
-        array of int
-        """
-        if kind not in STATIC_KINDS:
-            raise InputError(f"static test kind must be one of {STATIC_KINDS}, got {kind!r}")
-        return np.array([i for i, k in enumerate(self.kind) if k == kind], dtype=int)
 
 
 @dataclass(frozen=True)
-class DynamicTests:
+class DynamicTests(_TestTable):
     """Dynamic (PMM) tests as harmonic components over one period.
 
     Parameters
@@ -121,6 +132,9 @@ class DynamicTests:
         ``cos(k omega t)``); NaN where not measured.
     """
 
+    _KINDS = DYNAMIC_KINDS
+    _WHAT = "dynamic"
+
     run: np.ndarray
     kind: tuple
     beta: np.ndarray
@@ -132,24 +146,6 @@ class DynamicTests:
     rdot_amp: np.ndarray
     components: dict
 
-    def __len__(self) -> int:
-        return len(self.run)
-
-    def select(self, kind: str) -> np.ndarray:
-        """Indices of the tests of one kind.
-
-        Parameters
-        ----------
-        kind : str
-            One of :data:`DYNAMIC_KINDS`.
-
-        Returns
-        -------
-        array of int
-        """
-        if kind not in DYNAMIC_KINDS:
-            raise InputError(f"dynamic test kind must be one of {DYNAMIC_KINDS}, got {kind!r}")
-        return np.array([i for i, k in enumerate(self.kind) if k == kind], dtype=int)
 
 
 @dataclass(frozen=True)
