@@ -13,6 +13,7 @@ import pytest
 
 from casship.cli import main
 from casship.design import COVARIANCES, ParameterBelief, covariance_kind, fit_noise
+from casship.gaussian import Gaussian
 from casship.identify import FitResult, ParameterUncertainty, read_params
 from casship.models import kvlcc2
 
@@ -47,7 +48,8 @@ def write_fit(path: Path, *, jackknife: bool = True, robust: bool = True) -> dic
                     param_names=list(model.param_names), covariance_robust=robust_cov if robust else None)
     if jackknife:
         unc = ParameterUncertainty(JACK, [params[n] for n in JACK], jack,
-                                   "run-level jackknife over 16 leave-one-run-out folds", {"folds": 16})
+                                   "run-level jackknife over 16 leave-one-run-out folds", {"folds": 16},
+                                   kind="calibrated")
         fit = dataclasses.replace(fit, param_covariance=unc.to_dict())
     fit.to_json(path)
     return {"model": model_cov, "robust": robust_cov, "jackknife": jack, "params": params}
@@ -176,3 +178,54 @@ def test_part_one_runs_from_a_fit_file(fit_files, tmp_path):
     assert asym[0]["sides"] == [-1, 1]            # the asymmetry wants both directions
     for name in ("ranking_fit_tactical_diameter.md", "fig_fit_port_starboard_difference.png"):
         assert (out / name).is_file(), name
+
+
+def test_the_covariance_kind_is_typed_and_travels_with_the_file(fit_files, tmp_path):
+    (path, _), (plain, _) = fit_files
+    import json
+    carried = json.loads(path.read_text())["param_covariance"]
+    assert carried["kind"] == "calibrated"                       # written where the covariance is made
+    assert ParameterUncertainty.from_dict(carried).kind == "calibrated"
+    # The file's kind wins over its prose: a source that mentions a jackknife but says robust is robust.
+    says_robust = dict(carried, kind="robust")
+    assert ParameterUncertainty.from_dict(says_robust).kind == "robust"
+    assert covariance_kind(ParameterUncertainty.from_dict(says_robust)) == "robust"
+    # A file older than the field: the prose rule, once, on reading.
+    old = {k: v for k, v in carried.items() if k != "kind"}
+    assert ParameterUncertainty.from_dict(old).kind == "calibrated"
+    older = tmp_path / "old_fit.json"
+    obj = json.loads(path.read_text())
+    obj["param_covariance"] = old
+    older.write_text(json.dumps(obj))
+    assert ParameterBelief.from_fit(older).kind == "calibrated"
+    # The fit's own covariances are made with their kind.
+    fit = FitResult.from_json(plain)
+    assert fit.uncertainty(kind="model").kind == "model-based"
+    assert fit.uncertainty(kind="robust").kind == "robust"
+    with pytest.raises(ValueError, match="covariance kind 'sandwich'"):
+        ParameterUncertainty.from_dict(dict(carried, kind="sandwich"))
+    with pytest.raises(ValueError, match="covariance kind"):
+        ParameterBelief(("K",), Gaussian([0.1], [[1.0]]), kind="guess")
+
+
+def test_one_belief_converts_to_a_prior_and_an_uncertainty_and_back(fit_files):
+    from casship.identify import Prior
+    (path, made), _ = fit_files
+    belief = ParameterBelief.from_fit(path)
+    unc = belief.to_uncertainty()
+    assert (unc.names, unc.kind, unc.source) == (list(belief.names), "calibrated", belief.source)
+    np.testing.assert_array_equal(unc.covariance, belief.cov)
+    again = ParameterBelief.from_uncertainty(unc, source=belief.source)
+    assert (again.names, again.mean, again.source, again.kind) == (belief.names, belief.mean, belief.source, belief.kind)
+    np.testing.assert_array_equal(again.cov, belief.cov)
+    with pytest.raises(ValueError, match="correlates"):
+        belief.to_prior()                                    # the jackknife covariance is not diagonal
+    prior = belief.to_prior(marginal=True, weight=0.5)
+    assert prior.weight == 0.5
+    assert prior.std == pytest.approx(dict(zip(JACK, np.sqrt(np.diag(made["jackknife"])))), rel=1e-14)
+    assert prior.mean == pytest.approx({n: made["params"][n] for n in JACK}, rel=1e-14)
+    independent = ParameterBelief.from_std({"K": 0.02, "T": 5.0}, {"K": 0.1, "T": 20.0})
+    assert Prior.from_belief(independent) == Prior({"K": 0.02, "T": 5.0}, {"K": 0.1, "T": 20.0})
+    back = ParameterBelief.from_prior(Prior({"K": 0.02, "T": 5.0}, {"K": 0.1}), {"T": 20.0, "other": 1.0})
+    assert (back.names, back.mean, back.std, back.kind) == (("K", "T"), {"K": 0.1, "T": 20.0}, {"K": 0.02, "T": 5.0},
+                                                             "prior")

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..gaussian import Gaussian
 from ..errors import InputError
+from ..identify.params_file import COVARIANCE_KINDS, CovarianceKind, kind_from_source
 
 __all__ = ["ParameterBelief", "COVARIANCES", "covariance_kind"]
 
@@ -28,35 +29,33 @@ __all__ = ["ParameterBelief", "COVARIANCES", "covariance_kind"]
 COVARIANCES = ("jackknife", "robust", "model")
 
 
-def covariance_kind(source: str) -> str:
-    """The kind of a parameter covariance from its stated source, for reports.
+def covariance_kind(covariance) -> str:
+    """The kind of a parameter covariance, for reports.
 
     Parameters
     ----------
-    source : str
-        A :class:`~casship.identify.ParameterUncertainty`'s ``source``.
+    covariance : ParameterUncertainty, ParameterBelief or str
+        An uncertainty or a belief (its ``kind``, set where the covariance was made), or the prose
+        ``source`` of a covariance from a file older than the ``kind`` field (read by
+        :func:`casship.identify.params_file.kind_from_source`, the one rule for those).
 
     Returns
     -------
     str
-        ``"calibrated"`` (a jackknife or another calibration over runs), ``"robust"`` (sandwich),
-        ``"model-based"``, or ``"stated"`` (a source that says none of these).
+        One of :data:`casship.identify.COVARIANCE_KINDS` (``"calibrated"``, ``"robust"``,
+        ``"model-based"``, ``"standard errors"``, ``"prior"``, ``"stated"``).
 
     Examples
     --------
+    >>> from casship.identify import ParameterUncertainty
+    >>> covariance_kind(ParameterUncertainty(["K"], [0.1], [[1e-4]], "by hand", kind="prior"))
+    'prior'
     >>> covariance_kind("run-level jackknife over 16 leave-one-run-out folds")
     'calibrated'
-    >>> covariance_kind("robust (sandwich)")
-    'robust'
     """
-    text = str(source).lower()
-    if "jackknife" in text or "calibrat" in text:
-        return "calibrated"
-    if "robust" in text or "sandwich" in text:
-        return "robust"
-    if "model-based" in text or "model based" in text:
-        return "model-based"
-    return "stated"
+    if isinstance(covariance, str):
+        return kind_from_source(covariance)
+    return covariance.kind
 
 
 @dataclass(frozen=True)
@@ -71,9 +70,10 @@ class ParameterBelief:
         Mean and covariance (natural units of the parameters).
     source : str
         Where the belief comes from (for reports).
-    kind : str
+    kind : CovarianceKind
         Which covariance it is: ``"prior"``, ``"calibrated"``, ``"robust"``, ``"model-based"``,
-        ``"standard errors"`` or ``"stated"`` (see :meth:`from_fit`).
+        ``"standard errors"`` or ``"stated"`` (:data:`casship.identify.COVARIANCE_KINDS`; see
+        :meth:`from_fit`).
 
     Examples
     --------
@@ -86,9 +86,11 @@ class ParameterBelief:
     names: tuple
     gaussian: Gaussian
     source: str = ""
-    kind: str = ""
+    kind: CovarianceKind = "stated"
 
     def __post_init__(self):
+        if self.kind not in COVARIANCE_KINDS:
+            raise InputError(f"parameter belief: unknown covariance kind {self.kind!r}; use one of {COVARIANCE_KINDS}")
         names = tuple(str(n) for n in self.names)
         if len(set(names)) != len(names):
             dup = sorted({n for n in names if names.count(n) > 1})
@@ -137,6 +139,65 @@ class ParameterBelief:
         return cls(tuple(names), Gaussian([float(mean[n]) for n in names], np.diag(s**2)), source, "prior")
 
     @classmethod
+    def from_prior(cls, prior, params: Mapping[str, float] | None = None, *,
+                   source: str = "prior") -> "ParameterBelief":
+        """The belief an identification :class:`~casship.identify.Prior` states (independent parameters).
+
+        Parameters
+        ----------
+        prior : casship.identify.Prior
+            Its ``std`` names the parameters; its ``mean`` gives their means.
+        params : mapping, optional
+            Means of the parameters the prior gives none for (a Prior defaults to the model's
+            nominal values: give ``model.param_dict(p)``).
+        source : str
+            Description for reports.
+
+        Returns
+        -------
+        ParameterBelief
+            With :attr:`kind` ``"prior"``.
+
+        Examples
+        --------
+        >>> from casship.identify import Prior
+        >>> ParameterBelief.from_prior(Prior({"K": 0.02}, {"K": 0.1})).std
+        {'K': 0.02}
+        """
+        mean = {**dict(params or {}), **dict(prior.mean)}
+        return cls.from_std(prior.std, mean, source=source)
+
+    def to_prior(self, *, weight: float = 1.0, marginal: bool = False):
+        """This belief as an identification :class:`~casship.identify.Prior` (see ``Prior.from_belief``).
+
+        Parameters
+        ----------
+        weight : float
+            Multiplies the prior's cost.
+        marginal : bool
+            Accept correlated parameters, keeping their marginal standard deviations only.
+
+        Returns
+        -------
+        casship.identify.Prior
+        """
+        from ..identify import Prior
+
+        return Prior.from_belief(self, weight=weight, marginal=marginal)
+
+    def to_uncertainty(self):
+        """This belief as a :class:`~casship.identify.ParameterUncertainty` (same names, means,
+        covariance, source and kind), e.g. to draw replays' bands from it.
+
+        Returns
+        -------
+        casship.identify.ParameterUncertainty
+        """
+        from ..identify import ParameterUncertainty
+
+        return ParameterUncertainty(list(self.names), self.gaussian.mean, self.cov, self.source, kind=self.kind)
+
+    @classmethod
     def from_uncertainty(cls, uncertainty, *, extra_std: Mapping[str, float] | None = None,
                          params: Mapping[str, float] | None = None, source: str | None = None) -> "ParameterBelief":
         """The belief a parameter file's uncertainty states: its parameters, values and covariance.
@@ -156,17 +217,17 @@ class ParameterBelief:
         Returns
         -------
         ParameterBelief
-            With :attr:`kind` ``"calibrated"`` (a jackknife), ``"robust"``, ``"model-based"`` or
-            ``"stated"`` (read from the uncertainty's source).
+            With the uncertainty's :attr:`kind`.
 
         Examples
         --------
         >>> from casship.identify import ParameterUncertainty
-        >>> u = ParameterUncertainty(["K", "T"], [0.1, 20.0], [[1e-4, 0.0], [0.0, 4.0]], "run-level jackknife")
+        >>> u = ParameterUncertainty(["K", "T"], [0.1, 20.0], [[1e-4, 0.0], [0.0, 4.0]], "run-level jackknife",
+        ...                          kind="calibrated")
         >>> ParameterBelief.from_uncertainty(u).kind
         'calibrated'
         """
-        kind = covariance_kind(uncertainty.source)
+        kind = uncertainty.kind
         text = source or (f"{kind} covariance ({uncertainty.source or 'source not stated'}) of "
                           f"{len(uncertainty.names)} parameter(s)")
         belief = cls(tuple(uncertainty.names), Gaussian(uncertainty.values, uncertainty.covariance), text, kind)
@@ -234,7 +295,7 @@ class ParameterBelief:
             raise InputError(f"unknown covariance {covariance!r}; use one of {COVARIANCES} (or None: the file's own)")
         values = dict(params or fit.params)
         carried = ParameterUncertainty.from_dict(fit.param_covariance, where) if fit.param_covariance else None
-        kind = covariance_kind(carried.source) if carried is not None else None
+        kind = carried.kind if carried is not None else None
         wanted = {None: kind, "jackknife": "calibrated", "robust": "robust", "model": "model-based"}[covariance]
         if carried is not None and kind == wanted:
             bad = [n for n, v in zip(carried.names, carried.values)

@@ -23,9 +23,9 @@ filter, priors, identifiability and the fit result.
 """
 from .crossval import CrossValidation, cross_validate
 from .identifiability import Identifiability
-from .mle import MLEProblem, default_prior
+from .mle import MLEProblem
 from .output_error import OutputErrorProblem
-from .params_file import ParameterUncertainty, read_params, replay_file
+from .params_file import COVARIANCE_KINDS, CovarianceKind, ParameterUncertainty, read_params, replay_file
 from .prior import Prior
 from .problem import IdentificationProblem
 from .records import initial_states, noise_std, share_labels
@@ -37,8 +37,9 @@ from .workflow import ShipFit, identify_ship
 from .spec import LikelihoodOptions, OutputErrorOptions, ProblemSpec
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
-           "IdentificationWarning", "Prior", "Identifiability", "default_prior", "noise_std",
-           "share_labels", "initial_states", "read_params", "replay_file", "ParameterUncertainty", "cross_validate", "CrossValidation"]
+           "IdentificationWarning", "Prior", "Identifiability", "noise_std",
+           "share_labels", "initial_states", "read_params", "replay_file", "ParameterUncertainty", "CovarianceKind",
+           "COVARIANCE_KINDS", "cross_validate", "CrossValidation"]
 __all__ += ["identify_ship", "ShipFit"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]
 __all__ += ["CaptiveProblem", "CostTerm", "JointProblem", "linear_derivatives"]

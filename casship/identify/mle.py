@@ -29,12 +29,18 @@ from .records import as_records, initial_states
 from .result import FitResult
 from ..errors import InputError, InputTypeError
 
-__all__ = ["MLEProblem", "default_prior"]
+__all__ = ["MLEProblem"]
 
 
-def default_prior(model, data: Dataset, R: np.ndarray, measured: Sequence[str], prior_var: float = 1.0,
+def _record_prior(model, data: Dataset, R: np.ndarray, measured: Sequence[str], prior_var: float = 1.0,
                   estimated: Sequence[str] = ()) -> Gaussian:
-    """A prior for the first sample of ``data``: states named like a column start at its first value.
+    """The default initial-state prior of one record of an :class:`MLEProblem`.
+
+    Its mean is the identification's one rule for a record's start (:func:`initial_states`, as in
+    output-error fitting: a NaN first value is an error, not read forward), its variance the
+    measurement variance of a state measured directly, ``prior_var`` for the others. A filter run
+    outside identification starts from :func:`casship.prior_from_data`, the one public
+    first-sample prior (it reads forward over a window and from the track).
 
     Parameters
     ----------
@@ -88,8 +94,8 @@ class MLEProblem(IdentificationProblem):
         named ``Q[w_r]``, ``R[psi]`` among the free quantities.
     x0 : Gaussian, sequence of Gaussian or mapping state -> value, optional
         Prior of the initial state of each record (one for all, or one per record). By default
-        states named like a data column start at its first value (see :func:`default_prior`; a NaN
-        there is an error naming the record).
+        states named like a data column start at its first value (measured ones with their
+        measurement variance, the others ``prior_var``; a NaN there is an error naming the record).
     estimate_x0 : sequence of str
         States whose initial means are estimated per record (``<state>@<record>``).
     prior_var : float
@@ -175,7 +181,7 @@ class MLEProblem(IdentificationProblem):
     def _make_priors(self, m, records, x0, prior_var, estimated) -> list[Gaussian]:
         est, n = self.estimator, len(records)
         if x0 is None or isinstance(x0, Mapping):
-            priors = [default_prior(m, d, est.R, est.measured, prior_var, estimated) for d in records]
+            priors = [_record_prior(m, d, est.R, est.measured, prior_var, estimated) for d in records]
             if isinstance(x0, Mapping):
                 idx = m.indices(x0, "state")
                 vals = m.states(**x0)

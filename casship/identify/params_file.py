@@ -20,13 +20,61 @@ import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal, get_args
 
 import numpy as np
 
 from ..errors import InputError, InputTypeError
 
 __all__ = ["read_params", "replay_file", "check_model", "ParameterUncertainty", "load_fit_json", "SYMMETRY_TOL",
-           "Q_MAX_DEG2_PER_S"]
+           "Q_MAX_DEG2_PER_S", "CovarianceKind", "COVARIANCE_KINDS", "kind_from_source"]
+
+#: Which covariance a Gaussian over parameters carries: a run-level calibration (``"calibrated"``,
+#: e.g. a jackknife), the robust (sandwich) or the model-based covariance of a fit, a fit's standard
+#: errors alone (independent), a prior stated by hand, or a covariance that says none of these.
+CovarianceKind = Literal["calibrated", "robust", "model-based", "standard errors", "prior", "stated"]
+COVARIANCE_KINDS: tuple = get_args(CovarianceKind)
+
+
+def kind_from_source(source: str) -> CovarianceKind:
+    """The kind of a covariance read from its prose ``source``: the rule for files older than the ``kind`` field.
+
+    Files written since carry the kind itself (``ParameterUncertainty.kind``); only
+    :meth:`ParameterUncertainty.from_dict` falls back to this rule, for a file without it.
+
+    Parameters
+    ----------
+    source : str
+        The covariance's stated source (e.g. ``"run-level jackknife over 16 folds"``).
+
+    Returns
+    -------
+    str
+        ``"calibrated"`` (a jackknife or another calibration over runs), ``"robust"`` (sandwich),
+        ``"model-based"``, or ``"stated"`` (a source that says none of these).
+
+    Examples
+    --------
+    >>> kind_from_source("run-level jackknife over 16 leave-one-run-out folds")
+    'calibrated'
+    >>> kind_from_source("robust (sandwich)")
+    'robust'
+    """
+    text = str(source).lower()
+    if "jackknife" in text or "calibrat" in text:
+        return "calibrated"
+    if "robust" in text or "sandwich" in text:
+        return "robust"
+    if "model-based" in text or "model based" in text:
+        return "model-based"
+    return "stated"
+
+
+def _checked_kind(kind, what: str) -> str:
+    """``kind`` when it is one of :data:`COVARIANCE_KINDS`, else an error naming ``what``."""
+    if kind not in COVARIANCE_KINDS:
+        raise InputError(f"{what}: unknown covariance kind {kind!r}; use one of {COVARIANCE_KINDS}")
+    return str(kind)
 
 #: Upper bound of a fit file's model discrepancy [deg^2/s]: beyond it the heading's 95 % band spans a
 #: full turn (+-180 deg) within about 10 s, i.e. the file predicts nothing.
@@ -99,6 +147,9 @@ class ParameterUncertainty:
         The covariance of the same parameters that ``psi_variance_rate`` was estimated beside (the
         predictive band adds ``q t`` to the band of this covariance, as in its estimation); None:
         ``covariance``.
+    kind : CovarianceKind
+        Which covariance it is (one of :data:`COVARIANCE_KINDS`), set where the covariance is made
+        and written to the file beside ``source``.
 
     Examples
     --------
@@ -114,8 +165,10 @@ class ParameterUncertainty:
     info: dict = field(default_factory=dict)
     psi_variance_rate: float = 0.0
     discrepancy_covariance: np.ndarray | None = None
+    kind: CovarianceKind = "stated"
 
     def __post_init__(self):
+        self.kind = _checked_kind(self.kind, "ParameterUncertainty")
         self.psi_variance_rate = float(self.psi_variance_rate)
         q_max = float(np.radians(np.radians(Q_MAX_DEG2_PER_S)))
         if not (np.isfinite(self.psi_variance_rate) and 0.0 <= self.psi_variance_rate <= q_max):
@@ -164,9 +217,9 @@ class ParameterUncertainty:
         return out
 
     def to_dict(self) -> dict:
-        """JSON-friendly form (``names``, ``values``, ``matrix``, ``source``, ``info``)."""
+        """JSON-friendly form (``names``, ``values``, ``matrix``, ``source``, ``kind``, ``info``)."""
         return {"names": list(self.names), "values": self.values.tolist(), "matrix": self.covariance.tolist(),
-                "source": self.source, "info": dict(self.info)}
+                "source": self.source, "kind": self.kind, "info": dict(self.info)}
 
     @classmethod
     def from_dict(cls, d, where: str = "the file", *, key: str = "param_covariance") -> "ParameterUncertainty":
@@ -175,7 +228,9 @@ class ParameterUncertainty:
         Parameters
         ----------
         d : mapping
-            With ``names``, ``values``, ``matrix`` (and optionally ``source``, ``info``).
+            With ``names``, ``values``, ``matrix`` (and optionally ``source``, ``kind``, ``info``); a
+            file without ``kind`` (older than the field) gets the kind its ``source`` states
+            (:func:`kind_from_source`).
         where : str
             What holds it (for the messages).
         key : str
@@ -206,8 +261,10 @@ class ParameterUncertainty:
             raise InputError(f"{field_} lacks the values of {names}")
         _numbers(values, (len(names),), f"{field_}.values")
         _numbers(d["matrix"], (len(names), len(names)), f"{field_}.matrix")
+        source = str(d.get("source", ""))
+        kind = _checked_kind(d["kind"], f"{field_}.kind") if "kind" in d else kind_from_source(source)
         try:
-            return cls(names, values, d["matrix"], str(d.get("source", "")), dict(d.get("info") or {}))
+            return cls(names, values, d["matrix"], source, dict(d.get("info") or {}), kind=kind)
         except ValueError as exc:
             msg = str(exc).removeprefix("ParameterUncertainty: ")
             raise InputError(f"{field_}.matrix {msg.removeprefix('covariance ')}" if msg.startswith("covariance ")

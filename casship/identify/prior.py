@@ -61,6 +61,52 @@ class Prior:
         object.__setattr__(self, "mean", mean)
         object.__setattr__(self, "weight", w)
 
+    @classmethod
+    def from_belief(cls, belief, *, weight: float = 1.0, marginal: bool = False) -> "Prior":
+        """The prior a Gaussian over named parameters states: its means and standard deviations.
+
+        A :class:`Prior` is independent per quantity, so a belief whose parameters are correlated
+        is refused unless ``marginal`` (then only its marginal standard deviations are kept).
+
+        Parameters
+        ----------
+        belief : casship.design.ParameterBelief
+            Names, means and covariance (e.g. ``ParameterBelief.from_fit``).
+        weight : float
+            Multiplies the prior's cost.
+        marginal : bool
+            Accept a correlated belief, keeping its marginal standard deviations only.
+
+        Returns
+        -------
+        Prior
+
+        Raises
+        ------
+        ValueError
+            A correlated belief without ``marginal``, naming the most correlated pair.
+
+        Examples
+        --------
+        >>> from casship.design import ParameterBelief
+        >>> b = ParameterBelief.from_std({"K": 0.02}, mean={"K": 0.1})
+        >>> Prior.from_belief(b)
+        Prior(std={'K': 0.02}, mean={'K': 0.1}, weight=1.0)
+        """
+        names, cov = list(belief.names), np.asarray(belief.cov, dtype=float)
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        if not marginal and len(names) > 1:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                corr = np.abs(cov / np.outer(sd, sd))
+            np.fill_diagonal(corr, 0.0)
+            corr = np.nan_to_num(corr)
+            if corr.max() > 1e-12:
+                i, j = np.unravel_index(int(np.argmax(corr)), corr.shape)
+                raise InputError(f"the belief correlates {names[i]} and {names[j]} (|rho| = {corr[i, j]:.3g}); a "
+                                 "Prior is independent per quantity: pass marginal=True to keep the marginal "
+                                 "standard deviations only")
+        return cls(dict(zip(names, sd.tolist())), dict(belief.mean), weight)
+
     def vectors(self, space, model) -> tuple[np.ndarray, np.ndarray]:
         """Prior mean and precision (``weight / std^2``, 0 without a prior) of each free quantity.
 

@@ -231,7 +231,8 @@ class FitResult:
             return None
         names = [self.free[i] for i in idx]
         return ParameterUncertainty(names, [self.estimates[n] for n in names], C[np.ix_(idx, idx)],
-                                    "robust (sandwich)" if robust else "model-based", psi_variance_rate=q)
+                                    "robust (sandwich)" if robust else "model-based", psi_variance_rate=q,
+                                    kind="robust" if robust else "model-based")
 
     def record_parameters(self, record: int) -> dict:
         """All model parameters of one fitted record (its own per-record and per-group copies applied).

@@ -169,7 +169,7 @@ class ShipFit:
         if not names:
             return None
         return ParameterUncertainty(names, values, block_diag(*parts), "robust (sandwich) of the refinement and the "
-                                    "mirror-pair stage; facility quantities pooled over facilities")
+                                    "mirror-pair stage; facility quantities pooled over facilities", kind="robust")
 
     def to_dict(self, facility: str | None = None, uncertainty=None) -> dict:
         """The fit file's content for replaying records of ``facility`` (see :meth:`params`).

@@ -55,7 +55,8 @@ def jackknife(everything, folds) -> ParameterUncertainty:
             C[names.index(q), names.index(q)] += pool["spread"] ** 2
     values = [everything.params()[k] for k in names]
     return ParameterUncertainty(names, values, C, f"run-level jackknife over {n} leave-one-run-out folds (facility "
-                                "quantities: population value, with the between-facility spread added)", {"folds": n})
+                                "quantities: population value, with the between-facility spread added)", {"folds": n},
+                                kind="calibrated")
 
 
 def calibration_table(everything, folds, jack: ParameterUncertainty) -> dict:
