@@ -386,7 +386,8 @@ class JointProblem:
                           info=info, cost=rep.f, n_obs=n_obs, loglik=loglik, method=f"joint ({pb.method} + "
                           + " + ".join(t.label for t in self.terms) + ")", status=rep.status, message=rep.message,
                           iterations=rep.iterations, seconds=time.perf_counter() - t0, lower=lower, upper=upper,
-                          records=list(pb.labels) + [t.label for t in self.terms], model=m)
+                          records=list(pb.labels) + [t.label for t in self.terms], model=m,
+                          noise=pb.noise_report(theta[:k0]) if pb.method == "output-error" else None)
 
     def subset(self, indices: Sequence[int]) -> "JointProblem":
         """The same joint problem with the free-running problem on some of its records (terms kept).

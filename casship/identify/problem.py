@@ -235,6 +235,21 @@ class IdentificationProblem:
         """
         return self._prior_terms(np.asarray(theta, dtype=float))
 
+    def noise_report(self, theta) -> dict:
+        """The output noise of the fit at ``theta`` as a fit file records it (``sigma`` and its fitted
+        scale for output error, ``R`` for a likelihood).
+
+        Parameters
+        ----------
+        theta : array_like
+            Free values (natural units, ordered like :attr:`free`).
+
+        Returns
+        -------
+        dict
+        """
+        return self._noise_report(np.asarray(theta, dtype=float))
+
     @property
     def prior_precision(self) -> np.ndarray:
         """The prior's precision of each free quantity (0: no prior), ordered like :attr:`free`."""
