@@ -26,12 +26,15 @@ its reason (:attr:`ShipFit.choices`). On free-running records of a manoeuvring m
    coefficients are the rudder's ``gamma_R_plus/minus`` and the wake's ``C_2_plus/minus``.
 
    **Facility quantities, the rule.** A quantity of a facility's model, rudder or propeller set
-   (the neutral angle, a wake measured behind one facility's model: ``facility_values=``) is that
-   facility's: never applied as exact to a record of another facility. Each is pooled over the
-   facilities that measured it (population prior: the preset value with its stated uncertainty;
-   between-facility spread: the same stated uncertainty, :data:`NEUTRAL_SPREAD` for the neutral
-   angle), and a record of a facility without its own value, in the fit and in a replay, runs at the
-   population value, with ``sqrt(var(population) + spread^2)`` in its band.
+   (the neutral angle, a wake measured behind one facility's model: ``facility_values=``, the
+   rudder's own :data:`RUDDER` candidates) is that facility's: never applied as exact to a record
+   of another facility. The rudder's are free per facility (``epsilon@HSVA``) under the run-level
+   rule like any candidate. Each is pooled over the facilities that have a value (population prior:
+   the preset value with its stated uncertainty; between-facility spread: the same stated
+   uncertainty, :data:`NEUTRAL_SPREAD` for the neutral angle), and a record of a facility without
+   its own value runs at the population value in a replay (in the fit: a measured value's
+   population value, a rudder quantity's preset), with ``sqrt(var(population) + spread^2)`` in its
+   band.
 6. **The free set from run-level evidence** (:meth:`~casship.identify.Identifiability.propose`,
    ``evidence="runs"``): greedy D-optimal forward selection admitting a quantity only while every
    chosen one has a posterior/prior standard deviation at most 0.5, where the standard deviation is
@@ -63,7 +66,7 @@ from .shipfit import ShipFit, pool_facilities
 from .uncertainty import effective_samples
 
 __all__ = ["identify_ship", "ShipFit", "PRESET_UNCERTAINTY", "preset_prior_std", "run_evidence", "pool_facilities",
-           "resample", "approach_resistance", "CANDIDATES", "ASYMMETRY", "DIRECTION_SWITCHED", "MEASURED"]
+           "resample", "approach_resistance", "CANDIDATES", "ASYMMETRY", "DIRECTION_SWITCHED", "RUDDER", "MEASURED"]
 
 HULL_LINEAR = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash")
 HULL_CUBIC = ("Y_vvv_dash", "Y_vvr_dash", "Y_vrr_dash", "Y_rrr_dash", "N_vvv_dash", "N_vvr_dash", "N_vrr_dash",
@@ -72,6 +75,10 @@ HULL_CUBIC = ("Y_vvv_dash", "Y_vvr_dash", "Y_vrr_dash", "Y_rrr_dash", "N_vvv_das
 ASYMMETRY = ("Y_0_dash", "N_0_dash")
 #: The rudder neutral angle: a facility's quantity (its model and rudder), pooled over facilities.
 FACILITY = ("delta_0",)
+#: The rudder's own quantities (a facility's model rudder: its inflow factor, the propeller race's
+#: straightening, its lift gradient; :data:`casship.identify.captive.FACILITY_PARAMS`): candidates
+#: estimated per facility (``name@facility``) and pooled over facilities.
+RUDDER = ("epsilon", "kappa", "f_alpha")
 #: Coefficients that switch with the sign of a drift angle (rudder flow straightening, wake change in
 #: manoeuvring): from mirrored evidence only.
 DIRECTION_SWITCHED = ("gamma_R_plus", "gamma_R_minus", "C_2_plus", "C_2_minus")
@@ -495,17 +502,23 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
         fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at0, start, join=True)
     else:
         at, guess, first, fit, rows = dict(at0), dict(start), [], None, []
+        # the rudder's own quantities: one copy per facility (never one value carried across facilities)
+        own_cands = [c for c in cands if c in RUDDER]
+        if own_cands:
+            note("facility", ", ".join(own_cands) + " per facility (" + ", ".join(sorted(set(fac))) + ")",
+                 "the rudder's own quantities belong to a facility's model rudder: a copy per facility, each chosen "
+                 "by the run-level rule like any candidate, pooled over facilities after the fit")
         for k in range(max(1, passes)):
             if k > 0 and rest and reweigh:
                 sigma.update(channel_sigma(recs_b, model.params({**dict(zip(model.param_names, fixed)), **{
                     q: at[q] for q in cands}}), "the previous estimate"))
-            prob = problem(recs_b, cands, fixed, weights_=rw)
-            point = {q: at[q] for q in cands}
+            prob = problem(recs_b, cands, fixed, weights_=rw, share={q: list(fac) for q in own_cands} or None)
+            point = {q: at.get(q, at[q.split("@")[0]]) for q in prob.free}
             idf = prob.identifiability(at=point)
             idf.evidence = run_evidence(prob, point)
             idf = with_terms(idf, prob, point)
             chosen, rows = idf.propose(max_ratio=max_ratio, max_corr=max_corr, max_count=max_free, evidence="runs",
-                                       explain=True, candidates=cands, keep=[])
+                                       explain=True, candidates=prob.free, keep=[])
             where = "the preset" if k == 0 else "the previous estimate"
             note("free set", ", ".join(chosen) or "nothing",
                  f"chosen at {where} by run-level evidence ({idf.evidence.kind}, {len(idf.evidence.labels)} units): "
@@ -516,11 +529,14 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                 first = list(chosen)
             if not chosen:
                 break
-            fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at, guess, join=True)
+            declared = list(dict.fromkeys(q.split("@")[0] for q in chosen))
+            copies = {q: [lab if f"{q}@{lab}" in chosen else None for lab in fac] for q in own_cands if q in declared}
+            fit, use = refine(problem(recs_b, declared, fixed, weights_=rw, share=copies or None), chosen, at, guess,
+                              join=True)
             note("refinement", f"MAP output error, status {fit.status}, started from the "
                  + ("inverse-dynamics values" if use else "point of the choice"),
                  "the start with the lower cost" if use else "the inverse-dynamics start did not lower the cost")
-            est = {q: float(v) for q, v in fit.estimates.items() if "@" not in q}
+            est = {q: float(v) for q, v in fit.estimates.items() if "@" not in q or q.split("@")[0] in own_cands}
             at.update(est)
             guess.update(est)
         if fit is None:               # nothing the runs determine: a result, said as one
@@ -530,6 +546,16 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                 f"the records determine none of the candidates {cands} by the run-level rule (posterior/prior std "
                 f"<= {max_ratio:g}): the preset stays; widen the prior of the quantities you expect to move "
                 "(prior= / --prior) or give the free set (free= / --free)", "nothing determined")
+        nominal = model.param_dict()
+        for q in own_cands:
+            est_q = {lab: (float(fit.estimates[f"{q}@{lab}"]), _std_error(fit, f"{q}@{lab}"))
+                     for lab in sorted(set(fac)) if f"{q}@{lab}" in fit.estimates}
+            if est_q:
+                pools[q] = pool_facilities(est_q, spread=all_std[q], prior_std=all_std[q], prior_mean=nominal[q])
+                note("facility", f"{q}: " + ", ".join(f"{lab} {v:.4g}" for lab, (v, _) in est_q.items())
+                     + f"; population {pools[q]['population']:.4g} +- {pools[q]['new_facility_std']:.3g}",
+                     "pooled with a between-facility spread equal to its stated uncertainty; a record of a facility "
+                     "without its own value is replayed at the population value with that spread in its band")
     ship = ShipFit(fit, model, list(chosen), choices, sigma, [float(w) for w in rw], rows, first,
                    {**preset, **asym_values}, start, asym_fit, asym_values, {**measured_pools, **pools}, fac,
                    time.perf_counter() - t0,
@@ -544,6 +570,13 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
         note("verdict", f"{ship.fit.verdict['verdict']}: replays of the records against the preset"
              + (" and left-one-out" if verdict == "loo" and len(records) > 1 else ""), ship.fit.verdict["reason"])
     return ship
+
+
+def _std_error(fit, name: str) -> float:
+    """The robust standard error of a free quantity where finite (the fit file's covariance), else the
+    model-based one."""
+    se = fit.std_errors_robust.get(name, math.nan)
+    return float(se) if np.isfinite(se) and se > 0 else float(fit.std_errors[name])
 
 
 def _judge_ship(ship: ShipFit, records, verdict: str, refit) -> None:
