@@ -52,10 +52,24 @@ def test_held_out_run_is_predicted_better_than_by_the_published_constants(quick)
     # the free set is chosen twice (at the preset, then at that refinement's estimate); the file carries the second
     fold = summary["folds"]["run:MARIN zz_-20"]
     assert fold["free_at_preset"] and fold["free"]
-    # the files' free quantities: the chosen set, then the joined captive facility's own ones (name@HMRI)
-    ship_free = [n for n in json.loads((out / fold["file"]).read_text())["free"] if "@" not in n]
-    assert ship_free == fold["free"]
-    assert [n for n in json.loads((out / "fit.json").read_text())["free"] if "@" not in n] == summary["free"]
+    # the files' free quantities: the chosen set (the rudder's own quantities one copy per facility,
+    # name@MARIN / name@HSVA), then the joined captive facility's own ones (name@HMRI)
+    ship_free = [n for n in json.loads((out / fold["file"]).read_text())["free"] if not n.endswith("@HMRI")]
+    assert sorted(ship_free) == sorted(fold["free"])
+    assert sorted(n for n in json.loads((out / "fit.json").read_text())["free"]
+                  if not n.endswith("@HMRI")) == sorted(summary["free"])
+    # facilities as facilities: HSVA's measured wake is HSVA's; the MARIN run is replayed with the pooled
+    # population value (the spread in its band), never with HSVA's value as exact
+    held_file = json.loads((out / fold["file"]).read_text())
+    pool = held_file["workflow"]["facility_quantities"]["w_P0"]
+    assert set(pool["facilities"]) == {"HSVA"} and held_file["workflow"]["replayed_as_facility"] == "MARIN"
+    assert held_file["params"]["w_P0"] == pytest.approx(pool["population"], rel=1e-12)
+    assert abs(held_file["params"]["w_P0"] - pool["facilities"]["HSVA"]["value"]) > 0.01
+    cov = held_file["param_covariance"]
+    i = cov["names"].index("w_P0")
+    assert np.sqrt(cov["matrix"][i][i]) == pytest.approx(pool["new_facility_std"], rel=1e-9)
+    for name in ("epsilon", "kappa", "f_alpha"):     # no rudder quantity is one value carried across facilities
+        assert name not in fold["free"], name
     for name in ("report.md", "fit.json", "fit_without_MARIN_zz_-20.json", "cross_validation.csv", "summary.json",
                  "fig_heldout_MARIN_zz_-20.png"):
         assert (out / name).exists(), name
