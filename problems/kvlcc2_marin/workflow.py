@@ -72,7 +72,11 @@ OPTION_PRIOR = {"c_alpha3": 0.5}
 VARIANTS = ("library workflow: run-level selection, facility neutral angle pooled, mirror-pair rule for "
             "gamma_R+-",
             "the same with the HMRI captive tests joined in one objective (shipped whenever the captive data are "
-            "present: a rule fixed before either was run, not a choice on their numbers)")
+            "present: a rule fixed before either was run, not a choice on their numbers)",
+            "the issue's facility rule applied to the wake alone (HSVA's thrust-fitted wake HSVA's own, MARIN at "
+            "the pooled value) and C_2+- under the mirrored-evidence rule (an intermediate run, its numbers seen)",
+            "the facility rule in full (shipped: a defect against a rule stated before the numbers): the wake and "
+            "the rudder's epsilon, kappa, f_alpha per facility, pooled, C_2+- from mirrored evidence only")
 #: Variants accepted or dropped in earlier rounds on the leave-one-run-out means the headline reported
 #: (listed in the report's choices): they count as tried on the same numbers.
 VARIANTS_EARLIER = 12
