@@ -384,9 +384,10 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
         note("cost", "channel sigmas " + ", ".join(f"{k} {v:.3g}" for k, v in sigma.items()), "given")
     else:
         sigma, rest = {}, list(measured)
-    def channel_sigma(rs, params, where):
+    def channel_sigma(rs, params, where, own=None):
         unit = OutputErrorProblem(model, rs, [model.param_names[0]], measured=measured,
-                                  sigma={c: 1.0 for c in measured}, params=params, record_params=record_params)
+                                  sigma={c: 1.0 for c in measured}, params=params,
+                                  record_params=record_params if own is None else own)
         res = unit.residuals()           # at params (the one free value at its fixed value)
         neff = effective_samples(res, measured)
         out = {c: float(np.sqrt(sum(np.nansum(e[:, j] ** 2) for e in res) / max(neff[c]["n_eff"], 1.0)))
@@ -412,8 +413,10 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
 
         if join and terms:
             prob = JointProblem(prob, terms, hold_fixed=True)
-        guess_id = {q: guess_pool.get(q.split("@")[0], at[q.split("@")[0]]) for q in chosen}
-        preset_guess = {q: at[q.split("@")[0]] for q in chosen}
+        # a facility's copy starts from its own previous value where there is one
+        guess_id = {q: guess_pool.get(q, guess_pool.get(q.split("@")[0], at.get(q, at[q.split("@")[0]])))
+                    for q in chosen}
+        preset_guess = {q: at.get(q, at[q.split("@")[0]]) for q in chosen}
         use = bool(chosen) and prob.cost(guess_id) < prob.cost(preset_guess)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IdentificationWarning)
@@ -510,8 +513,10 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                  "by the run-level rule like any candidate, pooled over facilities after the fit")
         for k in range(max(1, passes)):
             if k > 0 and rest and reweigh:
+                own_at = [{**(record_params[i] if record_params else {}),
+                           **{q: at[f"{q}@{lab}"] for q in own_cands if f"{q}@{lab}" in at}} for i, lab in enumerate(fac)]
                 sigma.update(channel_sigma(recs_b, model.params({**dict(zip(model.param_names, fixed)), **{
-                    q: at[q] for q in cands}}), "the previous estimate"))
+                    q: at[q] for q in cands}}), "the previous estimate", own_at))
             prob = problem(recs_b, cands, fixed, weights_=rw, share={q: list(fac) for q in own_cands} or None)
             point = {q: at.get(q, at[q.split("@")[0]]) for q in prob.free}
             idf = prob.identifiability(at=point)
