@@ -178,3 +178,22 @@ def test_one_rudder_value_for_two_facilities_fits_neither(monkeypatch):
                             dt=1.0, verdict=None)
     assert "K" in ship.fit.free and "K" not in ship.facility
     assert abs(ship.params("A")["K"] / K_A - 1) > 0.2 and abs(ship.params("B")["K"] / 0.08 - 1) > 0.2
+
+
+def test_with_one_facility_its_copy_is_the_shared_value_through_every_pass(monkeypatch):
+    """One facility: ``K@A`` is the same quantity as a shared ``K`` (second choice and refinement start
+    from its previous value, channel sigmas taken at it)."""
+    from casship.identify import workflow
+
+    recs = _runs([K_A, K_A, K_A])
+    model = cs.models.nomoto_first_order(**PRESET)
+    fits = {}
+    for rudder in ((), ("K",)):
+        monkeypatch.setattr(workflow, "RUDDER", rudder)
+        fits[rudder] = cs.identify_ship(recs, model, facility="A", candidates=["K", "T"], prior=PRIOR, passes=2,
+                                        verdict=None)
+    plain, copy = fits[()], fits[("K",)]
+    assert copy.sigma == pytest.approx(plain.sigma, rel=1e-9)
+    assert copy.fit.estimates["K@A"] == pytest.approx(plain.fit.estimates["K"], rel=1e-6)
+    assert copy.fit.estimates["T"] == pytest.approx(plain.fit.estimates["T"], rel=1e-6)
+    assert copy.params("A")["K"] == pytest.approx(plain.params("A")["K"], rel=1e-6)

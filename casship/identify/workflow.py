@@ -385,9 +385,11 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
     else:
         sigma, rest = {}, list(measured)
     def channel_sigma(rs, params, where, own=None):
-        unit = OutputErrorProblem(model, rs, [model.param_names[0]], measured=measured,
-                                  sigma={c: 1.0 for c in measured}, params=params,
-                                  record_params=record_params if own is None else own)
+        own = record_params if own is None else own
+        taken = {n for o in (own or []) for n in (o or {})}      # the one free value must not hide a record's own
+        dummy = next(n for n in model.param_names if n not in taken)
+        unit = OutputErrorProblem(model, rs, [dummy], measured=measured, sigma={c: 1.0 for c in measured},
+                                  params=params, record_params=own)
         res = unit.residuals()           # at params (the one free value at its fixed value)
         neff = effective_samples(res, measured)
         out = {c: float(np.sqrt(sum(np.nansum(e[:, j] ** 2) for e in res) / max(neff[c]["n_eff"], 1.0)))
