@@ -197,3 +197,24 @@ def test_summary_holds_every_fold_family_the_circle_the_coverage_and_the_variant
     # the fit file records every choice of the workflow with its reason
     fit = json.loads((out / "fit.json").read_text())
     assert fit["workflow"]["choices"] and all(c["reason"] for c in fit["workflow"]["choices"])
+
+
+def test_the_thrust_wake_is_the_facility_s_and_the_open_water_curve_the_ship_s():
+    import casship as cs
+    from casship.errors import InputError
+    from problems.kvlcc2_marin.data import Run
+    from problems.kvlcc2_marin.propulsion import PropulsionFit
+    from problems.kvlcc2_marin.workflow import propulsion_split
+
+    t = np.arange(3.0)
+    runs = [Run(f"{f} {i}", f, cs.Dataset(t, {"thrust": np.ones(3)}), "zigzag") for i, f in enumerate(("HSVA", "MARIN"))]
+    prop = PropulsionFit({"k_0": 0.26, "k_1": -0.19, "k_2": -0.13, "w_P0": 0.49}, {"w_P0": 0.004}, ["w_P0"], [],
+                         0.0, {}, {}, 1.0, ["HSVA 0"])
+    ship, own = propulsion_split(prop, runs)
+    assert ship == {"k_0": 0.26, "k_1": -0.19, "k_2": -0.13}
+    assert own == {"w_P0": {"HSVA": (0.49, 0.004)}}
+    empty = PropulsionFit({}, {}, [], [], float("nan"), {}, {}, float("nan"), [])
+    assert propulsion_split(empty, runs) == ({}, {})
+    both = PropulsionFit({"w_P0": 0.49}, {"w_P0": 0.004}, ["w_P0"], [], 0.0, {}, {}, 1.0, ["HSVA 0", "MARIN 1"])
+    with pytest.raises(InputError, match="several facilities"):
+        propulsion_split(both, runs)
