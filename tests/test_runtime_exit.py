@@ -74,15 +74,16 @@ def _builds(cache: Path) -> list[str]:
     return sorted(p.name for p in cache.glob("casship-cc-*")) if cache.is_dir() else []
 
 
-def _record(tmp_path: Path) -> Path:
+def _record(tmp_path: Path, seconds: float = 300.0) -> Path:
     m = cs.models.nomoto_first_order(K=0.1, T=20.0)
-    t = np.arange(0, 300.0, 1.0)
+    t = np.arange(0, seconds, 1.0)
     tr = cs.simulate(m, m.states(), t, {"delta": 0.15 * np.sign(np.sin(2 * np.pi * t / 120))})
     return cs.measure(tr, m, {"psi": 0.01}, seed=3).to_csv(tmp_path / "rec.csv")
 
 
-def _identify(tmp_path: Path, cache: Path, cc: str) -> subprocess.Popen:
-    args = [sys.executable, "-m", "casship", "identify", str(_record(tmp_path)), "--model", "nomoto1",
+def _identify(tmp_path: Path, cache: Path, cc: str, seconds: float = 300.0) -> subprocess.Popen:
+    """``casship identify`` on a record of ``seconds`` (evaluated interpreted while its compiles run)."""
+    args = [sys.executable, "-m", "casship", "identify", str(_record(tmp_path, seconds)), "--model", "nomoto1",
             "--free", "K,T", "--guess", "K=0.05,T=10", "--R", "psi=1e-4", "--out", str(tmp_path / "fit.json")]
     return subprocess.Popen(args, cwd=tmp_path, env=_env(cache, cc), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
@@ -147,7 +148,10 @@ print("result", h.function(x=[1, 2])["y"])
 def test_ctrl_c_during_a_compile_exits_130_at_once_with_no_build_folder(tmp_path):
     cc, pids = _slow_compiler(tmp_path, 60)
     cache = tmp_path / "cache"
-    proc = _identify(tmp_path, cache, cc)
+    # a long record: the fit (interpreted while its compile runs) takes seconds after the compile starts,
+    # so the Ctrl-C meets the command at work (on 300 samples it wrote its result within 0.2 s, and a
+    # Ctrl-C after that is rightly ignored: the result is out)
+    proc = _identify(tmp_path, cache, cc, seconds=200_000.0)
     try:
         _wait_for(lambda: _pids(pids) and _builds(cache), 60, "the compile to start")
         sent = time.monotonic()
