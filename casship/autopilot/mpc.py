@@ -4,10 +4,16 @@ The prediction model is the first-order Nomoto model of the design with the stee
 driven by its rate and a constant steering bias ``b`` (from the heading observer, which gives
 offset-free control in wind and current)::
 
-    e' = r,   r' = (K (delta + b) - r) / T,   delta' = u          (e = wrap(psi - command))
+    e' = r,   r' = (K (delta + w) - r) / T,   delta' = u          (e = wrap(psi - command))
 
 (the second-order model ``r/delta = K (1 + T3 s)/((1 + T1 s)(1 + T2 s))`` when it is known),
-discretised exactly (zero-order hold on ``u``) at the MPC period ``T_s``. Each solve minimises
+discretised exactly (zero-order hold on ``u``) at the MPC period ``T_s``. The disturbance of each
+step, ``w_k = b - f(r_d)`` with ``f(r) = s(r) - r / K``, adds to the bias the steering the
+nonlinear ship needs beyond the linear model's at the reference rate ``r_d`` of that step
+(``s`` the ship's steady steering, :func:`~casship.autopilot.plants.steering_feedforward`, the
+PID law's feed-forward): the linear model then plans only the deviation from the steady steering
+along the reference preview, and the steering limits still bound the total steering. Without a
+steering table ``f = 0``. Each solve minimises
 ``sum q_e e_k^2 + q_r r_k^2 + r_u u_k^2`` over ``N`` steps subject to ``|delta| <= delta_max``,
 ``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a soft limit). The quadratic program keeps
 the optimal-control structure (variables ``x0, u0, x1, u1, ..., xN``, the model as equality
@@ -59,6 +65,9 @@ class MPCAutopilot:
         Time between solves [s] (default: the period). Solving more often than the model's step
         (the plan's first rate applied until the next solve) keeps the feedback of a long horizon
         with a coarse step.
+    steering : SteeringFeedforward, optional
+        The nonlinear ship's steady steering ``s(r)``; the plan then asks ``s(r_d) - r_d / K``
+        more steering than the linear model along the reference preview (:meth:`feedforward`).
     """
 
     nomoto: Nomoto
@@ -72,6 +81,7 @@ class MPCAutopilot:
     r_u: float = 1.0
     reference: ReferenceModel | None = None
     replan: float | None = None
+    steering: object = None
     _solver: object = field(default=None, init=False, repr=False)
 
     MEMORY_LOG = ("chi_d", "r_d", "e")
@@ -92,6 +102,41 @@ class MPCAutopilot:
         """Order of the Nomoto prediction model (2 when ``T1, T2, T3`` are known)."""
         return 2 if self.nomoto.second_order else 1
 
+    def feedforward(self, r):
+        """``f(r) = s(r) - r / K``: the steady steering the nonlinear ship needs at the rate of turn
+        ``r`` beyond the linear model's (0 without a steering table).
+
+        Parameters
+        ----------
+        r : float or casadi.MX
+            Rate of turn [rad/s].
+        """
+        if self.steering is None:
+            return 0.0 * r
+        return self.steering(r) - r / self.nomoto.K
+
+    def disturbance(self, bias, rate0, rates):
+        """The disturbance ``w_k = b - (f(r_k) + f(r_{k+1})) / 2`` of each step (``1 x N``): the bias
+        less the extra steady steering at the reference rate over the step (its ends averaged).
+
+        Parameters
+        ----------
+        bias : float or casadi.MX
+            Steering bias estimate.
+        rate0 : float or casadi.MX
+            Reference rate at the start of the horizon [rad/s].
+        rates : array or casadi.MX
+            Reference rate at the end of each step (``1 x N``, the preview's second row).
+        """
+        N = int(self.horizon)
+        if isinstance(rates, (ca.MX, ca.SX)):
+            r = ca.horzcat(rate0, ca.reshape(rates, 1, N))
+            f = ca.horzcat(*[self.feedforward(r[0, k]) for k in range(N + 1)])
+            return bias - 0.5 * (f[0, :N] + f[0, 1:])
+        r = np.concatenate([[float(rate0)], np.ravel(rates)])
+        f = np.array([float(self.feedforward(v)) for v in r])
+        return (bias - 0.5 * (f[:-1] + f[1:])).reshape(1, N)
+
     def model(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Exact discretisation ``x+ = A x + B u + E b`` at ``period`` of ``[e, r, delta]`` (first
         order) or ``[e, r, xi, delta]`` (second order, the observer form of
@@ -109,16 +154,17 @@ class MPCAutopilot:
         """The QP in optimal-control form for HPIPM (``casadi.qpsol``, the stage structure detected
         from the variable and constraint order): variables ``[x0 u0 x1 u1 ... xN]`` with ``u_k`` the
         steering rate and a slack ``s_k >= 0`` of the turn-rate limit, constraints stage by stage:
-        the model ``A x_k + B u_k + E b - x_{k+1} = 0``, then ``|r_k| <= r_max + s_k`` (soft: an
+        the model ``A x_k + B u_k + E w_k - x_{k+1} = 0``, then ``|r_k| <= r_max + s_k`` (soft: an
         estimated rate a little above the limit must not make the problem infeasible; an exact
         penalty on the slack makes the limit hard whenever it can be met), bounds on the steering
         and its rate, ``x0`` fixed by its bounds. Returns ``mpc(x0, b, target, U_guess) -> (u0, X,
-        U)`` (an MX Function)."""
+        U)`` (an MX Function; ``b`` the disturbance ``w`` of each step, ``1 x N``, or one number for
+        all)."""
         A, B, E = (ca.DM(M) for M in self.model())
         N, nx = int(self.horizon), A.shape[0]
         X = [ca.SX.sym(f"x{k}", nx) for k in range(N + 1)]
         U = [ca.SX.sym(f"u{k}", 2) for k in range(N)]
-        b, target = ca.SX.sym("b"), ca.SX.sym("target", 2, N)
+        b, target = ca.SX.sym("b", 1, N), ca.SX.sym("target", 2, N)
         # exact (l1) penalty on the slack: the largest price the cost can put on the rate of turn of
         # one step (a course error of pi on every later step, moved by the period) bounds the
         # multiplier; a small quadratic term keeps the Hessian definite. (A larger weight only
@@ -128,7 +174,7 @@ class MPCAutopilot:
         z, g, lbg, ubg, cost = [], [], [], [], 0
         for k in range(N):
             z += [X[k], U[k]]
-            g.append(ca.mtimes(A, X[k]) + B * U[k][0] + E * b - X[k + 1])
+            g.append(ca.mtimes(A, X[k]) + B * U[k][0] + E * b[0, k] - X[k + 1])
             lbg += [0.0] * nx
             ubg += [0.0] * nx
             if k > 0:
@@ -138,7 +184,7 @@ class MPCAutopilot:
             cost += (self.q_e * (X[k + 1][0] - target[0, k]) ** 2 + self.q_r * (X[k + 1][1] - target[1, k]) ** 2
                      + self.r_u * U[k][0] ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
         z.append(X[N])
-        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "p": ca.vertcat(b, ca.vec(target)), "f": cost,
+        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "p": ca.vertcat(ca.vec(b), ca.vec(target)), "f": cost,
                                           "g": ca.vertcat(*g)},
                       {"error_on_fail": False, "print_time": False})
         # bounds: x0 fixed; the steering limited from x1 on; course error, rate and the internal
@@ -151,13 +197,13 @@ class MPCAutopilot:
             lo[ix[k] + nx - 1], hi[ix[k] + nx - 1] = -self.steer_max, self.steer_max
         lo[iu], hi[iu] = -self.rate_max, self.rate_max
         lo[[i + 1 for i in iu]] = 0.0
-        x0, bm = ca.MX.sym("x0", nx), ca.MX.sym("b")
+        x0, bm = ca.MX.sym("x0", nx), ca.MX.sym("b", 1, N)
         tm, U_guess = ca.MX.sym("target", 2, N), ca.MX.sym("U_guess", 1, N)
         lbx = ca.vertcat(x0, ca.DM(lo[nx:]))
         ubx = ca.vertcat(x0, ca.DM(hi[nx:]))
         guess = ca.MX.zeros(nv)
         guess[iu] = U_guess.T
-        sol = qp(x0=guess, p=ca.vertcat(bm, ca.vec(tm)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg), ubg=ca.DM(ubg))
+        sol = qp(x0=guess, p=ca.vertcat(ca.vec(bm), ca.vec(tm)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg), ubg=ca.DM(ubg))
         zs = sol["x"]
         Xs = ca.horzcat(*[zs[ix[k]:ix[k] + nx] for k in range(N + 1)])
         Us = ca.horzcat(*[zs[iu[k]] for k in range(N)])
@@ -220,7 +266,8 @@ class MPCAutopilot:
         dt : float
             Loop period [s].
         bias : float
-            Steering bias estimate (the heading observer's ``b``).
+            Steering bias estimate (the heading observer's ``b``); the plan's disturbance adds the
+            extra steady steering along the preview (:meth:`disturbance`).
 
         Returns
         -------
@@ -236,15 +283,16 @@ class MPCAutopilot:
         if mem["count"] % every == 0:
             U_guess = np.hstack([mem["U"][:, 1:], mem["U"][:, -1:]])          # the last plan, shifted
             delta = mem["steer_cmd"]
+            target = self._preview(mem["xr"], ref)
+            w = self.disturbance(bias, mem["xr"][1] if self.reference is not None else 0.0, target[1])
             if self.order == 1:
                 x0 = [e, r, delta]
             else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
                 sys = self.nomoto.system(2)
-                x0 = [e, r, -sys.A[1, 1] * r - sys.B[1, 0] * (delta + bias), delta]
-            out = self._solve({"x0": np.array(x0), "b": bias, "target": self._preview(mem["xr"], ref),
-                               "U_guess": U_guess})
+                x0 = [e, r, -sys.A[1, 1] * r - sys.B[1, 0] * (delta + w[0, 0]), delta]
+            out = self._solve({"x0": np.array(x0), "b": w, "target": target, "U_guess": U_guess})
             mem["X"], mem["U"] = np.asarray(out["X"]), np.asarray(out["U"])
-            self._check(mem["X"], mem["U"], np.array(x0), bias)
+            self._check(mem["X"], mem["U"], np.array(x0), w)
             mem["rate"] = float(out["u0"])
         mem["count"] += 1
         cmd = float(np.clip(mem["steer_cmd"] + mem["rate"] * dt, -self.steer_max, self.steer_max))
@@ -265,7 +313,7 @@ class MPCAutopilot:
             bad.append("steering rate")
         if np.max(np.abs(X[n - 1, 1:])) > self.steer_max * (1 + tol) + 1e-12:
             bad.append("steering angle")
-        resid = X[:, 1:] - (A @ X[:, :-1] + B @ U + E * bias)
+        resid = X[:, 1:] - (A @ X[:, :-1] + B @ U + E @ np.broadcast_to(np.reshape(bias, (1, -1)), U.shape))
         scale = 1 + np.max(np.abs(X))
         if np.max(np.abs(resid)) > 1e-6 * scale or np.max(np.abs(X[:, 0] - x0)) > 1e-6 * scale:
             bad.append("the model")
@@ -336,14 +384,15 @@ class MPCLaw:
         xr, cmd, rate, count, plan = mem[0:3], mem[3], mem[4], mem[5], mem[6:].T
         xr_next = mpc._ref_step()(xr, ref, self.dt) if mpc.reference is not None else ca.vertcat(ref, 0, 0)
         e = ca.atan2(ca.sin(chi - ref), ca.cos(chi - ref))
+        target = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix()), ca.vertcat(
+            ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])), 2, N)
+        w = mpc.disturbance(bias, xr_next[1] if mpc.reference is not None else ca.MX(0), target[1, :])
         if mpc.order == 1:
             x0 = ca.vertcat(e, r, cmd)
         else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
             sys2 = mpc.nomoto.system(2)
-            x0 = ca.vertcat(e, r, -float(sys2.A[1, 1]) * r - float(sys2.B[1, 0]) * (cmd + bias), cmd)
-        target = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix()), ca.vertcat(
-            ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])), 2, N)
-        a = [ca.MX.sym(k, *sh) for k, sh in (("x0", x0.shape), ("b", (1, 1)), ("target", (2, N)), ("plan", (1, N)),
+            x0 = ca.vertcat(e, r, -float(sys2.A[1, 1]) * r - float(sys2.B[1, 0]) * (cmd + w[0, 0]), cmd)
+        a = [ca.MX.sym(k, *sh) for k, sh in (("x0", x0.shape), ("b", (1, N)), ("target", (2, N)), ("plan", (1, N)),
                                                ("rate", (1, 1)))]
         shifted = ca.horzcat(a[3][:, 1:], a[3][:, -1:])
         out = mpc._solver.call({"x0": a[0], "b": a[1], "target": a[2], "U_guess": shifted})
@@ -351,7 +400,7 @@ class MPCLaw:
         hold = ca.Function("mpc_hold", a, [a[4], a[3]])
         branch = ca.Function.conditional("mpc_period", [hold], solve)
         due = ca.if_else(ca.fmod(count, self.every) == 0, 1, 0)
-        rate_next, plan_next = branch(due, x0, bias, target, plan, rate)
+        rate_next, plan_next = branch(due, x0, w, target, plan, rate)
         cmd_next = ca.fmin(ca.fmax(cmd + rate_next * self.dt, -mpc.steer_max), mpc.steer_max)
         chi_d = xr_next[0]
         return ca.Function("mpc_law", [mem, ref, chi, r, dt, U, st, bias],
@@ -397,4 +446,4 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
                         replan=max(s.dt, round(period / 10 / s.dt) * s.dt),
                         q_e=1.0 / np.radians(1.0) ** 2, q_r=(1.0 / s.r_max**2) if q_r is None else q_r,
                         r_u=(100.0 / s.steer_rate_max) ** 2 if r_u is None else r_u,
-                        reference=design.autopilot.reference)
+                        reference=design.autopilot.reference, steering=design.autopilot.steering)
