@@ -14,8 +14,11 @@ nonlinear ship needs beyond the linear model's at the reference rate ``r_d`` of 
 PID law's feed-forward): the linear model then plans only the deviation from the steady steering
 along the reference preview, and the steering limits still bound the total steering. Without a
 steering table ``f = 0``. Each solve minimises
-``sum q_e e_k^2 + q_r r_k^2 + r_u u_k^2`` over ``N`` steps subject to ``|delta| <= delta_max``,
-``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a soft limit). The quadratic program keeps
+``sum q_e (e_k - e_d,k)^2 + q_r (r_k - r_d,k)^2 + r_u (u_k - u_d,k)^2`` over ``N`` steps subject to ``|delta| <= delta_max``,
+``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a soft limit); ``e_d, r_d`` are the
+reference model's preview and ``u_d`` the rate of the steering that holds the model on it,
+``s(r_d) + (T / K) a_d`` (the PID law's low-frequency feed-forward), so that following the reference
+costs nothing and the weights price only the departures from it. The quadratic program keeps
 the optimal-control structure (variables ``x0, u0, x1, u1, ..., xN``, the model as equality
 constraints stage by stage) and is solved by HPIPM (Frison & Diehl 2020), the structure-exploiting
 interior-point QP solver shipped with CasADi (``casadi.conic(..., "hpipm")``), whose cost grows
@@ -137,6 +140,29 @@ class MPCAutopilot:
         f = np.array([float(self.feedforward(v)) for v in r])
         return (bias - 0.5 * (f[:-1] + f[1:])).reshape(1, N)
 
+    def steering_rates(self, ref0, previews):
+        """Rate of the reference steering ``s(r_d) + (T / K) a_d`` over each step (``1 x N``):
+        ``u_d,k`` of the cost (``s(r) = r / K`` without a steering table).
+
+        Parameters
+        ----------
+        ref0 : sequence
+            Reference rate and acceleration at the start of the horizon.
+        previews : array or casadi.MX
+            Reference rate and acceleration at the end of each step (``2 x N``).
+        """
+        N, K, m = int(self.horizon), self.nomoto.K, self.nomoto.T / self.nomoto.K
+        symbolic = isinstance(previews, (ca.MX, ca.SX))
+        cat = ca.horzcat if symbolic else (lambda *a: np.hstack([np.reshape(v, (1, -1)) for v in a]))
+        r = cat(ref0[0], ca.reshape(previews[0, :], 1, N) if symbolic else previews[0])
+        a = cat(ref0[1], ca.reshape(previews[1, :], 1, N) if symbolic else previews[1])
+        if symbolic:
+            steady = ca.horzcat(*[self.feedforward(r[0, k]) + r[0, k] / K for k in range(N + 1)])
+        else:
+            steady = np.array([[float(self.feedforward(v)) + v / K for v in np.ravel(r)]])
+        d = steady + m * a
+        return (d[:, 1:] - d[:, :-1]) / self.period
+
     def model(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Exact discretisation ``x+ = A x + B u + E b`` at ``period`` of ``[e, r, delta]`` (first
         order) or ``[e, r, xi, delta]`` (second order, the observer form of
@@ -159,12 +185,12 @@ class MPCAutopilot:
         penalty on the slack makes the limit hard whenever it can be met), bounds on the steering
         and its rate, ``x0`` fixed by its bounds. Returns ``mpc(x0, b, target, U_guess) -> (u0, X,
         U)`` (an MX Function; ``b`` the disturbance ``w`` of each step, ``1 x N``, or one number for
-        all)."""
+        all; the optional ``u_ref``, ``1 x N``, the steering rate the cost measures from, default 0)."""
         A, B, E = (ca.DM(M) for M in self.model())
         N, nx = int(self.horizon), A.shape[0]
         X = [ca.SX.sym(f"x{k}", nx) for k in range(N + 1)]
         U = [ca.SX.sym(f"u{k}", 2) for k in range(N)]
-        b, target = ca.SX.sym("b", 1, N), ca.SX.sym("target", 2, N)
+        b, target, uref = ca.SX.sym("b", 1, N), ca.SX.sym("target", 2, N), ca.SX.sym("u_ref", 1, N)
         # exact (l1) penalty on the slack: the largest price the cost can put on the rate of turn of
         # one step (a course error of pi on every later step, moved by the period) bounds the
         # multiplier; a small quadratic term keeps the Hessian definite. (A larger weight only
@@ -182,9 +208,10 @@ class MPCAutopilot:
                 lbg += [-np.inf, -self.r_max]
                 ubg += [self.r_max, np.inf]
             cost += (self.q_e * (X[k + 1][0] - target[0, k]) ** 2 + self.q_r * (X[k + 1][1] - target[1, k]) ** 2
-                     + self.r_u * U[k][0] ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
+                     + self.r_u * (U[k][0] - uref[0, k]) ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
         z.append(X[N])
-        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "p": ca.vertcat(ca.vec(b), ca.vec(target)), "f": cost,
+        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "p": ca.vertcat(ca.vec(b), ca.vec(target), ca.vec(uref)),
+                                          "f": cost,
                                           "g": ca.vertcat(*g)},
                       {"error_on_fail": False, "print_time": False})
         # bounds: x0 fixed; the steering limited from x1 on; course error, rate and the internal
@@ -198,36 +225,43 @@ class MPCAutopilot:
         lo[iu], hi[iu] = -self.rate_max, self.rate_max
         lo[[i + 1 for i in iu]] = 0.0
         x0, bm = ca.MX.sym("x0", nx), ca.MX.sym("b", 1, N)
-        tm, U_guess = ca.MX.sym("target", 2, N), ca.MX.sym("U_guess", 1, N)
+        tm, U_guess, um = ca.MX.sym("target", 2, N), ca.MX.sym("U_guess", 1, N), ca.MX.sym("u_ref", 1, N)
         lbx = ca.vertcat(x0, ca.DM(lo[nx:]))
         ubx = ca.vertcat(x0, ca.DM(hi[nx:]))
         guess = ca.MX.zeros(nv)
         guess[iu] = U_guess.T
-        sol = qp(x0=guess, p=ca.vertcat(ca.vec(bm), ca.vec(tm)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg), ubg=ca.DM(ubg))
+        sol = qp(x0=guess, p=ca.vertcat(ca.vec(bm), ca.vec(tm), ca.vec(um)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg), ubg=ca.DM(ubg))
         zs = sol["x"]
         Xs = ca.horzcat(*[zs[ix[k]:ix[k] + nx] for k in range(N + 1)])
         Us = ca.horzcat(*[zs[iu[k]] for k in range(N)])
-        return ca.Function("mpc", [x0, bm, tm, U_guess], [Us[0, 0], Xs, Us], ["x0", "b", "target", "U_guess"],
-                           ["u0", "X", "U"])
+        return ca.Function("mpc", [x0, bm, tm, U_guess, um], [Us[0, 0], Xs, Us],
+                           ["x0", "b", "target", "U_guess", "u_ref"], ["u0", "X", "U"])
 
-    def preview_matrix(self) -> np.ndarray:
-        """``(2 N, 3)`` matrix taking the reference model's state relative to the command (a fixed
-        point) to its course error and rate over the horizon, column by column (the linear model,
-        no rate saturation, stepped exactly at ``period``)."""
+    def preview_matrix(self, rows: int = 2) -> np.ndarray:
+        """``(rows N, 3)`` matrix taking the reference model's state relative to the command (a fixed
+        point) to its course error and rate (``rows = 3``: and acceleration) over the horizon, step
+        by step (the linear model, no rate saturation, stepped exactly at ``period``).
+
+        Parameters
+        ----------
+        rows : {2, 3}
+            Course error and rate, or also the acceleration.
+        """
         N = int(self.horizon)
         if self.reference is None:
-            return np.zeros((2 * N, 3))
+            return np.zeros((rows * N, 3))
         Ad = expm(np.asarray(self.reference.system().A) * self.period)
-        rows, M = [], np.eye(3)
+        out, M = [], np.eye(3)
         for _ in range(N):
             M = Ad @ M
-            rows.append(M[:2])
-        return np.vstack(rows)
+            out.append(M[:rows])
+        return np.vstack(out)
 
-    def _preview(self, xr: np.ndarray, ref: float) -> np.ndarray:
-        """Course error and rate of the reference model over the horizon (``2 x N``)."""
+    def _preview(self, xr: np.ndarray, ref: float, rows: int = 2) -> np.ndarray:
+        """Course error and rate (and acceleration) of the reference model over the horizon
+        (``rows x N``)."""
         z = np.array([float(wrap(xr[0] - ref)), xr[1], xr[2]])
-        return (self.preview_matrix() @ z).reshape(int(self.horizon), 2).T
+        return (self.preview_matrix(rows) @ z).reshape(int(self.horizon), rows).T
 
     def law(self, dt: float) -> "MPCLaw":
         """This MPC as the law of the compiled closed loop at loop period ``dt`` (:class:`MPCLaw`).
@@ -284,13 +318,16 @@ class MPCAutopilot:
             U_guess = np.hstack([mem["U"][:, 1:], mem["U"][:, -1:]])          # the last plan, shifted
             delta = mem["steer_cmd"]
             target = self._preview(mem["xr"], ref)
-            w = self.disturbance(bias, mem["xr"][1] if self.reference is not None else 0.0, target[1])
+            full = self._preview(mem["xr"], ref, 3)
+            xr0 = mem["xr"] if self.reference is not None else np.zeros(3)
+            w = self.disturbance(bias, xr0[1], target[1])
+            u_ref = self.steering_rates(xr0[1:], full[1:])
             if self.order == 1:
                 x0 = [e, r, delta]
             else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
                 sys = self.nomoto.system(2)
                 x0 = [e, r, -sys.A[1, 1] * r - sys.B[1, 0] * (delta + w[0, 0]), delta]
-            out = self._solve({"x0": np.array(x0), "b": w, "target": target, "U_guess": U_guess})
+            out = self._solve({"x0": np.array(x0), "b": w, "target": target, "U_guess": U_guess, "u_ref": u_ref})
             mem["X"], mem["U"] = np.asarray(out["X"]), np.asarray(out["U"])
             self._check(mem["X"], mem["U"], np.array(x0), w)
             mem["rate"] = float(out["u0"])
@@ -384,23 +421,26 @@ class MPCLaw:
         xr, cmd, rate, count, plan = mem[0:3], mem[3], mem[4], mem[5], mem[6:].T
         xr_next = mpc._ref_step()(xr, ref, self.dt) if mpc.reference is not None else ca.vertcat(ref, 0, 0)
         e = ca.atan2(ca.sin(chi - ref), ca.cos(chi - ref))
-        target = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix()), ca.vertcat(
-            ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])), 2, N)
-        w = mpc.disturbance(bias, xr_next[1] if mpc.reference is not None else ca.MX(0), target[1, :])
+        full = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix(3)), ca.vertcat(
+            ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])), 3, N)
+        target = full[:2, :]
+        xr0 = xr_next if mpc.reference is not None else ca.MX.zeros(3)
+        w = mpc.disturbance(bias, xr0[1], target[1, :])
+        u_ref = mpc.steering_rates([xr0[1], xr0[2]], full[1:, :])
         if mpc.order == 1:
             x0 = ca.vertcat(e, r, cmd)
         else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
             sys2 = mpc.nomoto.system(2)
             x0 = ca.vertcat(e, r, -float(sys2.A[1, 1]) * r - float(sys2.B[1, 0]) * (cmd + w[0, 0]), cmd)
         a = [ca.MX.sym(k, *sh) for k, sh in (("x0", x0.shape), ("b", (1, N)), ("target", (2, N)), ("plan", (1, N)),
-                                               ("rate", (1, 1)))]
+                                               ("rate", (1, 1)), ("u_ref", (1, N)))]
         shifted = ca.horzcat(a[3][:, 1:], a[3][:, -1:])
-        out = mpc._solver.call({"x0": a[0], "b": a[1], "target": a[2], "U_guess": shifted})
+        out = mpc._solver.call({"x0": a[0], "b": a[1], "target": a[2], "U_guess": shifted, "u_ref": a[5]})
         solve = ca.Function("mpc_solve", a, [out["u0"], out["U"]])
         hold = ca.Function("mpc_hold", a, [a[4], a[3]])
         branch = ca.Function.conditional("mpc_period", [hold], solve)
         due = ca.if_else(ca.fmod(count, self.every) == 0, 1, 0)
-        rate_next, plan_next = branch(due, x0, w, target, plan, rate)
+        rate_next, plan_next = branch(due, x0, w, target, plan, rate, u_ref)
         cmd_next = ca.fmin(ca.fmax(cmd + rate_next * self.dt, -mpc.steer_max), mpc.steer_max)
         chi_d = xr_next[0]
         return ca.Function("mpc_law", [mem, ref, chi, r, dt, U, st, bias],
