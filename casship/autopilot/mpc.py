@@ -14,11 +14,11 @@ nonlinear ship needs beyond the linear model's at the reference rate ``r_d`` of 
 PID law's feed-forward): the linear model then plans only the deviation from the steady steering
 along the reference preview, and the steering limits still bound the total steering. Without a
 steering table ``f = 0``. Each solve minimises
-``sum q_e (e_k - e_d,k)^2 + q_r (r_k - r_d,k)^2 + r_u (u_k - u_d,k)^2`` over ``N`` steps subject to ``|delta| <= delta_max``,
-``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a soft limit); ``e_d, r_d`` are the
-reference model's preview and ``u_d`` the rate of the steering that holds the model on it,
-``s(r_d) + (T / K) a_d`` (the PID law's low-frequency feed-forward), so that following the reference
-costs nothing and the weights price only the departures from it. The quadratic program keeps
+``sum q_e (e_k - e_d,k)^2 + q_r (r_k - r_d,k)^2 + r_u (u_k - u_d,k)^2`` over ``N`` steps subject
+to ``|delta| <= delta_max``, ``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a
+soft limit); ``e_d, r_d`` are the reference model's preview and ``u_d`` the rate of the steering
+that holds the model on it, ``s(r_d) + (T / K) a_d`` (the PID law's low-frequency feed-forward),
+so that following the reference costs nothing and the weights price only the departures from it. The quadratic program keeps
 the optimal-control structure (variables ``x0, u0, x1, u1, ..., xN``, the model as equality
 constraints stage by stage) and is solved by HPIPM (Frison & Diehl 2020), the structure-exploiting
 interior-point QP solver shipped with CasADi (``casadi.conic(..., "hpipm")``), whose cost grows
@@ -210,9 +210,8 @@ class MPCAutopilot:
             cost += (self.q_e * (X[k + 1][0] - target[0, k]) ** 2 + self.q_r * (X[k + 1][1] - target[1, k]) ** 2
                      + self.r_u * (U[k][0] - uref[0, k]) ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
         z.append(X[N])
-        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "p": ca.vertcat(ca.vec(b), ca.vec(target), ca.vec(uref)),
-                                          "f": cost,
-                                          "g": ca.vertcat(*g)},
+        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "f": cost, "g": ca.vertcat(*g),
+                                          "p": ca.vertcat(ca.vec(b), ca.vec(target), ca.vec(uref))},
                       {"error_on_fail": False, "print_time": False})
         # bounds: x0 fixed; the steering limited from x1 on; course error, rate and the internal
         # state of the second-order model far outside any plan (HPIPM wants finite bounds)
@@ -230,7 +229,8 @@ class MPCAutopilot:
         ubx = ca.vertcat(x0, ca.DM(hi[nx:]))
         guess = ca.MX.zeros(nv)
         guess[iu] = U_guess.T
-        sol = qp(x0=guess, p=ca.vertcat(ca.vec(bm), ca.vec(tm), ca.vec(um)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg), ubg=ca.DM(ubg))
+        sol = qp(x0=guess, p=ca.vertcat(ca.vec(bm), ca.vec(tm), ca.vec(um)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg),
+                 ubg=ca.DM(ubg))
         zs = sol["x"]
         Xs = ca.horzcat(*[zs[ix[k]:ix[k] + nx] for k in range(N + 1)])
         Us = ca.horzcat(*[zs[iu[k]] for k in range(N)])
@@ -458,7 +458,10 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     horizon then shorter), re-planned ten times per period; weights: course error 1/(1 deg)^2, yaw
     rate ``1/r_max^2`` (both against the reference model's preview), steering rate
     ``(100 / rate_max)^2`` (a steering rate of 1 % of the limit costs as much as 1 deg of course
-    error).
+    error); the steady steering of the design's PID law (``design.autopilot.steering``) along the
+    preview. In the design's loop (``design.simulate(controller=mpc)``) the heading observer runs on
+    the MPC's model (:func:`~casship.autopilot.estimation.heading_observer` with ``steering`` and
+    ``second``).
 
     Parameters
     ----------
