@@ -10,12 +10,19 @@ after it (15-20 % of the kvlcc2-marin study's CPU time with two BLAS threads). A
 may sum a product's terms in another order than a single thread does (results that differ in the
 last bits): code whose numbers must not depend on the limit runs inside :func:`blas_threads` with
 ``None``, the count the BLAS had before any limit of this module.
+
+CasADi is not safe to call from several threads at once (building or calling Functions from two
+threads can crash the process). Cases handed to a Dask scheduler therefore run under a process-wide
+lock: a worker process with several threads, or several workers in one process (``processes=False``),
+runs its cases one at a time. Parallelism comes from worker processes (``--nthreads 1``, several
+processes); in a worker process with one thread the lock is never contended and costs nothing.
 """
 from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from functools import partial
+from threading import Lock
 from typing import Callable, Iterable, Iterator, Sequence
 
 from .errors import InputError
@@ -71,7 +78,7 @@ def run_cases(func: Callable, cases: Iterable, *, workers: int | None = None, sc
             raise SetupError("a Dask scheduler was given but dask.distributed is not installed "
                                "(pip install 'casship[dask]')") from exc
         with Client(scheduler) as client:
-            futures = client.map(func, cases, pure=False)
+            futures = client.map(partial(_one_at_a_time, func), cases, pure=False)
             _wait(dask_completed(futures), len(cases), label, unit)
             return client.gather(futures)
     if workers == 1 or len(cases) <= 1:
@@ -152,6 +159,15 @@ def blas_threads(n: int | None) -> Iterator[None]:
 def _limited(func: Callable, n: int, case):
     """``func(case)`` with the BLAS held to ``n`` threads."""
     with blas_threads(n):
+        return func(case)
+
+
+_CASADI_LOCK = Lock()     # one case at a time per process: CasADi is not thread-safe
+
+
+def _one_at_a_time(func: Callable, case):
+    """``func(case)`` holding this process's case lock (a Dask worker may run cases in threads)."""
+    with _CASADI_LOCK:
         return func(case)
 
 

@@ -29,7 +29,7 @@ import numpy as np
 import casship as cs
 from casship.design import (Approach, ParameterBelief, TrialLimits, design_trials, fit_noise, get_target,
                             standard_trials, trial_information)
-from casship.identify import Prior, read_params
+from casship.identify import Prior, read_fit_file
 from casship.models import kvlcc2
 from casship.studies import Study, run_study
 
@@ -99,7 +99,8 @@ def fit_belief(fit_file: Path, covariance: str | None = None):
     cover; the noise is the fit's own (:func:`casship.design.fit_noise`); the last item is the
     file's heading model discrepancy [rad^2/s] (0 when it carries none).
     """
-    model, p, unc = read_params(fit_file, "kvlcc2", uncertainty=True)     # the file's covariance checked too
+    fit = read_fit_file(fit_file, "kvlcc2")             # the file's covariance checked too
+    model, p, unc = fit.model, fit.params, fit.uncertainty
     values = model.param_dict(p)
     belief = ParameterBelief.from_fit(fit_file, covariance=covariance, params=values)
     held = {n: s for n, s in prior_std(model, HELD_PRIOR).items() if n not in belief.names}

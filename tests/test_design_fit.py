@@ -14,7 +14,7 @@ import pytest
 from casship.cli import main
 from casship.design import COVARIANCES, ParameterBelief, covariance_kind, fit_noise
 from casship.gaussian import Gaussian
-from casship.identify import FitResult, ParameterUncertainty, read_params
+from casship.identify import FitResult, ParameterUncertainty, read_fit_file, read_params
 from casship.models import kvlcc2
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,7 +64,8 @@ def fit_files(tmp_path_factory):
 
 def test_belief_from_a_fit_file_is_its_calibrated_covariance_block(fit_files):
     (path, mats), (plain, plain_mats) = fit_files
-    model, p, unc = read_params(path, "kvlcc2", uncertainty=True)
+    read = read_fit_file(path, "kvlcc2")
+    model, p, unc = read.model, read.params, read.uncertainty
     belief = ParameterBelief.from_fit(path, params=model.param_dict(p))
     assert belief.kind == "calibrated" and "jackknife" in belief.source and path.name in belief.source
     assert belief.names == tuple(JACK)

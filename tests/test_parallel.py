@@ -71,6 +71,31 @@ def test_a_studys_cases_on_a_two_worker_dask_cluster_give_the_serial_numbers():
     assert not np.array_equal(serial[0]["steer"], serial[1]["steer"])     # the filter changes the run
 
 
+_RUNNING = {"now": 0, "most": 0}
+
+
+def _sleepy_case(case: int) -> int:
+    """Counts how many cases of this process run at once (threaded Dask workers share the module)."""
+    import time
+
+    _RUNNING["now"] += 1
+    _RUNNING["most"] = max(_RUNNING["most"], _RUNNING["now"])
+    time.sleep(0.2)
+    _RUNNING["now"] -= 1
+    return case
+
+
+def test_dask_workers_in_one_process_run_cases_one_at_a_time():
+    """CasADi is not thread-safe: two threaded workers of one process must not run cases together."""
+    from dask import distributed
+
+    _RUNNING.update(now=0, most=0)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster:
+        assert run_cases(_sleepy_case, list(range(6)), scheduler=cluster.scheduler_address) == list(range(6))
+    assert _RUNNING["most"] == 1
+
+
 def test_unpicklable_case_function_fails_loudly():
     with pytest.raises(Exception):
         run_cases(lambda c: c, [1, 2], workers=2)

@@ -7,7 +7,7 @@ import pytest
 
 import casship as cs
 from casship.cli import main
-from casship.identify import FitResult, ParameterUncertainty, read_params
+from casship.identify import FitResult, ParameterUncertainty, read_fit_file, read_params
 from casship.identify.verdict import Q_MAX_DEG2_PER_S
 
 
@@ -42,7 +42,7 @@ def test_a_non_symmetric_covariance_is_refused_naming_the_entry(fit_doc, tmp_pat
     bad["param_covariance"]["matrix"] = m.tolist()
     path = _write(tmp_path, bad)
     with pytest.raises(ValueError, match=r"param_covariance.matrix is not symmetric: entry \(K, T\)"):
-        read_params(path, uncertainty=True)
+        read_fit_file(path)
     assert _simulate(path, data, tmp_path) == 2
     assert "not symmetric: entry (K, T)" in capsys.readouterr().err
     # round-off is not refused (averaged away)
@@ -50,7 +50,7 @@ def test_a_non_symmetric_covariance_is_refused_naming_the_entry(fit_doc, tmp_pat
     m = np.asarray(ok["param_covariance"]["matrix"])
     m[0, 1] *= 1 + 1e-12
     ok["param_covariance"]["matrix"] = m.tolist()
-    assert read_params(_write(tmp_path, ok, "ok.json"), uncertainty=True)[2] is not None
+    assert read_fit_file(_write(tmp_path, ok, "ok.json")).uncertainty is not None
 
 
 def test_duplicated_names_are_refused_by_every_reader(fit_doc, tmp_path, capsys):
@@ -71,7 +71,7 @@ def test_duplicated_names_are_refused_by_every_reader(fit_doc, tmp_path, capsys)
     twice["param_covariance"]["values"] = [twice["params"]["K"]] * 2
     path = _write(tmp_path, twice, "names.json")
     with pytest.raises(ValueError, match=r"param_covariance: parameter name\(s\) \['K'\] given more than once"):
-        read_params(path, uncertainty=True)
+        read_fit_file(path)
     assert _simulate(path, data, tmp_path) == 2
     twice = json.loads(text)
     twice["free"] = ["K", "K"]
@@ -87,11 +87,11 @@ def test_model_discrepancy_bounds(fit_doc, tmp_path, q, ok):
     d["model_discrepancy"] = {"psi_variance_growth_deg2_per_s": q}
     path = _write(tmp_path, json.dumps(d).replace("NaN", '"nan"') if q != q else d)
     if ok:
-        assert read_params(path, uncertainty=True)[2].psi_variance_rate == pytest.approx(np.radians(np.radians(q)))
+        assert read_fit_file(path).uncertainty.psi_variance_rate == pytest.approx(np.radians(np.radians(q)))
     else:
         with pytest.raises(ValueError, match=r"model_discrepancy.psi_variance_growth_deg2_per_s must be a number in "
                                              r"\[0, 1000\] deg\^2/s"):
-            read_params(path, uncertainty=True)
+            read_fit_file(path)
     with pytest.raises(ValueError, match="psi_variance_rate"):
         ParameterUncertainty(["K"], [0.1], [[1e-4]], psi_variance_rate=1e300)
 
@@ -111,7 +111,7 @@ def test_null_covariances_name_the_field(fit_doc, tmp_path, capsys, field, where
     path = _write(tmp_path, d)
     with pytest.raises(ValueError, match=where):
         if field.startswith("param_covariance"):
-            read_params(path, uncertainty=True)
+            read_fit_file(path)
         else:
             FitResult.from_json(path)
     if field.startswith("param_covariance"):

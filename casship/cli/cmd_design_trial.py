@@ -99,7 +99,7 @@ def _discrepancy(args) -> tuple[float, str]:
     file's ``model_discrepancy``, else none."""
     import numpy as np
 
-    from ..identify import read_params
+    from ..identify import read_fit_file
 
     if args.discrepancy is not None:
         q = args.discrepancy
@@ -107,7 +107,7 @@ def _discrepancy(args) -> tuple[float, str]:
             raise InputError(f"--discrepancy-deg2-s: a heading variance growth in [0, 1e4] deg^2/s, got {q:g}")
         return float(np.radians(np.radians(q))), "--discrepancy-deg2-s"
     if args.params:
-        _, _, unc = read_params(args.params, args.model, uncertainty=True)
+        unc = read_fit_file(args.params, args.model).uncertainty
         q = getattr(unc, "psi_variance_rate", None) if unc is not None else None
         if q:
             return float(q), f"{args.params} (model_discrepancy)"

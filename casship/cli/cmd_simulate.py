@@ -108,11 +108,11 @@ def run(args) -> int:
     stamps = check_outputs({"--csv": args.csv, "--plot": args.plot}, overwrite=args.overwrite)
     unc, verdict_note = None, ""
     if args.params:
-        from ..identify import read_params
+        from ..identify import read_fit_file
 
         # the fitted variant, checked against the file, and the file's parameter covariance
-        model, p, unc = read_params(args.params, args.model, uncertainty=True)
-        unc = None if args.no_bands else unc
+        fit = read_fit_file(args.params, args.model)
+        model, p, unc = fit.model, fit.params, (None if args.no_bands else fit.uncertainty)
         verdict_note = _verdict_note(args.params)
     else:
         model = load_model(args.model)

@@ -205,7 +205,7 @@ class ParameterBelief:
         Parameters
         ----------
         uncertainty : casship.identify.ParameterUncertainty
-            E.g. the third value of ``read_params(path, model, uncertainty=True)``.
+            E.g. ``read_fit_file(path, model).uncertainty``.
         extra_std : mapping name -> float, optional
             Prior standard deviations of further parameters (independent of the rest, centred on
             ``params``); a name the uncertainty covers is an error.

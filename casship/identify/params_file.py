@@ -7,7 +7,7 @@ parameter vector, or refuses a model or parameter set other than the fitted one,
 
 A fit file also carries the uncertainty of the parameters a new run is replayed with
 (``"param_covariance"``: names, covariance matrix and where it comes from);
-``read_params(..., uncertainty=True)`` returns it as a :class:`ParameterUncertainty`, from which
+:func:`read_fit_file` returns it as a :class:`ParameterUncertainty` (``FitFile.uncertainty``), from which
 replays and manoeuvre simulations draw their prediction bands. A file may also carry a
 model-discrepancy estimate (``"model_discrepancy"``: ``psi_variance_growth_deg2_per_s``, a heading
 variance ``q t`` that the parameter band misses, growing with the time since the start, estimated
@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import InputError, InputTypeError
 
-__all__ = ["read_params", "replay_file", "check_model", "ParameterUncertainty", "load_fit_json", "SYMMETRY_TOL",
+__all__ = ["read_params", "read_fit_file", "FitFile", "replay_file", "check_model", "ParameterUncertainty", "load_fit_json", "SYMMETRY_TOL",
            "Q_MAX_DEG2_PER_S", "CovarianceKind", "COVARIANCE_KINDS", "kind_from_source"]
 
 #: Which covariance a Gaussian over parameters carries: a run-level calibration (``"calibrated"``,
@@ -318,8 +318,27 @@ def _checked_covariance(matrix, names, what: str) -> np.ndarray:
     return a
 
 
+@dataclass(frozen=True)
+class FitFile:
+    """A parameter file read once: the model it belongs to, its parameter vector and their uncertainty.
+
+    Parameters
+    ----------
+    model : Model
+        The model the parameters belong to (rebuilt with the file's options when named).
+    params : ndarray
+        The model's parameter vector with the file's values.
+    uncertainty : ParameterUncertainty or None
+        The file's parameter covariance and model discrepancy (None when it carries none).
+    """
+
+    model: object
+    params: np.ndarray
+    uncertainty: "ParameterUncertainty | None"
+
+
 def read_params(path, model=None, *, uncertainty: bool = False):
-    """The model a parameter file belongs to and its parameter vector (and their uncertainty).
+    """The model a parameter file belongs to and its parameter vector.
 
     Parameters
     ----------
@@ -327,27 +346,64 @@ def read_params(path, model=None, *, uncertainty: bool = False):
         JSON with key ``"params"`` (name -> value); a fit file also has ``"model"``,
         ``"model_options"`` and ``"param_set"``.
     model : Model, str or None
-        The model to apply the parameters to: a built model (checked against the file), a registered
-        name (built with the file's ``model_options`` when the file names the same model), or None
-        (the file's own model).
+        As for :func:`read_fit_file`.
     uncertainty : bool
-        Also return the file's :class:`ParameterUncertainty` (``None`` when it carries none).
+        Deprecated: also return the uncertainty (a third value). Use :func:`read_fit_file`, which
+        returns all three as one value.
 
     Returns
     -------
-    (Model, ndarray) or (Model, ndarray, ParameterUncertainty or None)
+    (Model, ndarray)
         The model and its parameter vector with the file's values.
 
     Raises
     ------
-    ValueError
-        For a file that is not such JSON, a model or parameter set other than the file's (naming
-        both), or parameter names the model lacks.
+    casship.errors.InputError
+        As :func:`read_fit_file`.
 
     Examples
     --------
     >>> model, p = read_params("fit.json", "kvlcc2")      # doctest: +SKIP
-    >>> model, p, unc = read_params("fit.json", "kvlcc2", uncertainty=True)   # doctest: +SKIP
+    """
+    read = read_fit_file(path, model)
+    if uncertainty:
+        import warnings
+
+        warnings.warn("read_params(..., uncertainty=True) is deprecated: read_fit_file(path, model) returns the "
+                      "model, the parameters and their uncertainty as one value", DeprecationWarning, stacklevel=2)
+        return read.model, read.params, read.uncertainty
+    return read.model, read.params
+
+
+def read_fit_file(path, model=None) -> FitFile:
+    """A parameter file's model, parameter vector and uncertainty (the file read and checked once).
+
+    Parameters
+    ----------
+    path : str or Path
+        JSON with key ``"params"`` (name -> value); a fit file also has ``"model"``,
+        ``"model_options"``, ``"param_set"``, and may carry ``"param_covariance"`` and
+        ``"model_discrepancy"``.
+    model : Model, str or None
+        The model to apply the parameters to: a built model (checked against the file), a registered
+        name (built with the file's ``model_options`` when the file names the same model), or None
+        (the file's own model).
+
+    Returns
+    -------
+    FitFile
+        ``.model``, ``.params`` and ``.uncertainty`` (None when the file carries no covariance).
+
+    Raises
+    ------
+    casship.errors.InputError
+        For a file that is not such JSON, a model or parameter set other than the file's (naming
+        both), parameter names the model lacks, or a covariance or discrepancy that is not valid.
+
+    Examples
+    --------
+    >>> fit = read_fit_file("fit.json", "kvlcc2")      # doctest: +SKIP
+    >>> fit.model, fit.params, fit.uncertainty          # doctest: +SKIP
     """
     from ..model import Model
     from ..models import get_model
@@ -366,11 +422,9 @@ def read_params(path, model=None, *, uncertainty: bool = False):
     elif not isinstance(model, Model):
         raise InputTypeError(f"model must be a casship Model, a registered name or None, got {type(model).__name__}")
     p = check_model(model, params, name=name, options=options, param_set=pset, source=str(path))
-    if not uncertainty:
-        return model, p
     cov = obj.get("param_covariance")
     if not cov:
-        return model, p, None
+        return FitFile(model, p, None)
     unc = ParameterUncertainty.from_dict(cov, str(path))
     check_model(model, dict(zip(unc.names, unc.values)), name=name, options=options, param_set=pset,
                 source=f"{path} (param_covariance)")
@@ -394,7 +448,7 @@ def read_params(path, model=None, *, uncertainty: bool = False):
                 raise InputError(f"{path}: model_discrepancy.estimated_with has parameters {base.names}, "
                                  f"param_covariance {unc.names}; they must be the same, in the same order")
             unc.discrepancy_covariance = base.covariance          # checked as it was read
-    return model, p, unc
+    return FitFile(model, p, unc)
 
 
 def check_model(model, params: dict, *, name=None, options=None, param_set: str = "", source: str = "the fit"):
@@ -470,5 +524,5 @@ def replay_file(path, data, model=None, *, uncertainty: bool = True, **options):
     """
     from ..validation import replay
 
-    model, p, unc = read_params(path, model, uncertainty=True)
-    return replay(model, data, p, uncertainty=unc if uncertainty else None, **options)
+    fit = read_fit_file(path, model)
+    return replay(fit.model, data, fit.params, uncertainty=fit.uncertainty if uncertainty else None, **options)
