@@ -421,26 +421,27 @@ class MPCLaw:
         xr, cmd, rate, count, plan = mem[0:3], mem[3], mem[4], mem[5], mem[6:].T
         xr_next = mpc._ref_step()(xr, ref, self.dt) if mpc.reference is not None else ca.vertcat(ref, 0, 0)
         e = ca.atan2(ca.sin(chi - ref), ca.cos(chi - ref))
-        full = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix(3)), ca.vertcat(
-            ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])), 3, N)
+        z = ca.vertcat(ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])
+        # the solve branch: preview, disturbance and reference steering are made only when a solve is due
+        a = [ca.MX.sym(k, *sh) for k, sh in (("e", (1, 1)), ("r", (1, 1)), ("cmd", (1, 1)), ("bias", (1, 1)),
+                                               ("z", (3, 1)), ("plan", (1, N)), ("rate", (1, 1)))]
+        full = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix(3)), a[4]), 3, N)
         target = full[:2, :]
-        xr0 = xr_next if mpc.reference is not None else ca.MX.zeros(3)
-        w = mpc.disturbance(bias, xr0[1], target[1, :])
-        u_ref = mpc.steering_rates([xr0[1], xr0[2]], full[1:, :])
+        z0 = a[4] if mpc.reference is not None else ca.MX.zeros(3)
+        w = mpc.disturbance(a[3], z0[1], target[1, :])
+        u_ref = mpc.steering_rates([z0[1], z0[2]], full[1:, :])
         if mpc.order == 1:
-            x0 = ca.vertcat(e, r, cmd)
+            x0 = ca.vertcat(a[0], a[1], a[2])
         else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
             sys2 = mpc.nomoto.system(2)
-            x0 = ca.vertcat(e, r, -float(sys2.A[1, 1]) * r - float(sys2.B[1, 0]) * (cmd + w[0, 0]), cmd)
-        a = [ca.MX.sym(k, *sh) for k, sh in (("x0", x0.shape), ("b", (1, N)), ("target", (2, N)), ("plan", (1, N)),
-                                               ("rate", (1, 1)), ("u_ref", (1, N)))]
-        shifted = ca.horzcat(a[3][:, 1:], a[3][:, -1:])
-        out = mpc._solver.call({"x0": a[0], "b": a[1], "target": a[2], "U_guess": shifted, "u_ref": a[5]})
+            x0 = ca.vertcat(a[0], a[1], -float(sys2.A[1, 1]) * a[1] - float(sys2.B[1, 0]) * (a[2] + w[0, 0]), a[2])
+        shifted = ca.horzcat(a[5][:, 1:], a[5][:, -1:])
+        out = mpc._solver.call({"x0": x0, "b": w, "target": target, "U_guess": shifted, "u_ref": u_ref})
         solve = ca.Function("mpc_solve", a, [out["u0"], out["U"]])
-        hold = ca.Function("mpc_hold", a, [a[4], a[3]])
+        hold = ca.Function("mpc_hold", a, [a[6], a[5]])
         branch = ca.Function.conditional("mpc_period", [hold], solve)
         due = ca.if_else(ca.fmod(count, self.every) == 0, 1, 0)
-        rate_next, plan_next = branch(due, x0, w, target, plan, rate, u_ref)
+        rate_next, plan_next = branch(due, e, r, cmd, bias, z, plan, rate)
         cmd_next = ca.fmin(ca.fmax(cmd + rate_next * self.dt, -mpc.steer_max), mpc.steer_max)
         chi_d = xr_next[0]
         return ca.Function("mpc_law", [mem, ref, chi, r, dt, U, st, bias],
