@@ -257,6 +257,23 @@ class MPCAutopilot:
             out.append(M[:rows])
         return np.vstack(out)
 
+    def plan_inputs(self) -> ca.Function:
+        """``plan_inputs(bias, z) -> (target, w, u_ref)``: from the reference model's state relative to
+        the command ``z`` (course error, rate, acceleration) the preview of the course error and rate
+        (``2 x N``), the disturbance of each step (:meth:`disturbance`) and the reference steering's
+        rate (:meth:`steering_rates`); one SX Function, called once per solve."""
+        if getattr(self, "_inputs_fun", None) is None:
+            N = int(self.horizon)
+            b, z = ca.SX.sym("bias"), ca.SX.sym("z", 3)
+            full = ca.reshape(ca.mtimes(ca.DM(self.preview_matrix(3)), z), 3, N)
+            z0 = z if self.reference is not None else ca.SX.zeros(3)
+            target = full[:2, :]
+            w = self.disturbance(b, z0[1], target[1, :])
+            u_ref = self.steering_rates([z0[1], z0[2]], full[1:, :])
+            self._inputs_fun = ca.Function("mpc_plan_inputs", [b, z], [target, w, u_ref], ["bias", "z"],
+                                           ["target", "w", "u_ref"])
+        return self._inputs_fun
+
     def _preview(self, xr: np.ndarray, ref: float, rows: int = 2) -> np.ndarray:
         """Course error and rate (and acceleration) of the reference model over the horizon
         (``rows x N``)."""
@@ -318,10 +335,8 @@ class MPCAutopilot:
             U_guess = np.hstack([mem["U"][:, 1:], mem["U"][:, -1:]])          # the last plan, shifted
             delta = mem["steer_cmd"]
             target = self._preview(mem["xr"], ref)
-            full = self._preview(mem["xr"], ref, 3)
-            xr0 = mem["xr"] if self.reference is not None else np.zeros(3)
-            w = self.disturbance(bias, xr0[1], target[1])
-            u_ref = self.steering_rates(xr0[1:], full[1:])
+            z = np.array([float(wrap(mem["xr"][0] - ref)), mem["xr"][1], mem["xr"][2]])
+            _, w, u_ref = (np.asarray(v) for v in self.plan_inputs()(bias, z))
             if self.order == 1:
                 x0 = [e, r, delta]
             else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
@@ -425,11 +440,7 @@ class MPCLaw:
         # the solve branch: preview, disturbance and reference steering are made only when a solve is due
         a = [ca.MX.sym(k, *sh) for k, sh in (("e", (1, 1)), ("r", (1, 1)), ("cmd", (1, 1)), ("bias", (1, 1)),
                                                ("z", (3, 1)), ("plan", (1, N)), ("rate", (1, 1)))]
-        full = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix(3)), a[4]), 3, N)
-        target = full[:2, :]
-        z0 = a[4] if mpc.reference is not None else ca.MX.zeros(3)
-        w = mpc.disturbance(a[3], z0[1], target[1, :])
-        u_ref = mpc.steering_rates([z0[1], z0[2]], full[1:, :])
+        target, w, u_ref = mpc.plan_inputs()(a[3], a[4])
         if mpc.order == 1:
             x0 = ca.vertcat(a[0], a[1], a[2])
         else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
