@@ -174,3 +174,20 @@ def test_mpc_overshoots_no_more_than_the_pid_on_the_kvlcc2_90_deg_changes(kvlcc2
     for m_mpc, m_pid in zip(res.metrics, pid.metrics):
         assert m_mpc["overshoot_pct"] <= m_pid["overshoot_pct"]
     assert np.all(np.abs(res.data["steer"]) <= kvlcc2.settings.steer_max + 1e-9)
+
+
+def test_python_update_and_compiled_law_make_the_same_plan_with_the_steady_steering(kvlcc2):
+    """Both paths take the preview, disturbance and reference steering from ``plan_inputs``: the
+    same command from the same memory in a turn (bias and steady steering nonzero)."""
+    mpc = mpc_for_design(kvlcc2)
+    dt, ref, bias = kvlcc2.settings.dt, np.radians(60.0), np.radians(0.5)
+    xr = np.array([np.radians(20.0), 0.6 * kvlcc2.settings.r_max, 1e-6])
+    mem = mpc.memory0(0.0)
+    mem.update(xr=xr, steer_cmd=0.05)
+    _, cmd, _ = mpc.update(mem, ref, np.radians(19.0), xr[1], dt, bias)
+    law = mpc.law(dt)
+    m0 = law.memory0(0.0)
+    m0[0:3], m0[3] = xr, 0.05
+    out = law.function(m0, ref, np.radians(19.0), xr[1], dt, 8.0, 0.05, bias)
+    assert float(out[1]) == pytest.approx(cmd, abs=1e-9)
+    assert abs(cmd - 0.05) > 1e-6                 # the plan moved the steering
