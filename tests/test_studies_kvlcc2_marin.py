@@ -52,10 +52,24 @@ def test_held_out_run_is_predicted_better_than_by_the_published_constants(quick)
     # the free set is chosen twice (at the preset, then at that refinement's estimate); the file carries the second
     fold = summary["folds"]["run:MARIN zz_-20"]
     assert fold["free_at_preset"] and fold["free"]
-    # the files' free quantities: the chosen set, then the joined captive facility's own ones (name@HMRI)
-    ship_free = [n for n in json.loads((out / fold["file"]).read_text())["free"] if "@" not in n]
-    assert ship_free == fold["free"]
-    assert [n for n in json.loads((out / "fit.json").read_text())["free"] if "@" not in n] == summary["free"]
+    # the files' free quantities: the chosen set (the rudder's own quantities one copy per facility,
+    # name@MARIN / name@HSVA), then the joined captive facility's own ones (name@HMRI)
+    ship_free = [n for n in json.loads((out / fold["file"]).read_text())["free"] if not n.endswith("@HMRI")]
+    assert sorted(ship_free) == sorted(fold["free"])
+    assert sorted(n for n in json.loads((out / "fit.json").read_text())["free"]
+                  if not n.endswith("@HMRI")) == sorted(summary["free"])
+    # facilities as facilities: HSVA's measured wake is HSVA's; the MARIN run is replayed with the pooled
+    # population value (the spread in its band), never with HSVA's value as exact
+    held_file = json.loads((out / fold["file"]).read_text())
+    pool = held_file["workflow"]["facility_quantities"]["w_P0"]
+    assert set(pool["facilities"]) == {"HSVA"} and held_file["workflow"]["replayed_as_facility"] == "MARIN"
+    assert held_file["params"]["w_P0"] == pytest.approx(pool["population"], rel=1e-12)
+    assert abs(held_file["params"]["w_P0"] - pool["facilities"]["HSVA"]["value"]) > 0.01
+    cov = held_file["param_covariance"]
+    i = cov["names"].index("w_P0")
+    assert np.sqrt(cov["matrix"][i][i]) == pytest.approx(pool["new_facility_std"], rel=1e-9)
+    for name in ("epsilon", "kappa", "f_alpha"):     # no rudder quantity is one value carried across facilities
+        assert name not in fold["free"], name
     for name in ("report.md", "fit.json", "fit_without_MARIN_zz_-20.json", "cross_validation.csv", "summary.json",
                  "fig_heldout_MARIN_zz_-20.png"):
         assert (out / name).exists(), name
@@ -183,3 +197,24 @@ def test_summary_holds_every_fold_family_the_circle_the_coverage_and_the_variant
     # the fit file records every choice of the workflow with its reason
     fit = json.loads((out / "fit.json").read_text())
     assert fit["workflow"]["choices"] and all(c["reason"] for c in fit["workflow"]["choices"])
+
+
+def test_the_thrust_wake_is_the_facility_s_and_the_open_water_curve_the_ship_s():
+    import casship as cs
+    from casship.errors import InputError
+    from problems.kvlcc2_marin.data import Run
+    from problems.kvlcc2_marin.propulsion import PropulsionFit
+    from problems.kvlcc2_marin.workflow import propulsion_split
+
+    t = np.arange(3.0)
+    runs = [Run(f"{f} {i}", f, cs.Dataset(t, {"thrust": np.ones(3)}), "zigzag") for i, f in enumerate(("HSVA", "MARIN"))]
+    prop = PropulsionFit({"k_0": 0.26, "k_1": -0.19, "k_2": -0.13, "w_P0": 0.49}, {"w_P0": 0.004}, ["w_P0"], [],
+                         0.0, {}, {}, 1.0, ["HSVA 0"])
+    ship, own = propulsion_split(prop, runs)
+    assert ship == {"k_0": 0.26, "k_1": -0.19, "k_2": -0.13}
+    assert own == {"w_P0": {"HSVA": (0.49, 0.004)}}
+    empty = PropulsionFit({}, {}, [], [], float("nan"), {}, {}, float("nan"), [])
+    assert propulsion_split(empty, runs) == ({}, {})
+    both = PropulsionFit({"w_P0": 0.49}, {"w_P0": 0.004}, ["w_P0"], [], 0.0, {}, {}, 1.0, ["HSVA 0", "MARIN 1"])
+    with pytest.raises(InputError, match="several facilities"):
+        propulsion_split(both, runs)

@@ -118,19 +118,26 @@ class ParamSpace:
         Initial states of the records (free entries are replaced).
     Q, R : arrays
         Fixed noise covariances (likelihood problems; zeros otherwise).
+    record_base : sequence of (np,) arrays or None, optional
+        Fixed parameter values of each record where they differ from ``base`` (e.g. a facility's
+        own measured wake); ``None`` for a record at ``base``. A new run is at ``base``.
     bounds, scale : mapping name -> (lower, upper) / magnitude, optional
         For any free quantity; a declared name applies to all its copies.
     """
 
     def __init__(self, model: Model, n_records: int, free: Sequence[str], *, copies: Mapping | None = None,
                  base=None, measured: Sequence[str] = (), noise=(), x0=(), x0_fixed=None, Q=None, R=None,
-                 bounds: Mapping | None = None, scale: Mapping | None = None):
+                 bounds: Mapping | None = None, scale: Mapping | None = None, record_base=None):
         free = list(free)
         twice = sorted({n for n in free if free.count(n) > 1})
         if twice:
             raise InputError(f"free quantities listed twice: {twice}")
         self.model, self.n_records, self.measured = model, int(n_records), tuple(measured)
         self.base = np.asarray(model.params() if base is None else base, dtype=float)
+        if record_base is not None and len(record_base) != int(n_records):
+            raise InputError(f"record_base: {len(record_base)} entries for {int(n_records)} records")
+        self.record_base = [self.base if b is None else np.asarray(b, dtype=float)
+                            for b in (record_base if record_base is not None else [None] * int(n_records))]
         copies = dict(copies or {})
         unknown = set(copies) - set(free)
         if unknown:
@@ -208,7 +215,7 @@ class ParamSpace:
     def _record_map(self, r: int) -> RecordMap:
         m = self.model
         cols = np.array([j for j, e in enumerate(self.entries) if r in e.records], dtype=int)
-        fixed = {"p": self.base.copy(), "u": np.zeros(m.nu), "y": np.zeros(len(self.measured)),
+        fixed = {"p": self.record_base[r].copy(), "u": np.zeros(m.nu), "y": np.zeros(len(self.measured)),
                  "Q": np.diag(self.Q).copy(), "R": np.diag(self.R).copy(), "x0": self.x0_fixed[r].copy()}
         block = {"param": "p", "bias_in": "u", "bias_out": "y", "Q": "Q", "R": "R", "x0": "x0"}
         E = {k: np.zeros((v.size, cols.size)) for k, v in fixed.items()}

@@ -86,6 +86,9 @@ class OutputErrorProblem(IdentificationProblem):
     bounds, scale : mapping name -> (lower, upper) / magnitude, optional
         For any free quantity (a declared name applies to all its copies); the model's parameter
         bounds apply too.
+    record_params : sequence of (mapping name -> value, or None), optional
+        One entry per record: fixed parameter values of that record over ``params`` (e.g. a
+        facility's own measured wake; the free quantities are unaffected). A new run is at ``params``.
     jit : bool or None
         Compile the cost and its derivatives to C (``None``: when a compiler works; code not in the
         cache yet is compiled in the background while the fit runs interpreted, with the same numbers).
@@ -111,10 +114,12 @@ class OutputErrorProblem(IdentificationProblem):
                  sigma: Mapping[str, float] | str | None = "estimate", params=None, x0=None,
                  estimate_x0: Sequence[str] = (), share: Mapping | None = None, groups: Mapping | None = None,
                  record_weights: Sequence[float] | None = None, prior=None, shooting: str = "single",
-                 segment: int = 50, method: str = "rk4", bounds=None, scale=None, jit: bool | None = None):
+                 segment: int = 50, method: str = "rk4", bounds=None, scale=None, jit: bool | None = None,
+                 record_params: Sequence[Mapping | None] | None = None):
         kwargs = dict(model=model, datasets=datasets, free=free, measured=measured, sigma=sigma, params=params, x0=x0,
                       estimate_x0=estimate_x0, share=share, groups=groups, record_weights=record_weights, prior=prior,
-                      shooting=shooting, segment=segment, method=method, bounds=bounds, scale=scale, jit=jit)
+                      shooting=shooting, segment=segment, method=method, bounds=bounds, scale=scale, jit=jit,
+                      record_params=record_params)
         records = as_records(datasets)
         self.record_weights = _record_weights(record_weights, records)
         if isinstance(model, Model):          # a discrete-time model has its own step
@@ -141,7 +146,7 @@ class OutputErrorProblem(IdentificationProblem):
         if self.segment < 2:
             raise InputError(f"segment must be >= 2 samples, got {segment}")
         self._setup(m, records, free, kwargs=kwargs, share=share, groups=groups, prior=prior, params=params, x0=x0,
-                    estimate_x0=estimate_x0, bounds=bounds, scale=scale, measured=measured)
+                    estimate_x0=estimate_x0, bounds=bounds, scale=scale, measured=measured, record_params=record_params)
         check_gaps(self.dmodel, self.records, self.x0, self.space.base, self.labels)
         self._arrays = [self._arrays_of(d) for d in self.records]
         if shooting == "multiple" and np.any(self.record_weights != 1.0):

@@ -81,7 +81,7 @@ class IdentificationProblem:
 
     # -- set-up (called by the subclasses) ---------------------------------------------------------
     def _setup(self, model, records, free, *, kwargs: dict, share, groups, prior, params, x0, estimate_x0,
-               bounds, scale, measured, noise=(), Q=None, R=None) -> None:
+               bounds, scale, measured, noise=(), Q=None, R=None, record_params=None) -> None:
         self.spec = ProblemSpec.from_arguments(type(self), kwargs, self._SUBJECT)
         self.records = as_records(records)
         self.model = model
@@ -93,9 +93,14 @@ class IdentificationProblem:
         self.x0 = initial_states(model, self.records, x0, estimate_x0)
         x0_entries = [(r, model.index(s), self.x0[r][model.index(s)]) for r in range(len(self.records))
                       for s in estimate_x0]
+        if record_params is not None and len(record_params) != len(self.records):
+            raise InputError(f"record_params: {len(record_params)} entries for {len(self.records)} records")
+        # a record's own fixed values (e.g. its facility's measured wake) over the shared ones
+        record_base = None if record_params is None else [
+            None if not own else model.params({**model.param_dict(base), **dict(own)}) for own in record_params]
         self.space = ParamSpace(model, len(self.records), free, copies=share_labels(self.records, share, groups),
                                 base=base, measured=self.measured, noise=noise, x0=x0_entries, x0_fixed=self.x0,
-                                Q=Q, R=R, bounds=bounds, scale=scale)
+                                Q=Q, R=R, bounds=bounds, scale=scale, record_base=record_base)
         if not len(self.space):
             raise InputError("nothing to estimate: give free parameters, biases, noise or estimate_x0")
         self.prior = _as_prior(prior)

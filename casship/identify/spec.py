@@ -20,7 +20,7 @@ __all__ = ["ProblemSpec", "OutputErrorOptions", "LikelihoodOptions"]
 #: Settings every problem takes (keyword arguments of both constructors).
 COMMON = ("free", "params", "x0", "estimate_x0", "share", "groups", "prior", "bounds", "scale", "jit")
 #: Settings that hold one item per record (subset with the records).
-PER_RECORD = ("x0", "record_weights")
+PER_RECORD = ("x0", "record_weights", "record_params")
 
 
 @dataclass(frozen=True)
@@ -29,7 +29,7 @@ class OutputErrorOptions:
 
     Parameters
     ----------
-    measured, sigma, record_weights, shooting, segment, method
+    measured, sigma, record_weights, shooting, segment, method, record_params
         As the constructor takes them.
     """
 
@@ -39,6 +39,7 @@ class OutputErrorOptions:
     shooting: str = "single"
     segment: int = 50
     method: str = "rk4"
+    record_params: Sequence[Mapping | None] | None = None
 
 
 @dataclass(frozen=True)

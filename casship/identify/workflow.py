@@ -22,7 +22,19 @@ its reason (:attr:`ShipFit.choices`). On free-running records of a manoeuvring m
    the records that form mirror pairs within one facility and nothing else. The rudder neutral
    angle ``delta_0`` is a facility's, not the ship's: one value per facility with a pair, pooled
    hierarchically (:func:`pool_facilities`: a population value and a between-facility spread); a
-   record from a facility without a value is run at the population value.
+   record from a facility without a value is run at the population value. The direction-switched
+   coefficients are the rudder's ``gamma_R_plus/minus`` and the wake's ``C_2_plus/minus``.
+
+   **Facility quantities, the rule.** A quantity of a facility's model, rudder or propeller set
+   (the neutral angle, a wake measured behind one facility's model: ``facility_values=``, the
+   rudder's own :data:`RUDDER` candidates) is that facility's: never applied as exact to a record
+   of another facility. The rudder's are free per facility (``epsilon@HSVA``) under the run-level
+   rule like any candidate. Each is pooled over the facilities that have a value (population prior:
+   the preset value with its stated uncertainty; between-facility spread: the same stated
+   uncertainty, :data:`NEUTRAL_SPREAD` for the neutral angle), and a record of a facility without
+   its own value runs at the population value in a replay (in the fit: a measured value's
+   population value, a rudder quantity's preset), with ``sqrt(var(population) + spread^2)`` in its
+   band.
 6. **The free set from run-level evidence** (:meth:`~casship.identify.Identifiability.propose`,
    ``evidence="runs"``): greedy D-optimal forward selection admitting a quantity only while every
    chosen one has a posterior/prior standard deviation at most 0.5, where the standard deviation is
@@ -54,7 +66,7 @@ from .shipfit import ShipFit, pool_facilities
 from .uncertainty import effective_samples
 
 __all__ = ["identify_ship", "ShipFit", "PRESET_UNCERTAINTY", "preset_prior_std", "run_evidence", "pool_facilities",
-           "resample", "approach_resistance", "CANDIDATES", "ASYMMETRY", "DIRECTION_SWITCHED", "MEASURED"]
+           "resample", "approach_resistance", "CANDIDATES", "ASYMMETRY", "DIRECTION_SWITCHED", "RUDDER", "MEASURED"]
 
 HULL_LINEAR = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash")
 HULL_CUBIC = ("Y_vvv_dash", "Y_vvr_dash", "Y_vrr_dash", "Y_rrr_dash", "N_vvv_dash", "N_vvr_dash", "N_vrr_dash",
@@ -63,8 +75,13 @@ HULL_CUBIC = ("Y_vvv_dash", "Y_vvr_dash", "Y_vrr_dash", "Y_rrr_dash", "N_vvv_das
 ASYMMETRY = ("Y_0_dash", "N_0_dash")
 #: The rudder neutral angle: a facility's quantity (its model and rudder), pooled over facilities.
 FACILITY = ("delta_0",)
-#: Coefficients that switch with the sign of a drift angle: from mirrored evidence only.
-DIRECTION_SWITCHED = ("gamma_R_plus", "gamma_R_minus")
+#: The rudder's own quantities (a facility's model rudder: its inflow factor, the propeller race's
+#: straightening, its lift gradient; :data:`casship.identify.captive.FACILITY_PARAMS`): candidates
+#: estimated per facility (``name@facility``) and pooled over facilities.
+RUDDER = ("epsilon", "kappa", "f_alpha")
+#: Coefficients that switch with the sign of a drift angle (rudder flow straightening, wake change in
+#: manoeuvring): from mirrored evidence only.
+DIRECTION_SWITCHED = ("gamma_R_plus", "gamma_R_minus", "C_2_plus", "C_2_minus")
 #: Candidates of the free set (those the model has).
 CANDIDATES = (*HULL_LINEAR, *HULL_CUBIC, "R_0_dash", "l_R_dash", "epsilon", "kappa", "f_alpha", "a_H", "x_H_dash",
               "t_R", "m_x_dash", "m_y_dash", "J_z_dash")
@@ -139,7 +156,8 @@ def _with_rudder_offset(record, offset: float):
 def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                   weights: Mapping[str, float] | None = None, prior: Mapping[str, float] | None = None,
                   candidates: Sequence[str] | None = None, measured: Sequence[str] | None = None,
-                  facility=None, propulsion: Mapping[str, float] | None = None, smoothed=None, dt: float = 2.0,
+                  facility=None, propulsion: Mapping[str, float] | None = None,
+                  facility_values: Mapping[str, Mapping[str, tuple]] | None = None, smoothed=None, dt: float = 2.0,
                   max_ratio: float = MAX_RATIO, max_corr: float = MAX_CORR, max_free: int = 15, passes: int = 2,
                   record_weights: str = "equal", reweigh: bool = True, terms=None, show: bool = False, verbose: bool = False,
                   verdict: str | None = "loo") -> ShipFit:
@@ -165,7 +183,12 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
     facility : str or sequence of str, optional
         Facility of each record (default ``meta["facility"]``, else one facility).
     propulsion : mapping name -> value, optional
-        Values set before the fit (e.g. a propeller fitted to measured thrust).
+        Values set before the fit for every record (e.g. a propeller's open-water thrust curve).
+    facility_values : mapping name -> (mapping facility -> (value, standard error)), optional
+        Quantities measured per facility before the fit (e.g. a wake fitted to one facility's
+        measured thrust): each facility's records run at its own value, records of other facilities
+        at the population value of :func:`pool_facilities` (prior and between-facility spread: the
+        quantity's stated uncertainty), with that spread in their replays' band.
     smoothed : sequence of Dataset, optional
         Smoothed records with ``u_dot, v_dot, r_dot`` (else smoothed here, when they hold ``x, y, psi``).
     dt : float
@@ -245,10 +268,38 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
              "fitted to measured thrust before the manoeuvring fit (given)")
     else:
         note("propulsion", "the preset propeller", "no propeller values fitted to measured thrust were given")
-    fixed = model.params(preset)
+    # facility quantities measured before the fit: pooled, each record at its facility's value
+    measured_pools = {}
+    for q, by_fac in dict(facility_values or {}).items():
+        if q not in names:
+            raise InputError(f"facility_values: {q!r} is not a parameter of {model.name!r}")
+        if q in preset:
+            raise InputError(f"facility_values: {q!r} is also given in propulsion= (one value for every record)")
+        std = preset_prior_std(model, [q], prior)[q]
+        est = {str(f): (float(v), float(se)) for f, (v, se) in dict(by_fac).items()}
+        measured_pools[q] = pool_facilities(est, spread=std, prior_std=std, prior_mean=model.param_dict()[q])
+    population = {q: float(pool["population"]) for q, pool in measured_pools.items()}
+
+    def facility_value(q, lab):
+        own = measured_pools[q]["facilities"].get(lab)
+        return own["value"] if own else measured_pools[q]["population"]
+
+    own_values = [{q: facility_value(q, lab) for q in measured_pools} for lab in fac]
+    record_params = own_values if measured_pools else None
+    if measured_pools:
+        note("facility", "; ".join(
+            f"{q}: " + ", ".join(f"{f} {v['value']:.4g}" for f, v in pool["facilities"].items())
+            + f", population {pool['population']:.4g} +- {pool['new_facility_std']:.3g} (records of "
+            + (", ".join(sorted(set(fac) - set(pool["facilities"]))) or "no other facility") + ")"
+            for q, pool in measured_pools.items()),
+            "a quantity measured in one facility (its model, rudder or propeller) is that facility's: pooled over "
+            "the facilities that measured it with a between-facility spread equal to its stated uncertainty; "
+            "records of another facility run at the population value, never at another facility's value")
+    fixed = model.params({**preset, **population})
     start = {}
     if "R_0_dash" in names and "n" in inputs and all("u" in r for r in records):
-        r0 = float(np.mean([approach_resistance(model, r, fixed) for r in records]))
+        r0 = float(np.mean([approach_resistance(model, r, model.params({**preset, **own}))
+                            for r, own in zip(records, own_values)]))
         start["R_0_dash"] = r0
         note("propulsion", f"R_0' starts at {r0:.4g} (preset {model.param_dict()['R_0_dash']:.4g})",
              "the value that holds the records' approach speeds at their measured propeller rates (mean over "
@@ -294,8 +345,9 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
              "workflow's manoeuvring candidates)")
     if candidates is None:
         cands = [c for c in CANDIDATES if c in names]
-        asym = [c for c in (*ASYMMETRY, *DIRECTION_SWITCHED) if c in names]
-        facq = [c for c in FACILITY if c in names]
+        asym = [c for c in (*ASYMMETRY, *DIRECTION_SWITCHED) if c in names and c not in preset
+                and c not in measured_pools]
+        facq = [c for c in FACILITY if c in names and c not in measured_pools]
     else:
         cands = [c for c in candidates if c not in (*ASYMMETRY, *DIRECTION_SWITCHED, *FACILITY)]
         asym = [c for c in candidates if c in (*ASYMMETRY, *DIRECTION_SWITCHED)]
@@ -309,7 +361,8 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
             raise InputError(f"free: {bad} are not parameters of {model.name!r}")
     terms = list(terms or ())
     if terms:
-        shared = [n for t in terms for n in t.names if "@" not in n and n in names and n not in preset]
+        shared = [n for t in terms for n in t.names if "@" not in n and n in names and n not in preset
+                  and n not in measured_pools]
         extra = [n for n in dict.fromkeys(shared) if n not in cands and n not in facq and n not in asym]
         cands = [*cands, *extra]
         note("joined evidence", ", ".join(f"{t.label} ({t.n_obs} values)" for t in terms),
@@ -331,9 +384,12 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
         note("cost", "channel sigmas " + ", ".join(f"{k} {v:.3g}" for k, v in sigma.items()), "given")
     else:
         sigma, rest = {}, list(measured)
-    def channel_sigma(rs, params, where):
-        unit = OutputErrorProblem(model, rs, [model.param_names[0]], measured=measured,
-                                  sigma={c: 1.0 for c in measured}, params=params)
+    def channel_sigma(rs, params, where, own=None):
+        own = record_params if own is None else own
+        taken = {n for o in (own or []) for n in (o or {})}      # the one free value must not hide a record's own
+        dummy = next(n for n in model.param_names if n not in taken)
+        unit = OutputErrorProblem(model, rs, [dummy], measured=measured, sigma={c: 1.0 for c in measured},
+                                  params=params, record_params=own)
         res = unit.residuals()           # at params (the one free value at its fixed value)
         neff = effective_samples(res, measured)
         out = {c: float(np.sqrt(sum(np.nansum(e[:, j] ** 2) for e in res) / max(neff[c]["n_eff"], 1.0)))
@@ -346,10 +402,11 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
     if rest:
         sigma.update(channel_sigma(recs, fixed, "the preset"))
 
-    def problem(rs, names_free, params, share=None, weights_=None):
+    def problem(rs, names_free, params, share=None, weights_=None, which=None):
         pri = {n: all_std[n.split("@")[0]] for n in names_free}
+        own = None if record_params is None else [record_params[i] for i in (which or range(len(rs)))]
         return OutputErrorProblem(model, rs, names_free, measured=measured, sigma=sigma, params=params,
-                                  prior=Prior(pri), record_weights=weights_,
+                                  prior=Prior(pri), record_weights=weights_, record_params=own,
                                   scale={k: v for k, v in PRESET_UNCERTAINTY["abs"].items() if k in names_free},
                                   share=share)
 
@@ -358,8 +415,10 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
 
         if join and terms:
             prob = JointProblem(prob, terms, hold_fixed=True)
-        guess_id = {q: guess_pool.get(q.split("@")[0], at[q.split("@")[0]]) for q in chosen}
-        preset_guess = {q: at[q.split("@")[0]] for q in chosen}
+        # a facility's copy starts from its own previous value where there is one
+        guess_id = {q: guess_pool.get(q, guess_pool.get(q.split("@")[0], at.get(q, at[q.split("@")[0]])))
+                    for q in chosen}
+        preset_guess = {q: at.get(q, at[q.split("@")[0]]) for q in chosen}
         use = bool(chosen) and prob.cost(guess_id) < prob.cost(preset_guess)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IdentificationWarning)
@@ -405,7 +464,7 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
             labs = [fac[i] for i in paired]
             share = {q: labs for q in facq} or None
             names_a = [*cands, *asym, *facq]
-            prob_a = problem(sub, names_a, fixed, share=share, weights_=np.mean([len(r) for r in sub]) /
+            prob_a = problem(sub, names_a, fixed, share=share, which=paired, weights_=np.mean([len(r) for r in sub]) /
                              np.array([len(r) for r in sub], dtype=float))
             at_a = {q: at0[q.split("@")[0]] for q in prob_a.free}
             idf = prob_a.identifiability(at=at_a, pairs_within=labs)
@@ -415,7 +474,7 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
             declared = list(dict.fromkeys(q.split("@")[0] for q in chosen))
             prob_a2 = problem(sub, declared, fixed, share={q: [lab if f"{q}@{lab}" in chosen else None for lab in labs]
                                                            for q in facq if q in declared} or None,
-                              weights_=prob_a.record_weights)
+                              weights_=prob_a.record_weights, which=paired)
             asym_fit, _ = refine(prob_a2, chosen, at0, start)
             asym_values = {q: float(asym_fit.estimates[q]) for q in chosen if q in asym}
             pair_names = ", ".join(str(r.meta.get("name", f"record {i}")) for i, r in zip(paired, sub))
@@ -438,7 +497,7 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                 for lab in set(fac):
                     own = pools["delta_0"]["facilities"].get(lab)
                     offsets[lab] = own["value"] if own else pools["delta_0"]["population"]
-    fixed = model.params({**preset, **asym_values})
+    fixed = model.params({**preset, **population, **asym_values})
     recs_b = [_with_rudder_offset(r, offsets.get(f, 0.0)) for r, f in zip(recs, fac)]
 
     # 6. the free set and the refinement
@@ -448,17 +507,25 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
         fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at0, start, join=True)
     else:
         at, guess, first, fit, rows = dict(at0), dict(start), [], None, []
+        # the rudder's own quantities: one copy per facility (never one value carried across facilities)
+        own_cands = [c for c in cands if c in RUDDER]
+        if own_cands:
+            note("facility", ", ".join(own_cands) + " per facility (" + ", ".join(sorted(set(fac))) + ")",
+                 "the rudder's own quantities belong to a facility's model rudder: a copy per facility, each chosen "
+                 "by the run-level rule like any candidate, pooled over facilities after the fit")
         for k in range(max(1, passes)):
             if k > 0 and rest and reweigh:
+                own_at = [{**(record_params[i] if record_params else {}),
+                           **{q: at[f"{q}@{lab}"] for q in own_cands if f"{q}@{lab}" in at}} for i, lab in enumerate(fac)]
                 sigma.update(channel_sigma(recs_b, model.params({**dict(zip(model.param_names, fixed)), **{
-                    q: at[q] for q in cands}}), "the previous estimate"))
-            prob = problem(recs_b, cands, fixed, weights_=rw)
-            point = {q: at[q] for q in cands}
+                    q: at[q] for q in cands}}), "the previous estimate", own_at))
+            prob = problem(recs_b, cands, fixed, weights_=rw, share={q: list(fac) for q in own_cands} or None)
+            point = {q: at.get(q, at[q.split("@")[0]]) for q in prob.free}
             idf = prob.identifiability(at=point)
             idf.evidence = run_evidence(prob, point)
             idf = with_terms(idf, prob, point)
             chosen, rows = idf.propose(max_ratio=max_ratio, max_corr=max_corr, max_count=max_free, evidence="runs",
-                                       explain=True, candidates=cands, keep=[])
+                                       explain=True, candidates=prob.free, keep=[])
             where = "the preset" if k == 0 else "the previous estimate"
             note("free set", ", ".join(chosen) or "nothing",
                  f"chosen at {where} by run-level evidence ({idf.evidence.kind}, {len(idf.evidence.labels)} units): "
@@ -469,11 +536,14 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                 first = list(chosen)
             if not chosen:
                 break
-            fit, use = refine(problem(recs_b, chosen, fixed, weights_=rw), chosen, at, guess, join=True)
+            declared = list(dict.fromkeys(q.split("@")[0] for q in chosen))
+            copies = {q: [lab if f"{q}@{lab}" in chosen else None for lab in fac] for q in own_cands if q in declared}
+            fit, use = refine(problem(recs_b, declared, fixed, weights_=rw, share=copies or None), chosen, at, guess,
+                              join=True)
             note("refinement", f"MAP output error, status {fit.status}, started from the "
                  + ("inverse-dynamics values" if use else "point of the choice"),
                  "the start with the lower cost" if use else "the inverse-dynamics start did not lower the cost")
-            est = {q: float(v) for q, v in fit.estimates.items() if "@" not in q}
+            est = {q: float(v) for q, v in fit.estimates.items() if "@" not in q or q.split("@")[0] in own_cands}
             at.update(est)
             guess.update(est)
         if fit is None:               # nothing the runs determine: a result, said as one
@@ -483,18 +553,37 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                 f"the records determine none of the candidates {cands} by the run-level rule (posterior/prior std "
                 f"<= {max_ratio:g}): the preset stays; widen the prior of the quantities you expect to move "
                 "(prior= / --prior) or give the free set (free= / --free)", "nothing determined")
+        nominal = model.param_dict()
+        for q in own_cands:
+            est_q = {lab: (float(fit.estimates[f"{q}@{lab}"]), _std_error(fit, f"{q}@{lab}"))
+                     for lab in sorted(set(fac)) if f"{q}@{lab}" in fit.estimates}
+            if est_q:
+                pools[q] = pool_facilities(est_q, spread=all_std[q], prior_std=all_std[q], prior_mean=nominal[q])
+                note("facility", f"{q}: " + ", ".join(f"{lab} {v:.4g}" for lab, (v, _) in est_q.items())
+                     + f"; population {pools[q]['population']:.4g} +- {pools[q]['new_facility_std']:.3g}",
+                     "pooled with a between-facility spread equal to its stated uncertainty; a record of a facility "
+                     "without its own value is replayed at the population value with that spread in its band")
     ship = ShipFit(fit, model, list(chosen), choices, sigma, [float(w) for w in rw], rows, first,
-                   {**preset, **asym_values}, start, asym_fit, asym_values, pools, fac, time.perf_counter() - t0,
+                   {**preset, **asym_values}, start, asym_fit, asym_values, {**measured_pools, **pools}, fac,
+                   time.perf_counter() - t0,
                    unpinned)
     if verdict is not None:
         _judge_ship(ship, list(records), verdict, lambda train: identify_ship(
             [records[i] for i in train], model, free=free, weights=weights, prior=prior, candidates=candidates,
-            measured=measured, facility=[fac[i] for i in train], propulsion=propulsion, dt=dt, max_ratio=max_ratio,
+            measured=measured, facility=[fac[i] for i in train], propulsion=propulsion,
+            facility_values=facility_values, dt=dt, max_ratio=max_ratio,
             max_corr=max_corr, max_free=max_free, passes=passes, record_weights=record_weights, reweigh=reweigh,
             terms=terms, verdict=None))
         note("verdict", f"{ship.fit.verdict['verdict']}: replays of the records against the preset"
              + (" and left-one-out" if verdict == "loo" and len(records) > 1 else ""), ship.fit.verdict["reason"])
     return ship
+
+
+def _std_error(fit, name: str) -> float:
+    """The robust standard error of a free quantity where finite (the fit file's covariance), else the
+    model-based one."""
+    se = fit.std_errors_robust.get(name, math.nan)
+    return float(se) if np.isfinite(se) and se > 0 else float(fit.std_errors[name])
 
 
 def _judge_ship(ship: ShipFit, records, verdict: str, refit) -> None:

@@ -60,10 +60,9 @@ def _moved_table(everything) -> str:
 
 def _propulsion(runs, everything) -> tuple[str, str, dict]:
     pub, model = study_model(), study_model()
-    p_fit = model.params(everything.params())
     rows = {}
-    for r in runs:
-        a, b = mismatch(pub, r), mismatch(model, r, p_fit)
+    for r in runs:          # each run with its facility's wake (the population value where it has none)
+        a, b = mismatch(pub, r), mismatch(model, r, model.params(everything.params(r.facility)))
         rows[r.name] = {"u0 [m/s]": a["u0_mps"], "n measured [1/s]": a["n_measured"],
                         "n needed, published": a["n_needed"], "error published [%]": a["n_error_pct"],
                         "n needed, fit": b["n_needed"], "error fit [%]": b["n_error_pct"]}
@@ -333,8 +332,9 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
             "with every run weighted the same (`casship.identify.identify_ship`, see `problems/kvlcc2_marin/workflow.py`). Every held-out run is "
             "scored by replaying its fold's fit file with `casship.identify.replay_file`, the function behind "
             "`casship simulate --model kvlcc2 --params FILE --inputs RUN`; every run gets the file's one set of "
-            "hull coefficients, and the neutral angle of its facility when the training had one (else the "
-            "population value, its band widened by the between-facility spread). Indices of the fit carry the "
+            "hull coefficients, and its facility's own quantities (neutral angle, wake, the rudder's `epsilon`, "
+            "`kappa`, `f_alpha`) when the training had them (else the population value, its band widened by "
+            "the between-facility spread). Indices of the fit carry the "
             "95 % interval of parameter draws from the file's covariance.")
     head_text, head = _headline(by_kind, coverage, variants)
     rep.section("Headline: every fold family, the circle left out, the predictive coverage")
@@ -437,7 +437,9 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     rep.section("Propulsion: the propeller fitted to the measured thrust")
     prop = everything.propulsion
     rep.add(f"Open-water K_T rewritten for D_p = 9.86 m (quadratic, largest error {prop.kt_fit_error:.2g}); wake "
-            f"from the measured thrust of {len(prop.runs)} HSVA runs, free: {', '.join(prop.free) or 'none'}.",
+            f"from the measured thrust of {len(prop.runs)} HSVA runs, free: {', '.join(prop.free) or 'none'}: "
+            "HSVA's own wake (a model-scale wake behind HSVA's model); MARIN's runs run at the pooled population "
+            "value with the between-facility spread in their band.",
             thrust_table, "Propeller rate needed to hold each run's approach speed:", rate_table)
     rep.section("Folds")
     fold_rows = {(", ".join(res["held"]) if res["kind"] == "run" else
