@@ -11,7 +11,8 @@ defaults), in the same scenarios:
 PID: Fossen's pole placement; LQR: integral LQR (``control.lqr``) at the same bandwidth; MPC:
 :class:`casship.autopilot.mpc.MPCAutopilot` on the design's Nomoto model with the rudder angle,
 rudder rate and turn-rate limits as constraints, warm-started, tracking the same reference model,
-with the observer's rudder-bias estimate as its disturbance (offset-free). All three run in the
+with the observer's rudder-bias estimate and the ship's steady steering along the preview as its
+disturbance (offset-free; the observer then runs on the MPC's model). All three run in the
 compiled loop (the MPC's QP, solved by HPIPM once per MPC period, is a call node of the step).
 """
 from __future__ import annotations

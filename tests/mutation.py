@@ -225,7 +225,7 @@ MUTANTS = [
     M("MPC preview: one period late", MPC, "M = Ad @ M\n            rows.append(M[:2])",
       "rows.append(M[:2])\n            M = Ad @ M", (T_RAP,)),
     M("MPC preview: from the reference state before the sample's step", MPC,
-      '"target": self._preview(mem["xr"], ref)', '"target": self._preview(memory["xr"], ref)', (T_RAP,)),
+      'target = self._preview(mem["xr"], ref)', 'target = self._preview(memory["xr"], ref)', (T_RAP,)),
     M("MPC preview: the reference model's acceleration dropped", MPC,
       "z = np.array([float(wrap(xr[0] - ref)), xr[1], xr[2]])", "z = np.array([float(wrap(xr[0] - ref)), xr[1], 0.0])",
       (T_RAP,)),

@@ -153,13 +153,21 @@ def course_prior(north: float, east: float, speed: float, chi: float, gnss_std: 
                     np.diag([gnss_std**2, gnss_std**2, 1.0, np.radians(5.0) ** 2, 0.01]))
 
 
-def heading_observer(K: float, T: float, wave: WaveYaw | None = None, *, steer: str = "delta") -> Model:
+def heading_observer(K: float, T: float, wave: WaveYaw | None = None, *, steer: str = "delta",
+                     steering=None, second: tuple | None = None) -> Model:
     """Nomoto heading model with a rudder bias and optionally Fossen's wave filter (a casship Model).
 
     States ``psi, r, b`` (``T r' + r = K (delta + b)``, ``b`` a slowly varying rudder bias that a
     steady wind or current moment looks like), and with ``wave`` the wave states ``psi_w, r_w``
     (:class:`WaveYaw`). Outputs ``psi_m = psi + psi_w`` (compass) and ``r_m = r + r_w`` (rate gyro).
     Noises ``w_r`` (yaw acceleration), ``w_b`` (bias drift), ``w_w`` (wave intensity).
+
+    With ``steering`` (the ship's steady steering ``s(r)``) the damping is the nonlinear ship's:
+    ``T r' + K s(r) = K (delta + b)`` (the nonlinear Nomoto model, ``K s`` the steady-turn curve), so
+    that the bias does not take up the extra steering of a large turn (the model of the MPC, whose
+    disturbance this bias is). With ``second = (T1, T2, T3)`` the yaw dynamics are the second-order
+    Nomoto model in the observer form of :meth:`Nomoto.system <casship.autopilot.nomoto.Nomoto.system>`
+    (the extra state ``xi``): ``T1 T2 r'' + (T1 + T2) r' + K s(r) = K (delta + b + T3 delta')``.
 
     Parameters
     ----------
@@ -169,6 +177,10 @@ def heading_observer(K: float, T: float, wave: WaveYaw | None = None, *, steer: 
         The wave model of the filter.
     steer : str
         Name of the steering input.
+    steering : SteeringFeedforward, optional
+        Steady steering of the nonlinear ship (:func:`~casship.autopilot.plants.steering_feedforward`).
+    second : tuple of float, optional
+        ``T1, T2, T3`` of the second-order Nomoto model.
     """
     name = "heading-observer" + ("+wave" if wave is not None else "")
     b = ModelBuilder(name, "Nomoto heading model with rudder bias" + (" and wave filter" if wave else ""))
@@ -177,7 +189,14 @@ def heading_observer(K: float, T: float, wave: WaveYaw | None = None, *, steer: 
     bias = b.state("b", unit="rad", doc="rudder bias")
     delta = b.input(steer)
     Kp, Tp = b.param("K", K, unit="1/s"), b.param("T", T, unit="s")
-    b.ode(psi=r, r=(Kp * (delta + bias) - r) / Tp + b.noise("w_r"), b=b.noise("w_b"))
+    damping = r if steering is None else Kp * steering(r)
+    if second is None:
+        b.ode(psi=r, r=(Kp * (delta + bias) - damping) / Tp + b.noise("w_r"), b=b.noise("w_b"))
+    else:
+        T1, T2, T3 = (float(v) for v in second)
+        xi = b.state("xi", unit="rad/s^2", doc="internal state of the second-order Nomoto model")
+        b.ode(psi=r, r=-(T1 + T2) / (T1 * T2) * r + xi + Kp * T3 / (T1 * T2) * (delta + bias) + b.noise("w_r"),
+              xi=(Kp * (delta + bias) - damping) / (T1 * T2), b=b.noise("w_b"))
     psi_w = r_w = 0
     if wave is not None:
         psi_w = b.state("psi_w", unit="rad", doc="first-order wave yaw")
@@ -228,7 +247,7 @@ def heading_prior(observer: Model, psi: float, r: float, compass_std: float) -> 
         Heading noise [rad].
     """
     mean = observer.states(psi=psi, r=r)
-    var = {"psi": compass_std**2, "r": 1e-6, "b": np.radians(2.0) ** 2, "psi_w": np.radians(2.0) ** 2,
+    var = {"psi": compass_std**2, "r": 1e-6, "xi": 1e-10, "b": np.radians(2.0) ** 2, "psi_w": np.radians(2.0) ** 2,
            "r_w": np.radians(2.0) ** 2}
     return Gaussian(mean, np.diag([var[n] for n in observer.state_names]))
 

@@ -4,12 +4,21 @@ The prediction model is the first-order Nomoto model of the design with the stee
 driven by its rate and a constant steering bias ``b`` (from the heading observer, which gives
 offset-free control in wind and current)::
 
-    e' = r,   r' = (K (delta + b) - r) / T,   delta' = u          (e = wrap(psi - command))
+    e' = r,   r' = (K (delta + w) - r) / T,   delta' = u          (e = wrap(psi - command))
 
 (the second-order model ``r/delta = K (1 + T3 s)/((1 + T1 s)(1 + T2 s))`` when it is known),
-discretised exactly (zero-order hold on ``u``) at the MPC period ``T_s``. Each solve minimises
-``sum q_e e_k^2 + q_r r_k^2 + r_u u_k^2`` over ``N`` steps subject to ``|delta| <= delta_max``,
-``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a soft limit). The quadratic program keeps
+discretised exactly (zero-order hold on ``u``) at the MPC period ``T_s``. The disturbance of each
+step, ``w_k = b - f(r_d)`` with ``f(r) = s(r) - r / K``, adds to the bias the steering the
+nonlinear ship needs beyond the linear model's at the reference rate ``r_d`` of that step
+(``s`` the ship's steady steering, :func:`~casship.autopilot.plants.steering_feedforward`, the
+PID law's feed-forward): the linear model then plans only the deviation from the steady steering
+along the reference preview, and the steering limits still bound the total steering. Without a
+steering table ``f = 0``. Each solve minimises
+``sum q_e (e_k - e_d,k)^2 + q_r (r_k - r_d,k)^2 + r_u (u_k - u_d,k)^2`` over ``N`` steps subject
+to ``|delta| <= delta_max``, ``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a
+soft limit); ``e_d, r_d`` are the reference model's preview and ``u_d`` the rate of the steering
+that holds the model on it, ``s(r_d) + (T / K) a_d`` (the PID law's low-frequency feed-forward),
+so that following the reference costs nothing and the weights price only the departures from it. The quadratic program keeps
 the optimal-control structure (variables ``x0, u0, x1, u1, ..., xN``, the model as equality
 constraints stage by stage) and is solved by HPIPM (Frison & Diehl 2020), the structure-exploiting
 interior-point QP solver shipped with CasADi (``casadi.conic(..., "hpipm")``), whose cost grows
@@ -59,6 +68,9 @@ class MPCAutopilot:
         Time between solves [s] (default: the period). Solving more often than the model's step
         (the plan's first rate applied until the next solve) keeps the feedback of a long horizon
         with a coarse step.
+    steering : SteeringFeedforward, optional
+        The nonlinear ship's steady steering ``s(r)``; the plan then asks ``s(r_d) - r_d / K``
+        more steering than the linear model along the reference preview (:meth:`feedforward`).
     """
 
     nomoto: Nomoto
@@ -72,6 +84,7 @@ class MPCAutopilot:
     r_u: float = 1.0
     reference: ReferenceModel | None = None
     replan: float | None = None
+    steering: object = None
     _solver: object = field(default=None, init=False, repr=False)
 
     MEMORY_LOG = ("chi_d", "r_d", "e")
@@ -92,6 +105,64 @@ class MPCAutopilot:
         """Order of the Nomoto prediction model (2 when ``T1, T2, T3`` are known)."""
         return 2 if self.nomoto.second_order else 1
 
+    def feedforward(self, r):
+        """``f(r) = s(r) - r / K``: the steady steering the nonlinear ship needs at the rate of turn
+        ``r`` beyond the linear model's (0 without a steering table).
+
+        Parameters
+        ----------
+        r : float or casadi.MX
+            Rate of turn [rad/s].
+        """
+        if self.steering is None:
+            return 0.0 * r
+        return self.steering(r) - r / self.nomoto.K
+
+    def disturbance(self, bias, rate0, rates):
+        """The disturbance ``w_k = b - (f(r_k) + f(r_{k+1})) / 2`` of each step (``1 x N``): the bias
+        less the extra steady steering at the reference rate over the step (its ends averaged).
+
+        Parameters
+        ----------
+        bias : float or casadi.MX
+            Steering bias estimate.
+        rate0 : float or casadi.MX
+            Reference rate at the start of the horizon [rad/s].
+        rates : array or casadi.MX
+            Reference rate at the end of each step (``1 x N``, the preview's second row).
+        """
+        N = int(self.horizon)
+        if isinstance(rates, (ca.MX, ca.SX)):
+            r = ca.horzcat(rate0, ca.reshape(rates, 1, N))
+            f = ca.horzcat(*[self.feedforward(r[0, k]) for k in range(N + 1)])
+            return bias - 0.5 * (f[0, :N] + f[0, 1:])
+        r = np.concatenate([[float(rate0)], np.ravel(rates)])
+        f = np.array([float(self.feedforward(v)) for v in r])
+        return (bias - 0.5 * (f[:-1] + f[1:])).reshape(1, N)
+
+    def steering_rates(self, ref0, previews):
+        """Rate of the reference steering ``s(r_d) + (T / K) a_d`` over each step (``1 x N``):
+        ``u_d,k`` of the cost (``s(r) = r / K`` without a steering table).
+
+        Parameters
+        ----------
+        ref0 : sequence
+            Reference rate and acceleration at the start of the horizon.
+        previews : array or casadi.MX
+            Reference rate and acceleration at the end of each step (``2 x N``).
+        """
+        N, K, m = int(self.horizon), self.nomoto.K, self.nomoto.T / self.nomoto.K
+        symbolic = isinstance(previews, (ca.MX, ca.SX))
+        cat = ca.horzcat if symbolic else (lambda *a: np.hstack([np.reshape(v, (1, -1)) for v in a]))
+        r = cat(ref0[0], ca.reshape(previews[0, :], 1, N) if symbolic else previews[0])
+        a = cat(ref0[1], ca.reshape(previews[1, :], 1, N) if symbolic else previews[1])
+        if symbolic:
+            steady = ca.horzcat(*[self.feedforward(r[0, k]) + r[0, k] / K for k in range(N + 1)])
+        else:
+            steady = np.array([[float(self.feedforward(v)) + v / K for v in np.ravel(r)]])
+        d = steady + m * a
+        return (d[:, 1:] - d[:, :-1]) / self.period
+
     def model(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Exact discretisation ``x+ = A x + B u + E b`` at ``period`` of ``[e, r, delta]`` (first
         order) or ``[e, r, xi, delta]`` (second order, the observer form of
@@ -109,16 +180,17 @@ class MPCAutopilot:
         """The QP in optimal-control form for HPIPM (``casadi.qpsol``, the stage structure detected
         from the variable and constraint order): variables ``[x0 u0 x1 u1 ... xN]`` with ``u_k`` the
         steering rate and a slack ``s_k >= 0`` of the turn-rate limit, constraints stage by stage:
-        the model ``A x_k + B u_k + E b - x_{k+1} = 0``, then ``|r_k| <= r_max + s_k`` (soft: an
+        the model ``A x_k + B u_k + E w_k - x_{k+1} = 0``, then ``|r_k| <= r_max + s_k`` (soft: an
         estimated rate a little above the limit must not make the problem infeasible; an exact
         penalty on the slack makes the limit hard whenever it can be met), bounds on the steering
         and its rate, ``x0`` fixed by its bounds. Returns ``mpc(x0, b, target, U_guess) -> (u0, X,
-        U)`` (an MX Function)."""
+        U)`` (an MX Function; ``b`` the disturbance ``w`` of each step, ``1 x N``, or one number for
+        all; the optional ``u_ref``, ``1 x N``, the steering rate the cost measures from, default 0)."""
         A, B, E = (ca.DM(M) for M in self.model())
         N, nx = int(self.horizon), A.shape[0]
         X = [ca.SX.sym(f"x{k}", nx) for k in range(N + 1)]
         U = [ca.SX.sym(f"u{k}", 2) for k in range(N)]
-        b, target = ca.SX.sym("b"), ca.SX.sym("target", 2, N)
+        b, target, uref = ca.SX.sym("b", 1, N), ca.SX.sym("target", 2, N), ca.SX.sym("u_ref", 1, N)
         # exact (l1) penalty on the slack: the largest price the cost can put on the rate of turn of
         # one step (a course error of pi on every later step, moved by the period) bounds the
         # multiplier; a small quadratic term keeps the Hessian definite. (A larger weight only
@@ -128,7 +200,7 @@ class MPCAutopilot:
         z, g, lbg, ubg, cost = [], [], [], [], 0
         for k in range(N):
             z += [X[k], U[k]]
-            g.append(ca.mtimes(A, X[k]) + B * U[k][0] + E * b - X[k + 1])
+            g.append(ca.mtimes(A, X[k]) + B * U[k][0] + E * b[0, k] - X[k + 1])
             lbg += [0.0] * nx
             ubg += [0.0] * nx
             if k > 0:
@@ -136,10 +208,10 @@ class MPCAutopilot:
                 lbg += [-np.inf, -self.r_max]
                 ubg += [self.r_max, np.inf]
             cost += (self.q_e * (X[k + 1][0] - target[0, k]) ** 2 + self.q_r * (X[k + 1][1] - target[1, k]) ** 2
-                     + self.r_u * U[k][0] ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
+                     + self.r_u * (U[k][0] - uref[0, k]) ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
         z.append(X[N])
-        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "p": ca.vertcat(b, ca.vec(target)), "f": cost,
-                                          "g": ca.vertcat(*g)},
+        qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "f": cost, "g": ca.vertcat(*g),
+                                          "p": ca.vertcat(ca.vec(b), ca.vec(target), ca.vec(uref))},
                       {"error_on_fail": False, "print_time": False})
         # bounds: x0 fixed; the steering limited from x1 on; course error, rate and the internal
         # state of the second-order model far outside any plan (HPIPM wants finite bounds)
@@ -151,37 +223,62 @@ class MPCAutopilot:
             lo[ix[k] + nx - 1], hi[ix[k] + nx - 1] = -self.steer_max, self.steer_max
         lo[iu], hi[iu] = -self.rate_max, self.rate_max
         lo[[i + 1 for i in iu]] = 0.0
-        x0, bm = ca.MX.sym("x0", nx), ca.MX.sym("b")
-        tm, U_guess = ca.MX.sym("target", 2, N), ca.MX.sym("U_guess", 1, N)
+        x0, bm = ca.MX.sym("x0", nx), ca.MX.sym("b", 1, N)
+        tm, U_guess, um = ca.MX.sym("target", 2, N), ca.MX.sym("U_guess", 1, N), ca.MX.sym("u_ref", 1, N)
         lbx = ca.vertcat(x0, ca.DM(lo[nx:]))
         ubx = ca.vertcat(x0, ca.DM(hi[nx:]))
         guess = ca.MX.zeros(nv)
         guess[iu] = U_guess.T
-        sol = qp(x0=guess, p=ca.vertcat(bm, ca.vec(tm)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg), ubg=ca.DM(ubg))
+        sol = qp(x0=guess, p=ca.vertcat(ca.vec(bm), ca.vec(tm), ca.vec(um)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg),
+                 ubg=ca.DM(ubg))
         zs = sol["x"]
         Xs = ca.horzcat(*[zs[ix[k]:ix[k] + nx] for k in range(N + 1)])
         Us = ca.horzcat(*[zs[iu[k]] for k in range(N)])
-        return ca.Function("mpc", [x0, bm, tm, U_guess], [Us[0, 0], Xs, Us], ["x0", "b", "target", "U_guess"],
-                           ["u0", "X", "U"])
+        return ca.Function("mpc", [x0, bm, tm, U_guess, um], [Us[0, 0], Xs, Us],
+                           ["x0", "b", "target", "U_guess", "u_ref"], ["u0", "X", "U"])
 
-    def preview_matrix(self) -> np.ndarray:
-        """``(2 N, 3)`` matrix taking the reference model's state relative to the command (a fixed
-        point) to its course error and rate over the horizon, column by column (the linear model,
-        no rate saturation, stepped exactly at ``period``)."""
+    def preview_matrix(self, rows: int = 2) -> np.ndarray:
+        """``(rows N, 3)`` matrix taking the reference model's state relative to the command (a fixed
+        point) to its course error and rate (``rows = 3``: and acceleration) over the horizon, step
+        by step (the linear model, no rate saturation, stepped exactly at ``period``).
+
+        Parameters
+        ----------
+        rows : {2, 3}
+            Course error and rate, or also the acceleration.
+        """
         N = int(self.horizon)
         if self.reference is None:
-            return np.zeros((2 * N, 3))
+            return np.zeros((rows * N, 3))
         Ad = expm(np.asarray(self.reference.system().A) * self.period)
-        rows, M = [], np.eye(3)
+        out, M = [], np.eye(3)
         for _ in range(N):
             M = Ad @ M
-            rows.append(M[:2])
-        return np.vstack(rows)
+            out.append(M[:rows])
+        return np.vstack(out)
 
-    def _preview(self, xr: np.ndarray, ref: float) -> np.ndarray:
-        """Course error and rate of the reference model over the horizon (``2 x N``)."""
+    def plan_inputs(self) -> ca.Function:
+        """``plan_inputs(bias, z) -> (target, w, u_ref)``: from the reference model's state relative to
+        the command ``z`` (course error, rate, acceleration) the preview of the course error and rate
+        (``2 x N``), the disturbance of each step (:meth:`disturbance`) and the reference steering's
+        rate (:meth:`steering_rates`); one SX Function, called once per solve."""
+        if getattr(self, "_inputs_fun", None) is None:
+            N = int(self.horizon)
+            b, z = ca.SX.sym("bias"), ca.SX.sym("z", 3)
+            full = ca.reshape(ca.mtimes(ca.DM(self.preview_matrix(3)), z), 3, N)
+            z0 = z if self.reference is not None else ca.SX.zeros(3)
+            target = full[:2, :]
+            w = self.disturbance(b, z0[1], target[1, :])
+            u_ref = self.steering_rates([z0[1], z0[2]], full[1:, :])
+            self._inputs_fun = ca.Function("mpc_plan_inputs", [b, z], [target, w, u_ref], ["bias", "z"],
+                                           ["target", "w", "u_ref"])
+        return self._inputs_fun
+
+    def _preview(self, xr: np.ndarray, ref: float, rows: int = 2) -> np.ndarray:
+        """Course error and rate (and acceleration) of the reference model over the horizon
+        (``rows x N``)."""
         z = np.array([float(wrap(xr[0] - ref)), xr[1], xr[2]])
-        return (self.preview_matrix() @ z).reshape(int(self.horizon), 2).T
+        return (self.preview_matrix(rows) @ z).reshape(int(self.horizon), rows).T
 
     def law(self, dt: float) -> "MPCLaw":
         """This MPC as the law of the compiled closed loop at loop period ``dt`` (:class:`MPCLaw`).
@@ -220,7 +317,8 @@ class MPCAutopilot:
         dt : float
             Loop period [s].
         bias : float
-            Steering bias estimate (the heading observer's ``b``).
+            Steering bias estimate (the heading observer's ``b``); the plan's disturbance adds the
+            extra steady steering along the preview (:meth:`disturbance`).
 
         Returns
         -------
@@ -236,15 +334,17 @@ class MPCAutopilot:
         if mem["count"] % every == 0:
             U_guess = np.hstack([mem["U"][:, 1:], mem["U"][:, -1:]])          # the last plan, shifted
             delta = mem["steer_cmd"]
+            target = self._preview(mem["xr"], ref)
+            z = np.array([float(wrap(mem["xr"][0] - ref)), mem["xr"][1], mem["xr"][2]])
+            _, w, u_ref = (np.asarray(v) for v in self.plan_inputs()(bias, z))
             if self.order == 1:
                 x0 = [e, r, delta]
             else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
                 sys = self.nomoto.system(2)
-                x0 = [e, r, -sys.A[1, 1] * r - sys.B[1, 0] * (delta + bias), delta]
-            out = self._solve({"x0": np.array(x0), "b": bias, "target": self._preview(mem["xr"], ref),
-                               "U_guess": U_guess})
+                x0 = [e, r, -sys.A[1, 1] * r - sys.B[1, 0] * (delta + w[0, 0]), delta]
+            out = self._solve({"x0": np.array(x0), "b": w, "target": target, "U_guess": U_guess, "u_ref": u_ref})
             mem["X"], mem["U"] = np.asarray(out["X"]), np.asarray(out["U"])
-            self._check(mem["X"], mem["U"], np.array(x0), bias)
+            self._check(mem["X"], mem["U"], np.array(x0), w)
             mem["rate"] = float(out["u0"])
         mem["count"] += 1
         cmd = float(np.clip(mem["steer_cmd"] + mem["rate"] * dt, -self.steer_max, self.steer_max))
@@ -265,7 +365,7 @@ class MPCAutopilot:
             bad.append("steering rate")
         if np.max(np.abs(X[n - 1, 1:])) > self.steer_max * (1 + tol) + 1e-12:
             bad.append("steering angle")
-        resid = X[:, 1:] - (A @ X[:, :-1] + B @ U + E * bias)
+        resid = X[:, 1:] - (A @ X[:, :-1] + B @ U + E @ np.broadcast_to(np.reshape(bias, (1, -1)), U.shape))
         scale = 1 + np.max(np.abs(X))
         if np.max(np.abs(resid)) > 1e-6 * scale or np.max(np.abs(X[:, 0] - x0)) > 1e-6 * scale:
             bad.append("the model")
@@ -336,22 +436,23 @@ class MPCLaw:
         xr, cmd, rate, count, plan = mem[0:3], mem[3], mem[4], mem[5], mem[6:].T
         xr_next = mpc._ref_step()(xr, ref, self.dt) if mpc.reference is not None else ca.vertcat(ref, 0, 0)
         e = ca.atan2(ca.sin(chi - ref), ca.cos(chi - ref))
+        z = ca.vertcat(ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])
+        # the solve branch: preview, disturbance and reference steering are made only when a solve is due
+        a = [ca.MX.sym(k, *sh) for k, sh in (("e", (1, 1)), ("r", (1, 1)), ("cmd", (1, 1)), ("bias", (1, 1)),
+                                               ("z", (3, 1)), ("plan", (1, N)), ("rate", (1, 1)))]
+        target, w, u_ref = mpc.plan_inputs()(a[3], a[4])
         if mpc.order == 1:
-            x0 = ca.vertcat(e, r, cmd)
+            x0 = ca.vertcat(a[0], a[1], a[2])
         else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
             sys2 = mpc.nomoto.system(2)
-            x0 = ca.vertcat(e, r, -float(sys2.A[1, 1]) * r - float(sys2.B[1, 0]) * (cmd + bias), cmd)
-        target = ca.reshape(ca.mtimes(ca.DM(mpc.preview_matrix()), ca.vertcat(
-            ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])), 2, N)
-        a = [ca.MX.sym(k, *sh) for k, sh in (("x0", x0.shape), ("b", (1, 1)), ("target", (2, N)), ("plan", (1, N)),
-                                               ("rate", (1, 1)))]
-        shifted = ca.horzcat(a[3][:, 1:], a[3][:, -1:])
-        out = mpc._solver.call({"x0": a[0], "b": a[1], "target": a[2], "U_guess": shifted})
+            x0 = ca.vertcat(a[0], a[1], -float(sys2.A[1, 1]) * a[1] - float(sys2.B[1, 0]) * (a[2] + w[0, 0]), a[2])
+        shifted = ca.horzcat(a[5][:, 1:], a[5][:, -1:])
+        out = mpc._solver.call({"x0": x0, "b": w, "target": target, "U_guess": shifted, "u_ref": u_ref})
         solve = ca.Function("mpc_solve", a, [out["u0"], out["U"]])
-        hold = ca.Function("mpc_hold", a, [a[4], a[3]])
+        hold = ca.Function("mpc_hold", a, [a[6], a[5]])
         branch = ca.Function.conditional("mpc_period", [hold], solve)
         due = ca.if_else(ca.fmod(count, self.every) == 0, 1, 0)
-        rate_next, plan_next = branch(due, x0, bias, target, plan, rate)
+        rate_next, plan_next = branch(due, e, r, cmd, bias, z, plan, rate)
         cmd_next = ca.fmin(ca.fmax(cmd + rate_next * self.dt, -mpc.steer_max), mpc.steer_max)
         chi_d = xr_next[0]
         return ca.Function("mpc_law", [mem, ref, chi, r, dt, U, st, bias],
@@ -369,7 +470,10 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     horizon then shorter), re-planned ten times per period; weights: course error 1/(1 deg)^2, yaw
     rate ``1/r_max^2`` (both against the reference model's preview), steering rate
     ``(100 / rate_max)^2`` (a steering rate of 1 % of the limit costs as much as 1 deg of course
-    error).
+    error); the steady steering of the design's PID law (``design.autopilot.steering``) along the
+    preview. In the design's loop (``design.simulate(controller=mpc)``) the heading observer runs on
+    the MPC's model (:func:`~casship.autopilot.estimation.heading_observer` with ``steering`` and
+    ``second``).
 
     Parameters
     ----------
@@ -397,4 +501,4 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
                         replan=max(s.dt, round(period / 10 / s.dt) * s.dt),
                         q_e=1.0 / np.radians(1.0) ** 2, q_r=(1.0 / s.r_max**2) if q_r is None else q_r,
                         r_u=(100.0 / s.steer_rate_max) ** 2 if r_u is None else r_u,
-                        reference=design.autopilot.reference)
+                        reference=design.autopilot.reference, steering=design.autopilot.steering)

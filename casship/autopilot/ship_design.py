@@ -105,7 +105,8 @@ class Design:
         s = self.settings
         return Sensors(s.gnss_rate, s.gnss_std, s.compass_rate, s.compass_std, s.gyro_std)
 
-    def estimator(self, kind: str | None = None, *, wave: WaveYaw | None = None, x0=None) -> LoopEstimator:
+    def estimator(self, kind: str | None = None, *, wave: WaveYaw | None = None, x0=None,
+                  steering=None, second: bool = False) -> LoopEstimator:
         """The loop's estimator (tuned by the settings) started at ``x0`` (the trim point).
 
         Parameters
@@ -117,6 +118,12 @@ class Design:
             Put this wave model into the heading observer (wave filter).
         x0 : array, optional
             Start state (default: the trim point).
+        steering : SteeringFeedforward, optional
+            The heading observer's damping from the ship's steady steering (:func:`heading_observer`;
+            the MPC's model).
+        second : bool
+            The heading observer on the second-order Nomoto model (when the design has it; the MPC's
+            model).
         """
         s, pl = self.settings, self.plant
         kind = kind or s.mode
@@ -129,7 +136,9 @@ class Design:
             speed = float(np.hypot(x0[m.index("u")], x0[m.index("v")])) if "u" in m.state_names else s.speed
             prior = course_prior(x0[m.index(pl.north)], x0[m.index(pl.east)], speed, chi0, s.gnss_std)
             return LoopEstimator(est, prior, "course")
-        obs = heading_observer(self.nomoto.K, self.nomoto.T, wave, steer=pl.steer)
+        nom = self.nomoto
+        obs = heading_observer(nom.K, nom.T, wave, steer=pl.steer, steering=steering,
+                               second=(nom.T1, nom.T2, nom.T3) if second and nom.second_order else None)
         q_r, q_b = s.observer_q
         est = heading_kf(obs, s.dt, compass_std=s.compass_std, gyro_std=s.gyro_std, q_r=q_r, q_b=q_b)
         prior = heading_prior(obs, x0[m.index(pl.heading)], x0[m.index(pl.yaw_rate)], s.compass_std)
@@ -176,7 +185,11 @@ class Design:
             model_wave = (wave if wave is not None else settings_wave(s)) if wave_filter else None
             if wave_filter and model_wave is None:
                 raise InputError("wave_filter needs a wave model: give wave, or design with wave_w0 and wave_std")
-            estimator = self.estimator("course" if mode == "course" else "heading", wave=model_wave, x0=pl.x0)
+            # the MPC's disturbance is the observer's bias: estimated on the model the MPC plans with
+            mpc = isinstance(controller, MPCAutopilot)
+            estimator = self.estimator("course" if mode == "course" else "heading", wave=model_wave, x0=pl.x0,
+                                       steering=controller.steering if mpc else None,
+                                       second=mpc and controller.order == 2)
         law = self.autopilot
         if isinstance(controller, (control.StateSpace, control.TransferFunction)):
             law = self.linear_controller(controller)
