@@ -6,7 +6,8 @@ The compiler is ``$CC`` if set, else ``gcc``, else ``cc``; the flags and the tim
 started (its process group), and the compile fails with :class:`CompileError`.
 
 Nothing waits for a compiler nobody needs: a Ctrl-C while one runs in the calling thread stops it
-(its process group) before the interrupt goes on, and at exit :func:`stop_compilers` stops those
+(its process group) before the interrupt goes on (one that comes while the compiler is being started
+is held until it is registered, then handled the same way), and at exit :func:`stop_compilers` stops those
 still running in background threads and removes their build folders.
 """
 from __future__ import annotations
@@ -18,6 +19,7 @@ import signal
 import subprocess
 import sys
 import threading
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Sequence
 
@@ -145,17 +147,19 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     """
     limit = compile_timeout()
     posix = os.name == "posix"
-    with _STATE_LOCK:
-        if _STATE["stopping"]:
-            raise CompileError(f"compiling {what}: not started, the process is ending")
-        try:
-            # a session of its own: a Ctrl-C at the terminal reaches casship, which stops the group
-            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                    start_new_session=posix)
-        except OSError as exc:
-            raise CompileError(f"compiling {what}: the compiler {cmd[0]} cannot be run ({exc})") from None
-        _RUNNING.add(proc)
+    with _interrupts_deferred() as pending:      # a Ctrl-C before the compiler is registered is held back
+        with _STATE_LOCK:
+            if _STATE["stopping"]:
+                raise CompileError(f"compiling {what}: not started, the process is ending")
+            try:
+                # a session of its own: a Ctrl-C at the terminal reaches casship, which stops the group
+                proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                        start_new_session=posix)
+            except OSError as exc:
+                raise CompileError(f"compiling {what}: the compiler {cmd[0]} cannot be run ({exc})") from None
+            _RUNNING.add(proc)
     try:
+        pending.deliver()                         # ... and goes on here, where it stops the compiler
         with activity(f"casship: compiling {what} to C (once; then kept in the cache)"):
             out, err = proc.communicate(timeout=limit)
     except subprocess.TimeoutExpired:
@@ -179,6 +183,48 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     if _STATE["stopping"]:
         raise CompileError(f"compiling {what}: stopped, the process is ending")
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+class _Deferred:
+    """The Ctrl-Cs held back by :func:`_interrupts_deferred`, handed on by :meth:`deliver`."""
+
+    def __init__(self):
+        self.caught: list = []
+        self.handler = None
+
+    def __call__(self, signum, frame):
+        self.caught.append((signum, frame))
+
+    def deliver(self) -> None:
+        """Run the handler that was in place for each Ctrl-C held back (the default one raises
+        ``KeyboardInterrupt``)."""
+        caught, self.caught = self.caught, []
+        for signum, frame in caught:
+            if callable(self.handler):
+                self.handler(signum, frame)
+
+
+@contextmanager
+def _interrupts_deferred():
+    """Hold back Ctrl-C (SIGINT) in the block: between starting a compiler in a session of its own and
+    registering it, an interrupt would leave it running unseen (the terminal's Ctrl-C does not reach
+    it). Only the main thread receives Python's signals; elsewhere nothing is held back."""
+    pending = _Deferred()
+    if threading.current_thread() is not threading.main_thread():
+        yield pending
+        return
+    try:
+        pending.handler = signal.signal(signal.SIGINT, pending)
+    except (ValueError, OSError):           # no handler can be set here (an embedded interpreter)
+        yield pending
+        return
+    try:
+        yield pending
+    except BaseException:               # the block failed: its error goes on, unless a Ctrl-C came meanwhile
+        signal.signal(signal.SIGINT, pending.handler)
+        pending.deliver()
+        raise
+    signal.signal(signal.SIGINT, pending.handler)
 
 
 def build_library(fun: ca.Function, folder: Path, stem: str, compiler: str, flags: Sequence[str],
