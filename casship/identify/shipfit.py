@@ -138,11 +138,11 @@ class ShipFit:
 
         Returns
         -------
-        ParameterUncertainty or None
+        ParameterBelief or None
         """
         from scipy.linalg import block_diag
 
-        from .params_file import ParameterUncertainty
+        from .belief import ParameterBelief
 
         parts, names, values = [], [], []
         b = self.fit.uncertainty("robust")
@@ -168,8 +168,9 @@ class ShipFit:
             values.append(own["value"] if own else pool["population"])
         if not names:
             return None
-        return ParameterUncertainty(names, values, block_diag(*parts), "robust (sandwich) of the refinement and the "
-                                    "mirror-pair stage; facility quantities pooled over facilities", kind="robust")
+        return ParameterBelief.from_values(names, values, block_diag(*parts), "robust (sandwich) of the refinement and "
+                                           "the mirror-pair stage; facility quantities pooled over facilities",
+                                           kind="robust")
 
     def to_dict(self, facility: str | None = None, uncertainty=None) -> dict:
         """The fit file's content for replaying records of ``facility`` (see :meth:`params`).
@@ -178,7 +179,7 @@ class ShipFit:
         ----------
         facility : str, optional
             The facility of the records the file will replay.
-        uncertainty : ParameterUncertainty, optional
+        uncertainty : ParameterBelief, optional
             The covariance to write (default :meth:`uncertainty`).
 
         Returns
@@ -207,7 +208,7 @@ class ShipFit:
         path : str or Path
         facility : str, optional
             The facility of the records the file will replay.
-        uncertainty : ParameterUncertainty, optional
+        uncertainty : ParameterBelief, optional
             The covariance to write (default :meth:`uncertainty`).
         extra : mapping, optional
             More top-level entries of the file.
