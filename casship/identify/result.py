@@ -8,7 +8,6 @@ parameter set), so that a fit file replays on the model it was made for and refu
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
