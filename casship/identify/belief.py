@@ -17,145 +17,17 @@ import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import SimpleNamespace
-from typing import Literal, get_args
 
 import numpy as np
 
 from ..errors import InputError
 from ..gaussian import Gaussian
-from .fit_json import fit_fields, load_fit_json
+from .covariance import (COVARIANCE_KINDS, COVARIANCES, Q_MAX_DEG2_PER_S, SYMMETRY_TOL, CovarianceKind, check_numbers,
+                         checked_covariance, checked_kind, covariance_kind, discrepancy_of, free_block, kind_from_source)
+from .fit_json import fit_view
 
 __all__ = ["ParameterBelief", "ParameterUncertainty", "CovarianceKind", "COVARIANCE_KINDS", "COVARIANCES",
            "kind_from_source", "covariance_kind", "discrepancy_of", "SYMMETRY_TOL", "Q_MAX_DEG2_PER_S"]
-
-#: The covariances of a fit file a belief can be built from (:meth:`ParameterBelief.from_fit`).
-COVARIANCES = ("jackknife", "robust", "model")
-
-#: Which covariance a Gaussian over parameters carries: a run-level calibration (``"calibrated"``,
-#: e.g. a jackknife), the robust (sandwich) or the model-based covariance of a fit, a fit's standard
-#: errors alone (independent), a prior stated by hand, or a covariance that says none of these.
-CovarianceKind = Literal["calibrated", "robust", "model-based", "standard errors", "prior", "stated"]
-COVARIANCE_KINDS: tuple = get_args(CovarianceKind)
-
-
-def kind_from_source(source: str) -> CovarianceKind:
-    """The kind of a covariance read from its prose ``source``: the rule for files older than the ``kind`` field.
-
-    Files written since carry the kind itself (``ParameterBelief.kind``); only
-    :meth:`ParameterBelief.from_dict` falls back to this rule, for a file without it.
-
-    Parameters
-    ----------
-    source : str
-        The covariance's stated source (e.g. ``"run-level jackknife over 16 folds"``).
-
-    Returns
-    -------
-    str
-        ``"calibrated"`` (a jackknife or another calibration over runs), ``"robust"`` (sandwich),
-        ``"model-based"``, or ``"stated"`` (a source that says none of these).
-
-    Examples
-    --------
-    >>> kind_from_source("run-level jackknife over 16 leave-one-run-out folds")
-    'calibrated'
-    >>> kind_from_source("robust (sandwich)")
-    'robust'
-    """
-    text = str(source).lower()
-    if "jackknife" in text or "calibrat" in text:
-        return "calibrated"
-    if "robust" in text or "sandwich" in text:
-        return "robust"
-    if "model-based" in text or "model based" in text:
-        return "model-based"
-    return "stated"
-
-
-def _checked_kind(kind, what: str) -> str:
-    """``kind`` when it is one of :data:`COVARIANCE_KINDS`, else an error naming ``what``."""
-    if kind not in COVARIANCE_KINDS:
-        raise InputError(f"{what}: unknown covariance kind {kind!r}; use one of {COVARIANCE_KINDS}")
-    return str(kind)
-
-#: Upper bound of a fit file's model discrepancy [deg^2/s]: beyond it the heading's 95 % band spans a
-#: full turn (+-180 deg) within about 10 s, i.e. the file predicts nothing.
-Q_MAX_DEG2_PER_S = 1e3
-
-
-
-
-def covariance_kind(covariance) -> str:
-    """The kind of a parameter covariance, for reports.
-
-    Parameters
-    ----------
-    covariance : ParameterBelief or str
-        A belief (its ``kind``, set where the covariance was made), or the prose ``source`` of a
-        covariance from a file older than the ``kind`` field (read by :func:`kind_from_source`, the
-        one rule for those).
-
-    Returns
-    -------
-    str
-        One of :data:`COVARIANCE_KINDS` (``"calibrated"``, ``"robust"``, ``"model-based"``,
-        ``"standard errors"``, ``"prior"``, ``"stated"``).
-
-    Examples
-    --------
-    >>> covariance_kind(ParameterBelief.from_values(["K"], [0.1], [[1e-4]], "by hand", kind="prior"))
-    'prior'
-    >>> covariance_kind("run-level jackknife over 16 leave-one-run-out folds")
-    'calibrated'
-    """
-    if isinstance(covariance, str):
-        return kind_from_source(covariance)
-    return covariance.kind
-
-
-def discrepancy_of(discrepancy, where: str, names) -> tuple[float, np.ndarray | None]:
-    """A fit file's ``model_discrepancy`` object read: its heading variance rate and the covariance beside it.
-
-    Parameters
-    ----------
-    discrepancy : mapping or None
-        ``{"psi_variance_growth_deg2_per_s": q, "estimated_with": {...}}`` (``estimated_with``
-        optional: the covariance of the same parameters ``q`` was estimated beside).
-    where : str
-        What holds it (for the messages).
-    names : sequence of str
-        The parameters of the file's ``param_covariance`` (``estimated_with`` must have the same).
-
-    Returns
-    -------
-    (float, ndarray or None)
-        ``q`` [rad^2/s] (0 when none is given) and the ``estimated_with`` covariance (None when absent).
-
-    Raises
-    ------
-    casship.errors.InputError
-        A discrepancy that is not an object, a rate outside ``[0, Q_MAX_DEG2_PER_S]`` deg^2/s, or an
-        ``estimated_with`` covariance that is not valid or not of the same parameters.
-    """
-    if not discrepancy:
-        return 0.0, None
-    if not isinstance(discrepancy, Mapping):
-        raise InputError(f"{where}: model_discrepancy must be an object, got {discrepancy!r:.60}")
-    q = discrepancy.get("psi_variance_growth_deg2_per_s")
-    if not isinstance(q, (int, float)) or isinstance(q, bool) or not np.isfinite(q) or not 0 <= q <= Q_MAX_DEG2_PER_S:
-        raise InputError(f"{where}: model_discrepancy.psi_variance_growth_deg2_per_s must be a number in "
-                         f"[0, {Q_MAX_DEG2_PER_S:g}] deg^2/s (beyond, the 95 % heading band spans a full turn within "
-                         f"about 10 s), got {q!r}")
-    beside = discrepancy.get("estimated_with")
-    base = None
-    if beside is not None:      # the covariance whose band q completes (same parameters, same order)
-        base = ParameterBelief.from_dict(beside, where, key="model_discrepancy.estimated_with")
-        if list(base.names) != list(names):
-            raise InputError(f"{where}: model_discrepancy.estimated_with has parameters {list(base.names)}, "
-                             f"param_covariance {list(names)}; they must be the same, in the same order")
-    return float(np.radians(np.radians(q))), (None if base is None else base.covariance)
-
 
 @dataclass(frozen=True)
 class ParameterBelief:
@@ -207,7 +79,7 @@ class ParameterBelief:
     discrepancy_covariance: np.ndarray | None = None
 
     def __post_init__(self):
-        object.__setattr__(self, "kind", _checked_kind(self.kind, "ParameterBelief"))
+        object.__setattr__(self, "kind", checked_kind(self.kind, "ParameterBelief"))
         names = tuple(str(n) for n in self.names)
         twice = sorted({n for n in names if names.count(n) > 1})
         if twice:
@@ -229,7 +101,7 @@ class ParameterBelief:
         object.__setattr__(self, "psi_variance_rate", q)
         if self.discrepancy_covariance is not None:
             object.__setattr__(self, "discrepancy_covariance",
-                               _checked_covariance(self.discrepancy_covariance, names, "discrepancy_covariance"))
+                               checked_covariance(self.discrepancy_covariance, names, "discrepancy_covariance"))
 
     # -- construction ------------------------------------------------------------------------------
     @classmethod
@@ -267,7 +139,7 @@ class ParameterBelief:
         values = np.asarray(values, dtype=float).reshape(-1)
         if values.size != len(names):
             raise InputError(f"ParameterBelief: {values.size} values for {len(names)} names")
-        cov = _checked_covariance(covariance, names, "covariance")
+        cov = checked_covariance(covariance, names, "covariance")
         return cls(tuple(names), Gaussian(values, cov), source, kind, dict(info or {}), psi_variance_rate,
                    discrepancy_covariance)
 
@@ -458,7 +330,7 @@ class ParameterBelief:
         where = "the fit"
         if isinstance(fit, (str, os.PathLike)):
             where = Path(fit).name
-            fit = _fit_of_file(fit)
+            fit = fit_view(fit)
         if covariance not in (None, *COVARIANCES):
             raise InputError(f"unknown covariance {covariance!r}; use one of {COVARIANCES} (or None: the file's own)")
         values = dict(params or fit.params)
@@ -471,60 +343,25 @@ class ParameterBelief:
                    if not np.isclose(v, values.get(n, np.nan), rtol=1e-12, atol=0.0)]
             if bad:
                 raise InputError(f"{where}: the values of {bad} in its covariance differ from its parameters")
-            q, beside = discrepancy_of(discrepancy, where, carried.names)
+            q, beside = discrepancy_of(discrepancy, where, carried.names, read=cls.from_dict)
             belief = dataclasses.replace(carried.described(), psi_variance_rate=q, discrepancy_covariance=beside)
         elif covariance == "jackknife":
             has = f"it carries a {kind} one ({carried.source})" if carried is not None else "it carries none"
             raise InputError(f"{where} has no calibrated (jackknife) covariance: {has}; ask for the robust or the "
                              "model-based one")
         else:
-            belief = cls._free_block(fit, values, robust={None: None, "robust": True, "model": False}[covariance])
-            if belief is None:
+            block = free_block(fit, values, robust={None: None, "robust": True, "model": False}[covariance])
+            if block is None:
                 if not extra_std:
                     raise InputError(f"{where} has no free model parameter among {list(fit.free)}; give prior "
                                      "standard deviations (extra_std)")
                 return cls.from_std(extra_std, values, source=source or f"prior around the values of {where}")
+            names, means, cov, how, kind = block
+            belief = cls(names, Gaussian(means, cov), how, kind)
             q = float(np.radians(np.radians(discrepancy.get("psi_variance_growth_deg2_per_s", 0.0) or 0.0)))
             belief = dataclasses.replace(belief, psi_variance_rate=q)
         belief = dataclasses.replace(belief, source=f"{where}: {belief.source}")
         return belief._with_extra(extra_std, values, source, clash="the fit estimated")
-
-    @classmethod
-    def _free_block(cls, fit, values: dict, *, robust: bool | None) -> "ParameterBelief | None":
-        """The robust (``robust=None``: when the fit has a finite one) or model-based covariance of the
-        fit's free model parameters (see from_fit); None when no free quantity is a model parameter."""
-        pick, names = [], []
-        for i, q in enumerate(fit.free):
-            base = q.split("@", 1)[0]
-            if base not in values or base in names:
-                continue
-            if "@" in q and not np.isclose(fit.estimates[q], values[base], rtol=1e-12, atol=0.0):
-                continue                                   # another record's / group's copy
-            pick.append(i)
-            names.append(base)
-        if not names:
-            return None
-        if robust is None:
-            robust = (fit.covariance_robust is not None
-                      and bool(np.all(np.isfinite(np.asarray(fit.covariance_robust)[np.ix_(pick, pick)]))))
-        if robust and fit.covariance_robust is None:
-            raise InputError("the fit has no robust covariance; use covariance='model'")
-        full = np.asarray(fit.covariance_robust if robust else fit.covariance, dtype=float)
-        block = full[np.ix_(pick, pick)]
-        kind = "robust" if robust else "model-based"
-        if not np.all(np.isfinite(block)):
-            if robust:
-                raise InputError(f"the fit's robust covariance is not finite for {names}; use covariance='model'")
-            se = np.array([fit.std_errors[fit.free[i]] for i in pick])
-            bad = [n for n, s in zip(names, se) if not (np.isfinite(s) and s > 0)]
-            if bad:
-                raise InputError(f"the fit does not determine {bad} (standard error not finite); give them a "
-                                 "prior standard deviation instead")
-            block, kind = np.diag(se**2), "standard errors"
-        how = {"robust": "robust (sandwich) covariance", "model-based": "model-based covariance",
-               "standard errors": "standard errors (no covariance in the fit)"}[kind]
-        return cls(tuple(names), Gaussian([values[n] for n in names], 0.5 * (block + block.T)),
-                   f"{how} of {len(names)} free parameter(s)", kind)
 
     def extended(self, std: Mapping[str, float], mean: Mapping[str, float], *,
                  source: str | None = None) -> "ParameterBelief":
@@ -710,10 +547,10 @@ class ParameterBelief:
         values = d.get("values")
         if values is None:
             raise InputError(f"{field_} lacks the values of {names}")
-        _numbers(values, (len(names),), f"{field_}.values")
-        _numbers(d["matrix"], (len(names), len(names)), f"{field_}.matrix")
+        check_numbers(values, (len(names),), f"{field_}.values")
+        check_numbers(d["matrix"], (len(names), len(names)), f"{field_}.matrix")
         source = str(d.get("source", ""))
-        kind = _checked_kind(d["kind"], f"{field_}.kind") if "kind" in d else kind_from_source(source)
+        kind = checked_kind(d["kind"], f"{field_}.kind") if "kind" in d else kind_from_source(source)
         try:
             return ParameterBelief.from_values(names, values, d["matrix"], source, dict(d.get("info") or {}), kind=kind)
         except ValueError as exc:
@@ -741,67 +578,3 @@ class ParameterUncertainty(ParameterBelief):
                       "...) (note: its .std is a dict by name)", DeprecationWarning, stacklevel=2)
         return ParameterBelief.from_values(names, values, covariance, source, info, psi_variance_rate,
                                            discrepancy_covariance, kind)
-
-
-def _fit_of_file(path) -> SimpleNamespace:
-    """The fields of a fit file (those :meth:`ParameterBelief.from_fit` reads) as attributes.
-
-    A view, not a :class:`~casship.identify.FitResult`: the fit builds its uncertainty as a belief, so
-    the belief reads the file through the JSON reader both share.
-    """
-    path = Path(path)
-    try:
-        fields = fit_fields(load_fit_json(path))
-    except ValueError as exc:
-        text = str(exc)
-        raise InputError(text if text.startswith(str(path)) else f"{path}: {text}") from None
-    return SimpleNamespace(**{"covariance_robust": None, "param_covariance": {}, "model_discrepancy": {}, **fields})
-
-
-def _numbers(value, shape: tuple, what: str) -> None:
-    """Refuse a JSON value that is not a (nested) list of numbers of ``shape``, naming ``what``."""
-    if value is None:
-        raise InputError(f"{what} is null; a fit file carries a {' x '.join(map(str, shape))} list of numbers there")
-    try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"{what}: expected a {' x '.join(map(str, shape))} list of numbers, got {value!r:.80}") from None
-    if a.shape != shape:
-        raise InputError(f"{what}: shape {a.shape}, {' x '.join(map(str, shape))} wanted")
-
-
-#: Relative asymmetry of a covariance entry tolerated as round-off (``|a_ij - a_ji| / sqrt(a_ii a_jj)``).
-SYMMETRY_TOL = 1e-8
-
-
-def _checked_covariance(matrix, names, what: str) -> np.ndarray:
-    """``matrix`` as a symmetric positive semi-definite covariance of ``names``, or ``ValueError``.
-
-    An asymmetry within round-off (:data:`SYMMETRY_TOL`) is averaged away; beyond it the entry is named.
-    """
-    k = len(names)
-    if matrix is None:
-        raise InputError(f"ParameterBelief: {what} is null ({k} x {k} wanted for {list(names)})")
-    try:
-        a = np.asarray(matrix, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"ParameterBelief: {what} is not a matrix of numbers") from None
-    if a.size != k * k:
-        raise InputError(f"ParameterBelief: {what} has {a.size} entries, {k} x {k} wanted for {list(names)}")
-    a = a.reshape(k, k)
-    if not np.all(np.isfinite(a)):
-        bad = [n for n, d in zip(names, np.diag(a)) if not np.isfinite(d)]
-        raise InputError(f"ParameterBelief: {what} not finite for {bad or list(names)}")
-    scale = np.sqrt(np.abs(np.outer(np.diag(a), np.diag(a))))
-    gap = np.abs(a - a.T)
-    bad = gap > SYMMETRY_TOL * np.maximum(scale, np.abs(a).max(initial=0.0) * 1e-12) + 1e-300
-    if bad.any():
-        i, j = (int(x) for x in np.argwhere(np.triu(bad, 1))[0])
-        raise InputError(f"ParameterBelief: {what} is not symmetric: entry ({names[i]}, {names[j]}) = {a[i, j]:.6g} "
-                         f"but ({names[j]}, {names[i]}) = {a[j, i]:.6g} (beyond round-off)")
-    a = 0.5 * (a + a.T)
-    if np.linalg.eigvalsh(a).min(initial=0.0) < -1e-9 * max(1.0, np.abs(a).max()):
-        raise InputError(f"ParameterBelief: {what} is not positive semi-definite")
-    return a
-
-

@@ -9,12 +9,13 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["load_fit_json", "fit_fields", "SCALARS", "DICTS", "LISTS"]
+__all__ = ["load_fit_json", "fit_fields", "fit_view", "SCALARS", "DICTS", "LISTS"]
 
 #: The fields of a fit file beside its parameters and covariances, by JSON type.
 SCALARS = ("cost", "loglik", "n_obs", "aic", "bic", "method", "status", "iterations", "solve_time_s", "message",
@@ -124,3 +125,26 @@ def fit_fields(d: Mapping) -> dict:
                 std_errors={n: float(v) for n, v in d["std_errors"].items()},
                 correlation=mat("correlation"), covariance=mat("covariance"),
                 **{**dict(cost=np.nan, loglik=np.nan, n_obs=0, aic=np.nan, bic=np.nan), **kw})
+
+
+def fit_view(path) -> SimpleNamespace:
+    """The fields of a fit file (those :meth:`~casship.identify.ParameterBelief.from_fit` reads) as attributes.
+
+    A view, not a :class:`~casship.identify.FitResult`: the fit builds its uncertainty as a belief, so
+    the belief reads the file through the JSON reader both share.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    types.SimpleNamespace
+    """
+    path = Path(path)
+    try:
+        fields = fit_fields(load_fit_json(path))
+    except ValueError as exc:
+        text = str(exc)
+        raise InputError(text if text.startswith(str(path)) else f"{path}: {text}") from None
+    return SimpleNamespace(**{"covariance_robust": None, "param_covariance": {}, "model_discrepancy": {}, **fields})

@@ -143,7 +143,7 @@ def read_fit_file(path, model=None) -> FitFile:
     mismatch = [n for n, v in zip(unc.names, unc.values) if not np.isclose(v, params.get(n, np.nan), rtol=1e-12)]
     if mismatch:
         raise InputError(f"{path}: param_covariance values of {mismatch} differ from the file's params")
-    q, beside = discrepancy_of(obj.get("model_discrepancy"), str(path), unc.names)
+    q, beside = discrepancy_of(obj.get("model_discrepancy"), str(path), unc.names, read=ParameterBelief.from_dict)
     # one frozen value: the covariance with the discrepancy beside it (nothing set after the fact)
     unc = dataclasses.replace(unc, psi_variance_rate=q, discrepancy_covariance=beside)
     return FitFile(model, p, unc)
