@@ -272,8 +272,9 @@ class MPCAutopilot:
     def plan_inputs(self) -> ca.Function:
         """``plan_inputs(bias, z) -> (target, w, u_ref)``: from the reference model's state relative to
         the command ``z`` (course error, rate, acceleration) the preview of the course error and rate
-        (``2 x N``), the disturbance of each step (:meth:`disturbance`) and the reference steering's
-        rate (:meth:`steering_rates`); one SX Function, called once per solve."""
+        (``2 x N``), the disturbance of each step (:meth:`disturbance`), the reference steering's
+        rate and the steering that holds the model on the preview, the reference steering less the
+        bias (:meth:`steering_rates`); one SX Function, called once per solve."""
         if getattr(self, "_inputs_fun", None) is None:
             N = int(self.horizon)
             b, z = ca.SX.sym("bias"), ca.SX.sym("z", 3)
@@ -282,6 +283,7 @@ class MPCAutopilot:
             target = full[:2, :]
             w = self.disturbance(b, z0[1], target[1, :])
             u_ref, s_ref = self.steering_rates([z0[1], z0[2]], full[1:, :])
+            s_ref = s_ref - b        # the steering that holds the model on the preview cancels the bias too
             self._inputs_fun = ca.Function("mpc_plan_inputs", [b, z], [target, w, u_ref, s_ref], ["bias", "z"],
                                            ["target", "w", "u_ref", "steer_ref"])
         return self._inputs_fun
@@ -477,7 +479,7 @@ class MPCLaw:
 
 
 def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60, q_r: float | None = None,
-                   r_u: float | None = None, q_d: float | None = None) -> MPCAutopilot:
+                   r_u: float | None = None, q_d: float | None = None, tuning: str = "limits") -> MPCAutopilot:
     """An MPC (heading control; a course-mode design is refused) with the design's model, limits and
     reference model (the PID law's, ``design.autopilot.reference``: the default design runs its PID
     with it, so the two are compared like with like).
@@ -485,19 +487,23 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     Horizon ``6 pi / wn_ref`` (three periods of the reference model's natural frequency) in
     ``steps`` steps (the period rounded to a multiple of the loop period; on a course-unstable ship
     (``T < 0``) at most ``|T| / 10``, the horizon then shorter), re-planned ten times per period.
+    Weights (``tuning``):
 
-    Weights, from the PID design's bandwidth ``wn`` and damping ``zeta`` and ``m = T / K``: on the
-    inertia part of the model (``e'' = delta / m``, ``delta' = u``) the unconstrained
-    infinite-horizon law of the cost ``q_e e^2 + q_r r^2 + q_d delta^2 + r_u u^2`` has its poles at
-    the roots of ``(s + wn)(s^2 + 2 zeta wn s + wn^2)``, the PID's closed-loop pair plus the
-    steering at ``wn``: with ``c = 4 zeta^2 - 1`` (the optimal poles are the stable roots of
-    ``r_u m^2 (-s^2)^3 + q_d m^2 s^4 - q_r s^2 + q_e = 0``)::
+    - ``"limits"`` (default): course error 1/(1 deg)^2, yaw rate ``1/r_max^2``, steering rate
+      ``(100 / rate_max)^2`` (a steering rate of 1 % of the limit costs as much as 1 deg of course
+      error), no steering weight;
+    - ``"bandwidth"``: from the PID design's ``wn`` and ``zeta`` (:func:`mpc_weights`), stated
+      before it was measured: on the inertia part of the model (``e'' = delta / m``, ``delta' =
+      u``, ``m = T / K``) the unconstrained infinite-horizon law of the cost ``q_e e^2 + q_r r^2 +
+      q_d delta^2 + r_u u^2`` has its poles at the roots of ``(s + w)(s^2 + 2 zeta w s + w^2)``, the
+      PID's closed-loop pair plus the steering, at ``w = max(wn, 1 / |T|)`` (below ``1 / |T|`` the
+      ship is not an inertia: its rate follows the steering); the steering and its rate measured
+      from the reference steering along the preview. It is not the default: on the docs' table it
+      is at or below the PID in more rows and where the limits bind, but above the ``"limits"``
+      tuning in some (docs/autopilots.md section 9).
 
-        q_e = 1 / (1 deg)^2,  q_r = c q_e / wn^2,  q_d = c q_e / (m^2 wn^4),  r_u = q_e / (m^2 wn^6)
-
-    all against the reference model's preview and the reference steering along it (``zeta >= 1/2``,
-    else give the weights). The steady steering of the design's PID law
-    (``design.autopilot.steering``) along the preview. In the design's loop
+    ``q_r``, ``r_u``, ``q_d`` given replace the tuning's. The steady steering of the design's PID
+    law (``design.autopilot.steering``) along the preview. In the design's loop
     (``design.simulate(controller=mpc)``) the heading observer runs on the MPC's model
     (:func:`~casship.autopilot.estimation.heading_observer` with ``steering`` and ``second``).
 
@@ -510,6 +516,8 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
         Steps over the horizon.
     q_r, r_u, q_d : float, optional
         Replace the yaw-rate, steering-rate and steering weights.
+    tuning : {"limits", "bandwidth"}
+        The rule of the weights.
     """
     s = design.settings
     if s.mode == "course":
@@ -523,7 +531,13 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     if nom.T < 0:        # a course-unstable ship drifts off between solves: re-plan within a tenth of |T|
         period = min(period, abs(nom.T) / 10)
     period = max(s.dt, round(period / s.dt) * s.dt)
-    weights = mpc_weights(s.wn, s.zeta, nom.m)
+    if tuning == "bandwidth":
+        weights = mpc_weights(s.wn, s.zeta, nom.K, nom.T)
+    elif tuning == "limits":
+        weights = {"q_e": 1.0 / np.radians(1.0) ** 2, "q_r": 1.0 / s.r_max**2, "q_d": 0.0,
+                   "r_u": (100.0 / s.steer_rate_max) ** 2}
+    else:
+        raise InputError(f"MPC tuning must be 'limits' or 'bandwidth', got {tuning!r}")
     for name, given in (("q_r", q_r), ("r_u", r_u), ("q_d", q_d)):
         if given is not None:
             weights[name] = given
@@ -532,23 +546,28 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
                         reference=design.autopilot.reference, steering=design.autopilot.steering)
 
 
-def mpc_weights(wn: float, zeta: float, m: float) -> dict:
-    """The MPC's default weights from the PID design's ``wn``, ``zeta`` and ``m = T / K`` (the rule
-    of :func:`mpc_for_design`): ``q_e = 1 / (1 deg)^2``, ``q_r = c q_e / wn^2``, ``q_d = c q_e /
-    (m^2 wn^4)``, ``r_u = q_e / (m^2 wn^6)`` with ``c = 4 zeta^2 - 1``.
+def mpc_weights(wn: float, zeta: float, K: float, T: float) -> dict:
+    """The MPC's weights from the PID design's bandwidth (``tuning="bandwidth"`` of
+    :func:`mpc_for_design`): with ``w = max(wn, 1 / |T|)``, ``m = T / K`` and ``c = 4 zeta^2 - 1``::
+
+        q_e = 1 / (1 deg)^2,  q_r = c q_e / w^2,  q_d = c q_e / (m^2 w^4),  r_u = q_e / (m^2 w^6)
+
+    the weights whose unconstrained infinite-horizon law on ``e'' = delta / m``, ``delta' = u`` has
+    its poles at the roots of ``(s + w)(s^2 + 2 zeta w s + w^2)`` (the optimal poles are the stable
+    roots of ``r_u m^2 (-s^2)^3 + q_d m^2 s^4 - q_r s^2 + q_e = 0``).
 
     Parameters
     ----------
     wn, zeta : float
-        Closed-loop natural frequency [rad/s] and damping of the PID design.
-    m : float
-        ``T / K`` of the Nomoto model (the steering per unit yaw acceleration).
+        Closed-loop natural frequency [rad/s] and damping (at least 1/2) of the PID design.
+    K, T : float
+        Nomoto gain and time constant.
     """
     if not (np.isfinite(wn) and wn > 0):
         raise InputError(f"MPC weights: wn must be positive and finite, got {wn}")
     if not (np.isfinite(zeta) and zeta >= 0.5):
         raise InputError(f"MPC weights: zeta = {zeta} < 1/2 has no such weights (give q_r, q_d and r_u)")
-    if not (np.isfinite(m) and m != 0):
-        raise InputError(f"MPC weights: m = T / K must be finite and nonzero, got {m}")
-    q_e, c = 1.0 / np.radians(1.0) ** 2, 4 * zeta**2 - 1
-    return {"q_e": q_e, "q_r": c * q_e / wn**2, "q_d": c * q_e / (m**2 * wn**4), "r_u": q_e / (m**2 * wn**6)}
+    if not (np.isfinite(K) and K != 0 and np.isfinite(T) and T != 0):
+        raise InputError(f"MPC weights: the Nomoto K and T must be finite and nonzero, got K = {K}, T = {T}")
+    q_e, c, w, m = 1.0 / np.radians(1.0) ** 2, 4 * zeta**2 - 1, max(wn, 1.0 / abs(T)), T / K
+    return {"q_e": q_e, "q_r": c * q_e / w**2, "q_d": c * q_e / (m**2 * w**4), "r_u": q_e / (m**2 * w**6)}
