@@ -274,5 +274,5 @@ def test_python_update_and_compiled_law_agree_with_the_steering_weight(kvlcc2):
     out = law.function(m0, ref, np.radians(19.0), xr[1], dt, 8.0, 0.05, bias)
     assert float(out[1]) == pytest.approx(cmd, abs=1e-9)
     _, w, _, s_ref = (np.asarray(v) for v in mpc.plan_inputs()(bias, np.array([xr[0] - ref, xr[1], xr[2]])))
-    _, s_nobias = (np.asarray(v) for v in mpc.steering_rates([xr[1], xr[2]], mpc._preview(xr, ref, 3)[1:]))
+    s_nobias = np.asarray(mpc.reference_steering([xr[1], xr[2]], mpc._preview(xr, ref, 3)[1:]))[:, 1:]
     np.testing.assert_allclose(s_ref, s_nobias - bias, atol=1e-12)

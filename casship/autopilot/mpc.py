@@ -15,11 +15,11 @@ PID law's feed-forward): the linear model then plans only the deviation from the
 along the reference preview, and the steering limits still bound the total steering. Without a
 steering table ``f = 0``. Each solve minimises
 ``sum q_e (e_k - e_d,k)^2 + q_r (r_k - r_d,k)^2 + q_d (delta_k - delta_d,k)^2 + r_u (u_k - u_d,k)^2``
-over ``N`` steps subject
-to ``|delta| <= delta_max``, ``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a
-soft limit); ``e_d, r_d`` are the reference model's preview, ``delta_d`` the steering that holds the model on
-it, ``s(r_d) + (T / K) a_d`` (the PID law's low-frequency feed-forward), and ``u_d`` its rate,
-so that following the reference costs nothing and the weights price only the departures from it. The quadratic program keeps
+over ``N`` steps subject to ``|delta| <= delta_max``, ``|u| <= rate_max`` and ``|r| <= r_max``
+(the preset rate of turn, a soft limit); ``e_d, r_d`` are the reference model's preview,
+``delta_d`` the steering that holds the model on it, ``s(r_d) + (T / K) a_d - b`` (the PID law's
+low-frequency feed-forward, less the bias), and ``u_d`` its rate, so that following the reference
+costs nothing and the weights price only the departures from it. The quadratic program keeps
 the optimal-control structure (variables ``x0, u0, x1, u1, ..., xN``, the model as equality
 constraints stage by stage) and is solved by HPIPM (Frison & Diehl 2020), the structure-exploiting
 interior-point QP solver shipped with CasADi (``casadi.conic(..., "hpipm")``), whose cost grows
@@ -146,10 +146,9 @@ class MPCAutopilot:
         f = np.array([float(self.feedforward(v)) for v in r])
         return (bias - 0.5 * (f[:-1] + f[1:])).reshape(1, N)
 
-    def steering_rates(self, ref0, previews):
-        """Rate of the reference steering ``s(r_d) + (T / K) a_d`` over each step (``1 x N``):
-        ``u_d,k`` of the cost (``s(r) = r / K`` without a steering table), and the reference
-        steering at the end of each step (``1 x N``, ``delta_d,k`` of the cost).
+    def reference_steering(self, ref0, previews):
+        """The reference steering ``s(r_d) + (T / K) a_d`` (``s(r) = r / K`` without a steering
+        table) at the start and the end of each step (``1 x (N + 1)``).
 
         Parameters
         ----------
@@ -167,8 +166,21 @@ class MPCAutopilot:
             steady = ca.horzcat(*[self.feedforward(r[0, k]) + r[0, k] / K for k in range(N + 1)])
         else:
             steady = np.array([[float(self.feedforward(v)) + v / K for v in np.ravel(r)]])
-        d = steady + m * a
-        return (d[:, 1:] - d[:, :-1]) / self.period, d[:, 1:]
+        return steady + m * a
+
+    def steering_rates(self, ref0, previews):
+        """Rate of the reference steering (:meth:`reference_steering`) over each step (``1 x N``):
+        ``u_d,k`` of the cost.
+
+        Parameters
+        ----------
+        ref0 : sequence
+            Reference rate and acceleration at the start of the horizon.
+        previews : array or casadi.MX
+            Reference rate and acceleration at the end of each step (``2 x N``).
+        """
+        d = self.reference_steering(ref0, previews)
+        return (d[:, 1:] - d[:, :-1]) / self.period
 
     def model(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Exact discretisation ``x+ = A x + B u + E b`` at ``period`` of ``[e, r, delta]`` (first
@@ -282,8 +294,9 @@ class MPCAutopilot:
             z0 = z if self.reference is not None else ca.SX.zeros(3)
             target = full[:2, :]
             w = self.disturbance(b, z0[1], target[1, :])
-            u_ref, s_ref = self.steering_rates([z0[1], z0[2]], full[1:, :])
-            s_ref = s_ref - b        # the steering that holds the model on the preview cancels the bias too
+            u_ref = self.steering_rates([z0[1], z0[2]], full[1:, :])
+            # the steering that holds the model on the preview cancels the bias too
+            s_ref = self.reference_steering([z0[1], z0[2]], full[1:, :])[:, 1:] - b
             self._inputs_fun = ca.Function("mpc_plan_inputs", [b, z], [target, w, u_ref, s_ref], ["bias", "z"],
                                            ["target", "w", "u_ref", "steer_ref"])
         return self._inputs_fun
