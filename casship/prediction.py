@@ -1,6 +1,6 @@
 """Prediction bands: the parameter uncertainty of a fit carried through a simulation.
 
-A fit's parameters are uncertain (:class:`~casship.identify.ParameterUncertainty`: values and
+A fit's parameters are uncertain (:class:`~casship.identify.ParameterBelief`: values and
 covariance). Two routes carry that uncertainty into a replayed or simulated manoeuvre:
 
 * **Exact sensitivities** (:func:`trajectory_sensitivities`): the forward sensitivities
@@ -152,7 +152,7 @@ def sampled_metrics(run: Callable, draws: np.ndarray, level: float = 0.95, *, ba
         :func:`casship.simulate_many`) and returns one entry per draw: ``(metrics, psi)``, or the
         exception its simulation failed with (counted as failed).
     draws : (n, np) array
-        Parameter vectors (e.g. :meth:`~casship.identify.ParameterUncertainty.sample`).
+        Parameter vectors (e.g. :meth:`~casship.identify.ParameterBelief.sample`).
     level : float
         Coverage of the intervals (equal-tailed percentiles).
     batch : bool

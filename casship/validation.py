@@ -52,7 +52,7 @@ class ReplayResult:
         With a parameter uncertainty: per sample ``psi_std`` [rad], ``x_std``, ``y_std``,
         ``cross_track_std`` [m] (linearised, exact sensitivities), ``level`` and ``z``; and
         ``coverage``: the fraction of the measured heading inside the band. With a model-discrepancy
-        term (:attr:`ParameterUncertainty.psi_variance_rate` ``q``; 0 when the file carries none)
+        term (:attr:`~casship.identify.ParameterBelief.psi_variance_rate` ``q``; 0 when the file carries none)
         also the predictive heading band ``psi_std_predictive = sqrt(psi_std^2 + q t)`` (the same
         covariance, so never narrower than the parameter band), ``psi_variance_rate`` and its
         ``coverage_predictive``.
@@ -406,7 +406,7 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     check_limits : bool
         Check the measured inputs, the initial state and the time steps against the model's
         validity ranges (see :func:`casship.simulate`).
-    uncertainty : ParameterUncertainty, optional
+    uncertainty : ParameterBelief, optional
         Uncertainty of some of the parameters (e.g. from a fit file): the result then carries
         prediction bands (exact sensitivities) and index intervals (``samples`` draws).
     level : float

@@ -14,7 +14,7 @@ import pytest
 from casship.cli import main
 from casship.design import COVARIANCES, ParameterBelief, covariance_kind, fit_noise
 from casship.gaussian import Gaussian
-from casship.identify import FitResult, ParameterUncertainty, read_fit_file, read_params
+from casship.identify import FitResult, read_fit_file, read_params
 from casship.models import kvlcc2
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,9 +47,9 @@ def write_fit(path: Path, *, jackknife: bool = True, robust: bool = True) -> dic
                     model_options=dict(model.meta["options"]), param_set=model.vessel.param_set,
                     param_names=list(model.param_names), covariance_robust=robust_cov if robust else None)
     if jackknife:
-        unc = ParameterUncertainty(JACK, [params[n] for n in JACK], jack,
-                                   "run-level jackknife over 16 leave-one-run-out folds", {"folds": 16},
-                                   kind="calibrated")
+        unc = ParameterBelief.from_values(JACK, [params[n] for n in JACK], jack,
+                                          "run-level jackknife over 16 leave-one-run-out folds", {"folds": 16},
+                                          kind="calibrated")
         fit = dataclasses.replace(fit, param_covariance=unc.to_dict())
     fit.to_json(path)
     return {"model": model_cov, "robust": robust_cov, "jackknife": jack, "params": params}
@@ -71,8 +71,8 @@ def test_belief_from_a_fit_file_is_its_calibrated_covariance_block(fit_files):
     assert belief.names == tuple(JACK)
     assert np.allclose(belief.cov, mats["jackknife"], rtol=1e-14, atol=0.0)
     assert belief.mean == {n: mats["params"][n] for n in JACK}
-    # the same belief as from the uncertainty read_params returns
-    assert np.allclose(ParameterBelief.from_uncertainty(unc).cov, belief.cov, rtol=1e-14)
+    # the same belief as the uncertainty read_fit_file returns
+    assert np.allclose(unc.described().cov, belief.cov, rtol=1e-14)
     # the others on request: the blocks of the fit's free model parameters (psi@0 is not one)
     for kind, key in (("robust", "robust"), ("model", "model")):
         b = ParameterBelief.from_fit(path, covariance=kind)
@@ -186,14 +186,14 @@ def test_the_covariance_kind_is_typed_and_travels_with_the_file(fit_files, tmp_p
     import json
     carried = json.loads(path.read_text())["param_covariance"]
     assert carried["kind"] == "calibrated"                       # written where the covariance is made
-    assert ParameterUncertainty.from_dict(carried).kind == "calibrated"
+    assert ParameterBelief.from_dict(carried).kind == "calibrated"
     # The file's kind wins over its prose: a source that mentions a jackknife but says robust is robust.
     says_robust = dict(carried, kind="robust")
-    assert ParameterUncertainty.from_dict(says_robust).kind == "robust"
-    assert covariance_kind(ParameterUncertainty.from_dict(says_robust)) == "robust"
+    assert ParameterBelief.from_dict(says_robust).kind == "robust"
+    assert covariance_kind(ParameterBelief.from_dict(says_robust)) == "robust"
     # A file older than the field: the prose rule, once, on reading.
     old = {k: v for k, v in carried.items() if k != "kind"}
-    assert ParameterUncertainty.from_dict(old).kind == "calibrated"
+    assert ParameterBelief.from_dict(old).kind == "calibrated"
     older = tmp_path / "old_fit.json"
     obj = json.loads(path.read_text())
     obj["param_covariance"] = old
@@ -204,7 +204,7 @@ def test_the_covariance_kind_is_typed_and_travels_with_the_file(fit_files, tmp_p
     assert fit.uncertainty(kind="model").kind == "model-based"
     assert fit.uncertainty(kind="robust").kind == "robust"
     with pytest.raises(ValueError, match="covariance kind 'sandwich'"):
-        ParameterUncertainty.from_dict(dict(carried, kind="sandwich"))
+        ParameterBelief.from_dict(dict(carried, kind="sandwich"))
     with pytest.raises(ValueError, match="covariance kind"):
         ParameterBelief(("K",), Gaussian([0.1], [[1.0]]), kind="guess")
 
@@ -213,10 +213,12 @@ def test_one_belief_converts_to_a_prior_and_an_uncertainty_and_back(fit_files):
     from casship.identify import Prior
     (path, made), _ = fit_files
     belief = ParameterBelief.from_fit(path)
-    unc = belief.to_uncertainty()
-    assert (unc.names, unc.kind, unc.source) == (list(belief.names), "calibrated", belief.source)
+    with pytest.warns(DeprecationWarning, match="to_uncertainty"):      # 0.3's conversions: the belief itself
+        unc = belief.to_uncertainty()
+    assert (unc.names, unc.kind, unc.source) == (belief.names, "calibrated", belief.source)
     np.testing.assert_array_equal(unc.covariance, belief.cov)
-    again = ParameterBelief.from_uncertainty(unc, source=belief.source)
+    with pytest.warns(DeprecationWarning, match="from_uncertainty"):
+        again = ParameterBelief.from_uncertainty(unc, source=belief.source)
     assert (again.names, again.mean, again.source, again.kind) == (belief.names, belief.mean, belief.source, belief.kind)
     np.testing.assert_array_equal(again.cov, belief.cov)
     with pytest.raises(ValueError, match="correlates"):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import casship as cs
-from casship.identify import ParameterUncertainty, read_fit_file, read_params
+from casship.identify import ParameterBelief, read_fit_file, read_params
 from casship.models import kvlcc2, nomoto_first_order
 from casship.prediction import trajectory_sensitivities
 from casship.identify import replay_file
@@ -74,7 +74,7 @@ def test_fit_files_carry_the_covariance_and_replay_with_bands(tmp_path):
     path = fit.to_json(tmp_path / "fit.json")
     read = read_fit_file(path)
     model, p, unc = read.model, read.params, read.uncertainty
-    assert unc.names == ["K", "T"] and unc.source == "robust (sandwich)"
+    assert unc.names == ("K", "T") and unc.source == "robust (sandwich)"
     assert np.allclose(unc.covariance, fit.uncertainty().covariance)
     assert read_params(path)[1] == pytest.approx(p) and len(read_params(path)) == 2     # one arity
     with pytest.warns(DeprecationWarning, match="read_fit_file"):
@@ -92,12 +92,12 @@ def test_fit_files_carry_the_covariance_and_replay_with_bands(tmp_path):
             read(path)
 
 
-def test_parameter_uncertainty_checks_its_input():
+def test_parameter_belief_checks_its_input():
     with pytest.raises(ValueError, match="not positive semi-definite"):
-        ParameterUncertainty(["a", "b"], [0.0, 0.0], [[1.0, 2.0], [2.0, 1.0]])
+        ParameterBelief.from_values(["a", "b"], [0.0, 0.0], [[1.0, 2.0], [2.0, 1.0]])
     with pytest.raises(ValueError, match="not finite for"):
-        ParameterUncertainty(["a"], [0.0], [[np.nan]])
-    u = ParameterUncertainty(["K", "T"], [0.1, 20.0], [[1e-4, 0.0], [0.0, 4.0]])
+        ParameterBelief.from_values(["a"], [0.0], [[np.nan]])
+    u = ParameterBelief.from_values(["K", "T"], [0.1, 20.0], [[1e-4, 0.0], [0.0, 4.0]])
     m = nomoto_first_order()
     draws = u.sample(m, m.params(), 4000, seed=1)
     assert np.std(draws[:, m.index("T", "param")]) == pytest.approx(2.0, rel=0.05)

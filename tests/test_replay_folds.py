@@ -11,7 +11,7 @@ import pytest
 import casship as cs
 from casship import folds, runtime
 from casship.errors import DivergenceError
-from casship.identify import ParameterUncertainty
+from casship.identify import ParameterBelief
 from casship.models import kvlcc2
 from casship.prediction import sampled_metrics, trajectory_sensitivities
 from casship.runtime import CompileError, Compiling, find_compiler
@@ -99,7 +99,7 @@ def test_batched_draws_give_the_intervals_and_failures_of_one_simulation_each():
     m = _steering("many_draws", 1.0e-3)
     t = np.arange(0.0, 300.0, 1.0)
     data = cs.Dataset(t, {"delta": np.radians(10.0) * np.sign(np.sin(t / 30.0) + 1e-9)})
-    unc = ParameterUncertainty(["K", "T"], [0.1, 1.0], [[1e-4, 0.0], [0.0, 1.0]])   # T near 0: rk4 unstable
+    unc = ParameterBelief.from_values(["K", "T"], [0.1, 1.0], [[1e-4, 0.0], [0.0, 1.0]])   # T near 0: rk4 unstable
     draws = unc.sample(m, m.params(), 40, seed=2)
 
     def metrics(tr):
@@ -140,7 +140,7 @@ def test_a_replay_with_bands_is_the_same_compiled_or_interpreted():
     t = np.arange(0.0, 400.0, 0.5)
     truth = cs.simulate(m, m.states(), t, {"delta": np.radians(15.0) * np.sign(np.sin(t / 50.0) + 1e-9)})
     data = cs.Dataset(t, {n: truth[n] for n in ("x", "y", "psi", "r", "delta")})
-    unc = ParameterUncertainty(["K", "T"], [0.1, 20.0], [[4e-5, 0.0], [0.0, 1.0]])
+    unc = ParameterBelief.from_values(["K", "T"], [0.1, 20.0], [[4e-5, 0.0], [0.0, 1.0]])
     a, b = (replay(m, data, uncertainty=unc, samples=12, seed=4, jit=jit) for jit in (False, True))
     for key in ("psi_std", "x_std", "y_std"):
         assert np.abs(a.bands[key] - b.bands[key]).max() <= 1e-12 * np.abs(a.bands[key]).max(), key
@@ -151,7 +151,7 @@ def test_a_replay_with_bands_is_the_same_compiled_or_interpreted():
 def test_replays_of_new_model_objects_build_no_function_again():
     t = np.arange(0.0, 200.0, 1.0)
     data = cs.Dataset(t, {"delta": np.radians(10.0) * np.sign(np.sin(t / 30.0) + 1e-9), "psi": np.zeros(t.size)})
-    unc = ParameterUncertainty(["K"], [0.1], [[1e-5]])
+    unc = ParameterBelief.from_values(["K"], [0.1], [[1e-5]])
     replay(_steering("shared_a", 3.0e-3), data, uncertainty=unc, samples=5, jit=False)
     built = folds.COUNTS["built"]
     replay(_steering("shared_b", 3.0e-3), data, uncertainty=unc, samples=5, jit=False)   # a new model object
@@ -164,7 +164,7 @@ def test_without_a_compiler_replays_run_interpreted_with_the_same_numbers(tmp_pa
     m = _steering("no_compiler", 4.0e-3)                 # a structure no other test compiles
     t = np.arange(0.0, 200.0, 1.0)
     data = cs.Dataset(t, {"delta": np.radians(10.0) * np.sign(np.sin(t / 30.0) + 1e-9), "psi": np.zeros(t.size)})
-    unc = ParameterUncertainty(["K"], [0.1], [[1e-5]])
+    unc = ParameterBelief.from_values(["K"], [0.1], [[1e-5]])
     ref = replay(m, data, uncertainty=unc, samples=6, jit=False)
     monkeypatch.setenv("CASSHIP_CACHE_DIR", str(tmp_path / "cache"))
     bad = tmp_path / "badcc"                              # answers --version, refuses to compile

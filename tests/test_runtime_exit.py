@@ -271,10 +271,10 @@ def test_an_error_raised_while_a_ctrl_c_unwinds_is_still_an_interrupt(monkeypatc
 def test_a_ctrl_c_while_a_compiler_starts_is_held_until_it_is_registered():
     """Between starting a compiler (in a session of its own) and registering it, a Ctrl-C is held back and
     handed on after: otherwise it would leave that compiler running unseen."""
-    from casship.runtime._compiler import _interrupts_deferred
+    from casship.runtime import interrupts_deferred
 
     before = signal.getsignal(signal.SIGINT)
-    with _interrupts_deferred() as pending:
+    with interrupts_deferred() as pending:
         signal.raise_signal(signal.SIGINT)            # no KeyboardInterrupt inside the block
         reached = True
     assert reached and len(pending.caught) == 1
@@ -284,7 +284,7 @@ def test_a_ctrl_c_while_a_compiler_starts_is_held_until_it_is_registered():
     assert pending.caught == []
     # the block fails while a Ctrl-C is held: the Ctrl-C wins
     with pytest.raises(KeyboardInterrupt):
-        with _interrupts_deferred():
+        with interrupts_deferred():
             signal.raise_signal(signal.SIGINT)
             raise OSError("the compiler cannot be run")
     assert signal.getsignal(signal.SIGINT) is before

@@ -7,7 +7,7 @@ import pytest
 
 import casship as cs
 from casship.cli import main
-from casship.identify import FitResult, ParameterUncertainty, read_fit_file, read_params
+from casship.identify import FitResult, ParameterBelief, read_fit_file, read_params
 from casship.identify.verdict import Q_MAX_DEG2_PER_S
 
 
@@ -93,7 +93,7 @@ def test_model_discrepancy_bounds(fit_doc, tmp_path, q, ok):
                                              r"\[0, 1000\] deg\^2/s"):
             read_fit_file(path)
     with pytest.raises(ValueError, match="psi_variance_rate"):
-        ParameterUncertainty(["K"], [0.1], [[1e-4]], psi_variance_rate=1e300)
+        ParameterBelief.from_values(["K"], [0.1], [[1e-4]], psi_variance_rate=1e300)
 
 
 @pytest.mark.parametrize("field, where", [("param_covariance.matrix", "param_covariance.matrix is null"),

@@ -12,7 +12,8 @@ filter, priors, identifiability and the fit result.
 * :func:`cross_validate` -- leave-one-run-out / leave-one-group-out replays against the published
   values, as a :class:`CrossValidation` value with a table and overlay figures.
 * :func:`noise_std`, :func:`decimate`, :func:`share_labels`, :func:`initial_states` -- record helpers.
-* :func:`read_fit_file` (and :func:`read_params`) and :class:`ParameterUncertainty` -- a fit file's parameters and their covariance;
+* :func:`read_fit_file` (and :func:`read_params`) and :class:`ParameterBelief` -- a fit file's parameters and
+  their covariance, the same Gaussian over named parameters a prior and a trial design use;
   :func:`replay_file` -- a record replayed with a fit file (the path of ``casship simulate --params``).
 * :func:`identify_ship` -- the ship workflow in one call (propulsion, weights, prior, a free set from
   run-level evidence, the inverse-dynamics start), every choice with its reason (:class:`ShipFit`).
@@ -25,7 +26,8 @@ from .crossval import CrossValidation, cross_validate
 from .identifiability import Identifiability
 from .mle import MLEProblem
 from .output_error import OutputErrorProblem
-from .params_file import COVARIANCE_KINDS, CovarianceKind, FitFile, ParameterUncertainty, read_fit_file, read_params, replay_file
+from .belief import COVARIANCE_KINDS, CovarianceKind, ParameterBelief, ParameterUncertainty
+from .params_file import FitFile, read_fit_file, read_params, replay_file
 from .prior import Prior
 from .problem import IdentificationProblem
 from .records import initial_states, noise_std, share_labels
@@ -38,7 +40,7 @@ from .spec import LikelihoodOptions, OutputErrorOptions, ProblemSpec
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
            "IdentificationWarning", "Prior", "Identifiability", "noise_std",
-           "share_labels", "initial_states", "read_params", "read_fit_file", "FitFile", "replay_file", "ParameterUncertainty", "CovarianceKind",
+           "share_labels", "initial_states", "read_params", "read_fit_file", "FitFile", "replay_file", "ParameterBelief", "ParameterUncertainty", "CovarianceKind",
            "COVARIANCE_KINDS", "cross_validate", "CrossValidation"]
 __all__ += ["identify_ship", "ShipFit"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]

@@ -7,7 +7,7 @@ parameter set), so that a fit file replays on the model it was made for and refu
 """
 from __future__ import annotations
 
-import json
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
@@ -16,6 +16,7 @@ import numpy as np
 from scipy import stats
 
 from ..errors import InputError, SolverError
+from .fit_json import DICTS, LISTS, SCALARS, fit_fields, load_fit_json
 
 __all__ = ["FitResult", "IdentificationError", "IdentificationWarning"]
 
@@ -45,16 +46,6 @@ def _clean(value):
     from ..io.jsonfile import json_ready
 
     return json_ready(value)
-
-
-def _unclean(value):
-    if isinstance(value, dict):
-        return {k: _unclean(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_unclean(v) for v in value]
-    if isinstance(value, str) and value in ("nan", "inf", "-inf"):
-        return float(value)
-    return value
 
 
 @dataclass
@@ -212,16 +203,15 @@ class FitResult:
 
         Returns
         -------
-        ParameterUncertainty or None
-            None when no shared model parameter is free.
+        ParameterBelief or None
+            None when no shared model parameter is free; it carries the fit's model discrepancy
+            (``psi_variance_rate``).
         """
-        from .params_file import ParameterUncertainty
+        from .belief import ParameterBelief
 
         q = float(np.radians(np.radians(self.model_discrepancy.get("psi_variance_growth_deg2_per_s", 0.0) or 0.0)))
         if kind is None and self.param_covariance:
-            unc = ParameterUncertainty.from_dict(self.param_covariance, "this fit")
-            unc.psi_variance_rate = q
-            return unc
+            return dataclasses.replace(ParameterBelief.from_dict(self.param_covariance, "this fit"), psi_variance_rate=q)
         if kind not in (None, "model", "robust"):
             raise InputError(f"kind must be None, 'model' or 'robust', got {kind!r}")
         robust = kind != "model" and self.covariance_robust is not None
@@ -230,9 +220,9 @@ class FitResult:
         if not idx:
             return None
         names = [self.free[i] for i in idx]
-        return ParameterUncertainty(names, [self.estimates[n] for n in names], C[np.ix_(idx, idx)],
-                                    "robust (sandwich)" if robust else "model-based", psi_variance_rate=q,
-                                    kind="robust" if robust else "model-based")
+        return ParameterBelief.from_values(names, [self.estimates[n] for n in names], C[np.ix_(idx, idx)],
+                                           "robust (sandwich)" if robust else "model-based", psi_variance_rate=q,
+                                           kind="robust" if robust else "model-based")
 
     def record_parameters(self, record: int) -> dict:
         """All model parameters of one fitted record (its own per-record and per-group copies applied).
@@ -328,11 +318,7 @@ class FitResult:
         return self.summary()
 
     # -- JSON --------------------------------------------------------------------------------------
-    _SCALARS = ("cost", "loglik", "n_obs", "aic", "bic", "method", "status", "iterations", "solve_time_s", "message",
-                "param_set")
-    _DICTS = ("whiteness", "noise", "std_errors_robust", "effective_samples", "channel_share", "prior", "model_options",
-              "verdict", "model_discrepancy")
-    _LISTS = ("warnings", "x0", "records", "record_params", "param_names")
+    _SCALARS, _DICTS, _LISTS = SCALARS, DICTS, LISTS
 
     def to_dict(self) -> dict:
         """The fit as a JSON-friendly dict (everything but the predictions)."""
@@ -377,37 +363,7 @@ class FitResult:
         -------
         FitResult
         """
-        d = _unclean(dict(d))
-        missing = [k for k in ("model", "params", "free", "estimates", "std_errors") if k not in d]
-        if missing:
-            raise InputError(f"fit JSON lacks key(s) {missing}")
-        k = len(d["free"])
-        twice = sorted({n for n in d["free"] if list(d["free"]).count(n) > 1})
-        if twice:
-            raise InputError(f"fit JSON: free names {twice} given more than once")
-
-        def mat(key):
-            value = d.get(key, np.full((k, k), np.nan))
-            if value is None:
-                raise InputError(f"fit JSON: {key} is null; a {k} x {k} matrix of the free quantities {d['free']} "
-                                 "is wanted (or leave the key out)")
-            try:
-                a = np.asarray(value, dtype=float)
-            except (TypeError, ValueError):
-                raise InputError(f"fit JSON: {key} is not a matrix of numbers") from None
-            if a.size != k * k:
-                raise InputError(f"fit JSON: {key} has {a.size} entries, {k} x {k} wanted for {d['free']}")
-            return a.reshape(k, k)
-        kw = {key: d[key] for key in (*cls._SCALARS, *cls._DICTS, *cls._LISTS) if key in d}
-        if "covariance_robust" in d:
-            kw["covariance_robust"] = mat("covariance_robust")
-        if d.get("param_covariance"):
-            kw["param_covariance"] = dict(d["param_covariance"])
-        return cls(model=d["model"], params={n: float(v) for n, v in d["params"].items()}, free=list(d["free"]),
-                   estimates={n: float(v) for n, v in d["estimates"].items()},
-                   std_errors={n: float(v) for n, v in d["std_errors"].items()},
-                   correlation=mat("correlation"), covariance=mat("covariance"),
-                   **{**dict(cost=np.nan, loglik=np.nan, n_obs=0, aic=np.nan, bic=np.nan), **kw})
+        return cls(**fit_fields(d))
 
     @classmethod
     def from_json(cls, path) -> "FitResult":
@@ -421,8 +377,6 @@ class FitResult:
         -------
         FitResult
         """
-        from .params_file import load_fit_json
-
         path = Path(path)
         try:
             return cls.from_dict(load_fit_json(path))

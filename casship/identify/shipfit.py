@@ -15,6 +15,8 @@ from typing import Mapping
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["ShipFit", "pool_facilities"]
 
 
@@ -138,11 +140,11 @@ class ShipFit:
 
         Returns
         -------
-        ParameterUncertainty or None
+        ParameterBelief or None
         """
         from scipy.linalg import block_diag
 
-        from .params_file import ParameterUncertainty
+        from .belief import ParameterBelief
 
         parts, names, values = [], [], []
         b = self.fit.uncertainty("robust")
@@ -168,8 +170,9 @@ class ShipFit:
             values.append(own["value"] if own else pool["population"])
         if not names:
             return None
-        return ParameterUncertainty(names, values, block_diag(*parts), "robust (sandwich) of the refinement and the "
-                                    "mirror-pair stage; facility quantities pooled over facilities", kind="robust")
+        return ParameterBelief.from_values(names, values, block_diag(*parts), "robust (sandwich) of the refinement and "
+                                           "the mirror-pair stage; facility quantities pooled over facilities",
+                                           kind="robust")
 
     def to_dict(self, facility: str | None = None, uncertainty=None) -> dict:
         """The fit file's content for replaying records of ``facility`` (see :meth:`params`).
@@ -178,7 +181,7 @@ class ShipFit:
         ----------
         facility : str, optional
             The facility of the records the file will replay.
-        uncertainty : ParameterUncertainty, optional
+        uncertainty : ParameterBelief, optional
             The covariance to write (default :meth:`uncertainty`).
 
         Returns
@@ -207,7 +210,7 @@ class ShipFit:
         path : str or Path
         facility : str, optional
             The facility of the records the file will replay.
-        uncertainty : ParameterUncertainty, optional
+        uncertainty : ParameterBelief, optional
             The covariance to write (default :meth:`uncertainty`).
         extra : mapping, optional
             More top-level entries of the file.
@@ -244,6 +247,39 @@ class ShipFit:
             out[n] = {"value": self.fit.estimates[n], "published": nominal[n], "std_error": self.fit.std_errors[n],
                       "std_error_robust": self.fit.std_errors_robust.get(n, math.nan), "stage": "MAP refinement"}
         return out
+
+    def judge(self, records, verdict: str, refit) -> None:
+        """Set the verdict and the model discrepancy of ``self.fit``: its records replayed with the ship's full
+        parameters (the workflow's presets, facility values and refinement) against the preset, and with
+        ``verdict="loo"`` each record replayed by the workflow run without it (``refit(train)``).
+
+        Parameters
+        ----------
+        records : list of Dataset
+            The records the workflow was run on (in its order).
+        verdict : {"replay", "loo"}
+            Replays of the records only, or also left-one-out.
+        refit : callable
+            ``refit(train)``: the workflow run on the records whose indices are ``train`` (a ShipFit).
+        """
+        import dataclasses
+
+        from .verdict import judge_records
+
+        if verdict not in ("replay", "loo"):
+            raise InputError(f"verdict must be 'replay', 'loo' or None, got {verdict!r}")
+        labels = [str(d.meta.get("name", i)) for i, d in enumerate(records)]
+
+        def as_replayed(s: ShipFit, facility=None):
+            return dataclasses.replace(s.fit, params=s.params(facility))
+
+        def refit_full(train):
+            return as_replayed(refit(train), self.facilities[[i for i in range(len(records)) if i not in train][0]])
+
+        one = self.facilities[0] if len(set(self.facilities)) == 1 else None
+        self.fit.verdict, self.fit.model_discrepancy = judge_records(
+            self.model, records, as_replayed(self, one), start=self.model.params(), labels=labels,
+            loo=verdict == "loo" and len(records) > 1, refit=refit_full if len(records) > 1 else None)
 
     def summary(self) -> str:
         """The choices with their reasons, then the fit."""

@@ -568,7 +568,7 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
                    time.perf_counter() - t0,
                    unpinned)
     if verdict is not None:
-        _judge_ship(ship, list(records), verdict, lambda train: identify_ship(
+        ship.judge(list(records), verdict, lambda train: identify_ship(
             [records[i] for i in train], model, free=free, weights=weights, prior=prior, candidates=candidates,
             measured=measured, facility=[fac[i] for i in train], propulsion=propulsion,
             facility_values=facility_values, dt=dt, max_ratio=max_ratio,
@@ -584,27 +584,3 @@ def _std_error(fit, name: str) -> float:
     model-based one."""
     se = fit.std_errors_robust.get(name, math.nan)
     return float(se) if np.isfinite(se) and se > 0 else float(fit.std_errors[name])
-
-
-def _judge_ship(ship: ShipFit, records, verdict: str, refit) -> None:
-    """Set the verdict and the model discrepancy of ``ship.fit``: its records replayed with the ship's full
-    parameters (the workflow's presets, facility values and refinement) against the preset, and with
-    ``verdict="loo"`` each record replayed by the workflow run without it (``refit(train)``)."""
-    import dataclasses
-
-    from .verdict import judge_records
-
-    if verdict not in ("replay", "loo"):
-        raise InputError(f"verdict must be 'replay', 'loo' or None, got {verdict!r}")
-    labels = [str(d.meta.get("name", i)) for i, d in enumerate(records)]
-
-    def as_replayed(s: ShipFit, facility=None):
-        return dataclasses.replace(s.fit, params=s.params(facility))
-
-    def refit_full(train):
-        return as_replayed(refit(train), ship.facilities[[i for i in range(len(records)) if i not in train][0]])
-
-    one = ship.facilities[0] if len(set(ship.facilities)) == 1 else None
-    ship.fit.verdict, ship.fit.model_discrepancy = judge_records(
-        ship.model, records, as_replayed(ship, one), start=ship.model.params(), labels=labels,
-        loo=verdict == "loo" and len(records) > 1, refit=refit_full if len(records) > 1 else None)

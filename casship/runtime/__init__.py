@@ -42,7 +42,7 @@ from ._pieces import THREADS, Job, PieceFailed, piece, pieces, run_pieces
 from ._cache import cache_dir, cache_key, cached_function, compile_function
 from ._housekeeping import CacheInfo, Cleared, cache_info, clear_cache
 from ._codegen import CFiles, c_array, check_c_name, compile_c, generate_c, read_harness_output, write_harness
-from ._compiler import CompileError, find_compiler, stop_compilers
+from ._compiler import CompileError, find_compiler, interrupts_deferred, stop_compilers
 from ._loop import NativeFold
 from ._policy import (BACKGROUND_FAILURES, COUNTS, FUNCTIONS, JitPolicy, current_function, is_compiled, jit_function, record_loop, shared_function,
                       shared_functions)
@@ -53,6 +53,6 @@ __all__ = ["BufferedCall", "BoundedTable", "Job", "PieceFailed", "run_pieces", "
            "current_function", "COUNTS", "FUNCTIONS", "BACKGROUND_FAILURES",
            "fold_chunk", "DEFAULT_CHUNK",
            "compile_function", "cached_function", "compile_in_background", "Compiling", "hand_off", "finish_handed_off", "CompileError", "cache_dir",
-           "cache_info", "clear_cache", "cache_key", "CacheInfo", "Cleared", "stop_compilers",
+           "cache_info", "clear_cache", "cache_key", "CacheInfo", "Cleared", "stop_compilers", "interrupts_deferred",
            "find_compiler", "DEFAULT_FLAGS", "NATIVE_FLAGS", "DEFAULT_TIMEOUT",
            "CFiles", "generate_c", "write_harness", "compile_c", "read_harness_output", "c_array", "check_c_name"]

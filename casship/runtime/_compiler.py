@@ -29,7 +29,7 @@ from ..errors import SetupError
 from ..progress import activity
 from ._settings import ENV_TIMEOUT, compile_timeout
 
-__all__ = ["CompileError", "find_compiler", "run_compiler", "build_library", "stop_compilers", "stopping",
+__all__ = ["CompileError", "find_compiler", "run_compiler", "build_library", "stop_compilers", "stopping", "interrupts_deferred",
            "building", "SUFFIX"]
 
 SUFFIX = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
@@ -147,7 +147,7 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
     """
     limit = compile_timeout()
     posix = os.name == "posix"
-    with _interrupts_deferred() as pending:      # a Ctrl-C before the compiler is registered is held back
+    with interrupts_deferred() as pending:      # a Ctrl-C before the compiler is registered is held back
         with _STATE_LOCK:
             if _STATE["stopping"]:
                 raise CompileError(f"compiling {what}: not started, the process is ending")
@@ -186,7 +186,7 @@ def run_compiler(cmd: list[str], what: str) -> subprocess.CompletedProcess:
 
 
 class _Deferred:
-    """The Ctrl-Cs held back by :func:`_interrupts_deferred`, handed on by :meth:`deliver`."""
+    """The Ctrl-Cs held back by :func:`interrupts_deferred`, handed on by :meth:`deliver`."""
 
     def __init__(self):
         self.caught: list = []
@@ -205,10 +205,26 @@ class _Deferred:
 
 
 @contextmanager
-def _interrupts_deferred():
-    """Hold back Ctrl-C (SIGINT) in the block: between starting a compiler in a session of its own and
-    registering it, an interrupt would leave it running unseen (the terminal's Ctrl-C does not reach
-    it). Only the main thread receives Python's signals; elsewhere nothing is held back."""
+def interrupts_deferred():
+    """Hold back Ctrl-C (SIGINT) in the block, to hand it on where it can be handled.
+
+    Between starting a compiler in a session of its own and registering it, an interrupt would leave it
+    running unseen (the terminal's Ctrl-C does not reach it). Only the main thread receives Python's
+    signals; elsewhere nothing is held back. A block that fails while a Ctrl-C is held ends in that
+    Ctrl-C (the interrupt wins over the error).
+
+    Yields
+    ------
+    pending
+        ``pending.deliver()`` runs the handler that was in place for each Ctrl-C held back (the
+        default one raises ``KeyboardInterrupt``); ``pending.caught`` lists them.
+
+    Examples
+    --------
+    >>> with interrupts_deferred() as pending:
+    ...     started = "the work that must not be cut in two"
+    >>> pending.deliver()          # nothing was held back: nothing happens
+    """
     pending = _Deferred()
     if threading.current_thread() is not threading.main_thread():
         yield pending

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from casship.identify import ParameterUncertainty
+from casship.identify import ParameterBelief
 from casship.identify.asymmetry import mirror_pairs, turn_side
 from casship.maneuvers import run_maneuver
 from casship.identify import replay_file
@@ -42,7 +42,7 @@ __all__ = ["jackknife", "calibration_table", "band_check", "heading_growth", "pr
 Z95 = 1.959963984540054
 
 
-def jackknife(everything, folds) -> ParameterUncertainty:
+def jackknife(everything, folds) -> ParameterBelief:
     """Run-level jackknife covariance of the moved parameters of ``everything`` over ``folds``
     (the leave-one-run-out :class:`.workflow.FoldFit` values)."""
     names = [n for n in everything.moved() if not n.startswith("k_")]
@@ -54,12 +54,12 @@ def jackknife(everything, folds) -> ParameterUncertainty:
         if q in names:
             C[names.index(q), names.index(q)] += pool["spread"] ** 2
     values = [everything.params()[k] for k in names]
-    return ParameterUncertainty(names, values, C, f"run-level jackknife over {n} leave-one-run-out folds (facility "
-                                "quantities: population value, with the between-facility spread added)", {"folds": n},
-                                kind="calibrated")
+    return ParameterBelief.from_values(names, values, C, f"run-level jackknife over {n} leave-one-run-out folds "
+                                       "(facility quantities: population value, with the between-facility spread added)",
+                                       {"folds": n}, kind="calibrated")
 
 
-def calibration_table(everything, folds, jack: ParameterUncertainty) -> dict:
+def calibration_table(everything, folds, jack: ParameterBelief) -> dict:
     """Per quantity: estimate, standard errors and the share of fold estimates in each 95 % interval."""
     moved = everything.moved()
     rows = {}
@@ -67,7 +67,7 @@ def calibration_table(everything, folds, jack: ParameterUncertainty) -> dict:
         est = jack.values[i]
         fold_values = np.array([f.params()[name] for f in folds])
         ses = {"model-based": moved[name]["std_error"], "robust": moved[name].get("std_error_robust", np.nan),
-               "jackknife": float(jack.std[i])}
+               "jackknife": jack.std[name]}
         row = {"estimate": est, "published": moved[name]["published"], "stage": moved[name]["stage"],
                "fold spread (std)": float(np.std(fold_values, ddof=1))}
         for kind, se in ses.items():
