@@ -34,7 +34,7 @@ from .designs import LQG, lqg_design, lqr_design, pid_pole_placement
 from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linear_estimator
 from .guidance import LOSGuidance, Waypoints, cross_track_metrics, track_deviation
 from .law import Actuator, Autopilot, PIDGains
-from .mpc import MPCAutopilot, MPCLaw, mpc_for_design
+from .mpc import MPCAutopilot, MPCLaw, mpc_for_design, mpc_weights
 from .nomoto import Nomoto, fit_nomoto, nomoto_from_linear, nomoto_from_model
 from .performance import (CRITERIA, course_change_metrics, course_keeping_metrics, course_scenario,
                           performance_report, step_metrics)
@@ -54,6 +54,6 @@ __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "P
            "step_metrics", "course_change_metrics", "course_keeping_metrics", "performance_report", "CRITERIA",
            "course_scenario", "plot_design", "plot_closed_loop", "bode_phase_deg", "Design", "design_autopilot",
            "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings", "Waypoints",
-           "LOSGuidance", "cross_track_metrics", "MPCAutopilot", "mpc_for_design", "ScheduledAutopilot",
+           "LOSGuidance", "cross_track_metrics", "MPCAutopilot", "mpc_for_design", "mpc_weights", "ScheduledAutopilot",
            "default_schedule", "SteeringFeedforward", "steering_feedforward", "LinearController", "speed_profile",
            "track_deviation", "MPCLaw"]

@@ -14,11 +14,12 @@ nonlinear ship needs beyond the linear model's at the reference rate ``r_d`` of 
 PID law's feed-forward): the linear model then plans only the deviation from the steady steering
 along the reference preview, and the steering limits still bound the total steering. Without a
 steering table ``f = 0``. Each solve minimises
-``sum q_e (e_k - e_d,k)^2 + q_r (r_k - r_d,k)^2 + r_u (u_k - u_d,k)^2`` over ``N`` steps subject
-to ``|delta| <= delta_max``, ``|u| <= rate_max`` and ``|r| <= r_max`` (the preset rate of turn, a
-soft limit); ``e_d, r_d`` are the reference model's preview and ``u_d`` the rate of the steering
-that holds the model on it, ``s(r_d) + (T / K) a_d`` (the PID law's low-frequency feed-forward),
-so that following the reference costs nothing and the weights price only the departures from it. The quadratic program keeps
+``sum q_e (e_k - e_d,k)^2 + q_r (r_k - r_d,k)^2 + q_d (delta_k - delta_d,k)^2 + r_u (u_k - u_d,k)^2``
+over ``N`` steps subject to ``|delta| <= delta_max``, ``|u| <= rate_max`` and ``|r| <= r_max``
+(the preset rate of turn, a soft limit); ``e_d, r_d`` are the reference model's preview,
+``delta_d`` the steering that holds the model on it, ``s(r_d) + (T / K) a_d - b`` (the PID law's
+low-frequency feed-forward, less the bias), and ``u_d`` its rate, so that following the reference
+costs nothing and the weights price only the departures from it. The quadratic program keeps
 the optimal-control structure (variables ``x0, u0, x1, u1, ..., xN``, the model as equality
 constraints stage by stage) and is solved by HPIPM (Frison & Diehl 2020), the structure-exploiting
 interior-point QP solver shipped with CasADi (``casadi.conic(..., "hpipm")``), whose cost grows
@@ -43,7 +44,7 @@ from .nomoto import Nomoto
 from .reference import ReferenceModel
 from ..errors import InputError
 
-__all__ = ["MPCAutopilot", "MPCLaw", "mpc_for_design"]
+__all__ = ["MPCAutopilot", "MPCLaw", "mpc_for_design", "mpc_weights"]
 
 
 @dataclass
@@ -62,6 +63,8 @@ class MPCAutopilot:
         Steering limit, steering rate limit [unit/s] and turn-rate limit [rad/s].
     q_e, q_r, r_u : float
         Weights of the course error [1/rad^2], yaw rate [1/(rad/s)^2] and steering rate.
+    q_d : float
+        Weight of the steering's departure from the reference steering (default 0: none).
     reference : ReferenceModel, optional
         Reference model whose preview the plan tracks (None: the command itself).
     replan : float, optional
@@ -82,6 +85,7 @@ class MPCAutopilot:
     q_e: float = 1.0
     q_r: float = 0.0
     r_u: float = 1.0
+    q_d: float = 0.0
     reference: ReferenceModel | None = None
     replan: float | None = None
     steering: object = None
@@ -94,6 +98,8 @@ class MPCAutopilot:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise InputError(f"MPC {name} must be positive and finite, got {v}")
+        if not (np.isfinite(self.q_d) and self.q_d >= 0):
+            raise InputError(f"MPC q_d must be non-negative and finite, got {self.q_d}")
         if self.replan is not None and not (np.isfinite(self.replan) and 0 < self.replan <= self.period):
             raise InputError(f"MPC replan must be in (0, period], got {self.replan}")
         if int(self.horizon) != self.horizon or self.horizon < 2:
@@ -140,9 +146,9 @@ class MPCAutopilot:
         f = np.array([float(self.feedforward(v)) for v in r])
         return (bias - 0.5 * (f[:-1] + f[1:])).reshape(1, N)
 
-    def steering_rates(self, ref0, previews):
-        """Rate of the reference steering ``s(r_d) + (T / K) a_d`` over each step (``1 x N``):
-        ``u_d,k`` of the cost (``s(r) = r / K`` without a steering table).
+    def reference_steering(self, ref0, previews):
+        """The reference steering ``s(r_d) + (T / K) a_d`` (``s(r) = r / K`` without a steering
+        table) at the start and the end of each step (``1 x (N + 1)``).
 
         Parameters
         ----------
@@ -160,7 +166,20 @@ class MPCAutopilot:
             steady = ca.horzcat(*[self.feedforward(r[0, k]) + r[0, k] / K for k in range(N + 1)])
         else:
             steady = np.array([[float(self.feedforward(v)) + v / K for v in np.ravel(r)]])
-        d = steady + m * a
+        return steady + m * a
+
+    def steering_rates(self, ref0, previews):
+        """Rate of the reference steering (:meth:`reference_steering`) over each step (``1 x N``):
+        ``u_d,k`` of the cost.
+
+        Parameters
+        ----------
+        ref0 : sequence
+            Reference rate and acceleration at the start of the horizon.
+        previews : array or casadi.MX
+            Reference rate and acceleration at the end of each step (``2 x N``).
+        """
+        d = self.reference_steering(ref0, previews)
         return (d[:, 1:] - d[:, :-1]) / self.period
 
     def model(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -185,12 +204,14 @@ class MPCAutopilot:
         penalty on the slack makes the limit hard whenever it can be met), bounds on the steering
         and its rate, ``x0`` fixed by its bounds. Returns ``mpc(x0, b, target, U_guess) -> (u0, X,
         U)`` (an MX Function; ``b`` the disturbance ``w`` of each step, ``1 x N``, or one number for
-        all; the optional ``u_ref``, ``1 x N``, the steering rate the cost measures from, default 0)."""
+        all; the optional ``u_ref`` and ``steer_ref``, ``1 x N``, the steering rate and steering the
+        cost measures from, default 0)."""
         A, B, E = (ca.DM(M) for M in self.model())
         N, nx = int(self.horizon), A.shape[0]
         X = [ca.SX.sym(f"x{k}", nx) for k in range(N + 1)]
         U = [ca.SX.sym(f"u{k}", 2) for k in range(N)]
         b, target, uref = ca.SX.sym("b", 1, N), ca.SX.sym("target", 2, N), ca.SX.sym("u_ref", 1, N)
+        sref = ca.SX.sym("steer_ref", 1, N)
         # exact (l1) penalty on the slack: the largest price the cost can put on the rate of turn of
         # one step (a course error of pi on every later step, moved by the period) bounds the
         # multiplier; a small quadratic term keeps the Hessian definite. (A larger weight only
@@ -209,9 +230,11 @@ class MPCAutopilot:
                 ubg += [self.r_max, np.inf]
             cost += (self.q_e * (X[k + 1][0] - target[0, k]) ** 2 + self.q_r * (X[k + 1][1] - target[1, k]) ** 2
                      + self.r_u * (U[k][0] - uref[0, k]) ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
+            if self.q_d:
+                cost += self.q_d * (X[k + 1][nx - 1] - sref[0, k]) ** 2
         z.append(X[N])
         qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "f": cost, "g": ca.vertcat(*g),
-                                          "p": ca.vertcat(ca.vec(b), ca.vec(target), ca.vec(uref))},
+                                          "p": ca.vertcat(ca.vec(b), ca.vec(target), ca.vec(uref), ca.vec(sref))},
                       {"error_on_fail": False, "print_time": False})
         # bounds: x0 fixed; the steering limited from x1 on; course error, rate and the internal
         # state of the second-order model far outside any plan (HPIPM wants finite bounds)
@@ -225,17 +248,18 @@ class MPCAutopilot:
         lo[[i + 1 for i in iu]] = 0.0
         x0, bm = ca.MX.sym("x0", nx), ca.MX.sym("b", 1, N)
         tm, U_guess, um = ca.MX.sym("target", 2, N), ca.MX.sym("U_guess", 1, N), ca.MX.sym("u_ref", 1, N)
+        sm = ca.MX.sym("steer_ref", 1, N)
         lbx = ca.vertcat(x0, ca.DM(lo[nx:]))
         ubx = ca.vertcat(x0, ca.DM(hi[nx:]))
         guess = ca.MX.zeros(nv)
         guess[iu] = U_guess.T
-        sol = qp(x0=guess, p=ca.vertcat(ca.vec(bm), ca.vec(tm), ca.vec(um)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg),
+        sol = qp(x0=guess, p=ca.vertcat(ca.vec(bm), ca.vec(tm), ca.vec(um), ca.vec(sm)), lbx=lbx, ubx=ubx, lbg=ca.DM(lbg),
                  ubg=ca.DM(ubg))
         zs = sol["x"]
         Xs = ca.horzcat(*[zs[ix[k]:ix[k] + nx] for k in range(N + 1)])
         Us = ca.horzcat(*[zs[iu[k]] for k in range(N)])
-        return ca.Function("mpc", [x0, bm, tm, U_guess, um], [Us[0, 0], Xs, Us],
-                           ["x0", "b", "target", "U_guess", "u_ref"], ["u0", "X", "U"])
+        return ca.Function("mpc", [x0, bm, tm, U_guess, um, sm], [Us[0, 0], Xs, Us],
+                           ["x0", "b", "target", "U_guess", "u_ref", "steer_ref"], ["u0", "X", "U"])
 
     def preview_matrix(self, rows: int = 2) -> np.ndarray:
         """``(rows N, 3)`` matrix taking the reference model's state relative to the command (a fixed
@@ -260,8 +284,9 @@ class MPCAutopilot:
     def plan_inputs(self) -> ca.Function:
         """``plan_inputs(bias, z) -> (target, w, u_ref)``: from the reference model's state relative to
         the command ``z`` (course error, rate, acceleration) the preview of the course error and rate
-        (``2 x N``), the disturbance of each step (:meth:`disturbance`) and the reference steering's
-        rate (:meth:`steering_rates`); one SX Function, called once per solve."""
+        (``2 x N``), the disturbance of each step (:meth:`disturbance`), the reference steering's
+        rate and the steering that holds the model on the preview, the reference steering less the
+        bias (:meth:`steering_rates`); one SX Function, called once per solve."""
         if getattr(self, "_inputs_fun", None) is None:
             N = int(self.horizon)
             b, z = ca.SX.sym("bias"), ca.SX.sym("z", 3)
@@ -270,8 +295,10 @@ class MPCAutopilot:
             target = full[:2, :]
             w = self.disturbance(b, z0[1], target[1, :])
             u_ref = self.steering_rates([z0[1], z0[2]], full[1:, :])
-            self._inputs_fun = ca.Function("mpc_plan_inputs", [b, z], [target, w, u_ref], ["bias", "z"],
-                                           ["target", "w", "u_ref"])
+            # the steering that holds the model on the preview cancels the bias too
+            s_ref = self.reference_steering([z0[1], z0[2]], full[1:, :])[:, 1:] - b
+            self._inputs_fun = ca.Function("mpc_plan_inputs", [b, z], [target, w, u_ref, s_ref], ["bias", "z"],
+                                           ["target", "w", "u_ref", "steer_ref"])
         return self._inputs_fun
 
     def _preview(self, xr: np.ndarray, ref: float, rows: int = 2) -> np.ndarray:
@@ -336,13 +363,14 @@ class MPCAutopilot:
             delta = mem["steer_cmd"]
             target = self._preview(mem["xr"], ref)
             z = np.array([float(wrap(mem["xr"][0] - ref)), mem["xr"][1], mem["xr"][2]])
-            _, w, u_ref = (np.asarray(v) for v in self.plan_inputs()(bias, z))
+            _, w, u_ref, s_ref = (np.asarray(v) for v in self.plan_inputs()(bias, z))
             if self.order == 1:
                 x0 = [e, r, delta]
             else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
                 sys = self.nomoto.system(2)
                 x0 = [e, r, -sys.A[1, 1] * r - sys.B[1, 0] * (delta + w[0, 0]), delta]
-            out = self._solve({"x0": np.array(x0), "b": w, "target": target, "U_guess": U_guess, "u_ref": u_ref})
+            out = self._solve({"x0": np.array(x0), "b": w, "target": target, "U_guess": U_guess, "u_ref": u_ref,
+                               "steer_ref": s_ref})
             mem["X"], mem["U"] = np.asarray(out["X"]), np.asarray(out["U"])
             self._check(mem["X"], mem["U"], np.array(x0), w)
             mem["rate"] = float(out["u0"])
@@ -440,14 +468,15 @@ class MPCLaw:
         # the solve branch: preview, disturbance and reference steering are made only when a solve is due
         a = [ca.MX.sym(k, *sh) for k, sh in (("e", (1, 1)), ("r", (1, 1)), ("cmd", (1, 1)), ("bias", (1, 1)),
                                                ("z", (3, 1)), ("plan", (1, N)), ("rate", (1, 1)))]
-        target, w, u_ref = mpc.plan_inputs()(a[3], a[4])
+        target, w, u_ref, s_ref = mpc.plan_inputs()(a[3], a[4])
         if mpc.order == 1:
             x0 = ca.vertcat(a[0], a[1], a[2])
         else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
             sys2 = mpc.nomoto.system(2)
             x0 = ca.vertcat(a[0], a[1], -float(sys2.A[1, 1]) * a[1] - float(sys2.B[1, 0]) * (a[2] + w[0, 0]), a[2])
         shifted = ca.horzcat(a[5][:, 1:], a[5][:, -1:])
-        out = mpc._solver.call({"x0": x0, "b": w, "target": target, "U_guess": shifted, "u_ref": u_ref})
+        out = mpc._solver.call({"x0": x0, "b": w, "target": target, "U_guess": shifted, "u_ref": u_ref,
+                                "steer_ref": s_ref})
         solve = ca.Function("mpc_solve", a, [out["u0"], out["U"]])
         hold = ca.Function("mpc_hold", a, [a[6], a[5]])
         branch = ca.Function.conditional("mpc_period", [hold], solve)
@@ -463,17 +492,33 @@ class MPCLaw:
 
 
 def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60, q_r: float | None = None,
-                   r_u: float | None = None) -> MPCAutopilot:
-    """An MPC (heading control; a course-mode design is refused) with the design's model, limits and reference model: horizon ``6 pi / wn_ref`` (three
-    periods of the reference model's natural frequency) in ``steps`` steps (the period rounded to a
-    multiple of the loop period; on a course-unstable ship (``T < 0``) at most ``|T| / 10``, the
-    horizon then shorter), re-planned ten times per period; weights: course error 1/(1 deg)^2, yaw
-    rate ``1/r_max^2`` (both against the reference model's preview), steering rate
-    ``(100 / rate_max)^2`` (a steering rate of 1 % of the limit costs as much as 1 deg of course
-    error); the steady steering of the design's PID law (``design.autopilot.steering``) along the
-    preview. In the design's loop (``design.simulate(controller=mpc)``) the heading observer runs on
-    the MPC's model (:func:`~casship.autopilot.estimation.heading_observer` with ``steering`` and
-    ``second``).
+                   r_u: float | None = None, q_d: float | None = None, tuning: str = "limits") -> MPCAutopilot:
+    """An MPC (heading control; a course-mode design is refused) with the design's model, limits and
+    reference model (the PID law's, ``design.autopilot.reference``: the default design runs its PID
+    with it, so the two are compared like with like).
+
+    Horizon ``6 pi / wn_ref`` (three periods of the reference model's natural frequency) in
+    ``steps`` steps (the period rounded to a multiple of the loop period; on a course-unstable ship
+    (``T < 0``) at most ``|T| / 10``, the horizon then shorter), re-planned ten times per period.
+    Weights (``tuning``):
+
+    - ``"limits"`` (default): course error 1/(1 deg)^2, yaw rate ``1/r_max^2``, steering rate
+      ``(100 / rate_max)^2`` (a steering rate of 1 % of the limit costs as much as 1 deg of course
+      error), no steering weight;
+    - ``"bandwidth"``: from the PID design's ``wn`` and ``zeta`` (:func:`mpc_weights`), stated
+      before it was measured: on the inertia part of the model (``e'' = delta / m``, ``delta' =
+      u``, ``m = T / K``) the unconstrained infinite-horizon law of the cost ``q_e e^2 + q_r r^2 +
+      q_d delta^2 + r_u u^2`` has its poles at the roots of ``(s + w)(s^2 + 2 zeta w s + w^2)``, the
+      PID's closed-loop pair plus the steering, at ``w = max(wn, 1 / |T|)`` (below ``1 / |T|`` the
+      ship is not an inertia: its rate follows the steering); the steering and its rate measured
+      from the reference steering along the preview. It is not the default: on the docs' table it
+      is at or below the PID in more rows and where the limits bind, but above the ``"limits"``
+      tuning in some (docs/autopilots.md section 9).
+
+    ``q_r``, ``r_u``, ``q_d`` given replace the tuning's. The steady steering of the design's PID
+    law (``design.autopilot.steering``) along the preview. In the design's loop
+    (``design.simulate(controller=mpc)``) the heading observer runs on the MPC's model
+    (:func:`~casship.autopilot.estimation.heading_observer` with ``steering`` and ``second``).
 
     Parameters
     ----------
@@ -482,8 +527,10 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
         Prediction horizon [s].
     steps : int
         Steps over the horizon.
-    q_r, r_u : float, optional
-        Replace the yaw-rate and steering-rate weights.
+    q_r, r_u, q_d : float, optional
+        Replace the yaw-rate, steering-rate and steering weights.
+    tuning : {"limits", "bandwidth"}
+        The rule of the weights.
     """
     s = design.settings
     if s.mode == "course":
@@ -497,8 +544,43 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
     if nom.T < 0:        # a course-unstable ship drifts off between solves: re-plan within a tenth of |T|
         period = min(period, abs(nom.T) / 10)
     period = max(s.dt, round(period / s.dt) * s.dt)
+    if tuning == "bandwidth":
+        weights = mpc_weights(s.wn, s.zeta, nom.K, nom.T)
+    elif tuning == "limits":
+        weights = {"q_e": 1.0 / np.radians(1.0) ** 2, "q_r": 1.0 / s.r_max**2, "q_d": 0.0,
+                   "r_u": (100.0 / s.steer_rate_max) ** 2}
+    else:
+        raise InputError(f"MPC tuning must be 'limits' or 'bandwidth', got {tuning!r}")
+    for name, given in (("q_r", q_r), ("r_u", r_u), ("q_d", q_d)):
+        if given is not None:
+            weights[name] = given
     return MPCAutopilot(design.nomoto, period, steps, s.steer_max, s.steer_rate_max, s.r_max,
-                        replan=max(s.dt, round(period / 10 / s.dt) * s.dt),
-                        q_e=1.0 / np.radians(1.0) ** 2, q_r=(1.0 / s.r_max**2) if q_r is None else q_r,
-                        r_u=(100.0 / s.steer_rate_max) ** 2 if r_u is None else r_u,
+                        replan=max(s.dt, round(period / 10 / s.dt) * s.dt), **weights,
                         reference=design.autopilot.reference, steering=design.autopilot.steering)
+
+
+def mpc_weights(wn: float, zeta: float, K: float, T: float) -> dict:
+    """The MPC's weights from the PID design's bandwidth (``tuning="bandwidth"`` of
+    :func:`mpc_for_design`): with ``w = max(wn, 1 / |T|)``, ``m = T / K`` and ``c = 4 zeta^2 - 1``::
+
+        q_e = 1 / (1 deg)^2,  q_r = c q_e / w^2,  q_d = c q_e / (m^2 w^4),  r_u = q_e / (m^2 w^6)
+
+    the weights whose unconstrained infinite-horizon law on ``e'' = delta / m``, ``delta' = u`` has
+    its poles at the roots of ``(s + w)(s^2 + 2 zeta w s + w^2)`` (the optimal poles are the stable
+    roots of ``r_u m^2 (-s^2)^3 + q_d m^2 s^4 - q_r s^2 + q_e = 0``).
+
+    Parameters
+    ----------
+    wn, zeta : float
+        Closed-loop natural frequency [rad/s] and damping (at least 1/2) of the PID design.
+    K, T : float
+        Nomoto gain and time constant.
+    """
+    if not (np.isfinite(wn) and wn > 0):
+        raise InputError(f"MPC weights: wn must be positive and finite, got {wn}")
+    if not (np.isfinite(zeta) and zeta >= 0.5):
+        raise InputError(f"MPC weights: zeta = {zeta} < 1/2 has no such weights (give q_r, q_d and r_u)")
+    if not (np.isfinite(K) and K != 0 and np.isfinite(T) and T != 0):
+        raise InputError(f"MPC weights: the Nomoto K and T must be finite and nonzero, got K = {K}, T = {T}")
+    q_e, c, w, m = 1.0 / np.radians(1.0) ** 2, 4 * zeta**2 - 1, max(wn, 1.0 / abs(T)), T / K
+    return {"q_e": q_e, "q_r": c * q_e / w**2, "q_d": c * q_e / (m**2 * w**4), "r_u": q_e / (m**2 * w**6)}
