@@ -48,7 +48,16 @@ def test_autopilot_json_course_changes_schedule_and_mpc(capsys):
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert out["controller"] == "mpc" and out["mpc"]["solver"] == "hpipm" and out["mpc"]["horizon"] == 60
+    assert out["mpc"]["tuning"] == "limits"
     assert all(c["overshoot_pct"] <= 10.0 for c in out["course_changes"])
+    # the bandwidth weights are the API's (same run as mpc_for_design(d, tuning="bandwidth")); alone they are refused
+    code = main(["autopilot", "--model", "otter", "--controller", "mpc", "--mpc-tuning", "bandwidth", "--scenario",
+                 "course-20", "--t-end", "60", "--json"])
+    assert code == 0
+    banded = json.loads(capsys.readouterr().out)
+    assert banded["mpc"]["tuning"] == "bandwidth" and banded["course_changes"] != out["course_changes"]
+    assert main(["autopilot", "--model", "otter", "--mpc-tuning", "bandwidth"]) == 2
+    assert "--mpc-tuning would have no effect" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("name, args, api", [

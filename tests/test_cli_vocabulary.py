@@ -69,7 +69,7 @@ MEANINGS = {
     "--ekf-alpha": ("course EKF time constants", ("autopilot",)), "--ekf-q": ("course EKF noise", ("autopilot",)),
     "--observer-q": ("heading observer noise", ("autopilot",)),
     "--segment": ("length of one course change [s]", ("autopilot",)),
-    "--controller": ("law or MPC", ("autopilot",)), "--schedule": ("gain-schedule speeds [m/s]", ("autopilot",)),
+    "--controller": ("law or MPC", ("autopilot",)), "--mpc-tuning": ("the MPC's weights", ("autopilot",)), "--schedule": ("gain-schedule speeds [m/s]", ("autopilot",)),
     "--current": ("current speed and direction [m/s, deg]", ("autopilot",)),
     "--wind": ("wind speed and direction [m/s, deg]", ("autopilot",)),
     "--show-defaults": ("print the settings and exit", ("autopilot",)),

@@ -28,7 +28,7 @@ from pathlib import Path
 
 from ._vocabulary import add_deprecated_alias
 from ._common import (add_model_option, add_overwrite_option, check_input_files, check_outputs, check_ship, print_json,
-                      require, seed)
+                      refuse_unused, require, seed)
 
 #: settings shown in degrees on the command line (name -> option suffix)
 _DEGREES = {"r_max": "deg_s", "compass_std": "deg", "gyro_std": "deg_s", "wave_std": "deg"}
@@ -112,6 +112,10 @@ def register(sub) -> None:
     p.add_argument("--controller", choices=("law", "mpc"), default="law",
                    help="'law': the designed PID/LQR law; 'mpc': the design's MPC (HPIPM, 60-step horizon) in the "
                         "compiled loop")
+    p.add_argument("--mpc-tuning", choices=("limits", "bandwidth"), default="limits",
+                   help="the MPC's weights (with --controller mpc): 'limits' from the rudder and turn-rate limits "
+                        "(default); 'bandwidth' from the PID design's wn and zeta (overshoots less where the rudder "
+                        "limits bind; see docs/autopilots.md)")
     p.add_argument("--schedule", type=float, nargs="*", default=None, metavar="SPEED",
                    help="gain scheduling over the speed: design at these speeds [m/s] (none given: 40, 55, 70, 85 and "
                         "100 %% of the approach speed) and interpolate the law in the measured speed")
@@ -343,7 +347,9 @@ def run(args) -> int:
             for k, row in rows.items():
                 print(f"{k:>15} = {_shown(k, row['value'], moment):<40} ({row['source']})")
         return 0
-    controller = ap.mpc_for_design(design) if args.controller == "mpc" else None
+    if args.controller != "mpc":
+        refuse_unused(args.parser, {"--mpc-tuning": args.mpc_tuning != "limits"}, "it tunes --controller mpc")
+    controller = ap.mpc_for_design(design, tuning=args.mpc_tuning) if args.controller == "mpc" else None
     if args.scenario == "track":
         res = _track_run(args, design, env, controller)
     else:
@@ -370,7 +376,8 @@ def run(args) -> int:
         del out["metrics"], out["course_changes"]
     out["controller"] = "mpc" if controller is not None else res.controller
     if controller is not None:
-        out["mpc"] = {"period_s": controller.period, "horizon": int(controller.horizon), "solver": "hpipm"}
+        out["mpc"] = {"period_s": controller.period, "horizon": int(controller.horizon), "solver": "hpipm",
+                      "tuning": args.mpc_tuning}
     if args.plot:
         from ..outdir import output_folder
 
@@ -388,7 +395,8 @@ def run(args) -> int:
     print(f"{args.model} at {s.speed:.3g} m/s: Nomoto K = {nom.K:.4g} 1/s, T = {nom.T:.4g} s"
           + (f" (T1 {nom.T1:.4g}, T2 {nom.T2:.4g}, T3 {nom.T3:.4g})" if nom.second_order else ""))
     if controller is not None:
-        print(f"controller: mpc (HPIPM, period {controller.period:g} s, horizon {int(controller.horizon)} steps); "
+        print(f"controller: mpc (HPIPM, period {controller.period:g} s, horizon {int(controller.horizon)} steps, "
+              f"{args.mpc_tuning} weights); "
               f"{s.mode} mode, loop period {s.dt:g} s; reference model and margins below from the {g.method} design")
         print(f"{g.method} design: wn = {s.wn:.4g} rad/s, Kp = {g.Kp:.4g}, Kd = {g.Kd:.4g} s, Ki = {g.Ki:.4g} 1/s")
     else:
