@@ -180,8 +180,16 @@ def test_python_update_and_compiled_law_make_the_same_plan_with_the_steady_steer
     """Both paths take the preview, disturbance and reference steering from ``plan_inputs``: the
     same command from the same memory in a turn (bias and steady steering nonzero)."""
     mpc = mpc_for_design(kvlcc2)
-    dt, ref, bias = kvlcc2.settings.dt, np.radians(60.0), np.radians(0.5)
-    xr = np.array([np.radians(20.0), 0.6 * kvlcc2.settings.r_max, 1e-6])
+    cmd, law_cmd, _ = _python_and_compiled_commands(kvlcc2, mpc)
+    assert law_cmd == pytest.approx(cmd, abs=1e-9)
+    assert abs(cmd - 0.05) > 1e-6                 # the plan moved the steering
+
+
+def _python_and_compiled_commands(design, mpc):
+    """The command of ``mpc.update`` and of its compiled law from the same memory in a turn (bias and
+    steady steering nonzero), with that state ``(ref, bias, xr)``."""
+    dt, ref, bias = design.settings.dt, np.radians(60.0), np.radians(0.5)
+    xr = np.array([np.radians(20.0), 0.6 * design.settings.r_max, 1e-6])
     mem = mpc.memory0(0.0)
     mem.update(xr=xr, steer_cmd=0.05)
     _, cmd, _ = mpc.update(mem, ref, np.radians(19.0), xr[1], dt, bias)
@@ -189,8 +197,7 @@ def test_python_update_and_compiled_law_make_the_same_plan_with_the_steady_steer
     m0 = law.memory0(0.0)
     m0[0:3], m0[3] = xr, 0.05
     out = law.function(m0, ref, np.radians(19.0), xr[1], dt, 8.0, 0.05, bias)
-    assert float(out[1]) == pytest.approx(cmd, abs=1e-9)
-    assert abs(cmd - 0.05) > 1e-6                 # the plan moved the steering
+    return cmd, float(out[1]), (ref, bias, xr)
 
 
 def test_bandwidth_weights_by_hand():
@@ -263,16 +270,8 @@ def test_python_update_and_compiled_law_agree_with_the_steering_weight(kvlcc2):
     """With the bandwidth tuning (a steering weight against the reference steering less the bias)
     both paths make the same plan."""
     mpc = mpc_for_design(kvlcc2, tuning="bandwidth")
-    dt, ref, bias = kvlcc2.settings.dt, np.radians(60.0), np.radians(0.5)
-    xr = np.array([np.radians(20.0), 0.6 * kvlcc2.settings.r_max, 1e-6])
-    mem = mpc.memory0(0.0)
-    mem.update(xr=xr, steer_cmd=0.05)
-    _, cmd, _ = mpc.update(mem, ref, np.radians(19.0), xr[1], dt, bias)
-    law = mpc.law(dt)
-    m0 = law.memory0(0.0)
-    m0[0:3], m0[3] = xr, 0.05
-    out = law.function(m0, ref, np.radians(19.0), xr[1], dt, 8.0, 0.05, bias)
-    assert float(out[1]) == pytest.approx(cmd, abs=1e-9)
+    cmd, law_cmd, (ref, bias, xr) = _python_and_compiled_commands(kvlcc2, mpc)
+    assert law_cmd == pytest.approx(cmd, abs=1e-9)
     _, w, _, s_ref = (np.asarray(v) for v in mpc.plan_inputs()(bias, np.array([xr[0] - ref, xr[1], xr[2]])))
     s_nobias = np.asarray(mpc.reference_steering([xr[1], xr[2]], mpc._preview(xr, ref, 3)[1:]))[:, 1:]
     np.testing.assert_allclose(s_ref, s_nobias - bias, atol=1e-12)

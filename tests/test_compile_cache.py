@@ -16,6 +16,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
+from processes import gone
 
 import casship as cs
 from casship import runtime as rt
@@ -375,17 +376,6 @@ def test_another_compile_failure_keeps_march_native(cache, tmp_path):
     assert json.loads(record.read_text())["flags"] == list(rt.DEFAULT_FLAGS)
 
 
-def _gone(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    try:                                                         # a zombie nobody reaped is gone too
-        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] == "Z"
-    except OSError:
-        return True
-
-
 @posix_only
 def test_a_hung_compiler_is_stopped_with_a_clear_error(cache, tmp_path, monkeypatch):
     pidfile = tmp_path / "sleeper.pid"
@@ -398,9 +388,9 @@ def test_a_hung_compiler_is_stopped_with_a_clear_error(cache, tmp_path, monkeypa
     assert time.monotonic() - t0 < 30
     pid = int(pidfile.read_text())
     deadline = time.monotonic() + 5
-    while not _gone(pid) and time.monotonic() < deadline:
+    while not gone(pid) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert _gone(pid)                                            # the compiler's own children stopped too
+    assert gone(pid)                                            # the compiler's own children stopped too
     assert not _entry_files(cache)[0]
     monkeypatch.setenv("CASSHIP_COMPILE_TIMEOUT", "soon")
     with pytest.raises(ValueError, match="CASSHIP_COMPILE_TIMEOUT"):

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import gone
 
 import casship as cs
 from casship import runtime as rt
@@ -48,17 +49,6 @@ def _env(cache: Path, cc: str) -> dict:
     env.update(CASSHIP_CACHE_DIR=str(cache), CC=cc, PYTHONUNBUFFERED="1",
                PYTHONPATH=os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]))
     return env
-
-
-def _gone(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return True
-    try:                                                         # a zombie nobody reaped is gone too
-        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] == "Z"
-    except OSError:
-        return True
 
 
 def _wait_for(check, timeout: float, what: str):
@@ -114,7 +104,7 @@ def test_a_written_result_exits_without_waiting_for_the_background_compile(tmp_p
     started = _pids(pids)
     assert started, "the compile had started (the check would mean nothing otherwise)"
     assert waited < 5.0, f"exited {waited:.1f} s after writing its result"
-    _wait_for(lambda: all(_gone(p) for p in started), 5, "its compiler to be gone")
+    _wait_for(lambda: all(gone(p) for p in started), 5, "its compiler to be gone")
     _wait_for(lambda: len(list(cache.glob("*.json"))) >= 1 and not _builds(cache), 150,
               "the detached process to fill the cache")
 
@@ -132,7 +122,7 @@ def test_without_hand_off_the_unfinished_compiles_are_dropped(tmp_path):
     assert proc.returncode == 0 and "result [2, 4]" in out, err
     time.sleep(1.0)
     assert not list(cache.glob("*.json")) and _builds(cache) == []
-    assert all(_gone(p) for p in _pids(pids))
+    assert all(gone(p) for p in _pids(pids))
 
 
 _BACKGROUND = """
@@ -167,7 +157,7 @@ def test_ctrl_c_during_a_compile_exits_130_at_once_with_no_build_folder(tmp_path
     assert took < 2.0, f"exited {took:.1f} s after Ctrl-C"
     assert "interrupted" in err and "Exception ignored" not in err and "internal error" not in err, err
     assert _builds(cache) == []
-    _wait_for(lambda: all(_gone(p) for p in _pids(pids)), 5, "the compiler's process group to be stopped")
+    _wait_for(lambda: all(gone(p) for p in _pids(pids)), 5, "the compiler's process group to be stopped")
 
 
 _COMPILE_NOW = """
@@ -195,7 +185,7 @@ def test_ctrl_c_during_a_compile_in_the_calling_thread_stops_it_and_removes_its_
     assert proc.returncode != 0 and "KeyboardInterrupt" in proc.stderr.read()
     assert took < 10.0          # a plain script: its own interpreter teardown (the CLI skips it, above)
     assert _builds(cache) == []
-    _wait_for(lambda: all(_gone(p) for p in _pids(pids)), 5, "the compiler's process group to be stopped")
+    _wait_for(lambda: all(gone(p) for p in _pids(pids)), 5, "the compiler's process group to be stopped")
 
 
 def test_a_killed_process_leaves_a_build_folder_that_the_next_run_removes(tmp_path):

@@ -47,6 +47,16 @@ from ..errors import InputError
 __all__ = ["MPCAutopilot", "MPCLaw", "mpc_for_design", "mpc_weights"]
 
 
+def _casadi(x):
+    """``x`` as a CasADi value (numbers as ``DM``): the plan's inputs are built one way for both."""
+    return x if isinstance(x, (ca.MX, ca.SX, ca.DM)) else ca.DM(np.asarray(x, dtype=float))
+
+
+def _like(result, *inputs):
+    """``result`` as a numpy array when every input was numeric, else as built (symbolic)."""
+    return result if any(isinstance(v, (ca.MX, ca.SX)) for v in inputs) else np.array(ca.DM(result))
+
+
 @dataclass
 class MPCAutopilot:
     """Receding-horizon course autopilot (see the module docstring).
@@ -138,13 +148,9 @@ class MPCAutopilot:
             Reference rate at the end of each step (``1 x N``, the preview's second row).
         """
         N = int(self.horizon)
-        if isinstance(rates, (ca.MX, ca.SX)):
-            r = ca.horzcat(rate0, ca.reshape(rates, 1, N))
-            f = ca.horzcat(*[self.feedforward(r[0, k]) for k in range(N + 1)])
-            return bias - 0.5 * (f[0, :N] + f[0, 1:])
-        r = np.concatenate([[float(rate0)], np.ravel(rates)])
-        f = np.array([float(self.feedforward(v)) for v in r])
-        return (bias - 0.5 * (f[:-1] + f[1:])).reshape(1, N)
+        r = ca.horzcat(_casadi(rate0), ca.reshape(_casadi(rates), 1, N))
+        f = ca.horzcat(*[self.feedforward(r[0, k]) for k in range(N + 1)])
+        return _like(_casadi(bias) - 0.5 * (f[0, :N] + f[0, 1:]), bias, rate0, rates)
 
     def reference_steering(self, ref0, previews):
         """The reference steering ``s(r_d) + (T / K) a_d`` (``s(r) = r / K`` without a steering
@@ -158,15 +164,11 @@ class MPCAutopilot:
             Reference rate and acceleration at the end of each step (``2 x N``).
         """
         N, K, m = int(self.horizon), self.nomoto.K, self.nomoto.T / self.nomoto.K
-        symbolic = isinstance(previews, (ca.MX, ca.SX))
-        cat = ca.horzcat if symbolic else (lambda *a: np.hstack([np.reshape(v, (1, -1)) for v in a]))
-        r = cat(ref0[0], ca.reshape(previews[0, :], 1, N) if symbolic else previews[0])
-        a = cat(ref0[1], ca.reshape(previews[1, :], 1, N) if symbolic else previews[1])
-        if symbolic:
-            steady = ca.horzcat(*[self.feedforward(r[0, k]) + r[0, k] / K for k in range(N + 1)])
-        else:
-            steady = np.array([[float(self.feedforward(v)) + v / K for v in np.ravel(r)]])
-        return steady + m * a
+        p = _casadi(previews)
+        r = ca.horzcat(_casadi(ref0[0]), ca.reshape(p[0, :], 1, N))
+        a = ca.horzcat(_casadi(ref0[1]), ca.reshape(p[1, :], 1, N))
+        steady = ca.horzcat(*[self.feedforward(r[0, k]) + r[0, k] / K for k in range(N + 1)])
+        return _like(steady + m * a, *ref0, previews)
 
     def steering_rates(self, ref0, previews):
         """Rate of the reference steering (:meth:`reference_steering`) over each step (``1 x N``):

@@ -13,6 +13,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from ..errors import InputError
+from .fit_json import square_matrix
 
 __all__ = ["CovarianceKind", "COVARIANCE_KINDS", "COVARIANCES", "kind_from_source", "checked_kind", "covariance_kind",
            "discrepancy_of", "Q_MAX_DEG2_PER_S", "SYMMETRY_TOL", "check_numbers", "checked_covariance", "free_block"]
@@ -199,13 +200,7 @@ def checked_covariance(matrix, names, what: str) -> np.ndarray:
     k = len(names)
     if matrix is None:
         raise InputError(f"ParameterBelief: {what} is null ({k} x {k} wanted for {list(names)})")
-    try:
-        a = np.asarray(matrix, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"ParameterBelief: {what} is not a matrix of numbers") from None
-    if a.size != k * k:
-        raise InputError(f"ParameterBelief: {what} has {a.size} entries, {k} x {k} wanted for {list(names)}")
-    a = a.reshape(k, k)
+    a = square_matrix(matrix, names, f"ParameterBelief: {what}")
     if not np.all(np.isfinite(a)):
         bad = [n for n, d in zip(names, np.diag(a)) if not np.isfinite(d)]
         raise InputError(f"ParameterBelief: {what} not finite for {bad or list(names)}")

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["load_fit_json", "fit_fields", "fit_view", "SCALARS", "DICTS", "LISTS"]
+__all__ = ["load_fit_json", "fit_fields", "fit_view", "square_matrix", "SCALARS", "DICTS", "LISTS"]
 
 #: The fields of a fit file beside its parameters and covariances, by JSON type.
 SCALARS = ("cost", "loglik", "n_obs", "aic", "bic", "method", "status", "iterations", "solve_time_s", "message",
@@ -108,13 +108,7 @@ def fit_fields(d: Mapping) -> dict:
         if value is None:
             raise InputError(f"fit JSON: {key} is null; a {k} x {k} matrix of the free quantities {d['free']} "
                              "is wanted (or leave the key out)")
-        try:
-            a = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            raise InputError(f"fit JSON: {key} is not a matrix of numbers") from None
-        if a.size != k * k:
-            raise InputError(f"fit JSON: {key} has {a.size} entries, {k} x {k} wanted for {d['free']}")
-        return a.reshape(k, k)
+        return square_matrix(value, d["free"], f"fit JSON: {key}")
     kw = {key: d[key] for key in (*SCALARS, *DICTS, *LISTS) if key in d}
     if "covariance_robust" in d:
         kw["covariance_robust"] = mat("covariance_robust")
@@ -148,3 +142,29 @@ def fit_view(path) -> SimpleNamespace:
         text = str(exc)
         raise InputError(text if text.startswith(str(path)) else f"{path}: {text}") from None
     return SimpleNamespace(**{"covariance_robust": None, "param_covariance": {}, "model_discrepancy": {}, **fields})
+
+
+def square_matrix(value, names, what: str) -> np.ndarray:
+    """``value`` as a ``len(names)`` x ``len(names)`` float matrix, or an error naming ``what``.
+
+    Parameters
+    ----------
+    value : array_like
+        A (nested) list of numbers.
+    names : sequence of str
+        What its rows and columns are (for the size and the message).
+    what : str
+        The field, as the messages name it.
+
+    Returns
+    -------
+    ndarray
+    """
+    k = len(names)
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} is not a matrix of numbers") from None
+    if a.size != k * k:
+        raise InputError(f"{what} has {a.size} entries, {k} x {k} wanted for {list(names)}")
+    return a.reshape(k, k)
