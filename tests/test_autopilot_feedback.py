@@ -46,3 +46,40 @@ def test_feedback_gives_the_recorded_0_4_numbers(otter, key):
     data = getattr(loop, runner)(cmd, t_end, seed=5)
     assert len(data) == 201
     assert _fingerprint(data) == RECORDED_0_4[key]       # exact: the refactor changes no operation
+
+
+@pytest.mark.parametrize("mode, shorthand, cls", [("course", "truth", ap.TrueState), ("heading", "truth", ap.TrueState),
+                                                  ("heading", "raw", ap.RawMeasurement)])
+@pytest.mark.parametrize("runner", ["run", "run_stepwise"])
+def test_shorthand_string_and_class_give_equal_arrays(otter, mode, shorthand, cls, runner):
+    by_name = otter.closed_loop_system(mode=mode, estimator=shorthand)
+    by_class = otter.closed_loop_system(mode=mode, estimator=cls())
+    assert by_name.estimator == cls() and type(by_class.estimator) is cls      # resolved once, at construction
+    cmd, t_end, _ = ap.course_scenario("course-20", 4.0)
+    a, b = getattr(by_name, runner)(cmd, t_end, seed=5), getattr(by_class, runner)(cmd, t_end, seed=5)
+    assert a.names == b.names
+    for name in a.names:
+        assert np.array_equal(a[name], b[name], equal_nan=True), name
+    assert _fingerprint(b) == RECORDED_0_4[(mode, shorthand, runner)]
+
+
+def test_feedback_sources_are_exported_values():
+    assert {"TrueState", "RawMeasurement", "LoopFeedback"} <= set(ap.__all__)
+    assert ap.TrueState() == ap.TrueState() and hash(ap.RawMeasurement()) == hash(ap.RawMeasurement())
+    assert ap.RawMeasurement().modes == ("heading",) and ap.TrueState().modes == ("course", "heading")
+    with pytest.raises(AttributeError):
+        ap.TrueState().modes = ("course",)                                       # frozen
+
+
+def test_unknown_or_unsupported_feedback_is_named(otter):
+    with pytest.raises(cs.errors.InputError, match="'kalman'") as err:
+        otter.closed_loop_system(mode="heading", estimator="kalman")
+    assert "'kalman'" in str(err.value) and "'raw'" in str(err.value) and "'truth'" in str(err.value)
+    with pytest.raises(cs.errors.InputError, match="'course'") as err:
+        otter.closed_loop_system(mode="course", estimator=ap.RawMeasurement())
+    assert "RawMeasurement" in str(err.value)
+    with pytest.raises(cs.errors.InputTypeError, match="int"):
+        otter.closed_loop_system(mode="heading", estimator=3)
+    heading_est = otter.estimator("heading")
+    with pytest.raises(cs.errors.InputError, match="heading estimator cannot feed a course autopilot"):
+        otter.closed_loop_system(mode="course", estimator=heading_est)
