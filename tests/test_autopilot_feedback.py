@@ -83,3 +83,17 @@ def test_unknown_or_unsupported_feedback_is_named(otter):
     heading_est = otter.estimator("heading")
     with pytest.raises(cs.errors.InputError, match="heading estimator cannot feed a course autopilot"):
         otter.closed_loop_system(mode="course", estimator=heading_est)
+
+
+def test_true_state_reads_course_or_heading_by_hand():
+    """Course: the backward difference across +-pi (the yaw rate on the first sample); heading: psi and r."""
+    from casship.autopilot.loop_variants import READINGS
+
+    meas = {"psi": 0.3, "r": 0.02}
+    course, heading = READINGS["course"], READINGS["heading"]
+    angle, rate = course.true_numeric(meas, -3.1, 3.1, 0.5, 0.5)
+    assert angle == -3.1 and rate == pytest.approx((2 * np.pi - 6.2) / 0.5, rel=1e-12)
+    assert course.true_numeric(meas, -3.1, 3.1, 0.0, 0.5) == (-3.1, 0.02)         # first sample
+    assert heading.true_numeric(meas, -3.1, 3.1, 0.5, 0.5) == (0.3, 0.02)
+    assert heading.start_angle(3 * np.pi / 2, lambda: pytest.fail("course not needed")) == pytest.approx(-np.pi / 2)
+    assert course.start_angle(0.3, lambda: 0.25) == 0.25

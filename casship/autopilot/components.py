@@ -55,7 +55,8 @@ class Sensors:
 
 @dataclass(frozen=True)
 class LoopEstimator(LoopFeedback):
-    """An estimator in the loop and how the loop reads it (a :class:`~casship.autopilot.loop_variants.LoopFeedback`).
+    """An estimator in the loop and how the loop reads it: a feedback source
+    (:class:`~casship.autopilot.loop_variants.LoopFeedback`).
 
     It feeds its estimate of the controlled angle and (with ``rate="estimator"``) its rate; its
     memory (mean, covariance, ...) is a block of the loop state. It feeds an autopilot of its
