@@ -45,7 +45,9 @@ def test_feedback_gives_the_recorded_0_4_numbers(otter, key):
     cmd, t_end, _ = ap.course_scenario("course-20", 4.0)
     data = getattr(loop, runner)(cmd, t_end, seed=5)
     assert len(data) == 201
-    assert _fingerprint(data) == RECORDED_0_4[key]       # exact: the refactor changes no operation
+    # exact on the machine that recorded them (the refactor changes no operation); 1e-9 leaves room for
+    # another libm or BLAS in the design, far below what a changed branch moves
+    assert _fingerprint(data) == pytest.approx(RECORDED_0_4[key], rel=1e-9, abs=1e-12)
 
 
 @pytest.mark.parametrize("mode, shorthand, cls", [("course", "truth", ap.TrueState), ("heading", "truth", ap.TrueState),
@@ -60,7 +62,7 @@ def test_shorthand_string_and_class_give_equal_arrays(otter, mode, shorthand, cl
     assert a.names == b.names
     for name in a.names:
         assert np.array_equal(a[name], b[name], equal_nan=True), name
-    assert _fingerprint(b) == RECORDED_0_4[(mode, shorthand, runner)]
+    assert _fingerprint(b) == pytest.approx(RECORDED_0_4[(mode, shorthand, runner)], rel=1e-9, abs=1e-12)
 
 
 def test_feedback_sources_are_exported_values():
