@@ -3,9 +3,9 @@
 :func:`replay` starts the model from the measured initial state, drives it with the measured
 inputs (zero-order hold on the record's time stamps) and reports the root-mean-square errors of
 heading (wrapped differences), position and surge speed, plus the manoeuvre metrics of the
-replayed run and of the measurement, computed by the same functions of :mod:`casship.maneuvers`.
+replayed run and of the measurement, computed by the same functions of :mod:`casship.maneuvers.metrics`.
 Given the parameters' uncertainty, it also carries prediction bands on heading and track (exact
-sensitivities, :mod:`casship.prediction`) and intervals on the indices (parameter draws).
+sensitivities, :mod:`casship.simulation.bands`) and intervals on the indices (parameter draws).
 
 :func:`casship.identify.replay_file` is *the* replay of a fit file (through :func:`replay`): what ``casship
 simulate --params FILE --inputs RUN`` prints, what the studies' cross-validation scores and what the tests check.
@@ -17,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .angles import wrap
-from .data import Dataset
-from .trajectory import Trajectory
-from .maneuvers import execute_time, turning_metrics, zigzag_metrics
-from .model import Model
-from .simulate import simulate, simulate_many
-from .errors import InputError
+from ..angles import wrap
+from ..data import Dataset
+from ..trajectory import Trajectory
+from .metrics import execute_time, turning_metrics, zigzag_metrics
+from ..model import Model
+from ..simulation import prediction_bands, sampled_metrics, simulate, simulate_many, trajectory_sensitivities
+from ..errors import InputError
 
 __all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent", "COVERAGE_SLACK"]
 
@@ -186,7 +186,7 @@ class ReplayResult:
         matplotlib.figure.Figure, the axes given, or Path
             See :mod:`casship.plotting`.
         """
-        from .plotting import finish, panels, split_args
+        from ..plotting import finish, panels, split_args
 
         ax, path = split_args(ax, path)
         given = ax
@@ -416,7 +416,7 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
     seed : int or numpy.random.Generator
         Seed of the draws.
     jit : bool or None
-        How the simulation folds run (see :mod:`casship.folds`): compiled from the cache, else
+        How the simulation folds run (see :mod:`casship.simulation.folds`): compiled from the cache, else
         compiled in the background while they run interpreted (``None``, the default), compiled
         now (``True``) or interpreted (``False``). The numbers are the same either way. The draws
         run as one mapped call per chunk of the record (:func:`casship.simulate_many`).
@@ -474,9 +474,7 @@ def replay(model: Model, data: Dataset, p=None, *, method: str = "rk4", max_step
 
 
 def _add_uncertainty(result, model, traj, data, unc, level, samples, seed, method, max_step, jit, metrics_of) -> None:
-    """Bands from exact sensitivities, index intervals from parameter draws (see :mod:`casship.prediction`)."""
-    from .prediction import prediction_bands, sampled_metrics, trajectory_sensitivities
-
+    """Bands from exact sensitivities, index intervals from parameter draws (see :mod:`casship.simulation.bands`)."""
     p = model.params(traj.meta["params"])
     U = np.column_stack([traj[n] for n in model.input_names])
     x0 = np.array([traj[n][0] for n in model.state_names])

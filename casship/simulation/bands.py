@@ -21,9 +21,9 @@ import numpy as np
 from scipy import stats
 
 from .folds import sensitivity_fold
-from .runtime import Job, run_pieces
-from .model import Model
-from .errors import InputError
+from ..runtime import Job, run_pieces
+from ..model import Model
+from ..errors import InputError
 
 __all__ = ["trajectory_sensitivities", "prediction_bands", "sampled_metrics", "band_z"]
 
@@ -67,7 +67,7 @@ def trajectory_sensitivities(model: Model, x0, t, U, p, names, *, method: str = 
     jit : bool or None
         The sensitivity fold interpreted (``False``), compiled (``True``), or compiled from the cache,
         else in the background while it runs interpreted (``None``); shared per process by the
-        model's structure (:func:`casship.folds.sensitivity_fold`). The same numbers either way.
+        model's structure (:func:`casship.simulation.folds.sensitivity_fold`). The same numbers either way.
 
     Returns
     -------
@@ -76,7 +76,7 @@ def trajectory_sensitivities(model: Model, x0, t, U, p, names, *, method: str = 
     S : (N, nx, k) array
         ``dX / dtheta`` (zero at the first sample).
     """
-    from .discretize import discretize
+    from ..discretize import discretize
 
     t = np.asarray(t, dtype=float)
     dt = np.diff(t)
@@ -165,7 +165,7 @@ def sampled_metrics(run: Callable, draws: np.ndarray, level: float = 0.95, *, ba
         sample, or None), ``samples``, ``failed`` (draws whose simulation failed) and ``failures``
         (each distinct reason a draw failed, its first line, -> how many draws it stopped).
     """
-    from .angles import wrap
+    from ..angles import wrap
 
     failures = (ValueError, RuntimeError, FloatingPointError)
     if batch:

@@ -10,7 +10,7 @@ sensitivities of the states to the uncertain parameters. Three Functions do that
   every draw of a chunk in one call (:func:`fold_steps` with several parameter vectors);
 * :func:`sensitivity_fold`: the step with its forward sensitivities
   ``S_{k+1} = F_x S_k + F_p E`` (``E`` selects the parameters), as used by
-  :func:`casship.prediction.trajectory_sensitivities`.
+  :func:`casship.simulation.bands.trajectory_sensitivities`.
 
 They depend only on the step Function (the model's equations, the integration method and its
 sub-steps) and their sizes, never on the model object, the record or the parameter values. So they
@@ -33,8 +33,8 @@ import weakref
 import casadi as ca
 import numpy as np
 
-from .errors import SolverError
-from .runtime import COUNTS as _COUNTS, Job, JitPolicy, PieceFailed, fold_chunk, pieces, run_pieces, shared_function
+from ..errors import SolverError
+from ..runtime import COUNTS as _COUNTS, Job, JitPolicy, PieceFailed, fold_chunk, pieces, run_pieces, shared_function
 
 __all__ = ["simulation_fold", "sensitivity_fold", "fold_steps", "padded", "signature",
            "IntegrationError", "solver_status", "COUNTS"]

@@ -5,14 +5,14 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from .runtime import BufferedCall
-from .angles import wrap
-from .data import Dataset, check_time
-from .errors import DivergenceError, InputError, SolverError
+from ..runtime import BufferedCall
+from ..angles import wrap
+from ..data import Dataset, check_time
+from ..errors import DivergenceError, InputError, SolverError
 from .folds import IntegrationError, fold_steps, padded, solver_status
-from .trajectory import Trajectory
-from .discretize import discretize
-from .model import Model
+from ..trajectory import Trajectory
+from ..discretize import discretize
+from ..model import Model
 from .validity import ValidityError, check_inputs, check_states, check_step, warn_states
 
 __all__ = ["simulate", "simulate_many", "measure", "input_matrix", "fold_steps", "IntegrationError"]
@@ -111,7 +111,7 @@ def check_radians(model: Model, U: np.ndarray) -> None:
 
 def _chunk(steps: int) -> int:
     """Map length for ``steps`` steps: a power of two up to the runtime's chunk (few cached sizes)."""
-    from .runtime import fold_chunk
+    from ..runtime import fold_chunk
 
     return min(fold_chunk(), 1 << max(0, int(steps - 1).bit_length()))
 
@@ -163,11 +163,11 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = N
     check_limits : bool
         Check the initial state and the inputs against the model's declared ranges (``model.limits``)
         and a fixed step (``euler``, ``rk4``) against its stability limit at the start (see
-        :mod:`casship.validity`); both raise :class:`~casship.validity.ValidityError`. A state
-        leaving its range during the run gives a :class:`~casship.validity.ValidityWarning`.
+        :mod:`casship.simulation.validity`); both raise :class:`~casship.simulation.validity.ValidityError`. A state
+        leaving its range during the run gives a :class:`~casship.simulation.validity.ValidityWarning`.
         ``False`` is the explicit opt-in for a deliberate out-of-range study.
     jit : bool or None
-        How the fold over the record runs (see :mod:`casship.folds`): interpreted (``False``, the
+        How the fold over the record runs (see :mod:`casship.simulation.folds`): interpreted (``False``, the
         default: a one-off simulation does not pay for a compile), compiled (``True``), or compiled
         from the cache, else in the background while it runs interpreted (``None``: for repeated
         simulations of one model, as replays make). The same numbers either way.
@@ -180,7 +180,7 @@ def simulate(model: Model, x0, t, inputs=None, p=None, *, method: str | None = N
     ------
     ValueError
         Bad time grid (not increasing, NaN), shapes, unknown input names, non-finite inputs.
-    casship.validity.ValidityError
+    casship.simulation.validity.ValidityError
         An input or the initial state outside the model's ranges, or a step beyond the stability
         limit (e.g. a long time gap with ``rk4``), unless ``check_limits=False``.
     IntegrationError
@@ -238,17 +238,17 @@ def simulate_many(model: Model, x0, t, inputs, params, *, method: str | None = N
     check_limits : bool
         As for :func:`simulate`: the initial state and the inputs are checked once (raising), the
         fixed step's stability limit per parameter vector (its simulation then fails with the
-        :class:`~casship.validity.ValidityError`).
+        :class:`~casship.simulation.validity.ValidityError`).
     jit : bool or None
         The fold interpreted (``False``), compiled (``True``), or compiled from the cache, else in the
         background while it runs interpreted (``None``); the same numbers either way (see
-        :mod:`casship.folds`).
+        :mod:`casship.simulation.folds`).
 
     Returns
     -------
     list
         Per row of ``params``: its :class:`~casship.trajectory.Trajectory`, or the exception its
-        simulation failed with (:class:`~casship.validity.ValidityError`,
+        simulation failed with (:class:`~casship.simulation.validity.ValidityError`,
         :class:`~casship.errors.DivergenceError`, :class:`IntegrationError`), as :func:`simulate`
         would raise it for that row.
 

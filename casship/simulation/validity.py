@@ -16,12 +16,12 @@ raises for a longer step (a time gap in a record, a ``dt`` of 1000 s) instead of
 Examples
 --------
 >>> import numpy as np, casship as cs
->>> from casship.validity import check_inputs, stable_step
+>>> from casship.simulation import check_inputs, stable_step
 >>> ship = cs.models.get_model("kvlcc2")
 >>> check_inputs(ship, {"delta": np.radians(200.0)})
 Traceback (most recent call last):
 ...
-casship.validity.ValidityError: input 'delta' = 200 deg is outside its valid range [-35, 35] deg (rudder stop) of model 'kvlcc2'; pass check_limits=False (command line: --allow-out-of-range) for a deliberate out-of-range study
+casship.simulation.validity.ValidityError: input 'delta' = 200 deg is outside its valid range [-35, 35] deg (rudder stop) of model 'kvlcc2'; pass check_limits=False (command line: --allow-out-of-range) for a deliberate out-of-range study
 >>> m = cs.models.nomoto_first_order(K=0.1, T=20.0)
 >>> round(stable_step(m, m.states(), m.inputs(), m.params(), "rk4"), 1)   # 2.785 T
 55.7
@@ -34,8 +34,8 @@ from typing import Mapping
 import casadi as ca
 import numpy as np
 
-from .errors import InputError
-from .model import Model
+from ..errors import InputError
+from ..model import Model
 
 __all__ = ["ValidityError", "ValidityWarning", "OPT_IN", "MARGIN", "check_inputs", "is_stable_step", "decaying_modes", "check_states", "warn_states",
            "stable_step", "check_step", "describe_limit", "check_start"]
@@ -226,7 +226,7 @@ _JACOBIAN_CALLS: dict[int, tuple] = {}
 def _state_jacobian(model: Model, x, u, p) -> np.ndarray:
     """``A = df/dx`` at ``(x, u, p)`` through a buffered call of ``model.f_jac`` (checked once per record
     by every batch estimator: no DM conversion)."""
-    from .runtime import BufferedCall
+    from ..runtime import BufferedCall
 
     key = id(model.f_jac)
     if key not in _JACOBIAN_CALLS:              # the Function is kept with its call, so its id stays unique
