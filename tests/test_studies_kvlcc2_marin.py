@@ -54,13 +54,14 @@ def test_held_out_run_is_predicted_better_than_by_the_published_constants(quick)
     assert fold["free_at_preset"] and fold["free"]
     # the files' free quantities: the chosen set (the rudder's own quantities one copy per facility,
     # name@MARIN / name@HSVA), then the joined captive facility's own ones (name@HMRI)
-    ship_free = [n for n in json.loads((out / fold["file"]).read_text())["free"] if not n.endswith("@HMRI")]
+    # (the joint fit's files: the chosen ones, or kept beside the captive-only file the nested choice shipped)
+    ship_free = [n for n in json.loads((out / fold["joint_file"]).read_text())["free"] if not n.endswith("@HMRI")]
     assert sorted(ship_free) == sorted(fold["free"])
-    assert sorted(n for n in json.loads((out / "fit.json").read_text())["free"]
+    assert sorted(n for n in json.loads(Path(summary["joint_fit_json"]).read_text())["free"]
                   if not n.endswith("@HMRI")) == sorted(summary["free"])
     # facilities as facilities: HSVA's measured wake is HSVA's; the MARIN run is replayed with the pooled
     # population value (the spread in its band), never with HSVA's value as exact
-    held_file = json.loads((out / fold["file"]).read_text())
+    held_file = json.loads((out / fold["joint_file"]).read_text())
     pool = held_file["workflow"]["facility_quantities"]["w_P0"]
     assert set(pool["facilities"]) == {"HSVA"} and held_file["workflow"]["replayed_as_facility"] == "MARIN"
     assert held_file["params"]["w_P0"] == pytest.approx(pool["population"], rel=1e-12)
@@ -97,7 +98,8 @@ def test_fit_file_replays_the_fitted_variant_from_the_command_line(quick, data_d
     out, summary = quick
     fit = json.loads((out / "fit.json").read_text())
     assert fit["model"] == "kvlcc2" and fit["model_options"] == {"asymmetry": True, "smooth": True}
-    assert set(fit["param_covariance"]["names"]) >= {n for n in fit["free"] if "@" not in n}
+    cov = fit["param_covariance"]
+    assert cov["names"] and all(fit["params"][n] == v for n, v in zip(cov["names"], cov["values"]))
     held = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_-20_m.dat"
     capsys.readouterr()
     assert main(["simulate", "--model", "kvlcc2", "--params", str(out / "fit.json"), "--inputs", str(held), "--json"]) == 0
@@ -194,9 +196,29 @@ def test_summary_holds_every_fold_family_the_circle_the_coverage_and_the_variant
     assert on_disk["variants_tried"] == summary["variants_tried"]
     report = (out / "report.md").read_text()
     assert "Headline: every fold family" in report and "Turning circle left out" in report
-    # the fit file records every choice of the workflow with its reason
-    fit = json.loads((out / "fit.json").read_text())
+    # the joint fit's file records every choice of the workflow with its reason
+    fit = json.loads(Path(summary["joint_fit_json"]).read_text())
     assert fit["workflow"]["choices"] and all(c["reason"] for c in fit["workflow"]["choices"])
+
+
+def test_the_nested_choice_never_sees_the_runs_its_fold_holds_out(quick):
+    from problems.kvlcc2_marin.choice import RULE
+
+    out, summary = quick
+    nested = summary["nested_choice"]
+    assert nested["rule"] == RULE and nested["all_runs"] in ("captive-only", "joint")
+    fold = summary["folds"]["run:MARIN zz_-20"]
+    chosen = json.loads((out / fold["file"]).read_text())["nested_choice"]
+    assert chosen["choice"] == nested["folds"]["run:MARIN zz_-20"]["choice"]
+    inner = {n for g in chosen["groups"] for n in g}
+    assert "MARIN zz_-20" not in chosen["per_run"] and "MARIN zz_-20" not in inner
+    assert inner == set(chosen["per_run"]) == set(fold["train"])
+    # the choice follows the rule on its own scores
+    s = chosen["scores"]
+    assert chosen["choice"] == ("joint" if s["joint"] < s["captive-only"] else "captive-only")
+    assert s["captive-only"] == pytest.approx(np.mean([v["captive-only"] for v in chosen["per_run"].values()]))
+    # the file a user replays is the chosen candidate's
+    assert summary["fit_json_candidate"] == nested["all_runs"]
 
 
 def test_the_thrust_wake_is_the_facility_s_and_the_open_water_curve_the_ship_s():

@@ -16,6 +16,8 @@ The package, one job per module:
 * :mod:`~casship.autopilot.slot` -- any python-control controller as the law of the compiled loop;
 * :mod:`~casship.autopilot.closed_loop` -- the closed loop as one compiled CasADi step;
 * :mod:`~casship.autopilot.components` -- sensors, the estimator in the loop, the record of a run;
+* :mod:`~casship.autopilot.loop_variants` -- what the loop feeds back (true state, raw compass and gyro,
+  an estimator) and how it reads the course or heading;
 * :mod:`~casship.autopilot.performance` -- course-changing and course-keeping checks;
 * :mod:`~casship.autopilot.guidance` -- waypoints, LOS and integral LOS;
 * :mod:`~casship.autopilot.mpc` -- a CasADi model-predictive course controller;
@@ -34,6 +36,7 @@ from .designs import LQG, lqg_design, lqr_design, pid_pole_placement
 from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linear_estimator
 from .guidance import LOSGuidance, Waypoints, cross_track_metrics, track_deviation
 from .law import Actuator, Autopilot, PIDGains
+from .loop_variants import LoopFeedback, RawMeasurement, TrueState
 from .mpc import MPCAutopilot, MPCLaw, mpc_for_design, mpc_weights
 from .nomoto import Nomoto, fit_nomoto, nomoto_from_linear, nomoto_from_model
 from .performance import (CRITERIA, course_change_metrics, course_keeping_metrics, course_scenario,
@@ -50,7 +53,8 @@ __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "P
            "lqr_design", "lqg_design", "LQG", "ReferenceModel", "Autopilot", "Actuator", "loop_systems",
            "loop_transfer", "closed_loop_tf", "margins", "course_linearization", "SteeringPlant", "steering_plant",
            "steering_model", "twin_propeller_allocation", "twin_propeller_yaw_limit", "ClosedLoop", "ClosedLoopResult",
-           "LoopEstimator", "Sensors", "WaveYaw", "course_ekf", "heading_kf", "heading_observer", "linear_estimator",
+           "LoopEstimator", "LoopFeedback", "TrueState",
+           "RawMeasurement", "Sensors", "WaveYaw", "course_ekf", "heading_kf", "heading_observer", "linear_estimator",
            "step_metrics", "course_change_metrics", "course_keeping_metrics", "performance_report", "CRITERIA",
            "course_scenario", "plot_design", "plot_closed_loop", "bode_phase_deg", "Design", "design_autopilot",
            "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings", "Waypoints",

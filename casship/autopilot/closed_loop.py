@@ -24,10 +24,11 @@ import numpy as np
 
 from ..angles import wrap
 from ..data import Dataset, check_rows
-from ..errors import DivergenceError, InputError, InputTypeError
-from .components import DRAWS, MASKS, Layout, LoopEstimator, Sensors
+from ..errors import DivergenceError, InputError
+from .components import DRAWS, MASKS, Layout, Sensors
 from .estimation import WaveYaw
 from .law import Actuator, Autopilot
+from .loop_variants import READINGS, feedback_source
 from .plants import SteeringPlant
 
 __all__ = ["ClosedLoop"]
@@ -53,9 +54,11 @@ class ClosedLoop:
         Controlled angle: course over ground or heading.
     rate : {"estimator", "gyro"}
         Rate fed to the autopilot: the estimator's (course rate or yaw rate) or the rate gyro's.
-    estimator : LoopEstimator, "truth" or "raw"
-        The estimator; ``"truth"`` feeds the true angle and rate (no sensors); ``"raw"`` (heading
-        mode) feeds the last compass reading and the gyro.
+    estimator : LoopEstimator, TrueState, RawMeasurement, "truth" or "raw"
+        The feedback source (:class:`~casship.autopilot.loop_variants.LoopFeedback`): an estimator;
+        :class:`~casship.autopilot.loop_variants.TrueState` (shorthand ``"truth"``) feeds the true
+        angle and rate (no sensors); :class:`~casship.autopilot.loop_variants.RawMeasurement`
+        (shorthand ``"raw"``, heading mode) feeds the last compass reading and the gyro.
     sensors : Sensors
     wave : WaveYaw, optional
         First-order wave yaw added to the measured heading and yaw rate.
@@ -63,6 +66,14 @@ class ClosedLoop:
         Path guidance (:class:`casship.autopilot.guidance.LOSGuidance`) giving the course command
         from the position (the estimator's in course mode, the last GNSS fix in heading mode, the
         true one with ``estimator="truth"``).
+
+    Attributes
+    ----------
+    estimator : LoopFeedback
+        The feedback source (a shorthand string resolved).
+    reading : CourseReading or HeadingReading
+        How the controlled angle of ``mode`` is read (:data:`~casship.autopilot.loop_variants.READINGS`).
+
     Notes
     -----
     The law is any object with ``MEMORY``, ``memory0(chi0)``, ``symbolic_step(memory, ref, chi, r,
@@ -76,30 +87,19 @@ class ClosedLoop:
     def __init__(self, plant: SteeringPlant, autopilot: Autopilot, actuator: Actuator, *, dt: float,
                  mode: str = "course", rate: str = "gyro", estimator="truth", sensors: Sensors | None = None,
                  wave: WaveYaw | None = None, guidance=None):
-        if mode not in ("course", "heading"):
+        if mode not in READINGS:
             raise InputError(f"mode must be 'course' or 'heading', got {mode!r}")
         if rate not in ("estimator", "gyro"):
             raise InputError(f"rate must be 'estimator' or 'gyro', got {rate!r}")
         if not (np.isfinite(dt) and dt > 0):
             raise InputError(f"dt must be positive, got {dt}")
-        if isinstance(estimator, str):
-            if estimator not in ("truth", "raw"):
-                raise InputError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {estimator!r}")
-            if estimator == "raw" and mode != "heading":
-                raise InputError("estimator 'raw' (compass and gyro as read) is for heading mode")
-        elif not isinstance(estimator, LoopEstimator):
-            raise InputTypeError(f"estimator must be a LoopEstimator, 'truth' or 'raw', got {type(estimator).__name__}")
-        elif estimator.kind != mode and guidance is None:   # both kinds and modes: "course" or "heading"
-            raise InputError(f"a {estimator.kind} estimator cannot feed a {mode} autopilot")
+        estimator = feedback_source(estimator)
+        estimator.check_mode(mode, guided=guidance is not None)
         self.plant, self.autopilot, self.actuator = plant, autopilot, actuator
-        self.dt, self.mode, self.rate = float(dt), mode, rate
+        self.dt, self.mode, self.rate, self.reading = float(dt), mode, rate, READINGS[mode]
         self.estimator, self.sensors, self.wave, self.guidance = estimator, sensors or Sensors(), wave, guidance
-        est_blocks = []
-        if isinstance(estimator, LoopEstimator):
-            fun = estimator.step
-            est_blocks = [(f"est_{n}", fun.nnz_in(n)) for n in estimator.memory]
         m = plant.model
-        blocks = [("x", m.nx), ("steer", 1), ("steer_prev", 1), *est_blocks,
+        blocks = [("x", m.nx), ("steer", 1), ("steer_prev", 1), *estimator.blocks(),
                   ("autopilot", len(autopilot.MEMORY)), ("compass_hold", 1), ("gnss_hold", 2), ("chi_prev", 1)]
         if wave is not None:
             blocks.append(("wave", 2))
@@ -141,44 +141,6 @@ class ClosedLoop:
         gyro = r + r_w + sen.gyro_std * draws[3]
         return {"gnss": gnss, "compass": compass, "gyro": gyro, "north": north, "east": east, "psi": psi, "r": r}
 
-    def _estimate(self, parts, meas, mask, dt_est, motion, steer_prev):
-        """Estimated controlled angle and rate, position and speed, and the estimator memory next."""
-        est, mode = self.estimator, self.mode
-        chi_true, U_true, _ = motion
-        if est == "truth":
-            angle = chi_true if mode == "course" else meas["psi"]
-            if mode == "course":          # course rate by a backward difference (yaw rate on the first sample)
-                rate = ca.if_else(dt_est > 0, ca.atan2(ca.sin(chi_true - parts["chi_prev"]),
-                                                       ca.cos(chi_true - parts["chi_prev"])) / self.dt, meas["r"])
-            else:
-                rate = meas["r"]
-            return {"angle": angle, "rate": rate, "north": meas["north"], "east": meas["east"], "U": U_true,
-                    "angle_std": ca.SX(0), "bias": ca.SX(0), "memory": {}, "compass_hold": parts["compass_hold"],
-                    "gnss_hold": parts["gnss_hold"]}
-        fix = ca.if_else(mask[0] > 0, meas["gnss"], parts["gnss_hold"])      # last GNSS fix (heading mode)
-        if est == "raw":
-            hold = ca.if_else(mask[1] > 0, meas["compass"], parts["compass_hold"])
-            return {"angle": hold, "rate": meas["gyro"], "north": fix[0], "east": fix[1], "U": U_true,
-                    "angle_std": ca.SX(0), "bias": ca.SX(0), "memory": {}, "compass_hold": hold, "gnss_hold": fix}
-        fun = est.step
-        call = {n: ca.reshape(parts[f"est_{n}"], fun.size_in(n)) for n in est.memory}
-        model = est.est.model
-        rd = est.reading
-        y, msk, u = rd.symbolic_input(meas, mask, steer_prev)
-        call.update(u_prev=u, u=u, y=y * msk, mask=msk, dt=dt_est, p=ca.DM(model.params()),
-                    Q=ca.DM(est.est.Q), R=ca.DM(est.est.R), gate=ca.inf)
-        out = fun.call(call)
-        xh = out["x"]
-        P = ca.reshape(out["P"], model.nx, model.nx)
-        memory = {n: out[n] for n in est.memory}
-        ix = est.state_index
-        angle, rate_est, north, east, U = rd.read(xh, ix, fix, U_true)
-        std = ca.sqrt(P[ix(rd.angle_state), ix(rd.angle_state)])
-        bias = rd.bias(xh, ix, model.state_names, ca.SX(0))
-        rate = rate_est if self.rate == "estimator" else meas["gyro"]
-        return {"angle": angle, "rate": rate, "north": north, "east": east, "U": U, "angle_std": std, "bias": bias,
-                "memory": memory, "compass_hold": parts["compass_hold"], "gnss_hold": fix}
-
     def _build(self):
         m = self.plant.model
         s = ca.SX.sym("s", self.layout.size)
@@ -192,7 +154,7 @@ class ClosedLoop:
         else:
             psi_w = r_w = ca.SX(0)
         meas = self._measurements(parts, draws, mask, x, motion, (psi_w, r_w))
-        est = self._estimate(parts, meas, mask, dt_est, motion, parts["steer_prev"])
+        est = self.estimator.symbolic(self, parts, meas, mask, dt_est, motion, parts["steer_prev"])
         log = {}
         command = ref
         nxt = {}
@@ -268,9 +230,7 @@ class ClosedLoop:
         parts = {"x": x0, "steer": 0.0, "steer_prev": 0.0, "autopilot": self.autopilot.memory0(chi0),
                  "compass_hold": x0[m.index(pl.heading)], "gnss_hold": x0[[m.index(pl.north), m.index(pl.east)]],
                  "chi_prev": chi0}
-        if isinstance(self.estimator, LoopEstimator):
-            memory = self.estimator.est.memory_from(self._prior(x0))
-            parts.update({f"est_{n}": v for n, v in memory.items()})
+        parts.update(self.estimator.memory0(lambda: self._prior(x0)))
         if self.wave is not None:
             parts["wave"] = np.zeros(2)
         if self.guidance is not None:
@@ -297,9 +257,7 @@ class ClosedLoop:
             Ship state.
         """
         pl, m = self.plant, self.plant.model
-        if self.mode == "heading":
-            return float(wrap(x0[m.index(pl.heading)]))
-        return self._course_over_ground(x0)
+        return self.reading.start_angle(x0[m.index(pl.heading)], lambda: self._course_over_ground(x0))
 
     def schedule(self, n: int) -> np.ndarray:
         """Sensor availability masks ``(2, n)``: GNSS and compass readings at their rates.
@@ -414,8 +372,7 @@ class ClosedLoop:
         act_f = ca.Function("actuator", [st, cmd, h], [a["steer"], a["rate_limited"]], ["steer", "command", "dt"],
                             ["steer_next", "rate_limited"])
         x_start = np.asarray(x0 if x0 is not None else (pl.x0 if pl.x0 is not None else m.states()), float)
-        online = self.estimator.est.online(self._prior(x_start)) if isinstance(self.estimator, LoopEstimator) \
-            else None
+        feed = self.estimator.stepwise(self, lambda: self._prior(x_start))
         guid_mem = self.guidance.memory0() if self.guidance is not None else None
         guid_f = self.guidance.function(self.dt) if self.guidance is not None else None
         if self.wave is not None:
@@ -432,29 +389,13 @@ class ClosedLoop:
             gn, ge = x[ix] + sen.gnss_std * draws[0, k], x[iy] + sen.gnss_std * draws[1, k]
             compass = float(wrap(x[ipsi] + psi_w + sen.compass_std * draws[2, k]))
             gyro = x[ir] + r_w + sen.gyro_std * draws[3, k]
-            north, east, U_hat, std, bias = x[ix], x[iy], U, 0.0, 0.0
             if masks[0, k]:
                 fix = np.array([gn, ge])
-            if online is not None:
-                rd = self.estimator.reading
-                y, extra = rd.online_input((gn, ge), compass, gyro, masks[:, k], steer_prev)
-                xh = online.update(y, dt_est[k], **extra)
-                ixh = self.estimator.state_index
-                angle, rate, north, east, U_hat = rd.read(xh, ixh, fix, U)
-                std = np.sqrt(online.P[ixh(rd.angle_state), ixh(rd.angle_state)])
-                bias = rd.bias(xh, ixh, self.estimator.est.model.state_names, 0.0)
-                if self.rate == "gyro":
-                    rate = gyro
-            elif self.estimator == "raw":
-                hold = compass if masks[1, k] else hold
-                angle, rate = hold, gyro
-                north, east = fix
-            else:
-                angle = chi if self.mode == "course" else x[ipsi]
-                if self.mode == "course":
-                    rate = float(wrap(chi - chi_prev)) / self.dt if k else x[ir]
-                else:
-                    rate = x[ir]
+            fed = feed({"gnss": (gn, ge), "compass": compass, "gyro": gyro, "north": x[ix], "east": x[iy],
+                        "psi": x[ipsi], "r": x[ir], "mask": masks[:, k], "dt_est": dt_est[k], "fix": fix, "chi": chi,
+                        "chi_prev": chi_prev, "U": U, "steer_prev": steer_prev, "compass_hold": hold})
+            angle, rate, north, east, U_hat = fed["angle"], fed["rate"], fed["north"], fed["east"], fed["U"]
+            std, bias, hold = fed["angle_std"], fed["bias"], fed["compass_hold"]
             log = {}
             command = refs[k]
             if guid_f is not None:
@@ -484,11 +425,9 @@ class ClosedLoop:
 
     def _dataset(self, t, log, x0) -> Dataset:
         meta = {"mode": self.mode, "model": self.plant.model.name, "dt": self.dt, "rate": self.rate}
-        if isinstance(self.estimator, LoopEstimator):
-            pl = self.plant
-            x0 = np.asarray(x0 if x0 is not None else (pl.x0 if pl.x0 is not None else pl.model.states()), float)
-            meta["estimator_prior"] = self._prior(x0)
-            meta["estimator"] = self.estimator.est
+        pl = self.plant
+        x0 = np.asarray(x0 if x0 is not None else (pl.x0 if pl.x0 is not None else pl.model.states()), float)
+        meta.update(self.estimator.meta(lambda: self._prior(x0)))
         cols = dict(zip(self.signals, log))
         cols["omega_chi"] = np.gradient(np.unwrap(cols["chi"]), t)      # true course rate
         return Dataset(t, cols, meta=meta)

@@ -13,7 +13,7 @@ from ..data import Dataset
 
 from ..gaussian import Gaussian
 from ..errors import InputError, InputTypeError
-from .loop_variants import READINGS
+from .loop_variants import READINGS, LoopFeedback
 
 __all__ = ["Sensors", "LoopEstimator", "ClosedLoopResult", "DRAWS", "MASKS", "Layout"]
 
@@ -54,8 +54,13 @@ class Sensors:
 
 
 @dataclass(frozen=True)
-class LoopEstimator:
-    """An estimator in the loop and how the loop reads it.
+class LoopEstimator(LoopFeedback):
+    """An estimator in the loop and how the loop reads it: a feedback source
+    (:class:`~casship.autopilot.loop_variants.LoopFeedback`).
+
+    It feeds its estimate of the controlled angle and (with ``rate="estimator"``) its rate; its
+    memory (mean, covariance, ...) is a block of the loop state. It feeds an autopilot of its
+    ``kind``, or one of the other kind when guidance gives the command.
 
     Parameters
     ----------
@@ -128,6 +133,58 @@ class LoopEstimator:
         name : str
         """
         return self.est.model.index(name)
+
+    # -- as the loop's feedback source (see LoopFeedback) -----------------------------------------
+    @property
+    def modes(self) -> tuple:
+        """The mode it feeds without guidance: its :attr:`kind`."""
+        return (self.kind,)
+
+    def check_mode(self, mode: str, *, guided: bool = False):
+        if self.kind != mode and not guided:
+            raise InputError(f"a {self.kind} estimator cannot feed a {mode} autopilot")
+
+    def blocks(self) -> list:
+        return [(f"est_{n}", self.step.nnz_in(n)) for n in self.memory]
+
+    def memory0(self, prior) -> dict:
+        return {f"est_{n}": v for n, v in self.est.memory_from(prior()).items()}
+
+    def meta(self, prior) -> dict:
+        return {"estimator_prior": prior(), "estimator": self.est}
+
+    def symbolic(self, loop, parts, meas, mask, dt_est, motion, steer_prev) -> dict:
+        fix = ca.if_else(mask[0] > 0, meas["gnss"], parts["gnss_hold"])      # last GNSS fix (heading kind)
+        fun = self.step
+        call = {n: ca.reshape(parts[f"est_{n}"], fun.size_in(n)) for n in self.memory}
+        model = self.est.model
+        rd = self.reading
+        y, msk, u = rd.symbolic_input(meas, mask, steer_prev)
+        call.update(u_prev=u, u=u, y=y * msk, mask=msk, dt=dt_est, p=ca.DM(model.params()),
+                    Q=ca.DM(self.est.Q), R=ca.DM(self.est.R), gate=ca.inf)
+        out = fun.call(call)
+        xh = out["x"]
+        P = ca.reshape(out["P"], model.nx, model.nx)
+        ix = self.state_index
+        angle, rate_est, north, east, U = rd.read(xh, ix, fix, motion[1])
+        std = ca.sqrt(P[ix(rd.angle_state), ix(rd.angle_state)])
+        bias = rd.bias(xh, ix, model.state_names, ca.SX(0))
+        rate = rate_est if loop.rate == "estimator" else meas["gyro"]
+        return {"angle": angle, "rate": rate, "north": north, "east": east, "U": U, "angle_std": std, "bias": bias,
+                "memory": {n: out[n] for n in self.memory}, "compass_hold": parts["compass_hold"], "gnss_hold": fix}
+
+    def stepwise(self, loop, prior):
+        online = self.est.online(prior())
+        rd, ix, names, gyro_rate = self.reading, self.state_index, self.est.model.state_names, loop.rate == "gyro"
+
+        def feed(s):
+            y, extra = rd.online_input(s["gnss"], s["compass"], s["gyro"], s["mask"], s["steer_prev"])
+            xh = online.update(y, s["dt_est"], **extra)
+            angle, rate, north, east, U = rd.read(xh, ix, s["fix"], s["U"])
+            std = np.sqrt(online.P[ix(rd.angle_state), ix(rd.angle_state)])
+            return {"angle": angle, "rate": s["gyro"] if gyro_rate else rate, "north": north, "east": east, "U": U,
+                    "angle_std": std, "bias": rd.bias(xh, ix, names, 0.0), "compass_hold": s["compass_hold"]}
+        return feed
 
 
 class Layout:

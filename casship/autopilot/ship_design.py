@@ -156,8 +156,10 @@ class Design:
             The truth (default: the design's plant, calm water).
         environment : mapping, optional
             Values of environment inputs of the plant (``wind_speed``, ``current_dir``, ...).
-        estimator : {"ekf", "truth", "raw"} or LoopEstimator
-            ``"ekf"``: the estimator of :meth:`estimator` for the mode.
+        estimator : {"ekf", "truth", "raw"}, LoopEstimator, TrueState or RawMeasurement
+            ``"ekf"``: the estimator of :meth:`estimator` for the mode; the rest as
+            :class:`ClosedLoop` (``"truth"`` and ``"raw"`` stand for :class:`TrueState` and
+            :class:`RawMeasurement`).
         sensors : Sensors, optional
             Default: from the settings.
         wave : WaveYaw, optional

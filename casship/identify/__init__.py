@@ -15,6 +15,7 @@ filter, priors, identifiability and the fit result.
 * :func:`read_fit_file` (and :func:`read_params`) and :class:`ParameterBelief` -- a fit file's parameters and
   their covariance, the same Gaussian over named parameters a prior and a trial design use;
   :func:`replay_file` -- a record replayed with a fit file (the path of ``casship simulate --params``).
+  :func:`write_params_file` -- values from elsewhere (another facility's tests) written as a replayable file.
 * :func:`identify_ship` -- the ship workflow in one call (propulsion, weights, prior, a free set from
   run-level evidence, the inverse-dynamics start), every choice with its reason (:class:`ShipFit`).
 * :mod:`casship.identify.asymmetry` -- port/starboard terms only from mirrored evidence.
@@ -27,7 +28,7 @@ from .identifiability import Identifiability
 from .mle import MLEProblem
 from .output_error import OutputErrorProblem
 from .belief import COVARIANCE_KINDS, CovarianceKind, ParameterBelief, ParameterUncertainty
-from .params_file import FitFile, read_fit_file, read_params, replay_file
+from .params_file import FitFile, read_fit_file, read_params, replay_file, write_params_file
 from .prior import Prior
 from .problem import IdentificationProblem
 from .records import initial_states, noise_std, share_labels
@@ -40,7 +41,7 @@ from .spec import LikelihoodOptions, OutputErrorOptions, ProblemSpec
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
            "IdentificationWarning", "Prior", "Identifiability", "noise_std",
-           "share_labels", "initial_states", "read_params", "read_fit_file", "FitFile", "replay_file", "ParameterBelief", "ParameterUncertainty", "CovarianceKind",
+           "share_labels", "initial_states", "read_params", "read_fit_file", "FitFile", "replay_file", "write_params_file", "ParameterBelief", "ParameterUncertainty", "CovarianceKind",
            "COVARIANCE_KINDS", "cross_validate", "CrossValidation"]
 __all__ += ["identify_ship", "ShipFit"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]

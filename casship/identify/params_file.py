@@ -27,7 +27,7 @@ from .belief import COVARIANCE_KINDS, Q_MAX_DEG2_PER_S, SYMMETRY_TOL, Covariance
     kind_from_source
 from .fit_json import load_fit_json
 
-__all__ = ["read_params", "read_fit_file", "FitFile", "replay_file", "check_model", "load_fit_json", "SYMMETRY_TOL",
+__all__ = ["read_params", "read_fit_file", "FitFile", "replay_file", "write_params_file", "check_model", "load_fit_json", "SYMMETRY_TOL",
            "Q_MAX_DEG2_PER_S", "CovarianceKind", "COVARIANCE_KINDS", "kind_from_source"]
 
 @dataclass(frozen=True)
@@ -224,3 +224,58 @@ def replay_file(path, data, model=None, *, uncertainty: bool = True, **options):
 
     fit = read_fit_file(path, model)
     return replay(fit.model, data, fit.params, uncertainty=fit.uncertainty if uncertainty else None, **options)
+
+
+def write_params_file(path, model, values, uncertainty=None, extra=None) -> Path:
+    """Write a parameter file that replays like a fit file: a model's values and their uncertainty.
+
+    For parameter values that come from elsewhere than a fit of this model (another facility's
+    captive tests, a handbook, a sister ship): the file names the model, its options and parameter
+    set, so :func:`read_fit_file` rebuilds the same variant and refuses another.
+
+    Parameters
+    ----------
+    path : str or Path
+    model : Model
+        The model the values belong to.
+    values : mapping name -> float
+        Parameters that differ from the model's (the others keep the model's values).
+    uncertainty : ParameterBelief, optional
+        Their covariance (``param_covariance``); its names must be parameters of the model and
+        its values those of the file.
+    extra : mapping, optional
+        More top-level entries (e.g. ``"model_discrepancy"``, provenance).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    casship.errors.InputError
+        A name the model lacks, a value that is not finite, or an uncertainty whose values are not
+        the file's.
+    """
+    from ..io.jsonfile import write_json
+
+    params = model.param_dict()
+    unknown = sorted(set(values) - set(params))
+    if unknown:
+        raise InputError(f"write_params_file: {unknown} are not parameters of {model.name!r}")
+    params.update({str(k): float(v) for k, v in values.items()})
+    bad = sorted(k for k, v in params.items() if not np.isfinite(v))
+    if bad:
+        raise InputError(f"write_params_file: parameter(s) {bad} are not finite")
+    if uncertainty is not None:
+        off = [n for n, v in zip(uncertainty.names, uncertainty.values)
+               if n not in params or not np.isclose(v, params[n], rtol=1e-12)]
+        if off:
+            raise InputError(f"write_params_file: the uncertainty's values of {off} are not the file's")
+    vessel = getattr(model, "vessel", None)
+    content = {"model": model.name, "model_options": dict(model.meta.get("options", {})),
+               "param_set": vessel.param_set if vessel is not None else "", "params": params,
+               "param_covariance": uncertainty.to_dict() if uncertainty is not None else {}}
+    content.update(dict(extra or {}))
+    path = Path(path)
+    write_json(path, content, what="parameter file")
+    return path

@@ -39,6 +39,7 @@ from casship.parallel import call, run_cases
 from casship.studies import Study
 
 from ..kit import data_folder
+from .choice import captive_only, choose
 from .calibration import (asymmetry_check, band_check, calibration_table, heading_growth, jackknife, mirror_check,
                           predictive_coverage)
 from .data import first_rudder_side, load_runs, regime
@@ -79,17 +80,29 @@ def run_fold(spec, runs, smoothed, curve, out: Path, *, dt: float, max_free: int
     """One fold: fit on the runs not held out, write the fit file, replay it on the held-out runs and
     draw their figure. Independent of every other fold (folds may run in any order or in parallel)."""
     kind, label, held = spec
-    fold = fit_fold([r for r in runs if r.name not in held], smoothed, curve, dt=dt, max_free=max_free,
-                    captive=captive)
-    # one file per facility of the held-out runs: a facility quantity (the neutral angle) is that
-    # facility's where the training had it, else the population value with the spread in the band
+    train = [r for r in runs if r.name not in held]
+    fold = fit_fold(train, smoothed, curve, dt=dt, max_free=max_free, captive=captive)
+    chosen = choose(train, smoothed, curve, dt=dt, max_free=max_free, captive=captive) if captive else None
     facilities = sorted({r.facility for r in runs if r.name in held})
     base = out / fold_file_name(kind, label)
-    paths = {f: write_fold_file(fold, base if len(facilities) == 1 else base.with_name(f"{base.stem}_{f}.json"),
-                                facility=f) for f in facilities}
+    captive_chosen = chosen is not None and chosen["choice"] == "captive-only"
+    # the joint fit's files (the chosen ones, or kept beside as "joint_..." for inspection): one per
+    # facility of the held-out runs, a facility quantity (the neutral angle) that facility's where the
+    # training had it, else the population value with the spread in the band
+    joint_base = base.with_name("joint_" + base.name[len("fit_"):]) if captive_chosen else base
+    extra = {"nested_choice": chosen} if chosen else None
+    joint = {f: write_fold_file(fold, joint_base if len(facilities) == 1
+                                else joint_base.with_name(f"{joint_base.stem}_{f}.json"), extra=extra, facility=f)
+             for f in facilities}
+    if captive_chosen:                    # one file: the captive-only model has no facility quantity of its own
+        path = captive_only(captive).write(base, fold.fit.noise, {"nested_choice": chosen})
+        paths = {f: path for f in facilities}
+    else:
+        paths = joint
     rows = [evaluate(r, paths[r.facility]) for r in runs if r.name in held]
-    res = {"kind": kind, "label": label, "held": held, "fold": fold, "file": ", ".join(p.name for p in paths.values()),
-           "evaluations": rows}
+    res = {"kind": kind, "label": label, "held": held, "fold": fold, "choice": chosen,
+           "file": ", ".join(sorted({p.name for p in paths.values()})),
+           "joint_file": ", ".join(sorted({p.name for p in joint.values()})), "evaluations": rows}
     res["figure"] = fold_figure(out, runs, res)
     return res
 
@@ -131,9 +144,12 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
         opts["captive"] = (str(folder), captive_fit(folder))
     # the fit on all runs first: the longest case starts at once
     cases = [(fit_fold, (runs, smoothed, curve), opts)]
+    if "captive" in opts:                            # the nested choice on all runs (module choice)
+        cases.append((choose, (runs, smoothed, curve), opts))
     cases += [(run_fold, (spec, runs, smoothed, curve, out), opts) for spec in fold_specs(runs, quick)]
     everything, *results = run_cases(call, cases, workers=workers, scheduler=scheduler,
                                      label="kvlcc2-marin fits", unit="fit", blas_threads=1)
+    chosen = results.pop(0) if "captive" in opts else None
     loro = [res["fold"] for res in results if res["kind"] == "run"]
     jack = jackknife(everything, loro) if len(loro) > 2 else None
     calibration = calibration_table(everything, loro, jack) if jack is not None else {}
@@ -147,11 +163,19 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
                    "over the leave-one-run-out held-out errors; replays of this file give the parameter band "
                    "(param_covariance) and the predictive band sqrt(s^2 + q t) on the same covariance, so the "
                    "predictive band is never the narrower"}} if bands else {}
-    fit_path = write_fold_file(everything, out / "fit.json", jack, discrepancy)
+    captive_chosen = chosen is not None and chosen["choice"] == "captive-only"
+    joint_path = write_fold_file(everything, out / ("fit_joint.json" if captive_chosen else "fit.json"), jack,
+                                 {**discrepancy, **({"nested_choice": chosen} if chosen else {})})
+    if captive_chosen:
+        shipped = captive_only(opts["captive"])
+        fit_path = shipped.write(out / "fit.json", everything.fit.noise, {**discrepancy, "nested_choice": chosen})
+        shipped_params = shipped.params()
+    else:
+        fit_path, shipped_params = joint_path, everything.params("HSVA")
     replays = run_cases(call, [(in_sample, (r, fit_path)) for r in runs], workers=workers, scheduler=scheduler,
                         blas_threads=1)
     model = study_model()
-    asym = asymmetry_check(runs, everything.params("HSVA"), model, published_model())
+    asym = asymmetry_check(runs, shipped_params, model, published_model())
     asym["mirror"] = {r.name: mirror for r, (_, mirror) in zip(runs, replays)}
     turns = {}
     for circle in (r for r in runs if r.kind == "turning"):
@@ -162,6 +186,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
                               "balance": steady_turn_balance(circle, files, published_model())}
     return write_outputs(out, runs, everything, results, [row for row, _ in replays], calibration=calibration,
                          jack=jack, asymmetry=asym, bands=bands, turns=turns, quick=quick, coverage=coverage,
+                         chosen=chosen,
                          variants={"this_round": len(VARIANTS), "declared": list(VARIANTS),
                                    "earlier_rounds": VARIANTS_EARLIER})
 

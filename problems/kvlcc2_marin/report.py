@@ -307,8 +307,22 @@ def _headline(by_kind, coverage, variants) -> tuple[str, dict]:
     return "\n\n".join(text), {**fams, "circle_left_out": circle}
 
 
+def _choice_text(chosen: dict, results) -> list[str]:
+    """The nested choice (module :mod:`.choice`): the rule, the choice on all runs and per fold."""
+    rows = {"all runs (fit.json)": {"choice": chosen["choice"], **{f"{k} inner score [deg]": v
+                                                                   for k, v in chosen["scores"].items()}}}
+    for res in results:
+        if res.get("choice"):
+            label = ", ".join(res["held"]) if res["kind"] == "run" else f"{res['kind']}: {res['label']}"
+            rows[f"without {label}"] = {"choice": res["choice"]["choice"],
+                                        **{f"{k} inner score [deg]": v for k, v in res["choice"]["scores"].items()}}
+    n_joint = sum(r["choice"] == "joint" for r in rows.values())
+    return [f"Nested choice ({chosen['rule']}): the joint fit chosen in {n_joint} of {len(rows)} fits; the held-out "
+            "runs of a fold never enter its choice.", md_table(rows, first="fit", spec=".3g")]
+
+
 def write_outputs(out: Path, runs, everything, results, in_sample, *, calibration, jack, asymmetry,
-                  quick: bool, bands=None, turns=None, coverage=None, variants=None) -> dict:
+                  quick: bool, bands=None, turns=None, coverage=None, variants=None, chosen=None) -> dict:
     """Write the tables, figures and report (the fit files are written by the folds); return the summary."""
     out = Path(out)
     coverage = coverage or {}
@@ -444,12 +458,15 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     rep.section("Folds")
     fold_rows = {(", ".join(res["held"]) if res["kind"] == "run" else
                   f"{res['kind']}: {res['label']} ({len(res['held'])} runs)"): {
-                     "file": res["file"], "free at the preset": ", ".join(res["fold"].first_free),
+                     "file": res["file"], "nested choice": (res.get("choice") or {}).get("choice", "joint"),
+                     "free at the preset": ", ".join(res["fold"].first_free),
                      "free (chosen again at that estimate)": ", ".join(res["fold"].free),
                      "fold time [s]": res["fold"].seconds,
                      "refinement time [s]": res["fold"].fit.solve_time_s, "status": res["fold"].fit.status}
                  for res in results}
     rep.add(md_table(fold_rows, first="held out", spec=".3g"))
+    if chosen is not None:
+        rep.add(*_choice_text(chosen, results))
     rep.add(f"Fit on all runs: {len(everything.free)} free quantities, refinement {everything.fit.solve_time_s:.1f} s, "
             f"whole workflow {everything.seconds:.1f} s.")
     for name in figs:
@@ -458,11 +475,18 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     rep.write(out)
     summary = {"study": "kvlcc2-marin", "quick": quick, "runs": [r.name for r in runs], **head,
                "predictive_coverage": coverage.get("mean", math.nan),
+               "fit_json_candidate": (chosen or {}).get("choice", "joint"),
+               "joint_fit_json": str(out / ("fit_joint.json" if (chosen or {}).get("choice") == "captive-only"
+                                            else "fit.json")),
                "predictive_band_never_narrower": (all(r.get("predictive_never_narrower") for r in in_sample)
                                                   if in_sample and all(r.get("predictive_never_narrower") is not None
                                                                        for r in in_sample) else None),
                "predictive_coverage_detail": coverage,
                "variants_tried": int(variants["this_round"] + variants["earlier_rounds"]),
+               "nested_choice": ({"rule": chosen["rule"], "all_runs": chosen["choice"], "all_runs_scores": chosen["scores"],
+                                  "folds": {f"{res['kind']}:{res['label']}": {"choice": res["choice"]["choice"],
+                                                                              "scores": res["choice"]["scores"]}
+                                            for res in results if res.get("choice")}} if chosen else None),
                "variants": variants,
                "model_options": workflow.MODEL_OPTIONS, "free": everything.free,
                "free_at_preset": everything.first_free,
@@ -476,6 +500,7 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
                "folds": {f"{res['kind']}:{res['label']}": {"free": res["fold"].free,
                                                            "free_at_preset": res["fold"].first_free,
                                                            "seconds": res["fold"].seconds,
-                                                           "train": res["fold"].train, "file": res["file"]}
+                                                           "train": res["fold"].train, "file": res["file"],
+                                                           "joint_file": res.get("joint_file", res["file"])}
                          for res in results}}
     return write_json(out / "summary.json", summary)
