@@ -5,7 +5,7 @@ A MARIN free-running zig-zag of the KVLCC2 model (3 844 samples) replayed with t
 the study's fit file carries a covariance for (standard deviations of 1-30 % of the published values
 here, for a fit file is not part of the repository): the replay itself, the exact sensitivities of
 heading and track (the bands) and 40 parameter draws (the index intervals), that is
-:func:`casship.validation.replay` with ``uncertainty`` and ``samples=40``.
+:func:`casship.maneuvers.replay` with ``uncertainty`` and ``samples=40``.
 
 * casship: the replay with its folds compiled (``jit=True``; the library is in the cache after the
   first call): one fold per chunk of the record for the replay and for the sensitivities, the 40
@@ -38,7 +38,7 @@ def main(quick: bool = False) -> list[dict]:
     from casship.identify import ParameterUncertainty
     from casship.io import data_dir, read_record
     from casship.models import kvlcc2
-    from casship.validation import replay
+    from casship.maneuvers import replay
 
     samples = 10 if quick else 40
     what = f"replay of a MARIN zig-zag with bands and {samples} draws, compiled"

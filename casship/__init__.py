@@ -19,7 +19,7 @@ _EXPORTS = {
     "wrap": "angles", "unwrap": "angles", "Dataset": "data", "Gaussian": "gaussian", "Trajectory": "trajectory",
     "DiscreteModel": "discretize", "discretize": "discretize", "van_loan": "discretize",
     "Model": "model", "ModelBuilder": "builder", "Vessel": "vessel", "Limit": "vessel",
-    "measure": "simulate", "simulate": "simulate", "simulate_many": "simulate",
+    "measure": "simulation", "simulate": "simulation", "simulate_many": "simulation",
     "EKF": "estimators", "KF": "estimators", "FilterResult": "estimators", "persistence_model": "estimators",
     "UKF": "estimators", "EnKF": "estimators", "KalmanBucy": "estimators", "augment": "estimators",
     "MHE": "estimators", "prior_from_data": "estimators", "noise_from_data": "estimators",
@@ -40,10 +40,12 @@ __all__ = ["ModelBuilder", "Model", "Vessel", "Limit", "DiscreteModel", "discret
 
 class _Package(types.ModuleType):
     """The package, keeping the functions ``casship.discretize`` and ``casship.simulate`` when their
-    modules of the same name are imported (the import system binds a submodule on its package)."""
+    modules of the same name are imported (the import system binds a submodule on its package; the
+    module ``casship.simulate`` is the deprecated path of :mod:`casship.simulation`, and holds the
+    same function)."""
 
     def __setattr__(self, name, value):
-        if isinstance(value, types.ModuleType) and _EXPORTS.get(name) == name:
+        if isinstance(value, types.ModuleType) and name in _EXPORTS and hasattr(value, name):
             value = getattr(value, name)
         super().__setattr__(name, value)
 

@@ -22,7 +22,7 @@ from .discretize import discretize
 from .estimators import EKF, UKF, prior_from_data
 from .io.jsonfile import write_json
 from .progress import progress
-from .simulate import measure, simulate
+from .simulation import measure, simulate
 
 __all__ = ["run_demo", "DemoConfig"]
 

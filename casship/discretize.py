@@ -199,7 +199,7 @@ class DiscreteModel:
         n : int
 
         ``fold(x0, U, p, W, dt) -> X`` with ``U`` (nu, n), ``W`` (nw, n), ``dt`` (1, n) and ``X`` the
-        (nx, n) states after each step; see :func:`casship.simulate.fold_steps` for records of any length.
+        (nx, n) states after each step; see :func:`casship.simulation.fold_steps` for records of any length.
         """
         n = int(n)
         if n < 1:

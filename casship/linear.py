@@ -316,7 +316,7 @@ def trim(model: Model, x=None, u=None, p=None, *, free: Sequence, zero: Sequence
     ValueError
         Unknown names, a non-square system, or a root finder that does not converge (the
         message gives the residual and the solver status).
-    casship.validity.ValidityError
+    casship.simulation.validity.ValidityError
         A given value or the solution outside the model's declared ranges.
 
     Examples
@@ -327,7 +327,7 @@ def trim(model: Model, x=None, u=None, p=None, *, free: Sequence, zero: Sequence
     >>> round(tr.values["delta"], 6)
     -0.01
     """
-    from .validity import check_inputs, check_states
+    from .simulation import check_inputs, check_states
 
     xv, uv = _vector(model, x, "state"), _vector(model, u, "input")
     pv = model.params(p) if p is not None else model.params()

@@ -40,7 +40,7 @@ from casship.identify.captive import linear_derivatives
 from casship.io import read_captive
 from casship.models import kvlcc2
 from casship.models.kvlcc2 import KVLCC2_COMMON, KVLCC2_L7
-from casship.validation import replay
+from casship.maneuvers import replay
 
 from . import Study
 from .kit import Departure, Report, data_folder, figure, fmt, md_table, write_json

@@ -9,7 +9,7 @@ zig-zags. For each, three records are compared with the same metric functions
 * **simulated**: :func:`casship.maneuvers.run_maneuver` on :func:`casship.models.kvlcc2` at the
   measured approach speed, the propeller rate solved for equilibrium at that speed, the rudder
   moved at 2.32 deg/s, the first side taken from the measured run;
-* **replayed**: :func:`casship.validation.replay` with the measured rudder and propeller rate from
+* **replayed**: :func:`casship.maneuvers.replay` with the measured rudder and propeller rate from
   the measured initial state.
 
 Outputs: ``metrics.md`` (table + IMO MSC.137(76) checks), ``report.md``, ``fig_<run>.png``
@@ -28,7 +28,7 @@ from casship.io import marin_runs, read_marin
 from casship.maneuvers import imo_check, imo_table, run_maneuver, turning_metrics, zigzag_metrics
 from casship.models import kvlcc2
 from casship.progress import progress
-from casship.validation import replay
+from casship.maneuvers import replay
 
 from . import Study
 from .kit import Departure, Report, data_folder, effect, write_json

@@ -213,7 +213,7 @@ def test_a_replay_given_its_start_says_so():
     model = cs.models.get_model("nomoto1")
     t = np.arange(0.0, 20.0, 0.5)
     data = cs.Dataset(t, {"delta": np.full(t.size, 0.1), "psi": np.zeros(t.size), "x": t})
-    from casship.validation import replay
+    from casship.maneuvers import replay
 
     res = replay(model, data, x0=model.states(r=0.01))
     assert res.start == {"psi": "x0", "r": "x0"} and res.not_compared == ["x"]

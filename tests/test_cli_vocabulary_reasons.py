@@ -2,8 +2,8 @@
 parameter draw."""
 import numpy as np
 
-from casship.prediction import sampled_metrics
-from casship.validation import _metric_notes, why_absent
+from casship.simulation import sampled_metrics
+from casship.maneuvers.replay import _metric_notes, why_absent
 
 
 def test_why_a_metric_is_absent():

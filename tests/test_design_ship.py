@@ -12,7 +12,7 @@ from casship.design import (Approach, FirstOvershoot, ParameterBelief, TrialLimi
                             optimise_free_trial, standard_trials)
 from casship.maneuvers import run_maneuver
 from casship.models import kvlcc2
-from casship.simulate import simulate
+from casship.simulation import simulate
 
 NAMES = ("N_r_dash", "Y_v_dash", "N_v_dash", "delta_0", "N_0_dash")
 NOISE = {"psi": np.radians(0.2), "r": np.radians(0.01), "u": 0.02}

@@ -13,7 +13,7 @@ import pytest
 
 import casship as cs
 from casship.cli import build_parser, main
-from casship.validity import ValidityError
+from casship.simulation import ValidityError
 
 
 def _fails(capsys, argv, *expected):
@@ -417,7 +417,7 @@ def test_linearize_without_inputs():
 
 def test_results_read_short(tmp_path):
     from casship.maneuvers import run_maneuver
-    from casship.validation import replay
+    from casship.maneuvers import replay
 
     m = cs.models.shi_taylor()
     tr = cs.trim(m, x={"u": 8.0}, u={"n": 1.0}, free=["n"], zero=["u"])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import casship as cs
-from casship.validity import ValidityError, stable_step
+from casship.simulation import ValidityError, stable_step
 
 
 @pytest.fixture(scope="module")

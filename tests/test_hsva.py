@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from casship.io import hsva_runs, read_hsva
-from casship.validation import classify_maneuver
+from casship.maneuvers import classify_maneuver
 
 TITLE = [" HSVA, experimental data CPMC", " KVLCC2", " Z10\u00b0/10\u00b0 starting to port", " Time series of motions"]
 

@@ -103,7 +103,7 @@ def test_trim_reports_failures_clearly():
 
 
 def test_trim_checks_the_declared_ranges():
-    from casship.validity import ValidityError
+    from casship.simulation import ValidityError
 
     ship = cs.models.get_model("kvlcc2")
     # 100 m/s is outside the model's speed range (it would "solve" for about -16 rps)

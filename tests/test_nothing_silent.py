@@ -134,7 +134,7 @@ def test_size_caps_before_memory_runs_out(capsys):
 def test_only_casships_own_errors_are_one_line_user_errors(monkeypatch, capsys):
     """Before: TypeError, KeyError and RuntimeError were reported as one-line user errors, hiding bugs."""
     assert issubclass(InputError, ValueError) and issubclass(SolverError, RuntimeError)
-    assert issubclass(cs.validity.ValidityError, CasshipError)
+    assert issubclass(cs.simulation.ValidityError, CasshipError)
     assert is_user_error(InputError("x")) and is_user_error(FileNotFoundError("x"))
     for exc in (TypeError("x"), KeyError("x"), RuntimeError("x"), ZeroDivisionError()):
         assert not is_user_error(exc)

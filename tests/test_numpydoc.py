@@ -34,7 +34,10 @@ def _modules():
         name = info.name
         if name.startswith(SKIP_PACKAGES) or any(part.startswith("_") for part in name.split(".")[1:]):
             continue
-        yield importlib.import_module(name)
+        with warnings.catch_warnings():         # the former module paths warn that they moved
+            warnings.filterwarnings("ignore", r"casship\.\w+ is deprecated", DeprecationWarning)
+            module = importlib.import_module(name)
+        yield module
 
 
 def _public(module):

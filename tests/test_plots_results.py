@@ -101,7 +101,7 @@ def test_filter_result(tmp_path):
 
 
 def test_replay_result(ship_run, tmp_path):
-    from casship.validation import replay
+    from casship.maneuvers import replay
 
     ship, tr = ship_run
     res = replay(ship, tr, ship.params())

@@ -1,4 +1,4 @@
-"""Prediction bands (casship.prediction): exact sensitivities, coverage of a simulated truth, fit
+"""Prediction bands (casship.simulation.bands): exact sensitivities, coverage of a simulated truth, fit
 files carrying the covariance, and per-record cost weights."""
 import json
 
@@ -8,9 +8,9 @@ import pytest
 import casship as cs
 from casship.identify import ParameterBelief, read_fit_file, read_params
 from casship.models import kvlcc2, nomoto_first_order
-from casship.prediction import trajectory_sensitivities
+from casship.simulation import trajectory_sensitivities
 from casship.identify import replay_file
-from casship.validation import replay
+from casship.maneuvers import replay
 
 
 @pytest.mark.parametrize("jit", [False, True])

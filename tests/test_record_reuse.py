@@ -11,7 +11,7 @@ import pytest
 
 import casship as cs
 from casship.estimators import ESTIMATORS
-from casship.validity import ValidityError
+from casship.simulation import ValidityError
 from filter_models import oscillator_case
 
 FAST = {"mhe": {"solver": "rti", "horizon": 5}}

@@ -10,7 +10,7 @@ from casship import Dataset
 from casship.autopilot.guidance import LOSGuidance, Waypoints
 from casship.autopilot.performance import step_metrics
 from casship.maneuvers import imo_check, zigzag_metrics
-from casship.prediction import band_z
+from casship.simulation import band_z
 
 
 # -- IMO MSC.137(76) 5.3.3: the 10/10 zig-zag limits at the edges of their L/V bands --------------------------
@@ -135,7 +135,7 @@ def test_band_z_is_the_two_sided_normal_quantile():
 
 
 def test_replay_band_halfwidth_is_z_times_std():
-    from casship.validation import ReplayResult
+    from casship.maneuvers import ReplayResult
     from casship.trajectory import Trajectory
 
     std = np.radians(np.array([0.0, 0.5, 1.0, 2.0]))
@@ -150,7 +150,7 @@ def test_replay_band_halfwidth_is_z_times_std():
 
 def test_prediction_bands_carry_the_z_of_their_level():
     from casship.models import nomoto_first_order
-    from casship.prediction import prediction_bands
+    from casship.simulation import prediction_bands
 
     m = nomoto_first_order(K=0.1, T=20.0)
     X = np.zeros((3, m.nx))

@@ -1,4 +1,4 @@
-"""Replays through shared simulation folds (casship.folds): compiled and interpreted give the same
+"""Replays through shared simulation folds (casship.simulation.folds): compiled and interpreted give the same
 numbers, the parameter draws run as one mapped call with the same results and failures as one
 simulation each, the sensitivities compiled equal the interpreted ones and central differences, and
 the Functions are built once per process per structure."""
@@ -9,14 +9,15 @@ import numpy as np
 import pytest
 
 import casship as cs
-from casship import folds, runtime
+from casship import runtime
+from casship.simulation import folds
 from casship.errors import DivergenceError
 from casship.identify import ParameterBelief
 from casship.models import kvlcc2
-from casship.prediction import sampled_metrics, trajectory_sensitivities
+from casship.simulation import sampled_metrics, trajectory_sensitivities
 from casship.runtime import CompileError, Compiling, find_compiler
-from casship.simulate import IntegrationError, fold_steps
-from casship.validation import replay
+from casship.simulation import IntegrationError, fold_steps
+from casship.maneuvers import replay
 
 try:
     find_compiler(None)

@@ -88,8 +88,8 @@ def test_one_chunk_setting(monkeypatch):
 def test_the_chunk_length_does_not_change_a_number(monkeypatch):
     """A filter, a simulation fold with sensitivities and an identification cost through the one driver,
     at two chunk lengths: the same numbers to the last bit (padding never reaches a result)."""
-    from casship.prediction import trajectory_sensitivities
-    from casship.simulate import fold_steps
+    from casship.simulation import trajectory_sensitivities
+    from casship.simulation import fold_steps
 
     m = cs.models.nomoto_first_order(K=0.1, T=20.0)
     dm = cs.discretize(m, 0.5)
@@ -119,7 +119,7 @@ def test_the_chunk_length_does_not_change_a_number(monkeypatch):
 
 def test_an_integrator_step_is_never_compiled():
     """CasADi generates no C for an adaptive integrator: the simulation folds stay interpreted under any jit."""
-    from casship.folds import simulation_fold
+    from casship.simulation import simulation_fold
 
     m = cs.models.nomoto_first_order(K=0.1, T=20.0)
     dm = cs.discretize(m, 0.5, method="cvodes")

@@ -5,7 +5,7 @@ from scipy.integrate import solve_ivp
 
 import casship as cs
 from casship.models import nomoto_first_order, shi_taylor, sog_cog
-from casship.simulate import fold_steps
+from casship.simulation import fold_steps
 
 
 def stable_shi():
@@ -168,7 +168,7 @@ def test_per_channel_rates_leave_nan_elsewhere(turning):
 
 def test_rates_that_do_not_divide_the_grid_rate():
     t = np.arange(0.0, 10.0, 0.02)
-    from casship.simulate import sample_mask
+    from casship.simulation.simulate import sample_mask
     rows = np.flatnonzero(sample_mask(t, 3.0))
     assert rows.size == 30                          # 3 Hz over 10 s
     # each sample lands on the first row at or after k / 3 s
@@ -260,7 +260,7 @@ def test_divergence_is_reported():
 
 
 def test_integrator_failure_names_the_solver_status():
-    from casship.simulate import IntegrationError
+    from casship.simulation import IntegrationError
 
     b = cs.ModelBuilder("blowup")
     x = b.state("x")
@@ -271,7 +271,7 @@ def test_integrator_failure_names_the_solver_status():
 
 
 def test_piecewise_constant_inputs_fail_with_the_step_and_time():
-    from casship.simulate import IntegrationError
+    from casship.simulation import IntegrationError
 
     b = cs.ModelBuilder("blowup_u")
     x = b.state("x")
@@ -301,7 +301,7 @@ def _kvlcc2():
 
 
 def test_inputs_outside_the_declared_range_raise_naming_input_value_and_range():
-    from casship.validity import ValidityError
+    from casship.simulation import ValidityError
 
     ship, x0 = _kvlcc2()
     t = np.arange(0.0, 20.0, 1.0)
@@ -316,7 +316,7 @@ def test_inputs_outside_the_declared_range_raise_naming_input_value_and_range():
 
 
 def test_closed_loop_inputs_are_checked_after_the_run():
-    from casship.validity import ValidityError
+    from casship.simulation import ValidityError
 
     ship, x0 = _kvlcc2()
     with pytest.raises(ValidityError, match=r"input 'delta' = 40 deg at t = 5 s"):
@@ -338,7 +338,7 @@ def test_margin_of_one_percent_at_a_bound():
 
 
 def test_state_leaving_its_range_warns_with_the_time():
-    from casship.validity import ValidityWarning
+    from casship.simulation import ValidityWarning
 
     b = cs.ModelBuilder("drift")
     pos = b.state("pos", unit="m")
@@ -352,7 +352,7 @@ def test_state_leaving_its_range_warns_with_the_time():
 
 
 def test_step_beyond_the_stability_limit_raises_instead_of_exploding():
-    from casship.validity import ValidityError, stable_step
+    from casship.simulation import ValidityError, stable_step
 
     m = cs.models.nomoto_first_order(K=0.1, T=20.0)
     # a 1e4 s gap in the time stamps: rk4 with one step per interval would return ~1e29
@@ -373,7 +373,7 @@ def test_step_beyond_the_stability_limit_raises_instead_of_exploding():
 
 
 def test_step_limit_of_a_lightly_damped_mode_for_euler():
-    from casship.validity import stable_step
+    from casship.simulation import stable_step
 
     b = cs.ModelBuilder("oscillator")
     pos, vel = b.state("pos"), b.state("vel")
@@ -387,7 +387,7 @@ def test_step_limit_of_a_lightly_damped_mode_for_euler():
 
 @pytest.mark.parametrize("method", ["euler", "rk4"])
 def test_one_step_stability_test_agrees_with_the_limit(method):
-    from casship.validity import is_stable_step, stable_step
+    from casship.simulation import is_stable_step, stable_step
 
     m = cs.models.get_model("shi-taylor")
     x, u, p = m.states(u=7.0, r=0.01), m.inputs(delta=0.1, n=1.5), m.params()

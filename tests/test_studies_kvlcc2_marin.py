@@ -14,7 +14,7 @@ import pytest
 
 from casship.cli import main
 from casship.models import get_model
-from casship.validation import replay
+from casship.maneuvers import replay
 from casship.io import read_marin
 from problems import get_study
 

@@ -8,7 +8,7 @@ import pytest
 import casship as cs
 from casship.cli import main
 from casship.identify import replay_file
-from casship.prediction import band_z
+from casship.simulation import band_z
 
 
 def _fit_file(tmp_path, q_deg2=None):

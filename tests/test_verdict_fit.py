@@ -11,7 +11,7 @@ import pytest
 import casship as cs
 from casship.cli import main
 from casship.identify.verdict import EXIT_WORSE, IN_SAMPLE_FACTOR, heading_discrepancy
-from casship.validation import replay
+from casship.maneuvers import replay
 
 
 def _kvlcc2_record_with_propulsion_mismatch():

@@ -277,7 +277,7 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
         rule("actuator_T", lambda: 1.0)
     limit = m.limits.get(plant.steer)
     if limit is not None and val["steer_max"] > max(abs(limit.lower), abs(limit.upper)) * (1 + 1e-9):
-        from ..validity import describe_limit
+        from ..simulation import describe_limit
 
         v = val["steer_max"]
         shown = f"{v:g} N m" if twin else f"{v:g} rad ({np.degrees(v):.4g} deg)"

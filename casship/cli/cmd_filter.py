@@ -179,7 +179,7 @@ def filter_file(args, model=None):
     from ..discretize import discretize
     from ..errors import InputError
     from ..estimators import ESTIMATORS, noise_from_data, prior_from_data
-    from ..validity import check_inputs, check_states, check_step
+    from ..simulation import check_inputs, check_states, check_step
 
     params = None
     fit_noise = {}
@@ -295,7 +295,7 @@ def filter_file(args, model=None):
 
 def _check_start(est, prior, data) -> None:
     """The model must be finite at the start: name the states to give with --x0."""
-    from ..validity import check_start
+    from ..simulation import check_start
 
     m = est.model
     check_start(m, prior.mean, data.matrix(m.input_names)[0] if m.nu else [], m.params(), what="the starting state",

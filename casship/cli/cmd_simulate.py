@@ -127,7 +127,7 @@ def run(args) -> int:
     check = not args.allow_out_of_range
     if args.inputs:
         from ..identify import replay_file
-        from ..validation import replay
+        from ..maneuvers import replay
 
         measured = read_records(args, [args.inputs], model, wrap_angles=False)[0]
         options = dict(method=args.method, check_limits=check, level=args.level, samples=args.samples)
@@ -210,7 +210,7 @@ def _with_percent(metrics: dict, settings: dict) -> dict:
 
 def _maneuver_intervals(simulate_with, model, p, unc, samples: int, seed: int, level: float) -> dict:
     """Index intervals of a manoeuvre from parameter draws of the fit file's covariance."""
-    from ..prediction import sampled_metrics
+    from ..simulation import sampled_metrics
 
     def run(pk):
         return {k: v for k, v in simulate_with(pk).metrics.items() if isinstance(v, (int, float))}, None

@@ -146,7 +146,7 @@ def _steps_to(approach: Approach, rudder_row, level: float, start_frac: float = 
               horizon: float = 60.0) -> int:
     """Steps until the heading change ``side * psi`` first reaches ``level`` in a plain simulation
     (no sensitivities), plus ``extra``; ``horizon`` in units of L/U."""
-    from ..simulate import fold_steps
+    from ..simulation import fold_steps
 
     m = approach.model
     n = int(np.ceil(horizon * approach.time_scale / approach.dt))

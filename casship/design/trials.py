@@ -80,7 +80,7 @@ class Trial:
         -------
         Dataset
         """
-        from ..simulate import simulate
+        from ..simulation import simulate
 
         m = approach.model
         U = approach.inputs(np.append(self.rudder, self.rudder[-1]))

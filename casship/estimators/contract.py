@@ -30,7 +30,7 @@ from ..data import Dataset
 from ..discretize import DiscreteModel
 from ..errors import InputError, InputTypeError
 from ..gaussian import Gaussian, as_cov
-from ..validity import check_start
+from ..simulation import check_start
 from .options import EstimatorOptions
 from .records import Records
 from .result import FilterResult

@@ -10,7 +10,7 @@ estimate at the sample before it, with the input held over it), online as in bat
   given (then every longer interval is a gap, whatever the state), else 1.5 times the nominal step
   ``dmodel.dt``. Discretisations without a step limit (adaptive, exact, discrete-time) have no gaps;
 * a longer interval is tested against the stability limit at the estimate before it
-  (:func:`casship.validity.is_stable_step`); where the model's Jacobian is not finite there, the
+  (:func:`casship.simulation.validity.is_stable_step`); where the model's Jacobian is not finite there, the
   gap cannot be checked and is refused;
 * a gap beyond the limit raises ``ValueError`` naming it (``on_gap="raise"``, the default) or, with
   ``on_gap="bridge"``, is bridged by prediction-only steps no longer than half the limit (at the limit
@@ -30,7 +30,7 @@ import numpy as np
 
 from ..data import Dataset
 from ..errors import InputError
-from ..validity import decaying_modes, is_stable_step, stable_step
+from ..simulation import decaying_modes, is_stable_step, stable_step
 
 __all__ = ["gap_threshold", "gap_limit", "gap_pieces", "checked_run", "bridge_gaps", "bridge_pieces", "GAP_FACTOR"]
 

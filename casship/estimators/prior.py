@@ -16,7 +16,7 @@ Each state starts, in this order, at
 Where each value came from is kept in :attr:`DataPrior.sources` (and shown by
 :meth:`DataPrior.describe`), so that a report or the command line can say it. A start where the
 model's equations are not finite (the MMG models at rest, u = v = 0) is refused by
-:func:`casship.validity.check_start`, naming the states that were left at zero.
+:func:`casship.simulation.validity.check_start`, naming the states that were left at zero.
 """
 from __future__ import annotations
 

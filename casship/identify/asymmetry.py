@@ -82,7 +82,7 @@ def maneuver_signature(data, rudder: str = "delta") -> dict:
         ``kind`` (``turning``, ``zigzag``, ``other``), ``rudder_deg`` (largest deflection from the
         approach angle), ``heading_deg`` (zig-zags) and ``side``.
     """
-    from ..validation import classify_maneuver
+    from ..maneuvers import classify_maneuver
 
     kind, options = classify_maneuver(data, rudder)
     d = np.asarray(data[rudder], dtype=float)

@@ -1,7 +1,7 @@
 """Cross-validation as an output: leave one run (or one group of runs) out, fit, replay what was left out.
 
 :func:`cross_validate` refits a problem on every fold and replays each held-out record with the
-fitted and with the reference (published) parameters (:func:`casship.validation.replay`: the
+fitted and with the reference (published) parameters (:func:`casship.maneuvers.replay`: the
 measured inputs from the measured initial state), comparing heading, speed and track RMSE and the
 manoeuvre indices (advance, transfer, tactical diameter, overshoots) with the measured ones. The
 result is a value (:class:`CrossValidation`) with a table (:meth:`~CrossValidation.summary`) and
@@ -90,7 +90,7 @@ def debiased(model, data, biases: dict):
 
 
 def _replay(model, data, params, biases, method):
-    from ..validation import replay
+    from ..maneuvers import replay
 
     return replay(model, debiased(model, data, biases), model.params(params), method=method)
 

@@ -334,7 +334,7 @@ class OutputErrorProblem(IdentificationProblem):
 
     def _guess_states(self, r, d, vals) -> np.ndarray:
         """Segment start guesses: measured states where a column holds them, else a simulation."""
-        from ..simulate import fold_steps
+        from ..simulation import fold_steps
 
         m, arr = self.model, self._arrays[r]
         U = (arr["U"] + vals["u"][:, None]).T

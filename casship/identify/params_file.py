@@ -220,7 +220,7 @@ def replay_file(path, data, model=None, *, uncertainty: bool = True, **options):
     --------
     >>> res = replay_file("fit.json", read_record("run.dat"), "kvlcc2")     # doctest: +SKIP
     """
-    from ..validation import replay
+    from ..maneuvers import replay
 
     fit = read_fit_file(path, model)
     return replay(fit.model, data, fit.params, uncertainty=fit.uncertainty if uncertainty else None, **options)

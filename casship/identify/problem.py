@@ -454,7 +454,7 @@ class IdentificationProblem:
 
     def _free_run(self, r: int, theta) -> dict:
         """Free-run simulation of record ``r`` at ``theta`` against its measured outputs (for plots)."""
-        from ..simulate import IntegrationError, simulate
+        from ..simulation import IntegrationError, simulate
 
         m, d = self.model, self.records[r]
         vals = self.space.record_map(r).values(theta)

@@ -239,7 +239,7 @@ def check_gaps(dmodel, records, x0, params, labels) -> None:
     """Refuse a sample interval longer than a fixed-step discretisation predicts over stably.
 
     A simulation (output error) steps from sample to sample; over a gap beyond the stability limit of
-    ``euler``/``rk4`` at the start (:func:`casship.validity.stable_step` times the sub-steps) it
+    ``euler``/``rk4`` at the start (:func:`casship.simulation.validity.stable_step` times the sub-steps) it
     explodes instead of predicting. Adaptive and exact discretisations have no limit.
 
     Parameters
@@ -258,7 +258,7 @@ def check_gaps(dmodel, records, x0, params, labels) -> None:
     ValueError
         Naming the record, the rows and the limit.
     """
-    from ..validity import is_stable_step, stable_step
+    from ..simulation import is_stable_step, stable_step
 
     m = dmodel.model
     substeps = getattr(dmodel, "substeps", 1)

@@ -3,7 +3,7 @@
 A fit that lowers its cost can still predict worse: a likelihood through a filter rewards one-step
 predictions, a cost dominated by one channel (surge) lets other parameters (yaw) absorb that
 channel's mismatch. :func:`judge` therefore replays every record of a fit (the measured inputs from
-the measured initial state, :func:`casship.validation.replay`) twice: with the **starting model**
+the measured initial state, :func:`casship.maneuvers.replay`) twice: with the **starting model**
 (the parameters the problem holds before the fit: the model's own values, or ``params=``, whatever
 ``guess`` the solver started from) and with the fit. With several records it also refits without
 each record (left-one-out) and replays the record left out: the prediction of a run the fit has not
@@ -88,8 +88,8 @@ def heading_discrepancy(t, e, s) -> float:
 
 def _replay(model, data, params: dict, biases: dict, method: str, uncertainty=None):
     """Replay ``data`` with ``params`` (and the record's input/output biases); None when it fails."""
-    from ..simulate import IntegrationError
-    from ..validation import replay
+    from ..simulation import IntegrationError
+    from ..maneuvers import replay
     from .crossval import debiased
 
     d = debiased(model, data, biases)

@@ -17,8 +17,7 @@ from ..angles import unwrap
 from ..data import Dataset, check_rows
 from ..trajectory import Trajectory
 from ..model import Model
-from ..simulate import simulate
-from ..validity import check_inputs, check_states
+from ..simulation import check_inputs, check_states, simulate
 from .inputs import (ZigZag, _input_vector, propeller_inputs, pullout_inputs, random_rudder_inputs, rudder_inputs,
                      spiral_inputs, straight_run_state, turning_inputs, vessel_of)
 from .metrics import turning_metrics, zigzag_metrics
@@ -62,11 +61,11 @@ def propeller_rate_for_speed(model: Model, speed: float, p=None, *, guess: float
     ValueError
         If the model has no propeller input, the speed is not positive, no scanned rate gives the
         speed, or the Newton iteration fails (its status is reported).
-    casship.validity.ValidityError
+    casship.simulation.validity.ValidityError
         The speed or the solved rate lies outside the model's declared ranges.
     """
     from ..linear import trim
-    from ..validity import check_states
+    from ..simulation import check_states
 
     props = propeller_inputs(model)
     if not props:
@@ -199,7 +198,7 @@ def run_maneuver(model: Model, kind: str = "turning", *, rudder_deg: float = 35.
     ValueError
         Unknown manoeuvre, non-positive speed, step, duration or hold, a step not shorter than the
         duration.
-    casship.validity.ValidityError
+    casship.simulation.validity.ValidityError
         Rudder, propeller rate or speed outside the model's ranges, or a step beyond the
         integrator's stability limit (unless ``check_limits=False``).
 

@@ -32,7 +32,7 @@ from casship.identify import ParameterBelief
 from casship.identify.asymmetry import mirror_pairs, turn_side
 from casship.maneuvers import run_maneuver
 from casship.identify import replay_file
-from casship.validation import replay
+from casship.maneuvers import replay
 
 from .validate import INDICES
 from .workflow import study_model

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from casship.identify import ParameterBelief, write_params_file
-from casship.validation import replay
+from casship.maneuvers import replay
 
 from .data import Run, per_run
 from .workflow import fit_fold, study_model

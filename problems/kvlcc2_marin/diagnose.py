@@ -17,7 +17,7 @@ import numpy as np
 from casship.identify import read_params
 from casship.identify import replay_file
 from casship.models.mmg import SMOOTH_WIDTH, mmg_forces, mmg_propeller
-from casship.validation import replay
+from casship.maneuvers import replay
 
 from .workflow import study_model
 

@@ -19,7 +19,7 @@ import numpy as np
 from casship.io.jsonfile import write_json
 from casship.models import kvlcc2
 from casship.identify import replay_file
-from casship.validation import replay
+from casship.maneuvers import replay
 
 from .data import Run, per_run
 from .workflow import study_model
