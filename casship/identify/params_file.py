@@ -209,12 +209,12 @@ def replay_file(path, data, model=None, *, uncertainty: bool = True, **options):
     uncertainty : bool
         Use the file's covariance for bands and intervals.
     **options
-        Further arguments of :func:`casship.validation.replay` (``method``, ``check_limits``, ``level``, ``samples``,
+        Further arguments of :func:`casship.maneuvers.replay` (``method``, ``check_limits``, ``level``, ``samples``,
         ``seed``).
 
     Returns
     -------
-    casship.validation.ReplayResult
+    casship.maneuvers.ReplayResult
 
     Examples
     --------
