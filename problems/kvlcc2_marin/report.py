@@ -353,6 +353,11 @@ def write_outputs(out: Path, runs, everything, results, in_sample, *, calibratio
     head_text, head = _headline(by_kind, coverage, variants)
     rep.section("Headline: every fold family, the circle left out, the predictive coverage")
     rep.add(head_text)
+    if chosen is not None:
+        folds = [res["choice"]["choice"] for res in results if res.get("choice")]
+        rep.add(f"\"fit\" is the candidate each fold's nested choice picked on its training runs (joint fit in "
+                f"{folds.count('joint')} of {len(folds)} folds, captive-only model in the others; `fit.json`: "
+                f"{chosen['choice']}); see *Nested choice* under Folds.")
     titles = {"run": "Leave-one-run-out: each run predicted by the fit file of a fold that did not see it",
               "regime": "Leave-one-regime-out: small-angle zig-zags, large-rudder zig-zags, turning circles",
               "facility": "Leave-one-facility-out: one facility's runs predicted by a fit on the other's",
