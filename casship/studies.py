@@ -139,7 +139,7 @@ def get_study(name: str) -> Study:
 
 
 def run_study(study: Study | str, out, *, quick: bool = False, workers: int | None = None,
-              scheduler: str | None = None, data=None, overwrite: bool = False, stream=None) -> dict:
+              scheduler: str | None = None, data=None, overwrite: bool = False, stream=None, params=None) -> dict:
     """Run a study into the folder ``out`` (see :func:`casship.outdir.output_folder`).
 
     The measured-data folder is found by :func:`casship.io.data_dir` (``data`` first, then
@@ -162,6 +162,9 @@ def run_study(study: Study | str, out, *, quick: bool = False, workers: int | No
         Replace the contents of a non-empty ``out``.
     stream : file, optional
         Where to announce the data folder (default ``sys.stderr``).
+    params : path, optional
+        A fit file for a study that designs or checks on one (``--params``; e.g. ``trial-design``,
+        which then skips the fit it would otherwise run).
 
     Returns
     -------
@@ -170,6 +173,13 @@ def run_study(study: Study | str, out, *, quick: bool = False, workers: int | No
     """
     stream = stream or sys.stderr
     study = get_study(study) if isinstance(study, str) else study
+    takes = inspect.signature(study.run).parameters
+    if params is not None:
+        if "params" not in takes:
+            with_params = sorted(n for n, s in studies().items() if "params" in inspect.signature(s.run).parameters)
+            raise InputError(f"study {study.name!r} takes no fit file (--params); studies that do: {with_params}")
+        if not Path(params).is_file():
+            raise InputError(f"--params {params}: no such file")
     folder = _data_dir(data, required=study.needs_data)
     if folder is None:
         print(f"study {study.name}: no measured-data folder found (give --data DIR or set CASSHIP_DATA); "
@@ -178,8 +188,9 @@ def run_study(study: Study | str, out, *, quick: bool = False, workers: int | No
         print(f"study {study.name}: measured data from {folder}", file=stream)
     with output_folder(out, overwrite=overwrite) as staging:
         kwargs = dict(quick=quick, workers=workers, scheduler=scheduler)
-        params = inspect.signature(study.run).parameters
-        if "data_dir" in params or any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        if params is not None:
+            kwargs["params"] = Path(params)
+        if "data_dir" in takes or any(p.kind is p.VAR_KEYWORD for p in takes.values()):
             kwargs["data_dir"] = folder
         elif study.needs_data:
             raise InputTypeError(f"study {study.name!r} needs measured data but its run() takes no data_dir")

@@ -9,6 +9,7 @@ import pytest
 from casship.cli import main
 from casship.io import data_dir
 from casship.outdir import MARKER, output_folder
+from casship.errors import InputError
 from casship.studies import Study, get_study, run_study, studies
 
 
@@ -133,3 +134,22 @@ def test_cli_refuses_a_non_empty_out_with_exit_code_2(tmp_path, capsys):
     assert main(["study", "tomera2011", "--quick", "--out", str(tmp_path / "o"), "--data",
                  str(tmp_path / "missing")]) == 2
     assert "missing" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def _designing(out, quick=False, workers=None, scheduler=None, params=None):
+    return {"params": str(params)}
+
+
+def test_a_fit_file_reaches_only_a_study_that_takes_one(tmp_path, capsys):
+    fit = tmp_path / "fit.json"
+    fit.write_text("{}")
+    summary = run_study(Study("designs", "t", _designing), tmp_path / "a", params=fit)
+    assert summary["params"] == str(fit)
+    with pytest.raises(InputError, match="'plain' takes no fit file.*trial-design"):
+        run_study(Study("plain", "t", _failing), tmp_path / "b", params=fit)
+    with pytest.raises(InputError, match="nofile.json: no such file"):
+        run_study(Study("designs", "t", _designing), tmp_path / "c", params=tmp_path / "nofile.json")
+    assert not (tmp_path / "b").exists() and not (tmp_path / "c").exists()
+    # the command line: refused before anything is written, exit 2, the option named
+    assert main(["study", "tomera2011", "--quick", "--out", str(tmp_path / "d"), "--params", str(fit)]) == 2
+    assert "takes no fit file (--params)" in capsys.readouterr().err and not (tmp_path / "d").exists()

@@ -25,6 +25,8 @@ def register(sub) -> None:
                    "else ../shared/data beside a source checkout)")
     p.add_argument("--workers", type=count, default=None, help="local worker processes (default: CPU count)")
     p.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
+    p.add_argument("--params", default=None, metavar="FIT_JSON",
+                   help="a fit file for a study that designs on one (trial-design: skips its own fit)")
     p.set_defaults(func=run)
 
 
@@ -40,6 +42,6 @@ def run(args) -> int:
     default = f"{study.name}-quick" if args.quick else study.name
     out = Path(args.out) if args.out else Path("casship-out") / default
     run_study(study, out, quick=args.quick, workers=args.workers, scheduler=args.scheduler, data=args.data,
-              overwrite=args.overwrite)
+              overwrite=args.overwrite, params=args.params)
     print(f"study {study.name} ({'quick' if args.quick else 'full'} run): results in {out}")
     return 0
