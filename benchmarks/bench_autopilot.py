@@ -86,8 +86,8 @@ def main(quick: bool = False) -> list[dict]:
     twin = _dense_twin(mpc)
     zeros, guess = np.zeros((2, 60)), np.zeros((1, 60))
 
-    def solve(m):
-        return lambda: [m._solver(x0, b, zeros, guess, guess) for x0, b in cases]
+    def solve(m):    # inputs: x0, b, target, U_guess, u_ref, steer_ref (no reference: a regulation plan)
+        return lambda: [m._solver(x0, b, zeros, guess, guess, guess) for x0, b in cases]
 
     t_hp = median_time(solve(mpc), repeat=repeat) / len(cases)
     t_qo = median_time(solve(twin), repeat=repeat) / len(cases)
@@ -96,7 +96,7 @@ def main(quick: bool = False) -> list[dict]:
         """Largest excess of a plan over the rate, steering and turn-rate limits (<= 0: held)."""
         out = []
         for x0, b in cases:
-            _, X, U = (np.asarray(v) for v in m._solver(x0, b, zeros, guess, guess))
+            _, X, U = (np.asarray(v) for v in m._solver(x0, b, zeros, guess, guess, guess))
             out.append(max(np.max(np.abs(U)) - mpc.rate_max, np.max(np.abs(X[-1, 1:])) - mpc.steer_max,
                            np.max(np.abs(X[1, 1:])) - mpc.r_max))
         return max(out), sum(v > 1e-7 for v in out)
