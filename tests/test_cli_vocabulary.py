@@ -20,7 +20,7 @@ MEANINGS = {
     "--overwrite": ("replace existing output files or folders", tuple(c for c in ALL if c != "cache")),
     "--model": ("registered model name", ("autopilot", "design-trial", "filter", "identify", "simulate")),
     "--params": ("JSON file with the ship's parameters (a fit file)", ("autopilot", "design-trial", "filter",
-                                                                       "identify", "simulate")),
+                                                                       "identify", "simulate", "study")),
     "--json": ("print the result as JSON on standard output", ("autopilot", "design-trial", "filter", "identify",
                                                                "simulate")),
     "--json-file": ("write the result as JSON to this file", ("bench",)),
