@@ -123,7 +123,7 @@ def choose(train: list[Run], smoothed: dict, curve, *, dt: float, max_free: int,
                          captive=captive)
         for r in (r for r in train if r.name in group):
             per[r.name]["joint"] = heading_rmse(r, inner.params(r.facility))
-    scores = {c: float(np.mean([v[c] for v in per.values()])) if groups or c == "captive-only" else float("nan")
-              for c in ("captive-only", "joint")}
+    scores = {"captive-only": float(np.mean([v["captive-only"] for v in per.values()])),
+              "joint": float(np.mean([v["joint"] for v in per.values()])) if groups else float("nan")}
     choice = "joint" if groups and scores["joint"] < scores["captive-only"] else "captive-only"
     return {"choice": choice, "scores": scores, "per_run": per, "groups": groups, "rule": RULE}
