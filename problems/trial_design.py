@@ -1,7 +1,8 @@
 """Trial design for the KVLCC2: which manoeuvre to run next, and a closed check by simulation.
 
 Part 1 (measured data): the KVLCC2 identified on the shared free-running runs by the registered
-``kvlcc2-marin`` study, run here into a subfolder (or any fit file a user has, ``params``); this
+``kvlcc2-marin`` study, run here into a subfolder with the leave-one-run-out folds its ``fit.json``
+depends on (or any fit file a user has, ``params``); this
 study reads only its ``fit.json``, as a user would (:func:`casship.identify.read_params`). The
 belief is the covariance the file carries -- the run-level jackknife of the parameters the fit
 moved, when the study calibrated it -- and this study's stated prior (:data:`HELD_PRIOR`) for the
@@ -22,6 +23,8 @@ pass/fail rule stated before the run (:data:`RULE`). With a scheduler address th
 from __future__ import annotations
 
 import time
+from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +36,7 @@ from casship.identify import Prior, read_fit_file
 from casship.models import kvlcc2
 from casship.studies import Study, run_study
 
+from . import kvlcc2_marin
 from .kit import Departure, Report, announce, data_folder, figure, md_table, run_cases, write_json
 
 __all__ = ["PRIOR_REL", "PRIOR_ABS", "HELD_PRIOR", "NOISE", "TRUTH_SEED", "STRUCTURE_ERROR", "COLOURED", "SHIPS",
@@ -81,13 +85,17 @@ def _limits(approach: Approach) -> TrialLimits:
 
 # -- part 1: the fit on the shared runs -------------------------------------------------------------------
 def kvlcc2_marin_fit(out: Path, data_dir, quick: bool, workers=None, scheduler=None) -> Path | None:
-    """Run the registered ``kvlcc2-marin`` study into ``out`` (as ``casship study kvlcc2-marin`` would) and
+    """Run the registered ``kvlcc2-marin`` study into ``out`` with the fold families its ``fit.json``
+    depends on (:data:`kvlcc2_marin.FIT_FILE_FAMILIES`: the same file ``casship study kvlcc2-marin``
+    writes, without the regime, facility and direction folds that only score the procedure) and
     return its ``fit.json``; None, said on the console, without the measured runs."""
     marin = data_folder(data_dir, "kvlcc2_marin_free", study="trial-design", part="the design on the fitted KVLCC2")
     if marin is None:
         return None
-    announce("trial-design", f"part 1: the kvlcc2-marin study{' (quick)' if quick else ''} into {out}")
-    run_study("kvlcc2-marin", out, quick=quick, workers=workers, scheduler=scheduler, data=marin.parent)
+    announce("trial-design", f"part 1: the kvlcc2-marin study{' (quick)' if quick else ''}, its leave-one-run-out "
+             f"folds, into {out}")
+    study = replace(kvlcc2_marin.STUDY, run=partial(kvlcc2_marin.run, families=kvlcc2_marin.FIT_FILE_FAMILIES))
+    run_study(study, out, quick=quick, workers=workers, scheduler=scheduler, data=marin.parent)
     return Path(out) / "fit.json"
 
 
@@ -380,7 +388,8 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
         part1 = None
     else:
         if params is None:
-            rep.add(f"The fit is the `kvlcc2-marin` study's on the shared runs, run here into `kvlcc2-marin/` "
+            rep.add(f"The fit is the `kvlcc2-marin` study's on the shared runs, run here into `kvlcc2-marin/` with its "
+                    "leave-one-run-out folds (the ones `fit.json` depends on) "
                     f"({t_fit:.0f} s; its report is there).")
         part1 = design_on_fit(fit_file, out, rep, dt=cfg["dt"], max_iter=cfg.get("max_iter_fitted", 0),
                               free=not quick)

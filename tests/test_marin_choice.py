@@ -52,3 +52,17 @@ def test_one_training_run_keeps_the_captive_only_model(monkeypatch):
     fitted = _rigged(monkeypatch, {"a": 9}, {"a": 1})
     out = choice.choose(_runs("a"), {}, None, dt=2.0, max_free=3, captive=("folder", None))
     assert out["choice"] == "captive-only" and not fitted and out["groups"] == []
+
+
+def test_fold_families_select_the_folds_and_unknown_ones_are_named():
+    from casship.errors import InputError
+    from problems import kvlcc2_marin as marin
+
+    runs = [SimpleNamespace(name=n, facility=f, kind="turning") for n, f in (("a", "X"), ("b", "Y"), ("c", "X"))]
+    assert marin.fold_specs(runs, families=marin.FIT_FILE_FAMILIES) == [("run", n, (n,)) for n in "abc"]
+    facility = marin.fold_specs(runs, families=("facility",))
+    assert facility == [("facility", "X", ("a", "c")), ("facility", "Y", ("b",))]
+    # the regime of every run is the same here, so that family has no fold; the default runs every family
+    assert [s[0] for s in marin.fold_specs(runs, families=("run", "regime", "facility"))] == ["run"] * 3 + ["facility"] * 2
+    with pytest.raises(InputError, match="'directions'"):
+        marin.fold_specs(runs, families=("run", "directions"))

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from casship.errors import InputError
 from casship.parallel import call, run_cases
 from casship.studies import Study
 
@@ -56,13 +57,25 @@ QUICK = {"runs": ("MARIN tc_-35", "MARIN zz_-20", "MARIN zz_10", "HSVA Z_10_10_P
                   "HSVA Z_20_10_S", "HSVA Z_35_05"),
          "held_out": ("MARIN zz_-20",), "dt": 4.0, "max_free": 6}
 GROUPINGS = (("regime", regime), ("facility", lambda r: r.facility), ("direction", first_rudder_side))
+#: Every fold family: leave one run out, then one regime, facility, direction out.
+FOLD_FAMILIES = ("run",) + tuple(kind for kind, _ in GROUPINGS)
+#: The families ``fit.json`` depends on (its jackknife covariance and its discrepancy term come from the
+#: leave-one-run-out folds; the others only score the procedure): what a study that designs on the fit runs.
+FIT_FILE_FAMILIES = ("run",)
 
 
-def fold_specs(runs, quick: bool = False) -> list[tuple[str, str, tuple]]:
-    """``(kind, label, held-out run names)`` of every fold."""
-    folds = [("run", name, (name,)) for name in (QUICK["held_out"] if quick else [r.name for r in runs])]
+def fold_specs(runs, quick: bool = False, families=FOLD_FAMILIES) -> list[tuple[str, str, tuple]]:
+    """``(kind, label, held-out run names)`` of every fold of the fold ``families`` (see :data:`FOLD_FAMILIES`)."""
+    unknown = sorted(set(families) - set(FOLD_FAMILIES))
+    if unknown:
+        raise InputError(f"unknown fold families {unknown}; known: {list(FOLD_FAMILIES)}")
+    folds = []
+    if "run" in families:
+        folds += [("run", name, (name,)) for name in (QUICK["held_out"] if quick else [r.name for r in runs])]
     if not quick:
         for kind, label_of in GROUPINGS:
+            if kind not in families:
+                continue
             labels = {r.name: label_of(r) for r in runs}
             if len(set(labels.values())) > 1:
                 folds += [(kind, label, tuple(n for n, v in labels.items() if v == label))
@@ -117,8 +130,13 @@ def in_sample(run, fit_path: Path) -> tuple[dict, dict]:
     return row, mirror_check([run], fit_path, published_model())[run.name]
 
 
-def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None) -> dict:
+def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: Path | None = None,
+        families=FOLD_FAMILIES) -> dict:
     """Fit, cross-validate and report (see the module text); ``quick``: seven runs, one fold.
+
+    ``families``: the fold families to run (default all, :data:`FOLD_FAMILIES`); with
+    :data:`FIT_FILE_FAMILIES` the study writes the same ``fit.json`` and reports only the
+    leave-one-run-out folds (what ``casship study trial-design`` runs before it designs on the fit).
 
     The fit on all runs and the folds are independent cases, run by :func:`casship.parallel.run_cases`
     (``workers`` local processes, or the Dask cluster at ``scheduler``) with one BLAS thread each
@@ -146,7 +164,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
     cases = [(fit_fold, (runs, smoothed, curve), opts)]
     if "captive" in opts:                            # the nested choice on all runs (module choice)
         cases.append((choose, (runs, smoothed, curve), opts))
-    cases += [(run_fold, (spec, runs, smoothed, curve, out), opts) for spec in fold_specs(runs, quick)]
+    cases += [(run_fold, (spec, runs, smoothed, curve, out), opts) for spec in fold_specs(runs, quick, families)]
     everything, *results = run_cases(call, cases, workers=workers, scheduler=scheduler,
                                      label="kvlcc2-marin fits", unit="fit", blas_threads=1)
     chosen = results.pop(0) if "captive" in opts else None
@@ -186,7 +204,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir: 
                               "balance": steady_turn_balance(circle, files, published_model())}
     return write_outputs(out, runs, everything, results, [row for row, _ in replays], calibration=calibration,
                          jack=jack, asymmetry=asym, bands=bands, turns=turns, quick=quick, coverage=coverage,
-                         chosen=chosen,
+                         chosen=chosen, families=families,
                          variants={"this_round": len(VARIANTS), "declared": list(VARIANTS),
                                    "earlier_rounds": VARIANTS_EARLIER})
 

@@ -17,7 +17,6 @@ model (the one that spends no free-running evidence).
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -72,25 +71,24 @@ class CaptiveOnly:
                                  {**fit, "candidate": "captive-only", **(extra or {})})
 
 
-@functools.cache
-def _captive_only(folder: str) -> CaptiveOnly:
-    from .workflow import captive_fit
-
-    fit = captive_fit(folder)
-    belief = fit.uncertainty("robust")
-    model = set(study_model().param_names)
-    keep = [i for i, n in enumerate(belief.names) if "@" not in n and n in model]
-    names = [belief.names[i] for i in keep]
-    cov = belief.cov[np.ix_(keep, keep)]
-    values = {n: float(fit.estimates[n]) for n in names}
-    return CaptiveOnly(values, ParameterBelief.from_values(
-        names, [values[n] for n in names], cov, "captive-only fit of the HMRI tests (robust covariance)",
-        kind="robust"))
+_CAPTIVE_ONLY: dict[str, CaptiveOnly] = {}
 
 
 def captive_only(captive) -> CaptiveOnly:
-    """The captive-only candidate of ``captive = (folder, captive-only fit)``."""
-    return _captive_only(str(captive[0]))
+    """The captive-only candidate of ``captive = (folder, captive-only fit)``: the fit's hull and
+    interaction estimates and their robust covariance (made once per process and folder)."""
+    folder, fit = str(captive[0]), captive[1]
+    if folder not in _CAPTIVE_ONLY:
+        belief = fit.uncertainty("robust")
+        model = set(study_model().param_names)
+        keep = [i for i, n in enumerate(belief.names) if "@" not in n and n in model]
+        names = [belief.names[i] for i in keep]
+        cov = belief.cov[np.ix_(keep, keep)]
+        values = {n: float(fit.estimates[n]) for n in names}
+        _CAPTIVE_ONLY[folder] = CaptiveOnly(values, ParameterBelief.from_values(
+            names, [values[n] for n in names], cov, "captive-only fit of the HMRI tests (robust covariance)",
+            kind="robust"))
+    return _CAPTIVE_ONLY[folder]
 
 
 def inner_groups(names, k: int = INNER_FOLDS) -> list[list[str]]:
