@@ -14,7 +14,9 @@ activity due to normal yaw motion).
 The full run makes the 20, 60 and 90 deg changes (and back) with two noise seeds per case; each
 design is made for the sea it sails in (``wave_w0``, ``wave_std``, ``wave_filter``: the wave yaw's
 spectrum enters the steering-noise budget, and the margins are those of the loop with the wave
-filter when it is on). The Otter is casship's default (with the Munk moment: course-unstable).
+filter when it is on). The Otter is casship's default (with the Munk moment: course-unstable). Each
+sea's heading-error floor (:func:`casship.autopilot.heading_error_floor`: no autopilot on compass and
+gyro holds the heading better) is reported next to the heading error of the runs.
 """
 from __future__ import annotations
 
@@ -70,7 +72,8 @@ def run_case(case: dict) -> dict:
     s, mg = d.settings, d.margins
     for r in runs:
         r.pop("res")
-    return {"ship": case["ship"], "filter": case["filter"], "runs": runs, "notes": notes,
+    floor = float(np.degrees(ap.heading_error_floor(d, wave_yaw(case["ship"]))))
+    return {"ship": case["ship"], "filter": case["filter"], "runs": runs, "notes": notes, "floor_deg": floor,
             "design": {"wn": s.wn, "wn_ref": s.wn_ref, "Kp": d.gains.Kp, "Kd": d.gains.Kd, "Ki": d.gains.Ki,
                        "observer_q": list(s.observer_q), "phase_margin_deg": mg["phase_margin_deg"],
                        "upper_gain_margin_db": mg["upper_gain_margin_db"], "steer_max": s.steer_max},
@@ -120,7 +123,8 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
         k = first["keeping"]
         table.append({"ship": r["ship"], "wave_filter": r["filter"],
                       "overshoot_pct": first["overshoot_pct"], "steady_error_deg": first["steady_error_deg"],
-                      "heading_error_rms_deg": k["error_rms_deg"], "steer_rms": k["steer_rms"],
+                      "heading_error_rms_deg": k["error_rms_deg"], "heading_floor_deg": r["floor_deg"],
+                      "steer_rms": k["steer_rms"],
                       "steer_rms_of_limit": k["steer_rms"] / r["design"]["steer_max"],
                       "steer_rate_rms": k["steer_rate_rms"], "steer_travel": k["steer_travel"],
                       "rate_limited_fraction": first["rate_limited_fraction"], "steer_unit": r["steer_unit"],
@@ -140,9 +144,12 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None) -> dict:
     rep.add("Each design is made for the sea it sails in (the wave yaw's spectrum in the steering-noise budget; "
             "with the wave filter, the margins of the loop with the filter in it). Course keeping over the last "
             "quarter of the first run (seed 1, the first change); steering in rad (KVLCC2 rudder) or N m (Otter "
-            "yaw moment), its RMS also as a fraction of the steering limit.")
+            "yaw moment), its RMS also as a fraction of the steering limit. heading_floor_deg is the heading error "
+            "no autopilot on compass and gyro gets below in this sea (casship.autopilot.heading_error_floor: the "
+            "Kalman-Bucy error of the low-frequency heading on the exact linearisation with the wave model).")
     rep.add(md_table(rows, ["ship", "wave_filter", "wn", "phase_margin_deg", "upper_gain_margin_db", "overshoot_pct",
-                            "heading_error_rms_deg", "steer_rms", "steer_rms_of_limit", "steer_rate_rms",
+                            "heading_error_rms_deg", "heading_floor_deg", "steer_rms", "steer_rms_of_limit",
+                            "steer_rate_rms",
                             "rate_limited_fraction"], spec=".3g"))
     rep.add("Overshoot of every course change (both changes of each run; the line is 10 % of the change):")
     rep.add(md_table([{**o, "overshoot_pct": ", ".join(f"{x:.1f}" for x in o["overshoot_pct"])} for o in overshoots],

@@ -21,6 +21,7 @@ The package, one job per module:
 * :mod:`~casship.autopilot.performance` -- course-changing and course-keeping checks;
 * :mod:`~casship.autopilot.guidance` -- waypoints, LOS and integral LOS;
 * :mod:`~casship.autopilot.mpc` -- a CasADi model-predictive course controller;
+* :mod:`~casship.autopilot.wave_limit` -- the heading-error floor in a sea and the LQG loop there;
 * :mod:`~casship.autopilot.montecarlo` -- runs over sensor-noise seeds and speeds;
 * :mod:`~casship.autopilot.plots` -- figures.
 
@@ -48,6 +49,7 @@ from .reference import ReferenceModel
 from .schedule import ScheduledAutopilot, default_schedule
 from .slot import LinearController
 from .ship_design import Design, RateLimitWarning, design_autopilot, simulate_autopilot
+from .wave_limit import WaveLQG, heading_error_floor, rice_exceedance, sea_model, wave_lqg
 
 __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "PIDGains", "pid_pole_placement",
            "lqr_design", "lqg_design", "LQG", "ReferenceModel", "Autopilot", "Actuator", "loop_systems",
@@ -60,4 +62,5 @@ __all__ = ["Nomoto", "nomoto_from_linear", "nomoto_from_model", "fit_nomoto", "P
            "simulate_autopilot", "RateLimitWarning", "RULES", "AutopilotSettings", "derive_settings", "Waypoints",
            "LOSGuidance", "cross_track_metrics", "MPCAutopilot", "mpc_for_design", "mpc_weights", "ScheduledAutopilot",
            "default_schedule", "SteeringFeedforward", "steering_feedforward", "LinearController", "speed_profile",
-           "track_deviation", "MPCLaw"]
+           "track_deviation", "MPCLaw", "heading_error_floor", "wave_lqg", "WaveLQG", "rice_exceedance",
+           "sea_model"]

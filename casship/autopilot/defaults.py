@@ -399,11 +399,13 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
                    f"{2 * p_unstable:.3g} rad/s, within a factor 3 of the wave encounter frequency "
                    f"{wave.w0:.3g} rad/s (the rule: w0 >= 6 / |T|)" if p_unstable > 0 and wave.w0 < 6 * p_unstable
                    else "the wave yaw's steering noise exceeds the budget at every bandwidth")
+            floor = _heading_floor(plant, lin, val, wave)
             warnings.warn(f"{m.name}: no bandwidth keeps the steering noise of the wave yaw ({np.degrees(val['wave_std']):.3g} "
                           f"deg at {wave.w0:.3g} rad/s) within the budget of {budget:.3g} "
                           f"{'N m' if twin else 'rad'}: {why}; the bandwidth is chosen for calm water (the margins "
-                          "reported are those of the loop with the wave filter when it is on)",
-                          WaveBudgetWarning, stacklevel=3)
+                          "reported are those of the loop with the wave filter when it is on). No autopilot on compass "
+                          f"and gyro holds this ship's heading better than {np.degrees(floor):.3g} deg RMS in this sea "
+                          "(casship.autopilot.heading_error_floor)", WaveBudgetWarning, stacklevel=3)
             budget_wave[0] = None
             wn, best = search()
         if wn is None:
@@ -437,6 +439,14 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     for key in ("ekf_alpha", "ekf_q", "observer_q"):
         val[key] = tuple(float(v) for v in val[key])
     return AutopilotSettings(**val, sources=src, steering=steering)
+
+
+def _heading_floor(plant: SteeringPlant, lin, val: dict, wave) -> float:
+    """:func:`~casship.autopilot.wave_limit.heading_error_floor` from the settings resolved so far [rad]."""
+    from .wave_limit import heading_error_floor
+
+    design = SimpleNamespace(linearization=lin, plant=plant, settings=SimpleNamespace(**val))
+    return heading_error_floor(design, wave)
 
 
 def _surge_pole(plant: SteeringPlant) -> float:

@@ -167,6 +167,8 @@ class Design:
         wave_filter : bool, optional
             Put the wave model into the heading observer (Fossen's wave filter): ``wave``, else the
             sea state of the settings (``wave_w0``, ``wave_std``). Default: the settings' ``wave_filter``.
+            With the nonlinear feed-forward the filter's yaw damping is then the ship's steady steering
+            (:func:`heading_observer` with ``steering``).
         guidance : LOSGuidance, optional
             Path following: the course command comes from the guidance.
         mode, rate : str, optional
@@ -189,9 +191,13 @@ class Design:
                 raise InputError("wave_filter needs a wave model: give wave, or design with wave_w0 and wave_std")
             # the MPC's disturbance is the observer's bias: estimated on the model the MPC plans with
             mpc = isinstance(controller, MPCAutopilot)
+            steering = controller.steering if mpc else None
+            if model_wave is not None and not mpc and s.feedforward == "nonlinear":
+                # with the wave filter the observer damps on the ship's steady steering: with the linear
+                # damping the wave states take up the model's error in a large turn (docs, section 8)
+                steering = s.steering
             estimator = self.estimator("course" if mode == "course" else "heading", wave=model_wave, x0=pl.x0,
-                                       steering=controller.steering if mpc else None,
-                                       second=mpc and controller.order == 2)
+                                       steering=steering, second=mpc and controller.order == 2)
         law = self.autopilot
         if isinstance(controller, (control.StateSpace, control.TransferFunction)):
             law = self.linear_controller(controller)
