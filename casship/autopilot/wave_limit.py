@@ -79,7 +79,8 @@ def sea_model(design, wave: WaveYaw | None = None, *, bias: bool = False) -> dic
     n = n0 + nb + 2
     A, B = np.zeros((n, n)), np.zeros((n, 1))
     A[:n0, :n0], B[:n0] = A0, B0
-    Aw, Gw = w._matrices()
+    wave_ss = w.system()
+    Aw, Gw = np.asarray(wave_ss.A, float), np.asarray(wave_ss.B, float)
     A[n - 2:, n - 2:] = Aw
     G = np.zeros((n, 1 + nb))
     G[n - 2:, 0] = Gw[:, 0]
