@@ -122,6 +122,13 @@ def _mmg_parts(model, sym) -> dict:
                            SMOOTH_WIDTH if opts.get("smooth") else None, opts.get("rudder_inflow", "published"))
 
 
+def _sparse(rows, cols, values, n_rows: int, n_cols: int):
+    """A ``scipy.sparse`` matrix from triplets (CasADi takes it as a sparse DM)."""
+    from scipy.sparse import csc_matrix
+
+    return csc_matrix((values, (rows, cols)), shape=(n_rows, n_cols))
+
+
 def pmm_motion(kind: str, U: float, *, beta: float = 0.0, omega: float | None = None, vdot_amp: float | None = None,
                r_amp: float | None = None, L: float, n: int = N_PHASES) -> dict:
     """The body-axis motion of a static or PMM test at ``n`` equally spaced phases of one period.
@@ -313,82 +320,107 @@ class CaptivePredictor:
         if bad:
             raise InputError(f"captive predictor: unknown component(s) {bad}; known: {list(HARMONICS)}")
         self.components = tuple(components)
-        F = captive_forces(model, self.channels)
+        self._F = captive_forces(model, self.channels)
         for name in (length, density):
             model.index(name, "param")
-        p = ca.MX.sym("p", model.np)
-        L, rho = p[model.index(length, "param")], p[model.index(density, "param")]
+        self._iL, self._irho = model.index(length, "param"), model.index(density, "param")
         st, dy = tests.static, tests.dynamic
         sk = tuple(static_kinds) if static_kinds is not None else None
         dk = tuple(dynamic_kinds) if dynamic_kinds is not None else None
+        # every sample the model is evaluated at (a static point, or one phase of a PMM period), and
+        # every observation as a weighted sum of one channel over samples, divided by 1/2 rho U^2 L^k
+        X, A, U = [], [], []
         obs: list[Observation] = []
-        preds = []
-        # static points: one sample each
+        rows, cols, weights, chan, speeds, powers = [], [], [], [], [], []
+
+        def observe(observation, channel, samples, w, speed):
+            rows.extend([len(obs)] * len(samples))
+            cols.extend(samples)
+            weights.extend(np.broadcast_to(w, (len(samples),)))
+            chan.append(self.channels.index(channel))
+            speeds.append(speed)
+            powers.append(FORCE_SCALES[channel])
+            obs.append(observation)
+
         s_idx = [i for i in range(len(st)) if sk is None or st.kind[i] in sk]
-        if s_idx:
-            X, A, U, speeds = [], [], [], []
-            for i in s_idx:
-                m = pmm_motion("static", st.speed[i], beta=st.beta[i], L=1.0)
-                X.append(self._state(m, 0, st.delta[i], rudder))
-                A.append([0.0, 0.0, 0.0])
-                U.append(self._inputs(st.delta[i], st.rps[i], rudder, propeller))
-                speeds.append(st.speed[i])
-            out = F.map(len(s_idx))(np.array(X).T, np.array(A).T, np.array(U).T, ca.repmat(p, 1, len(s_idx)))
-            for j, c in enumerate(self.channels):
-                scale = 0.5 * rho * np.array(speeds)[None, :] ** 2 * L ** FORCE_SCALES[c]
-                val = out[j, :] / scale
-                for col, i in enumerate(s_idx):
-                    meas = st.forces[c][i]
+        for i in s_idx:                               # static points: one sample each
+            m = pmm_motion("static", st.speed[i], beta=st.beta[i], L=1.0)
+            X.append(self._state(m, 0, st.delta[i], rudder))
+            A.append([0.0, 0.0, 0.0])
+            U.append(self._inputs(st.delta[i], st.rps[i], rudder, propeller))
+        for c in self.channels:                       # observations by channel, then point
+            for k, i in enumerate(s_idx):
+                meas = st.forces[c][i]
+                if np.isfinite(meas):
+                    observe(Observation("static", i, c, "value", float(meas), st.kind[i]), c, [k], 1.0, st.speed[i])
+        Hm = harmonic_matrix(n_phases, 3)
+        for i in (i for i in range(len(dy)) if dk is None or dy.kind[i] in dk):
+            m = self.motion(i, L_value=None, n=n_phases)
+            first = len(X)
+            for k in range(n_phases):
+                X.append(self._state(m, k, 0.0, rudder))
+                A.append([m["du"][k], m["dv"][k], m["dr"][k]])
+                U.append(self._inputs(0.0, dy.rps[i], rudder, propeller))
+            samples = list(range(first, first + n_phases))
+            for c in self.channels:
+                for h in self.components:
+                    meas = dy.components[c][i, HARMONICS.index(h)]
                     if np.isfinite(meas):
-                        obs.append(Observation("static", i, c, "value", float(meas), st.kind[i]))
-                        preds.append(val[col])
-        d_idx = [i for i in range(len(dy)) if dk is None or dy.kind[i] in dk]
-        if d_idx:
-            Hm = harmonic_matrix(n_phases, 3)
-            comp_rows = [HARMONICS.index(h) for h in self.components]
-            X, A, U = [], [], []
-            for i in d_idx:
-                m = self.motion(i, L_value=None, n=n_phases)
-                for k in range(n_phases):
-                    X.append(self._state(m, k, 0.0, rudder))
-                    A.append([m["du"][k], m["dv"][k], m["dr"][k]])
-                    U.append(self._inputs(0.0, dy.rps[i], rudder, propeller))
-            out = F.map(len(X))(np.array(X).T, np.array(A).T, np.array(U).T, ca.repmat(p, 1, len(X)))
-            for t, i in enumerate(d_idx):
-                block = out[:, t * n_phases:(t + 1) * n_phases]
-                for j, c in enumerate(self.channels):
-                    scale = 0.5 * rho * dy.speed[i] ** 2 * L ** FORCE_SCALES[c]
-                    comps = ca.mtimes(ca.DM(Hm[comp_rows]), block[j, :].T) / scale
-                    for q, h in enumerate(self.components):
-                        meas = dy.components[c][i, HARMONICS.index(h)]
-                        if np.isfinite(meas):
-                            obs.append(Observation("dynamic", i, c, h, float(meas), dy.kind[i]))
-                            preds.append(comps[q])
+                        observe(Observation("dynamic", i, c, h, float(meas), dy.kind[i]), c, samples,
+                                Hm[HARMONICS.index(h)], dy.speed[i])
         if not obs:
             raise InputError("captive predictor: no measured component selected")
         self.observations = obs
-        y = ca.vertcat(*preds)
-        self._value = ca.Function("captive_value", [p], [y], ["p"], ["y"])       # trial points: no Jacobian
-        self._function = None                    # value and Jacobian: built at the first :meth:`jacobian`
         self.measured = np.array([o.value for o in obs])
+        self._samples = (np.array(X).T, np.array(A).T, np.array(U).T)
+        n_obs, n_s = len(obs), len(X)
+        chan_of_row = np.array(chan)[np.array(rows)]
+        # one sparse weight matrix per channel: observation rows, sample columns
+        self._weights = [ca.DM(_sparse(np.array(rows)[chan_of_row == j], np.array(cols)[chan_of_row == j],
+                                       np.array(weights)[chan_of_row == j], n_obs, n_s))
+                         for j in range(len(self.channels))]
+        self._half_U2 = 0.5 * np.array(speeds) ** 2
+        self._powers = np.array(powers, dtype=float)
+        p = ca.MX.sym("p", model.np)
+        self._value = ca.Function("captive_value", [p], [self._scaled(p, self._F)[0]], ["p"], ["y"])
+        self._function = None                    # value and Jacobian: built at the first :meth:`jacobian`
+
+    def _scaled(self, p, point, jac: bool = False):
+        """``y`` (and ``dy/dp``) of every observation from ``point`` mapped over the samples."""
+        n_s = self._samples[0].shape[1]
+        out = point.map(n_s)(*self._samples, ca.repmat(p, 1, n_s))
+        F = out[0] if jac else out
+        raw = sum(ca.mtimes(W, F[j, :].T) for j, W in enumerate(self._weights))
+        L, rho = p[self._iL], p[self._irho]
+        scale = rho * self._half_U2 * L ** self._powers
+        y = raw / scale
+        if not jac:
+            return y, None
+        npar = p.numel()
+        raw_J = sum(ca.mtimes(W, ca.reshape(out[1][j, :], npar, n_s).T) for j, W in enumerate(self._weights))
+        # d(raw / scale)/dp: the scale depends on rho and L only
+        J = raw_J / ca.repmat(scale, 1, npar)
+        e_rho, e_L = np.zeros((1, npar)), np.zeros((1, npar))
+        e_rho[0, self._irho], e_L[0, self._iL] = 1.0, 1.0
+        J = J - ca.mtimes(y / rho, ca.DM(e_rho)) - ca.mtimes(self._powers * y / L, ca.DM(e_L))
+        return y, J
 
     @property
     def function(self) -> ca.Function:
         """``p -> (y, J)``: the predictions and their exact Jacobian in the parameters.
 
-        Built once, at first use, on the prediction expanded to scalar (SX) operations where the
-        model allows it: the graph is thousands of small scalar operations, which the SX virtual
-        machine evaluates about ten times faster than the MX one (KVLCC2 on the HMRI series: 24
-        against 280 ms per Jacobian, equal to 1e-16), for a few seconds of building once.
+        Built once, at first use: the force Function and its Jacobian in the parameters at one
+        sample (scalar operations), mapped over every sample and projected onto the observations by
+        sparse weight matrices, so the graph stays a handful of matrix operations (building it takes
+        milliseconds; differentiating the expanded prediction as a whole took seconds).
         """
         if self._function is None:
-            try:
-                value = self._value.expand()
-            except RuntimeError:                  # an MX-only node (e.g. an interpolant): keep MX
-                value = self._value
-            p = (ca.SX if value.is_a("SXFunction") else ca.MX).sym("p", value.size1_in(0))
-            y = value(p)
-            self._function = ca.Function("captive_predict", [p], [y, ca.jacobian(y, p)], ["p"], ["y", "J"])
+            x, a, u, p1 = (ca.SX.sym(n, self._F.sparsity_in(k)) for k, n in enumerate(("x", "a", "u", "p")))
+            F = self._F(x, a, u, p1)
+            point = ca.Function("captive_point", [x, a, u, p1], [F, ca.jacobian(F, p1)])
+            p = ca.MX.sym("p", self.model.np)
+            y, J = self._scaled(p, point, jac=True)
+            self._function = ca.Function("captive_predict", [p], [y, J], ["p"], ["y", "J"])
         return self._function
 
     # the model length is only known from p at evaluation; the motion needs it numerically
