@@ -128,3 +128,22 @@ def test_yaw_motion_kinematics():
     np.testing.assert_allclose(harmonics(mo["dr"], 1), [0, -psi_max * 0.25, 0], atol=1e-14)
     th = mo["theta"]
     np.testing.assert_allclose(np.hypot(mo["u"], mo["v"]), 1.0 / np.cos(psi_max * np.sin(th)), rtol=1e-14)
+
+
+def test_prediction_jacobian_in_the_scale_parameters_and_over_every_test_kind():
+    """The non-dimensionalisation depends on L_pp and rho: their columns carry the scale's derivative;
+    static and dynamic tests together, every channel."""
+    ship = kvlcc2_l7(asymmetry=True, smooth=True)
+    pr = CaptivePredictor(ship, design(), ("X", "Y", "N", "RY"))
+    assert {o.test for o in pr.observations} == {"static", "dynamic"}
+    p = ship.params()
+    y, J = pr.jacobian(p)
+    np.testing.assert_allclose(y, pr.predict(p), rtol=1e-13, atol=1e-15)
+    for name in ("L_pp", "rho", "N_r_dash", "f_alpha", "t_P"):
+        i = ship.index(name, "param")
+        h = 1e-6 * max(1.0, abs(p[i]))
+        dp = np.zeros_like(p)
+        dp[i] = h
+        fd = (pr.predict(p + dp) - pr.predict(p - dp)) / (2 * h)
+        assert np.max(np.abs(fd)) > 0, name
+        np.testing.assert_allclose(J[:, i], fd, rtol=1e-5, atol=1e-6 * np.max(np.abs(fd)) + 1e-11)
