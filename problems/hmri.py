@@ -11,7 +11,7 @@ import numpy as np
 from casship.identify.captive import CaptiveProblem
 from casship.models import kvlcc2_l7
 
-__all__ = ["FACILITY", "HMRI", "CHANNELS", "HULL", "INTERACTION", "OWN", "FREE", "KINDS", "WATCH", "RHO", "L_HMRI", "MASS", "IZ_MIDSHIP", "X_G",
+__all__ = ["FACILITY", "HMRI", "CHANNELS", "HULL", "INTERACTION", "OWN", "FREE", "LEVER", "KINDS", "WATCH", "RHO", "L_HMRI", "MASS", "IZ_MIDSHIP", "X_G",
            "hmri_model", "captive_problem", "shared_estimates"]
 
 FACILITY = "HMRI"
@@ -31,12 +31,15 @@ HULL = ("X_vv_dash", "X_vr_dash", "X_rr_dash", "X_vvvv_dash", "Y_v_dash", "Y_r_d
 INTERACTION = ("t_R", "a_H", "x_H_dash", "gamma_R_minus", "gamma_R_plus", "l_R_dash", "C_2_plus", "C_2_minus")
 OWN = ("t_P", "w_P0", "f_alpha", "delta_0")
 FREE = HULL + INTERACTION + OWN
+#: The rudder-lever structure the captive tests were read for (``rudder_lever="loading"``): its one extra coefficient.
+LEVER = ("x_HJ_dash",)
 KINDS = ("static_rudder", "static_drift", "drift_rudder", "pure_sway", "pure_yaw", "yaw_drift")
 WATCH = ("N_vvr_dash", "m_y_dash", "Y_vvv_dash", "N_rrr_dash", "N_vrr_dash", "x_H_dash", "t_R", "a_H")
 
 
-def hmri_model(tests, **overrides):
-    """The KVLCC2 L7 MMG model with HMRI's particulars, its open-water K_T and its resistance ``R'_0``."""
+def hmri_model(tests, rudder_lever: str = "constant", **overrides):
+    """The KVLCC2 L7 MMG model with HMRI's particulars, its open-water K_T and its resistance ``R'_0``
+    (``rudder_lever``: as for :func:`casship.models.kvlcc2`)."""
     ow = tests.open_water
     J = ow["J"]
     k = np.linalg.lstsq(np.vstack([np.ones_like(J), J, J**2]).T, ow["K_T"], rcond=None)[0]
@@ -45,12 +48,15 @@ def hmri_model(tests, **overrides):
     values = dict(HMRI, k_0=float(k[0]), k_1=float(k[1]), k_2=float(k[2]),
                   R_0_dash=R / (0.5 * RHO * U0**2 * HMRI["L_pp"] * HMRI["d"]))
     values.update(overrides)
-    return kvlcc2_l7(values, asymmetry=True, smooth=True)
+    return kvlcc2_l7(values, asymmetry=True, smooth=True, rudder_lever=rudder_lever)
 
 
 def captive_problem(tests, model=None):
-    """The study's captive problem (the free set, channels and noise rule of the module docstring)."""
-    return CaptiveProblem(model or hmri_model(tests), tests, list(FREE), facility=FACILITY, channels=CHANNELS)
+    """The study's captive problem (the free set, channels and noise rule of the module docstring; with
+    a ``rudder_lever="loading"`` model also :data:`LEVER`)."""
+    model = model or hmri_model(tests)
+    free = list(FREE) + [n for n in LEVER if n in model.param_names]
+    return CaptiveProblem(model, tests, free, facility=FACILITY, channels=CHANNELS)
 
 
 def shared_estimates(fit) -> dict:

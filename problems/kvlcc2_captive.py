@@ -24,6 +24,13 @@ Method, fixed before any replay was looked at:
 * **Replays**: the full-scale :func:`casship.models.kvlcc2` with the captive estimates of the hull
   and interaction quantities; the facility quantities of the free-running models (propeller,
   rudder, neutral angle) stay published. Nothing is tuned on the replays.
+* **A structure the tests were read for** (:func:`lever_structure`): the yaw moment per rudder
+  force of the static rudder tests falls with the propeller loading (``docs/identification.md``,
+  "What the captive tests say about hard-over"); the same fit with ``rudder_lever="loading"``
+  (one more coefficient, ``x'_HJ``) is reported beside: its likelihood-ratio statistic, the
+  coefficient and its errors, the residuals and its replays. Reported, not adopted: the study's
+  model and the captive-only candidate of ``kvlcc2-marin`` keep the published constant lever this
+  round (decided before it was fitted).
 
 Outputs: ``report.md``, ``coefficients.csv``, ``fig_forces.png`` (measured vs model per test kind),
 ``fig_replays.png``, ``captive_fit.json``, ``summary.json``.
@@ -138,6 +145,30 @@ def _circle_summary(circle) -> dict:
     return out
 
 
+def lever_structure(tests, fit, runs) -> dict:
+    """The captive fit with the loading-dependent rudder lever beside ``fit`` (the constant lever).
+
+    Returns the log-likelihoods and their likelihood-ratio statistic (chi-square with one degree of
+    freedom under the constant lever), ``x_HJ_dash`` with its standard and robust errors, the RMS
+    residual per group, and with ``runs`` the full-scale captive-only replays of both structures.
+    """
+    pb = captive_problem(tests, hmri_model(tests, rudder_lever="loading"))
+    alt = pb.solve(show=False)
+    name = pb.joint_name("x_HJ_dash")
+    out = {"status": alt.status, "loglik_constant": fit.loglik, "loglik_loading": alt.loglik,
+           "lr_statistic": 2.0 * (alt.loglik - fit.loglik), "lr_critical_1pct": 6.635,
+           "x_HJ_dash": alt.estimates[name], "std_error": alt.std_errors[name],
+           "std_error_robust": alt.std_errors_robust[name],
+           "x_H_dash": {"constant": fit.estimates["x_H_dash"], "loading": alt.estimates["x_H_dash"]},
+           "rms_by_group": {g: {"constant": fit.noise["rms"][g], "loading": alt.noise["rms"][g]}
+                            for g in fit.noise["rms"]}}
+    if runs:
+        rows, circle = replays(runs, kvlcc2(shared_estimates(alt), rudder_lever="loading"))
+        out["replays_mean_deg"] = float(np.mean([r["captive_deg"] for r in rows]))
+        out["circle"] = _circle_summary(circle)
+    return out
+
+
 # -- the study -----------------------------------------------------------------------------------
 def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=None) -> dict:
     """Fit the captive tests, compare with the published coefficients, replay the free-running runs."""
@@ -180,7 +211,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=N
 
     # replays of the free-running runs
     runs_folder = data_folder(data_dir, "kvlcc2_marin_free", study="kvlcc2-captive", part="the replays")
-    replay_rows, circle = [], {}
+    replay_rows, circle, runs = [], {}, []
     if runs_folder is not None:
         from .kvlcc2_marin.data import load_runs
 
@@ -213,6 +244,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=N
                                      for n, r in rows.items()},
                     "rms_by_group": rms, "linear_derivatives": lin},
         "replays": replay_rows, "circle": circle,
+        "rudder_lever": lever_structure(tests, fit, runs),
         "wall_time_s": None,
     }
     _report(rep, out, tests, fit, rows, rms, lin, replay_rows, summary, quick)
@@ -267,6 +299,7 @@ def _report(rep, out, tests, fit, rows, rms, lin, replay_rows, summary, quick) -
                 + ", ".join(f"{k} {fmt(v, '.3g')} %" for k, v in summary["circle_left_out"].items() if k != "runs")
                 + ".")
         rep.image("fig_replays.png", "heading RMSE per run")
+    _lever_report(rep, summary)
     rep.departures([
         Departure("facility", "Yasukawa & Yoshimura's model (NMRI L7)", "HMRI model T530 (L 6.83 m), its own "
                   "propeller, rudder, resistance and open-water curve", "hull coefficients shared; facility "
@@ -277,6 +310,29 @@ def _report(rep, out, tests, fit, rows, rms, lin, replay_rows, summary, quick) -
                   "running condition", "Y_vrr, N_vrr from the 2nd harmonics only"),
     ])
     rep.write(out)
+
+
+def _lever_report(rep, summary) -> None:
+    lv = summary["rudder_lever"]
+    rep.section("The rudder lever against propeller loading (reported, not adopted)")
+    text = (f"With `rudder_lever=\"loading\"` (x'_H + x'_HJ J_P): x'_HJ = {lv['x_HJ_dash']:.3g} +- "
+            f"{lv['std_error']:.2g} (robust {lv['std_error_robust']:.2g}), x'_H {lv['x_H_dash']['constant']:.3g} -> "
+            f"{lv['x_H_dash']['loading']:.3g}; likelihood-ratio statistic {lv['lr_statistic']:.3g} (1 % point of "
+            f"chi-square(1): {lv['lr_critical_1pct']}); static yaw-moment residual RMS "
+            f"{fmt(lv['rms_by_group']['static:N']['constant'], '.3g')} -> "
+            f"{fmt(lv['rms_by_group']['static:N']['loading'], '.3g')}.")
+    if "circle" in lv:
+        c = summary["circle_left_out"]
+        text += (f" Replayed at full scale: mean heading RMSE {summary['loro']['fit_mean_deg']:.2f} -> "
+                 f"{lv['replays_mean_deg']:.2f} deg; circle advance {fmt(c['advance_pct'], '+.1f')} -> "
+                 f"{fmt(lv['circle']['advance_pct'], '+.1f')} %, tactical diameter "
+                 f"{fmt(c['tactical_diameter_pct'], '+.1f')} -> {fmt(lv['circle']['tactical_diameter_pct'], '+.1f')} %.")
+    supported = lv["lr_statistic"] > lv["lr_critical_1pct"]
+    text += f" The captive tests {'support' if supported else 'do not support'} the structure at the 1 % level"
+    if "circle" in lv:
+        closer = abs(lv["circle"]["tactical_diameter_pct"]) < abs(summary["circle_left_out"]["tactical_diameter_pct"])
+        text += f"; it brings the circle's tactical diameter {'closer to' if closer else 'further from'} the measured one"
+    rep.add(text + " (see docs/identification.md). The study's model keeps the constant lever this round.")
 
 
 STUDY = Study("kvlcc2-captive", "KVLCC2 MMG coefficients from HMRI captive (PMM) tests alone, beside Yasukawa & "

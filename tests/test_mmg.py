@@ -338,3 +338,41 @@ def test_cubic_rudder_lift_is_an_option_that_leaves_the_published_model_alone():
         kvlcc2(rudder_lift="stall")
     with pytest.raises(ValueError, match="c_alpha3"):
         kvlcc2({"c_alpha3": 1.5}, rudder_lift="cubic")      # beyond the bound: the force would peak below 35 deg
+
+
+# -- rudder lever: the hull's share of the rudder force moving with the loading (option rudder_lever) --
+def test_loading_rudder_lever_moves_the_yaw_moment_by_the_hand_computed_amount():
+    """Straight ahead (v = r = 0: 1 - w_P = 1 - w_P0) the loading lever adds a_H x'_HJ L J_P RY to the
+    yaw moment (RY = -F_N cos(delta)), with J_P = u (1 - w_P0) n D / (n^2 D^2 + 1e-6); X and Y stay."""
+    from casship.models.mmg import mmg_force_parts
+
+    pub = kvlcc2().param_dict()
+    lever = kvlcc2({"x_HJ_dash": -2.0}, rudder_lever="loading").param_dict()
+    for delta_deg, n in ((35.0, 1.53), (-20.0, 1.78), (10.0, 0.9)):
+        delta = np.radians(delta_deg)
+        a, b = (mmg_force_parts(P, 7.97, 0.0, 0.0, delta, n) for P in (pub, lever))
+        D = pub["D_p"]
+        J_P = 7.97 * (1 - pub["w_P0"]) * n * D / (n**2 * D**2 + 1e-6)
+        expected = pub["a_H"] * -2.0 * pub["L_pp"] * J_P * float(a["RY"])
+        assert abs(expected) > 1e6                       # a moment the test can see
+        np.testing.assert_allclose(float(b["N"]) - float(a["N"]), expected, rtol=1e-9)
+        for c in ("X", "Y", "RY", "T"):
+            assert float(b[c]) == float(a[c])
+
+
+def test_loading_rudder_lever_is_an_option_that_leaves_the_published_model_alone():
+    pub, lever = kvlcc2(), kvlcc2(rudder_lever="loading")
+    assert lever.param_dict()["x_HJ_dash"] == 0.0 and "x_HJ_dash" not in pub.param_names
+    assert lever.meta["options"] == {"rudder_lever": "loading"}
+    assert lever.vessel.param_set == "kvlcc2/YY2015-full-scale+loading-lever"
+    assert get_model("kvlcc2", **lever.meta["options"]).vessel.param_set == lever.vessel.param_set
+    moved = kvlcc2({"x_HJ_dash": -2.0}, rudder_lever="loading")
+    for x, u in _random_points(pub, 10, 9):
+        np.testing.assert_array_equal(np.asarray(lever.f(x, u, lever.params(), np.zeros(3))),
+                                      np.asarray(pub.f(x, u, pub.params(), np.zeros(3))))
+    assert_jacobians(moved, *next(_random_points(moved, 1, 4)))
+    assert kvlcc2_l7(rudder_lever="loading").vessel.param_set == "kvlcc2/YY2015-L7+loading-lever"
+    with pytest.raises(ValueError, match="rudder_lever='loading'"):
+        kvlcc2({"x_HJ_dash": 0.1})
+    with pytest.raises(ValueError, match="rudder_lever"):
+        kvlcc2(rudder_lever="moving")

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..model import Model
 from ..vessel import Vessel
-from .mmg import MMG_ASYMMETRY_PARAMS, MMG_PARAMS, MMG_RUDDER_LIFT_PARAMS, mmg_standard
+from .mmg import MMG_ASYMMETRY_PARAMS, MMG_PARAMS, MMG_RUDDER_LEVER_PARAMS, MMG_RUDDER_LIFT_PARAMS, mmg_standard
 from ..errors import InputError
 
 __all__ = ["kvlcc2", "kvlcc2_l7", "KVLCC2_COMMON", "KVLCC2_FULL", "KVLCC2_L7", "KVLCC2_SOURCES"]
@@ -98,11 +98,12 @@ RUDDER_RATE_FULL = math.radians(2.32)    # rad/s (S2020)
 
 
 def _variant(param_set: str, asymmetry: bool, smooth: bool, rudder_inflow: str = "published",
-             rudder_lift: str = "sine") -> str:
+             rudder_lift: str = "sine", rudder_lever: str = "constant") -> str:
     """Parameter-set identity of a model variant (the extended variants carry other parameters)."""
     return (param_set + ("+asymmetry" if asymmetry else "") + ("+smooth" if smooth else "")
             + ("" if rudder_inflow == "published" else f"+{rudder_inflow}")
-            + ("" if rudder_lift == "sine" else f"+{rudder_lift}-lift"))
+            + ("" if rudder_lift == "sine" else f"+{rudder_lift}-lift")
+            + ("" if rudder_lever == "constant" else f"+{rudder_lever}-lever"))
 
 
 def _options(factory, given: Mapping) -> dict:
@@ -114,27 +115,31 @@ def _options(factory, given: Mapping) -> dict:
 
 def _build(particulars: Mapping[str, float], overrides: Mapping[str, float] | None, name: str, doc: str,
            vessel: Vessel, *, asymmetry: bool, smooth: bool, rudder_inflow: str, rudder_lift: str,
-           options: Mapping, **actuator) -> Model:
+           rudder_lever: str, options: Mapping, **actuator) -> Model:
     values = dict(KVLCC2_COMMON)
     values.update(particulars)
     known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {}),
-             **(MMG_RUDDER_LIFT_PARAMS if rudder_lift == "cubic" else {})}
+             **(MMG_RUDDER_LIFT_PARAMS if rudder_lift == "cubic" else {}),
+             **(MMG_RUDDER_LEVER_PARAMS if rudder_lever == "loading" else {})}
     for key, val in (overrides or {}).items():
         if key not in known:
             hint = (" (an asymmetry term: build with asymmetry=True)" if key in MMG_ASYMMETRY_PARAMS else
-                    " (build with rudder_lift='cubic')" if key in MMG_RUDDER_LIFT_PARAMS else "")
+                    " (build with rudder_lift='cubic')" if key in MMG_RUDDER_LIFT_PARAMS else
+                    " (build with rudder_lever='loading')" if key in MMG_RUDDER_LEVER_PARAMS else "")
             raise InputError(f"unknown KVLCC2 parameter {key!r}{hint}; known: {list(known)}")
         values[key] = float(val)
-    vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth, rudder_inflow, rudder_lift))
+    vessel = vessel.replace(param_set=_variant(vessel.param_set, asymmetry, smooth, rudder_inflow, rudder_lift,
+                                               rudder_lever))
     return mmg_standard(values, name=name, doc=doc, sources=KVLCC2_SOURCES, vessel=vessel, asymmetry=asymmetry,
-                        smooth=smooth, rudder_inflow=rudder_inflow, rudder_lift=rudder_lift,
+                        smooth=smooth, rudder_inflow=rudder_inflow, rudder_lift=rudder_lift, rudder_lever=rudder_lever,
                         meta={"options": dict(options)}, **actuator)
 
 
 def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
            rudder_time_constant: float = 1.0, rudder_rate_max: float = RUDDER_RATE_FULL,
            rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False,
-           rudder_inflow: str = "published", rudder_lift: str = "sine") -> Model:
+           rudder_inflow: str = "published", rudder_lift: str = "sine",
+           rudder_lever: str = "constant") -> Model:
     """KVLCC2 at full scale (L_pp = 320 m), MMG standard method.
 
     Parameters
@@ -160,6 +165,10 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
         ``"sine"`` (published) or ``"cubic"``: the rudder normal force loses lift slope at large
         effective angle, ``sin(alpha_R) - c_alpha3 sin(alpha_R)^3`` (parameter ``c_alpha3``, 0 by
         default: the published force; see :func:`casship.models.mmg.mmg_standard`).
+    rudder_lever : str
+        ``"constant"`` (published) or ``"loading"``: the point of the hull's share of the rudder force
+        moves with the propeller advance ratio, ``x'_H + x'_HJ J_P`` (parameter ``x_HJ_dash``, 0 by
+        default: the published lever; see :func:`casship.models.mmg.mmg_standard`).
 
     Returns
     -------
@@ -189,16 +198,17 @@ def kvlcc2(params: Mapping[str, float] | None = None, *, rudder_actuator: bool =
                   "Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
                   asymmetry=asymmetry, smooth=smooth, rudder_inflow=rudder_inflow, rudder_lift=rudder_lift,
-                  options=_options(kvlcc2, dict(
+                  rudder_lever=rudder_lever, options=_options(kvlcc2, dict(
                       rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
                       rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth,
-                      rudder_inflow=rudder_inflow, rudder_lift=rudder_lift)))
+                      rudder_inflow=rudder_inflow, rudder_lift=rudder_lift, rudder_lever=rudder_lever)))
 
 
 def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: bool = False,
               rudder_time_constant: float = 0.1, rudder_rate_max: float = RUDDER_RATE_FULL * np.sqrt(SCALE_L7),
               rudder_max: float | None = None, asymmetry: bool = False, smooth: bool = False,
-              rudder_inflow: str = "published", rudder_lift: str = "sine") -> Model:
+              rudder_inflow: str = "published", rudder_lift: str = "sine",
+           rudder_lever: str = "constant") -> Model:
     """KVLCC2 model L7 (L_pp = 7 m, scale 1/45.7), MMG standard method.
 
     ``vessel.U0`` is 1.18 m/s (Fn 0.142, S2020); ``vessel.n0`` is not given (sources disagree); the
@@ -214,8 +224,8 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
         Actuator settings [s, rad/s, rad]; the default rate is the Froude-scaled 15.68 deg/s.
     asymmetry, smooth : bool
         The extended variant and the smooth sign switches (as in :func:`kvlcc2`).
-    rudder_inflow, rudder_lift : str
-        Form of the rudder inflow and of the rudder lift (as in :func:`kvlcc2`).
+    rudder_inflow, rudder_lift, rudder_lever : str
+        Form of the rudder inflow, the rudder lift and the rudder lever (as in :func:`kvlcc2`).
 
     Returns
     -------
@@ -230,7 +240,7 @@ def kvlcc2_l7(params: Mapping[str, float] | None = None, *, rudder_actuator: boo
                   "(Yasukawa & Yoshimura 2015)", vessel, rudder_actuator=rudder_actuator,
                   rudder_time_constant=rudder_time_constant, rudder_rate_max=rudder_rate_max, rudder_max=rudder_max,
                   asymmetry=asymmetry, smooth=smooth, rudder_inflow=rudder_inflow, rudder_lift=rudder_lift,
-                  options=_options(kvlcc2_l7, dict(
+                  rudder_lever=rudder_lever, options=_options(kvlcc2_l7, dict(
                       rudder_actuator=rudder_actuator, rudder_time_constant=rudder_time_constant,
                       rudder_rate_max=rudder_rate_max, rudder_max=rudder_max, asymmetry=asymmetry, smooth=smooth,
-                      rudder_inflow=rudder_inflow, rudder_lift=rudder_lift)))
+                      rudder_inflow=rudder_inflow, rudder_lift=rudder_lift, rudder_lever=rudder_lever)))

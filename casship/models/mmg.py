@@ -99,6 +99,12 @@ MMG_RUDDER_LIFT_PARAMS: dict[str, tuple[str, str]] = {
                       "sin(alpha_R) - c_alpha3 sin(alpha_R)^3"),
 }
 
+#: Parameter of the rudder-lever variant (``rudder_lever="loading"``); zero gives the published constant lever.
+MMG_RUDDER_LEVER_PARAMS: dict[str, tuple[str, str]] = {
+    "x_HJ_dash": ("-", "change of x'_H with the propeller advance ratio: x'_H + x'_HJ J_P, the point of the "
+                       "hull's share of the rudder force moving with the propeller loading"),
+}
+
 _POS = (0.0, np.inf)
 #: Physical bounds of the MMG parameters (an identification cannot leave them).
 MMG_BOUNDS: dict[str, tuple[float, float]] = {
@@ -117,6 +123,9 @@ RUDDER_INFLOWS = ("published", "race-additive")
 
 #: Forms of the rudder normal force against the effective angle (see :func:`mmg_standard`, option ``rudder_lift``).
 RUDDER_LIFTS = ("sine", "cubic")
+
+#: Forms of the lever of the hull's share of the rudder force (see :func:`mmg_standard`, option ``rudder_lever``).
+RUDDER_LEVERS = ("constant", "loading")
 
 #: Width [rad] of the smooth sign switches of ``smooth=True`` (see :func:`mmg_standard`).
 SMOOTH_WIDTH = 0.01
@@ -286,7 +295,7 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
                  rudder_actuator: bool = False, rudder_time_constant: float = 1.0,
                  rudder_rate_max: float = np.radians(2.32), rudder_max: float | None = None,
                  asymmetry: bool = False, smooth: bool = False, rudder_inflow: str = "published",
-                 rudder_lift: str = "sine", meta: Mapping | None = None) -> Model:
+                 rudder_lift: str = "sine", rudder_lever: str = "constant", meta: Mapping | None = None) -> Model:
     """MMG standard-method model (Yasukawa & Yoshimura 2015) with the given parameter values.
 
     Hull (Eq. 8): ``X_H = 0.5 rho L d U^2 (-R0' + X'vv v'^2 + X'vr v' r' + X'rr r'^2 + X'vvvv v'^4)``,
@@ -335,6 +344,15 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     ``0.03 c_alpha3`` at 10 deg), a negative one strengthens it (the cross-flow lift of a low-aspect-ratio foil).
     The bounds ``[-1, 1]`` keep the force rising up to 35 deg.
 
+    **Rudder lever** (``rudder_lever``): the published model holds the hull's share of the rudder
+    force (``a_H``) at one point ``x'_H``. In captive tests the yaw moment per rudder force changes
+    with the propeller loading (the KVLCC2's HMRI static rudder tests at reduced speed and constant
+    rps: ``dN'/dRY'`` linear in ``J/J_0``, see ``docs/identification.md``, "What the captive tests
+    say about hard-over"; the MMG literature reports ``a_H`` and ``x_H`` varying with the loading).
+    With ``"loading"`` the point moves linearly with the propeller advance ratio,
+    ``x'_H + x'_HJ J_P`` with ``J_P = u_P n D / (n^2 D^2 + 10^-6)`` (finite at ``n = 0``);
+    ``x'_HJ = 0`` (its default) is the published model.
+
     **Smooth sign switches** (``smooth=True``): the published wake and flow-straightening terms switch
     on the signs of ``beta_P`` and ``beta_R`` (``C_2``, ``gamma_R``) and use ``|beta_P|``; their
     derivatives jump at zero drift, which makes an identification cost non-smooth (a Newton-type
@@ -373,6 +391,9 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
     rudder_lift : str
         ``"sine"`` (published) or ``"cubic"``: adds the parameter ``c_alpha3`` (zero unless ``values``
         gives it; see above).
+    rudder_lever : str
+        ``"constant"`` (published) or ``"loading"``: adds the parameter ``x_HJ_dash`` (zero unless
+        ``values`` gives it; see above).
     meta : mapping, optional
         Entries for ``model.meta`` (a preset records its build options under ``"options"`` there,
         so that a fit file rebuilds the same variant).
@@ -385,13 +406,18 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
         raise InputError(f"rudder_inflow must be one of {RUDDER_INFLOWS}, got {rudder_inflow!r}")
     if rudder_lift not in RUDDER_LIFTS:
         raise InputError(f"rudder_lift must be one of {RUDDER_LIFTS}, got {rudder_lift!r}")
-    cubic = rudder_lift == "cubic"
-    sources = {"c_alpha3": "rudder-lift variant; 0 gives the published model", **(sources or {})}
-    known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {}), **(MMG_RUDDER_LIFT_PARAMS if cubic else {})}
+    if rudder_lever not in RUDDER_LEVERS:
+        raise InputError(f"rudder_lever must be one of {RUDDER_LEVERS}, got {rudder_lever!r}")
+    cubic, loading = rudder_lift == "cubic", rudder_lever == "loading"
+    sources = {"c_alpha3": "rudder-lift variant; 0 gives the published model",
+               "x_HJ_dash": "rudder-lever variant; 0 gives the published model", **(sources or {})}
+    known = {**MMG_PARAMS, **(MMG_ASYMMETRY_PARAMS if asymmetry else {}), **(MMG_RUDDER_LIFT_PARAMS if cubic else {}),
+             **(MMG_RUDDER_LEVER_PARAMS if loading else {})}
     unknown = set(values) - set(known)
     if unknown:
         hint = (" (the asymmetry terms need asymmetry=True)" if unknown & set(MMG_ASYMMETRY_PARAMS) else
-                " (c_alpha3 needs rudder_lift='cubic')" if unknown & set(MMG_RUDDER_LIFT_PARAMS) else "")
+                " (c_alpha3 needs rudder_lift='cubic')" if unknown & set(MMG_RUDDER_LIFT_PARAMS) else
+                " (x_HJ_dash needs rudder_lever='loading')" if unknown & set(MMG_RUDDER_LEVER_PARAMS) else "")
         raise InputError(f"unknown MMG parameter(s) {sorted(unknown)}{hint}; known: {list(known)}")
     b = ModelBuilder(name, doc or "MMG standard method (Yasukawa & Yoshimura 2015)")
     P = {k: _param(b, k, values, sources, MMG_PARAMS) for k in MMG_PARAMS}
@@ -399,6 +425,8 @@ def mmg_standard(values: Mapping[str, float], *, name: str = "mmg", doc: str = "
         P.update({k: _param(b, k, values, sources, MMG_ASYMMETRY_PARAMS, default=0.0) for k in MMG_ASYMMETRY_PARAMS})
     if cubic:
         P["c_alpha3"] = _param(b, "c_alpha3", values, sources, MMG_RUDDER_LIFT_PARAMS, default=0.0)
+    if loading:
+        P["x_HJ_dash"] = _param(b, "x_HJ_dash", values, sources, MMG_RUDDER_LEVER_PARAMS, default=0.0)
     b.meta.update(dict(meta or {}))
     if asymmetry:          # port/starboard terms: identified only from mirrored evidence (casship.identify.asymmetry)
         b.meta["asymmetric"] = list(MMG_ASYMMETRY_PARAMS)
@@ -560,6 +588,8 @@ def mmg_force_parts(P: Mapping[str, ca.SX], u, v, r, delta, n, smooth: float | N
         lift = lift - P["c_alpha3"] * lift**3
     F_N = 0.5 * rho * P["A_R"] * U_R2 * P["f_alpha"] * lift
     x_R, x_H = P["x_R_dash"] * L, P["x_H_dash"] * L
+    if "x_HJ_dash" in P:        # the hull's share moves with the propeller loading (option rudder_lever="loading")
+        x_H = x_H + P["x_HJ_dash"] * L * u_P * n * D / (n**2 * D**2 + 1e-6)
     X_R = -(1 - P["t_R"]) * F_N * ca.sin(delta)
     Y_R = -(1 + P["a_H"]) * F_N * ca.cos(delta)
     N_R = -(x_R + P["a_H"] * x_H) * F_N * ca.cos(delta)
