@@ -318,24 +318,30 @@ def test_cubic_rudder_lift_in_straight_run_scales_the_force_by_one_minus_c_sin_s
         np.testing.assert_allclose(f[1], kept * f[0], rtol=1e-6)
 
 
-def test_cubic_rudder_lift_is_an_option_that_leaves_the_published_model_alone():
-    pub, cubic = kvlcc2(), kvlcc2(rudder_lift="cubic")
-    assert cubic.param_dict()["c_alpha3"] == 0.0 and "c_alpha3" not in pub.param_names
-    assert cubic.meta["options"] == {"rudder_lift": "cubic"}
-    assert cubic.vessel.param_set == "kvlcc2/YY2015-full-scale+cubic-lift"
-    assert get_model("kvlcc2", **cubic.meta["options"]).vessel.param_set == cubic.vessel.param_set
-    weaker = kvlcc2({"c_alpha3": 0.5}, rudder_lift="cubic")
+@pytest.mark.parametrize("option, value, param, moved, suffix", [
+    ("rudder_lift", "cubic", "c_alpha3", 0.5, "cubic-lift"),
+    ("rudder_lever", "loading", "x_HJ_dash", -2.0, "loading-lever")])
+def test_a_model_variant_is_an_option_that_leaves_the_published_model_alone(option, value, param, moved, suffix):
+    pub, variant = kvlcc2(), kvlcc2(**{option: value})
+    assert variant.param_dict()[param] == 0.0 and param not in pub.param_names
+    assert variant.meta["options"] == {option: value}
+    assert variant.vessel.param_set == f"kvlcc2/YY2015-full-scale+{suffix}"
+    assert get_model("kvlcc2", **variant.meta["options"]).vessel.param_set == variant.vessel.param_set
+    other = kvlcc2({param: moved}, **{option: value})
     for x, u in _random_points(pub, 10, 9):       # at its preset the variant is the published model, exactly
-        np.testing.assert_array_equal(np.asarray(cubic.f(x, u, cubic.params(), np.zeros(3))),
+        np.testing.assert_array_equal(np.asarray(variant.f(x, u, variant.params(), np.zeros(3))),
                                       np.asarray(pub.f(x, u, pub.params(), np.zeros(3))))
-        assert not np.allclose(np.asarray(weaker.f(x, u, weaker.params(), np.zeros(3))),
+        assert not np.allclose(np.asarray(other.f(x, u, other.params(), np.zeros(3))),
                                np.asarray(pub.f(x, u, pub.params(), np.zeros(3))), rtol=1e-6, atol=0.0)
-    assert_jacobians(weaker, *next(_random_points(weaker, 1, 4)))
-    assert kvlcc2_l7(rudder_lift="cubic").vessel.param_set == "kvlcc2/YY2015-L7+cubic-lift"
-    with pytest.raises(ValueError, match="rudder_lift='cubic'"):
-        kvlcc2({"c_alpha3": 0.1})
-    with pytest.raises(ValueError, match="rudder_lift"):
-        kvlcc2(rudder_lift="stall")
+    assert_jacobians(other, *next(_random_points(other, 1, 4)))
+    assert kvlcc2_l7(**{option: value}).vessel.param_set == f"kvlcc2/YY2015-L7+{suffix}"
+    with pytest.raises(ValueError, match=f"{option}='{value}'"):
+        kvlcc2({param: 0.1})
+    with pytest.raises(ValueError, match=option):
+        kvlcc2(**{option: "no-such-form"})
+
+
+def test_cubic_rudder_lift_beyond_its_bound_is_refused():
     with pytest.raises(ValueError, match="c_alpha3"):
         kvlcc2({"c_alpha3": 1.5}, rudder_lift="cubic")      # beyond the bound: the force would peak below 35 deg
 
@@ -358,21 +364,3 @@ def test_loading_rudder_lever_moves_the_yaw_moment_by_the_hand_computed_amount()
         np.testing.assert_allclose(float(b["N"]) - float(a["N"]), expected, rtol=1e-9)
         for c in ("X", "Y", "RY", "T"):
             assert float(b[c]) == float(a[c])
-
-
-def test_loading_rudder_lever_is_an_option_that_leaves_the_published_model_alone():
-    pub, lever = kvlcc2(), kvlcc2(rudder_lever="loading")
-    assert lever.param_dict()["x_HJ_dash"] == 0.0 and "x_HJ_dash" not in pub.param_names
-    assert lever.meta["options"] == {"rudder_lever": "loading"}
-    assert lever.vessel.param_set == "kvlcc2/YY2015-full-scale+loading-lever"
-    assert get_model("kvlcc2", **lever.meta["options"]).vessel.param_set == lever.vessel.param_set
-    moved = kvlcc2({"x_HJ_dash": -2.0}, rudder_lever="loading")
-    for x, u in _random_points(pub, 10, 9):
-        np.testing.assert_array_equal(np.asarray(lever.f(x, u, lever.params(), np.zeros(3))),
-                                      np.asarray(pub.f(x, u, pub.params(), np.zeros(3))))
-    assert_jacobians(moved, *next(_random_points(moved, 1, 4)))
-    assert kvlcc2_l7(rudder_lever="loading").vessel.param_set == "kvlcc2/YY2015-L7+loading-lever"
-    with pytest.raises(ValueError, match="rudder_lever='loading'"):
-        kvlcc2({"x_HJ_dash": 0.1})
-    with pytest.raises(ValueError, match="rudder_lever"):
-        kvlcc2(rudder_lever="moving")
