@@ -34,9 +34,8 @@ from casship.design import (Approach, ParameterBelief, TrialLimits, design_trial
                             standard_trials, trial_information)
 from casship.identify import Prior, read_fit_file
 from casship.models import kvlcc2
-from casship.studies import Study, run_study
+from casship.studies import Study, get_study, run_study
 
-from . import kvlcc2_marin
 from .kit import Departure, Report, announce, data_folder, figure, md_table, run_cases, write_json
 
 __all__ = ["PRIOR_REL", "PRIOR_ABS", "HELD_PRIOR", "NOISE", "TRUTH_SEED", "STRUCTURE_ERROR", "COLOURED", "SHIPS",
@@ -63,6 +62,9 @@ TRUTH_SEED = 7
 TARGET = "port_starboard_difference"
 QUICK = {"dt": 4.0, "max_iter": 30}
 FULL = {"dt": 4.0, "max_iter": 60, "max_iter_fitted": 60}   # part 1: some 35 parameters
+#: Part 1's fold families of the ``kvlcc2-marin`` study: the leave-one-run-out folds, which its
+#: ``fit.json`` depends on (its jackknife and discrepancy term; that study's ``FIT_FILE_FAMILIES``).
+PART1_FOLDS = ("run",)
 
 
 def study_model() -> cs.Model:
@@ -86,7 +88,7 @@ def _limits(approach: Approach) -> TrialLimits:
 # -- part 1: the fit on the shared runs -------------------------------------------------------------------
 def kvlcc2_marin_fit(out: Path, data_dir, quick: bool, workers=None, scheduler=None) -> Path | None:
     """Run the registered ``kvlcc2-marin`` study into ``out`` with the fold families its ``fit.json``
-    depends on (:data:`kvlcc2_marin.FIT_FILE_FAMILIES`: the same file ``casship study kvlcc2-marin``
+    depends on (:data:`PART1_FOLDS`: the same file ``casship study kvlcc2-marin``
     writes, without the regime, facility and direction folds that only score the procedure) and
     return its ``fit.json``; None, said on the console, without the measured runs."""
     marin = data_folder(data_dir, "kvlcc2_marin_free", study="trial-design", part="the design on the fitted KVLCC2")
@@ -94,7 +96,8 @@ def kvlcc2_marin_fit(out: Path, data_dir, quick: bool, workers=None, scheduler=N
         return None
     announce("trial-design", f"part 1: the kvlcc2-marin study{' (quick)' if quick else ''}, its leave-one-run-out "
              f"folds, into {out}")
-    study = replace(kvlcc2_marin.STUDY, run=partial(kvlcc2_marin.run, families=kvlcc2_marin.FIT_FILE_FAMILIES))
+    marin_study = get_study("kvlcc2-marin")
+    study = replace(marin_study, run=partial(marin_study.run, families=PART1_FOLDS))
     run_study(study, out, quick=quick, workers=workers, scheduler=scheduler, data=marin.parent)
     return Path(out) / "fit.json"
 

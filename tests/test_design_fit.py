@@ -232,3 +232,10 @@ def test_one_belief_converts_to_a_prior_and_an_uncertainty_and_back(fit_files):
     back = ParameterBelief.from_prior(Prior({"K": 0.02, "T": 5.0}, {"K": 0.1}), {"T": 20.0, "other": 1.0})
     assert (back.names, back.mean, back.std, back.kind) == (("K", "T"), {"K": 0.1, "T": 20.0}, {"K": 0.02, "T": 5.0},
                                                              "prior")
+
+
+def test_part_1_runs_the_fold_families_the_fit_file_depends_on():
+    from problems import kvlcc2_marin, trial_design
+
+    assert trial_design.PART1_FOLDS == kvlcc2_marin.FIT_FILE_FAMILIES
+    assert set(trial_design.PART1_FOLDS) <= set(kvlcc2_marin.FOLD_FAMILIES)
