@@ -65,6 +65,10 @@ SCH, PLANTS, MPC = "casship/autopilot/schedule.py", "casship/autopilot/plants.py
 T_RMET, T_RID = "tests/test_reference_metrics.py", "tests/test_reference_identify.py"
 T_RMHE, T_RAP = "tests/test_reference_mhe_arrival.py", "tests/test_reference_autopilot.py"
 T_GUID = "tests/test_autopilot_guidance.py"
+CF, T_CF = "casship/identify/captive_forces.py", "tests/test_captive_forces.py"
+MARIN, T_CHOICE = "problems/kvlcc2_marin/__init__.py", "tests/test_marin_choice.py"
+WAVE, T_WAVE = "casship/autopilot/wave_limit.py", "tests/test_autopilot_waves_unstable.py"
+T_MMG_ALL = "tests/test_mmg.py"
 
 MUTANTS = [
     # -- the statistics of the filters and the fits -------------------------------------------------------------
@@ -229,6 +233,18 @@ MUTANTS = [
     M("MPC preview: the reference model's acceleration dropped", MPC,
       "z = np.array([float(wrap(xr[0] - ref)), xr[1], xr[2]])", "z = np.array([float(wrap(xr[0] - ref)), xr[1], 0.0])",
       (T_RAP,)),
+    # -- captive forces, the rudder lever, the fold families, the heading-error floor ---------------------------
+    M("captive Jacobian: the scale's derivative in rho dropped", CF,
+      "J = J - ca.mtimes(y / rho, ca.DM(e_rho)) - ca.mtimes(self._powers * y / L, ca.DM(e_L))",
+      "J = J - ca.mtimes(self._powers * y / L, ca.DM(e_L))", (T_CF,)),
+    M("captive Jacobian: the scale's power of L taken as 1", CF, "ca.mtimes(self._powers * y / L, ca.DM(e_L))",
+      "ca.mtimes(y / L, ca.DM(e_L))", (T_CF,)),
+    M("rudder lever: the advance ratio without the wake", MMG, "x_H + P[\"x_HJ_dash\"] * L * u_P * n * D",
+      "x_H + P[\"x_HJ_dash\"] * L * u * n * D", (T_MMG_ALL,)),
+    M("fold families: the group families always run", MARIN, "            if kind not in families:\n                continue\n",
+      "", (T_CHOICE,)),
+    M("heading floor: the yaw rate's error for the heading's", WAVE, 'np.sqrt(P[m["ipsi"], m["ipsi"]])',
+      'np.sqrt(P[m["ir"], m["ir"]])', (T_WAVE,)),
 ]
 
 
