@@ -387,9 +387,10 @@ class CaptivePredictor:
 
     def _scaled(self, p, point, jac: bool = False):
         """``y`` (and ``dy/dp``) of every observation from ``point`` mapped over the samples."""
-        n_s = self._samples[0].shape[1]
-        out = point.map(n_s)(*self._samples, ca.repmat(p, 1, n_s))
-        F = out[0] if jac else out
+        x, xdot3, u = self._samples
+        n_s = x.shape[1]
+        out = point.map(n_s)(x=x, xdot3=xdot3, u=u, p=ca.repmat(p, 1, n_s))
+        F = out["F"]
         raw = sum(ca.mtimes(W, F[j, :].T) for j, W in enumerate(self._weights))
         L, rho = p[self._iL], p[self._irho]
         scale = rho * self._half_U2 * L ** self._powers
@@ -397,7 +398,7 @@ class CaptivePredictor:
         if not jac:
             return y, None
         npar = p.numel()
-        raw_J = sum(ca.mtimes(W, ca.reshape(out[1][j, :], npar, n_s).T) for j, W in enumerate(self._weights))
+        raw_J = sum(ca.mtimes(W, ca.reshape(out["dF_dp"][j, :], npar, n_s).T) for j, W in enumerate(self._weights))
         # d(raw / scale)/dp: the scale depends on rho and L only
         J = raw_J / ca.repmat(scale, 1, npar)
         e_rho, e_L = np.zeros((1, npar)), np.zeros((1, npar))
@@ -415,9 +416,11 @@ class CaptivePredictor:
         milliseconds; differentiating the expanded prediction as a whole took seconds).
         """
         if self._function is None:
-            x, a, u, p1 = (ca.SX.sym(n, self._F.sparsity_in(k)) for k, n in enumerate(("x", "a", "u", "p")))
-            F = self._F(x, a, u, p1)
-            point = ca.Function("captive_point", [x, a, u, p1], [F, ca.jacobian(F, p1)])
+            names = list(self._F.name_in())                      # x, xdot3, u, p
+            sym = {n: ca.SX.sym(n, self._F.sparsity_in(n)) for n in names}
+            F = self._F(**sym)["F"]
+            point = ca.Function("captive_point", [sym[n] for n in names], [F, ca.jacobian(F, sym["p"])], names,
+                                ["F", "dF_dp"])
             p = ca.MX.sym("p", self.model.np)
             y, J = self._scaled(p, point, jac=True)
             self._function = ca.Function("captive_predict", [p], [y, J], ["p"], ["y", "J"])
