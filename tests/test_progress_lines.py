@@ -73,11 +73,13 @@ def test_silenced_and_bad_interval(piped, monkeypatch):
 
 COMMAND = ["design-trial", "--model", "kvlcc2", "--prior-std", "N_r_dash=0.01,N_v_dash=0.03",
            "--sigma", "psi=0.0035,r=0.0002", "--dt", "4", "--zigzag", "20", "--pullout", "", "--no-spiral",
-           "--duration", "300", "--max-iter", "5"]       # a short free trial: a stage long enough to be reported
+           "--duration", "600", "--max-iter", "5"]       # a short free trial: a stage of several report intervals
 
 
 def test_piped_design_trial_prints_progress_lines(tmp_path):
-    env = {**os.environ, "CASSHIP_PROGRESS_INTERVAL": "0.2"}
+    # the free-trial stage takes some 0.3-0.5 s on a warm cache: an interval well below it (a report every 0.2 s
+    # could fall on either side of the whole stage)
+    env = {**os.environ, "CASSHIP_PROGRESS_INTERVAL": "0.05"}
     env.pop("CASSHIP_PROGRESS", None)
     run = subprocess.run([sys.executable, "-m", "casship", *COMMAND], capture_output=True, text=True, env=env,
                          cwd=tmp_path, timeout=600)
