@@ -57,33 +57,6 @@ from .hmri import (CHANNELS, FACILITY, FREE, HMRI, HULL, INTERACTION, IZ_MIDSHIP
 
 
 # -- figures -------------------------------------------------------------------------------------
-def _force_figure(path: Path, pb, fit, published_pred) -> None:
-    obs = pb.predictor.observations
-    pred = pb.prediction(np.array([fit.estimates[n] for n in pb.free]))
-    meas = pb.predictor.measured
-    chans = ("X", "Y", "N", "RY", "T")
-    with figure(path, len(KINDS), len(chans), figsize=(15, 17)) as (fig, axes):
-        for i, kind in enumerate(KINDS):
-            for j, c in enumerate(chans):
-                ax = axes[i, j]
-                idx = [q for q, o in enumerate(obs) if o.kind == kind and o.channel == c]
-                if not idx:
-                    ax.set_axis_off()
-                    continue
-                m = meas[idx]
-                ax.plot(m, published_pred[idx], "x", color="tab:gray", ms=4, label="published")
-                ax.plot(m, pred[idx], "o", color="tab:blue", ms=3, mfc="none", label="captive fit")
-                lo, hi = float(np.min(m)), float(np.max(m))
-                ax.plot([lo, hi], [lo, hi], "k-", lw=0.6)
-                ax.set_title(f"{kind}: {c}'", fontsize=9)
-                ax.tick_params(labelsize=7)
-                if i == len(KINDS) - 1:
-                    ax.set_xlabel("measured", fontsize=8)
-                if j == 0:
-                    ax.set_ylabel("model", fontsize=8)
-        axes[0, 0].legend(fontsize=7)
-
-
 def _replay_figure(path: Path, rows) -> None:
     with figure(path, 1, 1, figsize=(10, 4)) as (fig, ax):
         x = np.arange(len(rows))
@@ -202,7 +175,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=N
         w.writerow(["name", "published", "captive", "std_error", "std_error_robust", "z"])
         for n, r in rows.items():
             w.writerow([n, r["published"], r["captive"], r["std_error"], r["std_error_robust"], r["z"]])
-    _force_figure(out / "fig_forces.png", pb, fit, published_pred)
+    pb.plot(fit, path=out / "fig_forces.png")
     meas = pb.predictor.measured
     gidx = np.array(pb.groups)
     pred = pb.prediction(np.array([fit.estimates[n] for n in pb.free]))

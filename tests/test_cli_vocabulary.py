@@ -109,6 +109,8 @@ MEANINGS = {
     "--free": ("quantities to estimate", ("identify",)), "--objective": ("what the fit minimises (mle, oe)", ("identify",)),
     "--share": ("shared quantities", ("identify",)), "--group": ("group labels of records", ("identify",)),
     "--prior-weight": ("weight of the prior", ("identify",)), "--bounds": ("parameter bounds", ("identify",)),
+    "--captive": ("folder of captive (PMM) tests", ("identify",)),
+    "--rig": ("the rig of the captive tests (a known name or a JSON file)", ("identify",)),
     "--estimate-noise": ("noise variances to estimate", ("identify",)), "--guess": ("starting values", ("identify",)),
     "--estimate-x0": ("initial states to estimate", ("identify",)), "--decimate": ("keep every k-th sample", ("identify",)),
     "--shooting": ("output-error shooting", ("identify",)),

@@ -10,6 +10,7 @@ Examples::
         --share bias[n]=record --prior-std N_r_dash=0.01,Y_v_dash=0.05 --measured u,v,r,psi --decimate 20 \\
         --identifiability --out fit.json --plot fit.png
     casship simulate --model kvlcc2 --params fit.json --inputs ../shared/data/kvlcc2_marin_free/MARIN_FREE_KVLCC2_zz_-20_m.dat
+    casship identify --captive ../shared/data/kvlcc2_hmri_captive --rig hmri-t530 --model kvlcc2 --out captive.json
 
 Without ``--free`` the records are identified by the ship workflow
 (:func:`casship.identify.workflow.identify_ship`): propulsion first, a cost weighted by a stated
@@ -36,10 +37,16 @@ code 0; the first two end ``better`` on records of a Nomoto ship. The kvlcc2 exa
 options on three records of your own: its verdict says whether the fit beats the published constants
 (on the shared MARIN 10/10 zig-zag a yaw-only free set with the surge channel in the cost does not:
 verdict ``worse``, exit code 3), and the ``simulate`` line replays such a file with its bands.
+The last line fits the HMRI captive tests alone on the rig's model (``--rig``: a known rig or a
+JSON file, :mod:`casship.identify.rig`) and writes their hull and interaction coefficients carried
+to the ship; with records beside ``--captive`` the captive-only model or the joint fit is chosen by
+the nested rule of :mod:`casship.identify.captive_choice` (one record keeps the captive-only model,
+judged on it out of sample).
 """
 from __future__ import annotations
 
 import warnings
+from types import SimpleNamespace
 
 from ._vocabulary import add_deprecated_alias
 from ._common import (add_record_options, check_input_files, check_outputs, count, number, parse_items, parse_pairs,
@@ -65,10 +72,18 @@ def register(sub) -> None:
                                    "free set chosen from run-level evidence, the inverse-dynamics start; every "
                                    "choice printed with its reason (--weights, --prior-std, --measured override).\n\n"
                                    + __doc__.split("\n\n", 1)[1])
-    p.add_argument("data", nargs="+", help="records: CSV with a header row, MARIN .dat, NMEA log (see "
-                                            "casship.io.read_record); the record options below apply to each")
+    p.add_argument("data", nargs="*", help="records: CSV with a header row, MARIN .dat, NMEA log (see "
+                                            "casship.io.read_record); the record options below apply to each "
+                                            "(none with --captive: the captive tests alone)")
     p.add_argument("--model", required=True, help="registered model name (see 'casship simulate --list')")
     add_record_options(p, "records")
+    p.add_argument("--captive", default=None,
+                   help="folder of captive (PMM) tests (casship.io.read_captive), fitted on the --rig's model of the "
+                        "ship: alone without records (the classical route; the hull and interaction coefficients "
+                        "carried to --model), joined with the records in the ship workflow otherwise")
+    p.add_argument("--rig", default=None,
+                   help="the captive tests' rig: a known name (hmri-t530) or a JSON file of the facility's "
+                        "particulars (casship.identify.rig)")
     p.add_argument("--free", default=None,
                    help="comma-separated quantities to estimate: parameter names, bias[input], bias[output] "
                         "(default: the ship workflow chooses them from run-level evidence)")
@@ -190,6 +205,19 @@ def run(args) -> int:
     refuse_unused(args.parser, {"--prior-weight": args.prior_weight != 1.0 and not args.prior,
                                 "--group": bool(args.group) and "=group" not in (args.share or "")},
                   "--prior-weight weighs a --prior-std; --group labels the records for --share NAME=group")
+    if args.captive is None:
+        refuse_unused(args.parser, {"--rig": args.rig is not None}, "--rig names the model of a --captive folder")
+        if not args.data:
+            raise InputError("identify: give the records to fit, or --captive DIR --rig RIG for captive tests")
+    else:
+        if args.rig is None:
+            raise InputError("--captive: name the rig the tests were made on: --rig hmri-t530 or --rig RIG.json "
+                             "(the facility's particulars; see casship.identify.rig)")
+        refuse_unused(args.parser, {"--free": args.free is not None},
+                      "captive tests fit the free set of the rule in casship.identify.rig, and join records in the "
+                      "ship workflow (without --free)")
+        if not args.data:
+            return _captive_alone(args)
     if args.free is None:
         return _workflow(args)
     refuse_unused(args.parser, {"--weights": args.weights is not None},
@@ -270,11 +298,20 @@ def _workflow(args) -> int:
     model = get_model(args.model)
     records = [d.decimate(args.decimate) for d in read_records(args, args.data, model)]
     measured = parse_items(args.measured, "--measured") if args.measured is not None else None
-    ship = identify_ship(records, model, weights=parse_pairs(args.weights, "--weights") or None,
-                         prior=parse_pairs(args.prior, "--prior-std") or None, measured=measured,
-                         verbose=not args.json)
+    options = dict(weights=parse_pairs(args.weights, "--weights") or None,
+                   prior=parse_pairs(args.prior, "--prior-std") or None, measured=measured)
+    terms, choice = [], None
+    if args.captive is not None:            # the captive-only model or the joint fit, chosen on the records
+        problem, alone = _captive_fit(args)
+        choice = _choose(args, records, model, problem, alone, options)
+        if choice.choice == "captive-only":
+            return _write_captive_only(args, model, problem, alone, stamps, records=records, choice=choice)
+        terms = [problem.cost_term(alone)]
+    ship = identify_ship(records, model, terms=terms, verbose=not args.json, **options)
     facilities = sorted(set(ship.facilities))
-    write_output(args.out, lambda path: ship.to_json(path, facilities[0] if len(facilities) == 1 else None),
+    extra = {"captive_choice": choice.to_dict()} if choice is not None else None
+    write_output(args.out, lambda path: ship.to_json(path, facilities[0] if len(facilities) == 1 else None,
+                                                     extra=extra),
                  option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
         write_output(args.plot, ship.fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
@@ -284,3 +321,104 @@ def _workflow(args) -> int:
         print(ship.fit.summary())
         print(f"fit written to {args.out}" + (f" (verdict: {ship.fit.verdict['verdict']})" if ship.fit.worse else ""))
     return _exit_code(ship.fit, args.accept_worse)
+
+
+def _captive_fit(args):
+    """The ``--captive`` folder fitted on the ``--rig``'s model of ``--model``: ``(problem, fit)``."""
+    from ..identify.rig import read_rig
+    from ..io import read_captive
+    from ..progress import stage
+
+    rig = read_rig(args.rig)
+    stage(f"reading the captive tests of {rig.facility}", 1, 3)
+    tests = read_captive(args.captive)
+    problem = rig.problem(tests, args.model)
+    stage(f"fitting {len(problem.free)} coefficients to {len(problem.predictor.measured)} measured force values", 2, 3)
+    return problem, problem.solve(max_iter=args.max_iter)
+
+
+def _choose(args, records, model, problem, alone, options):
+    """The nested choice (:func:`casship.identify.captive_choice.choose_with_captive`), printed."""
+    from ..identify.captive_choice import choose_with_captive
+    from ..progress import stage
+
+    choice = choose_with_captive(records, model, problem, alone, workflow=options,
+                                 progress=lambda text: stage(text, 3, 3))
+    if not args.json:
+        s = choice.scores
+        how = ("no inner split: a single record" if not choice.groups else
+               f"captive-only {s['captive-only']:.3g} deg, joint {s['joint']:.3g} deg (inner cross-validation)")
+        print(f"[captive] {choice.choice}: mean heading RMSE of the records, {how}\n      because {choice.rule}")
+    return choice
+
+
+def _captive_alone(args) -> int:
+    """``casship identify --captive DIR --rig RIG --model NAME`` without records: the classical route."""
+    from ..models import get_model
+
+    refuse_unused(args.parser, {o: v for o, v in {
+        "--weights": args.weights is not None, "--share": args.share is not None, "--group": args.group is not None,
+        "--bounds": args.bounds is not None, "--R": args.R is not None, "--Q": args.Q is not None,
+        "--estimate-noise": args.estimate_noise is not None, "--sigma": args.sigma is not None,
+        "--guess": args.guess is not None, "--params": args.params is not None, "--measured": args.measured is not None,
+        "--estimate-x0": args.estimate_x0 is not None, "--shooting": args.shooting != "single",
+        "--identifiability": args.identifiability, "--prior-std": args.prior is not None,
+        "--prior-weight": args.prior_weight != 1.0, "--decimate": args.decimate != 1, "--no-loo": args.no_loo,
+        "--accept-worse": args.accept_worse}.items()},
+                  "without records the captive tests are fitted alone by the rule of casship.identify.rig")
+    stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
+    ship = get_model(args.model)
+    problem, fit = _captive_fit(args)
+    return _write_captive_only(args, ship, problem, fit, stamps)
+
+
+def _write_captive_only(args, ship, problem, fit, stamps, *, records=(), choice=None) -> int:
+    """The captive-only model of ``ship`` written, and judged on ``records`` (out of sample) when given."""
+    import numpy as np
+
+    from ..identify.rig import carried, write_carried
+    from ..identify.verdict import judge_unseen
+    from ..progress import stage
+
+    values, belief = carried(fit, ship)
+    extra = {"captive_fit": fit.to_dict()}
+    verdict = None
+    if records:
+        stage("judging the captive-only model on the records (out of sample)", 3, 3)
+        verdict, discrepancy = judge_unseen(ship, records, values, uncertainty=belief)
+        extra.update({"verdict": verdict, "model_discrepancy": discrepancy, "captive_choice": choice.to_dict()})
+    stage("writing", 3, 3)
+    write_output(args.out, lambda path: write_carried(path, ship, values, belief, extra=extra),
+                 option="--out", overwrite=args.overwrite, stamps=stamps)
+    if args.plot:
+        write_output(args.plot, lambda path: problem.plot(fit, path=path), option="--plot", overwrite=args.overwrite,
+                     stamps=stamps)
+    worse = verdict is not None and verdict["verdict"] in ("worse", "stalled")
+    if args.json:
+        print_json({"model": ship.name, "candidate": "captive-only", "carried": values, "captive_fit": fit.to_dict(),
+                    **({k: extra[k] for k in ("verdict", "model_discrepancy", "captive_choice")} if records else {}),
+                    "out": str(args.out)})
+    else:
+        print(fit.summary())
+        start = ship.param_dict()
+        sd = dict(zip(belief.names, np.sqrt(np.diag(belief.cov))))
+        own = [n for n in fit.free if "@" in n]
+        print(f"\ncarried to {ship.name!r} ({len(values)} hull and interaction coefficients, robust standard "
+              f"errors; {', '.join(own)} stay with the rig):")
+        print(f"{'name':>16} {'published':>11} {'captive':>11} {'SE':>9} {'z':>7}")
+        for n, v in values.items():
+            print(f"{n:>16} {start[n]:>11.5g} {v:>11.5g} {sd[n]:>9.3g} {(v - start[n]) / sd[n]:>7.1f}")
+        if verdict is None:
+            print("no free-running record: the file has no model-discrepancy term, so its replays' predictive band "
+                  "is the parameter band alone; identify records with --captive to estimate one")
+        else:
+            for row in verdict["records"]:
+                print(f"  {row['record']}: heading RMSE {row['psi_rmse_deg_start']:.3g} deg published, "
+                      f"{row['psi_rmse_deg_fit']:.3g} deg captive-only")
+            print(f"model discrepancy q = {extra['model_discrepancy']['psi_variance_growth_deg2_per_s']:.3g} deg^2/s "
+                  f"({extra['model_discrepancy']['method']})")
+            print(f"VERDICT: {verdict['verdict']}: {verdict['reason']}")
+        print(f"fit written to {args.out}")
+    if not worse:
+        return 0
+    return _exit_code(SimpleNamespace(worse=True, verdict=verdict), args.accept_worse)

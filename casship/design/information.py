@@ -92,7 +92,7 @@ def fit_noise(fit) -> dict:
     if noise.get("R"):
         return {str(k): float(np.sqrt(v)) for k, v in noise["R"].items()}
     raise InputError(f"{where} holds no output noise (an output-error fit's sigma or a likelihood fit's R); give the "
-                     "noise explicitly")
+                     "noise explicitly (noise= in Python; --sigma name=std,... for casship design-trial)")
 
 
 def trial_information(approach: Approach, trial: Trial, names: Sequence[str], noise: Mapping[str, float], *,

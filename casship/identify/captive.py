@@ -375,6 +375,53 @@ class CaptiveProblem:
         return CostTerm(label=f"captive:{self.facility}", names=tuple(self.free), start=start, lower=self.lower.copy(),
                         upper=self.upper.copy(), residual=residual, n_obs=len(s), prior_std=pstd, value=value)
 
+    def plot(self, fit, ax=None, path=None):
+        """Measured against modelled force components: one panel per test kind and channel.
+
+        Grey crosses: the model's own values (where the fit started); blue circles: ``fit``. The
+        plot contract of :mod:`casship.plotting`.
+
+        Parameters
+        ----------
+        fit : FitResult
+            A fit of this problem (:meth:`solve`).
+        ax : array of Axes, optional
+            ``kinds x channels`` axes to draw into.
+        path : str or Path, optional
+            Where to write the figure.
+        """
+        from ..plotting import finish, panels, split_args
+
+        ax, path = split_args(ax, path)
+        obs = self.predictor.observations
+        kinds = list(dict.fromkeys(o.kind for o in obs))
+        chans = [c for c in self.predictor.channels if any(o.channel == c for o in obs)]
+        fig, axes = panels(ax, len(kinds), len(chans), figsize=(3.0 * len(chans), 2.8 * len(kinds)),
+                           what="the captive force plot")
+        start = self.predictor.predict(self.base)
+        pred = self.prediction(np.array([fit.estimates[n] for n in self.free]))
+        meas = self.predictor.measured
+        for i, kind in enumerate(kinds):
+            for j, c in enumerate(chans):
+                a = axes[i, j]
+                idx = [q for q, o in enumerate(obs) if o.kind == kind and o.channel == c]
+                if not idx:
+                    a.set_axis_off()
+                    continue
+                m = meas[idx]
+                a.plot(m, start[idx], "x", color="tab:gray", ms=4, label="start")
+                a.plot(m, pred[idx], "o", color="tab:blue", ms=3, mfc="none", label="fit")
+                lo, hi = float(np.min(m)), float(np.max(m))
+                a.plot([lo, hi], [lo, hi], "k-", lw=0.6)
+                a.set_title(f"{kind}: {c}'", fontsize=9)
+                a.tick_params(labelsize=7)
+                if i == len(kinds) - 1:
+                    a.set_xlabel("measured", fontsize=8)
+                if j == 0:
+                    a.set_ylabel("model", fontsize=8)
+        axes[0, 0].legend(fontsize=7)
+        return finish(fig, ax, path)
+
     def __repr__(self) -> str:
         return (f"CaptiveProblem({self.model.name!r}, facility={self.facility!r}, {len(self.predictor.observations)} "
                 f"values, free={self.free})")

@@ -41,7 +41,7 @@ import numpy as np
 from .params_file import Q_MAX_DEG2_PER_S
 from .result import IdentificationWarning
 
-__all__ = ["judge", "judge_records", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
+__all__ = ["judge", "judge_records", "judge_unseen", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
            "VERDICTS"]
 
 #: Relative margin of the mean heading RMSE beyond which a fit is worse than its start.
@@ -254,6 +254,59 @@ def judge_records(model, records, fit, *, start=None, labels=None, loo: bool | N
                       "psi_rmse_deg_held_out_mean": _mean(r["psi_rmse_deg_held_out"] for r in loo_rows)}
     out["verdict"], out["reason"] = _decide(out, stalled)
     return out, _discrepancy(held, in_sample, loo, len(records))
+
+
+def judge_unseen(model, records, params, *, uncertainty=None, start=None, labels=None,
+                 method: str = "rk4") -> tuple[dict, dict]:
+    """The verdict of parameter values fitted on *other* evidence (captive tests) on ``records``.
+
+    The records took no part in the fit, so every replay is out of sample: the verdict compares the
+    mean heading RMSE with the start's as :func:`judge_records` does, and the model discrepancy comes
+    from these replays as from left-one-out replays (no in-sample factor).
+
+    Parameters
+    ----------
+    model : Model
+    records : sequence of Dataset
+    params : mapping name -> float
+        The values judged (the others keep the model's).
+    uncertainty : ParameterBelief, optional
+        Their covariance (the replays' parameter band).
+    start, labels, method
+        As for :func:`judge_records`.
+
+    Returns
+    -------
+    (dict, dict)
+        The verdict block and the ``model_discrepancy`` block.
+    """
+    records = list(records)
+    labels = list(labels) if labels is not None else [str(d.meta.get("name", i)) for i, d in enumerate(records)]
+    start_p = model.param_dict(model.params() if start is None else model.params(start))
+    values = {**model.param_dict(), **dict(params)}
+    base = {"status": "converged", "margin": WORSE_MARGIN, "out_of_sample": True,
+            "start": "the parameters before the fit (the model's own values)"}
+    if "psi" not in model.state_names and "psi" not in model.output_names or not all("psi" in d for d in records):
+        return ({**base, "verdict": "not judged", "reason": "the records hold no heading psi to replay", "records": []},
+                {"psi_variance_growth_deg2_per_s": 0.0, "method": "none (no heading in the records)"})
+    rows, held = [], []
+    for label, data in zip(labels, records):
+        s_res = _replay(model, data, start_p, {}, method)
+        f_res = _replay(model, data, values, {}, method, uncertainty=uncertainty)
+        rows.append({"record": label, "psi_rmse_deg_start": _rmse(s_res), "psi_rmse_deg_fit": _rmse(f_res)})
+        if f_res is not None:
+            held.append(_errors(f_res, data))
+    out = {**base, "records": rows, "psi_rmse_deg_start_mean": _mean(r["psi_rmse_deg_start"] for r in rows),
+           "psi_rmse_deg_fit_mean": _mean(r["psi_rmse_deg_fit"] for r in rows)}
+    verdict, reason = _decide(out, stalled=False)
+    out["verdict"], out["reason"] = verdict, reason + " (the records took no part in the fit: every replay is out of sample)"
+    if not held:
+        return out, {"psi_variance_growth_deg2_per_s": 0.0, "method": "none (no replay succeeded)"}
+    qs = [heading_discrepancy(*ser) for ser in held]
+    return out, {"psi_variance_growth_deg2_per_s": float(np.degrees(np.degrees(np.mean(qs)))),
+                 "method": f"out of sample over {len(held)} record{'s' if len(held) > 1 else ''} the fit did not see: least squares of "
+                           "e^2 - s^2 = q t per replay (the fit's parameter band), averaged",
+                 "per_record_deg2_per_s": [float(np.degrees(np.degrees(q))) for q in qs]}
 
 
 def _decide(out: dict, stalled: bool) -> tuple[str, str]:

@@ -22,19 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
-from casship.identify import ParameterBelief, write_params_file
+from casship.identify import ParameterBelief
+from casship.identify.captive_choice import INNER_FOLDS, RULE, inner_groups
+from casship.identify.rig import carried, write_carried
 from casship.maneuvers import replay
 
 from .data import Run, per_run
 from .workflow import fit_fold, study_model
 
 __all__ = ["INNER_FOLDS", "RULE", "CaptiveOnly", "captive_only", "inner_groups", "choose"]
-
-INNER_FOLDS = 3
-RULE = ("nested choice per fold on its training runs only: captive-only model (scored on every training run, "
-        "all out of sample) against the joint fit (scored by an inner 3-fold cross-validation of the training "
-        "runs, dealt in name order); lower mean heading RMSE wins, a tie or fewer than 2 training runs keeps "
-        "the captive-only model")
 
 
 @dataclass(frozen=True)
@@ -61,14 +57,8 @@ class CaptiveOnly:
         robust covariance as the fit's, and ``noise`` (the free-running channels' noise, which the
         captive tests do not measure: the joint fit's on the same runs), so that trial design and
         replays read it as they read a fit."""
-        names, cov = list(self.belief.names), self.belief.cov
-        sd = np.sqrt(np.diag(cov))
-        fit = {"free": names, "estimates": dict(self.values), "std_errors": dict(zip(names, sd.tolist())),
-               "std_errors_robust": dict(zip(names, sd.tolist())), "covariance": cov.tolist(),
-               "covariance_robust": cov.tolist(), "correlation": (cov / np.outer(sd, sd)).tolist(),
-               "noise": noise, "method": "captive-only (HMRI PMM tests), Gaussian ML"}
-        return write_params_file(path, study_model(), self.values, self.belief,
-                                 {**fit, "candidate": "captive-only", **(extra or {})})
+        return write_carried(path, study_model(), self.values, self.belief, noise=noise,
+                             method="captive-only (HMRI PMM tests), Gaussian ML", extra=extra)
 
 
 _CAPTIVE_ONLY: dict[str, CaptiveOnly] = {}
@@ -79,23 +69,8 @@ def captive_only(captive) -> CaptiveOnly:
     interaction estimates and their robust covariance (made once per process and folder)."""
     folder, fit = str(captive[0]), captive[1]
     if folder not in _CAPTIVE_ONLY:
-        belief = fit.uncertainty("robust")
-        model = set(study_model().param_names)
-        keep = [i for i, n in enumerate(belief.names) if "@" not in n and n in model]
-        names = [belief.names[i] for i in keep]
-        cov = belief.cov[np.ix_(keep, keep)]
-        values = {n: float(fit.estimates[n]) for n in names}
-        _CAPTIVE_ONLY[folder] = CaptiveOnly(values, ParameterBelief.from_values(
-            names, [values[n] for n in names], cov, "captive-only fit of the HMRI tests (robust covariance)",
-            kind="robust"))
+        _CAPTIVE_ONLY[folder] = CaptiveOnly(*carried(fit, study_model()))
     return _CAPTIVE_ONLY[folder]
-
-
-def inner_groups(names, k: int = INNER_FOLDS) -> list[list[str]]:
-    """The inner folds: ``names`` in sorted order dealt round-robin to ``min(k, len(names))`` groups."""
-    names = sorted(names)
-    k = min(k, len(names))
-    return [names[i::k] for i in range(k)]
 
 
 def heading_rmse(run: Run, params: dict) -> float:

@@ -1,0 +1,199 @@
+"""Captive rigs: the facility's model from its particulars and tests, the rule's free set, what carries to
+another ship, the out-of-sample verdict, and the ``casship identify --captive`` door."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from casship.cli import main
+from casship.data import Dataset
+from casship.errors import InputError
+from casship.identify.captive_choice import choose_with_captive, inner_groups
+from casship.identify.rig import (CAPTIVE_HULL, CAPTIVE_OWN, RIGS, Rig, captive_free_set, carried, read_rig,
+                                  write_carried)
+from casship.identify.verdict import judge_unseen
+from casship.models import kvlcc2, nomoto_first_order
+from casship.simulation import simulate
+
+from captive_records import design, synthetic
+
+PARTICULARS = {"L_pp": 7.0, "B": 1.27, "d": 0.46, "nabla": 3.27, "x_G": 0.25, "rho": 1000.0, "k_zz": 0.25,
+               "D_p": 0.216, "A_R": 0.0539, "H_R": 0.345}
+K_T = (0.29, -0.27, -0.16)         # K_T = k0 + k1 J + k2 J^2 of the synthetic open-water curve
+TRUE = {"Y_v_dash": -0.34, "N_v_dash": -0.13, "N_r_dash": -0.055, "m_y_dash": 0.25, "t_R": 0.45,
+        "gamma_R_plus": 0.6, "delta_0": 0.01}
+NOISE = {f"{t}:{c}": s for t in ("static", "dynamic") for c, s in zip(("X", "Y", "N", "RY", "T"),
+                                                                      (2e-4, 3e-4, 1e-4, 1e-4, 1e-4))}
+
+
+def rig_tests(rig: Rig, seed: int = 3):
+    """Synthetic tests of a known ship on ``rig``: with an exactly quadratic open-water curve and a resistance test."""
+    J = np.linspace(0.0, 0.7, 8)
+    base = replace(design(U=1.18, rps=10.0, L=PARTICULARS["L_pp"]), source="synthetic",
+                   open_water={"J": J, "K_T": K_T[0] + K_T[1] * J + K_T[2] * J**2, "K_Q": 0.03 + 0 * J},
+                   resistance={"speed": np.array([1.0, 1.1, 1.3]), "resistance": np.array([20.0, 24.0, 33.0])})
+    model = rig.model(base)
+    truth = synthetic(model, model.params(TRUE), base, channels=("X", "Y", "N", "RY", "T"), noise=NOISE, seed=seed)
+    return replace(truth, open_water=base.open_water, resistance=base.resistance), model
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return Rig("TANK", PARTICULARS, nominal_speed=1.18, source="made up")
+
+
+def test_the_rig_model_carries_its_particulars_propeller_curve_and_resistance(rig):
+    tests, model = rig_tests(rig)
+    p = model.param_dict()
+    for name, value in PARTICULARS.items():
+        assert p[name] == value
+    np.testing.assert_allclose([p["k_0"], p["k_1"], p["k_2"]], K_T, atol=1e-12)     # the quadratic fitted exactly
+    R = np.interp(1.18, [1.0, 1.1, 1.3], [20.0, 24.0, 33.0])
+    assert p["R_0_dash"] == pytest.approx(R / (0.5 * 1000.0 * 1.18**2 * 7.0 * 0.46), rel=1e-12)
+    assert {"delta_0", "Y_0_dash"} <= set(model.param_names)            # the neutral angle of the captive variant
+
+
+def test_the_rule_recovers_a_known_ship_and_carries_only_the_hull(rig):
+    tests, _ = rig_tests(rig)
+    pb = rig.problem(tests)
+    assert pb.plain == captive_free_set(pb.model)
+    assert set(CAPTIVE_HULL) <= set(pb.plain) and set(CAPTIVE_OWN) <= set(pb.plain)
+    fit = pb.solve(show=False)
+    for name, value in TRUE.items():
+        joint = pb.joint_name(name)
+        assert abs(fit.estimates[joint] - value) < 4 * fit.std_errors[joint], name
+    ship = kvlcc2()
+    values, belief = carried(fit, ship)
+    assert not any("@" in n for n in values) and "delta_0" not in values      # facility quantities stay with the rig
+    assert list(belief.names) == list(values) and belief.kind == "robust"
+    robust = fit.uncertainty("robust")
+    i = [robust.names.index(n) for n in values]
+    np.testing.assert_array_equal(belief.cov, robust.cov[np.ix_(i, i)])
+    path = write_carried("carried.json", ship, values, belief)
+    obj = json.loads(path.read_text())
+    assert obj["candidate"] == "captive-only" and obj["estimates"] == values
+
+
+def test_rig_files_and_their_errors(rig, tmp_path):
+    path = tmp_path / "rig.json"
+    path.write_text(json.dumps(rig.to_dict()))
+    assert read_rig(path) == rig
+    hmri = read_rig("hmri-t530")
+    assert hmri.facility == "HMRI" and set(RIGS) == {"hmri-t530"}
+    # k_zz from the yaw inertia about midship (README): m k^2 L^2 + m x_G^2 = 9516 kg m^2
+    p = hmri.particulars
+    assert 3123.0 * (p["k_zz"] * p["L_pp"]) ** 2 + 3123.0 * p["x_G"] ** 2 == pytest.approx(9516.0, rel=1e-12)
+    cases = {"nosuch": "neither a known rig", '{"facility": "A"}': "missing 'nominal_speed_mps'",
+             '{"facility": "A", "nominal_speed_mps": 1, "particulars": {"L_pp": "7"}}': "['L_pp'] are not numbers",
+             '{"facility": "A", "nominal_speed_mps": 1, "particulars": {"L_pp": 7}, "speed": 2}': "unknown entries",
+             '{"facility": "A@B", "nominal_speed_mps": 1, "particulars": {"L_pp": 7}}': "without '@'",
+             '[1, 2]': "expected a JSON object", '{': "not JSON"}
+    for text, message in cases.items():
+        src = text
+        if text != "nosuch":
+            src = tmp_path / "bad.json"
+            src.write_text(text)
+        with pytest.raises(InputError, match=message.replace("[", r"\[").replace("]", r"\]")):
+            read_rig(src)
+    tests, _ = rig_tests(rig)
+    with pytest.raises(InputError, match="outside the resistance test"):
+        Rig("TANK", PARTICULARS, nominal_speed=2.0).values(tests)
+    with pytest.raises(InputError, match="lacks"):
+        rig.values(replace(tests, open_water=None))
+    with pytest.raises(InputError, match="rig TANK: .*'hull_colour'"):
+        Rig("TANK", {**PARTICULARS, "hull_colour": 1.0}, nominal_speed=1.18).model(tests)
+    with pytest.raises(InputError, match="cannot be a captive rig's model"):
+        rig.model(tests, "nomoto1")
+
+
+def _nomoto_record(K, T, seed=0):
+    m = nomoto_first_order()
+    t = np.arange(0.0, 300.0, 1.0)
+    delta = np.radians(10.0) * np.sign(np.sin(2 * np.pi * t / 120.0))
+    tr = simulate(m, np.zeros(2), t, {"delta": delta}, p=m.params({"K": K, "T": T}))
+    psi = tr["psi"] + np.radians(0.2) * np.random.default_rng(seed).standard_normal(len(t))
+    return Dataset(t, {"delta": delta, "r": tr["r"], "psi": psi}, meta={"name": f"zz{seed}"})
+
+
+def test_judging_values_on_records_they_did_not_see():
+    m = nomoto_first_order()
+    K, T = 0.8 * m.param_dict()["K"], 1.3 * m.param_dict()["T"]
+    records = [_nomoto_record(K, T, seed) for seed in (1, 2)]
+    verdict, q = judge_unseen(m, records, {"K": K, "T": T})
+    assert verdict["verdict"] == "better" and verdict["out_of_sample"]
+    assert all(r["psi_rmse_deg_fit"] < r["psi_rmse_deg_start"] for r in verdict["records"])
+    assert 0.0 <= q["psi_variance_growth_deg2_per_s"] < 1e-3 and "out of sample" in q["method"]
+    same, _ = judge_unseen(m, records, {})
+    assert same["verdict"] == "no better"
+
+
+def test_inner_groups_deal_names_in_order():
+    assert inner_groups(["c", "a", "b", "d"]) == [["a", "d"], ["b"], ["c"]]
+    assert inner_groups(["x"]) == [["x"]]
+
+
+# -- the command, on the measured folders --------------------------------------------------------------------
+
+def _folders(data_dir):
+    captive = data_dir / "kvlcc2_hmri_captive"
+    marin = data_dir / "kvlcc2_marin_free"
+    if not captive.is_dir() or not marin.is_dir():
+        pytest.skip("the HMRI captive tests or the MARIN runs are absent from the data folder")
+    return captive, marin / "MARIN_FREE_KVLCC2"
+
+
+@pytest.mark.data
+def test_identify_captive_alone_writes_the_carried_hull(data_dir, capsys):
+    from casship.io import read_captive
+
+    captive, _ = _folders(data_dir)
+    assert main(["identify", "--captive", str(captive), "--rig", "hmri-t530", "--model", "kvlcc2",
+                 "--out", "cap.json", "--plot", "forces.png"]) == 0
+    text = capsys.readouterr().out
+    assert "carried to 'kvlcc2'" in text and "no model-discrepancy term" in text
+    obj = json.loads(open("cap.json").read())
+    fit = read_rig("hmri-t530").problem(read_captive(captive), "kvlcc2").solve(show=False)
+    values, _ = carried(fit, kvlcc2())
+    assert obj["estimates"] == pytest.approx(values, rel=1e-9) and "verdict" not in obj
+    assert open("forces.png", "rb").read(4) == b"\x89PNG"
+
+
+@pytest.mark.data
+def test_identify_with_captive_tests_chooses_by_the_rule_and_judges_out_of_sample(data_dir, capsys):
+    captive, marin = _folders(data_dir)
+    code = main(["identify", f"{marin}_zz_10_m.dat", "--model", "kvlcc2", "--captive", str(captive), "--rig",
+                 "hmri-t530", "--out", "fit.json"])
+    obj = json.loads(open("fit.json").read())
+    assert obj["captive_choice"]["choice"] == "captive-only" and obj["captive_choice"]["groups"] == []
+    assert obj["verdict"]["out_of_sample"] and obj["model_discrepancy"]["psi_variance_growth_deg2_per_s"] >= 0
+    assert code == (3 if obj["verdict"]["verdict"] in ("worse", "stalled") else 0)
+    assert "[captive] captive-only" in capsys.readouterr().out
+    assert main(["simulate", "--model", "kvlcc2", "--params", "fit.json", "--inputs", f"{marin}_zz_-20_m.dat",
+                 "--samples", "0"]) == 0
+
+
+@pytest.mark.data
+def test_the_choice_scores_both_candidates_with_an_inner_split(data_dir):
+    from casship.io import read_captive, read_marin
+
+    captive, marin = _folders(data_dir)
+    records = [read_marin(f"{marin}_{n}_m.dat") for n in ("tc_-35", "zz_10")]
+    pb = read_rig("hmri-t530").problem(read_captive(captive), "kvlcc2")
+    choice = choose_with_captive(records, kvlcc2(), pb, pb.solve(show=False))
+    assert len(choice.groups) == 2 and all(np.isfinite(v) for v in choice.scores.values())
+    assert choice.choice == min(choice.scores, key=choice.scores.get)
+
+
+def test_the_command_refuses_what_it_cannot_do(capsys):
+    assert main(["identify", "--model", "kvlcc2"]) == 2
+    assert "--captive DIR --rig RIG" in capsys.readouterr().err
+    assert main(["identify", "--model", "kvlcc2", "--captive", "somewhere"]) == 2
+    assert "name the rig" in capsys.readouterr().err
+    for args, message in ((["x.csv", "--model", "kvlcc2", "--rig", "hmri-t530"], "--rig would have no effect"),
+                          (["--model", "kvlcc2", "--captive", "d", "--rig", "hmri-t530", "--free", "K"],
+                           "--free would have no effect")):
+        assert main(["identify", *args]) == 2
+        assert message in capsys.readouterr().err
