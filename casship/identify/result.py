@@ -263,7 +263,9 @@ class FitResult:
 
     def summary(self) -> str:
         """A plain-text report: estimates, standard errors, prior, channel shares, warnings."""
-        lines = [f"{self.method} fit of {self.model!r} on {len(self.records) or '?'} record(s): cost {self.cost:.6g}, "
+        on = (", ".join(self.records) if self.records and all(r.startswith("captive:") for r in self.records)
+              else f"{len(self.records) or '?'} record(s)")        # captive tests are named by their facility
+        lines = [f"{self.method} fit of {self.model!r} on {on}: cost {self.cost:.6g}, "
                  f"status {self.status}, {self.iterations} iterations, {self.solve_time_s:.2f} s"]
         if self.message:
             lines.append(f"  ({self.message})")
