@@ -57,6 +57,8 @@ DISC, RTS, ANG = "casship/discretize.py", "casship/estimators/rts.py", "casship/
 MET, MMG = "casship/maneuvers/metrics.py", "casship/models/mmg.py"
 T_LIK, T_UKF = "tests/test_likelihood_reference.py", "tests/test_ukf_reference.py"
 T_FISH, T_GRAD = "tests/test_fisher_reference.py", "tests/test_gradient_reference.py"
+RIG, VERD = "casship/identify/rig.py", "casship/identify/verdict.py"
+CHOOSE, T_RIG = "casship/identify/captive_choice.py", "tests/test_captive_rig.py"
 T_MAP, T_GATE, T_MMG = "tests/test_map_reference.py", "tests/test_gate_reference.py", "tests/test_mmg_reference.py"
 PERF, PRED, GUID = "casship/autopilot/performance.py", "casship/simulation/bands.py", "casship/autopilot/guidance.py"
 UNC, ASYM, CV = "casship/identify/uncertainty.py", "casship/identify/asymmetry.py", "casship/identify/crossval.py"
@@ -245,6 +247,17 @@ MUTANTS = [
       "", (T_CHOICE,)),
     M("heading floor: the yaw rate's error for the heading's", WAVE, 'np.sqrt(P[m["ipsi"], m["ipsi"]])',
       'np.sqrt(P[m["ir"], m["ir"]])', (T_WAVE,)),
+    # -- captive rigs, what carries to another ship, the out-of-sample verdict ------------------------------------
+    M("rig: R'_0 without the draught", RIG, 'U0**2 * p["L_pp"] * p["d"])', 'U0**2 * p["L_pp"])', (T_RIG,)),
+    M("rig: the model-based covariance carried for the robust one", RIG, 'belief = fit.uncertainty("robust")',
+      'belief = fit.uncertainty("model")', (T_RIG,)),
+    M("rig: the open-water curve fitted linear", RIG, "np.vstack([np.ones_like(J), J, J**2]).T",
+      "np.vstack([np.ones_like(J), J, 0 * J]).T", (T_RIG,)),
+    M("verdict out of sample: the start's replay for the fit's", VERD,
+      "f_res = _replay(model, data, values, {}, method, uncertainty=uncertainty)",
+      "f_res = _replay(model, data, start_p, {}, method, uncertainty=uncertainty)", (T_RIG,)),
+    M("captive choice: the worse candidate wins", CHOOSE, 'scores["joint"] < scores["captive-only"] else',
+      'scores["joint"] > scores["captive-only"] else', (T_RIG,)),
 ]
 
 

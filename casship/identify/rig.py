@@ -305,7 +305,7 @@ def carried(fit, model):
 
     belief = fit.uncertainty("robust")
     have = set(model.param_names)
-    keep = [i for i, n in enumerate(belief.names) if "@" not in n and n in have]
+    keep = [i for i, n in enumerate(belief.names) if n in have]     # a name@facility is no parameter of the ship
     names = [belief.names[i] for i in keep]
     values = {n: float(fit.estimates[n]) for n in names}
     facility = ", ".join(r.split(":", 1)[-1] for r in fit.records)
