@@ -121,3 +121,31 @@ def test_wave_filter_course_changes_of_the_otter(otter, change):
         assert max(m["overshoot_pct"] for m in res.metrics) <= 10.0, seed
     calm = otter.simulate(f"course-{change}", seed=1, warn=False)
     assert max(m["overshoot_pct"] for m in calm.metrics) < 2.0
+
+
+def test_the_margins_are_those_of_the_observer_that_runs(otter):
+    """With the wave filter the observer damps on the steady steering (rule 1): the linear analysis takes its
+    damping on a straight course, the mean of the observer's own Jacobians just either side of r = 0."""
+    from casship.autopilot.analysis import loop_systems, margins
+    from casship.autopilot.estimation import heading_filter_system, observer_damping
+    from casship.linear import linearize
+
+    s, nom = otter.settings, otter.nomoto
+    kappa = observer_damping(s, nom)
+    assert abs(kappa - 1.0) > 0.1                       # the steady steering is not the linear damping here
+    obs = ap.heading_observer(nom.K, nom.T, _sea(), steering=s.steering)
+    h = 1e-6
+    slopes = [linearize(obs, {"r": r}).A[1, 1] for r in (h, -h)]
+    assert np.mean(slopes) == pytest.approx(-kappa / nom.T, rel=1e-6)
+    # the design's margins are those of the loop with that observer (and differ from the linear damping's)
+    def loop_margins(k):
+        est = heading_filter_system(nom.K / k, nom.T / k, *s.observer_q, s.compass_std**2 / s.compass_rate,
+                                    s.gyro_std**2 * s.dt, steer=otter.plant.steer, wave=ap.estimation.settings_wave(s))
+        L, _ = loop_systems(otter.linearization, otter.gains, otter.actuator, delay=s.delay,
+                            reference=otter.autopilot.reference, controlled="psi", filter_T=s.filter_T,
+                            estimator=est, rate=s.rate)
+        return margins(L)["phase_margin_deg"]
+    assert otter.margins["phase_margin_deg"] == pytest.approx(loop_margins(kappa), rel=1e-9)
+    assert abs(loop_margins(1.0) - loop_margins(kappa)) > 1.0
+    # without the wave filter the observer damps linearly
+    assert observer_damping(type("S", (), {"steering": s.steering, "feedforward": "linear"})(), nom) == 1.0

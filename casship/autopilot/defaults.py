@@ -25,7 +25,7 @@ import numpy as np
 
 from .analysis import course_change_demand, loop_systems, margins
 from .designs import lqr_design, pid_pole_placement
-from .estimation import linear_estimator, settings_wave, tune_course_q, tune_heading_q
+from .estimation import linear_estimator, observer_damping, settings_wave, tune_course_q, tune_heading_q
 from .law import Actuator
 from .nomoto import Nomoto
 from .plants import SteeringPlant, steering_feedforward, twin_propeller_yaw_limit
@@ -335,6 +335,10 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     q_b = (0.05 * val["steer_max"]) ** 2 / (10 * (LU if LU else 1.0 / val.get("wn", 1.0)))
 
     budget_wave = [wave]            # the sea state the noise budget counts (dropped when no bandwidth meets it)
+    # with the wave filter the observer damps on the steady steering (section 8, rule 1): the noise budget
+    # and the margins analyse that observer, linearised on a straight course (Nomoto K / kappa, T / kappa)
+    kappa = (observer_damping(SimpleNamespace(steering=steering, feedforward=val["feedforward"]), nom)
+             if val["wave_filter"] and mode == "heading" else 1.0)
 
     def candidate(wn, wn_ref=None):
         """Gains, estimator tuning and the linear loop (with the estimator) at bandwidth ``wn``."""
@@ -359,7 +363,9 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
                 q_r, qb = val["observer_q"]
             else:
                 qb = q_b
-                q_r, noise = tune_heading_q(K=nom.K, T=nom.T, q_r_max=2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T), q_b=qb, dt=dt,
+                filtered = val["wave_filter"] and budget_wave[0] is not None
+                q_r, noise = tune_heading_q(K=nom.K / (kappa if filtered else 1.0), T=nom.T / (kappa if filtered else 1.0),
+                                        q_r_max=2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T), q_b=qb, dt=dt,
                                         compass_every=max(1, int(round(1 / (val["compass_rate"] * dt)))),
                                         compass_std=val["compass_std"], gyro_std=val["gyro_std"], Kp=gains.Kp,
                                         Kd=Kd_est, budget=room, wave=budget_wave[0],
@@ -367,8 +373,8 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
                 tuned["_quiet"] = tuned["_quiet"] and noise <= room * (1 + 1e-9)
                 tuned["_command_noise"] = noise
             tuned.update(observer_q=(q_r, qb))
-        est = linear_estimator(SimpleNamespace(**{**val, **tuned, "wave_filter": val["wave_filter"] and
-                                                  budget_wave[0] is not None}), nom, plant.steer)
+        est = linear_estimator(SimpleNamespace(**{**val, **tuned, "steering": steering, "wave_filter": val["wave_filter"]
+                                                  and budget_wave[0] is not None}), nom, plant.steer)
         ref = ReferenceModel(wn_ref, val["zeta_ref"]) if wn_ref else None
         L, closed = loop_systems(lin, gains, actuator, delay=val["delay"], reference=ref, controlled=controlled,
                                  filter_T=val["filter_T"], estimator=est, rate=val["rate"])

@@ -434,8 +434,40 @@ def linear_estimator(settings, nomoto, steer: str = "delta") -> control.StateSpa
         return course_filter_system(s.speed, s.ekf_alpha[1], s.ekf_q[1] * s.dt, s.gnss_std**2 / s.gnss_rate)
     q_r, q_b = s.observer_q
     wave = settings_wave(s) if getattr(s, "wave_filter", False) else None
-    return heading_filter_system(nomoto.K, nomoto.T, q_r, q_b, s.compass_std**2 / s.compass_rate,
+    kappa = observer_damping(s, nomoto) if wave is not None else 1.0
+    return heading_filter_system(nomoto.K / kappa, nomoto.T / kappa, q_r, q_b, s.compass_std**2 / s.compass_rate,
                                  s.gyro_std**2 * s.dt, steer=steer, wave=wave)
+
+
+def observer_damping(settings, nomoto) -> float:
+    """The yaw damping of the loop's heading observer on a straight course, relative to the Nomoto model's.
+
+    With the wave filter and the nonlinear feed-forward the observer damps on the ship's steady
+    steering (``T r' + K s(r) = K (delta + b)``, :func:`heading_observer`): linearised on a straight
+    course its damping is ``kappa r`` with ``kappa = K s'(0)``, the slope of the steering table at
+    ``r = 0`` taken as the mean of its two sides (the secant between the table's points either side of
+    0). The linear observer is then the Nomoto model ``(K / kappa, T / kappa)``, and the loop's margins
+    are those of the observer that runs. 1 when the observer damps linearly.
+
+    Parameters
+    ----------
+    settings : AutopilotSettings
+    nomoto : Nomoto
+
+    Returns
+    -------
+    float
+    """
+    table = getattr(settings, "steering", None)
+    if table is None or getattr(settings, "feedforward", "linear") != "nonlinear":
+        return 1.0
+    r, s = np.asarray(table.rates, float), np.asarray(table.steer, float)
+    i = int(np.argmin(np.abs(r)))
+    kappa = float(nomoto.K * (s[i + 1] - s[i - 1]) / (r[i + 1] - r[i - 1]))
+    if not np.isfinite(kappa) or kappa == 0.0:
+        raise InputError(f"the observer's steady steering has no slope at r = 0 (K s'(0) = {kappa}); the table's "
+                         "rates about 0 cannot give a linear observer")
+    return kappa
 
 
 def settings_wave(settings) -> WaveYaw | None:
