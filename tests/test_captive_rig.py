@@ -197,3 +197,37 @@ def test_the_command_refuses_what_it_cannot_do(capsys):
                            "--free would have no effect")):
         assert main(["identify", *args]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_identify_with_captive_tests_alone_and_the_joint_branch(rig, monkeypatch):
+    """Without records the carried captive-only model; with records and the joint fit chosen, the ship workflow with
+    the captive term (the choice forced here: on these synthetic records either candidate could win)."""
+    import casship as cs
+    from casship.identify import captive_choice
+    from casship.identify.captive_choice import CaptiveChoice, identify_with_captive
+
+    tests, _ = rig_tests(rig)
+    pb = rig.problem(tests)
+    fit = pb.solve(show=False)
+    alone = identify_with_captive([], "kvlcc2", pb, fit)
+    assert alone.ship is None and alone.verdict is None and not alone.worse
+    assert alone.values == carried(fit, kvlcc2())[0]
+    assert "the captive tests alone" in alone.summary()
+    obj = json.loads(alone.to_json("alone.json").read_text())
+    assert obj["captive_choice"]["choice"] == "captive-only" and "verdict" not in obj
+
+    ship = cs.models.get_model("kvlcc2")
+    tr = cs.maneuvers.run_maneuver(ship, "zigzag", rudder_deg=10, duration=500, dt=2.0).trajectory
+    rng = np.random.default_rng(5)
+    noise = {"u": 0.02, "v": 0.02, "r": 1e-4, "x": 2.0, "y": 2.0, "psi": np.radians(0.2)}
+    cols = {n: tr[n] + noise.get(n, 0.0) * rng.standard_normal(len(tr)) for n in ("delta", "n", *noise)}
+    rec = cs.Dataset(tr.t, cols, meta={"name": "zz"})
+    forced = CaptiveChoice("joint", {"captive-only": 2.0, "joint": 1.0}, {"zz": {"captive-only": 2.0, "joint": 1.0}},
+                           [["zz"]])
+    monkeypatch.setattr(captive_choice, "choose_with_captive", lambda *a, **k: forced)
+    joint = identify_with_captive([rec], ship, pb, fit, workflow={"verdict": "replay"})
+    assert joint.ship is not None and joint.values == {}
+    assert "captive:TANK" in joint.ship.fit.records
+    assert joint.verdict_block is joint.ship.fit.verdict
+    obj = json.loads(joint.to_json("joint.json").read_text())
+    assert obj["captive_choice"]["choice"] == "joint" and obj["verdict"]["verdict"] in ("better", "no better", "worse")

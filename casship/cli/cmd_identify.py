@@ -300,18 +300,11 @@ def _workflow(args) -> int:
     measured = parse_items(args.measured, "--measured") if args.measured is not None else None
     options = dict(weights=parse_pairs(args.weights, "--weights") or None,
                    prior=parse_pairs(args.prior, "--prior-std") or None, measured=measured)
-    terms, choice = [], None
     if args.captive is not None:            # the captive-only model or the joint fit, chosen on the records
-        problem, alone = _captive_fit(args)
-        choice = _choose(args, records, model, problem, alone, options)
-        if choice.choice == "captive-only":
-            return _write_captive_only(args, model, problem, alone, stamps, records=records, choice=choice)
-        terms = [problem.cost_term(alone)]
-    ship = identify_ship(records, model, terms=terms, verbose=not args.json, **options)
+        return _captive(args, model, stamps, records, options)
+    ship = identify_ship(records, model, verbose=not args.json, **options)
     facilities = sorted(set(ship.facilities))
-    extra = {"captive_choice": choice.to_dict()} if choice is not None else None
-    write_output(args.out, lambda path: ship.to_json(path, facilities[0] if len(facilities) == 1 else None,
-                                                     extra=extra),
+    write_output(args.out, lambda path: ship.to_json(path, facilities[0] if len(facilities) == 1 else None),
                  option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
         write_output(args.plot, ship.fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
@@ -337,21 +330,6 @@ def _captive_fit(args):
     return problem, problem.solve(max_iter=args.max_iter)
 
 
-def _choose(args, records, model, problem, alone, options):
-    """The nested choice (:func:`casship.identify.captive_choice.choose_with_captive`), printed."""
-    from ..identify.captive_choice import choose_with_captive
-    from ..progress import stage
-
-    choice = choose_with_captive(records, model, problem, alone, workflow=options,
-                                 progress=lambda text: stage(text, 3, 3))
-    if not args.json:
-        s = choice.scores
-        how = ("no inner split: a single record" if not choice.groups else
-               f"captive-only {s['captive-only']:.3g} deg, joint {s['joint']:.3g} deg (inner cross-validation)")
-        print(f"[captive] {choice.choice}: mean heading RMSE of the records, {how}\n      because {choice.rule}")
-    return choice
-
-
 def _captive_alone(args) -> int:
     """``casship identify --captive DIR --rig RIG --model NAME`` without records: the classical route."""
     from ..models import get_model
@@ -367,58 +345,29 @@ def _captive_alone(args) -> int:
         "--accept-worse": args.accept_worse}.items()},
                   "without records the captive tests are fitted alone by the rule of casship.identify.rig")
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
-    ship = get_model(args.model)
-    problem, fit = _captive_fit(args)
-    return _write_captive_only(args, ship, problem, fit, stamps)
+    return _captive(args, get_model(args.model), stamps, [], {})
 
 
-def _write_captive_only(args, ship, problem, fit, stamps, *, records=(), choice=None) -> int:
-    """The captive-only model of ``ship`` written, and judged on ``records`` (out of sample) when given."""
-    import numpy as np
-
-    from ..identify.rig import carried, write_carried
-    from ..identify.verdict import judge_unseen
+def _captive(args, model, stamps, records, options) -> int:
+    """The captive tests alone or beside ``records`` (:func:`casship.identify.captive_choice.identify_with_captive`),
+    written, plotted and printed."""
+    from ..identify.captive_choice import identify_with_captive
     from ..progress import stage
 
-    values, belief = carried(fit, ship)
-    extra = {"captive_fit": fit.to_dict()}
-    verdict = None
-    if records:
-        stage("judging the captive-only model on the records (out of sample)", 3, 3)
-        verdict, discrepancy = judge_unseen(ship, records, values, uncertainty=belief)
-        extra.update({"verdict": verdict, "model_discrepancy": discrepancy, "captive_choice": choice.to_dict()})
-    stage("writing", 3, 3)
-    write_output(args.out, lambda path: write_carried(path, ship, values, belief, extra=extra),
+    problem, alone = _captive_fit(args)
+    result = identify_with_captive(records, model, problem, alone, workflow=options, verbose=not args.json,
+                                   progress=lambda text: stage(text, 3, 3))
+    facilities = sorted({str(d.meta.get("facility", "records")) for d in records})
+    write_output(args.out, lambda path: result.to_json(path, facilities[0] if len(facilities) == 1 else None),
                  option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
-        write_output(args.plot, lambda path: problem.plot(fit, path=path), option="--plot", overwrite=args.overwrite,
+        write_output(args.plot, lambda path: problem.plot(alone, path=path), option="--plot", overwrite=args.overwrite,
                      stamps=stamps)
-    worse = verdict is not None and verdict["verdict"] in ("worse", "stalled")
     if args.json:
-        print_json({"model": ship.name, "candidate": "captive-only", "carried": values, "captive_fit": fit.to_dict(),
-                    **({k: extra[k] for k in ("verdict", "model_discrepancy", "captive_choice")} if records else {}),
-                    "out": str(args.out)})
+        print_json({**result.to_dict(), "out": str(args.out)})
     else:
-        print(fit.summary())
-        start = ship.param_dict()
-        sd = dict(zip(belief.names, np.sqrt(np.diag(belief.cov))))
-        own = [n for n in fit.free if "@" in n]
-        print(f"\ncarried to {ship.name!r} ({len(values)} hull and interaction coefficients, robust standard "
-              f"errors; {', '.join(own)} stay with the rig):")
-        print(f"{'name':>16} {'published':>11} {'captive':>11} {'SE':>9} {'z':>7}")
-        for n, v in values.items():
-            print(f"{n:>16} {start[n]:>11.5g} {v:>11.5g} {sd[n]:>9.3g} {(v - start[n]) / sd[n]:>7.1f}")
-        if verdict is None:
-            print("no free-running record: the file has no model-discrepancy term, so its replays' predictive band "
-                  "is the parameter band alone; identify records with --captive to estimate one")
-        else:
-            for row in verdict["records"]:
-                print(f"  {row['record']}: heading RMSE {row['psi_rmse_deg_start']:.3g} deg published, "
-                      f"{row['psi_rmse_deg_fit']:.3g} deg captive-only")
-            print(f"model discrepancy q = {extra['model_discrepancy']['psi_variance_growth_deg2_per_s']:.3g} deg^2/s "
-                  f"({extra['model_discrepancy']['method']})")
-            print(f"VERDICT: {verdict['verdict']}: {verdict['reason']}")
+        print(result.summary())
         print(f"fit written to {args.out}")
-    if not worse:
+    if not result.worse:
         return 0
-    return _exit_code(SimpleNamespace(worse=True, verdict=verdict), args.accept_worse)
+    return _exit_code(SimpleNamespace(worse=True, verdict=result.verdict_block), args.accept_worse)

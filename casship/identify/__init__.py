@@ -21,7 +21,9 @@ filter, priors, identifiability and the fit result.
 * :mod:`casship.identify.asymmetry` -- port/starboard terms only from mirrored evidence.
 * :class:`CaptiveProblem` -- captive (PMM) model tests: forces of a model at a prescribed motion and their
   harmonics (:mod:`casship.identify.captive_forces`), fitted alone or as a :class:`CostTerm` of a
-  :class:`JointProblem` with the free-running records.
+  :class:`JointProblem` with the free-running records; a facility's :class:`Rig` (its model of the ship,
+  :func:`read_rig`) and :func:`identify_with_captive` (the captive tests alone, or beside records with the
+  captive-only model or the joint fit chosen by nested cross-validation, :class:`CaptiveShip`).
 """
 from .crossval import CrossValidation, cross_validate
 from .identifiability import Identifiability
@@ -37,6 +39,8 @@ from .result import FitResult, IdentificationError, IdentificationWarning
 from .cost_term import CostTerm, JointProblem
 from .captive import CaptiveProblem, linear_derivatives
 from .workflow import ShipFit, identify_ship
+from .rig import Rig, read_rig
+from .captive_choice import CaptiveShip, identify_with_captive
 from .spec import LikelihoodOptions, OutputErrorOptions, ProblemSpec
 
 __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResult", "IdentificationError",
@@ -45,5 +49,6 @@ __all__ = ["MLEProblem", "OutputErrorProblem", "IdentificationProblem", "FitResu
            "COVARIANCE_KINDS", "cross_validate", "CrossValidation"]
 __all__ += ["identify_ship", "ShipFit"]
 __all__ += ["smooth_trial", "inverse_dynamics", "linear_in", "rates_model"]
-__all__ += ["CaptiveProblem", "CostTerm", "JointProblem", "linear_derivatives"]
+__all__ += ["CaptiveProblem", "CostTerm", "JointProblem", "linear_derivatives", "Rig", "read_rig", "CaptiveShip",
+            "identify_with_captive"]
 __all__ += ["ProblemSpec", "OutputErrorOptions", "LikelihoodOptions"]

@@ -19,7 +19,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["INNER_FOLDS", "RULE", "CaptiveChoice", "choose_with_captive", "inner_groups"]
+__all__ = ["INNER_FOLDS", "RULE", "CaptiveChoice", "CaptiveShip", "choose_with_captive", "identify_with_captive",
+           "inner_groups"]
 
 #: Groups of the inner cross-validation.
 INNER_FOLDS = 3
@@ -145,3 +146,173 @@ def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mappi
               "joint": float(np.mean([v["joint"] for v in per.values()])) if groups else float("nan")}
     choice = "joint" if groups and scores["joint"] < scores["captive-only"] else "captive-only"
     return CaptiveChoice(choice, scores, per, groups)
+
+
+@dataclass
+class CaptiveShip:
+    """The result of :func:`identify_with_captive`: the chosen model of the ship and why.
+
+    Parameters
+    ----------
+    model : Model
+        The ship.
+    captive_fit : FitResult
+        The captive tests' own fit (on their rig's model).
+    choice : CaptiveChoice
+        The nested choice (``"captive-only"`` without records).
+    ship : ShipFit or None
+        The joint fit, when chosen.
+    values : dict
+        The captive-only model's carried values (hull and interaction), when chosen.
+    belief : ParameterBelief or None
+        Their robust covariance.
+    verdict, discrepancy : dict or None
+        The captive-only model judged on the records it has not seen
+        (:func:`~.verdict.judge_unseen`); None without records.
+    """
+
+    model: object = field(repr=False)
+    captive_fit: object = field(repr=False)
+    choice: CaptiveChoice
+    ship: object = None
+    values: dict = field(default_factory=dict)
+    belief: object = field(default=None, repr=False)
+    verdict: dict | None = None
+    discrepancy: dict | None = None
+
+    @property
+    def worse(self) -> bool:
+        """True when the chosen model is worse than its start, or its fit stalled."""
+        if self.ship is not None:
+            return bool(self.ship.fit.worse)
+        return self.verdict is not None and self.verdict["verdict"] in ("worse", "stalled")
+
+    @property
+    def verdict_block(self) -> dict | None:
+        """The chosen model's verdict (the joint fit's own, or the captive-only model's out of sample)."""
+        return self.ship.fit.verdict if self.ship is not None else self.verdict
+
+    def to_json(self, path, facility: str | None = None):
+        """Write the chosen model as a fit file (``casship simulate --params`` replays it), with the choice
+        (``captive_choice``) and the captive fit (``captive_fit``).
+
+        Parameters
+        ----------
+        path : str or Path
+        facility : str, optional
+            The facility of the records the file will replay (the joint fit's facility quantities).
+
+        Returns
+        -------
+        Path
+        """
+        from .rig import write_carried
+
+        extra = {"captive_choice": self.choice.to_dict(), "captive_fit": self.captive_fit.to_dict()}
+        if self.ship is not None:
+            return self.ship.to_json(path, facility, extra=extra)
+        if self.verdict is not None:
+            extra.update(verdict=self.verdict, model_discrepancy=self.discrepancy)
+        return write_carried(path, self.model, self.values, self.belief, extra=extra)
+
+    def summary(self) -> str:
+        """The choice, then the joint fit, or the carried coefficients beside the model's and their verdict."""
+        s = self.choice.scores
+        if not self.choice.per_record:
+            lines = ["[captive] captive-only: no free-running record, the captive tests alone (the classical route)"]
+        else:
+            how = (f"captive-only {s['captive-only']:.3g} deg, joint {s['joint']:.3g} deg (inner cross-validation)"
+                   if self.choice.groups else "no inner split: a single record")
+            lines = [f"[captive] {self.choice.choice}: mean heading RMSE of the records, {how}",
+                     f"      because {self.choice.rule}"]
+        if self.ship is not None:
+            lines.append(self.ship.fit.summary())
+            return "\n".join(lines)
+        lines.append(self.captive_fit.summary())
+        start = self.model.param_dict()
+        sd = dict(zip(self.belief.names, np.sqrt(np.diag(self.belief.cov))))
+        own = [n for n in self.captive_fit.free if "@" in n]
+        lines.append(f"\ncarried to {self.model.name!r} ({len(self.values)} hull and interaction coefficients, robust "
+                     f"standard errors; {', '.join(own)} stay with the rig):")
+        lines.append(f"{'name':>16} {'published':>11} {'captive':>11} {'SE':>9} {'z':>7}")
+        for n, v in self.values.items():
+            lines.append(f"{n:>16} {start[n]:>11.5g} {v:>11.5g} {sd[n]:>9.3g} {(v - start[n]) / sd[n]:>7.1f}")
+        if self.verdict is None:
+            lines.append("no free-running record: no model-discrepancy term, so replays' predictive band is the "
+                         "parameter band alone; give records beside the captive tests to estimate one")
+        else:
+            for row in self.verdict["records"]:
+                lines.append(f"  {row['record']}: heading RMSE {row['psi_rmse_deg_start']:.3g} deg published, "
+                             f"{row['psi_rmse_deg_fit']:.3g} deg captive-only")
+            lines.append(f"model discrepancy q = {self.discrepancy['psi_variance_growth_deg2_per_s']:.3g} deg^2/s "
+                         f"({self.discrepancy['method']})")
+            lines.append(f"VERDICT: {self.verdict['verdict']}: {self.verdict['reason']}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """JSON-ready: the choice, the chosen model's verdict, and the joint fit or the carried values."""
+        out = {"model": self.model.name, "captive_choice": self.choice.to_dict(),
+               "captive_fit": self.captive_fit.to_dict(), "verdict": self.verdict_block}
+        if self.ship is not None:
+            return {**out, "joint": self.ship.to_dict()}
+        return {**out, "carried": dict(self.values), "model_discrepancy": self.discrepancy}
+
+
+def identify_with_captive(records, model, problem, captive_fit=None, *, workflow: Mapping | None = None,
+                          verbose: bool = False, progress=None) -> CaptiveShip:
+    """Captive tests, alone or beside free-running records, in one call: the model :data:`RULE` chooses.
+
+    Without records the captive-only model is the result (the classical route, carried to
+    ``model``). With records the nested choice (:func:`choose_with_captive`) picks the captive-only
+    model or the joint fit: the joint fit is then the ship workflow on all records with the captive
+    term (:func:`~.workflow.identify_ship`, judged as it judges itself); the captive-only model is
+    judged on the records, all out of sample (:func:`~.verdict.judge_unseen`).
+
+    Parameters
+    ----------
+    records : sequence of Dataset
+        Free-running records (may be empty).
+    model : str or Model
+        The ship (a registered name or a model).
+    problem : CaptiveProblem
+        The captive tests on their rig's model (:meth:`~.rig.Rig.problem`).
+    captive_fit : FitResult, optional
+        Its fit (default: solved here).
+    workflow : mapping, optional
+        Keyword arguments of :func:`~.workflow.identify_ship` (``weights``, ``prior``, ``measured``...).
+    verbose : bool
+        Print the joint workflow's choices as they are made.
+    progress : callable, optional
+        ``progress(text)`` before each long step.
+
+    Returns
+    -------
+    CaptiveShip
+    """
+    from ..models import get_model
+    from .rig import carried
+    from .verdict import judge_unseen
+    from .workflow import identify_ship
+
+    model = get_model(model) if isinstance(model, str) else model
+    records = list(records)
+    if captive_fit is None:
+        captive_fit = problem.solve()
+    if not records:
+        values, belief = carried(captive_fit, model)
+        return CaptiveShip(model, captive_fit, CaptiveChoice("captive-only", {"captive-only": float("nan"),
+                                                                              "joint": float("nan")}, {}),
+                           values=values, belief=belief)
+    choice = choose_with_captive(records, model, problem, captive_fit, workflow=workflow, progress=progress)
+    if choice.choice == "joint":
+        if progress is not None:
+            progress("the joint fit on every record")
+        ship = identify_ship(records, model, terms=[problem.cost_term(captive_fit)], verbose=verbose,
+                             **dict(workflow or {}))
+        return CaptiveShip(model, captive_fit, choice, ship=ship)
+    if progress is not None:
+        progress("judging the captive-only model on the records (out of sample)")
+    values, belief = carried(captive_fit, model)
+    verdict, discrepancy = judge_unseen(model, records, values, uncertainty=belief)
+    return CaptiveShip(model, captive_fit, choice, values=values, belief=belief, verdict=verdict,
+                       discrepancy=discrepancy)
