@@ -46,7 +46,6 @@ judged on it out of sample).
 from __future__ import annotations
 
 import warnings
-from types import SimpleNamespace
 
 from ._vocabulary import add_deprecated_alias
 from ._common import (add_record_options, check_input_files, check_outputs, count, number, parse_items, parse_pairs,
@@ -122,7 +121,8 @@ def register(sub) -> None:
     p.add_argument("--max-iter", dest="max_iter", type=count, default=100, help="iteration limit (default 100)")
     p.add_argument("--identifiability", action="store_true",
                    help="print the Fisher-information analysis of the free set at the guess before fitting")
-    p.add_argument("--plot", default=None, help="PNG of measured outputs vs the fitted free-run simulation")
+    p.add_argument("--plot", default=None, help="PNG of measured outputs vs the fitted free-run simulation (with "
+                                                "--captive: the captive force components, measured vs modelled)")
     p.add_argument("--json", action="store_true", help="print the fit as JSON instead of a table")
     p.add_argument("--no-loo", dest="no_loo", action="store_true",
                    help="judge the fit on its records only (no left-one-out refits: the model discrepancy is then "
@@ -262,20 +262,20 @@ def run(args) -> int:
     else:
         print(fit.summary())
         print(f"fit written to {args.out}" + (f" (verdict: {fit.verdict['verdict']})" if fit.worse else ""))
-    return _exit_code(fit, args.accept_worse)
+    return _exit_code(fit.worse, fit.verdict, args.accept_worse)
 
 
-def _exit_code(fit, accept: bool) -> int:
+def _exit_code(worse: bool, verdict: dict | None, accept: bool) -> int:
     """0, or :data:`~casship.identify.verdict.EXIT_WORSE` for a fit worse than its start or stalled."""
     import sys
 
-    if not fit.worse:
+    if not worse:
         return 0
-    word = fit.verdict["verdict"]
+    word = verdict["verdict"]
     if accept:
-        print(f"casship identify: verdict {word} accepted (--accept-worse): {fit.verdict['reason']}", file=sys.stderr)
+        print(f"casship identify: verdict {word} accepted (--accept-worse): {verdict['reason']}", file=sys.stderr)
         return 0
-    print(f"casship identify: verdict {word}: {fit.verdict['reason']}; the fit file records it (exit code "
+    print(f"casship identify: verdict {word}: {verdict['reason']}; the fit file records it (exit code "
           f"{EXIT_WORSE}; --accept-worse to exit 0)", file=sys.stderr)
     return EXIT_WORSE
 
@@ -313,7 +313,7 @@ def _workflow(args) -> int:
     else:
         print(ship.fit.summary())
         print(f"fit written to {args.out}" + (f" (verdict: {ship.fit.verdict['verdict']})" if ship.fit.worse else ""))
-    return _exit_code(ship.fit, args.accept_worse)
+    return _exit_code(ship.fit.worse, ship.fit.verdict, args.accept_worse)
 
 
 def _captive_fit(args):
@@ -368,6 +368,4 @@ def _captive(args, model, stamps, records, options) -> int:
     else:
         print(result.summary())
         print(f"fit written to {args.out}")
-    if not result.worse:
-        return 0
-    return _exit_code(SimpleNamespace(worse=True, verdict=result.verdict_block), args.accept_worse)
+    return _exit_code(result.worse, result.verdict_block, args.accept_worse)
