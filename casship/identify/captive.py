@@ -390,6 +390,8 @@ class CaptiveProblem:
         path : str or Path, optional
             Where to write the figure.
         """
+        from matplotlib.ticker import MaxNLocator
+
         from ..plotting import finish, panels, split_args
 
         ax, path = split_args(ax, path)
@@ -409,12 +411,14 @@ class CaptiveProblem:
                     a.set_axis_off()
                     continue
                 m = meas[idx]
-                a.plot(m, start[idx], "x", color="tab:gray", ms=4, label="start")
+                a.plot(m, start[idx], "x", color="tab:gray", ms=4, label="start (the model's values)")
                 a.plot(m, pred[idx], "o", color="tab:blue", ms=3, mfc="none", label="fit")
                 lo, hi = float(np.min(m)), float(np.max(m))
                 a.plot([lo, hi], [lo, hi], "k-", lw=0.6)
                 a.set_title(f"{kind}: {c}'", fontsize=9)
                 a.tick_params(labelsize=7)
+                a.xaxis.set_major_locator(MaxNLocator(4))           # non-dimensional values: long tick labels
+                a.yaxis.set_major_locator(MaxNLocator(5))
                 if i == len(kinds) - 1:
                     a.set_xlabel("measured", fontsize=8)
                 if j == 0:
