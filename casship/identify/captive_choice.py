@@ -19,6 +19,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .records import record_label
+
 __all__ = ["INNER_FOLDS", "RULE", "CaptiveChoice", "CaptiveShip", "choose_with_captive", "identify_with_captive",
            "inner_groups"]
 
@@ -78,7 +80,7 @@ class CaptiveChoice:
 
 
 def _unique_labels(records) -> list[str]:
-    labels = [str(d.meta.get("name", i)) for i, d in enumerate(records)]
+    labels = [record_label(d, i) for i, d in enumerate(records)]
     if len(set(labels)) < len(labels):          # the rule deals names: make repeated names distinct
         labels = [f"{i}:{lab}" for i, lab in enumerate(labels)]
     return labels
@@ -126,7 +128,7 @@ def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mappi
     records = list(records)
     if not records:
         raise InputError("choose_with_captive: no records")
-    missing = [str(d.meta.get("name", i)) for i, d in enumerate(records) if "psi" not in d]
+    missing = [record_label(d, i) for i, d in enumerate(records) if "psi" not in d]
     if missing:
         raise InputError(f"choose_with_captive: records {missing} hold no heading psi (the choice replays the heading)")
     labels = _unique_labels(records)

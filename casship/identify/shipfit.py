@@ -16,6 +16,7 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import InputError
+from .records import record_label
 
 __all__ = ["ShipFit", "pool_facilities"]
 
@@ -268,7 +269,7 @@ class ShipFit:
 
         if verdict not in ("replay", "loo"):
             raise InputError(f"verdict must be 'replay', 'loo' or None, got {verdict!r}")
-        labels = [str(d.meta.get("name", i)) for i, d in enumerate(records)]
+        labels = [record_label(d, i) for i, d in enumerate(records)]
 
         def as_replayed(s: ShipFit, facility=None):
             return dataclasses.replace(s.fit, params=s.params(facility))

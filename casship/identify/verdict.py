@@ -40,6 +40,7 @@ import numpy as np
 
 from .params_file import Q_MAX_DEG2_PER_S
 from .result import IdentificationWarning
+from .records import record_label
 
 __all__ = ["judge", "judge_records", "judge_unseen", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
            "VERDICTS"]
@@ -211,7 +212,7 @@ def judge_records(model, records, fit, *, start=None, labels=None, loo: bool | N
     (dict, dict)
     """
     records = list(records)
-    labels = list(labels) if labels is not None else [str(d.meta.get("name", i)) for i, d in enumerate(records)]
+    labels = list(labels) if labels is not None else [record_label(d, i) for i, d in enumerate(records)]
     status = fit.status
     stalled = not fit.converged
     start_p = model.param_dict(model.params() if start is None else model.params(start))
@@ -281,7 +282,7 @@ def judge_unseen(model, records, params, *, uncertainty=None, start=None, labels
         The verdict block and the ``model_discrepancy`` block.
     """
     records = list(records)
-    labels = list(labels) if labels is not None else [str(d.meta.get("name", i)) for i, d in enumerate(records)]
+    labels = list(labels) if labels is not None else [record_label(d, i) for i, d in enumerate(records)]
     start_p = model.param_dict(model.params() if start is None else model.params(start))
     values = {**model.param_dict(), **dict(params)}
     base = {"status": "converged", "margin": WORSE_MARGIN, "out_of_sample": True,
