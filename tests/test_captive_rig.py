@@ -231,3 +231,28 @@ def test_identify_with_captive_tests_alone_and_the_joint_branch(rig, monkeypatch
     assert joint.verdict_block is joint.ship.fit.verdict
     obj = json.loads(joint.to_json("joint.json").read_text())
     assert obj["captive_choice"]["choice"] == "joint" and obj["verdict"]["verdict"] in ("better", "no better", "worse")
+
+
+def test_the_inner_folds_replay_a_record_with_its_own_facility(rig, monkeypatch):
+    """A record that names no facility is of the workflow's one default facility, in training and when held out."""
+    import casship as cs
+    from casship.identify import captive_choice, workflow
+
+    tests, _ = rig_tests(rig)
+    pb = rig.problem(tests)
+    fit = pb.solve(show=False)
+    ship = cs.models.get_model("kvlcc2")
+    tr = cs.maneuvers.run_maneuver(ship, "zigzag", rudder_deg=10, duration=300, dt=2.0).trajectory
+    records = [cs.Dataset(tr.t, {n: tr[n] for n in ("delta", "n", "u", "v", "r", "x", "y", "psi")}, meta={"name": k})
+               for k in ("a", "b")]
+    asked = []
+
+    class Fake:
+        def params(self, facility=None):
+            asked.append(facility)
+            return ship.param_dict()
+
+    monkeypatch.setattr(workflow, "identify_ship", lambda *a, **k: Fake())
+    choice = captive_choice.choose_with_captive(records, ship, pb, fit)
+    assert asked == [workflow.DEFAULT_FACILITY] * 2 and len(choice.groups) == 2
+    assert workflow.facility_of(cs.Dataset(tr.t, {"psi": tr["psi"]}, meta={"facility": "HSVA"})) == "HSVA"

@@ -352,12 +352,13 @@ def _captive(args, model, stamps, records, options) -> int:
     """The captive tests alone or beside ``records`` (:func:`casship.identify.captive_choice.identify_with_captive`),
     written, plotted and printed."""
     from ..identify.captive_choice import identify_with_captive
+    from ..identify.workflow import facility_of
     from ..progress import stage
 
     problem, alone = _captive_fit(args)
     result = identify_with_captive(records, model, problem, alone, workflow=options, verbose=not args.json,
                                    progress=lambda text: stage(text, 3, 3))
-    facilities = sorted({str(d.meta.get("facility", "records")) for d in records})
+    facilities = sorted({facility_of(d) for d in records})
     write_output(args.out, lambda path: result.to_json(path, facilities[0] if len(facilities) == 1 else None),
                  option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:

@@ -123,7 +123,7 @@ def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mappi
     """
     from ..errors import InputError
     from .rig import carried
-    from .workflow import identify_ship
+    from .workflow import facility_of, identify_ship
 
     records = list(records)
     if not records:
@@ -143,7 +143,7 @@ def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mappi
         ship = identify_ship(train, model, terms=[problem.cost_term(captive_fit)], verdict=None, **dict(workflow or {}))
         for lab, d in zip(labels, records):
             if lab in group:
-                per[lab]["joint"] = _heading_rmse(model, d, ship.params(d.meta.get("facility")))
+                per[lab]["joint"] = _heading_rmse(model, d, ship.params(facility_of(d)))
     scores = {"captive-only": float(np.mean([v["captive-only"] for v in per.values()])),
               "joint": float(np.mean([v["joint"] for v in per.values()])) if groups else float("nan")}
     choice = "joint" if groups and scores["joint"] < scores["captive-only"] else "captive-only"
