@@ -237,6 +237,7 @@ def test_the_inner_folds_replay_a_record_with_its_own_facility(rig, monkeypatch)
     """A record that names no facility is of the workflow's one default facility, in training and when held out."""
     import casship as cs
     from casship.identify import captive_choice, workflow
+    from casship.identify.records import DEFAULT_FACILITY, facility_of
 
     tests, _ = rig_tests(rig)
     pb = rig.problem(tests)
@@ -254,5 +255,5 @@ def test_the_inner_folds_replay_a_record_with_its_own_facility(rig, monkeypatch)
 
     monkeypatch.setattr(workflow, "identify_ship", lambda *a, **k: Fake())
     choice = captive_choice.choose_with_captive(records, ship, pb, fit)
-    assert asked == [workflow.DEFAULT_FACILITY] * 2 and len(choice.groups) == 2
-    assert workflow.facility_of(cs.Dataset(tr.t, {"psi": tr["psi"]}, meta={"facility": "HSVA"})) == "HSVA"
+    assert asked == [DEFAULT_FACILITY] * 2 and len(choice.groups) == 2
+    assert facility_of(cs.Dataset(tr.t, {"psi": tr["psi"]}, meta={"facility": "HSVA"})) == "HSVA"

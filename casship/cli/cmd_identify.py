@@ -352,7 +352,7 @@ def _captive(args, model, stamps, records, options) -> int:
     """The captive tests alone or beside ``records`` (:func:`casship.identify.captive_choice.identify_with_captive`),
     written, plotted and printed."""
     from ..identify.captive_choice import identify_with_captive
-    from ..identify.workflow import facility_of
+    from ..identify.records import facility_of
     from ..progress import stage
 
     problem, alone = _captive_fit(args)

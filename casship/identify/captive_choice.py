@@ -19,7 +19,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .records import record_label
+from .records import facility_of, record_label
 
 __all__ = ["INNER_FOLDS", "RULE", "CaptiveChoice", "CaptiveShip", "choose_with_captive", "identify_with_captive",
            "inner_groups"]
@@ -123,7 +123,7 @@ def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mappi
     """
     from ..errors import InputError
     from .rig import carried
-    from .workflow import facility_of, identify_ship
+    from .workflow import identify_ship
 
     records = list(records)
     if not records:

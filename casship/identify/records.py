@@ -16,7 +16,8 @@ from ..data import Dataset
 from ..estimators.prior import second_difference_std
 from ..errors import InputError, InputTypeError
 
-__all__ = ["check_gaps", "noise_std", "initial_states", "share_labels", "record_label", "as_records"]
+__all__ = ["check_gaps", "noise_std", "initial_states", "share_labels", "record_label", "facility_of", "DEFAULT_FACILITY",
+           "as_records"]
 
 
 def as_records(datasets) -> list[Dataset]:
@@ -47,6 +48,24 @@ def as_records(datasets) -> list[Dataset]:
             raise InputError(f"record {record_label(d, i)!r} has {len(d)} row(s); an identification record "
                              "needs at least two samples")
     return records
+
+
+#: The facility of a record whose ``meta`` names none (all such records are one facility).
+DEFAULT_FACILITY = "records"
+
+
+def facility_of(record: Dataset) -> str:
+    """The facility label of a record: its ``meta["facility"]``, else :data:`DEFAULT_FACILITY`.
+
+    Parameters
+    ----------
+    record : Dataset
+
+    Returns
+    -------
+    str
+    """
+    return str(record.meta.get("facility", DEFAULT_FACILITY))
 
 
 def record_label(data: Dataset, i: int) -> str:

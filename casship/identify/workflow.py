@@ -60,12 +60,13 @@ from .identifiability import MAX_CORR, MAX_RATIO, RunEvidence
 from .inverse_dynamics import inverse_dynamics, smooth_trial
 from .output_error import OutputErrorProblem
 from .prior import Prior
+from .records import facility_of
 from .result import IdentificationWarning
 from .runlevel import MEASURED, approach_resistance, resample, run_evidence
 from .shipfit import ShipFit, pool_facilities
 from .uncertainty import effective_samples
 
-__all__ = ["identify_ship", "ShipFit", "facility_of", "DEFAULT_FACILITY", "PRESET_UNCERTAINTY", "preset_prior_std", "run_evidence", "pool_facilities",
+__all__ = ["identify_ship", "ShipFit", "PRESET_UNCERTAINTY", "preset_prior_std", "run_evidence", "pool_facilities",
            "resample", "approach_resistance", "CANDIDATES", "ASYMMETRY", "DIRECTION_SWITCHED", "RUDDER", "MEASURED"]
 
 HULL_LINEAR = ("Y_v_dash", "Y_r_dash", "N_v_dash", "N_r_dash")
@@ -136,24 +137,6 @@ def preset_prior_std(model, names: Sequence[str], override: Mapping[str, float] 
         else:
             raise InputError(f"no stated prior uncertainty for {base!r}: give it (prior={{{base!r}: std}})")
     return out
-
-
-#: The facility of a record whose ``meta`` names none (all such records are one facility).
-DEFAULT_FACILITY = "records"
-
-
-def facility_of(record) -> str:
-    """The facility label of a record: its ``meta["facility"]``, else :data:`DEFAULT_FACILITY`.
-
-    Parameters
-    ----------
-    record : Dataset
-
-    Returns
-    -------
-    str
-    """
-    return str(record.meta.get("facility", DEFAULT_FACILITY))
 
 
 def _labels(records, facility) -> list[str]:
