@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from casship.identify.captive import linear_derivatives
+from casship.identify.rig import classical_derivatives
 from casship.io import read_captive
 from casship.models import kvlcc2
 from casship.models.kvlcc2 import KVLCC2_COMMON, KVLCC2_L7
@@ -160,7 +160,7 @@ def run(out: Path, quick: bool = False, workers=None, scheduler=None, data_dir=N
     fit = pb.solve(show=False)
     fit.to_json(out / "captive_fit.json")
     published_pred = pb.predictor.predict(model.params())     # the published hull on HMRI's model
-    lin = linear_derivatives(tests, L=L_HMRI, T=HMRI["d"], mass=MASS, rho=RHO, x_G=X_G, I_z=IZ_MIDSHIP)
+    lin = classical_derivatives(pb)
 
     # coefficients beside the published ones
     rows = {}

@@ -12,8 +12,8 @@ from casship.cli import main
 from casship.data import Dataset
 from casship.errors import InputError
 from casship.identify.captive_choice import choose_with_captive, inner_groups
-from casship.identify.rig import (CAPTIVE_HULL, CAPTIVE_OWN, RIGS, Rig, captive_free_set, carried, read_rig,
-                                  write_carried)
+from casship.identify.rig import (CAPTIVE_HULL, CAPTIVE_OWN, RIGS, Rig, captive_free_set, carried,
+                                  classical_derivatives, read_rig, write_carried)
 from casship.identify.verdict import judge_unseen
 from casship.models import kvlcc2, nomoto_first_order
 from casship.simulation import simulate
@@ -155,7 +155,11 @@ def test_identify_captive_alone_writes_the_carried_hull(data_dir, capsys):
     text = capsys.readouterr().out
     assert "carried to 'kvlcc2'" in text and "no model-discrepancy term" in text
     obj = json.loads(open("cap.json").read())
-    fit = read_rig("hmri-t530").problem(read_captive(captive), "kvlcc2").solve(show=False)
+    problem = read_rig("hmri-t530").problem(read_captive(captive), "kvlcc2")
+    fit = problem.solve(show=False)
+    # the classical cross-check on the rig's mass and yaw inertia: the added mass and inertia of docs/data.md
+    classical = classical_derivatives(problem)
+    assert classical["m_y_dash"] == pytest.approx(0.209, abs=5e-4) and classical["J_z_dash"] == pytest.approx(0.0114, abs=5e-5)
     values, _ = carried(fit, kvlcc2())
     assert obj["estimates"] == pytest.approx(values, rel=1e-9) and "verdict" not in obj
     assert open("forces.png", "rb").read(4) == b"\x89PNG"
@@ -212,7 +216,8 @@ def test_identify_with_captive_tests_alone_and_the_joint_branch(rig, monkeypatch
     alone = identify_with_captive([], "kvlcc2", pb, fit)
     assert alone.ship is None and alone.verdict is None and not alone.worse
     assert alone.values == carried(fit, kvlcc2())[0]
-    assert "the captive tests alone" in alone.summary()
+    assert "the captive tests alone" in alone.summary() and "classical linear derivatives" in alone.summary()
+    assert alone.classical == classical_derivatives(pb) and "N_v_dash" in alone.classical
     obj = json.loads(alone.to_json("alone.json").read_text())
     assert obj["captive_choice"]["choice"] == "captive-only" and "verdict" not in obj
 

@@ -171,6 +171,9 @@ class CaptiveShip:
     verdict, discrepancy : dict or None
         The captive-only model judged on the records it has not seen
         (:func:`~.verdict.judge_unseen`); None without records.
+    classical : dict
+        The classical linear derivatives of the tests (:func:`~.rig.classical_derivatives`), beside the
+        captive-only model's.
     """
 
     model: object = field(repr=False)
@@ -181,6 +184,7 @@ class CaptiveShip:
     belief: object = field(default=None, repr=False)
     verdict: dict | None = None
     discrepancy: dict | None = None
+    classical: dict = field(default_factory=dict)
 
     @property
     def worse(self) -> bool:
@@ -232,6 +236,13 @@ class CaptiveShip:
             return "\n".join(lines)
         lines.append(self.captive_fit.summary())
         start = self.model.param_dict()
+        if self.classical:
+            lines.append("\nclassical linear derivatives from the first harmonics and the static drift slope (cross-check):")
+            lines.append(f"{'name':>16} {'classical':>11} {'fit':>11} {'published':>11}")
+            for n in ("Y_v_dash", "N_v_dash", "N_r_dash", "m_y_dash", "J_z_dash"):
+                if n in self.classical and n in self.captive_fit.estimates:
+                    lines.append(f"{n:>16} {self.classical[n]:>11.5g} {self.captive_fit.estimates[n]:>11.5g} "
+                                 f"{start.get(n, float('nan')):>11.5g}")
         sd = dict(zip(self.belief.names, np.sqrt(np.diag(self.belief.cov))))
         own = [n for n in self.captive_fit.free if "@" in n]
         lines.append(f"\ncarried to {self.model.name!r} ({len(self.values)} hull and interaction coefficients, robust "
@@ -257,7 +268,8 @@ class CaptiveShip:
                "captive_fit": self.captive_fit.to_dict(), "verdict": self.verdict_block}
         if self.ship is not None:
             return {**out, "joint": self.ship.to_dict()}
-        return {**out, "carried": dict(self.values), "model_discrepancy": self.discrepancy}
+        return {**out, "carried": dict(self.values), "model_discrepancy": self.discrepancy,
+                "classical_derivatives": dict(self.classical)}
 
 
 def identify_with_captive(records, model, problem, captive_fit=None, *, workflow: Mapping | None = None,
@@ -292,7 +304,7 @@ def identify_with_captive(records, model, problem, captive_fit=None, *, workflow
     CaptiveShip
     """
     from ..models import get_model
-    from .rig import carried
+    from .rig import carried, classical_derivatives
     from .verdict import judge_unseen
     from .workflow import identify_ship
 
@@ -304,7 +316,7 @@ def identify_with_captive(records, model, problem, captive_fit=None, *, workflow
         values, belief = carried(captive_fit, model)
         return CaptiveShip(model, captive_fit, CaptiveChoice("captive-only", {"captive-only": float("nan"),
                                                                               "joint": float("nan")}, {}),
-                           values=values, belief=belief)
+                           values=values, belief=belief, classical=classical_derivatives(problem))
     choice = choose_with_captive(records, model, problem, captive_fit, workflow=workflow, progress=progress)
     if choice.choice == "joint":
         if progress is not None:
@@ -317,4 +329,4 @@ def identify_with_captive(records, model, problem, captive_fit=None, *, workflow
     values, belief = carried(captive_fit, model)
     verdict, discrepancy = judge_unseen(model, records, values, uncertainty=belief)
     return CaptiveShip(model, captive_fit, choice, values=values, belief=belief, verdict=verdict,
-                       discrepancy=discrepancy)
+                       discrepancy=discrepancy, classical=classical_derivatives(problem))

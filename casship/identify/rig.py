@@ -41,7 +41,7 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["Rig", "RIGS", "CAPTIVE_HULL", "CAPTIVE_INTERACTION", "CAPTIVE_OWN", "CAPTIVE_CHANNELS", "CAPTIVE_OPTIONS",
-           "captive_free_set", "carried", "read_rig", "write_carried"]
+           "captive_free_set", "carried", "classical_derivatives", "read_rig", "write_carried"]
 
 #: Hull coefficients a PMM series is designed to measure (static drift, pure sway, pure yaw, yaw with drift).
 CAPTIVE_HULL = ("X_vv_dash", "X_vr_dash", "X_rr_dash", "X_vvvv_dash", "Y_v_dash", "Y_r_dash", "Y_vvv_dash",
@@ -351,3 +351,29 @@ def write_carried(path, model, values, belief, *, noise=None, method: str = "cap
     if noise is not None:
         fit["noise"] = noise
     return write_params_file(path, model, values, belief, {**fit, "candidate": "captive-only", **(extra or {})})
+
+
+def classical_derivatives(problem) -> dict:
+    """The classical linear derivatives of a captive problem's tests (the naval architect's first check).
+
+    :func:`~casship.identify.captive.linear_derivatives` on the rig's particulars as the problem's model
+    holds them: length ``L_pp``, draught ``d``, mass ``rho nabla``, ``x_G`` and the yaw inertia about
+    midship ``m ((k_zz L)^2 + x_G^2)``.
+
+    Parameters
+    ----------
+    problem : CaptiveProblem
+        The captive tests on their rig's model (:meth:`Rig.problem`).
+
+    Returns
+    -------
+    dict
+        As :func:`~casship.identify.captive.linear_derivatives` (``Y_v_dash``, ``N_v_dash``,
+        ``N_r_dash``, ``m_y_dash``, ``J_z_dash``...).
+    """
+    from .captive import linear_derivatives
+
+    p = problem.model.param_dict(problem.base)
+    L, mass = p["L_pp"], p["rho"] * p["nabla"]
+    return linear_derivatives(problem.tests, L=L, T=p["d"], mass=mass, rho=p["rho"], x_G=p["x_G"],
+                              I_z=mass * ((p["k_zz"] * L) ** 2 + p["x_G"] ** 2))
