@@ -256,6 +256,8 @@ MUTANTS = [
     M("verdict out of sample: the start's replay for the fit's", VERD,
       "f_res = _replay(model, data, values, {}, method, uncertainty=uncertainty)",
       "f_res = _replay(model, data, start_p, {}, method, uncertainty=uncertainty)", (T_RIG,)),
+    M("classical derivatives: the yaw inertia about the centre of gravity for midship's", RIG,
+      'I_z=mass * ((p["k_zz"] * L) ** 2 + p["x_G"] ** 2))', 'I_z=mass * (p["k_zz"] * L) ** 2)', (T_RIG,)),
     M("captive choice: a held-out record without a facility at the population values", CHOOSE,
       "ship.params(facility_of(d))", 'ship.params(d.meta.get("facility"))', (T_RIG,)),
     M("captive choice: the worse candidate wins", CHOOSE, 'scores["joint"] < scores["captive-only"] else',
