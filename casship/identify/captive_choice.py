@@ -86,17 +86,6 @@ def _unique_labels(records) -> list[str]:
     return labels
 
 
-def _heading_rmse(model, data, params) -> float:
-    from ..maneuvers import replay
-    from ..simulation import IntegrationError
-
-    try:
-        e = replay(model, data, model.params(params), check_limits=False, samples=0).errors.get("psi_rmse_deg")
-    except (IntegrationError, ValueError, FloatingPointError, RuntimeError):
-        return float("inf")
-    return float(e) if e is not None and np.isfinite(e) else float("inf")
-
-
 def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mapping | None = None,
                         progress=None) -> CaptiveChoice:
     """The nested choice of :data:`RULE` between the captive-only model and the joint fit on ``records``.
@@ -123,6 +112,7 @@ def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mappi
     """
     from ..errors import InputError
     from .rig import carried
+    from .verdict import heading_rmse
     from .workflow import identify_ship
 
     records = list(records)
@@ -134,7 +124,7 @@ def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mappi
     labels = _unique_labels(records)
     values, _ = carried(captive_fit, model)
     captive_params = {**model.param_dict(), **values}
-    per = {lab: {"captive-only": _heading_rmse(model, d, captive_params)} for lab, d in zip(labels, records)}
+    per = {lab: {"captive-only": heading_rmse(model, d, captive_params)} for lab, d in zip(labels, records)}
     groups = inner_groups(labels) if len(records) >= 2 else []
     for g, group in enumerate(groups):
         if progress is not None:
@@ -143,7 +133,7 @@ def choose_with_captive(records, model, problem, captive_fit, *, workflow: Mappi
         ship = identify_ship(train, model, terms=[problem.cost_term(captive_fit)], verdict=None, **dict(workflow or {}))
         for lab, d in zip(labels, records):
             if lab in group:
-                per[lab]["joint"] = _heading_rmse(model, d, ship.params(facility_of(d)))
+                per[lab]["joint"] = heading_rmse(model, d, ship.params(facility_of(d)))
     scores = {"captive-only": float(np.mean([v["captive-only"] for v in per.values()])),
               "joint": float(np.mean([v["joint"] for v in per.values()])) if groups else float("nan")}
     choice = "joint" if groups and scores["joint"] < scores["captive-only"] else "captive-only"

@@ -42,7 +42,7 @@ from .params_file import Q_MAX_DEG2_PER_S
 from .result import IdentificationWarning
 from .records import record_label
 
-__all__ = ["judge", "judge_records", "judge_unseen", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
+__all__ = ["judge", "judge_records", "judge_unseen", "heading_rmse", "heading_discrepancy", "WORSE_MARGIN", "EXIT_WORSE", "IN_SAMPLE_FACTOR", "Q_MAX_DEG2_PER_S",
            "VERDICTS"]
 
 #: Relative margin of the mean heading RMSE beyond which a fit is worse than its start.
@@ -103,6 +103,26 @@ def _replay(model, data, params: dict, biases: dict, method: str, uncertainty=No
     if e is None or not np.isfinite(e):
         return None
     return res
+
+
+def heading_rmse(model, data, params, method: str = "rk4") -> float:
+    """Heading RMSE [deg] of ``data`` replayed with ``params`` from its measured start (infinite when the
+    replay fails), as the verdicts count it.
+
+    Parameters
+    ----------
+    model : Model
+    data : Dataset
+    params : mapping or array
+        The parameters (the others keep the model's).
+    method : str
+        Integration method.
+
+    Returns
+    -------
+    float
+    """
+    return _rmse(_replay(model, data, params, {}, method))
 
 
 def _record_values(fit, r: int) -> tuple[dict, dict]:
@@ -218,8 +238,7 @@ def judge_records(model, records, fit, *, start=None, labels=None, loo: bool | N
     start_p = model.param_dict(model.params() if start is None else model.params(start))
     base = {"status": status, "margin": WORSE_MARGIN,
             "start": "the parameters the problem held before the fit (the model's own values or params=)"}
-    if "psi" not in model.state_names and "psi" not in model.output_names or \
-            not all("psi" in d for d in records):
+    if not _has_heading(model, records):
         verdict = "stalled" if stalled else "not judged"
         reason = "the records hold no heading psi to replay" + ("; the solver did not converge" if stalled else "")
         return ({**base, "verdict": verdict, "reason": reason, "records": []},
@@ -287,7 +306,7 @@ def judge_unseen(model, records, params, *, uncertainty=None, start=None, labels
     values = {**model.param_dict(), **dict(params)}
     base = {"status": "converged", "margin": WORSE_MARGIN, "out_of_sample": True,
             "start": "the parameters before the fit (the model's own values)"}
-    if "psi" not in model.state_names and "psi" not in model.output_names or not all("psi" in d for d in records):
+    if not _has_heading(model, records):
         return ({**base, "verdict": "not judged", "reason": "the records hold no heading psi to replay", "records": []},
                 {"psi_variance_growth_deg2_per_s": 0.0, "method": "none (no heading in the records)"})
     rows, held = [], []
@@ -303,11 +322,8 @@ def judge_unseen(model, records, params, *, uncertainty=None, start=None, labels
     out["verdict"], out["reason"] = verdict, reason + " (the records took no part in the fit: every replay is out of sample)"
     if not held:
         return out, {"psi_variance_growth_deg2_per_s": 0.0, "method": "none (no replay succeeded)"}
-    qs = [heading_discrepancy(*ser) for ser in held]
-    return out, {"psi_variance_growth_deg2_per_s": float(np.degrees(np.degrees(np.mean(qs)))),
-                 "method": f"out of sample over {len(held)} record{'s' if len(held) > 1 else ''} the fit did not see: least squares of "
-                           "e^2 - s^2 = q t per replay (the fit's parameter band), averaged",
-                 "per_record_deg2_per_s": [float(np.degrees(np.degrees(q))) for q in qs]}
+    return out, _q_block(held, f"out of sample over {len(held)} record{'s' if len(held) > 1 else ''} the fit did not see: "
+                               "least squares of e^2 - s^2 = q t per replay (the fit's parameter band), averaged")
 
 
 def _decide(out: dict, stalled: bool) -> tuple[str, str]:
@@ -341,15 +357,23 @@ def _decide(out: dict, stalled: bool) -> tuple[str, str]:
 def _discrepancy(held: Sequence, in_sample: Sequence, loo: bool, n: int) -> dict:
     """The ``model_discrepancy`` block: ``q`` from the left-one-out replays, else in-sample times the factor."""
     if loo and held:
-        qs = [heading_discrepancy(*ser) for ser in held]
-        return {"psi_variance_growth_deg2_per_s": float(np.degrees(np.degrees(np.mean(qs)))),
-                "method": f"left-one-out over {n} records: least squares of e^2 - s^2 = q t per held-out replay "
-                          "(its fold's parameter band), averaged",
-                "per_record_deg2_per_s": [float(np.degrees(np.degrees(q))) for q in qs]}
+        return _q_block(held, f"left-one-out over {n} records: least squares of e^2 - s^2 = q t per held-out replay "
+                              "(its fold's parameter band), averaged")
     if in_sample:
-        qs = [heading_discrepancy(*ser) for ser in in_sample]
-        return {"psi_variance_growth_deg2_per_s": float(IN_SAMPLE_FACTOR * np.degrees(np.degrees(np.mean(qs)))),
-                "method": f"in-sample default: {IN_SAMPLE_FACTOR:g} x the least-squares q of e^2 - s^2 = q t on the "
-                          "fit's own replays (a record the fit has seen errs less than a new run)",
-                "per_record_deg2_per_s": [float(np.degrees(np.degrees(q))) for q in qs]}
+        return _q_block(in_sample, f"in-sample default: {IN_SAMPLE_FACTOR:g} x the least-squares q of e^2 - s^2 = q t "
+                                   "on the fit's own replays (a record the fit has seen errs less than a new run)",
+                        factor=IN_SAMPLE_FACTOR)
     return {"psi_variance_growth_deg2_per_s": 0.0, "method": "none (no replay of the fit succeeded)"}
+
+
+def _q_block(series: Sequence, method: str, factor: float = 1.0) -> dict:
+    """The ``model_discrepancy`` block of replays ``(t, e, s)``: the mean least-squares ``q`` [deg^2/s] times
+    ``factor``, how it was made, and each replay's own ``q``."""
+    qs = [heading_discrepancy(*ser) for ser in series]
+    return {"psi_variance_growth_deg2_per_s": float(factor * np.degrees(np.degrees(np.mean(qs)))), "method": method,
+            "per_record_deg2_per_s": [float(np.degrees(np.degrees(q))) for q in qs]}
+
+
+def _has_heading(model, records) -> bool:
+    """True when the model has a heading ``psi`` (state or output) and every record holds it."""
+    return ("psi" in model.state_names or "psi" in model.output_names) and all("psi" in d for d in records)
