@@ -338,7 +338,7 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
     # with the wave filter the observer damps on the steady steering (section 8, rule 1): the noise budget
     # and the margins analyse that observer, linearised on a straight course (Nomoto K / kappa, T / kappa)
     kappa = (observer_damping(SimpleNamespace(steering=steering, feedforward=val["feedforward"]), nom)
-             if val["wave_filter"] and mode == "heading" else 1.0)
+             if val["wave_filter"] else 1.0)
 
     def candidate(wn, wn_ref=None):
         """Gains, estimator tuning and the linear loop (with the estimator) at bandwidth ``wn``."""
@@ -363,9 +363,9 @@ def derive_settings(plant: SteeringPlant, lin, nom: Nomoto, given: Mapping | Non
                 q_r, qb = val["observer_q"]
             else:
                 qb = q_b
-                filtered = val["wave_filter"] and budget_wave[0] is not None
-                q_r, noise = tune_heading_q(K=nom.K / (kappa if filtered else 1.0), T=nom.T / (kappa if filtered else 1.0),
-                                        q_r_max=2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T), q_b=qb, dt=dt,
+                k = kappa if budget_wave[0] is not None else 1.0     # the filter is on only with the sea counted
+                q_r, noise = tune_heading_q(K=nom.K / k, T=nom.T / k, q_r_max=2 * (0.1 * val["r_max"]) ** 2 / abs(nom.T),
+                                        q_b=qb, dt=dt,
                                         compass_every=max(1, int(round(1 / (val["compass_rate"] * dt)))),
                                         compass_std=val["compass_std"], gyro_std=val["gyro_std"], Kp=gains.Kp,
                                         Kd=Kd_est, budget=room, wave=budget_wave[0],
