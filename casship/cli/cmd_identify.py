@@ -280,18 +280,22 @@ def _exit_code(worse: bool, verdict: dict | None, accept: bool) -> int:
     return EXIT_WORSE
 
 
+def _own_fit_options(args) -> dict:
+    """The options of a fit of one's own (``--free``), each with whether it was given: what the ship workflow and
+    the captive tests alone refuse."""
+    return {"--share": args.share is not None, "--group": args.group is not None, "--bounds": args.bounds is not None,
+            "--R": args.R is not None, "--Q": args.Q is not None, "--estimate-noise": args.estimate_noise is not None,
+            "--sigma": args.sigma is not None, "--guess": args.guess is not None, "--params": args.params is not None,
+            "--estimate-x0": args.estimate_x0 is not None, "--shooting": args.shooting != "single",
+            "--identifiability": args.identifiability, "--prior-weight": args.prior_weight != 1.0}
+
+
 def _workflow(args) -> int:
     """``casship identify`` without ``--free``: the ship workflow of the Python API, printed choice by choice."""
     from ..identify.workflow import identify_ship
     from ..models import get_model
 
-    refuse_unused(args.parser, {o: v for o, v in {
-        "--share": args.share is not None, "--group": args.group is not None,
-        "--bounds": args.bounds is not None, "--R": args.R is not None, "--Q": args.Q is not None,
-        "--estimate-noise": args.estimate_noise is not None, "--sigma": args.sigma is not None,
-        "--guess": args.guess is not None, "--params": args.params is not None,
-        "--estimate-x0": args.estimate_x0 is not None, "--shooting": args.shooting != "single",
-        "--identifiability": args.identifiability, "--prior-weight": args.prior_weight != 1.0}.items()},
+    refuse_unused(args.parser, _own_fit_options(args),
                   "without --free the ship workflow runs (output error, its own start and weights); give --free "
                   "for a fit of your own")
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
@@ -334,15 +338,10 @@ def _captive_alone(args) -> int:
     """``casship identify --captive DIR --rig RIG --model NAME`` without records: the classical route."""
     from ..models import get_model
 
-    refuse_unused(args.parser, {o: v for o, v in {
-        "--weights": args.weights is not None, "--share": args.share is not None, "--group": args.group is not None,
-        "--bounds": args.bounds is not None, "--R": args.R is not None, "--Q": args.Q is not None,
-        "--estimate-noise": args.estimate_noise is not None, "--sigma": args.sigma is not None,
-        "--guess": args.guess is not None, "--params": args.params is not None, "--measured": args.measured is not None,
-        "--estimate-x0": args.estimate_x0 is not None, "--shooting": args.shooting != "single",
-        "--identifiability": args.identifiability, "--prior-std": args.prior is not None,
-        "--prior-weight": args.prior_weight != 1.0, "--decimate": args.decimate != 1, "--no-loo": args.no_loo,
-        "--accept-worse": args.accept_worse}.items()},
+    refuse_unused(args.parser, {**_own_fit_options(args), "--weights": args.weights is not None,
+                                "--measured": args.measured is not None, "--prior-std": args.prior is not None,
+                                "--decimate": args.decimate != 1, "--no-loo": args.no_loo,
+                                "--accept-worse": args.accept_worse},
                   "without records the captive tests are fitted alone by the rule of casship.identify.rig")
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
     return _captive(args, get_model(args.model), stamps, [], {})
