@@ -57,14 +57,43 @@ def as_cov(value, n: int, name: str, names: Sequence[str] | None = None, allow_z
                          f"entry ({label(j)}, {label(i)}) is {m[j, i]:.6g}")
     m = 0.5 * (m + m.T)
     if n:
-        eig = np.linalg.eigvalsh(m)
-        tol = 1e-12 * abs(eig).max()     # relative: variances of lat/lon in rad are ~1e-14
-        if eig.min() < -tol:
-            raise InputError(f"{name}: not positive semi-definite (smallest eigenvalue {eig.min():.3g}); "
-                             "variances must be non-negative")
-        if not allow_zero and eig.min() <= tol:
-            raise InputError(f"{name}: must be positive definite (smallest eigenvalue {eig.min():.3g})")
+        _check_definite(m, name, label, allow_zero)
     return m
+
+
+def _check_definite(m: np.ndarray, name: str, label, allow_zero: bool) -> None:
+    """Raise unless ``m`` is positive semi-definite (definite unless ``allow_zero``), naming the channel.
+
+    The test is on the correlation matrix, so it does not depend on the channels' units: a variance
+    of 1e-12 rad^2/s^2 beside 6 m^2 is as definite as any other (a test relative to the largest
+    eigenvalue would call such a diagonal singular).
+    """
+    d = np.diag(m).copy()
+    if d.min() < 0:
+        i = int(np.argmin(d))
+        raise InputError(f"{name}: not positive semi-definite (the variance of {label(i)} is {d[i]:.3g}); "
+                         "variances must be non-negative")
+    zero = d <= 0
+    if zero.any():
+        i = int(np.argmax(zero))
+        if not allow_zero:
+            raise InputError(f"{name}: must be positive definite (the variance of {label(i)} is 0)")
+        if np.any(m[zero] != 0):
+            j = int(np.argmax(np.any(m[zero] != 0, axis=0)))
+            raise InputError(f"{name}: not positive semi-definite ({label(i)} has variance 0 but covaries with "
+                             f"{label(j)})")
+    keep = ~zero
+    if not keep.any():
+        return
+    scale = 1.0 / np.sqrt(d[keep])
+    eig = np.linalg.eigvalsh(m[np.ix_(keep, keep)] * np.outer(scale, scale))   # correlations: unit-free
+    tol = 1e-12 * max(1.0, float(keep.sum()))
+    if eig.min() < -tol:
+        raise InputError(f"{name}: not positive semi-definite (smallest eigenvalue of the correlation matrix "
+                         f"{eig.min():.3g}); variances must be non-negative")
+    if not allow_zero and eig.min() <= tol:
+        raise InputError(f"{name}: must be positive definite (smallest eigenvalue of the correlation matrix "
+                         f"{eig.min():.3g}: some channels are exactly correlated)")
 
 
 def _in_units(value: float, std: float, unit: str) -> str:

@@ -130,6 +130,21 @@ def test_check_time_and_covariances():
         as_cov([1.0, 0.0], 2, "R", allow_zero=False)
 
 
+def test_covariance_check_is_unit_free_and_names_the_channel():
+    # a smooth yaw-rate record (1e-12 rad^2/s^2) beside a position in metres (6 m^2) is definite
+    mixed = as_cov({"r": 1.1e-12, "x": 6.3}, 2, "R", ["r", "x"], allow_zero=False)
+    np.testing.assert_array_equal(mixed, np.diag([1.1e-12, 6.3]))
+    with pytest.raises(ValueError, match="R: must be positive definite \\(the variance of 'x' is 0\\)"):
+        as_cov({"r": 1.0, "x": 0.0}, 2, "R", ["r", "x"], allow_zero=False)
+    with pytest.raises(ValueError, match="Q: not positive semi-definite \\(the variance of 'b' is -1"):
+        as_cov([1.0, -1.0], 2, "Q", ["a", "b"])
+    with pytest.raises(ValueError, match="'a' has variance 0 but covaries with 'b'"):
+        as_cov([[0.0, 1e-3], [1e-3, 1.0]], 2, "Q", ["a", "b"])
+    with pytest.raises(ValueError, match="exactly correlated"):     # rank one in any units
+        as_cov([[1e-12, 2.5e-6], [2.5e-6, 6.25]], 2, "R", allow_zero=False)
+    assert np.linalg.matrix_rank(as_cov([[1e-12, 2.5e-6], [2.5e-6, 6.25]], 2, "Q")) == 1   # semi-definite: allowed
+
+
 def test_gaussian_sampling_is_seeded():
     g = cs.Gaussian([1.0, -1.0], [[2.0, 0.5], [0.5, 1.0]])
     np.testing.assert_array_equal(g.sample(5, seed=3), g.sample(5, seed=3))

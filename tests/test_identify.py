@@ -305,3 +305,16 @@ def _have_data() -> bool:
         return data_dir() is not None
     except FileNotFoundError:
         return False
+
+
+def test_a_trial_step_beyond_float_range_is_rejected_without_a_warning():
+    # a log-variance step past exp's range is inf: the trust region rejects it; nothing reaches the user
+    import warnings
+    from casship.identify._space import ParamSpace
+
+    m = cs.models.nomoto_first_order()
+    space = ParamSpace(m, 1, [], measured=["psi"], noise=[("R", 0, "R[psi]", 1e-4)], Q=np.zeros((1, 1)),
+                       R=np.eye(1) * 1e-4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.isinf(space.natural([800.0])).all()

@@ -244,7 +244,8 @@ class ParamSpace:
     # -- maps between decision variables and values ----------------------------------------------
     def natural(self, z) -> np.ndarray:
         z = np.asarray(z, dtype=float).reshape(-1)
-        return np.array([np.exp(z[i]) if e.log else z[i] * e.scale for i, e in enumerate(self.entries)])
+        with np.errstate(over="ignore"):    # a trial step beyond float range is inf; the solver rejects it
+            return np.array([np.exp(z[i]) if e.log else z[i] * e.scale for i, e in enumerate(self.entries)])
 
     def jac_natural(self, z) -> np.ndarray:
         """Diagonal of d(value)/dz (for the chain rule and the delta method)."""
