@@ -20,6 +20,7 @@ from ..linear import trim
 from ..builder import ModelBuilder
 from ..model import Model
 from ..errors import InputError
+from ..simulation import ValidityError
 
 __all__ = ["SteeringPlant", "steering_plant", "steering_model", "twin_propeller_allocation", "SteeringFeedforward",
            "steering_feedforward", "piecewise_linear", "speed_profile",
@@ -372,7 +373,19 @@ def steering_plant(model: Model, speed: float | None = None, *, p=None, steer: s
     x = model.states(**{surge: speed})
     u = model.inputs(**{k: v for k, v in inputs.items() if k != steer})
     if free is not None:
-        tr = trim(model, x, u, pv, free=[free], zero=[surge])
+        try:
+            tr = trim(model, x, u, pv, free=[free], zero=[surge])
+        except ValidityError:
+            if free == "tau_X" or vessel.n0:
+                raise
+            # no stated rate to start from (a model-scale ship): the start at 1 rps ended on the propeller's
+            # reversed root; propeller_rate_for_speed scans the declared range for the sign change of du/dt
+            from ..maneuvers import propeller_rate_for_speed
+
+            inputs[free] = propeller_rate_for_speed(model, speed, pv, inputs={k: v for k, v in inputs.items()
+                                                                            if k not in (steer, free)})
+            u = model.inputs(**{k: v for k, v in inputs.items() if k != steer})
+            tr = trim(model, x, u, pv, free=[free], zero=[surge])
         x, u = tr.x, tr.u
         inputs[free] = tr.values[free]
     others = {n: float(u[model.index(n, "input")]) for n in model.input_names if n != steer}

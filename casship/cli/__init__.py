@@ -219,11 +219,21 @@ def _run(args, command: str, show, interrupted: list, program: bool) -> int:
             if getattr(args, "debug", False):
                 raise
             if is_user_error(exc):
-                print(f"casship {command}: error: {_one_line(exc)}", file=sys.stderr)
+                print(f"casship {command}: error: {_opt_in(_one_line(exc), args, command)}", file=sys.stderr)
                 return 2
             print(f"casship {command}: internal error (a bug in casship): {type(exc).__name__}: "
                   f"{_one_line(exc)}; run it again with --debug for the traceback and report it", file=sys.stderr)
             return 1
+
+
+def _opt_in(message: str, args, command: str) -> str:
+    """``message`` without the validity errors' opt-in hint (``--allow-out-of-range``) where the command has no
+    such option: it would name an option the command refuses."""
+    validity = sys.modules.get("casship.simulation.validity")
+    if validity is None or hasattr(args, "allow_out_of_range") or validity.OPT_IN not in message:
+        return message
+    return message.replace(f"; {validity.OPT_IN}", "").replace(validity.OPT_IN, "") + \
+        f" (casship {command} stays within the model's validity ranges: give a value inside them)"
 
 
 def _on_interrupt(seen: list):

@@ -20,8 +20,8 @@ from __future__ import annotations
 import math
 
 from ._vocabulary import add_deprecated_alias
-from ._common import (add_overwrite_option, check_input_files, check_outputs, check_ship, count, parse_pairs,
-                      print_json, refuse_unused, write_output)
+from ._common import (add_overwrite_option, check_input_files, check_outputs, check_ship, count, finite, parse_pairs,
+                      positive, print_json, refuse_unused, write_output)
 from ..errors import InputError
 
 
@@ -53,8 +53,8 @@ def register(sub) -> None:
                    help="rank by a classical criterion on the parameters instead (the target is still reported)")
     p.add_argument("--sigma", default=None, help="noise standard deviation of one sample per measured output "
                                                  "name=value,... in SI units and radians (default: the fit file's)")
-    p.add_argument("--speed", type=float, default=None, help="approach speed [m/s] (default: the vessel's)")
-    p.add_argument("--dt", type=float, default=None, help="design step and sampling of a trial [s] (default L/U/40)")
+    p.add_argument("--speed", type=positive, default=None, help="approach speed [m/s] (default: the vessel's)")
+    p.add_argument("--dt", type=positive, default=None, help="design step and sampling of a trial [s] (default L/U/40)")
     p.add_argument("--turning", default="35", metavar="DEG,...",
                    help="turning-circle rudder angles [deg], comma-separated")
     p.add_argument("--zigzag", default="10,20", metavar="DEG,...", help="zig-zag angles [deg], comma-separated")
@@ -62,17 +62,17 @@ def register(sub) -> None:
                    help="pull-out rudder angles [deg], comma-separated ('' for none)")
     p.add_argument("--no-spiral", dest="spiral", action="store_false", help="leave the spiral out")
     p.add_argument("--no-free", dest="free", action="store_false", help="rank the standard trials only")
-    p.add_argument("--duration", type=float, default=None, help="free trial: duration [s] (default 25 L/U)")
-    p.add_argument("--rudder-max-deg", dest="rudder_max_deg", type=float, default=None,
+    p.add_argument("--duration", type=positive, default=None, help="free trial: duration [s] (default 25 L/U)")
+    p.add_argument("--rudder-max-deg", dest="rudder_max_deg", type=positive, default=None,
                    help="free trial: largest rudder angle [deg] (default: the rudder stop)")
-    p.add_argument("--rudder-rate-deg-s", dest="rudder_rate_deg", type=float, default=None,
+    p.add_argument("--rudder-rate-deg-s", dest="rudder_rate_deg", type=positive, default=None,
                    help="free trial: largest rudder rate [deg/s] (default: the vessel's)")
-    add_deprecated_alias(p, "--rudder-rate-deg", "--rudder-rate-deg-s", dest="rudder_rate_deg", type=float)
-    p.add_argument("--corridor", type=float, default=None, help="free trial: half width of the track corridor [m]")
-    p.add_argument("--speed-min", dest="speed_min", type=float, default=None, help="free trial: speed floor [m/s]")
-    p.add_argument("--knot", type=float, default=None, help="free trial: time between rudder knots [s] (default L/U/4)")
+    add_deprecated_alias(p, "--rudder-rate-deg", "--rudder-rate-deg-s", dest="rudder_rate_deg", type=positive)
+    p.add_argument("--corridor", type=positive, default=None, help="free trial: half width of the track corridor [m]")
+    p.add_argument("--speed-min", dest="speed_min", type=finite, default=None, help="free trial: speed floor [m/s]")
+    p.add_argument("--knot", type=positive, default=None, help="free trial: time between rudder knots [s] (default L/U/4)")
     p.add_argument("--max-iter", dest="max_iter", type=count, default=60, help="free trial: iteration limit")
-    p.add_argument("--discrepancy-deg2-s", dest="discrepancy", type=float, default=None,
+    p.add_argument("--discrepancy-deg2-s", dest="discrepancy", type=finite, default=None,
                    help="heading model discrepancy q [deg^2/s] (heading error variance growing as q t; default: the "
                         "fit file's model_discrepancy, else 0 = a model right in its structure); it sets the floor no "
                         "trial removes and tempers what long trials teach")
@@ -83,7 +83,8 @@ def register(sub) -> None:
     p.set_defaults(func=run, parser=p)
 
 
-def _angles(text, what: str) -> list[float]:
+def _angles(text, what: str, model=None) -> list[float]:
+    """The comma-separated rudder angles [deg] of ``what``, each within (0, 90] and the rudder stop of ``model``."""
     try:
         out = [float(s) for s in (text or "").split(",") if s.strip()]
     except ValueError:
@@ -91,6 +92,14 @@ def _angles(text, what: str) -> list[float]:
     bad = [a for a in out if not (0 < a <= 90)]
     if bad:
         raise InputError(f"{what}: angles must be in (0, 90] deg, got {bad}")
+    stop = getattr(getattr(model, "vessel", None), "rudder_max", None)
+    if stop:
+        from ..simulation import MARGIN
+
+        beyond = [a for a in out if a > math.degrees(stop) * (1 + MARGIN)]
+        if beyond:
+            raise InputError(f"{what}: {beyond} deg beyond the rudder stop {math.degrees(stop):g} deg of "
+                             f"{model.name!r}; give angles up to the stop")
     return out
 
 
@@ -158,6 +167,7 @@ def run(args) -> int:
     model = get_model(args.model)
     check_ship(model, args.model, "a trial design")
     model, p, belief, sigma = _belief_and_noise(args, model)
+    angles = {what: _angles(getattr(args, what), f"--{what}", model) for what in ("turning", "zigzag", "pullout")}
     q, q_source = _discrepancy(args)
     if not args.json:
         print(f"belief: {belief.kind} ({belief.source}); {len(belief.names)} uncertain parameters")
@@ -170,9 +180,7 @@ def run(args) -> int:
                              rudder_rate=None if args.rudder_rate_deg is None else math.radians(args.rudder_rate_deg),
                              corridor=args.corridor, speed_min=args.speed_min, knot=args.knot)
         limits.resolved(approach)
-    candidates = standard_trials(approach, turning=_angles(args.turning, "--turning"),
-                                 zigzag=_angles(args.zigzag, "--zigzag"), pullout=_angles(args.pullout, "--pullout"),
-                                 spiral=args.spiral)
+    candidates = standard_trials(approach, **angles, spiral=args.spiral)
     res = design_trials(model, belief, sigma, args.target, criterion=args.criterion, p=p, speed=args.speed,
                         dt=approach.dt, candidates=candidates, limits=limits, max_iter=args.max_iter, discrepancy=q)
     if args.csv:

@@ -1,0 +1,42 @@
+"""The command line as a new user meets it: the registered ships, plausible mistakes on the measured records,
+and errors that name the offending option, record or channel (no raw message, no option the command lacks)."""
+from __future__ import annotations
+
+import pytest
+
+from casship.cli import main
+
+from cli_checks import one_line_error
+
+
+# -- autopilot -------------------------------------------------------------------------------------------------
+def test_autopilot_designs_for_the_model_scale_ship_it_lists(capsys):
+    """Before: the trim started the propeller at 1 rps (no stated rate n0 for the model) and ended on the
+    reversed root, n = -8.8 1/s: every autopilot command on kvlcc2-l7 stopped with a validity error."""
+    assert main(["autopilot", "--model", "kvlcc2-l7", "--show-defaults", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "speed = 1.18 m/s" in out
+
+
+def test_a_validity_error_does_not_offer_an_option_the_command_lacks(capsys):
+    """Before: '... pass check_limits=False (command line: --allow-out-of-range)', an option autopilot refuses."""
+    err = one_line_error(capsys, ["autopilot", "--model", "kvlcc2", "--speed", "100", "--quiet"],
+                         "state 'u' = 100 m/s", "validity ranges")
+    assert "--allow-out-of-range" not in err and "check_limits" not in err
+
+
+# -- design-trial ------------------------------------------------------------------------------------------------
+DESIGN = ["design-trial", "--model", "kvlcc2", "--prior-std", "N_r_dash=0.01", "--sigma", "psi=0.003", "--no-free",
+          "--quiet"]
+
+
+def test_design_trial_rudder_angle_beyond_the_stop_names_the_option(capsys):
+    """Before: "input 'delta' = 80 deg is outside its valid range ... (command line: --allow-out-of-range)"."""
+    err = one_line_error(capsys, [*DESIGN, "--turning", "80"], "--turning", "80", "rudder stop 35 deg")
+    assert "--allow-out-of-range" not in err
+
+
+@pytest.mark.parametrize("option", ["--speed", "--dt", "--duration", "--knot", "--corridor", "--rudder-rate-deg-s"])
+def test_design_trial_a_non_positive_value_names_the_option(option, capsys):
+    """Before: 'approach speed must be a positive number [m/s], got -3.0' (the API's keyword, not the option)."""
+    one_line_error(capsys, [*DESIGN, option, "-3"], f"argument {option}: must be a positive number")
