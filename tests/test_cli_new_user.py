@@ -40,3 +40,37 @@ def test_design_trial_rudder_angle_beyond_the_stop_names_the_option(capsys):
 def test_design_trial_a_non_positive_value_names_the_option(option, capsys):
     """Before: 'approach speed must be a positive number [m/s], got -3.0' (the API's keyword, not the option)."""
     one_line_error(capsys, [*DESIGN, option, "-3"], f"argument {option}: must be a positive number")
+
+
+# -- identify: the records checked against the model's validity ranges, as filter and simulate do ---------------
+def _kvlcc2_record(path, n: float):
+    """A short straight run of kvlcc2 columns with propeller rate ``n`` [1/s], as a CSV."""
+    import numpy as np
+
+    import casship as cs
+
+    t = np.arange(0.0, 20.0, 0.5)
+    cols = {"u": np.full(t.size, 7.97), "v": np.zeros(t.size), "r": np.zeros(t.size), "x": 7.97 * t,
+            "y": np.zeros(t.size), "psi": np.zeros(t.size), "delta": np.zeros(t.size), "n": np.full(t.size, n)}
+    return cs.Dataset(t, cols).to_csv(path)
+
+
+def test_identify_refuses_a_record_outside_the_models_ranges_naming_it(tmp_path, capsys):
+    """Before: the fit ran (a model-scale propeller rate on the full-scale ship) and ended in nonsense."""
+    rec = _kvlcc2_record(tmp_path / "model_scale.csv", 10.23)
+    err = one_line_error(capsys, ["identify", str(rec), "--model", "kvlcc2", "--free", "N_r_dash", "--out",
+                                  str(tmp_path / "fit.json"), "--quiet"],
+                         "record model_scale.csv", "input 'n' = 10.23 1/s", "--allow-out-of-range")
+    assert not (tmp_path / "fit.json").exists(), err
+
+
+@pytest.mark.data
+def test_identify_refuses_records_of_the_other_scale(data_dir, tmp_path, capsys):
+    """Before: the HSVA model-scale zig-zag was fitted on the 320 m ship (exit 3, R[u] = 1e18)."""
+    hsva = data_dir / "kvlcc2_hsva_free" / "HSVA_CPMC_KVLCC2_Z_10_05.dat"
+    marin = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_10_m.dat"
+    out = str(tmp_path / "fit.json")
+    one_line_error(capsys, ["identify", str(hsva), "--model", "kvlcc2", "--free", "N_r_dash", "--out", out, "--quiet"],
+                   "record HSVA_CPMC_KVLCC2_Z_10_05.dat", "input 'n'", "of model 'kvlcc2'")
+    one_line_error(capsys, ["identify", str(marin), "--model", "kvlcc2-l7", "--out", out, "--quiet"],
+                   "record MARIN_FREE_KVLCC2_zz_10_m.dat", "state 'u' = 7.98 m/s", "of model 'kvlcc2-l7'")

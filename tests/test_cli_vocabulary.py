@@ -43,7 +43,7 @@ MEANINGS = {
     "--Q": ("process-noise variances", ("filter", "identify")),
     "--R": ("measurement variances", ("filter", "identify")),
     "--integrator": ("how the model's equations are integrated in time", ("filter", "simulate")),
-    "--allow-out-of-range": ("run outside the model's validity ranges", ("filter", "simulate")),
+    "--allow-out-of-range": ("run outside the model's validity ranges", ("filter", "identify", "simulate")),
     # autopilot
     "--scenario": ("closed-loop scenario", ("autopilot",)), "--waypoints": ("track waypoints [m]", ("autopilot",)),
     "--design": ("design method of the law (pid, lqr)", ("autopilot",)),

@@ -16,7 +16,7 @@ from ..errors import InputError
 
 __all__ = ["Parser", "UsageError", "HelpFormatter", "add_model_option", "require", "load_model", "add_overwrite_option",
            "add_limits_option", "check_ship", "parse_items", "parse_pairs", "number", "positive", "finite", "count", "seed", "load_record",
-           "add_record_options", "read_records", "check_angle_columns", "RECORD_PRESETS",
+           "add_record_options", "read_records", "check_angle_columns", "check_record_ranges", "RECORD_PRESETS",
            "check_input_files", "check_outputs", "write_output", "print_json", "refuse_unused"]
 
 
@@ -355,6 +355,38 @@ def read_records(args, paths, model=None, *, wrap_angles: bool = True) -> list:
         data.meta.setdefault("name", path.name)
         out.append(data)
     return out
+
+
+def check_record_ranges(model, records) -> None:
+    """Refuse a record whose inputs or first-row states leave the validity ranges of ``model``, naming the record.
+
+    What ``filter`` and ``simulate`` check before they run (their ``--allow-out-of-range`` opts out), for the
+    records of a fit: a model-scale record on the full-scale ship (propeller rate ten times its range), or the
+    reverse, is refused before any fitting.
+
+    Parameters
+    ----------
+    model : Model
+    records : sequence of Dataset
+        Each named by ``meta["name"]`` (else ``meta["source"]``).
+
+    Raises
+    ------
+    casship.simulation.ValidityError
+        Naming the record, the variable, its value and the range.
+    """
+    import numpy as np
+
+    from ..simulation import ValidityError, check_inputs, check_states
+
+    for k, d in enumerate(records):
+        label = d.meta.get("name") or d.meta.get("source") or f"#{k + 1}"
+        try:
+            check_inputs(model, {n: d[n] for n in model.input_names if n in d}, d.t)
+            first = {n: float(d[n][0]) for n in model.state_names if n in d and np.isfinite(d[n][0])}
+            check_states(model, first, what="first-row state")
+        except ValidityError as exc:
+            raise ValidityError(f"record {label}: {exc}") from None
 
 
 def _angle_names(model) -> list[str]:

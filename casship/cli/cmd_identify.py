@@ -48,8 +48,8 @@ from __future__ import annotations
 import warnings
 
 from ._vocabulary import add_deprecated_alias
-from ._common import (add_record_options, check_input_files, check_outputs, count, number, parse_items, parse_pairs,
-                      positive, print_json, read_records, refuse_unused, write_output)
+from ._common import (add_limits_option, add_record_options, check_input_files, check_outputs, check_record_ranges, count,
+                      number, parse_items, parse_pairs, positive, print_json, read_records, refuse_unused, write_output)
 from .cmd_filter import DEFAULT_Q
 from ..errors import InputError
 
@@ -130,7 +130,17 @@ def register(sub) -> None:
     p.add_argument("--accept-worse", dest="accept_worse", action="store_true",
                    help=f"exit 0 although the verdict is worse than the start or stalled (default: exit code "
                         f"{EXIT_WORSE}; the fit file says the verdict either way)")
+    add_limits_option(p)
     p.set_defaults(func=run, parser=p)
+
+
+def _records(args, model) -> list:
+    """The records, read and decimated, their inputs and first states checked against the model's validity
+    ranges (unless ``--allow-out-of-range``)."""
+    records = [d.decimate(args.decimate) for d in read_records(args, args.data, model)]
+    if not args.allow_out_of_range:
+        check_record_ranges(model, records)
+    return records
 
 
 def _bounds(text: str | None) -> dict:
@@ -226,7 +236,7 @@ def run(args) -> int:
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)  # before the fit
     model = get_model(args.model)
     stage("reading the records", 1, 5)
-    records = [d.decimate(args.decimate) for d in read_records(args, args.data, model)]
+    records = _records(args, model)
     free = parse_items(args.free, "--free")
     if not free:
         raise InputError("--free: give at least one quantity")
@@ -300,7 +310,7 @@ def _workflow(args) -> int:
                   "for a fit of your own")
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
     model = get_model(args.model)
-    records = [d.decimate(args.decimate) for d in read_records(args, args.data, model)]
+    records = _records(args, model)
     measured = parse_items(args.measured, "--measured") if args.measured is not None else None
     options = dict(weights=parse_pairs(args.weights, "--weights") or None,
                    prior=parse_pairs(args.prior, "--prior-std") or None, measured=measured)
@@ -341,6 +351,7 @@ def _captive_alone(args) -> int:
     refuse_unused(args.parser, {**_own_fit_options(args), "--weights": args.weights is not None,
                                 "--measured": args.measured is not None, "--prior-std": args.prior is not None,
                                 "--decimate": args.decimate != 1, "--no-loo": args.no_loo,
+                                "--allow-out-of-range": args.allow_out_of_range,
                                 "--accept-worse": args.accept_worse},
                   "without records the captive tests are fitted alone by the rule of casship.identify.rig")
     stamps = check_outputs({"--out": args.out, "--plot": args.plot}, overwrite=args.overwrite)
