@@ -74,3 +74,17 @@ def test_identify_refuses_records_of_the_other_scale(data_dir, tmp_path, capsys)
                    "record HSVA_CPMC_KVLCC2_Z_10_05.dat", "input 'n'", "of model 'kvlcc2'")
     one_line_error(capsys, ["identify", str(marin), "--model", "kvlcc2-l7", "--out", out, "--quiet"],
                    "record MARIN_FREE_KVLCC2_zz_10_m.dat", "state 'u' = 7.98 m/s", "of model 'kvlcc2-l7'")
+
+
+# -- the record options on a trial file ----------------------------------------------------------------------------
+@pytest.mark.data
+@pytest.mark.parametrize("command", [["identify", "--model", "kvlcc2", "--free", "N_r_dash"], ["filter", "--model", "kvlcc2"],
+                                     ["simulate", "--model", "kvlcc2", "--inputs"]])
+def test_record_options_on_a_trial_file_say_they_read_csv(command, data_dir, capsys):
+    """Before: "...zz_10_m.dat: no time column 't'; columns: ['MARIN(Maritime Research Institute Netherlands)']"
+    (the .dat file read as a CSV whose header is its title line)."""
+    rec = str(data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_10_m.dat")
+    argv = [*command, rec, "--columns", "psi=heading:deg", "--quiet"]
+    err = one_line_error(capsys, argv, "--columns: record options read CSV files", "is a marin record",
+                         "u, v, r, x, y, psi, delta, n")
+    assert "no time column" not in err

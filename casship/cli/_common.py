@@ -331,7 +331,7 @@ def read_records(args, paths, model=None, *, wrap_angles: bool = True) -> list:
     """
     from pathlib import Path
 
-    from ..io import read_csv
+    from ..io import read_csv, read_record, record_format
 
     preset_name = getattr(args, "preset", None)
     preset = RECORD_PRESETS[preset_name] if preset_name else {}
@@ -350,6 +350,13 @@ def read_records(args, paths, model=None, *, wrap_angles: bool = True) -> list:
             continue
         if not path.is_file():
             raise FileNotFoundError(f"data file {path}: no such file")
+        kind = record_format(path)
+        if kind != "csv":       # read_csv would take the file's title line for a header and miss its time column
+            given = [o for o, v in (("--preset", preset_name), ("--columns", getattr(args, "columns", None)),
+                                    ("--time", getattr(args, "time", None)), ("--latlon", latlon_text)) if v]
+            raise InputError(f"{', '.join(given)}: record options read CSV files; {path} is a {kind} record, read "
+                             f"with its own columns in SI units ({', '.join(read_record(path).names)}): leave "
+                             f"{'it' if len(given) == 1 else 'them'} out")
         data = read_csv(path, columns or None, time=time or "t:s", latlon=latlon)
         data = _checked_and_wrapped(data, model, path, wrap_angles)
         data.meta.setdefault("name", path.name)

@@ -20,9 +20,30 @@ from .marin import read_marin
 from .nmea import read_nmea
 from ..errors import InputError
 
-__all__ = ["read_record", "RECORD_FORMATS"]
+__all__ = ["read_record", "record_format", "RECORD_FORMATS"]
 
 RECORD_FORMATS = ("csv", "marin", "hsva", "nmea")
+
+
+def record_format(path) -> str:
+    """The format :func:`read_record` reads ``path`` as, from its suffix (and, for other suffixes, its first line).
+
+    Parameters
+    ----------
+    path : str or Path
+        An existing file.
+
+    Returns
+    -------
+    str
+        One of :data:`RECORD_FORMATS`.
+
+    Examples
+    --------
+    >>> record_format("MARIN_FREE_KVLCC2_zz_10_m.dat"), record_format("HSVA_CPMC_KVLCC2_Z_10_05.dat")
+    ('marin', 'hsva')
+    """
+    return _sniff(Path(path))
 
 
 def _sniff(path: Path) -> str:
