@@ -88,3 +88,34 @@ def test_record_options_on_a_trial_file_say_they_read_csv(command, data_dir, cap
     err = one_line_error(capsys, argv, "--columns: record options read CSV files", "is a marin record",
                          "u, v, r, x, y, psi, delta, n")
     assert "no time column" not in err
+
+
+# -- a channel whose noise the record does not show ------------------------------------------------------------------
+@pytest.fixture
+def steady_x(tmp_path):
+    """A kvlcc2 straight run whose x column advances by exactly 4 m a sample (second differences all zero), the
+    other outputs with noise."""
+    import numpy as np
+
+    import casship as cs
+
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 40.0, 0.5)
+    noisy = {name: level + scale * rng.standard_normal(t.size)
+             for name, level, scale in (("u", 8.0, 0.01), ("v", 0.0, 0.01), ("r", 0.0, 1e-5), ("y", 0.0, 0.1),
+                                        ("psi", 0.0, 1e-3))}
+    cols = {**noisy, "x": 8.0 * t, "delta": np.zeros(t.size), "n": np.full(t.size, 1.53)}
+    return cs.Dataset(t, cols).to_csv(tmp_path / "steady_x.csv")
+
+
+@pytest.mark.parametrize("command, option", [
+    (["filter", "--model", "kvlcc2"], "--R x=VARIANCE (or --R-std x=STD)"),
+    (["identify", "--model", "kvlcc2", "--free", "N_r_dash", "--out", "fit.json"], "--R x=VARIANCE"),
+    (["identify", "--model", "kvlcc2", "--free", "N_r_dash", "--out", "fit.json", "--objective", "oe"], "--sigma x=STD"),
+])
+def test_a_channel_without_visible_noise_is_named_with_the_option_that_gives_it(command, option, steady_x, capsys):
+    """Before: "the noise of 'x' cannot be estimated from the record (a constant channel); give its variance" (x is
+    not constant; no option, no record named), and for output error "... give its standard deviation"."""
+    err = one_line_error(capsys, [*command, str(steady_x), "--quiet"], "'x'", option, "leave 'x' out of --measured")
+    if "oe" not in command:
+        assert "steady_x.csv" in err and "second differences are zero" in err and "constant" not in err

@@ -111,6 +111,37 @@ def _variances(text: str | None, names, what: str):
     return pairs
 
 
+def record_noise(model, data, names, option: str = "--R NAME=VARIANCE (or --R-std NAME=STD)"):
+    """:func:`casship.estimators.noise_from_data` channel by channel, an error naming the channel, the option that
+    gives its noise instead and the remedy of leaving it unmeasured.
+
+    Parameters
+    ----------
+    model : Model
+    data : Dataset
+    names : sequence of str
+        The measured channels.
+    option : str
+        How the command takes a channel's noise (``NAME`` is replaced by the channel).
+
+    Returns
+    -------
+    (dict, dict)
+        Channel -> variance, channel -> how it was found.
+    """
+    from ..errors import InputError
+    from ..estimators import noise_from_data
+
+    R, how = {}, {}
+    for n in names:
+        try:
+            var, text = noise_from_data(model, data, [n])
+        except InputError as exc:
+            raise InputError(f"{exc} with {option.replace('NAME', n)}, or leave {n!r} out of --measured") from None
+        R[n], how[n] = var[n], text[n]
+    return R, how
+
+
 def _option_value(text: str):
     for conv in (int, float):
         try:
@@ -178,7 +209,7 @@ def filter_file(args, model=None):
 
     from ..discretize import discretize
     from ..errors import InputError
-    from ..estimators import ESTIMATORS, noise_from_data, prior_from_data
+    from ..estimators import ESTIMATORS, prior_from_data
     from ..simulation import check_inputs, check_states, check_step
 
     params = None
@@ -231,7 +262,7 @@ def filter_file(args, model=None):
         R = {n: float(fit_noise["R"][n]) for n in meas}
         sources["R"] = f"from the fit file {args.params}"
     if R is None:
-        R, how = noise_from_data(model, data, meas)
+        R, how = record_noise(model, data, meas)
         sources["R"] = "estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})"
                                                                   for n, v in R.items())
     Q = _variances(args.Q, model.noise_names, "--Q")

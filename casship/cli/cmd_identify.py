@@ -50,7 +50,7 @@ import warnings
 from ._vocabulary import add_deprecated_alias
 from ._common import (add_limits_option, add_record_options, check_input_files, check_outputs, check_record_ranges, count,
                       number, parse_items, parse_pairs, positive, print_json, read_records, refuse_unused, write_output)
-from .cmd_filter import DEFAULT_Q
+from .cmd_filter import DEFAULT_Q, record_noise
 from ..errors import InputError
 
 #: Exit code for a fit worse than its start or stalled (:data:`casship.identify.verdict.EXIT_WORSE`; a literal
@@ -160,7 +160,6 @@ def _problem(args, model, records, free, measured):
 
     from ..discretize import discretize
     from ..estimators import EKF
-    from ..estimators import noise_from_data
     from ..identify import MLEProblem, OutputErrorProblem, Prior
     from ..identify.params_file import read_params
 
@@ -175,6 +174,7 @@ def _problem(args, model, records, free, measured):
                   estimate_x0=parse_items(args.estimate_x0, "--estimate-x0"))
     if args.method == "oe":
         sigma = parse_pairs(args.sigma, "--sigma")
+        _check_sigma_estimates(model, records, [n for n in measured if n not in sigma])
         return OutputErrorProblem(model, records, free, measured=measured, sigma=sigma or "estimate",
                                   shooting=args.shooting, **common)
     R = parse_pairs(args.R, "--R")
@@ -184,7 +184,7 @@ def _problem(args, model, records, free, measured):
     rest = [n for n in measured if n not in R]
     start = {}
     for n in rest:              # the record's noise, the median over the records, as the starting value
-        start[n] = float(np.median([noise_from_data(model, d, [n])[0][n] for d in records]))
+        start[n] = float(np.median([record_noise(model, d, [n], "--R NAME=VARIANCE")[0][n] for d in records]))
     estimate = set(parse_items(args.estimate_noise, "--estimate-noise"))
     if estimate - {"Q", "R"}:
         raise InputError(f"--estimate-noise: unknown {sorted(estimate - {'Q', 'R'})}; use Q, R or Q,R")
@@ -199,6 +199,18 @@ def _problem(args, model, records, free, measured):
     dt = float(np.median(np.concatenate([np.diff(d.t) for d in records])))
     ekf = EKF(discretize(model, dt), Q, {**start, **R}, measured=measured)
     return MLEProblem(ekf, records, free, noise=noise, **common)
+
+
+def _check_sigma_estimates(model, records, names) -> None:
+    """The output-error weights estimated from the records (:func:`casship.identify.records.noise_std`): a channel
+    whose estimate fails is named with the option that gives it instead."""
+    from ..identify.records import noise_std
+
+    for n in names:
+        try:
+            noise_std(records, [n], [n] if model.angle_outputs[model.index(n, "output")] else [])
+        except InputError as exc:
+            raise InputError(f"{exc} with --sigma {n}=STD, or leave {n!r} out of --measured") from None
 
 
 def run(args) -> int:

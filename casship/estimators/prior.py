@@ -254,7 +254,8 @@ def noise_from_data(model, data: Dataset, measured: Sequence[str]) -> tuple[dict
     Raises
     ------
     InputError
-        A channel that is constant in the record (give its variance).
+        A channel whose noise the record does not show: constant, with second differences zero at most
+        samples, or too few samples (give its variance).
 
     Examples
     --------
@@ -287,8 +288,12 @@ def noise_from_data(model, data: Dataset, measured: Sequence[str]) -> tuple[dict
             found.append((std**2, "second differences"))
         var, text = max(found)
         if not var > 0:
-            count = int(np.isfinite(y).sum())
-            why = f"only {count} measured sample(s), too few" if count < 5 else "a constant channel"
-            raise InputError(f"the noise of {n!r} cannot be estimated from the record ({why}); give its variance")
+            finite = y[np.isfinite(y)]
+            why = (f"only {finite.size} measured sample(s), too few" if finite.size < 5 else "a constant channel"
+                   if np.ptp(finite) == 0 else "its second differences are zero at most samples: a channel that "
+                   "changes steadily, or is printed with few digits")
+            label = data.meta.get("name") or data.meta.get("source")
+            raise InputError(f"the noise of {n!r} cannot be estimated from the record"
+                             f"{f' {label}' if label else ''} ({why}); give its variance")
         R[n], how[n] = var, text
     return R, how
