@@ -119,3 +119,24 @@ def test_a_channel_without_visible_noise_is_named_with_the_option_that_gives_it(
     err = one_line_error(capsys, [*command, str(steady_x), "--quiet"], "'x'", option, "leave 'x' out of --measured")
     if "oe" not in command:
         assert "steady_x.csv" in err and "second differences are zero" in err and "constant" not in err
+
+
+def test_identify_decimation_that_leaves_one_row_names_the_option_and_the_record(tmp_path, capsys):
+    """Before: 'decimate: k = 100000 leaves 1 row(s) of 40' (neither the option nor the record)."""
+    rec = _kvlcc2_record(tmp_path / "short.csv", 1.53)
+    one_line_error(capsys, ["identify", str(rec), "--model", "kvlcc2", "--free", "N_r_dash", "--decimate", "100000",
+                            "--quiet"], "--decimate 100000: record short.csv has 40 rows", "--decimate 39 at most")
+
+
+# -- filter: the starting variances ------------------------------------------------------------------------------
+def test_filter_p0_for_some_states_keeps_the_default_for_the_others(tmp_path, capsys):
+    """Before: '--P0: no value for [...]' although the help says 'default 1, R for measured states'."""
+    rec = _kvlcc2_record(tmp_path / "run.csv", 1.53)
+    argv = ["filter", str(rec), "--model", "kvlcc2", "--R", "1e-4", "--measured", "x,y,psi", "--json", "--quiet"]
+    assert main([*argv, "--P0", "u=0.01,r=1e-6"]) == 0
+    import json
+
+    prior = json.loads(capsys.readouterr().out)["prior"]
+    assert prior["u"].split("+-")[1].split()[0] == "0.1" and prior["r"].split("+-")[1].split()[0] == "0.001"
+    assert prior["v"].split("+-")[1].split()[0] == "1" and prior["psi"].split("+-")[1].split()[0] == "0.01"
+    one_line_error(capsys, [*argv, "--P0", "u=-1"], "--P0: a variance must be non-negative", "'u': -1.0")

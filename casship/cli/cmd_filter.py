@@ -93,8 +93,8 @@ def register(sub) -> None:
 
 
 # -- argument parsing helpers --------------------------------------------------------------------
-def _variances(text: str | None, names, what: str):
-    """Scalar or name=value list -> a number or a dict over ``names`` (every name needs a value)."""
+def _variances(text: str | None, names, what: str, *, every: bool = True):
+    """Scalar or name=value list -> a number or a dict over ``names`` (with ``every``, every name needs a value)."""
     from ._common import number
 
     if text is None:
@@ -104,7 +104,7 @@ def _variances(text: str | None, names, what: str):
         return number(text, what)
     pairs = parse_pairs(text, what, names=names)
     missing = [n for n in names if n not in pairs]
-    if missing:
+    if missing and every:
         from ..errors import InputError
 
         raise InputError(f"{what}: no value for {missing}")
@@ -282,8 +282,11 @@ def filter_file(args, model=None):
 
     x0 = parse_pairs(args.x0, "--x0", names=model.state_names)
     prior = prior_from_data(model, data, measured=meas, R=est.R, x0=x0)
-    P0 = _variances(args.P0, model.state_names, "--P0")
+    P0 = _variances(args.P0, model.state_names, "--P0", every=False)     # the others keep their default
     if P0 is not None:
+        negative = {k: v for k, v in (P0.items() if isinstance(P0, dict) else [("all", P0)]) if v < 0}
+        if negative:
+            raise InputError(f"--P0: a variance must be non-negative, got {negative}")
         var = np.diag(prior.cov).copy()
         if isinstance(P0, dict):
             var[[model.index(k) for k in P0]] = list(P0.values())

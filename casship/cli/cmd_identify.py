@@ -137,7 +137,12 @@ def register(sub) -> None:
 def _records(args, model) -> list:
     """The records, read and decimated, their inputs and first states checked against the model's validity
     ranges (unless ``--allow-out-of-range``)."""
-    records = [d.decimate(args.decimate) for d in read_records(args, args.data, model)]
+    records = []
+    for d in read_records(args, args.data, model):
+        if args.decimate > 1 and args.decimate >= len(d):       # one row left (Dataset.decimate)
+            raise InputError(f"--decimate {args.decimate}: record {d.meta.get('name')} has {len(d)} rows; a fit "
+                             f"needs at least two after decimation (--decimate {max(len(d) - 1, 1)} at most)")
+        records.append(d.decimate(args.decimate))
     if not args.allow_out_of_range:
         check_record_ranges(model, records)
     return records
