@@ -140,3 +140,21 @@ def test_filter_p0_for_some_states_keeps_the_default_for_the_others(tmp_path, ca
     assert prior["u"].split("+-")[1].split()[0] == "0.1" and prior["r"].split("+-")[1].split()[0] == "0.001"
     assert prior["v"].split("+-")[1].split()[0] == "1" and prior["psi"].split("+-")[1].split()[0] == "0.01"
     one_line_error(capsys, [*argv, "--P0", "u=-1"], "--P0: a variance must be non-negative", "'u': -1.0")
+
+
+# -- identify: a fit that diverges says so in casship's words ------------------------------------------------------
+@pytest.mark.data
+def test_a_diverging_noise_fit_on_the_usv_logs_prints_no_raw_numpy_message(data_dir, tmp_path, capsys):
+    """Before: 'casship identify: warning: overflow encountered in multiply' (numpy's, from the chain rule of a
+    log-variance beyond float range) and a relative standard error printed with 90 digits. The fit stalls either
+    way (the two logs with Q and R free do not determine it): that is reported, exit code 3."""
+    folder = data_dir / "usv_fuzhou_gnss"
+    argv = ["identify", str(folder / "turnningdata_xy.csv"), str(folder / "zigzag_30_inter_xy.csv"), "--preset",
+            "usv-gnss", "--model", "sog-cog-latlon", "--free", "alpha1,alpha2", "--estimate-noise", "Q,R", "--out",
+            str(tmp_path / "usv.json"), "--quiet"]
+    assert main(argv) == 3
+    out, err = capsys.readouterr()
+    assert "overflow encountered" not in err and "encountered in" not in err, err
+    assert "verdict stalled" in err
+    table = [line for line in out.splitlines() if line.strip().startswith(("alpha", "Q[", "R["))]
+    assert len(table) == 6 and max(len(line) for line in table) < 80, table

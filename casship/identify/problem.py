@@ -326,7 +326,8 @@ class IdentificationProblem:
             fp, gp = self._prior_terms(theta)
             D = sp.jac_natural(z)
             Hp = H + np.diag(self._prec)
-            return f + fp, D * (g + gp), D[:, None] * Hp * D[None, :]
+            with np.errstate(over="ignore", invalid="ignore"):  # beyond float range: the solver rejects the step
+                return f + fp, D * (g + gp), D[:, None] * Hp * D[None, :]
 
         def cost(z):
             theta = sp.natural(z)

@@ -275,8 +275,10 @@ class FitResult:
             v, s = self.estimates[n], self.std_errors[n]
             rel = abs(s / v) if v else np.inf
             pr = f"N({q[n]['mean']:.4g}, {q[n]['std']:.3g}^2)" if n in q else "-"
+            # a standard error a million times its estimate is written in g format, not in 90 digits
+            rel_text = f"{rel:>8.2%}" if rel < 1e4 else f"{100 * rel:>7.2g}%"
             lines.append(f"{n:>16s} {v:>13.6g} {s:>11.4g} {self.std_errors_robust.get(n, np.nan):>11.4g} "
-                         f"{rel:>8.2%}  {pr}")
+                         f"{rel_text}  {pr}")
         if self.prior:
             lines.append(f"prior weight {self.prior.get('weight', 1.0):g} (MAP: standard errors are posterior)")
         for when, shares in (self.channel_share or {}).items():
