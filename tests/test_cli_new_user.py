@@ -25,6 +25,13 @@ def test_a_validity_error_does_not_offer_an_option_the_command_lacks(capsys):
     assert "--allow-out-of-range" not in err and "check_limits" not in err
 
 
+def test_an_unknown_scenario_names_the_option_and_every_kind(capsys):
+    """Before: "unknown scenario 'turn-20'; use course-A, step-A (A in degrees) or rot-R (R in deg/min)", after
+    the design, without the option and without track."""
+    one_line_error(capsys, ["autopilot", "--model", "kvlcc2", "--scenario", "turn-20", "--quiet"],
+                   "--scenario turn-20: unknown scenario", "course-A", "step-A", "rot-R", "or track")
+
+
 # -- design-trial ------------------------------------------------------------------------------------------------
 DESIGN = ["design-trial", "--model", "kvlcc2", "--prior-std", "N_r_dash=0.01", "--sigma", "psi=0.003", "--no-free",
           "--quiet"]

@@ -314,6 +314,14 @@ def _db(value: float) -> str:
     return f"{value:.1f} dB"
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def run(args) -> int:
     import numpy as np
 
@@ -322,6 +330,10 @@ def run(args) -> int:
     from ..models import get_model
 
     require(args.parser, args, {"--model": args.model})
+    kind, _, value = args.scenario.rpartition("-")
+    if args.scenario != "track" and (kind not in ("course", "step", "rot") or not _is_number(value)):
+        raise InputError(f"--scenario {args.scenario}: unknown scenario; use course-A, step-A (A in degrees), rot-R "
+                         "(R in deg/min) or track")
     check_input_files({"--params": args.params})
     check_outputs({"--plot": args.plot}, overwrite=args.overwrite, folders=("--plot",))
     if args.params:
