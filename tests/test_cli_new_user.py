@@ -165,3 +165,11 @@ def test_a_diverging_noise_fit_on_the_usv_logs_prints_no_raw_numpy_message(data_
     assert "verdict stalled" in err
     table = [line for line in out.splitlines() if line.strip().startswith(("alpha", "Q[", "R["))]
     assert len(table) == 6 and max(len(line) for line in table) < 80, table
+
+
+@pytest.mark.data
+def test_captive_given_a_file_of_the_folder_points_to_the_folder(data_dir, capsys):
+    """Before: '.../pure_yaw.csv: captive-test folder not found' (the file exists)."""
+    test = data_dir / "kvlcc2_hmri_captive" / "pure_yaw.csv"
+    one_line_error(capsys, ["identify", "--captive", str(test), "--rig", "hmri-t530", "--model", "kvlcc2", "--quiet"],
+                   "pure_yaw.csv: a file; the captive tests are read from their folder", "kvlcc2_hmri_captive)")

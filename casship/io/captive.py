@@ -336,6 +336,8 @@ def read_captive(folder) -> CaptiveTests:
     >>> tests.dynamic.select("pure_yaw")                                 # doctest: +SKIP
     """
     folder = Path(folder)
+    if folder.is_file():
+        raise InputError(f"{folder}: a file; the captive tests are read from their folder ({folder.parent})")
     if not folder.is_dir():
         raise InputError(f"{folder}: captive-test folder not found")
     notes: list[str] = []
