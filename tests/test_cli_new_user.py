@@ -173,3 +173,12 @@ def test_captive_given_a_file_of_the_folder_points_to_the_folder(data_dir, capsy
     test = data_dir / "kvlcc2_hmri_captive" / "pure_yaw.csv"
     one_line_error(capsys, ["identify", "--captive", str(test), "--rig", "hmri-t530", "--model", "kvlcc2", "--quiet"],
                    "pure_yaw.csv: a file; the captive tests are read from their folder", "kvlcc2_hmri_captive)")
+
+
+@pytest.mark.data
+def test_a_diverging_filter_names_the_starting_variances(data_dir, capsys):
+    """Before: '... the filter diverged; check the starting state (--x0), R, Q and the record', silent on --P0,
+    whose default variance 1 for the unmeasured yaw rate (1 rad/s standard deviation) makes the ensemble diverge."""
+    rec = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_10_m.dat"
+    one_line_error(capsys, ["filter", str(rec), "--model", "kvlcc2", "--estimator", "enkf", "--measured", "x,y,psi",
+                            "--quiet"], "the filter diverged", "--P0: 1 for a state not measured")

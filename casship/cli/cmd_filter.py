@@ -346,9 +346,9 @@ def _check_finite(result) -> None:
     if bad.size:
         k, i = bad[0]
         raise SolverError(f"the estimate of {result.state_names[i]!r} is not finite from row {k} (t = "
-                          f"{result.t[k]:g} s): the filter diverged; check the starting state (--x0), R, Q and the "
-                          "record")
+                          f"{result.t[k]:g} s): the filter diverged; check the starting state (--x0) and its variances (--P0: "
+                          "1 for a state not measured), R, Q and the record")
     if not np.isfinite(result.loglik):
         k = int(np.flatnonzero(~np.isfinite(result.loglik_terms))[0])
         raise SolverError(f"the log-likelihood is not finite (first at row {k}, t = {result.t[k]:g} s): the filter "
-                          "diverged; check the starting state (--x0), R, Q and the record")
+                          "diverged; check the starting state (--x0) and its variances (--P0), R, Q and the record")
