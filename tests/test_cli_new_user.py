@@ -182,3 +182,17 @@ def test_a_diverging_filter_names_the_starting_variances(data_dir, capsys):
     rec = data_dir / "kvlcc2_marin_free" / "MARIN_FREE_KVLCC2_zz_10_m.dat"
     one_line_error(capsys, ["filter", str(rec), "--model", "kvlcc2", "--estimator", "enkf", "--measured", "x,y,psi",
                             "--quiet"], "the filter diverged", "--P0: 1 for a state not measured")
+
+
+@pytest.mark.parametrize("option, value, text", [
+    ("--weights", "q=1", "--weights: unknown name(s) ['q']"),
+    ("--weights", "psi=-1", "--weights: a standard deviation must be positive, got {'psi': -1.0}"),
+    ("--prior-std", "N_q=0.1", "--prior-std: unknown name(s) ['N_q']"),
+])
+def test_the_ship_workflow_refuses_a_name_it_would_pass_over(option, value, text, tmp_path, capsys):
+    """Before: 'casship identify REC --model kvlcc2 --weights q=1' (or --prior-std N_q=0.1) ran the whole workflow
+    with the unknown name ignored; a negative weight stopped after the inverse-dynamics start with 'sigma values
+    must be positive: ['psi']'."""
+    rec = _kvlcc2_record(tmp_path / "run.csv", 1.53)
+    one_line_error(capsys, ["identify", str(rec), "--model", "kvlcc2", option, value, "--quiet"], text)
+    assert not (tmp_path / "fit.json").exists()

@@ -329,8 +329,14 @@ def _workflow(args) -> int:
     model = get_model(args.model)
     records = _records(args, model)
     measured = parse_items(args.measured, "--measured") if args.measured is not None else None
-    options = dict(weights=parse_pairs(args.weights, "--weights") or None,
-                   prior=parse_pairs(args.prior, "--prior-std") or None, measured=measured)
+    # the workflow passes over a name it does not use: an unknown one is refused here, by its option
+    weights = parse_pairs(args.weights, "--weights", names=measured or model.output_names)
+    prior = parse_pairs(args.prior, "--prior-std", names=model.param_names)
+    for option, values in (("--weights", weights), ("--prior-std", prior)):
+        bad = {k: v for k, v in values.items() if not v > 0}
+        if bad:
+            raise InputError(f"{option}: a standard deviation must be positive, got {bad}")
+    options = dict(weights=weights or None, prior=prior or None, measured=measured)
     if args.captive is not None:            # the captive-only model or the joint fit, chosen on the records
         return _captive(args, model, stamps, records, options)
     ship = identify_ship(records, model, verbose=not args.json, **options)
