@@ -196,3 +196,16 @@ def test_the_ship_workflow_refuses_a_name_it_would_pass_over(option, value, text
     rec = _kvlcc2_record(tmp_path / "run.csv", 1.53)
     one_line_error(capsys, ["identify", str(rec), "--model", "kvlcc2", option, value, "--quiet"], text)
     assert not (tmp_path / "fit.json").exists()
+
+
+@pytest.mark.parametrize("free", [["--free", "N_r_dash"], []])
+def test_identify_names_the_record_whose_input_is_not_finite(free, tmp_path, capsys):
+    """Before: "input 'delta' is not finite at row 5 (t = 2.5 s)" with two records, not saying which."""
+    import pandas as pd
+
+    good = _kvlcc2_record(tmp_path / "good.csv", 1.53)
+    frame = pd.read_csv(good)
+    frame.loc[5, "delta"] = float("nan")
+    frame.to_csv(tmp_path / "gap.csv", index=False)
+    one_line_error(capsys, ["identify", str(good), str(tmp_path / "gap.csv"), "--model", "kvlcc2", *free, "--quiet"],
+                   "record gap.csv: input 'delta' is not finite at row 5 (t = 2.5 s)")

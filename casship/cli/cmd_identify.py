@@ -139,6 +139,10 @@ def _records(args, model) -> list:
     ranges (unless ``--allow-out-of-range``)."""
     records = []
     for d in read_records(args, args.data, model):
+        try:                    # NaN in an input is an error (rows as in the file, before decimation)
+            d.matrix([n for n in model.input_names if n in d], finite=True, what="input")
+        except InputError as exc:
+            raise InputError(f"record {d.meta.get('name')}: {exc}") from None
         if args.decimate > 1 and args.decimate >= len(d):       # one row left (Dataset.decimate)
             raise InputError(f"--decimate {args.decimate}: record {d.meta.get('name')} has {len(d)} rows; a fit "
                              f"needs at least two after decimation (--decimate {max(len(d) - 1, 1)} at most)")
