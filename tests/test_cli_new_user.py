@@ -209,3 +209,28 @@ def test_identify_names_the_record_whose_input_is_not_finite(free, tmp_path, cap
     frame.to_csv(tmp_path / "gap.csv", index=False)
     one_line_error(capsys, ["identify", str(good), str(tmp_path / "gap.csv"), "--model", "kvlcc2", *free, "--quiet"],
                    "record gap.csv: input 'delta' is not finite at row 5 (t = 2.5 s)")
+
+
+def test_identify_names_the_record_that_lacks_a_column(tmp_path, capsys):
+    """Before: "data has no column(s) ['n'] needed by EKF on 'kvlcc2'" (or 'record 1 lacks ...', counted from 0)
+    with two records, and for a --measured output "unknown column 'psi' ... with --R psi=VARIANCE"."""
+    import pandas as pd
+
+    good = _kvlcc2_record(tmp_path / "good.csv", 1.53)
+    frame = pd.read_csv(good)
+    frame.drop(columns=["n"]).to_csv(tmp_path / "no_n.csv", index=False)
+    frame.drop(columns=["psi"]).to_csv(tmp_path / "no_psi.csv", index=False)
+    for free in (["--free", "N_r_dash"], []):
+        one_line_error(capsys, ["identify", str(good), str(tmp_path / "no_n.csv"), "--model", "kvlcc2", *free,
+                                "--quiet"], "record no_n.csv: no column(s) ['n'], the input(s) of 'kvlcc2'")
+        err = one_line_error(capsys, ["identify", str(good), str(tmp_path / "no_psi.csv"), "--model", "kvlcc2", *free,
+                                      "--measured", "u,psi", "--quiet"],
+                             "record no_psi.csv: no column(s) ['psi'], the --measured output(s)")
+        assert "VARIANCE" not in err
+
+
+def test_filter_measured_names_an_output_the_model_lacks(tmp_path, capsys):
+    """Before: "the data have no column(s) ['q'] needed by model 'kvlcc2'" (q is no output of the model)."""
+    rec = _kvlcc2_record(tmp_path / "run.csv", 1.53)
+    one_line_error(capsys, ["filter", str(rec), "--model", "kvlcc2", "--measured", "u,q", "--quiet"],
+                   "--measured: ['q'] not output(s) of model 'kvlcc2'", "'psi'")

@@ -137,6 +137,8 @@ def record_noise(model, data, names, option: str = "--R NAME=VARIANCE (or --R-st
         try:
             var, text = noise_from_data(model, data, [n])
         except InputError as exc:
+            if n not in data or n not in model.output_names:       # its own message names the unknown column
+                raise
             raise InputError(f"{exc} with {option.replace('NAME', n)}, or leave {n!r} out of --measured") from None
         R[n], how[n] = var[n], text[n]
     return R, how
@@ -228,6 +230,10 @@ def filter_file(args, model=None):
         meas = tuple(parse_items(args.measured, "--measured"))
         if not meas:
             raise InputError("--measured: no output named (give a,b or leave the option out for the outputs in the data)")
+        unknown = [n for n in meas if n not in model.output_names]
+        if unknown:
+            raise InputError(f"--measured: {unknown} not output(s) of model {model.name!r}; its outputs: "
+                             f"{list(model.output_names)}")
     else:
         meas = tuple(n for n in model.output_names if n in data)
         if not meas:

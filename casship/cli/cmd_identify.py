@@ -139,6 +139,7 @@ def _records(args, model) -> list:
     ranges (unless ``--allow-out-of-range``)."""
     records = []
     for d in read_records(args, args.data, model):
+        _check_columns(d, model.input_names, f"input(s) of {model.name!r}")
         try:                    # NaN in an input is an error (rows as in the file, before decimation)
             d.matrix([n for n in model.input_names if n in d], finite=True, what="input")
         except InputError as exc:
@@ -150,6 +151,14 @@ def _records(args, model) -> list:
     if not args.allow_out_of_range:
         check_record_ranges(model, records)
     return records
+
+
+def _check_columns(data, names, what: str) -> None:
+    """Refuse a record that lacks a column of ``names``, naming the record."""
+    missing = [n for n in names if n not in data]
+    if missing:
+        raise InputError(f"record {data.meta.get('name')}: no column(s) {missing}, the {what}; columns: "
+                         f"{list(data.names)} (use --columns)")
 
 
 def _bounds(text: str | None) -> dict:
@@ -265,6 +274,8 @@ def run(args) -> int:
                 else [n for n in model.output_names if all(n in d for d in records)])
     if not measured:
         raise InputError(f"no output of {model.name!r} {list(model.output_names)} is a column of every record")
+    for d in records:
+        _check_columns(d, [n for n in measured if n in model.output_names], "--measured output(s)")
     stage("building the problem", 2, 5)
     prob = _problem(args, model, records, free, measured)
     guess = parse_pairs(args.guess, "--guess")
@@ -333,6 +344,8 @@ def _workflow(args) -> int:
     model = get_model(args.model)
     records = _records(args, model)
     measured = parse_items(args.measured, "--measured") if args.measured is not None else None
+    for d in records:
+        _check_columns(d, [n for n in measured or () if n in model.output_names], "--measured output(s)")
     # the workflow passes over a name it does not use: an unknown one is refused here, by its option
     weights = parse_pairs(args.weights, "--weights", names=measured or model.output_names)
     prior = parse_pairs(args.prior, "--prior-std", names=model.param_names)
