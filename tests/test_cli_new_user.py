@@ -234,3 +234,14 @@ def test_filter_measured_names_an_output_the_model_lacks(tmp_path, capsys):
     rec = _kvlcc2_record(tmp_path / "run.csv", 1.53)
     one_line_error(capsys, ["filter", str(rec), "--model", "kvlcc2", "--measured", "u,q", "--quiet"],
                    "--measured: ['q'] not output(s) of model 'kvlcc2'", "'psi'")
+
+
+@pytest.mark.parametrize("estimator, option", [("mhe", "horizon=abc"), ("enkf", "members=abc"), ("ukf", "alpha=abc"),
+                                               ("ekf", "substeps=abc"), ("ekf", "gate=0.99,reacquire=abc"),
+                                               ("mhe", "tol=abc")])
+def test_filter_an_option_that_is_not_a_number_is_named(estimator, option, tmp_path, capsys):
+    """Before: 'internal error (a bug in casship): ValueError: could not convert string to float: 'abc''."""
+    rec = _kvlcc2_record(tmp_path / "run.csv", 1.53)
+    name = option.rsplit(",", 1)[-1].split("=")[0]
+    one_line_error(capsys, ["filter", str(rec), "--model", "kvlcc2", "--R", "1e-4", "--estimator", estimator,
+                            "--options", option, "--quiet"], f"option '{name}' is a number, got 'abc'")

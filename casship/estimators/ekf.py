@@ -9,7 +9,7 @@ import numpy as np
 from ..builder import ModelBuilder
 from ..discretize import rk4
 from .base import StepEstimator
-from .options import EstimatorOptions, check_int
+from .options import EstimatorOptions, check_int, check_number
 from .update import joseph_update, sandwich, symmetric
 from ..errors import InputError
 
@@ -50,7 +50,8 @@ class EKFOptions(EstimatorOptions):
             raise InputError(f"option 'covariance' must be 'discrete' or 'continuous', got {self.covariance!r}")
         object.__setattr__(self, "substeps", check_int(self.substeps, "substeps", 1))
         if self.reacquire is not None:
-            if isinstance(self.reacquire, bool) or not float(self.reacquire).is_integer() or self.reacquire < 1:
+            if isinstance(self.reacquire, bool) or not check_number(self.reacquire, "reacquire").is_integer() \
+                    or self.reacquire < 1:
                 raise InputError(f"option 'reacquire' is a positive number of samples, got {self.reacquire!r}")
             if self.gate is None:
                 raise InputError("option 'reacquire' needs a 'gate'")

@@ -11,7 +11,7 @@ from typing import Mapping
 
 from ..errors import InputError, InputTypeError
 
-__all__ = ["EstimatorOptions", "DIAGNOSTICS", "check_int"]
+__all__ = ["EstimatorOptions", "DIAGNOSTICS", "check_int", "check_number"]
 
 # Diagnostics a step Function can return besides its memory slots, in their fixed order.
 DIAGNOSTICS = ("x", "P", "x_pred", "P_pred", "C", "e", "S", "K", "nis", "ll", "accepted")
@@ -28,7 +28,7 @@ def check_int(value, name: str, low: int) -> int:
     low : int
         Smallest value allowed.
     """
-    if isinstance(value, bool) or not float(value).is_integer() or int(value) < low:
+    if isinstance(value, bool) or not check_number(value, name).is_integer() or int(value) < low:
         raise InputError(f"option {name!r} must be an integer >= {low}, got {value!r}")
     return int(value)
 
@@ -69,7 +69,7 @@ class EstimatorOptions:
 
     def __post_init__(self):
         if self.gate is not None:
-            gate = _number(self.gate, "gate")
+            gate = check_number(self.gate, "gate")
             if not 0 < gate < 1:
                 raise InputError(f"option 'gate' is a probability in (0, 1), got {self.gate!r}")
             object.__setattr__(self, "gate", gate)
@@ -91,7 +91,7 @@ class EstimatorOptions:
             raise InputError(f"option 'outputs' must contain 'x' and 'P', got {list(outputs)}")
         object.__setattr__(self, "outputs", tuple(o for o in DIAGNOSTICS if o in outputs))
         if self.max_gap is not None:
-            gap = _number(self.max_gap, "max_gap")
+            gap = check_number(self.max_gap, "max_gap")
             if not (gap > 0 and gap < float("inf")):
                 raise InputError(f"option 'max_gap' is a positive time [s] (or None), got {self.max_gap!r}")
             object.__setattr__(self, "max_gap", gap)
@@ -140,8 +140,20 @@ class EstimatorOptions:
         return replace(self, **changes)
 
 
-def _number(value, name: str) -> float:
-    """An option's value as a float, or ``ValueError`` naming the option."""
+def check_number(value, name: str) -> float:
+    """An option's value as a float, or :class:`~casship.errors.InputError` naming the option.
+
+    Parameters
+    ----------
+    value : object
+        A number, or text that reads as one (an option from the command line).
+    name : str
+        The option (for the message).
+
+    Returns
+    -------
+    float
+    """
     try:
         return float(value)
     except (TypeError, ValueError):

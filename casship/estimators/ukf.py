@@ -15,7 +15,7 @@ import numpy as np
 from dataclasses import dataclass
 
 from .base import StepEstimator
-from .options import EstimatorOptions
+from .options import EstimatorOptions, check_number
 from .update import gain_and_terms, masked_innovation_cov, outer_sum, sandwich
 from ..errors import InputError
 
@@ -142,7 +142,7 @@ class UKFOptions(EstimatorOptions):
         super().__post_init__()
         for name in ("alpha", "beta", "kappa"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not np.isfinite(float(v)):
+            if isinstance(v, bool) or not np.isfinite(check_number(v, name)):
                 raise InputError(f"option {name!r} must be a finite number, got {v!r}")
             object.__setattr__(self, name, float(v))
         if self.alpha <= 0:

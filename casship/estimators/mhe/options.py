@@ -18,14 +18,20 @@ QP_SOLVERS = ("qrqp", "osqp")
 
 
 def _positive(value, what: str) -> float:
-    v = float(value)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} is a number, got {value!r}") from None
     if not np.isfinite(v) or v <= 0:
         raise InputError(f"{what} must be positive and finite, got {value!r}")
     return v
 
 
 def _nonneg(value, what: str) -> float:
-    v = float(value)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} is a number, got {value!r}") from None
     if not np.isfinite(v) or v < 0:
         raise InputError(f"{what} must be >= 0 and finite, got {value!r}")
     return v
