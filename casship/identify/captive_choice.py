@@ -240,6 +240,10 @@ class CaptiveShip:
         lines.append(f"{'name':>16} {'published':>11} {'captive':>11} {'SE':>9} {'z':>7}")
         for n, v in self.values.items():
             lines.append(f"{n:>16} {start[n]:>11.5g} {v:>11.5g} {sd[n]:>9.3g} {(v - start[n]) / sd[n]:>7.1f}")
+        held = [n for n in self.belief.names if n not in self.values]
+        if held:
+            lines.append("at the preset, with the facility rule's spread in the bands (no captive test pins them on "
+                         "the ship): " + ", ".join(f"{n} {start[n]:.4g} +- {sd[n]:.3g}" for n in held))
         if self.verdict is None:
             lines.append("no free-running record: no model-discrepancy term, so replays' predictive band is the "
                          "parameter band alone; give records beside the captive tests to estimate one")
