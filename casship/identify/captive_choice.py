@@ -20,6 +20,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .records import facility_of, record_label
+from .shipfit import TRAINING
 
 __all__ = ["INNER_FOLDS", "RULE", "CaptiveChoice", "CaptiveShip", "choose_with_captive", "identify_with_captive",
            "inner_groups"]
@@ -188,15 +189,16 @@ class CaptiveShip:
         """The chosen model's verdict (the joint fit's own, or the captive-only model's out of sample)."""
         return self.ship.fit.verdict if self.ship is not None else self.verdict
 
-    def to_json(self, path, facility: str | None = None):
+    def to_json(self, path, facility: str | None = TRAINING):
         """Write the chosen model as a fit file (``casship simulate --params`` replays it), with the choice
         (``captive_choice``) and the captive fit (``captive_fit``).
 
         Parameters
         ----------
         path : str or Path
-        facility : str, optional
-            The facility of the records the file will replay (the joint fit's facility quantities).
+        facility : str or None
+            The facility of the records the file will replay (the joint fit's facility quantities;
+            :meth:`~.shipfit.ShipFit.to_json`: by default the records' facility when they share one).
 
         Returns
         -------
