@@ -262,6 +262,14 @@ MUTANTS = [
       "ship.params(facility_of(d))", 'ship.params(d.meta.get("facility"))', (T_RIG,)),
     M("captive choice: the worse candidate wins", CHOOSE, 'scores["joint"] < scores["captive-only"] else',
       'scores["joint"] > scores["captive-only"] else', (T_RIG,)),
+    M("rig: a new facility's quantity without the between-facility spread", RIG,
+      'prior_std=prior[n])["new_facility_std"]', 'prior_std=prior[n])["population_std"]', (T_RIG,)),
+    M("covariance check: relative to the largest eigenvalue again (units mixed)", "casship/gaussian.py",
+      "m[np.ix_(keep, keep)] * np.outer(scale, scale)", "m[np.ix_(keep, keep)] / np.abs(m).max()",
+      ("tests/test_data.py",)),
+    M("replay: the uninformative band never flagged", "casship/maneuvers/replay.py",
+      "np.asarray(std)) > UNINFORMATIVE_DEG", "np.asarray(std)) > 360.0 * UNINFORMATIVE_DEG",
+      ("tests/test_verdict_bands.py",)),
 ]
 
 

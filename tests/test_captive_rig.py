@@ -68,13 +68,28 @@ def test_the_rule_recovers_a_known_ship_and_carries_only_the_hull(rig):
     ship = kvlcc2()
     values, belief = carried(fit, ship)
     assert not any("@" in n for n in values) and "delta_0" not in values      # facility quantities stay with the rig
-    assert list(belief.names) == list(values) and belief.kind == "robust"
+    k = len(values)
+    assert list(belief.names)[:k] == list(values) and belief.kind == "robust"
     robust = fit.uncertainty("robust")
     i = [robust.names.index(n) for n in values]
-    np.testing.assert_array_equal(belief.cov, robust.cov[np.ix_(i, i)])
+    np.testing.assert_array_equal(belief.cov[:k, :k], robust.cov[np.ix_(i, i)])
+    # the facility quantities no captive test pins on the ship: at its preset, independent, with the
+    # population value of a new facility: prior and between-facility spread both the stated uncertainty
+    rest = list(belief.names)[k:]
+    preset = ship.param_dict()
+    assert set(rest) == {"epsilon", "kappa", "f_alpha", "t_P", "w_P0"}           # kvlcc2: no neutral angle term
+    np.testing.assert_array_equal(belief.cov[:k, k:], 0.0)
+    for j, n in enumerate(rest):
+        assert belief.values[k + j] == preset[n]
+        assert np.sqrt(belief.cov[k + j, k + j]) == pytest.approx(np.sqrt(2.0) * 0.2 * preset[n], rel=1e-12), n
+    with_ports = carried(fit, kvlcc2(asymmetry=True, smooth=True))[1]
+    sd = dict(zip(with_ports.names, np.sqrt(np.diag(with_ports.cov))))
+    assert sd["delta_0"] == pytest.approx(np.radians(np.sqrt(2.0)), rel=1e-12)     # 1 deg prior, 1 deg spread
+    assert sd["N_0_dash"] == pytest.approx(0.025, rel=1e-12)                        # a port/starboard term: its prior
     path = write_carried("carried.json", ship, values, belief)
     obj = json.loads(path.read_text())
-    assert obj["candidate"] == "captive-only" and obj["estimates"] == values
+    assert obj["candidate"] == "captive-only" and obj["estimates"] == values and obj["free"] == list(values)
+    assert obj["param_covariance"]["names"] == list(belief.names)
 
 
 def test_rig_files_and_their_errors(rig, tmp_path):

@@ -6,6 +6,7 @@ every other record, in the fit and in a replay, at the pooled population value w
 between-facility spread in its band; the records' own values reach the output-error problem as
 ``record_params``.
 """
+import dataclasses
 import json
 
 import numpy as np
@@ -197,3 +198,19 @@ def test_with_one_facility_its_copy_is_the_shared_value_through_every_pass(monke
     assert copy.fit.estimates["K@A"] == pytest.approx(plain.fit.estimates["K"], rel=1e-6)
     assert copy.fit.estimates["T"] == pytest.approx(plain.fit.estimates["T"], rel=1e-6)
     assert copy.params("A")["K"] == pytest.approx(plain.params("A")["K"], rel=1e-6)
+
+
+def test_a_fit_file_is_written_for_the_training_facility_when_there_is_one(two_facilities, tmp_path):
+    """One way to write a fit: ``to_json`` by default writes the training records' facility when they share
+    one (as ``casship identify`` does), the population values when they do not, or what it is told."""
+    from casship.identify.shipfit import TRAINING
+
+    ship, recs, pop = two_facilities                  # two facilities: the default is the population values
+    assert ship.file_facility() is None and ship.file_facility("A") == "A" and ship.file_facility(None) is None
+    content = json.loads(ship.to_json(tmp_path / "two.json").read_text())
+    assert content["params"]["K"] == pytest.approx(pop, rel=1e-12)
+    only_a = dataclasses.replace(ship, facilities=["A", "A"])
+    assert only_a.file_facility(TRAINING) == "A"
+    assert json.loads(only_a.to_json(tmp_path / "a.json").read_text())["params"]["K"] == K_A
+    assert json.loads(only_a.to_json(tmp_path / "pop.json", None).read_text())["params"]["K"] == pytest.approx(pop)
+    assert only_a.to_dict()["params"]["K"] == K_A      # the JSON printed and the file written agree

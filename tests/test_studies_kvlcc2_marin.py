@@ -240,3 +240,21 @@ def test_the_thrust_wake_is_the_facility_s_and_the_open_water_curve_the_ship_s()
     both = PropulsionFit({"w_P0": 0.49}, {"w_P0": 0.004}, ["w_P0"], [], 0.0, {}, {}, 1.0, ["HSVA 0", "MARIN 1"])
     with pytest.raises(InputError, match="several facilities"):
         propulsion_split(both, runs)
+
+
+def test_predictive_coverage_says_how_much_of_it_is_informative():
+    import casship as cs
+    from problems.kvlcc2_marin.calibration import predictive_coverage
+    from problems.kvlcc2_marin.data import Run
+
+    t = np.arange(0.0, 100.0, 1.0)
+    s = np.radians(np.where(t < 50.0, 10.0, 60.0)) / 1.959963984540054      # 10 deg, then 60 deg half-width
+    data = cs.Dataset(t, {"psi": np.radians(15.0) * np.ones_like(t)})          # 15 deg off the replay throughout
+    run = Run("MARIN A", "MARIN", data, "zigzag")
+    ev = {"row": {"run": "MARIN A"}, "fit": cs.Dataset(t, {"psi": np.zeros_like(t)}), "bands": {"psi_std": s}}
+    results = [{"kind": "run", "label": "MARIN A", "held": ["MARIN A"], "evaluations": [ev]}]
+    narrow = predictive_coverage([run], results, {"MARIN B": 0.0})
+    assert narrow["mean"] == 0.5 and narrow["informative_share"] == 1.0 and narrow["inside_and_informative"] == 0.5
+    ev["bands"] = {"psi_std": 2.0 * s}                                         # 20 deg, then 120 deg
+    wide = predictive_coverage([run], results, {"MARIN B": 0.0})
+    assert wide["mean"] == 1.0 and wide["informative_share"] == 0.5 and wide["inside_and_informative"] == 0.5

@@ -94,3 +94,21 @@ def test_a_fits_own_discrepancy_reaches_the_replay_as_the_predictive_band(tmp_pa
     np.testing.assert_allclose(res.bands["psi_std_predictive"],
                                np.sqrt(res.bands["psi_std"] ** 2 + np.radians(np.radians(q)) * (t - t[0])), rtol=1e-12)
     assert "psi_predictive_coverage" in res.band_summary()
+
+
+def test_a_band_wider_than_a_quarter_turn_is_flagged_as_saying_nothing(tmp_path):
+    from casship.maneuvers.replay import UNINFORMATIVE_DEG
+
+    path, t, delta, psi = _fit_file(tmp_path, 0.05)
+    res = replay_file(path, cs.Dataset(t, {"psi": psi, "delta": delta}), samples=0)
+    assert not any("says nothing" in n for n in res.coverage_notes())      # about 10 deg wide: informative
+    q = (np.radians(UNINFORMATIVE_DEG) / 1.96) ** 2 / 140.0                  # crosses 90 deg near t = 140 s
+    doc = json.loads(path.read_text())
+    doc["model_discrepancy"] = {"psi_variance_growth_deg2_per_s": float(np.degrees(np.degrees(q)))}
+    path.write_text(json.dumps(doc))
+    wide = replay_file(path, cs.Dataset(t, {"psi": psi, "delta": delta}), samples=0)
+    s = wide.bands["psi_std_predictive"]
+    first = t[np.argmax(np.degrees(wide.bands["z"] * s) > UNINFORMATIVE_DEG)]
+    notes = [n for n in wide.coverage_notes() if "says nothing" in n]
+    assert len(notes) == 1 and f"from {first:.0f} s of 199 s" in notes[0], notes
+    assert 130.0 < first < 145.0

@@ -357,9 +357,7 @@ def _workflow(args) -> int:
     if args.captive is not None:            # the captive-only model or the joint fit, chosen on the records
         return _captive(args, model, stamps, records, options)
     ship = identify_ship(records, model, verbose=not args.json, **options)
-    facilities = sorted(set(ship.facilities))
-    write_output(args.out, lambda path: ship.to_json(path, facilities[0] if len(facilities) == 1 else None),
-                 option="--out", overwrite=args.overwrite, stamps=stamps)
+    write_output(args.out, ship.to_json, option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
         write_output(args.plot, ship.fit.plot, option="--plot", overwrite=args.overwrite, stamps=stamps)
     if args.json:
@@ -402,15 +400,12 @@ def _captive(args, model, stamps, records, options) -> int:
     """The captive tests alone or beside ``records`` (:func:`casship.identify.captive_choice.identify_with_captive`),
     written, plotted and printed."""
     from ..identify.captive_choice import identify_with_captive
-    from ..identify.records import facility_of
     from ..progress import stage
 
     problem, alone = _captive_fit(args)
     result = identify_with_captive(records, model, problem, alone, workflow=options, verbose=not args.json,
                                    progress=lambda text: stage(text, 3, 3))
-    facilities = sorted({facility_of(d) for d in records})
-    write_output(args.out, lambda path: result.to_json(path, facilities[0] if len(facilities) == 1 else None),
-                 option="--out", overwrite=args.overwrite, stamps=stamps)
+    write_output(args.out, result.to_json, option="--out", overwrite=args.overwrite, stamps=stamps)
     if args.plot:
         write_output(args.plot, lambda path: problem.plot(alone, path=path), option="--plot", overwrite=args.overwrite,
                      stamps=stamps)

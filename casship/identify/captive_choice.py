@@ -20,6 +20,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .records import facility_of, record_label
+from .shipfit import TRAINING
 
 __all__ = ["INNER_FOLDS", "RULE", "CaptiveChoice", "CaptiveShip", "choose_with_captive", "identify_with_captive",
            "inner_groups"]
@@ -188,15 +189,16 @@ class CaptiveShip:
         """The chosen model's verdict (the joint fit's own, or the captive-only model's out of sample)."""
         return self.ship.fit.verdict if self.ship is not None else self.verdict
 
-    def to_json(self, path, facility: str | None = None):
+    def to_json(self, path, facility: str | None = TRAINING):
         """Write the chosen model as a fit file (``casship simulate --params`` replays it), with the choice
         (``captive_choice``) and the captive fit (``captive_fit``).
 
         Parameters
         ----------
         path : str or Path
-        facility : str, optional
-            The facility of the records the file will replay (the joint fit's facility quantities).
+        facility : str or None
+            The facility of the records the file will replay (the joint fit's facility quantities;
+            :meth:`~.shipfit.ShipFit.to_json`: by default the records' facility when they share one).
 
         Returns
         -------
@@ -240,6 +242,10 @@ class CaptiveShip:
         lines.append(f"{'name':>16} {'published':>11} {'captive':>11} {'SE':>9} {'z':>7}")
         for n, v in self.values.items():
             lines.append(f"{n:>16} {start[n]:>11.5g} {v:>11.5g} {sd[n]:>9.3g} {(v - start[n]) / sd[n]:>7.1f}")
+        held = [n for n in self.belief.names if n not in self.values]
+        if held:
+            lines.append("at the preset, with the facility rule's spread in the bands (no captive test pins them on "
+                         "the ship): " + ", ".join(f"{n} {start[n]:.4g} +- {sd[n]:.3g}" for n in held))
         if self.verdict is None:
             lines.append("no free-running record: no model-discrepancy term, so replays' predictive band is the "
                          "parameter band alone; give records beside the captive tests to estimate one")

@@ -41,7 +41,7 @@ import numpy as np
 from ..errors import InputError
 
 __all__ = ["Rig", "RIGS", "CAPTIVE_HULL", "CAPTIVE_INTERACTION", "CAPTIVE_OWN", "CAPTIVE_CHANNELS", "CAPTIVE_OPTIONS",
-           "captive_free_set", "carried", "classical_derivatives", "read_rig", "write_carried"]
+           "captive_free_set", "carried", "classical_derivatives", "read_rig", "unpinned_on_ship", "write_carried"]
 
 #: Hull coefficients a PMM series is designed to measure (static drift, pure sway, pure yaw, yaw with drift).
 CAPTIVE_HULL = ("X_vv_dash", "X_vr_dash", "X_rr_dash", "X_vvvv_dash", "Y_v_dash", "Y_r_dash", "Y_vvv_dash",
@@ -286,6 +286,15 @@ def read_rig(source) -> Rig:
 def carried(fit, model):
     """The captive estimates that carry to ``model`` (another ship of the hull form) and their belief.
 
+    The belief is what a record of the ship is replayed with, by the facility rule of the ship
+    workflow (:mod:`casship.identify.workflow`): the hull and interaction estimates with their robust
+    covariance; every facility quantity (the neutral angle, the rudder's own quantities, the rig's
+    own propeller, wake and rudder, :data:`CAPTIVE_OWN`) at the ship's preset, the population value
+    of a facility without a value of its own, with ``sqrt(prior^2 + spread^2)`` (its stated
+    uncertainty both, :func:`~.shipfit.pool_facilities` with no facility); and the port/starboard
+    terms at the preset with their prior standard deviation (no mirrored evidence). None of these is
+    carried as exact from one facility to another.
+
     Parameters
     ----------
     fit : FitResult
@@ -299,7 +308,8 @@ def carried(fit, model):
         The hull and interaction estimates (no ``name@facility`` quantity) that are parameters of
         ``model``.
     belief : ParameterBelief
-        Their robust covariance from the captive fit (``kind="robust"``).
+        Their robust covariance from the captive fit (``kind="robust"``), extended by the facility
+        quantities and port/starboard terms of ``model`` at its preset values (independent).
     """
     from .belief import ParameterBelief
 
@@ -309,9 +319,50 @@ def carried(fit, model):
     names = [belief.names[i] for i in keep]
     values = {n: float(fit.estimates[n]) for n in names}
     facility = ", ".join(r.split(":", 1)[-1] for r in fit.records)
-    return values, ParameterBelief.from_values(names, [values[n] for n in names], belief.cov[np.ix_(keep, keep)],
-                                               f"captive-only fit of the {facility} captive tests (robust covariance)",
-                                               kind="robust")
+    hull = ParameterBelief.from_values(names, [values[n] for n in names], belief.cov[np.ix_(keep, keep)],
+                                       f"captive-only fit of the {facility} captive tests (robust covariance)",
+                                       kind="robust")
+    beside = unpinned_on_ship(model, exclude=names)
+    if not beside:
+        return values, hull
+    return values, hull.extended(beside, model.param_dict(),
+                                 source=f"{hull.source}; {', '.join(beside)} at the preset with the facility rule's "
+                                        "spread (population value of a new facility, or the prior of a "
+                                        "port/starboard term)")
+
+
+def unpinned_on_ship(model, exclude=()) -> dict:
+    """Standard deviation of each quantity no captive test pins on a ship: a record of the ship is
+    replayed with these at the preset values.
+
+    Facility quantities (:data:`casship.identify.workflow.FACILITY`, ``RUDDER`` and
+    :data:`CAPTIVE_OWN`) get ``sqrt(prior^2 + spread^2)``, the population value's uncertainty of a
+    facility with no value of its own (prior and between-facility spread: the stated uncertainty,
+    ``NEUTRAL_SPREAD`` for the neutral angle); port/starboard terms (``ASYMMETRY``) their prior.
+
+    Parameters
+    ----------
+    model : Model
+        The ship.
+    exclude : sequence of str
+        Names already covered (the carried estimates).
+
+    Returns
+    -------
+    dict
+        Name -> standard deviation, for the names ``model`` has.
+    """
+    from .shipfit import pool_facilities
+    from .workflow import ASYMMETRY, FACILITY, NEUTRAL_SPREAD, RUDDER, preset_prior_std
+
+    have, skip = set(model.param_names), set(exclude)
+    facility = [n for n in dict.fromkeys((*FACILITY, *RUDDER, *CAPTIVE_OWN)) if n in have and n not in skip]
+    ports = [n for n in ASYMMETRY if n in have and n not in skip]
+    prior = preset_prior_std(model, facility + ports)
+    out = {n: pool_facilities({}, spread=NEUTRAL_SPREAD if n in FACILITY else prior[n],
+                              prior_std=prior[n])["new_facility_std"] for n in facility}
+    out.update({n: prior[n] for n in ports})
+    return out
 
 
 def write_carried(path, model, values, belief, *, noise=None, method: str = "captive-only (captive tests), Gaussian ML",
@@ -343,7 +394,9 @@ def write_carried(path, model, values, belief, *, noise=None, method: str = "cap
     """
     from .params_file import write_params_file
 
-    names, cov = list(belief.names), np.asarray(belief.cov, float)
+    names = list(values)         # the estimated ones; the belief may also hold quantities at the preset
+    idx = [list(belief.names).index(n) for n in names]
+    cov = np.asarray(belief.cov, float)[np.ix_(idx, idx)]
     sd = np.sqrt(np.diag(cov))
     fit = {"free": names, "estimates": dict(values), "std_errors": dict(zip(names, sd.tolist())),
            "std_errors_robust": dict(zip(names, sd.tolist())), "covariance": cov.tolist(),

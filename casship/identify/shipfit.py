@@ -18,7 +18,10 @@ import numpy as np
 from ..errors import InputError
 from .records import record_label
 
-__all__ = ["ShipFit", "pool_facilities"]
+__all__ = ["ShipFit", "TRAINING", "pool_facilities"]
+
+#: ``facility`` of :meth:`ShipFit.to_json`: the training records' facility when they share one.
+TRAINING = "the training records' facility"
 
 
 def pool_facilities(estimates: Mapping[str, tuple[float, float]], *, spread: float, prior_std: float,
@@ -175,13 +178,33 @@ class ShipFit:
                                            "the mirror-pair stage; facility quantities pooled over facilities",
                                            kind="robust")
 
-    def to_dict(self, facility: str | None = None, uncertainty=None) -> dict:
+    def file_facility(self, facility: str | None = TRAINING) -> str | None:
+        """The facility a fit file is written for: ``facility``, or with :data:`TRAINING` (the
+        default of :meth:`to_json`) the training records' facility when they share one, else None
+        (the population values: a file for records of any facility).
+
+        Parameters
+        ----------
+        facility : str or None
+            A facility, None (the population values) or :data:`TRAINING`.
+
+        Returns
+        -------
+        str or None
+        """
+        if facility != TRAINING:
+            return facility
+        own = sorted(set(self.facilities))
+        return own[0] if len(own) == 1 else None
+
+    def to_dict(self, facility: str | None = TRAINING, uncertainty=None) -> dict:
         """The fit file's content for replaying records of ``facility`` (see :meth:`params`).
 
         Parameters
         ----------
-        facility : str, optional
-            The facility of the records the file will replay.
+        facility : str or None
+            The facility of the records the file will replay; None: the population values;
+            default :data:`TRAINING` (:meth:`file_facility`).
         uncertainty : ParameterBelief, optional
             The covariance to write (default :meth:`uncertainty`).
 
@@ -191,6 +214,7 @@ class ShipFit:
         """
         import dataclasses
 
+        facility = self.file_facility(facility)
         unc = self.uncertainty(facility) if uncertainty is None else uncertainty
         fit = self.fit
         if unc is not None:
@@ -203,14 +227,16 @@ class ShipFit:
                          "asymmetry": self.asymmetry}
         return d
 
-    def to_json(self, path, facility: str | None = None, uncertainty=None, extra: Mapping | None = None):
+    def to_json(self, path, facility: str | None = TRAINING, uncertainty=None, extra: Mapping | None = None):
         """Write the fit file (``casship simulate --params`` replays it) for records of ``facility``.
 
         Parameters
         ----------
         path : str or Path
-        facility : str, optional
-            The facility of the records the file will replay.
+        facility : str or None
+            The facility of the records the file will replay; None: the population values; default
+            :data:`TRAINING`: the training records' facility when they share one (as ``casship
+            identify`` writes it), else the population values.
         uncertainty : ParameterBelief, optional
             The covariance to write (default :meth:`uncertainty`).
         extra : mapping, optional

@@ -95,7 +95,7 @@ PRESET_UNCERTAINTY = {
     "rel": {**{k: 0.2 for k in HULL_LINEAR}, **{k: 0.5 for k in HULL_CUBIC}, "R_0_dash": 0.3,
             "gamma_R_minus": 0.25, "gamma_R_plus": 0.25, "l_R_dash": 0.2, "epsilon": 0.2, "kappa": 0.2,
             "f_alpha": 0.2, "a_H": 0.3, "x_H_dash": 0.2, "t_R": 0.3, "m_x_dash": 0.2, "m_y_dash": 0.2,
-            "J_z_dash": 0.2, "w_P0": 0.2, "C_1": 0.3, "C_2_plus": 0.2, "C_2_minus": 0.2},
+            "J_z_dash": 0.2, "w_P0": 0.2, "t_P": 0.2, "C_1": 0.3, "C_2_plus": 0.2, "C_2_minus": 0.2},
     "abs": {"delta_0": math.radians(1.0), "Y_0_dash": 0.05, "N_0_dash": 0.025},
     "floor": {"X_vr_dash": 0.01},
 }

@@ -25,10 +25,15 @@ from ..model import Model
 from ..simulation import prediction_bands, sampled_metrics, simulate, simulate_many, trajectory_sensitivities
 from ..errors import InputError
 
-__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent", "COVERAGE_SLACK"]
+__all__ = ["replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent", "COVERAGE_SLACK",
+           "UNINFORMATIVE_DEG"]
 
 #: A heading band whose coverage of the measured heading falls more than this below its level is flagged.
 COVERAGE_SLACK = 0.15
+#: A heading band half-width [deg] beyond which a linearised band says nothing: past a quarter turn
+#: either side the first-order propagation of the parameters' uncertainty no longer describes the
+#: spread of replays, and covering the measured heading is no evidence of calibration.
+UNINFORMATIVE_DEG = 90.0
 
 
 @dataclass
@@ -112,7 +117,8 @@ class ReplayResult:
 
     def coverage_notes(self) -> list[str]:
         """Warnings, as text, for a heading band whose coverage of the measured heading falls more than
-        :data:`COVERAGE_SLACK` below its nominal level (a band that does not mean what it says)."""
+        :data:`COVERAGE_SLACK` below its nominal level, or that is wider than :data:`UNINFORMATIVE_DEG`
+        (a band that does not mean what it says)."""
         if not self.bands:
             return []
         level, notes = self.bands["level"], []
@@ -127,6 +133,16 @@ class ReplayResult:
             if c is not None and np.isfinite(c) and c < level - COVERAGE_SLACK:
                 notes.append(f"the {100 * level:.0f} % {what} covers {100 * c:.0f} % of the measured heading: far "
                              f"below its nominal {100 * level:.0f} %; {why}")
+        std = self.bands.get("psi_std_predictive", self.bands.get("psi_std"))
+        if std is not None:
+            wide = np.degrees(self.bands["z"] * np.asarray(std)) > UNINFORMATIVE_DEG
+            if wide.any():
+                t = np.asarray(self.trajectory.t)
+                t0 = float(t[int(np.argmax(wide))] - t[0])
+                notes.append(f"the {100 * level:.0f} % heading band is wider than +-{UNINFORMATIVE_DEG:.0f} deg from "
+                             f"{t0:.0f} s of {float(t[-1] - t[0]):.0f} s ({100 * float(np.mean(wide)):.0f} % of the "
+                             "record): there the linearised band says nothing, and its coverage is no evidence; "
+                             "the parameters' uncertainty does not bound this replay")
         return notes
 
     def __repr__(self) -> str:

@@ -33,6 +33,7 @@ from casship.identify.asymmetry import mirror_pairs, turn_side
 from casship.maneuvers import run_maneuver
 from casship.identify import replay_file
 from casship.maneuvers import replay
+from casship.maneuvers.replay import UNINFORMATIVE_DEG
 
 from .validate import INDICES
 from .workflow import study_model
@@ -160,7 +161,9 @@ def predictive_coverage(runs, results, q_by_run: dict, *, z: float = Z95) -> dic
     ``q t``, with ``q`` the mean over the leave-one-run-out held-out runs *not held out by that fold*
     (a fold never sees its own held-out errors): ``sqrt(s^2 + q t) >= s`` on every sample. Returns
     the share of heading samples inside the band per held-out run and fold, their mean over all folds
-    (``mean``) and per family (``by_kind``), and the parameter band's share beside it.
+    (``mean``) and per family (``by_kind``), and the parameter band's share beside it; and how much of it
+    is informative: the share of samples where the band is at most :data:`UNINFORMATIVE_DEG` wide
+    (``informative_share``) and the share both inside and informative (``inside_and_informative``).
     """
     by_name = {r.name: r for r in runs}
     rows = []
@@ -175,15 +178,22 @@ def predictive_coverage(runs, results, q_by_run: dict, *, z: float = Z95) -> dic
                 continue
             t, e, s = _heading_errors(by_name[ev["row"]["run"]], ev)
             wide = np.sqrt(s**2 + q * t)
+            informative = np.degrees(z * wide) <= UNINFORMATIVE_DEG
             rows.append({"kind": res["kind"], "label": res["label"], "run": ev["row"]["run"],
                          "predictive": float(np.mean(np.abs(e) <= z * wide)),
                          "parameter": float(np.mean(np.abs(e) <= z * s)),
+                         "informative_share": float(np.mean(informative)),
+                         "inside_and_informative": float(np.mean((np.abs(e) <= z * wide) & informative)),
                          "q_deg2_per_s": float(np.degrees(np.degrees(q))),
                          "never_narrower": bool(np.all(wide >= s))})
     kinds = sorted({r["kind"] for r in rows})
-    return {"rows": rows, "mean": float(np.mean([r["predictive"] for r in rows])) if rows else float("nan"),
-            "parameter_mean": float(np.mean([r["parameter"] for r in rows])) if rows else float("nan"),
-            "by_kind": {k: float(np.mean([r["predictive"] for r in rows if r["kind"] == k])) for k in kinds}}
+
+    def mean(key, kind=None):
+        v = [r[key] for r in rows if kind is None or r["kind"] == kind]
+        return float(np.mean(v)) if v else float("nan")
+    return {"rows": rows, "mean": mean("predictive"), "parameter_mean": mean("parameter"),
+            "informative_share": mean("informative_share"), "inside_and_informative": mean("inside_and_informative"),
+            "by_kind": {k: mean("predictive", k) for k in kinds}}
 
 
 def asymmetry_check(runs, fit_file_params, model, published) -> dict:

@@ -300,7 +300,11 @@ def _headline(by_kind, coverage, variants) -> tuple[str, dict]:
             f"of the fold that did not see them, over all fold families): "
             f"{fmt(coverage.get('mean', math.nan), '.2f')} (parameter band alone "
             f"{fmt(coverage.get('parameter_mean', math.nan), '.2f')}); per family "
-            + ", ".join(f"{k} {v:.2f}" for k, v in coverage.get("by_kind", {}).items()) + ".",
+            + ", ".join(f"{k} {v:.2f}" for k, v in coverage.get("by_kind", {}).items())
+            + f". The band is at most +-90 deg wide (informative) on {fmt(coverage.get('informative_share', math.nan), '.2f')} "
+              f"of the samples; inside it there: {fmt(coverage.get('inside_and_informative', math.nan), '.2f')} "
+              f"({fmt(coverage.get('inside_and_informative', math.nan) / (coverage.get('informative_share') or math.nan), '.2f')} "
+              "of the informative samples).",
             f"Variants tried: {variants['this_round']} this round, declared before its first cross-validation run "
             f"({'; '.join(variants['declared'])}); {variants['earlier_rounds']} in earlier rounds, chosen on the "
             "leave-one-run-out means (see the choices below)."]
