@@ -119,7 +119,7 @@ def test_filter_list_works_alone(capsys):
     (["--R", "phi=1e-4"], ["--R: unknown name(s) ['phi']"]),
     (["--x0", "bogus=1"], ["--x0: unknown name(s) ['bogus']"]),
     (["--options", "gait=0.9"], ["unknown option(s) ['gait']"]),
-    (["--measured", "heading"], ["no column(s) ['heading']"]),
+    (["--measured", "heading"], ["--measured: ['heading'] not output(s) of model 'nomoto1'"]),
 ])
 def test_filter_bad_values(capsys, nomoto_record, extra, expected):
     path, _ = nomoto_record
