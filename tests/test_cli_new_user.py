@@ -245,3 +245,22 @@ def test_filter_an_option_that_is_not_a_number_is_named(estimator, option, tmp_p
     name = option.rsplit(",", 1)[-1].split("=")[0]
     one_line_error(capsys, ["filter", str(rec), "--model", "kvlcc2", "--R", "1e-4", "--estimator", estimator,
                             "--options", option, "--quiet"], f"option '{name}' is a number, got 'abc'")
+
+
+def test_the_ship_workflow_names_the_record_it_cannot_use(tmp_path, capsys):
+    """Before: a record whose psi column holds no value stopped the workflow with 'Gaussian: mean contains
+    non-finite entries: entry 2 is nan'; a straight run beside a manoeuvre with "rudder column 'delta' never moves
+    by more than 1.0 deg" (which record?); and an output-error record of one row had a noise remedy appended."""
+    import pandas as pd
+
+    good = _kvlcc2_record(tmp_path / "straight.csv", 1.53)
+    frame = pd.read_csv(good)
+    frame.assign(psi=float("nan")).to_csv(tmp_path / "no_heading.csv", index=False)
+    frame.iloc[:1].to_csv(tmp_path / "one_row.csv", index=False)
+    one_line_error(capsys, ["identify", str(tmp_path / "no_heading.csv"), "--model", "kvlcc2", "--quiet"],
+                   "record no_heading.csv: column(s) ['psi'] hold no finite value")
+    one_line_error(capsys, ["identify", str(good), "--model", "kvlcc2", "--quiet"],
+                   "record straight.csv: rudder column 'delta' never moves")
+    err = one_line_error(capsys, ["identify", str(tmp_path / "one_row.csv"), "--model", "kvlcc2", "--free", "N_r_dash",
+                                  "--objective", "oe", "--quiet"], "'one_row.csv' has 1 row(s)")
+    assert "--sigma" not in err

@@ -224,6 +224,8 @@ def _check_sigma_estimates(model, records, names) -> None:
     whose estimate fails is named with the option that gives it instead."""
     from ..identify.records import noise_std
 
+    if any(len(d) < 2 for d in records):       # the problem names such a record itself
+        return
     for n in names:
         try:
             noise_std(records, [n], [n] if model.angle_outputs[model.index(n, "output")] else [])
@@ -334,6 +336,8 @@ def _own_fit_options(args) -> dict:
 
 def _workflow(args) -> int:
     """``casship identify`` without ``--free``: the ship workflow of the Python API, printed choice by choice."""
+    import numpy as np
+
     from ..identify.workflow import identify_ship
     from ..models import get_model
 
@@ -346,6 +350,11 @@ def _workflow(args) -> int:
     measured = parse_items(args.measured, "--measured") if args.measured is not None else None
     for d in records:
         _check_columns(d, [n for n in measured or () if n in model.output_names], "--measured output(s)")
+        # the workflow smooths and weighs every output a record holds: one never measured stops it
+        empty = [n for n in model.output_names if n in d and not np.isfinite(np.asarray(d[n], dtype=float)).any()]
+        if empty:
+            raise InputError(f"record {d.meta.get('name')}: column(s) {empty} hold no finite value (never measured); "
+                             "remove them from the record")
     # the workflow passes over a name it does not use: an unknown one is refused here, by its option
     weights = parse_pairs(args.weights, "--weights", names=measured or model.output_names)
     prior = parse_pairs(args.prior, "--prior-std", names=model.param_names)

@@ -60,7 +60,7 @@ from .identifiability import MAX_CORR, MAX_RATIO, RunEvidence
 from .inverse_dynamics import inverse_dynamics, smooth_trial
 from .output_error import OutputErrorProblem
 from .prior import Prior
-from .records import facility_of
+from .records import facility_of, record_label
 from .result import IdentificationWarning
 from .runlevel import MEASURED, approach_resistance, resample, run_evidence
 from .shipfit import ShipFit, pool_facilities
@@ -299,8 +299,13 @@ def identify_ship(records, model="kvlcc2", *, free: Sequence[str] | None = None,
     fixed = model.params({**preset, **population})
     start = {}
     if "R_0_dash" in names and "n" in inputs and all("u" in r for r in records):
-        r0 = float(np.mean([approach_resistance(model, r, model.params({**preset, **own}))
-                            for r, own in zip(records, own_values)]))
+        r0s = []
+        for i, (r, own) in enumerate(zip(records, own_values)):
+            try:
+                r0s.append(approach_resistance(model, r, model.params({**preset, **own})))
+            except InputError as exc:           # which record is no manoeuvre
+                raise InputError(f"record {record_label(r, i)}: {exc}") from None
+        r0 = float(np.mean(r0s))
         start["R_0_dash"] = r0
         note("propulsion", f"R_0' starts at {r0:.4g} (preset {model.param_dict()['R_0_dash']:.4g})",
              "the value that holds the records' approach speeds at their measured propeller rates (mean over "
