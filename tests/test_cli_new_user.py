@@ -49,6 +49,18 @@ def test_design_trial_a_non_positive_value_names_the_option(option, capsys):
     one_line_error(capsys, [*DESIGN, option, "-3"], f"argument {option}: must be a positive number")
 
 
+def test_design_trial_prior_std_for_a_parameter_the_fit_estimated_names_the_option(tmp_path, capsys):
+    """Before: "extra_std given for ['N_r_dash'], which the fit estimated" (the API's keyword, not --prior-std)."""
+    rec = _kvlcc2_record(tmp_path / "run.csv", 1.53)
+    fit = tmp_path / "fit.json"
+    main(["identify", str(rec), "--model", "kvlcc2", "--free", "N_r_dash", "--measured", "psi,r", "--R",
+          "psi=1e-6,r=1e-8", "--max-iter", "2", "--no-loo", "--out", str(fit), "--quiet"])
+    capsys.readouterr()
+    assert fit.exists()
+    one_line_error(capsys, ["design-trial", "--model", "kvlcc2", "--params", str(fit), "--prior-std", "N_r_dash=0.01",
+                            "--no-free", "--quiet"], "--prior-std: ['N_r_dash'] estimated by the fit")
+
+
 # -- identify: the records checked against the model's validity ranges, as filter and simulate do ---------------
 def _kvlcc2_record(path, n: float):
     """A short straight run of kvlcc2 columns with propeller rate ``n`` [1/s], as a CSV."""

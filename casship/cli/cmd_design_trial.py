@@ -135,6 +135,10 @@ def _belief_and_noise(args, model):
         check_input_files({"--params": args.params})
         model, p = read_params(args.params, args.model)
         fit = FitResult.from_json(args.params)
+        estimated = sorted(set(extra) & {q.split("@", 1)[0] for q in fit.free})
+        if estimated:
+            raise InputError(f"--prior-std: {estimated} estimated by the fit {args.params} (their covariance comes "
+                             "from it); give --prior-std for parameters the fit held fixed")
         if any(q.split("@", 1)[0] in model.param_names for q in fit.free):
             belief = ParameterBelief.from_fit(args.params, covariance=args.covariance, extra_std=extra,
                                               params=model.param_dict(p))
