@@ -97,7 +97,7 @@ def test_a_fits_own_discrepancy_reaches_the_replay_as_the_predictive_band(tmp_pa
 
 
 def test_a_band_wider_than_a_quarter_turn_is_flagged_as_saying_nothing(tmp_path):
-    from casship.maneuvers.replay import UNINFORMATIVE_DEG
+    from casship.maneuvers import UNINFORMATIVE_DEG
 
     path, t, delta, psi = _fit_file(tmp_path, 0.05)
     res = replay_file(path, cs.Dataset(t, {"psi": psi, "delta": delta}), samples=0)

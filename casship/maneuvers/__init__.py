@@ -23,10 +23,11 @@ from .inputs import (ReverseSpiral, ZigZag, propeller_inputs, pullout_inputs, ra
                      spiral_inputs, straight_run_state, turning_inputs, vessel_of)
 from .metrics import execute_time, imo_check, imo_table, turning_metrics, zigzag_metrics
 from .runners import MANEUVERS, ManeuverResult, propeller_rate_for_speed, run_maneuver
-from .replay import COVERAGE_SLACK, ReplayResult, classify_maneuver, maneuver_metrics, replay, why_absent
+from .replay import COVERAGE_SLACK, UNINFORMATIVE_DEG, ReplayResult, classify_maneuver, maneuver_metrics, replay, why_absent
 
 __all__ = ["rudder_inputs", "propeller_inputs", "propeller_rate_for_speed", "straight_run_state",
            "turning_inputs", "pullout_inputs", "spiral_inputs", "random_rudder_inputs", "ZigZag",
            "ReverseSpiral", "run_maneuver", "ManeuverResult", "turning_metrics", "zigzag_metrics", "execute_time",
            "imo_check", "imo_table", "MANEUVERS", "vessel_of",
-           "replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent", "COVERAGE_SLACK"]
+           "replay", "ReplayResult", "classify_maneuver", "maneuver_metrics", "why_absent", "COVERAGE_SLACK",
+           "UNINFORMATIVE_DEG"]

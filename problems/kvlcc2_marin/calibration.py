@@ -33,7 +33,7 @@ from casship.identify.asymmetry import mirror_pairs, turn_side
 from casship.maneuvers import run_maneuver
 from casship.identify import replay_file
 from casship.maneuvers import replay
-from casship.maneuvers.replay import UNINFORMATIVE_DEG
+from casship.maneuvers import UNINFORMATIVE_DEG
 
 from .validate import INDICES
 from .workflow import study_model
