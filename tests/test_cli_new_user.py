@@ -276,3 +276,13 @@ def test_the_ship_workflow_names_the_record_it_cannot_use(tmp_path, capsys):
     err = one_line_error(capsys, ["identify", str(tmp_path / "one_row.csv"), "--model", "kvlcc2", "--free", "N_r_dash",
                                   "--objective", "oe", "--quiet"], "'one_row.csv' has 1 row(s)")
     assert "--sigma" not in err
+
+
+def test_identify_replay_table_shows_whole_record_names(tmp_path, capsys):
+    """Before: names cut to their last 24 characters ('_FREE_KVLCC2_zz_10_m.dat'), where trial files differ at
+    their start."""
+    rec = _kvlcc2_record(tmp_path / "MARIN_FREE_KVLCC2_straight_run.csv", 1.53)
+    main(["identify", str(rec), "--model", "kvlcc2", "--free", "N_r_dash", "--measured", "psi,r", "--R",
+          "psi=1e-6,r=1e-8", "--max-iter", "2", "--no-loo", "--out", str(tmp_path / "fit.json"), "--quiet"])
+    out = capsys.readouterr().out
+    assert " MARIN_FREE_KVLCC2_straight_run.csv " in out.replace("\n", " "), out
