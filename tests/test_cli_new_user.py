@@ -286,3 +286,18 @@ def test_identify_replay_table_shows_whole_record_names(tmp_path, capsys):
           "psi=1e-6,r=1e-8", "--max-iter", "2", "--no-loo", "--out", str(tmp_path / "fit.json"), "--quiet"])
     out = capsys.readouterr().out
     assert " MARIN_FREE_KVLCC2_straight_run.csv " in out.replace("\n", " "), out
+
+
+@pytest.mark.data
+def test_output_error_says_which_states_start_at_zero(data_dir, tmp_path, capsys):
+    """Before: the output-error fit of the USV log on sog-cog started U, chi, omega_chi at 0 without a word (a
+    track that stays put: 0 iterations, 'converged', exit 0); now a warning names them and --estimate-x0."""
+    log = data_dir / "usv_fuzhou_gnss" / "zigzag_30_inter_xy.csv"
+    argv = ["identify", str(log), "--preset", "usv-gnss", "--model", "sog-cog", "--free", "alpha1", "--objective",
+            "oe", "--out", str(tmp_path / "fit.json"), "--quiet"]
+    main(argv)
+    err = capsys.readouterr().err
+    assert err.count("warning: output error starts state(s) ['U', 'chi', 'omega_chi'] at 0") == 1, err
+    assert "(zigzag_30_inter_xy.csv); --estimate-x0 U,chi,omega_chi estimates their start" in err
+    main([*argv, "--estimate-x0", "U,chi,omega_chi", "--overwrite"])
+    assert "starts state(s)" not in capsys.readouterr().err
