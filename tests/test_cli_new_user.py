@@ -301,3 +301,12 @@ def test_output_error_says_which_states_start_at_zero(data_dir, tmp_path, capsys
     assert "(zigzag_30_inter_xy.csv); --estimate-x0 U,chi,omega_chi estimates their start" in err
     main([*argv, "--estimate-x0", "U,chi,omega_chi", "--overwrite"])
     assert "starts state(s)" not in capsys.readouterr().err
+
+
+def test_autopilot_wind_on_a_ship_without_wind_geometry_names_the_option(capsys):
+    """Before: "add_wind: no value for wind geometry [...] (model 'otter+current' has no vessel wind geometry; pass
+    geometry=...)": a keyword the command line cannot pass, no --wind."""
+    err = one_line_error(capsys, ["autopilot", "--model", "otter", "--current", "0.5", "90", "--wind", "5", "0",
+                                  "--quiet"], "--wind: model 'otter' carries no wind geometry",
+                         "casship.models.add_wind(model, geometry=...)")
+    assert "otter+current" not in err
