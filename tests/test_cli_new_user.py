@@ -276,3 +276,37 @@ def test_the_ship_workflow_names_the_record_it_cannot_use(tmp_path, capsys):
     err = one_line_error(capsys, ["identify", str(tmp_path / "one_row.csv"), "--model", "kvlcc2", "--free", "N_r_dash",
                                   "--objective", "oe", "--quiet"], "'one_row.csv' has 1 row(s)")
     assert "--sigma" not in err
+
+
+def test_identify_replay_table_shows_whole_record_names(tmp_path, capsys):
+    """Before: names cut to their last 24 characters ('_FREE_KVLCC2_zz_10_m.dat'), where trial files differ at
+    their start."""
+    rec = _kvlcc2_record(tmp_path / "MARIN_FREE_KVLCC2_straight_run.csv", 1.53)
+    main(["identify", str(rec), "--model", "kvlcc2", "--free", "N_r_dash", "--measured", "psi,r", "--R",
+          "psi=1e-6,r=1e-8", "--max-iter", "2", "--no-loo", "--out", str(tmp_path / "fit.json"), "--quiet"])
+    out = capsys.readouterr().out
+    assert " MARIN_FREE_KVLCC2_straight_run.csv " in out.replace("\n", " "), out
+
+
+@pytest.mark.data
+def test_output_error_says_which_states_start_at_zero(data_dir, tmp_path, capsys):
+    """Before: the output-error fit of the USV log on sog-cog started U, chi, omega_chi at 0 without a word (a
+    track that stays put: 0 iterations, 'converged', exit 0); now a warning names them and --estimate-x0."""
+    log = data_dir / "usv_fuzhou_gnss" / "zigzag_30_inter_xy.csv"
+    argv = ["identify", str(log), "--preset", "usv-gnss", "--model", "sog-cog", "--free", "alpha1", "--objective",
+            "oe", "--out", str(tmp_path / "fit.json"), "--quiet"]
+    main(argv)
+    err = capsys.readouterr().err
+    assert err.count("warning: output error starts state(s) ['U', 'chi', 'omega_chi'] at 0") == 1, err
+    assert "(zigzag_30_inter_xy.csv); --estimate-x0 U,chi,omega_chi estimates their start" in err
+    main([*argv, "--estimate-x0", "U,chi,omega_chi", "--overwrite"])
+    assert "starts state(s)" not in capsys.readouterr().err
+
+
+def test_autopilot_wind_on_a_ship_without_wind_geometry_names_the_option(capsys):
+    """Before: "add_wind: no value for wind geometry [...] (model 'otter+current' has no vessel wind geometry; pass
+    geometry=...)": a keyword the command line cannot pass, no --wind."""
+    err = one_line_error(capsys, ["autopilot", "--model", "otter", "--current", "0.5", "90", "--wind", "5", "0",
+                                  "--quiet"], "--wind: model 'otter' carries no wind geometry",
+                         "casship.models.add_wind(model, geometry=...)")
+    assert "otter+current" not in err

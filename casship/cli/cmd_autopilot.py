@@ -224,7 +224,12 @@ def _environment(args, model):
         speed, direction = args.wind
         if not (np.isfinite(speed) and np.isfinite(direction) and speed >= 0):
             raise InputError(f"--wind: speed {speed:g} m/s from {direction:g} deg must be finite and >= 0")
-        model = add_wind(model)
+        try:
+            model = add_wind(model)
+        except InputError:      # its remedy (geometry=) is the Python API's; the option cannot give one
+            raise InputError(f"--wind: model {args.model!r} carries no wind geometry (the areas and heights of "
+                             "Fujiwara's loads); in Python, casship.models.add_wind(model, geometry=...) gives "
+                             "it") from None
         env.update(wind_speed=speed, wind_dir=float(np.radians(direction)))
     return model, env
 

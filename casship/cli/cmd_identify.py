@@ -193,6 +193,12 @@ def _problem(args, model, records, free, measured):
     if args.method == "oe":
         sigma = parse_pairs(args.sigma, "--sigma")
         _check_sigma_estimates(model, records, [n for n in measured if n not in sigma])
+        free_x0 = set(parse_items(args.estimate_x0, "--estimate-x0"))
+        zero = [s for s in model.state_names if s not in free_x0 and any(s not in d for d in records)]
+        if zero:        # a simulation started at 0 (a speed of 0 stays put): say so, with the remedy
+            warnings.warn(f"output error starts state(s) {zero} at 0 in the record(s) without a column for them "
+                          f"({', '.join(sorted({str(d.meta.get('name')) for d in records if set(zero) - set(d.names)}))}"
+                          f"); --estimate-x0 {','.join(zero)} estimates their start", UserWarning, stacklevel=2)
         return OutputErrorProblem(model, records, free, measured=measured, sigma=sigma or "estimate",
                                   shooting=args.shooting, **common)
     R = parse_pairs(args.R, "--R")

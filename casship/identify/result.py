@@ -300,11 +300,12 @@ class FitResult:
         lines = []
         rows = v.get("records", [])
         if rows:
-            lines.append(f"{'replayed record':>24s} {'start psi RMSE':>15s} {'fit psi RMSE':>13s}"
+            w = max(24, *(len(str(r["record"])) for r in rows))        # whole names: records differ at their start
+            lines.append(f"{'replayed record':>{w}s} {'start psi RMSE':>15s} {'fit psi RMSE':>13s}"
                          + (f" {'left-one-out':>13s}" if "loo" in v else ""))
             held = {r["record"]: r["psi_rmse_deg_held_out"] for r in v.get("loo", {}).get("records", [])}
             for r in rows:
-                lines.append(f"{str(r['record'])[-24:]:>24s} {r['psi_rmse_deg_start']:>11.3f} deg "
+                lines.append(f"{str(r['record']):>{w}s} {r['psi_rmse_deg_start']:>11.3f} deg "
                              f"{r['psi_rmse_deg_fit']:>9.3f} deg"
                              + (f" {held.get(r['record'], np.nan):>9.3f} deg" if held else ""))
         d = self.model_discrepancy
