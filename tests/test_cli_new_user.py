@@ -310,3 +310,14 @@ def test_autopilot_wind_on_a_ship_without_wind_geometry_names_the_option(capsys)
                                   "--quiet"], "--wind: model 'otter' carries no wind geometry",
                          "casship.models.add_wind(model, geometry=...)")
     assert "otter+current" not in err
+
+
+def test_a_failed_mhe_window_on_a_lat_lon_log_says_what_to_try(data_dir, capsys):
+    """Before: the real-time iteration on the latitude/longitude model stopped with an internal error
+    ('evaluation of mhe_gn_step_20 failed (status 1)', exit 1); IPOPT's failure gave its status alone."""
+    log = str(data_dir / "usv_fuzhou_gnss" / "zigzag_30_inter_xy.csv")
+    base = ["filter", log, "--preset", "usv-gnss", "--model", "sog-cog-latlon", "--estimator", "mhe", "--quiet"]
+    err = one_line_error(capsys, [*base, "--options", "solver=rti"], "MHE (real-time iteration, N = 20) failed at row",
+                         "Gauss-Newton step could not be computed", "solver=sqp", "sog-cog")
+    assert "internal error" not in err
+    one_line_error(capsys, base, "failed at row", "Maximum_Iterations_Exceeded", "solver=sqp", "sog-cog")

@@ -33,6 +33,12 @@ class MHEFailed(SolverError):
         self.status = status
 
 
+#: What a failed window suggests trying.
+RESCUE = ("variables of very different scales are hard for the solvers (latitude and longitude in radians beside "
+          "speeds: the model in metres, e.g. sog-cog, is better posed); the other solvers (options solver=sqp, "
+          "ipopt, rti) or the EKF may succeed")
+
+
 def _inside(win: Window, z: np.ndarray) -> bool:
     """``z`` finite and inside the window's bounds."""
     if not np.isfinite(z.sum()):                    # a NaN or inf anywhere makes the sum non-finite
@@ -44,7 +50,12 @@ def _real_time_iteration(win: Window, z0, par, where: str) -> np.ndarray:
     """One Gauss-Newton step; the bounded QP only when the unconstrained step leaves the bounds."""
     step = win.gn()
     step["z"], step["p"] = z0, par
-    step()
+    try:
+        step()
+    except RuntimeError as exc:         # the step's linear solve failed: no Gauss-Newton step exists here
+        raise MHEFailed(f"MHE (real-time iteration, N = {win.N}) failed at {where}: the Gauss-Newton step could "
+                        f"not be computed ({exc}): the window's normal matrix is singular or not finite in floating "
+                        f"point; {RESCUE}", "step_failed") from exc
     z = step.out("z_next").ravel()
     if _inside(win, z):
         return z.copy()
@@ -158,7 +169,7 @@ def solve_window(win: Window, z0: np.ndarray, par: np.ndarray, where: str, lam_g
         lam = win.lam_sign * np.asarray(sol["lam_g"]).ravel()
     gap = float(np.max(np.abs(g), initial=0.0))
     if status not in win.ok_status or not np.all(np.isfinite(z)):
-        raise MHEFailed(f"MHE ({win.solver.name()}) failed at {where}: solver status {status!r}", status)
+        raise MHEFailed(f"MHE ({win.solver.name()}) failed at {where}: solver status {status!r}; {RESCUE}", status)
     if not gap <= 1e-6 * max(1.0, float(np.max(np.abs(z)))):
         raise MHEFailed(f"MHE ({win.solver.name()}) failed at {where}: solver status {status!r} "
                         f"but the dynamics are violated by {gap:.3g} (infeasible window)", status)
