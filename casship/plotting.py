@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 
 from .errors import InputError
 
-__all__ = ["split_args", "panels", "finish"]
+__all__ = ["split_args", "panels", "finish", "view_lines", "mark_uninformative"]
 
 
 class _ShownFigure(Figure):
@@ -114,3 +114,46 @@ def finish(fig, ax, path, *, dpi: int = 110, tight: bool = True):
     path = Path(path)
     fig.savefig(path, dpi=dpi, format=path.suffix[1:].lower() or "png")
     return path
+
+
+def view_lines(ax, xs, ys, *, min_span: tuple[float, float] = (0.0, 0.0)) -> None:
+    """Autoscale ``ax`` to the given lines only, so that a band wider than them is clipped rather than
+    scaling the axes until the lines are flat (a prediction band of hundreds of degrees beside a
+    heading that stays within ten). The axes keep autoscaling (an equal aspect then adjusts them).
+
+    Parameters
+    ----------
+    ax : matplotlib Axes
+    xs, ys : sequences of arrays
+        The lines' coordinates (pairwise); points with a NaN are left out.
+    min_span : (float, float)
+        The smallest x and y span shown (data units).
+    """
+    x = np.concatenate([np.asarray(v, dtype=float).ravel() for v in xs]) if len(xs) else np.zeros(0)
+    y = np.concatenate([np.asarray(v, dtype=float).ravel() for v in ys]) if len(ys) else np.zeros(0)
+    ok = np.isfinite(x) & np.isfinite(y)
+    if not ok.any():
+        return
+    pts = np.column_stack([x[ok], y[ok]])
+    centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    half = 0.5 * np.asarray(min_span, dtype=float)
+    ax.ignore_existing_data_limits = True
+    ax.update_datalim(np.vstack([pts, centre - half, centre + half]))
+    ax.autoscale_view()
+
+
+def mark_uninformative(ax, t, halfwidth, limit: float) -> None:
+    """A dotted vertical line where a band's half-width first exceeds ``limit`` (nothing when it
+    never does), labelled for the legend.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes
+    t, halfwidth : arrays
+        Time and the band's half-width (the unit of ``limit``).
+    limit : float
+    """
+    wide = np.asarray(halfwidth) > limit
+    if wide.any():
+        ax.axvline(float(np.asarray(t)[int(np.argmax(wide))]), color="0.4", ls=":", lw=1.0,
+                   label=f"band wider than +-{limit:g} from here (says nothing)")

@@ -112,3 +112,20 @@ def test_a_band_wider_than_a_quarter_turn_is_flagged_as_saying_nothing(tmp_path)
     notes = [n for n in wide.coverage_notes() if "says nothing" in n]
     assert len(notes) == 1 and f"from {first:.0f} s of 199 s" in notes[0], notes
     assert 130.0 < first < 145.0
+
+
+def test_a_plot_keeps_the_lines_in_view_when_the_band_says_nothing(tmp_path):
+    """The heading panel is scaled to the replay, the record and the informative part of the band (a band
+    of hundreds of degrees used to flatten both lines), and marks where the band stops saying anything."""
+    path, t, delta, psi = _fit_file(tmp_path, 0.05)
+    doc = json.loads(path.read_text())
+    doc["model_discrepancy"] = {"psi_variance_growth_deg2_per_s": 800.0}      # +-780 deg after 199 s
+    path.write_text(json.dumps(doc))
+    res = replay_file(path, cs.Dataset(t, {"psi": psi, "delta": delta}), samples=0)
+    assert np.degrees(res.bands["z"] * res.bands["psi_std_predictive"][-1]) > 700.0
+    fig = res.plot()
+    heading = fig.axes[1]
+    lo, hi = heading.get_ylim()
+    top = max(np.degrees(np.abs(psi)).max(), 90.0)
+    assert -1.2 * top < lo and hi < 1.2 * top, (lo, hi)
+    assert any("says nothing" in line.get_label() for line in heading.get_lines())

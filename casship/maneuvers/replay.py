@@ -202,7 +202,7 @@ class ReplayResult:
         matplotlib.figure.Figure, the axes given, or Path
             See :mod:`casship.plotting`.
         """
-        from ..plotting import finish, panels, split_args
+        from ..plotting import finish, panels, split_args, view_lines
 
         ax, path = split_args(ax, path)
         given = ax
@@ -226,6 +226,19 @@ class ReplayResult:
         for name in tr.input_names:
             if name.startswith("delta"):
                 rudder.plot(tr.t, np.degrees(tr[name]), label=f"{name}")
+        lines = [ln for ln in (tr, data) if ln is not None]
+        headings = [ln for ln in lines if "psi" in ln]
+        tracks = [ln for ln in lines if "x" in ln and "y" in ln]
+        ht = [ln.t for ln in headings]
+        hy = [np.degrees(np.unwrap(ln["psi"])) for ln in headings]
+        ty, tx = [ln["y"] for ln in tracks], [ln["x"] for ln in tracks]
+        for t, edges, east, north in self._informative_band_edges():     # in view where the band says something
+            ht += [t, t]
+            hy += edges
+            ty += east
+            tx += north
+        view_lines(heading, ht, hy, min_span=(0.0, 10.0))
+        view_lines(track, ty, tx, min_span=(100.0, 100.0))
         track.set(xlabel="East y [m]", ylabel="North x [m]", title="track")
         track.set_aspect("equal", adjustable="datalim")
         heading.set(xlabel="time [s]", ylabel="heading psi [deg]")
@@ -240,7 +253,26 @@ class ReplayResult:
         return finish(fig, given, path)
 
 
+    def _informative_band_edges(self) -> list:
+        """The band edges where the heading band is at most :data:`UNINFORMATIVE_DEG` wide: ``[(t, [lower,
+        upper heading], [two East], [two North])]`` (empty without bands)."""
+        b, tr = self.bands, self.trajectory
+        std = b.get("psi_std_predictive", b.get("psi_std")) if b else None
+        if std is None:
+            return []
+        w = np.degrees(b["z"] * np.asarray(std))
+        keep = w <= UNINFORMATIVE_DEG
+        psi = np.degrees(np.unwrap(tr["psi"]))[keep]
+        east, north = [], []
+        if "cross_track_std" in b and "x" in tr and "y" in tr:
+            off = b["z"] * b["cross_track_std"][:, None] * b["normal"]
+            east = [np.asarray(tr["y"])[keep] + s * off[keep, 1] for s in (-1, 1)]
+            north = [np.asarray(tr["x"])[keep] + s * off[keep, 0] for s in (-1, 1)]
+        return [(np.asarray(tr.t)[keep], [psi - w[keep], psi + w[keep]], east, north)]
+
     def _draw_bands(self, track, heading) -> None:
+        from ..plotting import mark_uninformative
+
         tr, b, z = self.trajectory, self.bands, self.bands["z"]
         label = f"{100 * b['level']:.0f} % band"
         if "psi_std" in b:
@@ -254,6 +286,7 @@ class ReplayResult:
                     heading.plot(tr.t, psi + sign * w, color="C0", lw=0.8, ls="--",
                                  label=f"{100 * b['level']:.0f} % predictive band (with model discrepancy)"
                                  if sign > 0 else None)
+            mark_uninformative(heading, tr.t, w, UNINFORMATIVE_DEG)
         if "cross_track_std" in b:
             w = z * b["cross_track_std"][:, None] * b["normal"]
             for sign in (-1, 1):

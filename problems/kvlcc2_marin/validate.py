@@ -19,7 +19,8 @@ import numpy as np
 from casship.io.jsonfile import write_json
 from casship.models import kvlcc2
 from casship.identify import replay_file
-from casship.maneuvers import replay
+from casship.maneuvers import UNINFORMATIVE_DEG, replay
+from casship.plotting import mark_uninformative, view_lines
 
 from .data import Run, per_run
 from .workflow import study_model
@@ -109,14 +110,27 @@ def plot_overlay(axes, run: Run, published, fit, title: str, bands=None) -> None
     ax2.plot(d.t, np.degrees(np.unwrap(d["psi"])), "k-", lw=1.2, label="measured")
     ax2.plot(published.t, np.degrees(published["psi"]), "C1--", lw=1, label="published")
     ax2.plot(fit.t, np.degrees(fit["psi"]), "C0-", lw=1, label="fit")
+    east = [d["y"], published["y"], fit["y"]]
+    north = [d["x"], published["x"], fit["x"]]
+    times = [d.t, published.t, fit.t, d.t]
+    headings = [np.degrees(np.unwrap(d["psi"])), np.degrees(published["psi"]), np.degrees(fit["psi"]),
+                np.degrees(d["delta"])]
     if bands:
         z, psi = bands["z"], np.degrees(np.unwrap(fit["psi"]))
         w = np.degrees(z * bands["psi_std"])
         ax2.fill_between(fit.t, psi - w, psi + w, color="C0", alpha=0.25, lw=0,
                          label=f"{100 * bands['level']:.0f} % band")
+        mark_uninformative(ax2, fit.t, w, UNINFORMATIVE_DEG)
         off = z * bands["cross_track_std"][:, None] * bands["normal"]
+        keep = w <= UNINFORMATIVE_DEG            # the view holds the band where it says something
         for sign in (-1, 1):
             ax1.plot(fit["y"] + sign * off[:, 1], fit["x"] + sign * off[:, 0], "C0-", lw=0.5, alpha=0.6)
+            east.append(np.asarray(fit["y"])[keep] + sign * off[keep, 1])
+            north.append(np.asarray(fit["x"])[keep] + sign * off[keep, 0])
+            times.append(np.asarray(fit.t)[keep])
+            headings.append(psi[keep] + sign * w[keep])
+    view_lines(ax1, east, north, min_span=(100.0, 100.0))
+    view_lines(ax2, times, headings, min_span=(0.0, 10.0))
     ax1.legend(fontsize=7)
     ax2.plot(d.t, np.degrees(d["delta"]), "k:", lw=0.8, label="rudder [deg]")
     ax2.set_xlabel("t [s]")
