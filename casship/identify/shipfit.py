@@ -32,19 +32,19 @@ def pool_facilities(estimates: Mapping[str, tuple[float, float]], *, spread: flo
     Returns ``population`` (posterior mean of ``mu``), ``population_std`` and ``new_facility_std``
     (``sqrt(var(mu) + spread^2)``: what a record of a facility not in ``estimates`` is replayed with).
 
-                    Parameters
-                    ----------
-                    estimates : mapping facility -> (estimate, standard error)
-                    spread : float
-                        Between-facility standard deviation.
-                    prior_std, prior_mean : float
-                        Prior of the population value.
+    Parameters
+    ----------
+    estimates : mapping facility -> (estimate, standard error)
+    spread : float
+        Between-facility standard deviation.
+    prior_std, prior_mean : float
+        Prior of the population value.
 
-                    Returns
-                    -------
-                    dict
-                        ``population``, ``population_std``, ``new_facility_std``, ``spread`` and ``facilities``.
-                    """
+    Returns
+    -------
+    dict
+        ``population``, ``population_std``, ``new_facility_std``, ``spread`` and ``facilities``.
+    """
     prec = 1.0 / prior_std**2
     num = prior_mean * prec
     for est, se in estimates.values():
