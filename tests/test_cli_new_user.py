@@ -321,3 +321,26 @@ def test_a_failed_mhe_window_on_a_lat_lon_log_says_what_to_try(data_dir, capsys)
                          "Gauss-Newton step could not be computed", "solver=sqp", "sog-cog")
     assert "internal error" not in err
     one_line_error(capsys, base, "failed at row", "Maximum_Iterations_Exceeded", "solver=sqp", "sog-cog")
+
+
+def test_filter_takes_the_variances_of_some_channels_and_fills_the_others_as_identify_does(tmp_path, capsys):
+    """Before: '--R: no value for [...]' / '--Q: no value for [...]' for a partial list, while identify took one."""
+    import json
+
+    import numpy as np
+
+    import casship as cs
+
+    t = np.arange(0.0, 20.0, 0.5)
+    noise = np.random.default_rng(3).standard_normal((3, t.size))
+    cols = {"u": np.full(t.size, 7.97), "v": np.zeros(t.size), "r": np.zeros(t.size), "x": 7.97 * t + 2 * noise[0],
+            "y": 2 * noise[1], "psi": 0.003 * noise[2], "delta": np.zeros(t.size), "n": np.full(t.size, 1.53)}
+    rec = cs.Dataset(t, cols).to_csv(tmp_path / "run.csv")
+    argv = ["filter", str(rec), "--model", "kvlcc2", "--measured", "x,y,psi", "--json", "--quiet"]
+    assert main([*argv, "--R", "x=4,y=4", "--Q", "w_r=1e-9"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["R"].startswith("given (--R) for ['x', 'y'], estimated from the record: psi std")
+    assert out["Q"] == "given (--Q) for ['w_r']; w_u 1e-08 (default), w_v 1e-08 (default)"
+    assert main([*argv, "--R", "4"]) == 0                                  # a scalar is every channel's, as before
+    assert json.loads(capsys.readouterr().out)["R"] == "given (--R)"
+    one_line_error(capsys, [*argv, "--R-std", "x=-2"], "--R-std: a standard deviation must be positive")

@@ -65,10 +65,10 @@ def register(sub) -> None:
                         "and R where --Q / --R are not given")
     p.add_argument("--measured", default=None, help="measured outputs a,b (default: outputs present in the data)")
     p.add_argument("--R", default=None, help="measurement variances: scalar or name=value,... (SI units); "
-                                             "default: estimated from the record")
+                                             "channels not given: from --params, else estimated from the record")
     p.add_argument("--R-std", dest="R_std", default=None, help="measurement standard deviations, as --R")
-    p.add_argument("--Q", default=None, help=f"process-noise variances: scalar or name=value,... (default "
-                                             f"{DEFAULT_Q:g} per channel)")
+    p.add_argument("--Q", default=None, help=f"process-noise variances: scalar or name=value,... (channels not "
+                                             f"given: from --params, else {DEFAULT_Q:g})")
     p.add_argument("--x0", default=None, help="initial state name=value,... (default: from the record, see "
                                               "casship.prior_from_data)")
     p.add_argument("--P0", default=None, help="initial variances: scalar or name=value,... (default 1, R for "
@@ -254,29 +254,48 @@ def filter_file(args, model=None):
     dm = discretize(model, dt, method=args.method)
     sources = {}
 
-    # measurement covariance: --R / --R-std, else estimated from the record
-    R = _variances(args.R, meas, "--R")
-    sources["R"] = "given (--R)"
+    # measurement covariance: --R / --R-std (any channels), the rest from the fit file or the record
+    R = _variances(args.R, meas, "--R", every=False)
+    given = "--R"
     if args.R_std is not None:
-        std = _variances(args.R_std, meas, "--R-std")
+        std = _variances(args.R_std, meas, "--R-std", every=False)
         bad = {k: v for k, v in (std.items() if isinstance(std, dict) else [("all", std)]) if v <= 0}
         if bad:
             raise InputError(f"--R-std: a standard deviation must be positive, got {bad}")
         R = {k: v**2 for k, v in std.items()} if isinstance(std, dict) else std**2
-        sources["R"] = "given (--R-std)"
+        given = "--R-std"
+    parts = [f"given ({given})"] if R is not None else []
+    if isinstance(R, dict) and set(R) != set(meas):
+        rest = [n for n in meas if n not in R]
+        if isinstance(fit_noise.get("R"), dict) and set(rest) <= set(fit_noise["R"]):
+            R.update({n: float(fit_noise["R"][n]) for n in rest})
+            parts = [f"given ({given}) for {sorted(set(meas) - set(rest))}, from the fit file {args.params} for {rest}"]
+        else:
+            more, how = record_noise(model, data, rest)
+            R.update(more)
+            parts = [f"given ({given}) for {sorted(set(meas) - set(rest))}, estimated from the record: "
+                     + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})" for n, v in more.items())]
+        R = {n: R[n] for n in meas}
     if R is None and isinstance(fit_noise.get("R"), dict) and set(meas) <= set(fit_noise["R"]):
         R = {n: float(fit_noise["R"][n]) for n in meas}
-        sources["R"] = f"from the fit file {args.params}"
+        parts = [f"from the fit file {args.params}"]
     if R is None:
         R, how = record_noise(model, data, meas)
-        sources["R"] = "estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})"
-                                                                  for n, v in R.items())
-    Q = _variances(args.Q, model.noise_names, "--Q")
+        parts = ["estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})" for n, v in R.items())]
+    sources["R"] = parts[0]
+    Q = _variances(args.Q, model.noise_names, "--Q", every=False)
     sources["Q"] = "given (--Q)"
-    if Q is None and isinstance(fit_noise.get("Q"), dict) and fit_noise["Q"] and set(fit_noise["Q"]) <= set(model.noise_names):
-        Q = {n: float(fit_noise["Q"].get(n, DEFAULT_Q)) for n in model.noise_names}
+    fit_q = fit_noise.get("Q") if isinstance(fit_noise.get("Q"), dict) and set(fit_noise["Q"]) <= set(model.noise_names) \
+        else {}
+    if isinstance(Q, dict) and set(Q) != set(model.noise_names):
+        rest = [n for n in model.noise_names if n not in Q]
+        Q = {n: float(Q[n]) if n in Q else float(fit_q.get(n, DEFAULT_Q)) for n in model.noise_names}
+        sources["Q"] = (f"given (--Q) for {sorted(set(model.noise_names) - set(rest))}; "
+                        + ", ".join(f"{n} {Q[n]:g} ({'the fit file' if n in fit_q else 'default'})" for n in rest))
+    if Q is None and fit_q:
+        Q = {n: float(fit_q.get(n, DEFAULT_Q)) for n in model.noise_names}
         sources["Q"] = f"from the fit file {args.params}" + (f" ({DEFAULT_Q:g} for the channels it did not estimate)"
-                                                            if set(fit_noise["Q"]) != set(model.noise_names) else "")
+                                                            if set(fit_q) != set(model.noise_names) else "")
     if Q is None:
         Q = DEFAULT_Q
         sources["Q"] = (f"default {DEFAULT_Q:g} per channel {list(model.noise_names)} (not tuned: compare the NIS "
