@@ -268,7 +268,7 @@ MUTANTS = [
       "m[np.ix_(keep, keep)] * np.outer(scale, scale)", "m[np.ix_(keep, keep)] / np.abs(m).max()",
       ("tests/test_data.py",)),
     M("replay: the uninformative band never flagged", "casship/maneuvers/replay.py",
-      "np.asarray(std)) > UNINFORMATIVE_DEG", "np.asarray(std)) > 360.0 * UNINFORMATIVE_DEG",
+      "wide = halfwidth > UNINFORMATIVE_DEG", "wide = halfwidth > 360.0 * UNINFORMATIVE_DEG",
       ("tests/test_verdict_bands.py",)),
 ]
 

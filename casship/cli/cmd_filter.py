@@ -264,25 +264,25 @@ def filter_file(args, model=None):
             raise InputError(f"--R-std: a standard deviation must be positive, got {bad}")
         R = {k: v**2 for k, v in std.items()} if isinstance(std, dict) else std**2
         given = "--R-std"
-    parts = [f"given ({given})"] if R is not None else []
+    source = f"given ({given})"
     if isinstance(R, dict) and set(R) != set(meas):
         rest = [n for n in meas if n not in R]
         if isinstance(fit_noise.get("R"), dict) and set(rest) <= set(fit_noise["R"]):
             R.update({n: float(fit_noise["R"][n]) for n in rest})
-            parts = [f"given ({given}) for {sorted(set(meas) - set(rest))}, from the fit file {args.params} for {rest}"]
+            source = f"given ({given}) for {sorted(set(meas) - set(rest))}, from the fit file {args.params} for {rest}"
         else:
             more, how = record_noise(model, data, rest)
             R.update(more)
-            parts = [f"given ({given}) for {sorted(set(meas) - set(rest))}, estimated from the record: "
-                     + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})" for n, v in more.items())]
+            source = (f"given ({given}) for {sorted(set(meas) - set(rest))}, estimated from the record: "
+                      + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})" for n, v in more.items()))
         R = {n: R[n] for n in meas}
     if R is None and isinstance(fit_noise.get("R"), dict) and set(meas) <= set(fit_noise["R"]):
         R = {n: float(fit_noise["R"][n]) for n in meas}
-        parts = [f"from the fit file {args.params}"]
+        source = f"from the fit file {args.params}"
     if R is None:
         R, how = record_noise(model, data, meas)
-        parts = ["estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})" for n, v in R.items())]
-    sources["R"] = parts[0]
+        source = "estimated from the record: " + ", ".join(f"{n} std {np.sqrt(v):.3g} ({how[n]})" for n, v in R.items())
+    sources["R"] = source
     Q = _variances(args.Q, model.noise_names, "--Q", every=False)
     sources["Q"] = "given (--Q)"
     fit_q = fit_noise.get("Q") if isinstance(fit_noise.get("Q"), dict) and set(fit_noise["Q"]) <= set(model.noise_names) \

@@ -133,9 +133,9 @@ class ReplayResult:
             if c is not None and np.isfinite(c) and c < level - COVERAGE_SLACK:
                 notes.append(f"the {100 * level:.0f} % {what} covers {100 * c:.0f} % of the measured heading: far "
                              f"below its nominal {100 * level:.0f} %; {why}")
-        std = self.bands.get("psi_std_predictive", self.bands.get("psi_std"))
-        if std is not None:
-            wide = np.degrees(self.bands["z"] * np.asarray(std)) > UNINFORMATIVE_DEG
+        halfwidth = self._heading_halfwidth()
+        if halfwidth is not None:
+            wide = halfwidth > UNINFORMATIVE_DEG
             if wide.any():
                 t = np.asarray(self.trajectory.t)
                 t0 = float(t[int(np.argmax(wide))] - t[0])
@@ -253,14 +253,19 @@ class ReplayResult:
         return finish(fig, given, path)
 
 
+    def _heading_halfwidth(self):
+        """The widest heading band's half-width [deg] per sample (the predictive band where there is one), or None."""
+        b = self.bands
+        std = b.get("psi_std_predictive", b.get("psi_std")) if b else None
+        return None if std is None else np.degrees(b["z"] * np.asarray(std))
+
     def _informative_band_edges(self) -> list:
         """The band edges where the heading band is at most :data:`UNINFORMATIVE_DEG` wide: ``[(t, [lower,
         upper heading], [two East], [two North])]`` (empty without bands)."""
         b, tr = self.bands, self.trajectory
-        std = b.get("psi_std_predictive", b.get("psi_std")) if b else None
-        if std is None:
+        w = self._heading_halfwidth()
+        if w is None:
             return []
-        w = np.degrees(b["z"] * np.asarray(std))
         keep = w <= UNINFORMATIVE_DEG
         psi = np.degrees(np.unwrap(tr["psi"]))[keep]
         east, north = [], []

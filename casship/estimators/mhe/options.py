@@ -17,21 +17,22 @@ ARRIVALS = ("ekf", "fixed")
 QP_SOLVERS = ("qrqp", "osqp")
 
 
-def _positive(value, what: str) -> float:
+def _float(value, what: str) -> float:
     try:
-        v = float(value)
+        return float(value)
     except (TypeError, ValueError):
         raise InputError(f"{what} is a number, got {value!r}") from None
+
+
+def _positive(value, what: str) -> float:
+    v = _float(value, what)
     if not np.isfinite(v) or v <= 0:
         raise InputError(f"{what} must be positive and finite, got {value!r}")
     return v
 
 
 def _nonneg(value, what: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{what} is a number, got {value!r}") from None
+    v = _float(value, what)
     if not np.isfinite(v) or v < 0:
         raise InputError(f"{what} must be >= 0 and finite, got {value!r}")
     return v
