@@ -24,7 +24,7 @@ import numpy as np
 
 from casship import autopilot as ap
 from casship.autopilot.guidance import LOSGuidance, Waypoints, cross_track_metrics
-from casship.autopilot.mpc import mpc_for_design
+from casship.autopilot.mpc_design import mpc_for_design
 from casship.models import get_model
 from casship.models import otter as casship_otter
 from casship.models.wind import add_current

@@ -4,7 +4,8 @@ import pytest
 
 import casship as cs
 from casship import autopilot as ap
-from casship.autopilot.mpc import MPCAutopilot, mpc_for_design
+from casship.autopilot.mpc import MPCAutopilot
+from casship.autopilot.mpc_design import mpc_for_design
 
 
 @pytest.fixture(scope="module")
@@ -205,7 +206,7 @@ def test_bandwidth_weights_by_hand():
     q_d = 3 q_e / (250^2 0.05^4) = 7.68 q_e, r_u = q_e / (250^2 0.05^6) = 1024 q_e; with T = 10 s the
     inertia holds above 1 / T = 0.1 rad/s only, so w = 0.1 (m = 50): q_r = 300 q_e, q_d = 12 q_e,
     r_u = 400 q_e."""
-    from casship.autopilot.mpc import mpc_weights
+    from casship.autopilot.mpc_design import mpc_weights
 
     q_e = 1.0 / np.radians(1.0) ** 2
     w = mpc_weights(0.05, 1.0, 0.2, 50.0)
@@ -225,7 +226,7 @@ def test_bandwidth_weights_place_the_poles_of_the_inertia_model(zeta):
     (s + wn)(s^2 + 2 zeta wn s + wn^2) (Riccati equation, not the rule's own algebra)."""
     from scipy.linalg import solve_continuous_are
 
-    from casship.autopilot.mpc import mpc_weights
+    from casship.autopilot.mpc_design import mpc_weights
 
     K, T, wn = -0.0105, -190.0, 0.05           # a course-unstable ship: the rule takes |m|^2
     w = mpc_weights(wn, zeta, K, T)
@@ -252,7 +253,7 @@ def test_bandwidth_weights_overshoot_less_than_the_pid_where_the_limits_bind(kvl
     rudder at its angle and rate limits) with the bandwidth weights: its 90 deg step overshoots less
     than the PID with its reference model (0.2 against 0.41 %, seed 2; with that test's weights
     3.0 %), and the limits still bind and hold."""
-    from casship.autopilot.mpc import mpc_weights
+    from casship.autopilot.mpc_design import mpc_weights
 
     d = kvlcc2
     s = d.settings

@@ -20,7 +20,7 @@ The package, one job per module:
   an estimator) and how it reads the course or heading;
 * :mod:`~casship.autopilot.performance` -- course-changing and course-keeping checks;
 * :mod:`~casship.autopilot.guidance` -- waypoints, LOS and integral LOS;
-* :mod:`~casship.autopilot.mpc` -- a CasADi model-predictive course controller;
+* :mod:`~casship.autopilot.mpc` -- a CasADi model-predictive course controller (:mod:`~casship.autopilot.mpc_design`: one for a design);
 * :mod:`~casship.autopilot.wave_limit` -- the heading-error floor in a sea and the LQG loop there;
 * :mod:`~casship.autopilot.montecarlo` -- runs over sensor-noise seeds and speeds;
 * :mod:`~casship.autopilot.plots` -- figures.
@@ -38,7 +38,8 @@ from .estimation import WaveYaw, course_ekf, heading_kf, heading_observer, linea
 from .guidance import LOSGuidance, Waypoints, cross_track_metrics, track_deviation
 from .law import Actuator, Autopilot, PIDGains
 from .loop_variants import LoopFeedback, RawMeasurement, TrueState
-from .mpc import MPCAutopilot, MPCLaw, mpc_for_design, mpc_weights
+from .mpc import MPCAutopilot, MPCLaw
+from .mpc_design import mpc_for_design, mpc_weights
 from .nomoto import Nomoto, fit_nomoto, nomoto_from_linear, nomoto_from_model
 from .performance import (CRITERIA, course_change_metrics, course_keeping_metrics, course_scenario,
                           performance_report, step_metrics)
