@@ -30,6 +30,14 @@ The MPC runs inside the compiled closed loop (:meth:`MPCAutopilot.law`: the solv
 of the loop's step, taken once per ``replan`` interval through ``casadi.Function.conditional``), and from
 Python (:meth:`MPCAutopilot.update`, which checks each plan against the limits and the model and
 raises on a failed solve).
+
+Offset-free control comes from the observer's bias (``offset="bias"``, above) or, as in the PID
+law, from the integral of the tracking error (``offset="integral"``): the prediction model then
+carries ``z' = e`` (before the steering state), the cost adds ``q_z (z_k - z_d,k)^2`` with
+``z_d,k`` the integral of the reference preview's course error (exact, from the reference model),
+so that ``z_k - z_d,k`` is the integral of ``chi - chi_d`` the law keeps (from the start of the
+run, held while the command is at its limit and the error would drive it further, the PID law's
+anti-windup); the observer's bias is then not used (``w_k = -f(r_d)``).
 """
 from __future__ import annotations
 
@@ -84,6 +92,11 @@ class MPCAutopilot:
     steering : SteeringFeedforward, optional
         The nonlinear ship's steady steering ``s(r)``; the plan then asks ``s(r_d) - r_d / K``
         more steering than the linear model along the reference preview (:meth:`feedforward`).
+    offset : {"bias", "integral"}
+        Offset-free control from the heading observer's steering bias, or from the integral of
+        the tracking error (see the module docstring).
+    q_z : float
+        Weight of the integral of the tracking error [1/(rad s)^2] (``offset="integral"``).
     """
 
     nomoto: Nomoto
@@ -99,6 +112,8 @@ class MPCAutopilot:
     reference: ReferenceModel | None = None
     replan: float | None = None
     steering: object = None
+    offset: str = "bias"
+    q_z: float = 0.0
     _solver: object = field(default=None, init=False, repr=False)
 
     MEMORY_LOG = ("chi_d", "r_d", "e")
@@ -110,11 +125,21 @@ class MPCAutopilot:
                 raise InputError(f"MPC {name} must be positive and finite, got {v}")
         if not (np.isfinite(self.q_d) and self.q_d >= 0):
             raise InputError(f"MPC q_d must be non-negative and finite, got {self.q_d}")
+        if self.offset not in ("bias", "integral"):
+            raise InputError(f"MPC offset must be 'bias' or 'integral', got {self.offset!r}")
+        if not (np.isfinite(self.q_z) and (self.q_z > 0 if self.integral else self.q_z == 0)):
+            raise InputError(f"MPC q_z = {self.q_z}: the integral's weight must be positive and finite with "
+                             "offset='integral' and 0 without it")
         if self.replan is not None and not (np.isfinite(self.replan) and 0 < self.replan <= self.period):
             raise InputError(f"MPC replan must be in (0, period], got {self.replan}")
         if int(self.horizon) != self.horizon or self.horizon < 2:
             raise InputError(f"MPC horizon must be an integer >= 2, got {self.horizon}")
         self._solver = self._build()
+
+    @property
+    def integral(self) -> bool:
+        """Whether the plan carries the integral of the tracking error (``offset="integral"``)."""
+        return self.offset == "integral"
 
     @property
     def order(self) -> int:
@@ -187,13 +212,17 @@ class MPCAutopilot:
     def model(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Exact discretisation ``x+ = A x + B u + E b`` at ``period`` of ``[e, r, delta]`` (first
         order) or ``[e, r, xi, delta]`` (second order, the observer form of
-        :meth:`Nomoto.system <casship.autopilot.nomoto.Nomoto.system>`)."""
+        :meth:`Nomoto.system <casship.autopilot.nomoto.Nomoto.system>`), with the integral ``z``
+        of ``e`` before the steering when the plan carries it (:attr:`integral`)."""
         sys = self.nomoto.system(self.order)
-        n = sys.nstates
+        m = sys.nstates
+        n = m + self.integral
         Ac = np.zeros((n + 1, n + 1))
-        Ac[:n, :n], Ac[:n, n] = sys.A, np.ravel(sys.B)                 # steering is the last state
+        Ac[:m, :m], Ac[:m, n] = sys.A, np.ravel(sys.B)                 # steering is the last state
+        if self.integral:
+            Ac[m, 0] = 1.0                                              # z' = e
         Bc = np.zeros((n + 1, 2))
-        Bc[n, 0], Bc[:n, 1] = 1.0, np.ravel(sys.B)                     # columns: u (rate), b (bias)
+        Bc[n, 0], Bc[:m, 1] = 1.0, np.ravel(sys.B)                     # columns: u (rate), b (bias)
         M = expm(np.block([[Ac, Bc], [np.zeros((2, n + 3))]]) * self.period)
         return M[:n + 1, :n + 1], M[:n + 1, n + 1:n + 2], M[:n + 1, n + 2:n + 3]
 
@@ -206,13 +235,15 @@ class MPCAutopilot:
         penalty on the slack makes the limit hard whenever it can be met), bounds on the steering
         and its rate, ``x0`` fixed by its bounds. Returns ``mpc(x0, b, target, U_guess) -> (u0, X,
         U)`` (an MX Function; ``b`` the disturbance ``w`` of each step, ``1 x N``, or one number for
-        all; the optional ``u_ref`` and ``steer_ref``, ``1 x N``, the steering rate and steering the
+        all; ``target`` the course error and rate of each step and, with :attr:`integral`, the
+        integral's; the optional ``u_ref`` and ``steer_ref``, ``1 x N``, the steering rate and steering the
         cost measures from, default 0)."""
         A, B, E = (ca.DM(M) for M in self.model())
         N, nx = int(self.horizon), A.shape[0]
         X = [ca.SX.sym(f"x{k}", nx) for k in range(N + 1)]
         U = [ca.SX.sym(f"u{k}", 2) for k in range(N)]
-        b, target, uref = ca.SX.sym("b", 1, N), ca.SX.sym("target", 2, N), ca.SX.sym("u_ref", 1, N)
+        rows = 2 + self.integral
+        b, target, uref = ca.SX.sym("b", 1, N), ca.SX.sym("target", rows, N), ca.SX.sym("u_ref", 1, N)
         sref = ca.SX.sym("steer_ref", 1, N)
         # exact (l1) penalty on the slack: the largest price the cost can put on the rate of turn of
         # one step (a course error of pi on every later step, moved by the period) bounds the
@@ -234,6 +265,8 @@ class MPCAutopilot:
                      + self.r_u * (U[k][0] - uref[0, k]) ** 2 + q_slack * U[k][1] ** 2 + l_slack * U[k][1])
             if self.q_d:
                 cost += self.q_d * (X[k + 1][nx - 1] - sref[0, k]) ** 2
+            if self.integral:
+                cost += self.q_z * (X[k + 1][nx - 2] - target[2, k]) ** 2
         z.append(X[N])
         qp = ca.qpsol("mpc_qp", "hpipm", {"x": ca.vertcat(*z), "f": cost, "g": ca.vertcat(*g),
                                           "p": ca.vertcat(ca.vec(b), ca.vec(target), ca.vec(uref), ca.vec(sref))},
@@ -249,7 +282,7 @@ class MPCAutopilot:
         lo[iu], hi[iu] = -self.rate_max, self.rate_max
         lo[[i + 1 for i in iu]] = 0.0
         x0, bm = ca.MX.sym("x0", nx), ca.MX.sym("b", 1, N)
-        tm, U_guess, um = ca.MX.sym("target", 2, N), ca.MX.sym("U_guess", 1, N), ca.MX.sym("u_ref", 1, N)
+        tm, U_guess, um = ca.MX.sym("target", rows, N), ca.MX.sym("U_guess", 1, N), ca.MX.sym("u_ref", 1, N)
         sm = ca.MX.sym("steer_ref", 1, N)
         lbx = ca.vertcat(x0, ca.DM(lo[nx:]))
         ubx = ca.vertcat(x0, ca.DM(hi[nx:]))
@@ -283,23 +316,47 @@ class MPCAutopilot:
             out.append(M[:rows])
         return np.vstack(out)
 
+    def integral_preview(self) -> np.ndarray:
+        """``(N, 3)`` matrix taking the reference model's state relative to the command to the
+        integral of its course error from now to the end of each step (exact for the linear model:
+        the last row of ``expm`` of the model with an integrator on its first state).
+        """
+        N = int(self.horizon)
+        if self.reference is None:
+            return np.zeros((N, 3))
+        A = np.zeros((4, 4))
+        A[:3, :3], A[3, 0] = np.asarray(self.reference.system().A), 1.0
+        step = expm(A * self.period)
+        Ad, Phi = step[:3, :3], step[3, :3]
+        out, M, acc = [], np.eye(3), np.zeros(3)
+        for _ in range(N):
+            acc = acc + Phi @ M
+            M = Ad @ M
+            out.append(acc)
+        return np.vstack(out)
+
     def plan_inputs(self) -> ca.Function:
         """``plan_inputs(bias, z) -> (target, w, u_ref)``: from the reference model's state relative to
         the command ``z`` (course error, rate, acceleration) the preview of the course error and rate
-        (``2 x N``), the disturbance of each step (:meth:`disturbance`), the reference steering's
-        rate and the steering that holds the model on the preview, the reference steering less the
-        bias (:meth:`steering_rates`); one SX Function, called once per solve."""
+        (``2 x N``; with :attr:`integral` a third row, the integral of the course error,
+        :meth:`integral_preview`), the disturbance of each step (:meth:`disturbance`), the reference
+        steering's rate and the steering that holds the model on the preview, the reference steering
+        less the bias (:meth:`steering_rates`); one SX Function, called once per solve. With
+        :attr:`integral` the bias is not used."""
         if getattr(self, "_inputs_fun", None) is None:
             N = int(self.horizon)
-            b, z = ca.SX.sym("bias"), ca.SX.sym("z", 3)
+            bias, z = ca.SX.sym("bias"), ca.SX.sym("z", 3)
+            b = 0 * bias if self.integral else bias
             full = ca.reshape(ca.mtimes(ca.DM(self.preview_matrix(3)), z), 3, N)
             z0 = z if self.reference is not None else ca.SX.zeros(3)
             target = full[:2, :]
             w = self.disturbance(b, z0[1], target[1, :])
+            if self.integral:
+                target = ca.vertcat(target, ca.mtimes(ca.DM(self.integral_preview()), z).T)
             u_ref = self.steering_rates([z0[1], z0[2]], full[1:, :])
             # the steering that holds the model on the preview cancels the bias too
             s_ref = self.reference_steering([z0[1], z0[2]], full[1:, :])[:, 1:] - b
-            self._inputs_fun = ca.Function("mpc_plan_inputs", [b, z], [target, w, u_ref, s_ref], ["bias", "z"],
+            self._inputs_fun = ca.Function("mpc_plan_inputs", [bias, z], [target, w, u_ref, s_ref], ["bias", "z"],
                                            ["target", "w", "u_ref", "steer_ref"])
         return self._inputs_fun
 
@@ -327,9 +384,29 @@ class MPCAutopilot:
         chi0 : float
             Initial course (or heading) of the reference model [rad].
         """
-        N, nx = int(self.horizon), 3 + (self.order == 2)
+        N, nx = int(self.horizon), 3 + (self.order == 2) + self.integral
         return {"steer_cmd": 0.0, "rate": 0.0, "X": np.zeros((nx, N + 1)), "U": np.zeros((1, N)), "count": 0,
-                "xr": np.array([chi0, 0.0, 0.0])}
+                "xr": np.array([chi0, 0.0, 0.0]), "integral": 0.0}
+
+    def plan_start(self, e, r, delta, w0, integral):
+        """The plan's start state from the course error ``e``, the rate ``r``, the steering command
+        ``delta``, the first step's disturbance ``w0`` and the integral of the tracking error (used
+        with :attr:`integral`); numbers or CasADi expressions. The second-order model's internal
+        state is the one with ``r' = 0`` (the rate is estimated, not its change)."""
+        x = [e, r]
+        if self.order == 2:
+            sys = self.nomoto.system(2)
+            x.append(-float(sys.A[1, 1]) * r - float(sys.B[1, 0]) * (delta + w0))
+        x += [integral] * self.integral + [delta]
+        return _like(ca.vertcat(*[_casadi(v) for v in x]), e, r, delta, w0, integral)
+
+    def integral_step(self, integral, e, cmd, dt):
+        """The integral of the tracking error ``e = wrap(chi - chi_d)`` one sample on, held while the
+        command ``cmd`` is at its limit and ``e`` would drive it further (the PID law's anti-windup);
+        numbers or CasADi expressions."""
+        hold = ca.logic_or(ca.logic_and(cmd >= self.steer_max, e < 0), ca.logic_and(cmd <= -self.steer_max, e > 0))
+        out = ca.if_else(hold, integral, integral + dt * e)
+        return out if isinstance(out, (ca.MX, ca.SX)) else float(out)
 
     def update(self, memory: dict, ref: float, chi: float, r: float, dt: float, bias: float = 0.0):
         """One loop sample: solve the QP when a new MPC period starts (warm-started with the previous
@@ -365,21 +442,19 @@ class MPCAutopilot:
             delta = mem["steer_cmd"]
             target = self._preview(mem["xr"], ref)
             z = np.array([float(wrap(mem["xr"][0] - ref)), mem["xr"][1], mem["xr"][2]])
-            _, w, u_ref, s_ref = (np.asarray(v) for v in self.plan_inputs()(bias, z))
-            if self.order == 1:
-                x0 = [e, r, delta]
-            else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
-                sys = self.nomoto.system(2)
-                x0 = [e, r, -sys.A[1, 1] * r - sys.B[1, 0] * (delta + w[0, 0]), delta]
-            out = self._solve({"x0": np.array(x0), "b": w, "target": target, "U_guess": U_guess, "u_ref": u_ref,
+            planned, w, u_ref, s_ref = (np.asarray(v) for v in self.plan_inputs()(bias, z))
+            target = np.vstack([target, planned[2:]])               # the integral's target, with one
+            x0 = self.plan_start(e, r, delta, w[0, 0], mem["integral"]).ravel()
+            out = self._solve({"x0": x0, "b": w, "target": target, "U_guess": U_guess, "u_ref": u_ref,
                                "steer_ref": s_ref})
             mem["X"], mem["U"] = np.asarray(out["X"]), np.asarray(out["U"])
-            self._check(mem["X"], mem["U"], np.array(x0), w)
+            self._check(mem["X"], mem["U"], x0, w)
             mem["rate"] = float(out["u0"])
         mem["count"] += 1
+        chi_d = float(mem["xr"][0]) if self.reference is not None else ref
+        mem["integral"] = self.integral_step(mem["integral"], float(wrap(chi - chi_d)), mem["steer_cmd"], dt)
         cmd = float(np.clip(mem["steer_cmd"] + mem["rate"] * dt, -self.steer_max, self.steer_max))
         mem["steer_cmd"] = cmd
-        chi_d = float(mem["xr"][0]) if self.reference is not None else ref
         return mem, cmd, {"chi_d": chi_d, "r_d": float(mem["X"][1, 1]), "e": float(wrap(chi - chi_d))}
 
     def _solve(self, args: dict) -> dict:
@@ -415,7 +490,8 @@ class MPCLaw:
     """The MPC as the law of the compiled closed loop (:meth:`MPCAutopilot.law`).
 
     Memory: the reference model ``chi_d, r_d, a_d``, the steering command and the planned rate, a
-    sample counter, and the last plan of steering rates (the warm start). Once per MPC period
+    sample counter, the integral of the tracking error (:meth:`MPCAutopilot.integral_step`; 0
+    unless the plan carries it), and the last plan of steering rates (the warm start). Once per MPC period
     (``casadi.Function.conditional`` on the counter) the QP is solved from the present course
     error, rate, steering command and the heading observer's bias, against the preview of the
     reference model; in between the command ramps at the planned rate. The log's ``a_d`` is the
@@ -436,7 +512,8 @@ class MPCLaw:
         self.mpc, self.dt = mpc, float(dt)
         self.every = max(1, int(round((mpc.replan or mpc.period) / dt)))
         N = int(mpc.horizon)
-        self.MEMORY = ("chi_d", "r_d", "a_d", "steer_cmd", "rate", "count") + tuple(f"plan{k}" for k in range(N))
+        self.MEMORY = ("chi_d", "r_d", "a_d", "steer_cmd", "rate", "count", "integral") + tuple(
+            f"plan{k}" for k in range(N))
         self.reference = mpc.reference
         self._function = None
 
@@ -448,7 +525,7 @@ class MPCLaw:
         chi0 : float
             Initial course (or heading) [rad].
         """
-        return np.concatenate([[chi0, 0.0, 0.0, 0.0, 0.0, 0.0], np.zeros(int(self.mpc.horizon))])
+        return np.concatenate([[chi0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], np.zeros(int(self.mpc.horizon))])
 
     @property
     def function(self) -> ca.Function:
@@ -463,19 +540,15 @@ class MPCLaw:
         n = len(self.MEMORY)
         mem, ref, chi, r = ca.MX.sym("memory", n), ca.MX.sym("ref"), ca.MX.sym("chi"), ca.MX.sym("r")
         dt, U, st, bias = ca.MX.sym("dt"), ca.MX.sym("speed"), ca.MX.sym("steering"), ca.MX.sym("bias")
-        xr, cmd, rate, count, plan = mem[0:3], mem[3], mem[4], mem[5], mem[6:].T
+        xr, cmd, rate, count, integral, plan = mem[0:3], mem[3], mem[4], mem[5], mem[6], mem[7:].T
         xr_next = mpc._ref_step()(xr, ref, self.dt) if mpc.reference is not None else ca.vertcat(ref, 0, 0)
         e = ca.atan2(ca.sin(chi - ref), ca.cos(chi - ref))
         z = ca.vertcat(ca.atan2(ca.sin(xr_next[0] - ref), ca.cos(xr_next[0] - ref)), xr_next[1], xr_next[2])
         # the solve branch: preview, disturbance and reference steering are made only when a solve is due
         a = [ca.MX.sym(k, *sh) for k, sh in (("e", (1, 1)), ("r", (1, 1)), ("cmd", (1, 1)), ("bias", (1, 1)),
-                                               ("z", (3, 1)), ("plan", (1, N)), ("rate", (1, 1)))]
+                                               ("z", (3, 1)), ("plan", (1, N)), ("rate", (1, 1)), ("integral", (1, 1)))]
         target, w, u_ref, s_ref = mpc.plan_inputs()(a[3], a[4])
-        if mpc.order == 1:
-            x0 = ca.vertcat(a[0], a[1], a[2])
-        else:        # internal state of the observer form with r' = 0 (the rate is estimated, not its change)
-            sys2 = mpc.nomoto.system(2)
-            x0 = ca.vertcat(a[0], a[1], -float(sys2.A[1, 1]) * a[1] - float(sys2.B[1, 0]) * (a[2] + w[0, 0]), a[2])
+        x0 = mpc.plan_start(a[0], a[1], a[2], w[0, 0], a[7])
         shifted = ca.horzcat(a[5][:, 1:], a[5][:, -1:])
         out = mpc._solver.call({"x0": x0, "b": w, "target": target, "U_guess": shifted, "u_ref": u_ref,
                                 "steer_ref": s_ref})
@@ -483,11 +556,13 @@ class MPCLaw:
         hold = ca.Function("mpc_hold", a, [a[6], a[5]])
         branch = ca.Function.conditional("mpc_period", [hold], solve)
         due = ca.if_else(ca.fmod(count, self.every) == 0, 1, 0)
-        rate_next, plan_next = branch(due, e, r, cmd, bias, z, plan, rate)
+        rate_next, plan_next = branch(due, e, r, cmd, bias, z, plan, rate, integral)
         cmd_next = ca.fmin(ca.fmax(cmd + rate_next * self.dt, -mpc.steer_max), mpc.steer_max)
         chi_d = xr_next[0]
+        integral_next = mpc.integral_step(integral, ca.atan2(ca.sin(chi - chi_d), ca.cos(chi - chi_d)), cmd, self.dt)
         return ca.Function("mpc_law", [mem, ref, chi, r, dt, U, st, bias],
-                           [ca.vertcat(xr_next, cmd_next, rate_next, count + 1, plan_next.T), cmd_next, chi_d,
+                           [ca.vertcat(xr_next, cmd_next, rate_next, count + 1, integral_next, plan_next.T), cmd_next,
+                            chi_d,
                             xr_next[1], rate_next, ca.atan2(ca.sin(chi - chi_d), ca.cos(chi - chi_d))],
                            ["memory", "ref", "chi", "r", "dt", "speed", "steering", "bias"],
                            ["memory_next", "steer", "chi_d", "r_d", "a_d", "e"])

@@ -11,7 +11,8 @@ __all__ = ["mpc_for_design", "mpc_weights"]
 
 
 def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60, q_r: float | None = None,
-                   r_u: float | None = None, q_d: float | None = None, tuning: str = "limits") -> MPCAutopilot:
+                   r_u: float | None = None, q_d: float | None = None, tuning: str = "limits",
+                   offset: str = "bias") -> MPCAutopilot:
     """An MPC (heading control; a course-mode design is refused) with the design's model, limits and
     reference model (the PID law's, ``design.autopilot.reference``: the default design runs its PID
     with it, so the two are compared like with like).
@@ -34,6 +35,11 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
       is at or below the PID in more rows and where the limits bind, but above the ``"limits"``
       tuning in some (docs/autopilots.md section 9).
 
+    Offset-free control (``offset``): ``"bias"`` (default) plans with the heading observer's steering
+    bias; ``"integral"`` with the integral of the tracking error, as the PID law (the bias unused),
+    weighted ``q_z = q_e (wn / 10)^2`` (the integral weight of casship's LQR rule,
+    ``settings.lqr_weights``, relative to the course error's: the PID's integral pole at ``wn / 10``).
+
     ``q_r``, ``r_u``, ``q_d`` given replace the tuning's. The steady steering of the design's PID
     law (``design.autopilot.steering``) along the preview. In the design's loop
     (``design.simulate(controller=mpc)``) the heading observer runs on the MPC's model
@@ -50,6 +56,8 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
         Replace the yaw-rate, steering-rate and steering weights.
     tuning : {"limits", "bandwidth"}
         The rule of the weights.
+    offset : {"bias", "integral"}
+        Offset-free control from the observer's bias or from the integral of the tracking error.
     """
     s = design.settings
     if s.mode == "course":
@@ -70,11 +78,15 @@ def mpc_for_design(design, *, horizon_time: float | None = None, steps: int = 60
                    "r_u": (100.0 / s.steer_rate_max) ** 2}
     else:
         raise InputError(f"MPC tuning must be 'limits' or 'bandwidth', got {tuning!r}")
+    if offset == "integral":
+        weights["q_z"] = weights["q_e"] * (s.wn / 10) ** 2
+    elif offset != "bias":
+        raise InputError(f"MPC offset must be 'bias' or 'integral', got {offset!r}")
     for name, given in (("q_r", q_r), ("r_u", r_u), ("q_d", q_d)):
         if given is not None:
             weights[name] = given
     return MPCAutopilot(design.nomoto, period, steps, s.steer_max, s.steer_rate_max, s.r_max,
-                        replan=max(s.dt, round(period / 10 / s.dt) * s.dt), **weights,
+                        replan=max(s.dt, round(period / 10 / s.dt) * s.dt), **weights, offset=offset,
                         reference=design.autopilot.reference, steering=design.autopilot.steering)
 
 
