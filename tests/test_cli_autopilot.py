@@ -58,6 +58,13 @@ def test_autopilot_json_course_changes_schedule_and_mpc(capsys):
     assert banded["mpc"]["tuning"] == "bandwidth" and banded["course_changes"] != out["course_changes"]
     assert main(["autopilot", "--model", "otter", "--mpc-tuning", "bandwidth"]) == 2
     assert "--mpc-tuning would have no effect" in capsys.readouterr().err
+    code = main(["autopilot", "--model", "otter", "--controller", "mpc", "--mpc-offset", "integral", "--scenario",
+                 "course-20", "--t-end", "60", "--json"])
+    assert code == 0
+    integral = json.loads(capsys.readouterr().out)
+    assert integral["mpc"]["offset"] == "integral" and integral["course_changes"] != out["course_changes"]
+    assert main(["autopilot", "--model", "otter", "--mpc-offset", "integral"]) == 2
+    assert "--mpc-offset would have no effect" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("name, args, api", [

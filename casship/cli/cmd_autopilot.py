@@ -116,6 +116,10 @@ def register(sub) -> None:
                    help="the MPC's weights (with --controller mpc): 'limits' from the rudder and turn-rate limits "
                         "(default); 'bandwidth' from the PID design's wn and zeta (overshoots less where the rudder "
                         "limits bind; see docs/autopilots.md)")
+    p.add_argument("--mpc-offset", choices=("bias", "integral"), default="bias",
+                   help="the MPC's offset-free action (with --controller mpc): 'bias' the heading observer's steering "
+                        "bias (default); 'integral' the integral of the tracking error, as the PID law (for a loop "
+                        "whose feedback has no bias estimate; see docs/autopilots.md)")
     p.add_argument("--schedule", type=float, nargs="*", default=None, metavar="SPEED",
                    help="gain scheduling over the speed: design at these speeds [m/s] (none given: 40, 55, 70, 85 and "
                         "100 %% of the approach speed) and interpolate the law in the measured speed")
@@ -365,8 +369,10 @@ def run(args) -> int:
                 print(f"{k:>15} = {_shown(k, row['value'], moment):<40} ({row['source']})")
         return 0
     if args.controller != "mpc":
-        refuse_unused(args.parser, {"--mpc-tuning": args.mpc_tuning != "limits"}, "it tunes --controller mpc")
-    controller = ap.mpc_for_design(design, tuning=args.mpc_tuning) if args.controller == "mpc" else None
+        refuse_unused(args.parser, {"--mpc-tuning": args.mpc_tuning != "limits", "--mpc-offset": args.mpc_offset != "bias"},
+                      "it tunes --controller mpc")
+    controller = (ap.mpc_for_design(design, tuning=args.mpc_tuning, offset=args.mpc_offset)
+                  if args.controller == "mpc" else None)
     if args.scenario == "track":
         res = _track_run(args, design, env, controller)
     else:
@@ -394,7 +400,7 @@ def run(args) -> int:
     out["controller"] = "mpc" if controller is not None else res.controller
     if controller is not None:
         out["mpc"] = {"period_s": controller.period, "horizon": int(controller.horizon), "solver": "hpipm",
-                      "tuning": args.mpc_tuning}
+                      "tuning": args.mpc_tuning, "offset": args.mpc_offset}
     if args.plot:
         from ..outdir import output_folder
 
@@ -413,7 +419,7 @@ def run(args) -> int:
           + (f" (T1 {nom.T1:.4g}, T2 {nom.T2:.4g}, T3 {nom.T3:.4g})" if nom.second_order else ""))
     if controller is not None:
         print(f"controller: mpc (HPIPM, period {controller.period:g} s, horizon {int(controller.horizon)} steps, "
-              f"{args.mpc_tuning} weights); "
+              f"{args.mpc_tuning} weights, offset from the {args.mpc_offset}); "
               f"{s.mode} mode, loop period {s.dt:g} s; reference model and margins below from the {g.method} design")
         print(f"{g.method} design: wn = {s.wn:.4g} rad/s, Kp = {g.Kp:.4g}, Kd = {g.Kd:.4g} s, Ki = {g.Ki:.4g} 1/s")
     else:
