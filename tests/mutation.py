@@ -66,6 +66,7 @@ ARR, RUN = "casship/estimators/mhe/arrival.py", "casship/estimators/mhe/runner.p
 SCH, PLANTS, MPC = "casship/autopilot/schedule.py", "casship/autopilot/plants.py", "casship/autopilot/mpc.py"
 T_RMET, T_RID = "tests/test_reference_metrics.py", "tests/test_reference_identify.py"
 T_RMHE, T_RAP = "tests/test_reference_mhe_arrival.py", "tests/test_reference_autopilot.py"
+T_MPCI = "tests/test_autopilot_mpc_integral.py"
 T_GUID = "tests/test_autopilot_guidance.py"
 CF, T_CF = "casship/identify/captive_forces.py", "tests/test_captive_forces.py"
 MARIN, T_CHOICE = "problems/kvlcc2_marin/__init__.py", "tests/test_marin_choice.py"
@@ -235,6 +236,11 @@ MUTANTS = [
     M("MPC preview: the reference model's acceleration dropped", MPC,
       "z = np.array([float(wrap(xr[0] - ref)), xr[1], xr[2]])", "z = np.array([float(wrap(xr[0] - ref)), xr[1], 0.0])",
       (T_RAP,)),
+    M("MPC integral: the plan's integral does not integrate", MPC, "Ac[m, 0] = 1.0", "Ac[m, 0] = 0.0", (T_MPCI,)),
+    M("MPC integral: its preview one period late", MPC, "acc = acc + Phi @ M\n            M = Ad @ M",
+      "M = Ad @ M\n            acc = acc + Phi @ M", (T_MPCI,)),
+    M("MPC integral: no anti-windup", MPC, "out = ca.if_else(hold, integral, integral + dt * e)",
+      "out = ca.if_else(hold, integral + dt * e, integral + dt * e)", (T_MPCI,)),
     # -- captive forces, the rudder lever, the fold families, the heading-error floor ---------------------------
     M("captive Jacobian: the scale's derivative in rho dropped", CF,
       "J = J - ca.mtimes(y / rho, ca.DM(e_rho)) - ca.mtimes(self._powers * y / L, ca.DM(e_L))",
