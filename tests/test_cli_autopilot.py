@@ -50,21 +50,16 @@ def test_autopilot_json_course_changes_schedule_and_mpc(capsys):
     assert out["controller"] == "mpc" and out["mpc"]["solver"] == "hpipm" and out["mpc"]["horizon"] == 60
     assert out["mpc"]["tuning"] == "limits"
     assert all(c["overshoot_pct"] <= 10.0 for c in out["course_changes"])
-    # the bandwidth weights are the API's (same run as mpc_for_design(d, tuning="bandwidth")); alone they are refused
-    code = main(["autopilot", "--model", "otter", "--controller", "mpc", "--mpc-tuning", "bandwidth", "--scenario",
-                 "course-20", "--t-end", "60", "--json"])
-    assert code == 0
-    banded = json.loads(capsys.readouterr().out)
-    assert banded["mpc"]["tuning"] == "bandwidth" and banded["course_changes"] != out["course_changes"]
-    assert main(["autopilot", "--model", "otter", "--mpc-tuning", "bandwidth"]) == 2
-    assert "--mpc-tuning would have no effect" in capsys.readouterr().err
-    code = main(["autopilot", "--model", "otter", "--controller", "mpc", "--mpc-offset", "integral", "--scenario",
-                 "course-20", "--t-end", "60", "--json"])
-    assert code == 0
-    integral = json.loads(capsys.readouterr().out)
-    assert integral["mpc"]["offset"] == "integral" and integral["course_changes"] != out["course_changes"]
-    assert main(["autopilot", "--model", "otter", "--mpc-offset", "integral"]) == 2
-    assert "--mpc-offset would have no effect" in capsys.readouterr().err
+    # the bandwidth weights and the integral offset are the API's (same runs as mpc_for_design(d, tuning=...,
+    # offset=...)); without --controller mpc they are refused
+    for option, value, key in (("--mpc-tuning", "bandwidth", "tuning"), ("--mpc-offset", "integral", "offset")):
+        code = main(["autopilot", "--model", "otter", "--controller", "mpc", option, value, "--scenario", "course-20",
+                     "--t-end", "60", "--json"])
+        assert code == 0
+        other = json.loads(capsys.readouterr().out)
+        assert other["mpc"][key] == value and other["course_changes"] != out["course_changes"]
+        assert main(["autopilot", "--model", "otter", option, value]) == 2
+        assert f"{option} would have no effect" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("name, args, api", [
