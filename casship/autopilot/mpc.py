@@ -392,7 +392,19 @@ class MPCAutopilot:
         """The plan's start state from the course error ``e``, the rate ``r``, the steering command
         ``delta``, the first step's disturbance ``w0`` and the integral of the tracking error (used
         with :attr:`integral`); numbers or CasADi expressions. The second-order model's internal
-        state is the one with ``r' = 0`` (the rate is estimated, not its change)."""
+        state is the one with ``r' = 0`` (the rate is estimated, not its change).
+
+        Parameters
+        ----------
+        e, r : float or casadi.MX
+            Course error to the command [rad] and rate [rad/s].
+        delta : float or casadi.MX
+            Steering command.
+        w0 : float or casadi.MX
+            Disturbance of the first step.
+        integral : float or casadi.MX
+            Integral of the tracking error [rad s].
+        """
         x = [e, r]
         if self.order == 2:
             sys = self.nomoto.system(2)
@@ -403,7 +415,19 @@ class MPCAutopilot:
     def integral_step(self, integral, e, cmd, dt):
         """The integral of the tracking error ``e = wrap(chi - chi_d)`` one sample on, held while the
         command ``cmd`` is at its limit and ``e`` would drive it further (the PID law's anti-windup);
-        numbers or CasADi expressions."""
+        numbers or CasADi expressions.
+
+        Parameters
+        ----------
+        integral : float or casadi.MX
+            Integral so far [rad s].
+        e : float or casadi.MX
+            Tracking error of this sample [rad].
+        cmd : float or casadi.MX
+            Steering command of the previous sample.
+        dt : float
+            Loop period [s].
+        """
         hold = ca.logic_or(ca.logic_and(cmd >= self.steer_max, e < 0), ca.logic_and(cmd <= -self.steer_max, e > 0))
         out = ca.if_else(hold, integral, integral + dt * e)
         return out if isinstance(out, (ca.MX, ca.SX)) else float(out)

@@ -16,18 +16,25 @@ __all__: list[str] = []          # the package's own building blocks
 
 
 def inv_sqrt(P: np.ndarray) -> np.ndarray:
-    """``W`` with ``W' W = P^-1`` (Cholesky; for a near-singular ``P`` eigenvalues floored at 1e-14
-    of the largest)."""
+    """``W`` with ``W' W = P^-1``, through the correlation matrix ``C = S^-1 P S^-1`` (``S`` the standard
+    deviations): ``W = W_C S^-1`` with ``W_C`` from the Cholesky factor of ``C``, or for a near-singular
+    ``C`` from its eigenvalues floored at 1e-14 of the largest. On ``C`` the test and the floor do not
+    depend on the states' units (a latitude's variance of 1e-16 rad^2 beside a speed's of 1 (m/s)^2
+    is no sign of singularity); a state with zero variance is scaled by the largest deviation."""
     P = 0.5 * (P + P.T)
-    L, info = _potrf(P, lower=1, clean=1)
-    # a positive definite P has a positive diagonal (potrf fails otherwise)
-    if info == 0 and L.diagonal().min() > 1e-7 * float(P.diagonal().max()) ** 0.5:
+    d = P.diagonal().copy()
+    top = float(np.sqrt(max(d.max(), 1e-300)))
+    sd = np.where(np.isfinite(d) & (d > 0), np.sqrt(np.abs(d)), top)
+    C = P / np.outer(sd, sd)
+    L, info = _potrf(C, lower=1, clean=1)
+    # a positive definite C has a positive diagonal (potrf fails otherwise)
+    if info == 0 and L.diagonal().min() > 1e-7 * float(C.diagonal().max()) ** 0.5:
         Linv, info = _trtri(L, lower=1)
         if info == 0:
-            return Linv
-    lam, V = np.linalg.eigh(P)
+            return Linv / sd
+    lam, V = np.linalg.eigh(C)
     lam = np.maximum(lam, 1e-14 * max(lam.max(), 1e-300))
-    return (V / np.sqrt(lam)).T
+    return (V / np.sqrt(lam)).T / sd
 
 
 def arrival_prior(kind: str, k: int, N: int, hist_x: np.ndarray, hist_P: np.ndarray, previous_x1: np.ndarray,

@@ -75,14 +75,40 @@ class Window:
     tol: float = 1e-8                     # the NLP solver's convergence tolerance
     make_kkt: object = None               # () -> Function (z, p, lam_g) -> (dual, primal) infeasibility
     _kkt: BufferedCall | None = None
+    curvature: ca.Function | None = None  # the first stage's Gauss-Newton curvature of each state (scaling)
+    sizes: tuple = ()                     # nx, nu, ny (to read the parameter vector)
 
     def nlp_call(self) -> BufferedCall:
-        """The NLP solver through bound buffers (bounds written once), for solvers that raise on failure."""
+        """The NLP solver through buffers, for solvers that raise on failure."""
         if self._nlp_call is None:
             call = BufferedCall(self.solver)
-            call["lbx"], call["ubx"], call["lbg"], call["ubg"] = self.lbx, self.ubx, 0.0, 0.0
+            call["lbg"], call["ubg"] = 0.0, 0.0
             self._nlp_call = call
         return self._nlp_call
+
+    def scaling(self, z: np.ndarray, par: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The NLP solvers' variable scale ``D`` (``z = D zeta``) and constraint scale ``D_g`` at the
+        start point ``z``: each state by ``min(1, 1 / sqrt(c))``, ``c`` its Gauss-Newton curvature in
+        the window's first stage (arrival and measurement), the noise variables (already whitened) by
+        1, each dynamics gap by its state's scale. Latitude and longitude in radians, whose curvature
+        is ``1 / R`` of a few-centimetre fix (about 1e16), then sit beside speeds at unit size. A state
+        is only scaled down: one the first stage hardly sees may be determined through the dynamics
+        by later stages, and scaled up its gaps would be held only to the tolerance times the scale."""
+        nx, nu, ny = self.sizes
+        N = self.N
+        sizes = [nx, nx * nx, nu * (N + 1), nu * N, ny * (N + 1), ny * (N + 1), N]
+        cuts = np.cumsum(sizes)
+        xbar, W, Uh, Up, Y, M, dt, p = np.split(np.asarray(par, dtype=float), cuts)   # params_vector's layout
+        Uh, Up, Y, M = Uh.reshape(N + 1, nu).T, Up.reshape(N, nu).T, Y.reshape(N + 1, ny).T, M.reshape(N + 1, ny).T
+        c = np.asarray(self.curvature(z[self.ix[0]], z[self.iv[0]] if self.iv.shape[1] else np.zeros(0),
+                                      z[self.ix[1]], Uh[:, 0], Y[:, 0], M[:, 0], Up[:, 0], dt[0], p, xbar,
+                                      W.reshape(nx, nx).T)).ravel()
+        dx = np.ones(nx)
+        ok = np.isfinite(c) & (c > 0)
+        dx[ok] = np.clip(1.0 / np.sqrt(c[ok]), 1e-12, 1.0)
+        D = np.ones(self.nz)
+        D[self.ix] = dx
+        return D, np.tile(dx, N)
 
     def gn(self, multipliers: bool = False) -> BufferedCall:
         """The Gauss-Newton step of the window, built on first use.
@@ -194,6 +220,10 @@ def build_window(mhe, N: int, solver: str) -> Window:
     res = ca.vertcat(arrival(X[:, 0], xbar, W), ca.vec(Rs), term(xN, Uh[:, N], Y[:, N], M[:, N], p))
     par = ca.vertcat(xbar, ca.vec(W), ca.vec(Uh), ca.vec(Up), ca.vec(Y), ca.vec(M), ca.vec(dt), p)
     nlp = {"x": z, "p": par, "f": 0.5 * ca.sumsqr(res), "g": ca.vec(G)}
+    # the NLP solvers see z = D zeta and the gaps divided by D_g (Window.scaling, given with the parameters)
+    zs, Ds, Dg = ca.MX.sym("z_scaled", nz), ca.MX.sym("D", nz), ca.MX.sym("D_g", nlp["g"].numel())
+    f_s, g_s, res_s = ca.substitute([nlp["f"], nlp["g"] / Dg, res], [z], [Ds * zs])
+    nlp_s = {"x": zs, "p": ca.vertcat(par, Ds, Dg), "f": f_s, "g": g_s}
     expand = o.expand if o.expand is not None else N * int(stage.n_nodes()) <= EXPAND_NODES
     common = {"expand": bool(expand), "print_time": False, "error_on_fail": False}
     if solver == "ipopt":
@@ -203,7 +233,7 @@ def build_window(mhe, N: int, solver: str) -> Window:
                  "mu_strategy": "adaptive", "warm_start_init_point": "yes", "warm_start_bound_push": 1e-9,
                  "warm_start_mult_bound_push": 1e-9, "bound_relax_factor": 0.0}
         # error_on_fail: a failed solve raises from the buffered call (the status is then read by a plain call)
-        S = ca.nlpsol(f"mhe_ipopt_{N}", "ipopt", nlp, {**common, "error_on_fail": True, "ipopt": iopts})
+        S = ca.nlpsol(f"mhe_ipopt_{N}", "ipopt", nlp_s, {**common, "error_on_fail": True, "ipopt": iopts})
         ok = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
     elif solver == "fatrop":
         # fatrop's stage structure: z = [x_0 v_0 ... x_N] and the dynamics as x_{j+1} - F(...) = 0 (the
@@ -211,18 +241,18 @@ def build_window(mhe, N: int, solver: str) -> Window:
         fopts = {"structure_detection": "manual", "N": N, "nx": [nx] * (N + 1), "nu": [nv] * N + [0],
                  "ng": [0] * (N + 1),
                  "fatrop": {"print_level": 0, "tol": o.tol, "max_iter": 100 if o.max_iter is None else o.max_iter}}
-        S = ca.nlpsol(f"mhe_fatrop_{N}", "fatrop", {**nlp, "g": -nlp["g"]}, {**common, **fopts})
+        S = ca.nlpsol(f"mhe_fatrop_{N}", "fatrop", {**nlp_s, "g": -nlp_s["g"]}, {**common, **fopts})
         ok = ("SOLVER_RET_SUCCESS",)
     elif solver == "sqp":
-        J = ca.jacobian(res, z)
+        J = ca.jacobian(res_s, zs)
         lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", nlp["g"].numel())
-        H = ca.Function("mhe_gn_hessian", [z, par, lam_f, lam_g], [lam_f * (J.T @ J)],
+        H = ca.Function("mhe_gn_hessian", [zs, nlp_s["p"], lam_f, lam_g], [lam_f * (J.T @ J)],
                         ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"])
         qp = o.qpsol or "qrqp"
         sopts = {**common, "hess_lag": H, "qpsol": qp, "qpsol_options": _qp_options(qp),
                  "print_iteration": False, "print_header": False, "print_status": False,
                  "max_iter": 50 if o.max_iter is None else o.max_iter, "tol_pr": o.tol, "tol_du": max(o.tol, 1e-8)}
-        S = ca.nlpsol(f"mhe_sqp_{N}", "sqpmethod", nlp, sopts)
+        S = ca.nlpsol(f"mhe_sqp_{N}", "sqpmethod", nlp_s, sopts)
         # a vanishing search direction means the start point is already optimal
         ok = ("Solve_Succeeded", "Search_Direction_Becomes_Too_Small")
     else:
@@ -260,11 +290,24 @@ def build_window(mhe, N: int, solver: str) -> Window:
         return fun.expand() if expand else fun
 
     win.make_kkt = kkt_error
+    win.curvature, win.sizes = _first_stage_curvature(stage, arrival, mhe), (nx, nu, ny)
     if solver == "fatrop":
         win.lam_sign = -1.0
     if solver == "rti":
         win.gn()
     return win
+
+
+def _first_stage_curvature(stage, arrival, mhe) -> ca.Function:
+    """``(x, v, x_next, u, y, mask, u_prev_next, dt, p, xbar, W) -> c``: the Gauss-Newton curvature
+    ``diag(J'J)`` of the window's first stage in its state (arrival and measurement residuals)."""
+    m, S = mhe.model, ca.SX
+    args = [S.sym("x", m.nx), S.sym("v", mhe.nv), S.sym("x_next", m.nx), S.sym("u", m.nu), S.sym("y", mhe.ny),
+            S.sym("mask", mhe.ny), S.sym("u_prev_next", m.nu), S.sym("dt"), S.sym("p", m.np)]
+    xbar, W = S.sym("xbar", m.nx), S.sym("W", m.nx, m.nx)
+    r = ca.vertcat(arrival(args[0], xbar, W), stage(*args)[1])
+    J = ca.jacobian(r, args[0])
+    return ca.Function("mhe_first_stage_curvature", args + [xbar, W], [ca.sum1(J * J).T])
 
 
 def _kkt_step(z, par, res, g, N, multipliers: bool = False) -> ca.Function:

@@ -149,24 +149,29 @@ def solve_window(win: Window, z0: np.ndarray, par: np.ndarray, where: str, lam_g
         return _real_time_iteration(win, z0, par, where), None
     if first_order_optimal(win, z0, par, lam_g0):
         return z0, lam_g0
-    lam0 = 0.0 if lam_g0 is None else lam_g0
-    if win.solver.class_name() == "IpoptInterface":     # bound buffers; a failure raises
+    # the solvers work in scaled variables (Window.scaling): z = D zeta, gaps / D_g, multipliers * D_g
+    D, Dg = win.scaling(z0, par)
+    scaled = {"x0": z0 / D, "p": np.concatenate([par, D, Dg]), "lbx": win.lbx / D, "ubx": win.ubx / D,
+              "lam_g0": (0.0 if lam_g0 is None else lam_g0 * Dg) * win.lam_sign}
+    if win.solver.class_name() == "IpoptInterface":     # buffers; a failure raises
         call = win.nlp_call()
-        call["x0"], call["p"], call["lam_g0"] = z0, par, lam0
+        for key, value in scaled.items():
+            call[key] = value
         try:
             call.trigger()
-            z, g, lam = call.out("x").ravel().copy(), call.out("g").ravel(), call.out("lam_g").ravel().copy()
+            z, g = D * call.out("x").ravel(), Dg * call.out("g").ravel()
+            lam = call.out("lam_g").ravel() / Dg
             status = win.ok_status[0]
         except RuntimeError:
-            status = _failed_status(win, z0, par, lam0)
+            status = _failed_status(win, scaled)
             z, g, lam = np.full(win.nz, np.nan), np.zeros(0), None
     else:
-        sol = win.solver(x0=z0, p=par, lbx=win.lbx, ubx=win.ubx, lbg=0.0, ubg=0.0, lam_g0=win.lam_sign * lam0)
+        sol = win.solver(**scaled, lbg=0.0, ubg=0.0)
         stats = win.solver.stats()
         status = stats.get("unified_return_status", stats["return_status"]) if win.lam_sign < 0 \
             else stats["return_status"]
-        z, g = np.asarray(sol["x"]).reshape(-1), np.asarray(sol["g"]).ravel()
-        lam = win.lam_sign * np.asarray(sol["lam_g"]).ravel()
+        z, g = D * np.asarray(sol["x"]).reshape(-1), Dg * np.asarray(sol["g"]).ravel()
+        lam = win.lam_sign * np.asarray(sol["lam_g"]).ravel() / Dg
     gap = float(np.max(np.abs(g), initial=0.0))
     if status not in win.ok_status or not np.all(np.isfinite(z)):
         raise MHEFailed(f"MHE ({win.solver.name()}) failed at {where}: solver status {status!r}; {RESCUE}", status)
@@ -176,10 +181,10 @@ def solve_window(win: Window, z0: np.ndarray, par: np.ndarray, where: str, lam_g
     return z, lam
 
 
-def _failed_status(win: Window, z0, par, lam0) -> str:
+def _failed_status(win: Window, scaled: dict) -> str:
     """The return status of a solve that raised (solved again by a plain call, which records it)."""
     try:
-        win.solver(x0=z0, p=par, lbx=win.lbx, ubx=win.ubx, lbg=0.0, ubg=0.0, lam_g0=lam0)
+        win.solver(**scaled, lbg=0.0, ubg=0.0)
     except RuntimeError:
         pass
     try:

@@ -1,0 +1,60 @@
+"""The MHE on states of very different scales (a latitude in radians beside a yaw rate): the window
+NLP scaled for the solver, the arrival cost's whitening unit-free, and no solver silently wrong."""
+import numpy as np
+import pytest
+
+import casship as cs
+from casship.estimators import MHEFailed
+from casship.estimators.mhe.arrival import inv_sqrt
+
+Q_S, R_S = 1e-6, 1e-16          # heading measured to 1e-8 rad, as a GNSS latitude in radians (6 cm)
+
+
+def _fine_heading_case():
+    m = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    dm = cs.discretize(m, 0.5, "rk4")
+    t = np.arange(0.0, 60.0, 0.5)
+    rng = np.random.default_rng(1)
+    delta = 0.1 * np.sign(np.sin(2 * np.pi * t / 20.0))
+    tr = cs.simulate(m, m.states(psi=0.4), t, {"delta": delta}, w=rng.standard_normal((t.size, 1)) * np.sqrt(Q_S))
+    data = cs.measure(tr, m, {"psi": np.sqrt(R_S)}, seed=rng, keep=("psi", "r"))
+    return dm, data, cs.Gaussian([0.4, 0.0], [1e-14, 1e-5])
+
+
+def test_ipopt_window_with_a_state_known_to_1e_8_equals_the_kalman_filter():
+    """Before: IPOPT stopped at row 4 with 'Maximum_Iterations_Exceeded' (curvatures 1e16 beside 1e5)."""
+    dm, data, prior = _fine_heading_case()
+    kf = cs.KF(dm, Q_S, R_S).filter(data, prior)
+    res = cs.MHE(dm, Q_S, R_S, options={"horizon": 4}).filter(data, prior)
+    assert np.abs(res.x[:, 0] - kf.x[:, 0]).max() <= 1e-3 * np.sqrt(R_S)
+    assert np.abs(res.x[:, 1] - kf.x[:, 1]).max() <= 1e-9
+    np.testing.assert_allclose(res.P, kf.P, rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("solver", ["fatrop", "sqp", "rti"])
+def test_other_solvers_succeed_exactly_or_say_they_failed(solver):
+    """Before: SQP returned headings 5.5e-4 rad (5.5 million standard deviations) from the filter's, as a
+    success. A solver may fail on this window, but not silently."""
+    dm, data, prior = _fine_heading_case()
+    kf = cs.KF(dm, Q_S, R_S).filter(data, prior)
+    try:
+        res = cs.MHE(dm, Q_S, R_S, options={"horizon": 4, "solver": solver}).filter(data, prior)
+    except MHEFailed as exc:
+        assert "failed at row" in str(exc)
+        return
+    assert np.abs(res.x[:, 0] - kf.x[:, 0]).max() <= 1e-3 * np.sqrt(R_S)
+
+
+def test_arrival_whitening_is_unit_free():
+    """``W P W' = I`` for a covariance of a latitude (1e-16 rad^2) beside speeds: before, the
+    near-singularity test on ``P`` itself floored the latitude's variance at 1e-14 of the largest."""
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((5, 5))
+    S = np.diag([1e-8, 1.3e-8, 1.0, 0.5, 0.1])
+    P = S @ (A @ A.T + np.eye(5)) @ S
+    W = inv_sqrt(P)
+    np.testing.assert_allclose(W @ P @ W.T, np.eye(5), atol=1e-10)
+    # a state with no variance still gives a finite whitening (the rest exact)
+    W0 = inv_sqrt(np.diag([1.0, 0.0, 4.0]))
+    assert np.all(np.isfinite(W0))
+    np.testing.assert_allclose((W0.T @ W0)[[0, 2], [0, 2]], [1.0, 0.25])
