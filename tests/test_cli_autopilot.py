@@ -43,7 +43,7 @@ def test_autopilot_json_course_changes_schedule_and_mpc(capsys):
         assert c["overshoot_deg"] == pytest.approx(c["overshoot_pct"] / 100 * abs(c["change_deg"]))
         assert c["overshoot_pct"] <= 10.0 and c["settling_time_s"] is not None
     assert out["steer_travel_N_m_per_hour"] > 0
-    code = main(["autopilot", "--model", "otter", "--controller", "mpc", "--scenario", "course-20", "--t-end", "60",
+    code = main(["autopilot", "--model", "otter", "--controller", "mpc", "--scenario", "course-20", "--duration", "60",
                  "--json"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
@@ -54,7 +54,7 @@ def test_autopilot_json_course_changes_schedule_and_mpc(capsys):
     # offset=...)); without --controller mpc they are refused
     for option, value, key in (("--mpc-tuning", "bandwidth", "tuning"), ("--mpc-offset", "integral", "offset")):
         code = main(["autopilot", "--model", "otter", "--controller", "mpc", option, value, "--scenario", "course-20",
-                     "--t-end", "60", "--json"])
+                     "--duration", "60", "--json"])
         assert code == 0
         other = json.loads(capsys.readouterr().out)
         assert other["mpc"][key] == value and other["course_changes"] != out["course_changes"]
