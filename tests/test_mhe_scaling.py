@@ -58,3 +58,48 @@ def test_arrival_whitening_is_unit_free():
     W0 = inv_sqrt(np.diag([1.0, 0.0, 4.0]))
     assert np.all(np.isfinite(W0))
     np.testing.assert_allclose((W0.T @ W0)[[0, 2], [0, 2]], [1.0, 0.25])
+
+
+def _scaled_linear_case(scale):
+    """The Nomoto case of ``tests/test_mhe.py`` with every variance times ``scale`` (the same problem in
+    other units: a unit-free estimator gives the same estimates in standard deviations)."""
+    m = cs.models.nomoto_first_order(K=0.1, T=20.0)
+    dm = cs.discretize(m, 0.5, "rk4")
+    t = np.arange(0.0, 60.0, 0.5)
+    rng = np.random.default_rng(1)
+    Q, R = 1e-6 * scale, 1e-4 * scale
+    delta = 0.1 * np.sign(np.sin(2 * np.pi * t / 20.0))
+    tr = cs.simulate(m, m.states(psi=0.0), t, {"delta": delta}, w=rng.standard_normal((t.size, 1)) * np.sqrt(Q))
+    data = cs.measure(tr, m, {"psi": np.sqrt(R)}, seed=rng, keep=("psi", "r"))
+    return dm, data, cs.Gaussian([0.0, 0.0], [1e-3 * scale, 1e-5 * scale]), Q, R
+
+
+@pytest.mark.parametrize("solver", ["ipopt", "sqp", "fatrop", "rti"])
+def test_the_same_problem_in_smaller_units_gives_the_kalman_filter(solver):
+    """Variances 1e-8 of the tested case's: before, the process noise (1e-14) was dropped as round-off
+    (absolute threshold 1e-12) and every solver returned headings 0.04 standard deviations off, as a
+    success; with it kept, the warm start was accepted at gaps small in radians but not in standard
+    deviations (1.7e-4 off). Now equal to the Kalman filter to 1e-8 standard deviations, or a failure
+    that says so."""
+    dm, data, prior, Q, R = _scaled_linear_case(1e-8)
+    kf = cs.KF(dm, Q, R).filter(data, prior)
+    try:
+        res = cs.MHE(dm, Q, R, options={"horizon": 4, "solver": solver}).filter(data, prior)
+    except MHEFailed as exc:
+        assert solver == "rti" and "failed at row" in str(exc)      # its Gauss-Newton step is not scaled
+        return
+    assert np.abs(res.x[:, 0] - kf.x[:, 0]).max() <= 1e-8 * np.sqrt(R)
+
+
+def test_process_noise_factor_keeps_small_variances():
+    from casship.estimators.mhe.problem import sqrt_factor
+
+    L, diagonal = sqrt_factor(np.diag([1e-14, 0.0, 2.0]))
+    assert diagonal and L.shape == (3, 2)
+    np.testing.assert_allclose(L @ L.T, np.diag([1e-14, 0.0, 2.0]), rtol=1e-15, atol=0)
+    Q = np.array([[1e-14, 6e-9 * 0.5], [6e-9 * 0.5, 1e-2 * 0.36]])
+    L, diagonal = sqrt_factor(Q)
+    assert not diagonal and L.shape == (2, 2)
+    np.testing.assert_allclose(L @ L.T, Q, rtol=1e-12, atol=1e-30)
+    L, _ = sqrt_factor(np.array([[1.0, 1.0], [1.0, 1.0]]))           # one direction
+    assert L.shape == (2, 1)

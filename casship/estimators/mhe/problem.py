@@ -34,17 +34,27 @@ EXPAND_NODES = 40_000
 
 def sqrt_factor(Q: np.ndarray, tol: float = 1e-12):
     """``L`` with ``L L' = Q`` and full column rank (columns for the nonzero variance directions),
-    and whether ``Q`` is diagonal."""
+    and whether ``Q`` is diagonal.
+
+    Unit-free: a diagonal ``Q`` keeps every positive variance however small (a yaw acceleration's
+    1e-14 rad^2/s^4 beside a surge's 1e-2 m^2/s^4 is noise, not round-off); a full ``Q`` is factored
+    through its correlation matrix, whose eigenvalues below ``tol`` of the largest are the singular
+    directions."""
     n = Q.shape[0]
     if n == 0:
         return np.zeros((0, 0)), True
-    if np.count_nonzero(Q - np.diag(np.diag(Q))) == 0:
-        d = np.diag(Q)
-        keep = d > tol * max(1.0, d.max())
-        return np.diag(np.sqrt(d))[:, keep], True
-    lam, V = np.linalg.eigh(Q)
-    keep = lam > tol * max(1.0, lam.max())
-    return V[:, keep] * np.sqrt(lam[keep]), False
+    d = np.diag(Q).copy()
+    if np.count_nonzero(Q - np.diag(d)) == 0:
+        keep = d > 0
+        return np.diag(np.sqrt(np.where(keep, d, 0.0)))[:, keep], True
+    sd = np.sqrt(np.where(d > 0, d, 0.0))
+    live = sd > 0                      # a zero variance has no correlations: its direction is dropped
+    C = Q[np.ix_(live, live)] / np.outer(sd[live], sd[live])
+    lam, V = np.linalg.eigh(0.5 * (C + C.T))
+    keep = lam > tol * max(lam.max(), 1e-300)
+    L = np.zeros((n, int(keep.sum())))
+    L[live] = sd[live, None] * V[:, keep] * np.sqrt(lam[keep])
+    return L, False
 
 
 @dataclass
@@ -73,10 +83,11 @@ class Window:
     lam_sign: float = 1.0                 # -1: the solver's constraints are the negated gaps (fatrop)
     expanded: bool = False                # the NLP and the Gauss-Newton step in scalar expressions
     tol: float = 1e-8                     # the NLP solver's convergence tolerance
-    make_kkt: object = None               # () -> Function (z, p, lam_g) -> (dual, primal) infeasibility
+    make_kkt: object = None               # () -> Function (z, p, lam_g) -> (Lagrangian gradient, gaps)
     _kkt: BufferedCall | None = None
     curvature: ca.Function | None = None  # the first stage's Gauss-Newton curvature of each state (scaling)
     sizes: tuple = ()                     # nx, nu, ny (to read the parameter vector)
+    _curvature_call: BufferedCall | None = None
 
     def nlp_call(self) -> BufferedCall:
         """The NLP solver through buffers, for solvers that raise on failure."""
@@ -97,12 +108,17 @@ class Window:
         nx, nu, ny = self.sizes
         N = self.N
         sizes = [nx, nx * nx, nu * (N + 1), nu * N, ny * (N + 1), ny * (N + 1), N]
-        cuts = np.cumsum(sizes)
-        xbar, W, Uh, Up, Y, M, dt, p = np.split(np.asarray(par, dtype=float), cuts)   # params_vector's layout
-        Uh, Up, Y, M = Uh.reshape(N + 1, nu).T, Up.reshape(N, nu).T, Y.reshape(N + 1, ny).T, M.reshape(N + 1, ny).T
-        c = np.asarray(self.curvature(z[self.ix[0]], z[self.iv[0]] if self.iv.shape[1] else np.zeros(0),
-                                      z[self.ix[1]], Uh[:, 0], Y[:, 0], M[:, 0], Up[:, 0], dt[0], p, xbar,
-                                      W.reshape(nx, nx).T)).ravel()
+        xbar, W, Uh, Up, Y, M, dt, p = np.split(np.asarray(par, dtype=float), np.cumsum(sizes))  # params_vector
+        if self._curvature_call is None:
+            self._curvature_call = BufferedCall(self.curvature)
+        call = self._curvature_call
+        call["x"], call["x_next"], call["xbar"], call["W"] = z[self.ix[0]], z[self.ix[1]], xbar, W
+        if self.iv.shape[1]:
+            call["v"] = z[self.iv[0]]
+        call["u"], call["u_prev_next"] = Uh[:nu], Up[:nu]        # the first sample of each (F order)
+        call["y"], call["mask"], call["dt"], call["p"] = Y[:ny], M[:ny], dt[:1], p
+        call()
+        c = call.out("c").ravel()
         dx = np.ones(nx)
         ok = np.isfinite(c) & (c > 0)
         dx[ok] = np.clip(1.0 / np.sqrt(c[ok]), 1e-12, 1.0)
@@ -285,8 +301,8 @@ def build_window(mhe, N: int, solver: str) -> Window:
     def kkt_error():
         lam = ca.MX.sym("lam_g", nlp["g"].numel())
         dual = ca.gradient(nlp["f"] + ca.dot(lam, nlp["g"]), z)
-        fun = ca.Function(f"mhe_kkt_error_{N}", [z, par, lam], [ca.mmax(ca.fabs(dual)), ca.mmax(ca.fabs(nlp["g"]))],
-                          ["z", "p", "lam_g"], ["dual", "primal"])
+        fun = ca.Function(f"mhe_kkt_error_{N}", [z, par, lam], [dual, nlp["g"]], ["z", "p", "lam_g"],
+                          ["dual", "primal"])
         return fun.expand() if expand else fun
 
     win.make_kkt = kkt_error
@@ -307,7 +323,8 @@ def _first_stage_curvature(stage, arrival, mhe) -> ca.Function:
     xbar, W = S.sym("xbar", m.nx), S.sym("W", m.nx, m.nx)
     r = ca.vertcat(arrival(args[0], xbar, W), stage(*args)[1])
     J = ca.jacobian(r, args[0])
-    return ca.Function("mhe_first_stage_curvature", args + [xbar, W], [ca.sum1(J * J).T])
+    return ca.Function("mhe_first_stage_curvature", args + [xbar, W], [ca.sum1(J * J).T],
+                       ["x", "v", "x_next", "u", "y", "mask", "u_prev_next", "dt", "p", "xbar", "W"], ["c"])
 
 
 def _kkt_step(z, par, res, g, N, multipliers: bool = False) -> ca.Function:
