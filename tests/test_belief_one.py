@@ -98,3 +98,19 @@ def test_a_belief_from_a_fit_file_carries_its_model_discrepancy(tmp_path):
     (tmp_path / "plain").mkdir()
     plain = _fit_file(tmp_path / "plain", discrepancy=False)
     assert ParameterBelief.from_fit(plain).psi_variance_rate == 0.0
+
+
+def test_a_belief_covariance_is_judged_on_its_correlations_not_its_units():
+    """Before: the discrepancy covariance was judged definite relative to its largest entry: an
+    indefinite block of coefficients with variances 1e-12 (a correlation of 2) beside a time
+    constant's variance of 100 was accepted (the parameters' own covariance is a Gaussian's, which
+    was already judged on its correlations)."""
+    names, values = ["N_r", "N_v", "T"], [1e-3, -2e-3, 20.0]
+    good = [[1e-12, 0.5e-12, 0.0], [0.5e-12, 1e-12, 0.0], [0.0, 0.0, 100.0]]
+    bad = [[1e-12, 2e-12, 0.0], [2e-12, 1e-12, 0.0], [0.0, 0.0, 100.0]]
+    for field in ("covariance", "discrepancy"):
+        with pytest.raises(ValueError, match="not positive semi-definite.*correlation"):
+            ParameterBelief.from_values(names, values, bad if field == "covariance" else good,
+                                        discrepancy_covariance=bad if field == "discrepancy" else None)
+    belief = ParameterBelief.from_values(names, values, good, discrepancy_covariance=good)
+    assert belief.std["N_r"] == pytest.approx(1e-6, rel=1e-12)

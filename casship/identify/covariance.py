@@ -13,6 +13,7 @@ from typing import Literal, get_args
 import numpy as np
 
 from ..errors import InputError
+from ..gaussian import as_cov
 from .fit_json import square_matrix
 
 __all__ = ["CovarianceKind", "COVARIANCE_KINDS", "COVARIANCES", "kind_from_source", "checked_kind", "covariance_kind",
@@ -211,10 +212,9 @@ def checked_covariance(matrix, names, what: str) -> np.ndarray:
         i, j = (int(x) for x in np.argwhere(np.triu(bad, 1))[0])
         raise InputError(f"ParameterBelief: {what} is not symmetric: entry ({names[i]}, {names[j]}) = {a[i, j]:.6g} "
                          f"but ({names[j]}, {names[i]}) = {a[j, i]:.6g} (beyond round-off)")
-    a = 0.5 * (a + a.T)
-    if np.linalg.eigvalsh(a).min(initial=0.0) < -1e-9 * max(1.0, np.abs(a).max()):
-        raise InputError(f"ParameterBelief: {what} is not positive semi-definite")
-    return a
+    # definiteness on the correlation matrix, naming the parameter (a test relative to the largest entry
+    # passed an indefinite block of coefficients of size 1e-6 beside a time constant's variance of 100)
+    return as_cov(0.5 * (a + a.T), k, f"ParameterBelief: {what}", list(names), allow_zero=True)
 
 
 def free_block(fit, values: dict, *, robust: bool | None):
