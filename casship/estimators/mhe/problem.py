@@ -85,9 +85,8 @@ class Window:
     tol: float = 1e-8                     # the NLP solver's convergence tolerance
     make_kkt: object = None               # () -> Function (z, p, lam_g) -> (Lagrangian gradient, gaps)
     _kkt: BufferedCall | None = None
-    curvature: ca.Function | None = None  # the first stage's Gauss-Newton curvature of each state (scaling)
-    sizes: tuple = ()                     # nx, nu, ny (to read the parameter vector)
-    _curvature_call: BufferedCall | None = None
+    scale: ca.Function | None = None      # (z, p) -> (D, D_g): the solvers' scales (Window.scaling)
+    _scale_call: BufferedCall | None = None
 
     def nlp_call(self) -> BufferedCall:
         """The NLP solver through buffers, for solvers that raise on failure."""
@@ -105,26 +104,12 @@ class Window:
         is ``1 / R`` of a few-centimetre fix (about 1e16), then sit beside speeds at unit size. A state
         is only scaled down: one the first stage hardly sees may be determined through the dynamics
         by later stages, and scaled up its gaps would be held only to the tolerance times the scale."""
-        nx, nu, ny = self.sizes
-        N = self.N
-        sizes = [nx, nx * nx, nu * (N + 1), nu * N, ny * (N + 1), ny * (N + 1), N]
-        xbar, W, Uh, Up, Y, M, dt, p = np.split(np.asarray(par, dtype=float), np.cumsum(sizes))  # params_vector
-        if self._curvature_call is None:
-            self._curvature_call = BufferedCall(self.curvature)
-        call = self._curvature_call
-        call["x"], call["x_next"], call["xbar"], call["W"] = z[self.ix[0]], z[self.ix[1]], xbar, W
-        if self.iv.shape[1]:
-            call["v"] = z[self.iv[0]]
-        call["u"], call["u_prev_next"] = Uh[:nu], Up[:nu]        # the first sample of each (F order)
-        call["y"], call["mask"], call["dt"], call["p"] = Y[:ny], M[:ny], dt[:1], p
-        call()
-        c = call.out("c").ravel()
-        dx = np.ones(nx)
-        ok = np.isfinite(c) & (c > 0)
-        dx[ok] = np.clip(1.0 / np.sqrt(c[ok]), 1e-12, 1.0)
-        D = np.ones(self.nz)
-        D[self.ix] = dx
-        return D, np.tile(dx, N)
+        if self._scale_call is None:
+            self._scale_call = BufferedCall(self.scale, cannot_fail=True)
+        call = self._scale_call
+        call["z"], call["p"] = z, par
+        call.trigger()
+        return call.out("D").ravel().copy(), call.out("D_g").ravel().copy()
 
     def gn(self, multipliers: bool = False) -> BufferedCall:
         """The Gauss-Newton step of the window, built on first use.
@@ -276,13 +261,15 @@ def build_window(mhe, N: int, solver: str) -> Window:
     pieces = {"X": X, "V": V, "xN": xN, "Xn": Xn, "xbar": xbar, "W": W, "Uh": Uh, "Up": Up, "Y": Y, "M": M,
               "dt": dt, "p": p}
 
+    scale = _scale_function(stage, arrival, mhe, z, par, pieces, N)
+
     def gauss_newton(multipliers: bool, method: str | None = None):
         # chosen by measurement (docs/benchmarks.md): compiled, the Riccati recursion is the fastest
         # (about 0.6 us per stage); under the virtual machine the sparse QR of the expanded KKT system
         # is, where expansion pays (its build grows with the expanded size like the NLP's)
         method = method or ("riccati" if o.jit or not expand else "kkt")
         fun = (riccati_step(stage, term, arrival, nx, nv, N, z, par, pieces, multipliers) if method == "riccati"
-               else _kkt_step(z, par, res, nlp["g"], N, multipliers))
+               else _kkt_step(z, par, res, nlp["g"], N, multipliers, scale))
         fun = current_function(jit_function(fun, o.jit))       # the runtime's policy (option jit)
         return BufferedCall(fun, cannot_fail=is_compiled(fun))
 
@@ -306,7 +293,7 @@ def build_window(mhe, N: int, solver: str) -> Window:
         return fun.expand() if expand else fun
 
     win.make_kkt = kkt_error
-    win.curvature, win.sizes = _first_stage_curvature(stage, arrival, mhe), (nx, nu, ny)
+    win.scale = scale
     if solver == "fatrop":
         win.lam_sign = -1.0
     if solver == "rti":
@@ -314,29 +301,47 @@ def build_window(mhe, N: int, solver: str) -> Window:
     return win
 
 
-def _first_stage_curvature(stage, arrival, mhe) -> ca.Function:
-    """``(x, v, x_next, u, y, mask, u_prev_next, dt, p, xbar, W) -> c``: the Gauss-Newton curvature
-    ``diag(J'J)`` of the window's first stage in its state (arrival and measurement residuals)."""
+def _scale_function(stage, arrival, mhe, z, par, pieces, N) -> ca.Function:
+    """``(z, p) -> (D, D_g)``, :meth:`Window.scaling`: each state by ``min(1, 1 / sqrt(c))`` (clipped at
+    1e-12), ``c`` its Gauss-Newton curvature ``diag(J'J)`` in the window's first stage (arrival and
+    measurement residuals), the noise variables by 1, each dynamics gap by its state's scale."""
     m, S = mhe.model, ca.SX
     args = [S.sym("x", m.nx), S.sym("v", mhe.nv), S.sym("x_next", m.nx), S.sym("u", m.nu), S.sym("y", mhe.ny),
             S.sym("mask", mhe.ny), S.sym("u_prev_next", m.nu), S.sym("dt"), S.sym("p", m.np)]
     xbar, W = S.sym("xbar", m.nx), S.sym("W", m.nx, m.nx)
     r = ca.vertcat(arrival(args[0], xbar, W), stage(*args)[1])
     J = ca.jacobian(r, args[0])
-    return ca.Function("mhe_first_stage_curvature", args + [xbar, W], [ca.sum1(J * J).T],
-                       ["x", "v", "x_next", "u", "y", "mask", "u_prev_next", "dt", "p", "xbar", "W"], ["c"])
+    c = ca.sum1(J * J).T
+    dx = ca.if_else(c > 0, ca.fmax(ca.fmin(1.0 / ca.sqrt(ca.fmax(c, 1e-300)), 1.0), 1e-12), 1.0)
+    first = ca.Function("mhe_first_stage_scale", args + [xbar, W], [dx])
+    P = pieces
+    v0 = P["V"][:, 0] if mhe.nv else ca.MX(0, 1)
+    d = first(P["X"][:, 0], v0, P["Xn"][:, 0], P["Uh"][:, 0], P["Y"][:, 0], P["M"][:, 0], P["Up"][:, 0],
+              P["dt"][0, 0], P["p"], P["xbar"], P["W"])
+    D = ca.vertcat(*([ca.vertcat(d, ca.MX.ones(mhe.nv))] * N), d)
+    return ca.Function(f"mhe_scale_{N}", [z, par], [D, ca.repmat(d, N, 1)], ["z", "p"], ["D", "D_g"]).expand()
 
 
-def _kkt_step(z, par, res, g, N, multipliers: bool = False) -> ca.Function:
+def _kkt_step(z, par, res, g, N, multipliers: bool = False, scale: ca.Function | None = None) -> ca.Function:
     """The Gauss-Newton step solving the KKT system ``[J'J  G'; G  0] [dz; lam] = -[J'r; g]`` with
-    CasADi's sparse QR (block-banded: the stages are interleaved in ``z``), in one Function."""
+    CasADi's sparse QR (block-banded: the stages are interleaved in ``z``), in one Function. With
+    ``scale`` (:meth:`Window.scaling`) the system is first equilibrated, ``S K S y = S b`` with
+    ``S = diag(D, 1 / D_g)``, so that the step holds in each state's deviations (the unscaled solve
+    left yaw-rate gaps of 8e-5 deviations where positions in metres sat beside a rate known to 1e-6)."""
     Jr, Jg = ca.jacobian(res, z), ca.jacobian(g, z)
     parts = ca.Function(f"mhe_gn_kkt_{N}", [z, par], [Jr.T @ Jr, Jr.T @ res, Jg, g]).expand()
     zs, ps = ca.MX.sym("z", z.sparsity()), ca.MX.sym("p", par.sparsity())
     H, grad, G, gv = parts(zs, ps)
     ng = g.numel()
     K = ca.blockcat([[H, G.T], [G, ca.MX(ng, ng)]])
-    sol = ca.solve(K, -ca.vertcat(grad, gv), "qr")
+    rhs = -ca.vertcat(grad, gv)
+    if scale is None:
+        sol = ca.solve(K, rhs, "qr")
+    else:
+        Dz, Dg = scale(zs, ps)
+        s_ = ca.vertcat(Dz, 1.0 / Dg)
+        Sd = ca.diag(s_)
+        sol = s_ * ca.solve(ca.mtimes(Sd, ca.mtimes(K, Sd)), s_ * rhs, "qr")
     dz = sol[: z.numel()]
     if not multipliers:
         return ca.Function(f"mhe_gn_step_{N}", [zs, ps], [zs + dz], ["z", "p"], ["z_next"])
