@@ -109,3 +109,13 @@ def test_process_noise_factor_keeps_small_variances():
     np.testing.assert_allclose(L @ L.T, Q, rtol=1e-12, atol=1e-30)
     L, _ = sqrt_factor(np.array([[1.0, 1.0], [1.0, 1.0]]))           # one direction
     assert L.shape == (2, 1)
+
+
+def test_the_compiled_unscaled_warm_start_is_not_taken_for_the_solution():
+    """With ``jit`` the Gauss-Newton warm start is the compiled Riccati recursion, which is not
+    equilibrated: its point is accepted only when its gaps are within the tolerance in standard
+    deviations too, so IPOPT still lands on the Kalman filter in the smaller units."""
+    dm, data, prior, Q, R = _scaled_linear_case(1e-8)
+    kf = cs.KF(dm, Q, R).filter(data, prior)
+    res = cs.MHE(dm, Q, R, options={"horizon": 4, "jit": True}).filter(data, prior)
+    assert np.abs(res.x[:, 0] - kf.x[:, 0]).max() <= 1e-8 * np.sqrt(R)

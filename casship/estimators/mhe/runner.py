@@ -64,7 +64,6 @@ class WindowEngine:
         view["p"][:] = p_aug
         self.p = view["p"]
         self._started = False
-        self._scales = {}                 # the NLP solvers' last scales (solve_window)
         self.outputs = tuple(o for o in DIAGNOSTICS if o in outputs)
         needed = tuple(o for o in DIAGNOSTICS if o in (*ARRIVAL_OUTPUTS, *self.outputs))
         step = mhe.arrival_step(needed)
@@ -118,7 +117,7 @@ class WindowEngine:
         lam = None
         if win.solver is not None:                      # NLP solvers: warm start (primal and dual)
             z0, lam = gauss_newton_start(win, z0, self.par)
-        self.z, _ = solve_window(win, z0, self.par, where, lam, self._scales)
+        self.z, _ = solve_window(win, z0, self.par, where, lam)
         self._x, self._P = self.z[win.ix[-1]], out["P"]
         self.samples += 1
         return self._x, self._P, info
