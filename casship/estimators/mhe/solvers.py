@@ -122,7 +122,7 @@ def first_order_optimal(win: Window, z: np.ndarray, par: np.ndarray, lam_g: np.n
     no bound multiplier), the gradient of the Lagrangian and the dynamics gaps within the solver's
     tolerance. (The interpreted Gauss-Newton step that makes ``z`` is equilibrated by the solvers'
     scales, :meth:`Window.scaling`, so its point is accurate in each state's deviations as well; the
-    compiled Riccati step is not, and is tested on a window in small units, where it is.)"""
+    compiled Riccati step needs no equilibration for that, tested on the same windows.)"""
     if lam_g is None or not np.isfinite(z.sum()):
         return False
     if not win.unbounded and not ((z > win.lbx).all() and (z < win.ubx).all()):
