@@ -306,18 +306,18 @@ def _scale_function(stage, arrival, mhe, z, par, pieces, N) -> ca.Function:
     1e-12), ``c`` its Gauss-Newton curvature ``diag(J'J)`` in the window's first stage (arrival and
     measurement residuals), the noise variables by 1, each dynamics gap by its state's scale."""
     m, S = mhe.model, ca.SX
-    args = [S.sym("x", m.nx), S.sym("v", mhe.nv), S.sym("x_next", m.nx), S.sym("u", m.nu), S.sym("y", mhe.ny),
-            S.sym("mask", mhe.ny), S.sym("u_prev_next", m.nu), S.sym("dt"), S.sym("p", m.np)]
+    sym = {n: S.sym(n, stage.size_in(n)) for n in stage.name_in()}
     xbar, W = S.sym("xbar", m.nx), S.sym("W", m.nx, m.nx)
-    r = ca.vertcat(arrival(args[0], xbar, W), stage(*args)[1])
-    J = ca.jacobian(r, args[0])
+    r = ca.vertcat(arrival(x=sym["x"], xbar=xbar, W=W)["r"], stage.call(sym)["r"])
+    J = ca.jacobian(r, sym["x"])
     c = ca.sum1(J * J).T
     dx = ca.if_else(c > 0, ca.fmax(ca.fmin(1.0 / ca.sqrt(ca.fmax(c, 1e-300)), 1.0), 1e-12), 1.0)
-    first = ca.Function("mhe_first_stage_scale", args + [xbar, W], [dx])
+    names = list(stage.name_in()) + ["xbar", "W"]
+    first = ca.Function("mhe_first_stage_scale", [sym[n] for n in stage.name_in()] + [xbar, W], [dx], names, ["d"])
     P = pieces
-    v0 = P["V"][:, 0] if mhe.nv else ca.MX(0, 1)
-    d = first(P["X"][:, 0], v0, P["Xn"][:, 0], P["Uh"][:, 0], P["Y"][:, 0], P["M"][:, 0], P["Up"][:, 0],
-              P["dt"][0, 0], P["p"], P["xbar"], P["W"])
+    d = first(x=P["X"][:, 0], v=P["V"][:, 0] if mhe.nv else ca.MX(0, 1), x_next=P["Xn"][:, 0], u=P["Uh"][:, 0],
+              y=P["Y"][:, 0], mask=P["M"][:, 0], u_prev_next=P["Up"][:, 0], dt_next=P["dt"][0, 0], p=P["p"],
+              xbar=P["xbar"], W=P["W"])["d"]
     D = ca.vertcat(*([ca.vertcat(d, ca.MX.ones(mhe.nv))] * N), d)
     return ca.Function(f"mhe_scale_{N}", [z, par], [D, ca.repmat(d, N, 1)], ["z", "p"], ["D", "D_g"]).expand()
 
@@ -338,7 +338,8 @@ def _kkt_step(z, par, res, g, N, multipliers: bool = False, scale: ca.Function |
     if scale is None:
         sol = ca.solve(K, rhs, "qr")
     else:
-        Dz, Dg = scale(zs, ps)
+        scales = scale(z=zs, p=ps)
+        Dz, Dg = scales["D"], scales["D_g"]
         s_ = ca.vertcat(Dz, 1.0 / Dg)
         Sd = ca.diag(s_)
         sol = s_ * ca.solve(ca.mtimes(Sd, ca.mtimes(K, Sd)), s_ * rhs, "qr")
