@@ -464,10 +464,8 @@ class MPCAutopilot:
         if mem["count"] % every == 0:
             U_guess = np.hstack([mem["U"][:, 1:], mem["U"][:, -1:]])          # the last plan, shifted
             delta = mem["steer_cmd"]
-            target = self._preview(mem["xr"], ref)
             z = np.array([float(wrap(mem["xr"][0] - ref)), mem["xr"][1], mem["xr"][2]])
-            planned, w, u_ref, s_ref = (np.asarray(v) for v in self.plan_inputs()(bias, z))
-            target = np.vstack([target, planned[2:]])               # the integral's target, with one
+            target, w, u_ref, s_ref = (np.asarray(v) for v in self.plan_inputs()(bias, z))   # as the compiled law
             x0 = self.plan_start(e, r, delta, w[0, 0], mem["integral"]).ravel()
             out = self._solve({"x0": x0, "b": w, "target": target, "U_guess": U_guess, "u_ref": u_ref,
                                "steer_ref": s_ref})
